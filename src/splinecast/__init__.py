@@ -1,0 +1,41 @@
+"""splinecast: exact, fast isosurface rendering of voxel data.
+
+The public API::
+
+    import splinecast as sc
+    vol = sc.read("head.nii.gz")               # or sc.demo("marschner-lobb", size=128)
+    scene = sc.Scene(vol, model="trilinear")
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(1024, 768))
+    frame = scene.render(cam, mode="iso", iso=80)
+    frame.save("head.png")
+
+Coordinate convention: see :mod:`splinecast.volume`.
+"""
+
+from .camera import Camera
+from .errors import DataError, ParameterError, ReadError, SplinecastError
+from .io import demo, read, write
+from .models import MODELS
+from .render.frame import Frame
+from .render.shading import Shading
+from .scene import Scene, check_iso
+from .volume import Volume
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Camera",
+    "MODELS",
+    "DataError",
+    "Frame",
+    "ParameterError",
+    "ReadError",
+    "Scene",
+    "Shading",
+    "SplinecastError",
+    "Volume",
+    "check_iso",
+    "demo",
+    "read",
+    "write",
+]

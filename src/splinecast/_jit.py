@@ -1,0 +1,17 @@
+"""The one place that says how splinecast compiles its kernels.
+
+``error_model="numpy"`` makes a float division by zero give inf/NaN as in numpy instead of raising,
+which removes a branch from every division in the hot loops; the kernels handle those values
+explicitly. ``cache=True`` stores compiled code on disk so only the first run compiles.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+from numba import njit
+
+__all__ = ["jit"]
+
+#: Decorator for every compiled function in splinecast (accepts njit keyword arguments).
+jit = partial(njit, cache=True, error_model="numpy")

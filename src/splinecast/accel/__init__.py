@@ -1,0 +1,1 @@
+"""Acceleration structures: integer grid traversal and min/max block hierarchies."""

@@ -1,0 +1,114 @@
+"""Min/max block hierarchy for empty-space skipping.
+
+Cells are grouped into aligned blocks of ``4``, ``16`` and ``64`` cells per axis. For every block
+the hierarchy stores the smallest and largest value any reconstruction inside it can take; a model
+supplies these as "the coefficients that influence a cell" (for trilinear interpolation: the eight
+corner voxels, whose range bounds the interpolant by convexity). The ranges depend on the volume
+only and are built once; an isovalue change only recomputes one boolean per block, "can this block
+contain the isovalue?", which takes a few milliseconds even for 512^3 volumes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import prange
+
+from .._jit import jit
+
+__all__ = ["BLOCK_SHIFTS", "MinMaxHierarchy"]
+
+#: log2 of the block edge (in cells) of each level, finest first.
+BLOCK_SHIFTS = (2, 4, 6)
+
+
+@jit(parallel=True)
+def _finest_ranges(
+    coeffs: np.ndarray, block: int, support: int, n_cells: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    nbx = (n_cells[0] + block - 1) // block
+    nby = (n_cells[1] + block - 1) // block
+    nbz = (n_cells[2] + block - 1) // block
+    lo = np.empty((nbx, nby, nbz), dtype=np.float64)
+    hi = np.empty((nbx, nby, nbz), dtype=np.float64)
+    sx, sy, sz = coeffs.shape
+    for bi in prange(nbx):
+        i0 = bi * block
+        i1 = min(i0 + block + support, sx)
+        for bj in range(nby):
+            j0 = bj * block
+            j1 = min(j0 + block + support, sy)
+            for bk in range(nbz):
+                k0 = bk * block
+                k1 = min(k0 + block + support, sz)
+                vmin = np.inf
+                vmax = -np.inf
+                for i in range(i0, i1):
+                    for j in range(j0, j1):
+                        for k in range(k0, k1):
+                            v = float(coeffs[i, j, k])
+                            vmin = min(vmin, v)
+                            vmax = max(vmax, v)
+                lo[bi, bj, bk] = vmin
+                hi[bi, bj, bk] = vmax
+    return lo, hi
+
+
+def _coarsen(arr: np.ndarray, factor: int, reduce: np.ufunc, fill: float) -> np.ndarray:
+    pad = [(0, (-s) % factor) for s in arr.shape]
+    padded = np.pad(arr, pad, constant_values=fill)
+    nx, ny, nz = (s // factor for s in padded.shape)
+    view = padded.reshape(nx, factor, ny, factor, nz, factor)
+    return reduce.reduce(reduce.reduce(reduce.reduce(view, axis=5), axis=3), axis=1)
+
+
+class MinMaxHierarchy:
+    """Per-block value ranges at three levels, and the active flags for one isovalue.
+
+    Parameters
+    ----------
+    coeffs : ndarray, shape (sx, sy, sz)
+        The values (voxels or spline coefficients) that bound the reconstruction.
+    n_cells : tuple of 3 int
+        Number of cells per axis.
+    support : int
+        Cell ``c`` depends on coefficients ``c .. c + support`` along each axis (1 for trilinear).
+    """
+
+    def __init__(self, coeffs: np.ndarray, n_cells: tuple[int, int, int], support: int) -> None:
+        self.n_cells = tuple(int(n) for n in n_cells)
+        block0 = 1 << BLOCK_SHIFTS[0]
+        lo, hi = _finest_ranges(coeffs, block0, support, np.asarray(self.n_cells, np.int64))
+        self.lows = [lo]
+        self.highs = [hi]
+        for finer, coarser in zip(BLOCK_SHIFTS[:-1], BLOCK_SHIFTS[1:], strict=True):
+            factor = 1 << (coarser - finer)
+            self.lows.append(_coarsen(self.lows[-1], factor, np.minimum, np.inf))
+            self.highs.append(_coarsen(self.highs[-1], factor, np.maximum, -np.inf))
+        self.iso: float | None = None
+        self.active: tuple[np.ndarray, ...] = ()
+
+    def classify(self, iso: float) -> tuple[np.ndarray, ...]:
+        """Active flags (uint8, one array per level, finest first) for ``iso``."""
+        self.iso = float(iso)
+        self.active = tuple(
+            ((lo <= iso) & (hi >= iso)).view(np.uint8)
+            for lo, hi in zip(self.lows, self.highs, strict=True)
+        )
+        return self.active
+
+    def classify_any(self, ranges: list[tuple[float, float]]) -> tuple[np.ndarray, ...]:
+        """Active flags for blocks meeting any of several closed value intervals."""
+        flags = []
+        for lo, hi in zip(self.lows, self.highs, strict=True):
+            act = np.zeros(lo.shape, dtype=bool)
+            for a, b in ranges:
+                act |= (lo <= b) & (hi >= a)
+            flags.append(act.view(np.uint8))
+        self.iso = None
+        self.active = tuple(flags)
+        return self.active
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the ranges and flags."""
+        return sum(a.nbytes for a in (*self.lows, *self.highs, *self.active))

@@ -1,0 +1,223 @@
+"""The :class:`Camera`: a look-at pinhole or orthographic camera and its per-pixel rays.
+
+Image convention: ``rays()`` returns arrays shaped ``(height, width, 3)``; row 0 is the top of the
+image and column 0 its left side. Rays go through pixel centres. Directions are unit vectors in
+world space, so a ray parameter is a world distance.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .errors import ParameterError
+
+__all__ = ["Camera", "parse_size"]
+
+
+def parse_size(size: Any) -> tuple[int, int]:
+    """Validate an image size given as ``(width, height)`` or ``"WxH"``.
+
+    Raises
+    ------
+    ParameterError
+        If the size is not two positive integers.
+    """
+    if isinstance(size, str):
+        parts = size.lower().split("x")
+        if len(parts) != 2:
+            raise ParameterError(f"size must look like WIDTHxHEIGHT, got {size!r}")
+        try:
+            size = (int(parts[0]), int(parts[1]))
+        except ValueError:
+            raise ParameterError(f"size must look like WIDTHxHEIGHT, got {size!r}") from None
+    try:
+        width, height = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise ParameterError(f"size must be (width, height), got {size!r}") from None
+    if width <= 0 or height <= 0:
+        raise ParameterError(f"size must be positive, got {width}x{height}")
+    if width * height > 64_000_000:
+        raise ParameterError(f"size {width}x{height} is too large (more than 64 megapixels)")
+    return width, height
+
+
+def _unit(v: np.ndarray, name: str) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    if not math.isfinite(n) or n == 0.0:
+        raise ParameterError(f"{name} must be a non-zero finite vector, got {v.tolist()}")
+    return v / n
+
+
+class Camera:
+    """A look-at camera.
+
+    Parameters
+    ----------
+    position : sequence of 3 floats
+        Eye position in world coordinates.
+    look_at : sequence of 3 floats
+        Point the camera looks at (appears in the image centre).
+    up : sequence of 3 floats, optional
+        Approximate up direction; it is made orthogonal to the viewing direction.
+    fov : float, optional
+        Vertical field of view in degrees for perspective projection (default 30).
+    size : (int, int) or str, optional
+        Image ``(width, height)`` in pixels or ``"WxH"``.
+    ortho : bool, optional
+        Orthographic projection instead of perspective.
+    ortho_height : float, optional
+        Height of the visible window in world units for orthographic projection; by default the
+        height a perspective camera with ``fov`` sees at the look-at distance.
+    """
+
+    def __init__(
+        self,
+        position: Any,
+        look_at: Any,
+        up: Any = (0.0, 0.0, 1.0),
+        fov: float = 30.0,
+        size: Any = (512, 512),
+        ortho: bool = False,
+        ortho_height: float | None = None,
+    ) -> None:
+        self.position = np.asarray(position, dtype=np.float64).reshape(3)
+        self.look_at = np.asarray(look_at, dtype=np.float64).reshape(3)
+        self.width, self.height = parse_size(size)
+        if not 0.0 < float(fov) < 180.0:
+            raise ParameterError(f"fov must be between 0 and 180 degrees, got {fov}")
+        self.fov = float(fov)
+        self.ortho = bool(ortho)
+        forward = _unit(self.look_at - self.position, "look_at - position")
+        up_vec = np.asarray(up, dtype=np.float64).reshape(3)
+        right = np.cross(forward, up_vec)
+        if np.linalg.norm(right) < 1e-9 * max(1.0, float(np.linalg.norm(up_vec))):
+            # Looking along `up`: any perpendicular up will do; pick a stable one.
+            alt = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0, 0])
+            right = np.cross(forward, alt)
+        self.forward = forward
+        self.right = _unit(right, "right")
+        self.up = np.cross(self.right, self.forward)
+        distance = float(np.linalg.norm(self.look_at - self.position))
+        if ortho_height is None:
+            ortho_height = 2.0 * distance * math.tan(math.radians(self.fov) / 2.0)
+        if not ortho_height > 0:
+            raise ParameterError(f"ortho_height must be positive, got {ortho_height}")
+        self.ortho_height = float(ortho_height)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """Image ``(width, height)`` in pixels."""
+        return self.width, self.height
+
+    @classmethod
+    def orbit(
+        cls,
+        volume: Any,
+        azimuth: float = 30.0,
+        elevation: float = 20.0,
+        distance: float | None = None,
+        size: Any = (512, 512),
+        fov: float = 30.0,
+        ortho: bool = False,
+        zoom: float = 1.0,
+    ) -> Camera:
+        """A camera on a sphere around the centre of ``volume``, looking at the centre.
+
+        Parameters
+        ----------
+        volume : Volume
+            The volume to frame (its world bounding box is used).
+        azimuth, elevation : float
+            Angles in degrees. Azimuth 0 looks from +x towards the centre, 90 from +y; elevation
+            is measured from the xy-plane towards +z, which is also the up direction.
+        distance : float, optional
+            Distance from the centre; by default far enough that the whole box fits the view.
+        size : (int, int) or str
+            Image ``(width, height)``.
+        fov : float
+            Vertical field of view in degrees (perspective).
+        ortho : bool
+            Orthographic projection (the window then just fits the box).
+        zoom : float
+            Magnification (> 1 moves closer / narrows the window).
+        """
+        if not (math.isfinite(azimuth) and math.isfinite(elevation)):
+            raise ParameterError("azimuth and elevation must be finite numbers")
+        if not zoom > 0:
+            raise ParameterError(f"zoom must be positive, got {zoom}")
+        lo, hi = volume.bounds
+        center = 0.5 * (lo + hi)
+        radius = 0.5 * float(np.linalg.norm(hi - lo)) or 1.0
+        width, height = parse_size(size)
+        half_fov = math.radians(fov) / 2.0
+        # The bounding sphere must fit the narrower of the two fields of view.
+        half_fov_min = min(half_fov, math.atan(math.tan(half_fov) * width / height))
+        if distance is None:
+            distance = radius / math.sin(half_fov_min) / zoom
+        if not distance > 0:
+            raise ParameterError(f"distance must be positive, got {distance}")
+        az, el = math.radians(azimuth), math.radians(elevation)
+        direction = np.array(
+            [math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)]
+        )
+        position = center + distance * direction
+        up = np.array([0.0, 0.0, 1.0])
+        if abs(math.cos(el)) < 1e-9:
+            up = np.array([-math.cos(az), -math.sin(az), 0.0]) * math.copysign(1.0, math.sin(el))
+        ortho_height = None
+        if ortho:
+            aspect = width / height
+            ortho_height = 2.0 * radius * max(1.0, 1.0 / aspect) / zoom
+        return cls(position, center, up=up, fov=fov, size=(width, height), ortho=ortho,
+                   ortho_height=ortho_height)
+
+    def pixel_basis(self) -> np.ndarray:
+        """Packed ray parameters for compiled kernels that generate rays per pixel.
+
+        Returns 16 float64: eye (3), forward (3), right (3), up (3), half width and half height
+        of the image window (at unit distance for perspective, in world units for orthographic),
+        an orthographic flag, and 0. :meth:`rays` and the kernels follow the same formula: pixel
+        ``(row, col)`` has screen coordinates ``sx = ((col + 0.5) / width * 2 - 1) * half_w`` and
+        ``sy = (1 - (row + 0.5) / height * 2) * half_h``.
+        """
+        half_h = 0.5 * self.ortho_height if self.ortho else math.tan(math.radians(self.fov) / 2)
+        half_w = half_h * self.width / self.height
+        return np.concatenate(
+            [self.position, self.forward, self.right, self.up,
+             [half_w, half_h, 1.0 if self.ortho else 0.0, 0.0]]
+        ).astype(np.float64)
+
+    def rays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-pixel ray origins and unit directions.
+
+        Returns
+        -------
+        origins, directions : ndarray, shape (height, width, 3), float64
+            Row 0 is the top of the image. For a perspective camera every origin is the eye
+            position; for an orthographic one the origins lie on the image plane through the eye.
+        """
+        w, h = self.width, self.height
+        basis = self.pixel_basis()
+        half_w, half_h = basis[12], basis[13]
+        xs = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * half_w
+        ys = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * half_h
+        sx = xs[None, :, None]
+        sy = ys[:, None, None]
+        if self.ortho:
+            origins = self.position + sx * self.right + sy * self.up
+            directions = np.broadcast_to(self.forward, (h, w, 3)).copy()
+        else:
+            origins = np.broadcast_to(self.position, (h, w, 3)).copy()
+            d = self.forward + sx * self.right + sy * self.up
+            directions = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        return np.ascontiguousarray(origins), np.ascontiguousarray(directions)
+
+    def __repr__(self) -> str:
+        kind = f"ortho_height={self.ortho_height:g}" if self.ortho else f"fov={self.fov:g}"
+        return (
+            f"Camera(position={self.position.tolist()}, look_at={self.look_at.tolist()}, "
+            f"size={self.width}x{self.height}, {kind})"
+        )

@@ -1,0 +1,274 @@
+"""First-hit isosurface ray casting on the trilinear reconstruction.
+
+Two methods share the ray set-up, the min/max block hierarchy and the integer traversal of
+:mod:`splinecast.accel.traversal`:
+
+* ``exact`` (default): per active cell the exact cubic ray profile is built, cells whose profile
+  cannot reach the isovalue are rejected from the extrema of the profile (the roots of its
+  derivative), and the first root is solved with a safeguarded Newton/bisection iteration.
+* ``sampled``: the reference "as common viewers do": samples every ``step`` voxels along the ray
+  (from the entry point, plus the exit point) and refines the first sign change by bisection. It
+  exists to be compared with the exact method.
+
+Rays are generated per pixel in world space; each is mapped to index space once (``o_idx = (o -
+origin) / spacing``, ``d_idx = u / spacing``), so the ray parameter stays the world distance
+along the unit ray and is directly the depth.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._jit import jit
+from ..accel.traversal import axis_advance, axis_exit, clip_to_box, start_cell
+from ..models.trilinear import cell_monomials, local_gradient, local_value, ray_cubic
+from ..roots.cubic import cubic_first_root
+from .rays import pixel_ray
+from .shading import shade_pixel
+
+__all__ = ["trace_trilinear", "METHODS"]
+
+#: Method names accepted by ``Scene.render(..., method=...)``.
+METHODS = {"exact": 0, "sampled": 1}
+
+_BISECTION_STEPS = 60
+
+
+@jit(inline="always")
+def _inactive_block(act0, act1, act2, i, j, k):
+    """Edge (in cells) of the largest inactive block containing cell (i, j, k), 0 if none."""
+    if act2[i >> 6, j >> 6, k >> 6] == 0:
+        return 64
+    if act1[i >> 4, j >> 4, k >> 4] == 0:
+        return 16
+    if act0[i >> 2, j >> 2, k >> 2] == 0:
+        return 4
+    return 0
+
+
+@jit()
+def _value_at(data: np.ndarray, px: float, py: float, pz: float) -> float:
+    """Trilinear value at an index-space point (clamped into the grid)."""
+    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
+    px = min(max(px, 0.0), float(nx))
+    py = min(max(py, 0.0), float(ny))
+    pz = min(max(pz, 0.0), float(nz))
+    i = min(int(px), nx - 1)
+    j = min(int(py), ny - 1)
+    k = min(int(pz), nz - 1)
+    _, _, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, i, j, k)
+    return local_value(k0, k1, k2, k3, k4, k5, k6, k7, px - i, py - j, pz - k)
+
+
+@jit()
+def _trace_ray(
+    data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt,
+):
+    """Trace one index-space ray. Returns (t_hit or inf, i, j, k, visited, tested, skipped)."""
+    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
+    visited = 0
+    tested = 0
+    skipped = 0
+    t_near, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, nx, ny, nz)
+    if not t_near <= t_far:
+        return math.inf, -1, -1, -1, visited, tested, skipped
+    ci, cj, ck = start_cell(ox, oy, oz, dx, dy, dz, t_near, nx, ny, nz)
+    t = t_near
+    # Sampled method state: the last sample's parameter and residual (NaN: no sample yet).
+    prev_t = math.nan
+    prev_g = math.nan
+    while True:
+        size = _inactive_block(act0, act1, act2, ci, cj, ck)
+        if size == 0:
+            size = 1
+        px, tx = axis_exit(ci, ox, dx, size)
+        py, ty = axis_exit(cj, oy, dy, size)
+        pz, tz = axis_exit(ck, oz, dz, size)
+        t_exit = min(tx, ty, tz)
+        t_end = min(t_exit, t_far)
+        if size > 1:
+            skipped += 1
+            if method == 1 and t_end >= t:
+                # The block lies strictly on one side of the isovalue, so one sample gives the
+                # sign of all its samples; a change against the previous sample is refined.
+                m = math.ceil((t - t_near) / dt)
+                ts = t_near + m * dt
+                if ts <= t_end:
+                    g = _value_at(data, ox + ts * dx, oy + ts * dy, oz + ts * dz) - iso
+                    if prev_g == prev_g and (prev_g < 0.0) != (g < 0.0):
+                        return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g,
+                                       ts, g, visited, tested, skipped)
+                    prev_t = t_near + math.floor((t_end - t_near) / dt) * dt
+                    prev_g = g
+        else:
+            visited += 1
+            vmin, vmax, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
+            if vmin <= iso <= vmax and t_end >= t:
+                tested += 1
+                ax = ox + t * dx - ci
+                ay = oy + t * dy - cj
+                az = oz + t * dz - ck
+                ex = ox + t_end * dx - ci - ax
+                ey = oy + t_end * dy - cj - ay
+                ez = oz + t_end * dz - ck - az
+                if method == 0:
+                    c3, c2, c1, c0 = ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7,
+                                               ax, ay, az, ex, ey, ez)
+                    s = cubic_first_root(c3, c2, c1, c0 - iso, 0.0, 1.0)
+                    if s == s:  # not NaN
+                        return t + s * (t_end - t), ci, cj, ck, visited, tested, skipped
+                else:
+                    # Samples on the global grid t_near + m dt that fall in [t, t_end].
+                    m = math.ceil((t - t_near) / dt)
+                    ts = t_near + m * dt
+                    while ts <= t_end:
+                        s = (ts - t) / (t_end - t) if t_end > t else 0.0
+                        g = local_value(k0, k1, k2, k3, k4, k5, k6, k7,
+                                        ax + s * ex, ay + s * ey, az + s * ez) - iso
+                        if prev_g == prev_g and ((prev_g < 0.0) != (g < 0.0) or g == 0.0):
+                            return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g,
+                                           ts, g, visited, tested, skipped)
+                        if prev_g != prev_g and g == 0.0:
+                            return ts, ci, cj, ck, visited, tested, skipped
+                        prev_t, prev_g = ts, g
+                        m += 1
+                        ts = t_near + m * dt
+            elif method == 1 and t_end >= t:
+                # A rejected cell lies entirely on one side: one sample there keeps the sign
+                # bookkeeping right without a value fetch (the corner range gives the sign).
+                m = math.ceil((t - t_near) / dt)
+                ts = t_near + m * dt
+                if ts <= t_end:
+                    g_side = vmin - iso if vmin > iso else vmax - iso
+                    if prev_g == prev_g and (prev_g < 0.0) != (g_side < 0.0):
+                        # The crossing lies between the previous sample and this cell.
+                        g = _value_at(data, ox + ts * dx, oy + ts * dy, oz + ts * dz) - iso
+                        return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g,
+                                       ts, g, visited, tested, skipped)
+                    prev_t = t_near + (math.floor((t_end - t_near) / dt)) * dt
+                    prev_g = g_side
+        if t_exit >= t_far:
+            break
+        ci = axis_advance(ci, px, tx, t_exit, ox, dx, size, nx)
+        cj = axis_advance(cj, py, ty, t_exit, oy, dy, size, ny)
+        ck = axis_advance(ck, pz, tz, t_exit, oz, dz, size, nz)
+        if ci < 0 or ci >= nx or cj < 0 or cj >= ny or ck < 0 or ck >= nz:
+            break
+        t = max(t, t_exit)
+    if method == 1 and prev_g == prev_g and prev_t < t_far:
+        # The sampled method also samples the exit point, so a crossing in the last partial
+        # step is not lost.
+        g = _value_at(data, ox + t_far * dx, oy + t_far * dy, oz + t_far * dz) - iso
+        if (prev_g < 0.0) != (g < 0.0) or g == 0.0:
+            return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g, t_far, g,
+                           visited, tested, skipped)
+    return math.inf, -1, -1, -1, visited, tested, skipped
+
+
+@jit()
+def _bisect(data, iso, ox, oy, oz, dx, dy, dz, ta, ga, tb, gb, visited, tested, skipped):
+    """Refine a sign change of the sampled method between ``ta`` and ``tb`` by bisection."""
+    if gb == 0.0:
+        t = tb
+    else:
+        for _ in range(_BISECTION_STEPS):
+            tm = 0.5 * (ta + tb)
+            gm = _value_at(data, ox + tm * dx, oy + tm * dy, oz + tm * dz) - iso
+            if (gm < 0.0) == (ga < 0.0) and gm != 0.0:
+                ta, ga = tm, gm
+            else:
+                tb, gb = tm, gm
+        t = tb
+    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
+    ci = min(max(int(math.floor(ox + t * dx)), 0), nx - 1)
+    cj = min(max(int(math.floor(oy + t * dy)), 0), ny - 1)
+    ck = min(max(int(math.floor(oz + t * dz)), 0), nz - 1)
+    return t, ci, cj, ck, visited, tested, skipped
+
+
+@jit(parallel=True)
+def trace_trilinear(
+    data: np.ndarray,
+    act0: np.ndarray,
+    act1: np.ndarray,
+    act2: np.ndarray,
+    iso: float,
+    basis: np.ndarray,
+    vol_origin: np.ndarray,
+    spacing: np.ndarray,
+    row_order: np.ndarray,
+    method: int,
+    step: float,
+    inside_high: bool,
+    shading: np.ndarray,
+    rgba: np.ndarray,
+    depth: np.ndarray,
+    position: np.ndarray,
+    normal: np.ndarray,
+    face: np.ndarray,
+    cells_visited: np.ndarray,
+    cells_tested: np.ndarray,
+    blocks_skipped: np.ndarray,
+) -> None:
+    """Trace and shade every pixel; results are written into the output arrays.
+
+    ``basis`` is :meth:`Camera.pixel_basis` (rays are generated per pixel).
+
+    ``row_order`` is a permutation of the rows that spreads each thread's share over the whole
+    image, so threads get similar amounts of work. ``step`` is in voxel (index) units and only
+    used by the sampled method.
+    """
+    height, width = depth.shape
+    sx, sy, sz = spacing[0], spacing[1], spacing[2]
+    orx, ory, orz = vol_origin[0], vol_origin[1], vol_origin[2]
+    out_sign = -1.0 if inside_high else 1.0
+    for r in prange(height):
+        row = row_order[r]
+        for col in range(width):
+            wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+            dx, dy, dz = ux / sx, uy / sy, uz / sz
+            ox, oy, oz = (wx - orx) / sx, (wy - ory) / sy, (wz - orz) / sz
+            # The sampled method's step, converted from voxels to world distance on this ray.
+            dt = step / math.sqrt(dx * dx + dy * dy + dz * dz)
+            t, ci, cj, ck, nvis, ntest, nskip = _trace_ray(
+                data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt
+            )
+            cells_visited[row, col] = nvis
+            cells_tested[row, col] = ntest
+            blocks_skipped[row, col] = nskip
+            if t == math.inf:
+                depth[row, col] = math.inf
+                for c in range(3):
+                    position[row, col, c] = math.nan
+                    normal[row, col, c] = math.nan
+                    rgba[row, col, c] = shading[6 + c]
+                rgba[row, col, 3] = shading[9]
+                face[row, col] = 0
+                continue
+            depth[row, col] = t
+            position[row, col, 0] = wx + t * ux
+            position[row, col, 1] = wy + t * uy
+            position[row, col, 2] = wz + t * uz
+            _, _, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
+            gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7,
+                                        ox + t * dx - ci, oy + t * dy - cj, oz + t * dz - ck)
+            # Index-space gradient to world space: d/dx_world = d/dx_index / spacing.
+            gx, gy, gz = gx / sx, gy / sy, gz / sz
+            norm = math.sqrt(gx * gx + gy * gy + gz * gz)
+            if norm > 0.0:
+                nx_, ny_, nz_ = out_sign * gx / norm, out_sign * gy / norm, out_sign * gz / norm
+            else:
+                nx_, ny_, nz_ = -ux, -uy, -uz  # flat spot: face the viewer
+            normal[row, col, 0] = nx_
+            normal[row, col, 1] = ny_
+            normal[row, col, 2] = nz_
+            front = nx_ * ux + ny_ * uy + nz_ * uz <= 0.0
+            face[row, col] = 1 if front else -1
+            cr, cg, cb = shade_pixel(shading, front, nx_, ny_, nz_, ux, uy, uz)
+            rgba[row, col, 0] = cr
+            rgba[row, col, 1] = cg
+            rgba[row, col, 2] = cb
+            rgba[row, col, 3] = 1.0

@@ -1,0 +1,84 @@
+"""Blinn–Phong shading with a headlight, and distinct colours for front and back faces.
+
+With the light at the eye, the light, view and half vectors all equal ``-ray``, so the diffuse term
+is ``|n . ray|`` and the specular term ``|n . ray|^shininess``. A face is *front-facing* when the
+ray crosses it from outside the object into it ("inside" is the side of the isovalue named by the
+volume's ``metadata["inside"]``: ``"high"`` for CT/MRI-like data, ``"low"`` for distance fields).
+Back faces appear where the object is cut by the volume box or a clip plane, or when the camera is
+inside it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._jit import jit
+from ..errors import ParameterError
+
+__all__ = ["Shading", "shade_pixel"]
+
+
+def _rgb(value: object, name: str, n: int = 3) -> tuple[float, ...]:
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size != n or not np.all((arr >= 0) & (arr <= 1)):
+        raise ParameterError(f"{name} must be {n} numbers in [0, 1], got {value!r}")
+    return tuple(float(v) for v in arr)
+
+
+@dataclass(frozen=True)
+class Shading:
+    """Colours and Blinn–Phong coefficients of the isosurface image.
+
+    Parameters
+    ----------
+    front_color, back_color : 3 floats in [0, 1]
+        Base colours of front and back faces.
+    background : 4 floats in [0, 1]
+        RGBA of pixels whose ray misses the surface.
+    ambient, diffuse, specular : float
+        Blinn–Phong weights.
+    shininess : float
+        Specular exponent.
+    """
+
+    front_color: tuple[float, ...] = (0.92, 0.84, 0.70)
+    back_color: tuple[float, ...] = (0.35, 0.55, 0.90)
+    background: tuple[float, ...] = (0.07, 0.07, 0.09, 1.0)
+    ambient: float = 0.12
+    diffuse: float = 0.78
+    specular: float = 0.25
+    shininess: float = 40.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "front_color", _rgb(self.front_color, "front_color"))
+        object.__setattr__(self, "back_color", _rgb(self.back_color, "back_color"))
+        object.__setattr__(self, "background", _rgb(self.background, "background", 4))
+        for name in ("ambient", "diffuse", "specular", "shininess"):
+            if not float(getattr(self, name)) >= 0:
+                raise ParameterError(f"{name} must be >= 0, got {getattr(self, name)}")
+
+    def as_array(self) -> np.ndarray:
+        """Packed parameters for the compiled kernels (16 float64)."""
+        return np.array(
+            [*self.front_color, *self.back_color, *self.background,
+             self.ambient, self.diffuse, self.specular, self.shininess],
+            dtype=np.float64,
+        )
+
+
+@jit(inline="always")
+def shade_pixel(
+    params: np.ndarray, front: bool, nx: float, ny: float, nz: float,
+    ux: float, uy: float, uz: float,
+) -> tuple[float, float, float]:
+    """RGB of a hit with unit normal ``n`` seen along unit ray direction ``u``."""
+    cos_theta = abs(nx * ux + ny * uy + nz * uz)
+    base = 0 if front else 3
+    amb, dif, spe, shin = params[10], params[11], params[12], params[13]
+    spec = spe * cos_theta**shin
+    r = params[base] * (amb + dif * cos_theta) + spec
+    g = params[base + 1] * (amb + dif * cos_theta) + spec
+    b = params[base + 2] * (amb + dif * cos_theta) + spec
+    return min(r, 1.0), min(g, 1.0), min(b, 1.0)
