@@ -3,32 +3,16 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._atomic import atomic_outputs
 from ..errors import ParameterError
 
-__all__ = ["Frame", "atomic_write"]
-
-
-def atomic_write(path: str | os.PathLike, write: Any) -> None:
-    """Call ``write(tmp_path)`` then move the result to ``path``; never leave half a file."""
-    path = Path(path)
-    if not path.parent.exists():
-        raise ParameterError(f"{path}: the folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+__all__ = ["Frame"]
 
 
 @dataclass
@@ -86,10 +70,13 @@ class Frame:
         if Path(path).suffix.lower() != ".png":
             raise ParameterError(f"{path}: the image must be saved as .png")
         image = Image.fromarray(self.to_uint8(), mode="RGBA")
-        atomic_write(path, lambda tmp: image.save(tmp, format="PNG"))
+        with atomic_outputs(Path(path)) as (tmp,):
+            image.save(tmp, format="PNG")
 
     def save_depth(self, path: str | os.PathLike) -> None:
         """Write the depth buffer as ``.npy`` (float64, ``inf`` on misses)."""
         if Path(path).suffix.lower() != ".npy":
             raise ParameterError(f"{path}: the depth buffer must be saved as .npy")
-        atomic_write(path, lambda tmp: np.save(tmp, self.depth))
+        with atomic_outputs(Path(path)) as (tmp,):
+            with open(tmp, "wb") as f:  # a file object: np.save must not append ".npy"
+                np.save(f, self.depth)

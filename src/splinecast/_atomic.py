@@ -1,0 +1,52 @@
+"""All-or-nothing output: write to temporary files beside the targets, then rename them in place."""
+
+from __future__ import annotations
+
+import os
+import secrets
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from .errors import ParameterError
+
+__all__ = ["atomic_outputs"]
+
+
+@contextmanager
+def atomic_outputs(*targets: Path) -> Iterator[list[Path]]:
+    """Yield temporary paths, one per target, and move them onto the targets on success.
+
+    The temporaries live in the target's own folder so that :func:`os.replace` is an atomic
+    rename on the same file system. If the body raises, every temporary is removed and no target
+    is touched. The targets are replaced in the order given, so pass a header last: a reader never
+    sees a new header pointing at missing data.
+
+    Raises
+    ------
+    ParameterError
+        When a target's folder does not exist or a file cannot be written there.
+    """
+    for target in targets:
+        if not target.parent.is_dir():
+            raise ParameterError(f"{target}: folder {target.parent} does not exist")
+    temps = [t.parent / f".{t.name}.{secrets.token_hex(4)}.part" for t in targets]
+    try:
+        yield temps
+        for temp, target in zip(temps, targets, strict=True):
+            os.replace(temp, target)
+    except OSError as exc:
+        _remove(temps)
+        reason = exc.strerror or str(exc)
+        raise ParameterError(f"{targets[0]}: cannot write: {reason}") from exc
+    except BaseException:
+        _remove(temps)
+        raise
+
+
+def _remove(paths: list[Path]) -> None:
+    for path in paths:
+        try:
+            path.unlink(missing_ok=True)
+        except OSError:
+            pass  # best effort: the original error is the one worth reporting

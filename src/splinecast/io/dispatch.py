@@ -1,0 +1,240 @@
+"""``read`` and ``write``: pick the format from the path's extension and the file's first bytes."""
+
+from __future__ import annotations
+
+import gzip
+import os
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+from ..errors import ParameterError, ReadError
+from ..volume import SUPPORTED_DTYPES, Volume
+from .sidecar import find_sidecar
+
+__all__ = ["read", "write", "sniff"]
+
+#: Extension -> format. Checked longest first so ".nii.gz" wins over ".gz".
+_EXTENSIONS = {
+    ".npy": "npy",
+    ".npz": "npz",
+    ".mhd": "metaimage",
+    ".mha": "metaimage",
+    ".nrrd": "nrrd",
+    ".nhdr": "nrrd",
+    ".nii": "nifti",
+    ".nii.gz": "nifti",
+    ".hdr": "nifti",
+    ".tif": "tiff",
+    ".tiff": "tiff",
+    ".dcm": "dicom",
+    ".json": "sidecar",
+}
+#: Formats whose files always start with a recognisable signature.
+_SIGNED = {"npy", "npz", "nrrd", "tiff", "nifti"}
+_SUPPORTED_READ = (
+    ".npy .npz .mhd .mha .nrrd .nhdr .nii .nii.gz .tif .tiff .dcm, raw + .json, a DICOM folder"
+)
+_NIFTI1_MAGIC = (b"n+1\0", b"ni1\0")
+_NIFTI2_MAGIC = (b"n+2\0", b"ni2\0")
+#: Enough bytes for every signature below (the NIfTI-1 magic sits at 344..348).
+_HEAD_BYTES = 352
+
+
+def sniff(path: Path) -> str | None:
+    """Recognise a file format from its first bytes; ``None`` if there is no known signature."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_HEAD_BYTES)
+    except OSError:
+        return None
+    if head.startswith(b"\x93NUMPY"):
+        return "npy"
+    if head.startswith((b"PK\x03\x04", b"PK\x05\x06")):
+        return "npz"
+    if head.startswith(b"NRRD"):
+        return "nrrd"
+    if head[:4] in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"):
+        return "tiff"
+    if head[128:132] == b"DICM":
+        return "dicom"
+    if _is_nifti(head):
+        return "nifti"
+    if head.startswith(b"\x1f\x8b"):
+        try:
+            with gzip.open(path, "rb") as fh:
+                inner = fh.read(_HEAD_BYTES)
+        except (OSError, EOFError, zlib.error):
+            return None
+        return "nifti" if _is_nifti(inner) else None
+    if head.lstrip().startswith((b"ObjectType", b"NDims")):
+        return "metaimage"
+    return None
+
+
+def _is_nifti(head: bytes) -> bool:
+    return head[344:348] in _NIFTI1_MAGIC or head[4:8] in _NIFTI2_MAGIC
+
+
+def _extension_format(path: Path) -> str | None:
+    name = path.name.lower()
+    for ext in sorted(_EXTENSIONS, key=len, reverse=True):
+        if name.endswith(ext):
+            return _EXTENSIONS[ext]
+    return None
+
+
+def _reader(kind: str) -> Callable[[Path], Volume]:
+    # Imported on use: each module is cheap, but this keeps `import splinecast.io` minimal.
+    if kind == "npy":
+        from .npyfile import read_npy
+
+        return read_npy
+    if kind == "npz":
+        from .npyfile import read_npz
+
+        return read_npz
+    if kind == "metaimage":
+        from .metaimage import read_metaimage
+
+        return read_metaimage
+    if kind == "nrrd":
+        from .nrrdfile import read_nrrd
+
+        return read_nrrd
+    if kind == "nifti":
+        from .nifti import read_nifti
+
+        return read_nifti
+    if kind == "tiff":
+        from .tiff import read_tiff
+
+        return read_tiff
+    if kind == "dicom":
+        from .dicom import read_dicom_file
+
+        return read_dicom_file
+    from .sidecar import read_sidecar
+
+    return read_sidecar
+
+
+def read(path: str | os.PathLike[str]) -> Volume:
+    """Read a volume from a file, a DICOM folder or a ``demo:`` name.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A file (``.npy``, ``.npz``, ``.mhd``/``.mha``, ``.nrrd``/``.nhdr``, ``.nii``/``.nii.gz``,
+        ``.tif``/``.tiff``, raw data with a ``.json`` sidecar, a ``.dcm`` slice), a folder holding
+        a DICOM series, or ``"demo:<name>?size=N&..."`` for a synthetic volume (see
+        :func:`splinecast.io.demo`). The format is recognised by the file's signature when it has
+        one, by its extension otherwise.
+
+    Returns
+    -------
+    Volume
+        With ``metadata["name"]`` (the file name or the ``demo:`` string), ``metadata["source"]``
+        (the full path) and ``metadata["format"]``. Uncompressed npy, raw, MetaImage, NRRD, NIfTI
+        and TIFF data stay memory-mapped; big-endian data is copied once into native order.
+
+    Raises
+    ------
+    ReadError
+        Missing file, unknown format, bad header, truncated data, unsupported content, or a
+        missing optional library (with the command that installs it).
+    ParameterError
+        A bad ``demo:`` name or parameter.
+
+    Warns
+    -----
+    OrientationWarning
+        When axes were flipped, permuted or an oblique rotation was dropped to fit x, y, z.
+    """
+    if isinstance(path, str) and path.startswith("demo:"):
+        from .synthetic import demo_from_uri
+
+        return demo_from_uri(path)
+    path = Path(os.fspath(path))
+    if not path.exists():
+        raise ReadError(f"{path}: no such file or folder")
+    if path.is_dir():
+        from .dicom import read_dicom_series
+
+        return read_dicom_series(path)
+    by_content = sniff(path)
+    by_extension = _extension_format(path)
+    if by_content is not None:
+        kind = by_content
+    elif by_extension is None and find_sidecar(path) is not None:
+        kind = "sidecar"  # headerless data (foo.raw) described by foo.json or foo.raw.json
+    elif path.suffix.lower() == ".img" and path.with_suffix(".hdr").is_file():
+        kind = "nifti"  # the data half of a NIfTI/Analyze .hdr/.img pair
+    elif by_extension in _SIGNED and path.suffix.lower() != ".hdr":
+        # (.hdr may be an Analyze 7.5 header, which has no signature: nibabel decides.)
+        raise ReadError(
+            f"{path}: not a valid {by_extension} file "
+            f"(its first bytes lack the {by_extension} signature)"
+        )
+    elif by_extension is not None:
+        kind = by_extension
+    else:
+        raise ReadError(_unknown_message(path))
+    return _reader(kind)(path)
+
+
+def _unknown_message(path: Path) -> str:
+    headers = [p.name for p in (path.with_suffix(".mhd"), path.with_suffix(".nhdr")) if p.is_file()]
+    if headers:
+        return f"{path}: raw voxels without a sidecar; read its header {headers[0]} instead"
+    if path.suffix.lower() in (".raw", ".bin", ".dat", ".img"):
+        return (
+            f"{path}: raw voxels need a description: add {path.name}.json with shape and dtype "
+            "(or write a .mhd header)"
+        )
+    return f"{path}: unknown file format (supported: {_SUPPORTED_READ})"
+
+
+# --------------------------------------------------------------------------- writing
+_WRITERS = (".npy", ".npz", ".mhd", ".raw", ".nrrd")
+
+
+def write(volume: Volume, path: str | os.PathLike[str]) -> None:
+    """Write a volume; the format follows the extension.
+
+    Parameters
+    ----------
+    volume : Volume
+        The volume to save.
+    path : str or path-like
+        ``.npy`` (voxels only), ``.npz`` (voxels, spacing, origin), ``.mhd`` (writes ``name.mhd``
+        and ``name.raw``), ``.raw`` (writes ``name.raw`` and the JSON sidecar ``name.json``) or
+        ``.nrrd`` (needs pynrrd). Raw data is little-endian with x varying fastest.
+
+    Raises
+    ------
+    ParameterError
+        Unknown extension, a folder that does not exist, voxels the format cannot hold, or any
+        failure while writing. Nothing is left behind on failure: every file is written to a
+        temporary beside its target and renamed into place only when complete.
+    """
+    path = Path(os.fspath(path))
+    suffix = path.suffix.lower()
+    if suffix not in _WRITERS:
+        raise ParameterError(
+            f"{path}: cannot write '{suffix or path.name}' files (use {', '.join(_WRITERS)})"
+        )
+    data = volume.data
+    if data.ndim != 3 or data.dtype.newbyteorder("=") not in SUPPORTED_DTYPES:
+        raise ParameterError(f"{path}: cannot write {data.dtype} voxels of shape {data.shape}")
+    if suffix == ".npy":
+        from .npyfile import write_npy as writer
+    elif suffix == ".npz":
+        from .npyfile import write_npz as writer
+    elif suffix == ".mhd":
+        from .metaimage import write_metaimage as writer
+    elif suffix == ".raw":
+        from .sidecar import write_sidecar as writer
+    else:
+        from .nrrdfile import write_nrrd as writer
+    writer(volume, path)
