@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -43,6 +44,21 @@ def median_ms(fn, repeats: int) -> tuple[float, list[float]]:
         fn()
         times.append((time.perf_counter() - start) * 1e3)
     return statistics.median(times), times
+
+
+def import_ms(repeats: int = 5) -> float:
+    """Median wall time of ``python -c "import splinecast"`` in a fresh interpreter, in ms."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "import splinecast"], check=True)
+        times.append((time.perf_counter() - start) * 1e3)
+    baseline = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "pass"], check=True)
+        baseline.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times) - statistics.median(baseline)
 
 
 def voxel_depth_error(frame_a: sc.Frame, frame_b: sc.Frame, camera: sc.Camera,
@@ -124,6 +140,9 @@ def markdown(results: dict) -> str:
         f"numpy {m['versions']['numpy']}. Command: `{results['command']}`. "
         "Medians after warm-up.",
         "",
+        f"`import splinecast`: {results['import_splinecast_ms']:.0f} ms (fresh interpreter, "
+        "minus the interpreter's own start-up).",
+        "",
         "| volume | image | ms/frame | Mrays/s | iso change: classify ms | iso change: to image ms "
         "| cells visited/ray | cells tested/ray | blocks skipped/ray | sampled step matching exact "
         "| sampled ms at that step | exact/sampled time |",
@@ -177,7 +196,8 @@ def main() -> None:
                   (lambda f=f, label=label: _shrink(f, label)), isos)
                  for label, f, isos in cases if "MRI" not in label]
     results = {"machine": describe(), "command": "python benchmarks/bench_core.py"
-               + (" --quick" if args.quick else ""), "volumes": []}
+               + (" --quick" if args.quick else ""), "import_splinecast_ms": import_ms(),
+               "volumes": []}
     for label, make, isos in cases:
         results["volumes"].append(bench_volume(label, make(), isos, sizes, repeats))
     results["machine"] = describe()  # threading layer is known after the first kernel ran

@@ -15,7 +15,7 @@ from numba import prange
 
 from .._jit import jit
 
-__all__ = ["BLOCK_SHIFTS", "MinMaxHierarchy"]
+__all__ = ["BLOCK_SHIFTS", "MinMaxHierarchy", "inactive_block_size"]
 
 #: log2 of the block edge (in cells) of each level, finest first.
 BLOCK_SHIFTS = (2, 4, 6)
@@ -51,6 +51,24 @@ def _finest_ranges(
                 lo[bi, bj, bk] = vmin
                 hi[bi, bj, bk] = vmax
     return lo, hi
+
+
+@jit(inline="always")
+def inactive_block_size(
+    act0: np.ndarray, act1: np.ndarray, act2: np.ndarray, i: int, j: int, k: int
+) -> int:
+    """Edge in cells of the largest inactive block holding cell ``(i, j, k)``; 0 if it is active.
+
+    The flags are :attr:`MinMaxHierarchy.active`, finest level first; the shifts are
+    :data:`BLOCK_SHIFTS` (checked coarse to fine so the biggest leap is taken).
+    """
+    if act2[i >> 6, j >> 6, k >> 6] == 0:
+        return 64
+    if act1[i >> 4, j >> 4, k >> 4] == 0:
+        return 16
+    if act0[i >> 2, j >> 2, k >> 2] == 0:
+        return 4
+    return 0
 
 
 def _coarsen(arr: np.ndarray, factor: int, reduce: np.ufunc, fill: float) -> np.ndarray:

@@ -25,7 +25,10 @@ import numpy as np
 
 from .._jit import jit
 
-__all__ = ["clip_to_box", "start_cell", "axis_exit", "axis_advance", "walk_cells"]
+__all__ = [
+    "clip_to_box", "start_cell", "axis_exit", "axis_advance", "walk_begin", "walk_step",
+    "walk_cells",
+]
 
 
 @jit(inline="always")
@@ -118,6 +121,52 @@ def axis_advance(
     return int(v)
 
 
+@jit(inline="always")
+def walk_begin(
+    ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, nx: int, ny: int, nz: int,
+) -> tuple[bool, int, int, int, float, float]:
+    """Start a walk: ``(inside, i, j, k, t_near, t_far)`` for the ray's entry into the grid."""
+    t_near, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, nx, ny, nz)
+    if not t_near <= t_far:
+        return False, -1, -1, -1, t_near, t_far
+    ci, cj, ck = start_cell(ox, oy, oz, dx, dy, dz, t_near, nx, ny, nz)
+    return True, ci, cj, ck, t_near, t_far
+
+
+@jit(inline="always")
+def walk_step(
+    ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, nx: int, ny: int, nz: int,
+    ci: int, cj: int, ck: int, t: float, t_far: float, size: int,
+) -> tuple[float, bool, int, int, int, float]:
+    """Leave the aligned block of ``size`` cells around cell ``(ci, cj, ck)``, entered at ``t``.
+
+    Returns ``(t_end, more, i, j, k, t_next)``: the block's segment is ``[t, t_end]`` (clipped to
+    the grid), ``more`` tells whether the ray goes on into cell ``(i, j, k)`` at ``t_next``.
+    Every model's kernel walks its rays with :func:`walk_begin` and this function::
+
+        inside, i, j, k, t, t_far = walk_begin(...)
+        while inside:
+            size = <1 for a cell to process, or the edge of an empty block to leap over>
+            t_end, inside, ni, nj, nk, t_next = walk_step(..., i, j, k, t, t_far, size)
+            <process the segment [t, t_end] of cell or block (i, j, k)>
+            i, j, k, t = ni, nj, nk, t_next
+    """
+    px, tx = axis_exit(ci, ox, dx, size)
+    py, ty = axis_exit(cj, oy, dy, size)
+    pz, tz = axis_exit(ck, oz, dz, size)
+    t_exit = min(tx, ty, tz)
+    t_end = min(t_exit, t_far)
+    if t_exit >= t_far:
+        return t_end, False, ci, cj, ck, t
+    ni = axis_advance(ci, px, tx, t_exit, ox, dx, size, nx)
+    nj = axis_advance(cj, py, ty, t_exit, oy, dy, size, ny)
+    nk = axis_advance(ck, pz, tz, t_exit, oz, dz, size, nz)
+    if ni < 0 or ni >= nx or nj < 0 or nj >= ny or nk < 0 or nk >= nz:
+        return t_end, False, ci, cj, ck, t
+    # A block exit can lie a rounding error before t on a non-crossing axis; never go back.
+    return t_end, True, ni, nj, nk, max(t, t_exit)
+
+
 @jit()
 def walk_cells(
     origin: np.ndarray, direction: np.ndarray, n_cells: np.ndarray, max_cells: int = 100000
@@ -142,25 +191,16 @@ def walk_cells(
     dx, dy, dz = direction[0], direction[1], direction[2]
     nx, ny, nz = n_cells[0], n_cells[1], n_cells[2]
     out = np.empty((max_cells, 3), dtype=np.int64)
-    t_near, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, nx, ny, nz)
-    if not t_near < t_far:
+    inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz)
+    if not t < t_far:
         return out[:0]
-    ci, cj, ck = start_cell(ox, oy, oz, dx, dy, dz, t_near, nx, ny, nz)
     count = 0
-    while count < max_cells:
+    while inside and count < max_cells:
         out[count, 0] = ci
         out[count, 1] = cj
         out[count, 2] = ck
         count += 1
-        px, tx = axis_exit(ci, ox, dx, 1)
-        py, ty = axis_exit(cj, oy, dy, 1)
-        pz, tz = axis_exit(ck, oz, dz, 1)
-        t_exit = min(tx, ty, tz)
-        if t_exit >= t_far:
-            break
-        ci = axis_advance(ci, px, tx, t_exit, ox, dx, 1, nx)
-        cj = axis_advance(cj, py, ty, t_exit, oy, dy, 1, ny)
-        ck = axis_advance(ck, pz, tz, t_exit, oz, dz, 1, nz)
-        if ci < 0 or ci >= nx or cj < 0 or cj >= ny or ck < 0 or ck >= nz:
-            break
+        _, inside, ci, cj, ck, t = walk_step(
+            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, 1
+        )
     return out[:count]

@@ -23,11 +23,12 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..accel.traversal import axis_advance, axis_exit, clip_to_box, start_cell
+from ..accel.minmax import inactive_block_size
+from ..accel.traversal import walk_begin, walk_step
 from ..models.trilinear import cell_monomials, local_gradient, local_value, ray_cubic
 from ..roots.cubic import cubic_first_root
+from .pixels import store_hit, store_miss
 from .rays import pixel_ray
-from .shading import shade_pixel
 
 __all__ = ["trace_trilinear", "METHODS"]
 
@@ -35,18 +36,6 @@ __all__ = ["trace_trilinear", "METHODS"]
 METHODS = {"exact": 0, "sampled": 1}
 
 _BISECTION_STEPS = 60
-
-
-@jit(inline="always")
-def _inactive_block(act0, act1, act2, i, j, k):
-    """Edge (in cells) of the largest inactive block containing cell (i, j, k), 0 if none."""
-    if act2[i >> 6, j >> 6, k >> 6] == 0:
-        return 64
-    if act1[i >> 4, j >> 4, k >> 4] == 0:
-        return 16
-    if act0[i >> 2, j >> 2, k >> 2] == 0:
-        return 4
-    return 0
 
 
 @jit()
@@ -72,24 +61,17 @@ def _trace_ray(
     visited = 0
     tested = 0
     skipped = 0
-    t_near, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, nx, ny, nz)
-    if not t_near <= t_far:
-        return math.inf, -1, -1, -1, visited, tested, skipped
-    ci, cj, ck = start_cell(ox, oy, oz, dx, dy, dz, t_near, nx, ny, nz)
-    t = t_near
+    inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz)
+    t_near = t
     # Sampled method state: the last sample's parameter and residual (NaN: no sample yet).
     prev_t = math.nan
     prev_g = math.nan
-    while True:
-        size = _inactive_block(act0, act1, act2, ci, cj, ck)
-        if size == 0:
-            size = 1
-        px, tx = axis_exit(ci, ox, dx, size)
-        py, ty = axis_exit(cj, oy, dy, size)
-        pz, tz = axis_exit(ck, oz, dz, size)
-        t_exit = min(tx, ty, tz)
-        t_end = min(t_exit, t_far)
-        if size > 1:
+    while inside:
+        size = inactive_block_size(act0, act1, act2, ci, cj, ck)
+        t_end, inside, ni, nj, nk, t_next = walk_step(
+            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, max(size, 1)
+        )
+        if size > 0:
             skipped += 1
             if method == 1 and t_end >= t:
                 # The block lies strictly on one side of the isovalue, so one sample gives the
@@ -137,27 +119,19 @@ def _trace_ray(
                         m += 1
                         ts = t_near + m * dt
             elif method == 1 and t_end >= t:
-                # A rejected cell lies entirely on one side: one sample there keeps the sign
-                # bookkeeping right without a value fetch (the corner range gives the sign).
+                # A rejected cell lies strictly on one side: its samples all have the sign of
+                # its corner range, so no value needs fetching unless the sign changed.
                 m = math.ceil((t - t_near) / dt)
                 ts = t_near + m * dt
                 if ts <= t_end:
                     g_side = vmin - iso if vmin > iso else vmax - iso
                     if prev_g == prev_g and (prev_g < 0.0) != (g_side < 0.0):
-                        # The crossing lies between the previous sample and this cell.
                         g = _value_at(data, ox + ts * dx, oy + ts * dy, oz + ts * dz) - iso
                         return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g,
                                        ts, g, visited, tested, skipped)
-                    prev_t = t_near + (math.floor((t_end - t_near) / dt)) * dt
+                    prev_t = t_near + math.floor((t_end - t_near) / dt) * dt
                     prev_g = g_side
-        if t_exit >= t_far:
-            break
-        ci = axis_advance(ci, px, tx, t_exit, ox, dx, size, nx)
-        cj = axis_advance(cj, py, ty, t_exit, oy, dy, size, ny)
-        ck = axis_advance(ck, pz, tz, t_exit, oz, dz, size, nz)
-        if ci < 0 or ci >= nx or cj < 0 or cj >= ny or ck < 0 or ck >= nz:
-            break
-        t = max(t, t_exit)
+        ci, cj, ck, t = ni, nj, nk, t_next
     if method == 1 and prev_g == prev_g and prev_t < t_far:
         # The sampled method also samples the exit point, so a crossing in the last partial
         # step is not lost.
@@ -224,7 +198,6 @@ def trace_trilinear(
     height, width = depth.shape
     sx, sy, sz = spacing[0], spacing[1], spacing[2]
     orx, ory, orz = vol_origin[0], vol_origin[1], vol_origin[2]
-    out_sign = -1.0 if inside_high else 1.0
     for r in prange(height):
         row = row_order[r]
         for col in range(width):
@@ -240,35 +213,11 @@ def trace_trilinear(
             cells_tested[row, col] = ntest
             blocks_skipped[row, col] = nskip
             if t == math.inf:
-                depth[row, col] = math.inf
-                for c in range(3):
-                    position[row, col, c] = math.nan
-                    normal[row, col, c] = math.nan
-                    rgba[row, col, c] = shading[6 + c]
-                rgba[row, col, 3] = shading[9]
-                face[row, col] = 0
+                store_miss(row, col, shading, rgba, depth, position, normal, face)
                 continue
-            depth[row, col] = t
-            position[row, col, 0] = wx + t * ux
-            position[row, col, 1] = wy + t * uy
-            position[row, col, 2] = wz + t * uz
             _, _, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
             gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7,
                                         ox + t * dx - ci, oy + t * dy - cj, oz + t * dz - ck)
             # Index-space gradient to world space: d/dx_world = d/dx_index / spacing.
-            gx, gy, gz = gx / sx, gy / sy, gz / sz
-            norm = math.sqrt(gx * gx + gy * gy + gz * gz)
-            if norm > 0.0:
-                nx_, ny_, nz_ = out_sign * gx / norm, out_sign * gy / norm, out_sign * gz / norm
-            else:
-                nx_, ny_, nz_ = -ux, -uy, -uz  # flat spot: face the viewer
-            normal[row, col, 0] = nx_
-            normal[row, col, 1] = ny_
-            normal[row, col, 2] = nz_
-            front = nx_ * ux + ny_ * uy + nz_ * uz <= 0.0
-            face[row, col] = 1 if front else -1
-            cr, cg, cb = shade_pixel(shading, front, nx_, ny_, nz_, ux, uy, uz)
-            rgba[row, col, 0] = cr
-            rgba[row, col, 1] = cg
-            rgba[row, col, 2] = cb
-            rgba[row, col, 3] = 1.0
+            store_hit(row, col, t, wx, wy, wz, ux, uy, uz, gx / sx, gy / sy, gz / sz,
+                      inside_high, shading, rgba, depth, position, normal, face)
