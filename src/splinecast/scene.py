@@ -17,8 +17,10 @@ from .accel.minmax import MinMaxHierarchy
 from .camera import Camera
 from .errors import ParameterError
 from .models import MODELS
+from .render.clipping import NO_PLANES
 from .render.frame import Frame
-from .render.iso import METHODS, trace_trilinear
+from .render.iso import METHODS
+from .render.kernels import ISO_KERNELS
 from .render.shading import Shading
 from .volume import Volume
 
@@ -71,7 +73,10 @@ class Scene:
     volume : Volume
         The data to render.
     model : str
-        Reconstruction: ``"trilinear"`` (more models plug in by name).
+        Reconstruction: ``"trilinear"`` (more models plug in by name, see
+        :data:`splinecast.models.MODELS`).
+    **options
+        Model options (for example ``prefilter=True`` for spline models), passed to the model.
 
     Examples
     --------
@@ -83,14 +88,14 @@ class Scene:
     (48, 64)
     """
 
-    def __init__(self, volume: Volume, model: str = "trilinear") -> None:
+    def __init__(self, volume: Volume, model: str = "trilinear", **options: Any) -> None:
         if not isinstance(volume, Volume):
             raise ParameterError(f"volume must be a splinecast.Volume, got {type(volume).__name__}")
         if model not in MODELS:
             raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
         start = time.perf_counter()
         self.volume = volume
-        self.model = MODELS[model](volume)
+        self.model = MODELS[model](volume, **options)
         self.hierarchy = MinMaxHierarchy(
             self.model.coefficients, self.model.n_cells, self.model.support
         )
@@ -179,9 +184,10 @@ class Scene:
         skipped = np.empty((h, w), np.int32)
         act0, act1, act2 = self.hierarchy.active
         start = time.perf_counter()
-        trace_trilinear(
-            self.model.data, act0, act1, act2, value, camera.pixel_basis(),
-            np.asarray(self.volume.origin), np.asarray(self.volume.spacing), _row_order(h),
+        ISO_KERNELS[self.model.name](
+            self.model.arrays, self.model.params, act0, act1, act2, value, camera.pixel_basis(),
+            np.asarray(self.volume.origin), np.asarray(self.volume.spacing), NO_PLANES,
+            _row_order(h),
             METHODS[method], float(step), inside == "high", shading.as_array(),
             rgba, depth, position, normal, face, visited, tested, skipped,
         )

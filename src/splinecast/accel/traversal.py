@@ -47,14 +47,14 @@ def _slab(o: float, d: float, hi: float, t0: float, t1: float) -> tuple[float, f
 @jit()
 def clip_to_box(
     ox: float, oy: float, oz: float, dx: float, dy: float, dz: float,
-    nx: int, ny: int, nz: int,
+    nx: int, ny: int, nz: int, t_min: float = 0.0, t_max: float = math.inf,
 ) -> tuple[float, float]:
     """Parameter interval ``[t_near, t_far]`` of the ray inside ``[0, n_a]`` on every axis.
 
-    ``nx, ny, nz`` are the numbers of cells. Only ``t >= 0`` is kept (the ray starts at ``o``).
-    An empty interval has ``t_near > t_far``.
+    ``nx, ny, nz`` are the numbers of cells. Only ``t_min <= t <= t_max`` is kept (by default
+    ``t >= 0``: the ray starts at ``o``). An empty interval has ``t_near > t_far``.
     """
-    t0, t1 = 0.0, math.inf
+    t0, t1 = t_min, t_max
     t0, t1 = _slab(ox, dx, float(nx), t0, t1)
     t0, t1 = _slab(oy, dy, float(ny), t0, t1)
     t0, t1 = _slab(oz, dz, float(nz), t0, t1)
@@ -124,9 +124,13 @@ def axis_advance(
 @jit(inline="always")
 def walk_begin(
     ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, nx: int, ny: int, nz: int,
+    t_min: float = 0.0, t_max: float = math.inf,
 ) -> tuple[bool, int, int, int, float, float]:
-    """Start a walk: ``(inside, i, j, k, t_near, t_far)`` for the ray's entry into the grid."""
-    t_near, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, nx, ny, nz)
+    """Start a walk: ``(inside, i, j, k, t_near, t_far)`` for the ray's entry into the grid.
+
+    ``[t_min, t_max]`` restricts the ray further (clip planes, a crop box).
+    """
+    t_near, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max)
     if not t_near <= t_far:
         return False, -1, -1, -1, t_near, t_far
     ci, cj, ck = start_cell(ox, oy, oz, dx, dy, dz, t_near, nx, ny, nz)

@@ -162,6 +162,16 @@ class TrilinearModel:
         self.n_cells = tuple(n - 1 for n in volume.shape)
 
     @property
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays the model's kernels take (here: the voxels)."""
+        return (self.data,)
+
+    @property
+    def params(self) -> np.ndarray:
+        """The numbers the model's kernels take (none for trilinear)."""
+        return np.zeros(1)
+
+    @property
     def coefficients(self) -> np.ndarray:
         """The values that bound the reconstruction cell by cell (here: the voxels)."""
         return self.data

@@ -27,6 +27,7 @@ from ..accel.minmax import inactive_block_size
 from ..accel.traversal import walk_begin, walk_step
 from ..models.trilinear import cell_monomials, local_gradient, local_value, ray_cubic
 from ..roots.cubic import cubic_first_root
+from .clipping import clip_interval
 from .pixels import store_hit, store_miss
 from .rays import pixel_ray
 
@@ -54,14 +55,14 @@ def _value_at(data: np.ndarray, px: float, py: float, pz: float) -> float:
 
 @jit()
 def _trace_ray(
-    data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt,
+    data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max,
 ):
     """Trace one index-space ray. Returns (t_hit or inf, i, j, k, visited, tested, skipped)."""
     nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
     visited = 0
     tested = 0
     skipped = 0
-    inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz)
+    inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max)
     t_near = t
     # Sampled method state: the last sample's parameter and residual (NaN: no sample yet).
     prev_t = math.nan
@@ -165,7 +166,8 @@ def _bisect(data, iso, ox, oy, oz, dx, dy, dz, ta, ga, tb, gb, visited, tested, 
 
 @jit(parallel=True)
 def trace_trilinear(
-    data: np.ndarray,
+    arrays: tuple,
+    params: np.ndarray,
     act0: np.ndarray,
     act1: np.ndarray,
     act2: np.ndarray,
@@ -173,6 +175,7 @@ def trace_trilinear(
     basis: np.ndarray,
     vol_origin: np.ndarray,
     spacing: np.ndarray,
+    planes: np.ndarray,
     row_order: np.ndarray,
     method: int,
     step: float,
@@ -189,12 +192,17 @@ def trace_trilinear(
 ) -> None:
     """Trace and shade every pixel; results are written into the output arrays.
 
-    ``basis`` is :meth:`Camera.pixel_basis` (rays are generated per pixel).
+    This is the iso kernel interface every model implements (see
+    :mod:`splinecast.render.kernels`): ``arrays`` and ``params`` are the model's prepared arrays
+    and numbers (trilinear: ``(voxels,)``, unused params), ``act0..act2`` the block flags,
+    ``basis`` is :meth:`Camera.pixel_basis` (rays are generated per pixel), ``planes`` the clip
+    planes of :mod:`splinecast.render.clipping`.
 
     ``row_order`` is a permutation of the rows that spreads each thread's share over the whole
     image, so threads get similar amounts of work. ``step`` is in voxel (index) units and only
     used by the sampled method.
     """
+    data = arrays[0]
     height, width = depth.shape
     sx, sy, sz = spacing[0], spacing[1], spacing[2]
     orx, ory, orz = vol_origin[0], vol_origin[1], vol_origin[2]
@@ -206,8 +214,9 @@ def trace_trilinear(
             ox, oy, oz = (wx - orx) / sx, (wy - ory) / sy, (wz - orz) / sz
             # The sampled method's step, converted from voxels to world distance on this ray.
             dt = step / math.sqrt(dx * dx + dy * dy + dz * dz)
+            t_min, t_max = clip_interval(planes, wx, wy, wz, ux, uy, uz)
             t, ci, cj, ck, nvis, ntest, nskip = _trace_ray(
-                data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt
+                data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max
             )
             cells_visited[row, col] = nvis
             cells_tested[row, col] = ntest
