@@ -14,7 +14,9 @@ on the other axes is the floor of the exit point, clamped into the block so the 
 consistent with the block it just left.
 
 Conventions: a ray lying exactly in a cell face belongs to the cell on the face's positive side
-(``floor``), except on the upper face of the grid, which belongs to the last cell.
+(``floor``), except on the upper face of the grid, which belongs to the last cell. A ray that
+starts (or leaves a block) exactly on a grid plane while moving towards the plane's negative side
+belongs to the cell below the plane, which it actually enters.
 """
 
 from __future__ import annotations
@@ -62,8 +64,20 @@ def clip_to_box(
 
 
 @jit(inline="always")
+def _cell_index(p: float, d: float) -> float:
+    """Cell holding coordinate ``p`` for a ray moving with slope ``d`` on this axis.
+
+    On a grid plane a ray moving down belongs to the cell below it (it never enters the one
+    above); otherwise, and for rays parallel to the axis, the cell above (``floor``).
+    """
+    if d < 0.0:
+        return math.ceil(p) - 1.0
+    return math.floor(p)
+
+
+@jit(inline="always")
 def _start_index(o: float, d: float, t: float, n: int) -> int:
-    v = math.floor(o + t * d)
+    v = _cell_index(o + t * d, d)
     if v < 0:
         return 0
     if v > n - 1:
@@ -113,7 +127,7 @@ def axis_advance(
         return c
     start = (c // size) * size
     end = min(start + size - 1, n - 1)
-    v = math.floor(o + t_exit * d)
+    v = _cell_index(o + t_exit * d, d)
     if v < start:
         return start
     if v > end:
