@@ -16,9 +16,14 @@ from .camera import Camera
 from .errors import DataError, ParameterError, ReadError, SplinecastError
 from .io import demo, read, write
 from .models import MODELS
+from .models.smoothing import smooth
+from .preintegration import preintegrate
+from .render.dvr import DVRSettings
+from .render.effects import SurfaceEffects
 from .render.frame import Frame
 from .render.shading import Shading
 from .scene import Scene, check_iso
+from .transfer import TransferFunction
 from .volume import Volume
 
 __version__ = "0.1.0"
@@ -26,6 +31,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Camera",
     "MODELS",
+    "DVRSettings",
     "DataError",
     "Frame",
     "ParameterError",
@@ -33,9 +39,13 @@ __all__ = [
     "Scene",
     "Shading",
     "SplinecastError",
+    "SurfaceEffects",
+    "TransferFunction",
     "Volume",
     "check_iso",
     "demo",
+    "preintegrate",
     "read",
+    "smooth",
     "write",
 ]

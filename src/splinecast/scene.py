@@ -17,17 +17,21 @@ from .accel.minmax import MinMaxHierarchy
 from .camera import Camera
 from .errors import ParameterError
 from .models import MODELS
-from .render.clipping import NO_PLANES
+from .render.clipping import make_planes
+from .render.dvr import DVRSettings
+from .render.effects import SurfaceEffects, apply_effects
 from .render.frame import Frame
 from .render.iso import METHODS
 from .render.kernels import ISO_KERNELS
+from .render.modes import render_dvr, render_mip, render_multi_iso
 from .render.shading import Shading
+from .transfer import TransferFunction
 from .volume import Volume
 
 __all__ = ["Scene", "MODES", "check_iso"]
 
 #: Render modes accepted by :meth:`Scene.render`.
-MODES = ("iso",)
+MODES = ("iso", "mip", "minip", "dvr")
 
 
 def _row_order(height: int) -> np.ndarray:
@@ -101,7 +105,10 @@ class Scene:
         )
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self.classify_ms = math.nan
+        #: Counts and timings of the model's own isovalue change (models with ``classify``).
+        self.iso_stats: dict[str, Any] = {}
         self._iso: float | None = None
+        self._table_cache: dict = {}  # the last pre-integration table (mode="dvr")
 
     @property
     def iso(self) -> float | None:
@@ -116,6 +123,8 @@ class Scene:
         value = self._check_iso(iso)
         start = time.perf_counter()
         self.hierarchy.classify(value)
+        if hasattr(self.model, "classify"):  # models with per-isovalue work lists (s31, qss)
+            self.iso_stats = self.model.classify(value)
         self.classify_ms = (time.perf_counter() - start) * 1e3
         self._iso = value
         return self.classify_ms
@@ -129,6 +138,16 @@ class Scene:
         step: float = 0.25,
         shading: Shading | None = None,
         inside: str | None = None,
+        *,
+        clip: Any = None,
+        crop: Any = None,
+        colors: Any = None,
+        opacity: Any = None,
+        effects: SurfaceEffects | None = None,
+        window: Any = None,
+        colormap: Any = "gray",
+        tf: TransferFunction | None = None,
+        dvr: DVRSettings | None = None,
     ) -> Frame:
         """Render one image.
 
@@ -137,12 +156,17 @@ class Scene:
         camera : Camera
             Viewpoint and image size.
         mode : str
-            ``"iso"``: first-hit isosurface.
-        iso : float, optional
-            Isovalue in data units; defaults to the volume's ``metadata["default_iso"]``.
+            ``"iso"``: first-hit isosurface (or several translucent ones, see ``iso``);
+            ``"mip"`` / ``"minip"``: maximum / minimum intensity projection (``Frame.value``);
+            ``"dvr"``: direct volume rendering through ``tf``.
+        iso : float or list of float, optional
+            Isovalue in data units; defaults to the volume's ``metadata["default_iso"]``. A list
+            renders every crossing of every isovalue, composited front to back with ``colors``
+            and ``opacity`` (trilinear model).
         method : str
             ``"exact"`` (analytic first root per cell, the default) or ``"sampled"`` (fixed step
-            plus bisection, the reference common viewers use).
+            plus bisection, the reference common viewers use). For MIP: analytic extrema per
+            cell, or samples every ``step`` voxels.
         step : float
             Sampling step of the sampled method, in voxels (index units).
         shading : Shading, optional
@@ -151,6 +175,21 @@ class Scene:
             ``"high"`` or ``"low"``: which side of the isovalue is the object's inside (decides
             front and back faces and the normals' orientation). Defaults to
             ``volume.metadata["inside"]`` or ``"high"``.
+        clip : list of (nx, ny, nz, d), optional
+            Clip planes in world coordinates, each keeping ``nx*x + ny*y + nz*z + d >= 0``;
+            applied analytically to every ray (all modes, all models).
+        crop : (x0, x1, y0, y1, z0, z1), optional
+            Axis-aligned world-space box to keep.
+        colors, opacity : optional
+            One RGB and one opacity per isovalue when ``iso`` is a list.
+        effects : SurfaceEffects, optional
+            Procedural texture and cel shading of isosurfaces.
+        window, colormap : optional
+            MIP/minIP display: value window ``(lo, hi)`` (default: the data range) and colormap.
+        tf : TransferFunction
+            Transfer function of ``mode="dvr"``.
+        dvr : DVRSettings, optional
+            Step, pre-integration, adaptive step, early termination, shading of ``mode="dvr"``.
 
         Returns
         -------
@@ -162,12 +201,37 @@ class Scene:
             raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         if method not in METHODS:
             raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+        # A model may implement only some iso methods (B-splines: "exact").
+        model_methods = getattr(self.model, "methods", tuple(METHODS))
+        if mode == "iso" and method not in model_methods:
+            raise ParameterError(
+                f"method={method!r} is not available for model {self.model.name!r} "
+                f"(use {', '.join(model_methods)})"
+            )
         if method == "sampled" and not (math.isfinite(step) and step > 0):
             raise ParameterError(f"step must be a positive number of voxels, got {step}")
         inside = inside or self.volume.metadata.get("inside", "high")
         if inside not in ("high", "low"):
             raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
         shading = shading or Shading()
+        if effects is not None and not isinstance(effects, SurfaceEffects):
+            raise ParameterError(f"effects must be a SurfaceEffects, got {type(effects).__name__}")
+        planes = make_planes(clip, crop)
+        if mode in ("mip", "minip"):
+            return render_mip(self.model, self.hierarchy, self.volume, camera, planes,
+                              _row_order(camera.height), mode, method, step, window, colormap,
+                              shading.background)
+        if mode == "dvr":
+            return render_dvr(self.model, self.hierarchy, self.volume, camera, planes,
+                              _row_order(camera.height), tf, dvr, shading.background,
+                              self._table_cache)
+        if isinstance(iso, (list, tuple, np.ndarray)):
+            if len(iso) == 0:
+                raise ParameterError("iso must hold at least one isovalue")
+            isos = [self._check_iso(v) for v in iso]
+            return render_multi_iso(self.model, self.hierarchy, self.volume, camera, planes,
+                                    _row_order(camera.height), isos, colors, opacity,
+                                    inside == "high", shading, effects)
         value = self._check_iso(iso)
         classify_ms = 0.0
         if value != self._iso:
@@ -186,11 +250,14 @@ class Scene:
         start = time.perf_counter()
         ISO_KERNELS[self.model.name](
             self.model.arrays, self.model.params, act0, act1, act2, value, camera.pixel_basis(),
-            np.asarray(self.volume.origin), np.asarray(self.volume.spacing), NO_PLANES,
+            np.asarray(self.volume.origin), np.asarray(self.volume.spacing), planes,
             _row_order(h),
             METHODS[method], float(step), inside == "high", shading.as_array(),
             rgba, depth, position, normal, face, visited, tested, skipped,
         )
+        if effects is not None and effects.active:
+            apply_effects(camera.pixel_basis(), shading.as_array(), effects.as_array(), position,
+                          normal, face, rgba)
         trace_ms = (time.perf_counter() - start) * 1e3
         hits = int(np.count_nonzero(np.isfinite(depth)))
         stats = {
@@ -210,4 +277,7 @@ class Scene:
         }
         if method == "sampled":
             stats["step"] = float(step)
+        stats.update(self.iso_stats)
+        if len(planes):
+            stats["planes"] = len(planes)
         return Frame(rgba, depth, position, normal, face, visited, tested, skipped, stats)

@@ -10,12 +10,14 @@ axis-aligned crop box is six such planes.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from .._jit import jit
+from ..errors import ParameterError
 
-__all__ = ["clip_interval", "NO_PLANES"]
+__all__ = ["clip_interval", "NO_PLANES", "make_planes"]
 
 #: An empty plane list, shape (0, 4).
 NO_PLANES = np.zeros((0, 4), dtype=np.float64)
@@ -42,3 +44,56 @@ def clip_interval(
         else:
             t_max = min(t_max, t_cross)
     return t_min, t_max
+
+
+def make_planes(clip: Any = None, crop: Any = None) -> np.ndarray:
+    """Validated planes, shape (m, 4), from clip planes and an axis-aligned crop box.
+
+    Parameters
+    ----------
+    clip : sequence of (nx, ny, nz, d), optional
+        Planes in world coordinates; each keeps ``nx*x + ny*y + nz*z + d >= 0``.
+    crop : (x0, x1, y0, y1, z0, z1), optional
+        World-space box to keep; it becomes six planes.
+
+    Raises
+    ------
+    ParameterError
+        A plane is not four finite numbers or has a zero normal; the crop box is not six finite
+        numbers with ``x0 < x1``, ``y0 < y1``, ``z0 < z1``.
+    """
+    rows: list[list[float]] = []
+    if clip is not None:
+        try:
+            arr = np.asarray(clip, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ParameterError(f"clip must be a list of (nx, ny, nz, d), got {clip!r}") from None
+        if arr.ndim == 1 and arr.size == 4:
+            arr = arr.reshape(1, 4)
+        if arr.size and (arr.ndim != 2 or arr.shape[1] != 4):
+            raise ParameterError(f"clip must be a list of (nx, ny, nz, d), got {clip!r}")
+        for plane in arr.reshape(-1, 4):
+            if not np.all(np.isfinite(plane)) or not np.any(plane[:3] != 0):
+                raise ParameterError(
+                    f"clip plane {tuple(plane.tolist())} needs finite numbers and a non-zero normal"
+                )
+            rows.append(plane.tolist())
+    if crop is not None:
+        try:
+            box = np.asarray(crop, dtype=np.float64).reshape(6)
+        except (TypeError, ValueError):
+            raise ParameterError(f"crop must be (x0, x1, y0, y1, z0, z1), got {crop!r}") from None
+        if not np.all(np.isfinite(box)) or np.any(box[1::2] <= box[0::2]):
+            raise ParameterError(
+                f"crop must be six finite numbers with x0 < x1, y0 < y1, z0 < z1, got {crop!r}"
+            )
+        for axis in range(3):
+            lo, hi = box[2 * axis], box[2 * axis + 1]
+            normal = [0.0, 0.0, 0.0]
+            normal[axis] = 1.0
+            rows.append([*normal, -lo])         # x_axis - lo >= 0
+            normal[axis] = -1.0
+            rows.append([*normal, hi])          # hi - x_axis >= 0
+    if not rows:
+        return NO_PLANES
+    return np.ascontiguousarray(np.array(rows, dtype=np.float64))

@@ -37,6 +37,9 @@ class Frame:
         empty space leapt over.
     stats : dict
         Summary numbers (timings in ms, counts, parameters).
+    value : ndarray, shape (height, width), float64, optional
+        Projected data value of ``mode="mip"`` / ``"minip"`` (NaN where the ray misses the
+        volume); ``None`` for other modes.
     """
 
     rgba: np.ndarray
@@ -48,6 +51,7 @@ class Frame:
     cells_tested: np.ndarray
     blocks_skipped: np.ndarray
     stats: dict[str, Any] = field(default_factory=dict)
+    value: np.ndarray | None = None
 
     @property
     def hit(self) -> np.ndarray:

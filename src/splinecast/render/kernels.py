@@ -10,10 +10,17 @@ position, normal, face, cells_visited, cells_tested, blocks_skipped)`` where ``a
 from __future__ import annotations
 
 from .iso import trace_trilinear
+from .iso_bspline import trace_bspline
+from .iso_type6 import trace_type6
 
 __all__ = ["ISO_KERNELS"]
 
 #: First-hit isosurface kernel by model name (the names of :data:`splinecast.models.MODELS`).
 ISO_KERNELS = {
     "trilinear": trace_trilinear,
+    "s31": trace_type6,
+    "qss": trace_type6,
+    "bspline1": trace_bspline,
+    "bspline2": trace_bspline,
+    "bspline3": trace_bspline,
 }

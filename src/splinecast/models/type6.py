@@ -1,0 +1,405 @@
+"""Shared machinery of the splines on the type-6 partition (:mod:`.s31`, :mod:`.qss`).
+
+A model of this family is defined by its coefficient rules only; this module turns the derived
+tables (:mod:`.type6_geometry`) into compiled evaluation (de Casteljau value and gradient,
+blossoming of the ray restriction) and prepares the volume:
+
+Border
+    The 27-neighbourhood of a border cube reaches one voxel outside the data. The data are
+    extended by *clamp-to-edge* (each outside value copies the nearest border voxel), so every
+    coefficient is still an average of real data values and nothing outside the data range
+    appears (no garbage, no ringing at the box faces). Linear functions are therefore reproduced
+    exactly only in cubes whose 27-neighbourhood lies inside the data; the outermost half cube
+    flattens towards the border. The spline covers ``[-1/2, n - 1/2]`` in index space per axis,
+    half a voxel more on each side than the trilinear box.
+Storage
+    The padded data are kept as float32 when that is exact (8/16-bit integers, float32) and as
+    float64 otherwise (or after the prefilter), to keep the number of compiled variants small.
+Bounds
+    Per cube, a conservative value range (used by the first stage of the isovalue change) is the
+    range of the 27 data values, widened by ``N (max - min)`` where ``N`` is the largest sum of
+    negative weights of the scheme (0 for S31 and QSS-A, whose weights are all non-negative;
+    1/16 for QSS-B): a coefficient ``sum w_o v_o`` with ``sum w_o = 1`` lies in ``[min - N (max -
+    min), max + N (max - min)]``.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numba import prange
+
+from .._jit import jit
+from ..errors import DataError, ParameterError
+from ..volume import Volume
+from .type6_geometry import Type6Tables, barycentric_matrices, decasteljau_tables, tet_of_point
+
+__all__ = [
+    "Type6Model",
+    "ROOT_FINDERS",
+    "gather27",
+    "tet_coefficients",
+    "stored_tet_coefficients",
+    "decasteljau_step",
+    "value_gradient",
+    "ray_bernstein",
+    "cube_bounds",
+    "evaluate_in_tets",
+    "evaluate_points",
+]
+
+#: Root finders of the ray–patch intersection (``root_finder=`` option): name -> code.
+ROOT_FINDERS = {"bernstein": 0, "newton": 1}
+
+
+# ----------------------------------------------------------------------------- compiled helpers
+@jit(inline="always")
+def gather27(pad: np.ndarray, i: int, j: int, k: int, out: np.ndarray) -> None:
+    """The 27 data values around cube ``(i, j, k)`` (``pad`` has a one-voxel border)."""
+    n = 0
+    for a in range(3):
+        for b in range(3):
+            for c in range(3):
+                out[n] = float(pad[i + a, j + b, k + c])
+                n += 1
+
+
+@jit(inline="always")
+def tet_coefficients(
+    v27: np.ndarray, tet: int, tet_points: np.ndarray, indptr: np.ndarray, cols: np.ndarray,
+    vals: np.ndarray, out: np.ndarray,
+) -> None:
+    """Bernstein–Bézier coefficients of one tetrahedron from the 27 data values (sparse rules)."""
+    for n in range(tet_points.shape[1]):
+        p = tet_points[tet, n]
+        s = 0.0
+        for q in range(indptr[p], indptr[p + 1]):
+            s += vals[q] * v27[cols[q]]
+        out[n] = s
+
+
+@jit(inline="always")
+def stored_tet_coefficients(
+    coeffs: np.ndarray, slot: int, tet: int, tet_points: np.ndarray, out: np.ndarray
+) -> None:
+    """Coefficients of one tetrahedron from a cube's precomputed coefficient row."""
+    for n in range(tet_points.shape[1]):
+        out[n] = coeffs[slot, tet_points[tet, n]]
+
+
+@jit(inline="always")
+def decasteljau_step(
+    src: np.ndarray, dst: np.ndarray, steps: np.ndarray, e: int,
+    l0: float, l1: float, l2: float, l3: float,
+) -> None:
+    """One de Casteljau step from degree ``e`` to ``e - 1`` at barycentric ``(l0, l1, l2, l3)``."""
+    n_out = e * (e + 1) * (e + 2) // 6
+    for n in range(n_out):
+        dst[n] = (l0 * src[steps[e - 1, n, 0]] + l1 * src[steps[e - 1, n, 1]]
+                  + l2 * src[steps[e - 1, n, 2]] + l3 * src[steps[e - 1, n, 3]])
+
+
+@jit(inline="always")
+def _linear_part(
+    c: np.ndarray, degree: int, steps: np.ndarray, l0: float, l1: float, l2: float, l3: float,
+    b10: np.ndarray, b4: np.ndarray,
+) -> None:
+    """De Casteljau down to degree 1: the 4 coefficients left in ``b4``."""
+    if degree == 3:
+        decasteljau_step(c, b10, steps, 3, l0, l1, l2, l3)
+        decasteljau_step(b10, b4, steps, 2, l0, l1, l2, l3)
+    else:
+        decasteljau_step(c, b4, steps, 2, l0, l1, l2, l3)
+
+
+@jit(inline="always")
+def value_gradient(
+    c: np.ndarray, degree: int, steps: np.ndarray, bary: np.ndarray, tet: int,
+    qx: float, qy: float, qz: float, b10: np.ndarray, b4: np.ndarray,
+) -> tuple[float, float, float, float]:
+    """Value and index-space gradient of the patch with coefficients ``c`` at local point ``q``.
+
+    The last de Casteljau level ``b4`` holds the four directional building blocks: the
+    derivative with respect to barycentric coordinate ``m`` is ``degree * b4[m]``, and the
+    barycentric gradients are the constant rows of ``bary[tet]``.
+    """
+    a = bary[tet]
+    l0 = a[0, 0] * qx + a[0, 1] * qy + a[0, 2] * qz + a[0, 3]
+    l1 = a[1, 0] * qx + a[1, 1] * qy + a[1, 2] * qz + a[1, 3]
+    l2 = a[2, 0] * qx + a[2, 1] * qy + a[2, 2] * qz + a[2, 3]
+    l3 = a[3, 0] * qx + a[3, 1] * qy + a[3, 2] * qz + a[3, 3]
+    _linear_part(c, degree, steps, l0, l1, l2, l3, b10, b4)
+    value = l0 * b4[0] + l1 * b4[1] + l2 * b4[2] + l3 * b4[3]
+    gx = degree * (a[0, 0] * b4[0] + a[1, 0] * b4[1] + a[2, 0] * b4[2] + a[3, 0] * b4[3])
+    gy = degree * (a[0, 1] * b4[0] + a[1, 1] * b4[1] + a[2, 1] * b4[2] + a[3, 1] * b4[3])
+    gz = degree * (a[0, 2] * b4[0] + a[1, 2] * b4[1] + a[2, 2] * b4[2] + a[3, 2] * b4[3])
+    return value, gx, gy, gz
+
+
+@jit(inline="always")
+def ray_bernstein(
+    c: np.ndarray, degree: int, steps: np.ndarray, bary: np.ndarray, tet: int,
+    ax: float, ay: float, az: float, bx: float, by: float, bz: float,
+    b10a: np.ndarray, b10b: np.ndarray, b4a: np.ndarray, b4b: np.ndarray, b4c: np.ndarray,
+) -> tuple[float, float, float, float]:
+    """Univariate Bernstein coefficients of the patch on the segment from ``a`` to ``b``.
+
+    The restriction of a degree-``d`` polynomial to a segment is a degree-``d`` polynomial in the
+    segment parameter whose ``k``-th Bernstein coefficient is the blossom evaluated ``d - k``
+    times at ``a`` and ``k`` times at ``b`` (barycentric coordinates of the end points). For a
+    quadratic the fourth returned value is 0.
+    """
+    t = bary[tet]
+    a0 = t[0, 0] * ax + t[0, 1] * ay + t[0, 2] * az + t[0, 3]
+    a1 = t[1, 0] * ax + t[1, 1] * ay + t[1, 2] * az + t[1, 3]
+    a2 = t[2, 0] * ax + t[2, 1] * ay + t[2, 2] * az + t[2, 3]
+    a3 = t[3, 0] * ax + t[3, 1] * ay + t[3, 2] * az + t[3, 3]
+    e0 = t[0, 0] * bx + t[0, 1] * by + t[0, 2] * bz + t[0, 3]
+    e1 = t[1, 0] * bx + t[1, 1] * by + t[1, 2] * bz + t[1, 3]
+    e2 = t[2, 0] * bx + t[2, 1] * by + t[2, 2] * bz + t[2, 3]
+    e3 = t[3, 0] * bx + t[3, 1] * by + t[3, 2] * bz + t[3, 3]
+    if degree == 3:
+        decasteljau_step(c, b10a, steps, 3, a0, a1, a2, a3)
+        decasteljau_step(c, b10b, steps, 3, e0, e1, e2, e3)
+        decasteljau_step(b10a, b4a, steps, 2, a0, a1, a2, a3)  # blossom (a, a, .)
+        decasteljau_step(b10a, b4b, steps, 2, e0, e1, e2, e3)  # blossom (a, b, .)
+        decasteljau_step(b10b, b4c, steps, 2, e0, e1, e2, e3)  # blossom (b, b, .)
+        u0 = a0 * b4a[0] + a1 * b4a[1] + a2 * b4a[2] + a3 * b4a[3]
+        u1 = e0 * b4a[0] + e1 * b4a[1] + e2 * b4a[2] + e3 * b4a[3]
+        u2 = e0 * b4b[0] + e1 * b4b[1] + e2 * b4b[2] + e3 * b4b[3]
+        u3 = e0 * b4c[0] + e1 * b4c[1] + e2 * b4c[2] + e3 * b4c[3]
+        return u0, u1, u2, u3
+    decasteljau_step(c, b4a, steps, 2, a0, a1, a2, a3)
+    decasteljau_step(c, b4b, steps, 2, e0, e1, e2, e3)
+    u0 = a0 * b4a[0] + a1 * b4a[1] + a2 * b4a[2] + a3 * b4a[3]
+    u1 = e0 * b4a[0] + e1 * b4a[1] + e2 * b4a[2] + e3 * b4a[3]
+    u2 = e0 * b4b[0] + e1 * b4b[1] + e2 * b4b[2] + e3 * b4b[3]
+    return u0, u1, u2, 0.0
+
+
+@jit(parallel=True)
+def evaluate_in_tets(
+    pad: np.ndarray, tet_points: np.ndarray, indptr: np.ndarray, cols: np.ndarray,
+    vals: np.ndarray, bary: np.ndarray, steps: np.ndarray, degree: int,
+    cubes: np.ndarray, tets: np.ndarray, q: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Value and index-space gradient of given patches at local points.
+
+    Point ``m`` is evaluated with the polynomial of tetrahedron ``tets[m]`` of cube ``cubes[m]``
+    at local coordinates ``q[m]`` (also outside that tetrahedron: the polynomial extends), which
+    is what continuity tests across shared faces need.
+    """
+    m_pts = q.shape[0]
+    values = np.empty(m_pts)
+    grads = np.empty((m_pts, 3))
+    for m in prange(m_pts):
+        v27 = np.empty(27)
+        c = np.empty(tet_points.shape[1])
+        b10 = np.empty(10)
+        b4 = np.empty(4)
+        gather27(pad, cubes[m, 0], cubes[m, 1], cubes[m, 2], v27)
+        tet_coefficients(v27, tets[m], tet_points, indptr, cols, vals, c)
+        v, gx, gy, gz = value_gradient(c, degree, steps, bary, tets[m],
+                                       q[m, 0], q[m, 1], q[m, 2], b10, b4)
+        values[m] = v
+        grads[m, 0] = gx
+        grads[m, 1] = gy
+        grads[m, 2] = gz
+    return values, grads
+
+
+@jit()
+def locate(points: np.ndarray, shape: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cube, tetrahedron and local coordinates of index-space points (clamped into the domain)."""
+    m_pts = points.shape[0]
+    cubes = np.empty((m_pts, 3), np.int64)
+    tets = np.empty(m_pts, np.int64)
+    q = np.empty((m_pts, 3))
+    for m in range(m_pts):
+        for a in range(3):
+            p = min(max(points[m, a], -0.5), shape[a] - 0.5)
+            c = min(max(int(math.floor(p + 0.5)), 0), shape[a] - 1)
+            cubes[m, a] = c
+            q[m, a] = p - c
+        tets[m] = tet_of_point(q[m, 0], q[m, 1], q[m, 2])
+    return cubes, tets, q
+
+
+def evaluate_points(model: Type6Model, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Value and index-space gradient of ``model``'s spline at index-space points (m, 3)."""
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    cubes, tets, q = locate(pts, np.asarray(model.n_cells, np.int64))
+    return evaluate_in_tets(model.pad, *model.tables_arrays, model.degree, cubes, tets, q)
+
+
+# ----------------------------------------------------------------------------- preparation
+def _shifted(arr: np.ndarray, axis: int, start: int) -> np.ndarray:
+    index = [slice(None)] * 3
+    index[axis] = slice(start, arr.shape[axis] - 2 + start)
+    return arr[tuple(index)]
+
+
+def _window3(arr: np.ndarray, reduce: np.ufunc) -> np.ndarray:
+    """``reduce`` over every 3x3x3 window of a padded array, shape (n-2, n-2, n-2) (separable)."""
+    out = arr
+    for axis in range(3):
+        out = reduce(reduce(_shifted(out, axis, 0), _shifted(out, axis, 1)),
+                     _shifted(out, axis, 2))
+    return out
+
+
+def cube_bounds(pad: np.ndarray, negative_sum: float) -> tuple[np.ndarray, np.ndarray]:
+    """Conservative per-cube value range of a scheme from the padded data (vectorised).
+
+    Rounding is outward, so the bounds stay conservative when stored in float32.
+    """
+    lo = _window3(pad, np.minimum)
+    hi = _window3(pad, np.maximum)
+    if negative_sum > 0.0:
+        spread = (hi.astype(np.float64) - lo) * negative_sum
+        lo = np.nextafter((lo - spread).astype(pad.dtype), -np.inf)
+        hi = np.nextafter((hi + spread).astype(pad.dtype), np.inf)
+    return np.ascontiguousarray(lo), np.ascontiguousarray(hi)
+
+
+def _pad_dtype(dtype: np.dtype) -> np.dtype:
+    exact_in_float32 = dtype.kind in "ui" and dtype.itemsize <= 2 or dtype == np.float32
+    return np.dtype(np.float32) if exact_in_float32 else np.dtype(np.float64)
+
+
+def laplacian_prefilter(pad: np.ndarray) -> np.ndarray:
+    """``f - (1/8) Delta_h f`` with the 7-point Laplacian in index units, on the padded grid.
+
+    Makes the S31 scheme exact on quadratics (the note's prefilter). The input is the
+    clamp-padded data; the output is re-padded by clamping so the border rule stays the same.
+    """
+    f = pad.astype(np.float64)
+    core = f[1:-1, 1:-1, 1:-1]
+    lap = (f[2:, 1:-1, 1:-1] + f[:-2, 1:-1, 1:-1] + f[1:-1, 2:, 1:-1] + f[1:-1, :-2, 1:-1]
+           + f[1:-1, 1:-1, 2:] + f[1:-1, 1:-1, :-2] - 6.0 * core)
+    return np.pad(core - lap / 8.0, 1, mode="edge")
+
+
+class Type6Model:
+    """Base of the spline models on the type-6 partition (use :class:`S31Model`/:class:`QSSModel`).
+
+    Parameters
+    ----------
+    volume : Volume
+        The data (at least 1 voxel per axis, no NaN or inf).
+    tables : Type6Tables
+        The scheme's derived coefficient tables.
+    prefilter : bool
+        Replace the data by ``f - Delta_h f / 8`` first (see :func:`laplacian_prefilter`).
+    precompute : bool
+        Keep the coefficients of the active cubes after an isovalue change (the thesis' "high
+        frame rate" variant; memory ``n_active * n_points * 8`` bytes) instead of computing a
+        tetrahedron's coefficients from the 27 data values whenever a ray crosses it.
+    root_finder : str
+        ``"bernstein"`` (guaranteed first root by Bernstein subdivision, default) or ``"newton"``
+        (the references' Newton iteration from three starts; cubic models only).
+    """
+
+    name = "type6"
+    #: Cube ``c`` depends on padded voxels ``c .. c + 2`` per axis.
+    support = 2
+    degree = 3
+
+    def __init__(
+        self, volume: Volume, tables: Type6Tables, prefilter: bool = False,
+        precompute: bool = False, root_finder: str = "bernstein",
+    ) -> None:
+        if not isinstance(volume, Volume):
+            raise ParameterError(f"volume must be a splinecast.Volume, got {type(volume)}")
+        if root_finder not in ROOT_FINDERS:
+            raise ParameterError(
+                f"root_finder must be one of {', '.join(ROOT_FINDERS)}, got {root_finder!r}"
+            )
+        nan_count = volume.count_nan()
+        if nan_count:
+            raise DataError(
+                f"{volume.name}: the data contains {nan_count} NaN values; replace them "
+                "(for example with numpy.nan_to_num) before rendering"
+            )
+        if np.isinf(volume.value_range).any():
+            raise DataError(f"{volume.name}: the data contains infinite values")
+        self.volume = volume
+        self.tables = tables
+        self.prefilter = bool(prefilter)
+        self.precompute = bool(precompute)
+        self.root_finder = root_finder
+        pad = np.pad(np.asarray(volume.data), 1, mode="edge")
+        if self.prefilter:
+            pad = laplacian_prefilter(pad)
+        self.pad = np.ascontiguousarray(pad, dtype=_pad_dtype(pad.dtype))
+        self.n_cells = tuple(int(n) for n in volume.shape)
+        self.tables_arrays = (
+            np.ascontiguousarray(tables.tet_points),
+            *tables.sparse(),
+            barycentric_matrices(),
+            decasteljau_tables(tables.degree),
+        )
+        self.cube_lo, self.cube_hi = cube_bounds(self.pad, tables.negative_weight_sum())
+        # Per-isovalue state, filled by classify().
+        from ..accel.active_cells import ActiveCells  # accel sits right of models: lazy import
+
+        self.active = ActiveCells(self)
+
+    # --------------------------------------------------------------------- model interface
+    @property
+    def coefficients(self) -> np.ndarray:
+        """Padded data: cube ``c`` lies in the range of ``pad[c .. c + 2]`` for convex schemes.
+
+        Used by the scene's generic block hierarchy; the type-6 kernels use the exact flags of
+        :meth:`classify` instead (which are also right for QSS-B's negative weights).
+        """
+        return self.pad
+
+    @property
+    def n_points(self) -> int:
+        """Distinct Bernstein–Bézier coefficients per cube."""
+        return self.tables.n_points
+
+    def classify(self, iso: float) -> dict[str, Any]:
+        """Isovalue change: classify and compact active cubes and tetrahedra (see ActiveCells)."""
+        return self.active.update(float(iso))
+
+    @property
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """Arrays of the type-6 iso kernels (see :mod:`splinecast.render.iso_type6`)."""
+        a = self.active
+        if a.iso is None:
+            raise RuntimeError("classify(iso) must run before rendering")
+        return (self.pad, a.slot, a.tet_mask, a.coeffs, a.act0, a.act1, a.act2,
+                *self.tables_arrays)
+
+    @property
+    def params(self) -> np.ndarray:
+        """``[degree, root finder code, precomputed coefficients (0/1)]`` as float64."""
+        return np.array([self.degree, ROOT_FINDERS[self.root_finder], float(self.precompute)])
+
+    @cached_property
+    def _static_nbytes(self) -> int:
+        return int(self.pad.nbytes + self.cube_lo.nbytes + self.cube_hi.nbytes
+                   + sum(a.nbytes for a in self.tables_arrays))
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the model: padded data, cube bounds, tables and per-isovalue arrays."""
+        return self._static_nbytes + self.active.nbytes
+
+    def evaluate(self, points: np.ndarray) -> np.ndarray:
+        """Spline values at index-space points, shape (m, 3) (clamped into the domain)."""
+        return evaluate_points(self, points)[0]
+
+    def gradient(self, points: np.ndarray) -> np.ndarray:
+        """Index-space gradient at index-space points (divide by spacing for world units)."""
+        return evaluate_points(self, points)[1]
+
+    def cube_coefficients(self, i: int, j: int, k: int) -> np.ndarray:
+        """All distinct coefficients of cube ``(i, j, k)`` (float64, in the tables' point order)."""
+        v27 = self.pad[i:i + 3, j:j + 3, k:k + 3].astype(np.float64).reshape(27)
+        return self.tables.weight_matrix() @ v27

@@ -1,0 +1,163 @@
+"""Type-6 splines: direct evaluation and gradient (continuity, precision, approximation order).
+
+References: analytic functions (linear, quadratic, smooth), finite differences, and the value of
+the neighbouring patch across each shared face.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import splinecast as sc
+from splinecast.models.qss import QSSModel
+from splinecast.models.s31 import S31Model
+from splinecast.models.type6 import evaluate_in_tets, locate
+
+RNG = np.random.default_rng(1234)
+
+
+def _model(kind, data, **kw):
+    vol = sc.Volume(np.asarray(data, dtype=np.float64))
+    if kind == "s31":
+        return S31Model(vol, **kw)
+    return QSSModel(vol, variant=kind, **kw)
+
+
+def _eval(model, cubes, tets, q):
+    return evaluate_in_tets(model.pad, *model.tables_arrays, model.degree,
+                            np.ascontiguousarray(cubes, np.int64),
+                            np.ascontiguousarray(tets, np.int64), np.ascontiguousarray(q))
+
+
+def _face_points(model, n_per_face=6):
+    """Random points on the four faces of every tetrahedron of cube (2, 2, 2), with both sides.
+
+    Returns cube/tet/local point of side A and side B for each sample and whether the face is a
+    cube face.
+    """
+    from splinecast.models.type6_geometry import tet_vertices
+
+    ca, ta, qa, cb, tb, qb, outer = [], [], [], [], [], [], []
+    for tet in range(24):
+        verts = np.array([[float(c) for c in v] for v in tet_vertices(tet)])
+        for drop in range(4):
+            for _ in range(n_per_face):
+                lam = RNG.dirichlet(np.ones(3)) * 0.9 + 0.1 / 3  # away from the face's edges
+                face = np.delete(verts, drop, axis=0)
+                p = lam @ face
+                # Step a little across the face, away from the opposite vertex, to find side B.
+                out = p + 1e-6 * (p - verts[drop])
+                cube_b, tet_b, _ = locate((out + 2.0)[None, :], np.array(model.n_cells))
+                qb_loc = p + 2.0 - cube_b[0]
+                ca.append((2, 2, 2))
+                ta.append(tet)
+                qa.append(p)
+                cb.append(cube_b[0])
+                tb.append(tet_b[0])
+                qb.append(qb_loc)
+                outer.append(drop == 0)
+    return (np.array(ca), np.array(ta), np.array(qa), np.array(cb), np.array(tb), np.array(qb),
+            np.array(outer))
+
+
+@pytest.mark.parametrize("kind", ["s31", "qss-b", "qss-a"])
+def test_continuity_on_shared_faces(kind):
+    model = _model(kind, RNG.normal(size=(5, 5, 5)))
+    ca, ta, qa, cb, tb, qb, outer = _face_points(model)
+    # Side B really is another tetrahedron (inner faces) or another cube (outer faces).
+    assert np.all((ta != tb) | np.any(ca != cb, axis=1))
+    assert np.all(np.any(ca != cb, axis=1) == outer)
+    va, ga = _eval(model, ca, ta, qa)
+    vb, gb = _eval(model, cb, tb, qb)
+    assert np.max(np.abs(va - vb)) < 1e-10
+    if kind == "s31":
+        assert np.max(np.abs(ga - gb)) < 1e-10
+    else:
+        # QSS: C1 across cube faces; only C0 across (some) faces inside the cube.
+        assert np.max(np.abs(ga[outer] - gb[outer])) < 1e-10
+        assert np.max(np.abs(ga[~outer] - gb[~outer])) > 1e-3
+
+
+@pytest.mark.parametrize("kind", ["s31", "qss-b", "qss-a"])
+def test_reproduces_linear_functions(kind):
+    n = 6
+    i, j, k = np.meshgrid(*(np.arange(n),) * 3, indexing="ij")
+    a = RNG.normal(size=4)
+    data = a[0] + a[1] * i + a[2] * j + a[3] * k
+    model = _model(kind, data)
+    # Cubes whose 27-neighbourhood is inside the data: 1..n-2, i.e. points in [0.5, n-2.5].
+    p = RNG.uniform(0.5, n - 2.5, size=(500, 3))
+    exact = a[0] + p @ a[1:]
+    assert np.max(np.abs(model.evaluate(p) - exact)) < 1e-12
+    assert np.max(np.abs(model.gradient(p) - a[1:])) < 1e-11
+
+
+def test_s31_quadratics_give_q_plus_laplacian_over_8_and_prefilter_is_exact():
+    n = 8
+    i, j, k = np.meshgrid(*(np.arange(n, dtype=float),) * 3, indexing="ij")
+    c = RNG.normal(size=10)
+
+    def q(x, y, z):
+        return (c[0] + c[1] * x + c[2] * y + c[3] * z + c[4] * x * x + c[5] * y * y
+                + c[6] * z * z + c[7] * x * y + c[8] * x * z + c[9] * y * z)
+
+    lap = 2 * (c[4] + c[5] + c[6])
+    p = RNG.uniform(1.5, n - 3.5, size=(500, 3))  # prefilter needs one more voxel of margin
+    exact = q(p[:, 0], p[:, 1], p[:, 2])
+    plain = _model("s31", q(i, j, k))
+    assert np.max(np.abs(plain.evaluate(p) - (exact + lap / 8))) < 1e-10
+    pre = _model("s31", q(i, j, k), prefilter=True)
+    assert np.max(np.abs(pre.evaluate(p) - exact)) < 1e-10
+
+
+@pytest.mark.parametrize("kind", ["s31", "qss-b"])
+def test_approximation_order_two(kind):
+    """Max error on f = sin x cos y cos z falls by ~4 per halving of h (values and gradients)."""
+    rng = np.random.default_rng(7)
+    errs, gerrs = [], []
+    for n in (11, 21, 41):
+        h = 1.0 / (n - 1)
+        x = np.arange(n) * h
+        X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+        model = _model(kind, np.sin(X) * np.cos(Y) * np.cos(Z))
+        w = rng.uniform(0.25, 0.75, size=(2000, 3))  # world points away from the border
+        p = w / h
+        f = np.sin(w[:, 0]) * np.cos(w[:, 1]) * np.cos(w[:, 2])
+        g = np.stack([np.cos(w[:, 0]) * np.cos(w[:, 1]) * np.cos(w[:, 2]),
+                      -np.sin(w[:, 0]) * np.sin(w[:, 1]) * np.cos(w[:, 2]),
+                      -np.sin(w[:, 0]) * np.cos(w[:, 1]) * np.sin(w[:, 2])], axis=1)
+        errs.append(np.max(np.abs(model.evaluate(p) - f)))
+        gerrs.append(np.max(np.abs(model.gradient(p) / h - g)))
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all(orders > 1.8), (errs, orders)
+    gorders = np.log2(np.array(gerrs[:-1]) / np.array(gerrs[1:]))
+    assert np.all(gorders > 0.9), (gerrs, gorders)
+
+
+@pytest.mark.parametrize("kind", ["s31", "qss-b"])
+def test_gradient_matches_finite_differences(kind):
+    model = _model(kind, RNG.normal(size=(6, 6, 6)))
+    p = RNG.uniform(0.0, 5.0, size=(200, 3))
+    h = 1e-6
+    fd = np.stack([(model.evaluate(p + h * e) - model.evaluate(p - h * e)) / (2 * h)
+                   for e in np.eye(3)], axis=1)
+    g = model.gradient(p)
+    # Points within h of a tetrahedron face can see a kink (QSS); compare the robust majority.
+    close = np.all(np.abs(fd - g) < 1e-5, axis=1)
+    assert close.mean() > 0.97
+
+
+def test_border_values_stay_in_data_range_and_options_are_checked():
+    data = RNG.uniform(3.0, 4.0, size=(4, 5, 6))
+    model = _model("s31", data)
+    p = np.stack([RNG.uniform(-0.5, s - 0.5, 2000) for s in data.shape], axis=1)
+    v = model.evaluate(p)
+    assert v.min() >= 3.0 - 1e-12 and v.max() <= 4.0 + 1e-12
+    vol = sc.Volume(data)
+    with pytest.raises(sc.ParameterError):
+        sc.Scene(vol, model="qss", prefilter=True)
+    with pytest.raises(sc.ParameterError):
+        sc.Scene(vol, model="s31", root_finder="sturm")
+    with pytest.raises(sc.ParameterError):
+        sc.Scene(vol, model="qss", variant="qss-c")
