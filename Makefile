@@ -4,9 +4,10 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
+BENCH_STAMP := $(VENV)/.bench-stamp
 DEMO_PNG ?= splinecast-demo.png
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench lint clean bench-deps compare compare-quick
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -18,11 +19,32 @@ demo: $(STAMP)
 	@$(VENV)/bin/splinecast render 'demo:marschner-lobb?size=128' --iso 0.5 --size 768x768 \
 		--azimuth 30 --elevation 25 --zoom 1.2 --quiet -o $(DEMO_PNG)
 
-test: $(STAMP)
+test: $(STAMP) $(BENCH_STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
+
+# Comparison suite against VTK and scikit-image (benchmarks/compare.py, issue 6).
+# Optional for `make test`: system libraries for offscreen OpenGL (scripts/install_bench.sh) and the
+# `bench` extra from PyPI (~10 s of wheels); if either fails the VTK tests skip with the reason.
+$(BENCH_STAMP): pyproject.toml scripts/install_bench.sh $(STAMP)
+	bash scripts/install_bench.sh --optional
+	$(PY) -m pip install --quiet -e '.[all,test,bench]' \
+		|| echo "bench extra not installed: VTK/scikit-image comparison tests will skip"
+	touch $(BENCH_STAMP)
+
+# Strict variant: fails when the system libraries or the extra cannot be installed.
+bench-deps: $(STAMP)
+	bash scripts/install_bench.sh
+	$(PY) -m pip install --quiet -e '.[all,test,bench]'
+	touch $(BENCH_STAMP)
+
+compare: bench-deps
+	$(PY) benchmarks/compare.py
+
+compare-quick: bench-deps
+	$(PY) benchmarks/compare.py --quick
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks

@@ -1,0 +1,144 @@
+"""Command line of the comparison suite: ``python -m benchmarks.compare [--quick]``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from . import methods as M
+from . import report, runner, scenes
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE.parent / "results"
+ISO_KEYS = list(M.ISO_METHODS)
+VOLUME_KEYS = list(M.VOLUME_METHODS)
+
+
+def machine() -> dict[str, Any]:
+    """CPU, cores and versions (the core benchmark's description plus VTK and scikit-image)."""
+    sys.path.insert(0, str(HERE.parent))
+    from _machine import describe
+
+    info = describe()
+    for package in ("vtk", "scikit-image", "matplotlib"):
+        try:
+            info["versions"][package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            info["versions"][package] = None
+    return info
+
+
+def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes: bool = True,
+        log=print) -> dict[str, Any]:
+    """Run the suite and write its results; returns the results dictionary."""
+    start = time.perf_counter()
+    vtk = M.vtk_status()
+    notes: list[str] = []
+    if not vtk["available"]:
+        notes.append(f"VTK methods skipped: {vtk['reason']}")
+    if not M.skimage_status()["available"]:
+        notes.append(f"scikit-image skipped: {M.skimage_status()['reason']}")
+    # splinecast's MIP/DVR are checked when they run (other work lands them); see mode_notes.
+    if quick:
+        suite, more = scenes.quick_suite()
+        sizes = [(128, 128)]
+        quality_size = (128, 128)
+        volume_scenes = [scenes.ml(64)]
+    else:
+        suite, more = scenes.full_suite()
+        sizes = [(512, 512), (1024, 768)]
+        quality_size = (512, 512)
+        volume_scenes = [s for s in suite if s.label in (
+            "marschner-lobb 128^3", "marschner-lobb 256^3", "noise 256^3")
+            or s.kind == "mri"]
+    notes += more
+    for note in notes:
+        log(f"note: {note}")
+    results: dict[str, Any] = {
+        "command": "python -m benchmarks.compare" + (" --quick" if quick else ""),
+        "machine": machine(), "vtk": vtk, "notes": notes, "iso": [], "volume": [],
+        "memory": {}, "threads": {},
+    }
+    error_images: dict[str, dict] = {}
+    for spec in suite:
+        log(f"iso: {spec.label}")
+        r = runner.run_iso_scene(spec, sizes, ISO_KEYS, repeats, quality_size, log)
+        error_images[spec.label] = r.pop("_error_images")
+        results["iso"].append(r)
+        for k, info in r["methods"].items():
+            results["threads"][ISO_LABELS_SHORT.get(k, k)] = info["threads"]
+    if volume_modes:
+        for spec in volume_scenes:
+            for mode in ("mip", "dvr"):
+                log(f"{mode}: {spec.label}")
+                r = runner.run_volume_scene(spec, mode, [sizes[-1]], VOLUME_KEYS,
+                                            repeats, log)
+                results["volume"].append(r)
+                for k, t in r["threads"].items():
+                    results["threads"][f"{k} {mode}"] = t
+    results["notes"] += mode_notes(results["volume"], volume_modes)
+    if memory:
+        size = sizes[-1]
+        for spec in suite:
+            if quick or spec.label in ("marschner-lobb 256^3", "noise 256^3", "noise 512^3"):
+                jobs = [("iso", k, "iso", 0.0) for k in ISO_KEYS if not M.iso_requirements(k)]
+                for r in results["volume"]:
+                    if r["scene"] == spec.label:
+                        jobs += [("volume", k, r["mode"], r["steps"].get(k, 0.0))
+                                 for k in VOLUME_KEYS if k not in r["skipped"]]
+                results["memory"][spec.label] = runner.measure_memory(spec, jobs, size, log)
+    results["machine"] = machine()  # the threading layer is known after the first kernel ran
+    results["elapsed_s"] = time.perf_counter() - start
+    stem = "compare_quick" if quick else "compare"
+    for path in report.write(results, error_images, out, stem):
+        log(f"wrote {path}")
+    return results
+
+
+def mode_notes(volume_results: list[dict[str, Any]], ran: bool) -> list[str]:
+    """Say for MIP and DVR whether splinecast's own mode took part in this run."""
+    notes = []
+    for mode in ("mip", "dvr"):
+        runs = [r for r in volume_results if r["mode"] == mode]
+        if ran and runs and all("splinecast" in r["skipped"] for r in runs):
+            notes.append(f"splinecast {mode.upper()} not available yet "
+                         f"({runs[0]['skipped']['splinecast']}); VTK's {mode.upper()} timed alone")
+    return notes
+
+
+ISO_LABELS_SHORT = {"splinecast": "splinecast", "vtk-flying-edges": "VTK flying edges",
+                    "vtk-marching-cubes": "VTK marching cubes",
+                    "skimage-mc": "skimage marching cubes + VTK"}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.compare",
+        description="splinecast vs VTK and scikit-image: speed and image quality (issue 6).")
+    parser.add_argument("--quick", action="store_true",
+                        help="64^3 volumes at 128x128 (the test suite's version)")
+    parser.add_argument("--repeats", type=int, default=7, help="timed runs per measurement")
+    parser.add_argument("--out", default=str(RESULTS), help="output folder")
+    parser.add_argument("--no-memory", action="store_true", help="skip the per-method RSS runs")
+    parser.add_argument("--no-volume", action="store_true", help="skip MIP/DVR")
+    parser.add_argument("--memory-worker", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.memory_worker:
+        job = json.loads(args.memory_worker)
+        M.vtk_status()  # picks the working offscreen window class for this process
+        print(json.dumps(runner.memory_worker(
+            job["data_path"], job["meta"], job["kind"], job["key"], tuple(job["size"]),
+            job["mode"], job["step"])))
+        return 0
+    run(args.quick, args.repeats, Path(args.out), memory=not args.no_memory,
+        volume_modes=not args.no_volume)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,211 @@
+"""The comparison suite (benchmarks/compare, issue 6): methods run, metrics are right.
+
+No timing is asserted. VTK-based checks need the ``bench`` extra and an offscreen OpenGL context
+(EGL or OSMesa, from scripts/install_bench.sh); without them they skip with the reason.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import splinecast as sc
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from benchmarks.compare import methods as M  # noqa: E402
+from benchmarks.compare import metrics, runner, scenes  # noqa: E402
+from benchmarks.compare.__main__ import run  # noqa: E402
+
+SIZE = (128, 128)
+
+
+def _vtk_or_skip() -> None:
+    status = M.vtk_status()
+    if not status["available"]:
+        pytest.skip(status["reason"])
+
+
+@pytest.fixture(scope="module")
+def sphere() -> tuple[scenes.SceneSpec, sc.Volume, sc.Camera]:
+    spec = scenes.sdf("sphere", 64)
+    vol = spec.make()
+    return spec, vol, sc.Camera.orbit(vol, azimuth=30, elevation=20, size=SIZE)
+
+
+def _analytic_sphere_depth(cam: sc.Camera, radius: float) -> np.ndarray:
+    """First intersection of each pixel ray with the sphere |p| = radius (inf on a miss)."""
+    o, d = cam.rays()
+    b = np.sum(o * d, axis=-1)
+    c = np.sum(o * o, axis=-1) - radius**2
+    disc = b * b - c
+    t = -b - np.sqrt(np.where(disc >= 0, disc, 0.0))
+    return np.where(disc >= 0, t, np.inf)
+
+
+# --------------------------------------------------------------------------- metrics, no VTK
+
+def test_metrics_zero_on_the_exact_surface_and_the_shift_when_shifted(sphere):
+    spec, vol, cam = sphere
+    radius = 0.6
+    depth = _analytic_sphere_depth(cam, radius)
+    o, d = cam.rays()
+    normals = o + depth[..., None] * d  # radial = exact outward normal
+    voxel = vol.spacing[0]
+    exact = metrics.surface_quality(depth, normals, cam, spec.truth, 0.0, voxel).summary()
+    assert exact["hits"] > 1000
+    assert exact["position_voxels_max"] < 1e-9
+    assert exact["normal_degrees_max"] < 1e-5
+    # A sphere rendered 0.3 voxel too large: every hit is 0.3 voxel from the exact surface.
+    shifted = _analytic_sphere_depth(cam, radius + 0.3 * voxel)
+    normals = o + np.where(np.isfinite(shifted), shifted, 0)[..., None] * d
+    q = metrics.surface_quality(shifted, normals, cam, spec.truth, 0.0, voxel).summary()
+    assert q["position_voxels_mean"] == pytest.approx(0.3, abs=1e-6)
+    assert q["position_voxels_max"] == pytest.approx(0.3, abs=1e-6)
+
+
+def test_zbuffer_conversion_inverts_the_projection(sphere):
+    _, _, cam = sphere
+    near, far = 2.0, 9.0
+    depth = _analytic_sphere_depth(cam, 0.6)
+    _, d = cam.rays()
+    eye_z = depth * (d @ cam.forward)
+    # OpenGL perspective depth of eye distance z: zb = (1 + (f + n)/(f - n) - 2fn/((f - n) z)) / 2.
+    zn = (far + near) / (far - near) - 2 * far * near / ((far - near) * eye_z)
+    zb = np.where(np.isfinite(depth), 0.5 * (zn + 1), 1.0)
+    back = metrics.zbuffer_to_depth(zb, cam, near, far)
+    hit = np.isfinite(depth)
+    assert np.array_equal(np.isfinite(back), hit)
+    np.testing.assert_allclose(back[hit], depth[hit], rtol=1e-12)
+
+
+def test_mesh_normal_interpolation_is_barycentric():
+    verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5], [6, 5, 5], [5, 6, 5.0]])
+    tris = np.array([[0, 1, 2], [3, 4, 5]])
+    vnormals = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [9, 9, 9], [9, 9, 9], [9, 9, 9.0]])
+    points = np.array([[0.25, 0.25, 0.0], [0.0, 0.0, 0.0], [1 / 3, 1 / 3, 0]])
+    n = metrics.mesh_normals_at(points, verts, tris, vnormals, candidates=2)
+    np.testing.assert_allclose(n, [[0.5, 0.25, 0.25], [1, 0, 0], [1 / 3, 1 / 3, 1 / 3]])
+
+
+# --------------------------------------------------------------------------- methods
+
+def test_splinecast_needs_no_extra_and_meets_the_analytic_sphere(sphere):
+    spec, vol, cam = sphere
+    method = M.SplinecastIso(vol, SIZE)
+    method.new_iso(0.0, cam)
+    depth, normals = method.surface(cam)
+    q = metrics.surface_quality(depth, normals, cam, spec.truth, 0.0, vol.spacing[0]).summary()
+    # Trilinear interpolation of a sampled distance field: well within a tenth of a voxel.
+    assert q["hits"] > 1000
+    assert q["position_voxels_max"] < 0.05
+    assert q["normal_degrees_max"] < 5.0
+
+
+@pytest.mark.parametrize("key", ["vtk-flying-edges", "vtk-marching-cubes", "skimage-mc"])
+def test_mesh_methods_render_the_sphere_where_it_is(sphere, key):
+    _vtk_or_skip()
+    if M.iso_requirements(key):
+        pytest.skip(M.iso_requirements(key))
+    spec, vol, cam = sphere
+    method = M.ISO_METHODS[key](vol, SIZE)
+    try:
+        method.new_iso(0.0, cam)
+        rgba = method.win.render(cam)
+        assert rgba.shape == (SIZE[1], SIZE[0], 4) and rgba[..., :3].max() > 0
+        depth, normals = method.surface(cam)
+    finally:
+        method.close()
+    exact = _analytic_sphere_depth(cam, 0.6)
+    # Coverage agrees with the analytic sphere except on silhouette pixels.
+    assert np.count_nonzero(np.isfinite(depth) != np.isfinite(exact)) < 0.01 * depth.size
+    q = metrics.surface_quality(depth, normals, cam, spec.truth, 0.0, vol.spacing[0]).summary()
+    assert q["position_voxels_max"] < 0.05
+    assert q["normal_degrees_p95"] < 3.0
+
+
+def test_exact_sphere_mesh_from_vtk_gives_near_zero_error_and_a_shift_gives_the_shift(sphere):
+    """A finely tessellated sphere, rasterized by VTK and read back through the z-buffer."""
+    _vtk_or_skip()
+    from vtkmodules.vtkFiltersSources import vtkSphereSource
+    from vtkmodules.vtkRenderingCore import vtkActor, vtkPolyDataMapper
+
+    spec, vol, cam = sphere
+    voxel = vol.spacing[0]
+    for radius, expected in ((0.6, 0.0), (0.6 + 0.5 * voxel, 0.5)):
+        source = vtkSphereSource()
+        source.SetRadius(radius)
+        source.SetThetaResolution(720)
+        source.SetPhiResolution(360)
+        win = M.VtkWindow(SIZE)
+        mapper = vtkPolyDataMapper()
+        mapper.SetInputConnection(source.GetOutputPort())
+        actor = vtkActor()
+        actor.SetMapper(mapper)
+        win.renderer.AddActor(actor)
+        try:
+            depth = win.depth(cam)
+        finally:
+            win.close()
+        o, d = cam.rays()
+        normals = o + np.where(np.isfinite(depth), depth, 0)[..., None] * d
+        q = metrics.surface_quality(depth, normals, cam, spec.truth, 0.0, voxel).summary()
+        assert q["hits"] > 1000
+        # Chords of a 720x360 tessellation sag by < 1e-4 voxel; 24-bit depth adds ~1e-5.
+        assert q["position_voxels_mean"] == pytest.approx(expected, abs=2e-3)
+        assert q["position_voxels_max"] == pytest.approx(expected, abs=1e-2)
+
+
+def test_vtk_mip_matches_the_dense_reference():
+    _vtk_or_skip()
+    vol = sc.demo("marschner-lobb", size=32)
+    cam = sc.Camera.orbit(vol, size=(64, 48))
+    ref = runner.reference_mip(vol, cam)
+    method = M.VtkVolume(vol, (64, 48), "mip", 0.5, 0.25, "fixed-point")
+    try:
+        img = method.image(cam)
+    finally:
+        method.close()
+    assert img.shape == ref.shape
+    assert np.mean(np.abs(img - ref)) < 0.02
+
+
+# --------------------------------------------------------------------------- the whole suite
+
+def test_quick_suite_runs_every_method_and_writes_results(tmp_path):
+    results = run(quick=True, repeats=1, out=tmp_path, memory=False, log=lambda *_: None)
+    available = [k for k in M.ISO_METHODS if not M.iso_requirements(k)]
+    assert "splinecast" in available
+    for scene in results["iso"]:
+        entry = scene["sizes"][0]
+        assert set(entry["methods"]) == set(available)
+        # Every method that ran also skipped nothing silently.
+        assert set(entry["methods"]) | set(scene["skipped"]) == set(M.ISO_METHODS)
+        for key in available:
+            assert entry["methods"][key]["first_image_ms"] > 0
+            assert scene["methods"][key]["quality"]["hits"] > 100
+    saved = json.loads((tmp_path / "compare_quick.json").read_text())
+    assert saved["machine"]["cores"] >= 1
+    text = (tmp_path / "compare_quick.md").read_text()
+    assert "splinecast exact" in text
+    for mode in ("mip", "dvr"):
+        if mode not in M.splinecast_modes():
+            assert f"splinecast {mode.upper()} not available yet" in text
+
+
+def test_without_the_extra_the_suite_says_what_it_skipped(tmp_path, monkeypatch):
+    """Simulate a machine without VTK: splinecast still runs, the skips carry reasons."""
+    reason = "VTK not installed (simulated); install the bench extra"
+    monkeypatch.setattr(M, "vtk_status", lambda: {"available": False, "reason": reason})
+    results = run(quick=True, repeats=1, out=tmp_path, memory=False, log=lambda *_: None)
+    for scene in results["iso"]:
+        assert set(scene["sizes"][0]["methods"]) == {"splinecast"}
+        assert scene["skipped"]["vtk-flying-edges"] == reason
+        assert "skimage-mc" in scene["skipped"]
+    assert any(reason in note for note in results["notes"])
+    assert reason in (tmp_path / "compare_quick.md").read_text()
