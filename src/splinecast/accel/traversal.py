@@ -101,7 +101,7 @@ def axis_exit(c: int, o: float, d: float, size: int) -> tuple[int, float]:
     Returns the plane's integer coordinate and the ray parameter where it is crossed
     (``inf`` when the ray is parallel to the axis).
     """
-    start = (c // size) * size
+    start = c & -size  # size is a power of two and c >= 0: clear the low bits
     if d > 0.0:
         plane = start + size
     elif d < 0.0:
@@ -125,7 +125,7 @@ def axis_advance(
         return plane if d > 0.0 else plane - 1
     if size == 1:
         return c
-    start = (c // size) * size
+    start = c & -size  # size is a power of two and c >= 0: clear the low bits
     end = min(start + size - 1, n - 1)
     v = _cell_index(o + t_exit * d, d)
     if v < start:

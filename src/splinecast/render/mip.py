@@ -7,8 +7,13 @@ maximum along the whole ray is found with no step size at all.
 
 Empty-space skipping uses the per-block maxima of the min/max hierarchy: a block whose largest
 possible value does not exceed the running maximum cannot change the result and is leapt over,
-which, once a bright structure has been met, removes most of the ray. Minimum intensity projection
-is the same computation on the negated field (the block minima, negated, serve as maxima).
+which, once a bright structure has been met, removes most of the ray. Before that walk, the exact
+method takes a cheap lower bound of the answer from a coarse walk over 16-cell blocks: every
+value the ray meets inside a block is at least the block's minimum, so the largest block minimum
+along the ray bounds the MIP from below, and blocks whose maximum lies strictly below that bound
+are leapt over from the start, even before anything bright has been met. Minimum intensity
+projection is the same computation on the negated field (the block minima, negated, serve as
+maxima).
 
 The sampled method takes samples every ``step`` voxels from the ray's entry point (the reference
 common viewers use); it can only report values the field takes, so it never exceeds the exact MIP.
@@ -33,15 +38,35 @@ __all__ = ["trace_mip"]
 
 @jit(inline="always")
 def _skip_size(h0: np.ndarray, h1: np.ndarray, h2: np.ndarray, i: int, j: int, k: int,
-               best: float) -> int:
-    """Edge of the largest block around cell ``(i, j, k)`` that cannot beat ``best``; 0 if none."""
-    if h2[i >> 6, j >> 6, k >> 6] <= best:
+               best: float, lower: float) -> int:
+    """Edge of the largest block around cell ``(i, j, k)`` that cannot hold the maximum.
+
+    A block cannot when its maximum does not beat the running maximum ``best`` (ties keep the
+    earlier position) or lies strictly below the known lower bound ``lower``; 0 if none.
+    """
+    v = h2[i >> 6, j >> 6, k >> 6]
+    if v <= best or v < lower:
         return 64
-    if h1[i >> 4, j >> 4, k >> 4] <= best:
+    v = h1[i >> 4, j >> 4, k >> 4]
+    if v <= best or v < lower:
         return 16
-    if h0[i >> 2, j >> 2, k >> 2] <= best:
+    v = h0[i >> 2, j >> 2, k >> 2]
+    if v <= best or v < lower:
         return 4
     return 0
+
+
+@jit(inline="always")
+def _lower_bound(g1, ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max):
+    """Largest 16-cell block minimum along the ray: a lower bound of its maximum."""
+    lower = -math.inf
+    inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max)
+    while inside:
+        lower = max(lower, g1[ci >> 4, cj >> 4, ck >> 4])
+        _, inside, ci, cj, ck, t = walk_step(
+            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, 16
+        )
+    return lower
 
 
 @jit(inline="always")
@@ -65,7 +90,7 @@ def _cubic_max(c3: float, c2: float, c1: float, c0: float) -> tuple[float, float
 
 
 @jit()
-def _mip_ray(data, h0, h1, h2, sign, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max):
+def _mip_ray(data, h0, h1, h2, g1, sign, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max):
     """One index-space ray. Returns ``(best, t_best, visited, tested, skipped)`` in sign space."""
     nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
     best = -math.inf
@@ -75,8 +100,12 @@ def _mip_ray(data, h0, h1, h2, sign, ox, oy, oz, dx, dy, dz, method, dt, t_min, 
     skipped = 0
     inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max)
     t_near = t
+    # Only the exact maximum is bounded by the block minima (samples may miss a block).
+    lower = -math.inf
+    if method == 0 and inside:
+        lower = _lower_bound(g1, ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max)
     while inside:
-        size = _skip_size(h0, h1, h2, ci, cj, ck, best)
+        size = _skip_size(h0, h1, h2, ci, cj, ck, best, lower)
         t_end, inside, ni, nj, nk, t_next = walk_step(
             ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, max(size, 1)
         )
@@ -86,7 +115,8 @@ def _mip_ray(data, h0, h1, h2, sign, ox, oy, oz, dx, dy, dz, method, dt, t_min, 
             visited += 1
             vmin, vmax, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
             # The corner range bounds the cell (convexity of trilinear interpolation).
-            if (vmax if sign > 0.0 else -vmin) > best:
+            cell_max = vmax if sign > 0.0 else -vmin
+            if cell_max > best and cell_max >= lower:
                 tested += 1
                 ax = ox + t * dx - ci
                 ay = oy + t * dy - cj
@@ -123,6 +153,7 @@ def trace_mip(
     h0: np.ndarray,
     h1: np.ndarray,
     h2: np.ndarray,
+    g1: np.ndarray,
     sign: float,
     basis: np.ndarray,
     vol_origin: np.ndarray,
@@ -141,9 +172,11 @@ def trace_mip(
     """Maximum (``sign=+1``) or minimum (``sign=-1``) of the trilinear field along every ray.
 
     ``h0..h2`` are the per-block maxima of the field times ``sign`` (the hierarchy's ``highs``
-    for MIP, its negated ``lows`` for minIP), finest level first. ``method`` is 0 (exact) or 1
-    (sampled every ``step`` voxels). Writes ``value`` (NaN when the ray misses the volume),
-    ``depth`` (world distance to the extremum, ``inf`` on a miss) and ``position``.
+    for MIP, its negated ``lows`` for minIP), finest level first; ``g1`` the per-block minima
+    times ``sign`` of the 16-cell level (``lows[1]`` for MIP, ``-highs[1]`` for minIP).
+    ``method`` is 0 (exact) or 1 (sampled every ``step`` voxels). Writes ``value`` (NaN when the
+    ray misses the volume), ``depth`` (world distance to the extremum, ``inf`` on a miss) and
+    ``position``.
     """
     height, width = depth.shape
     sx, sy, sz = spacing[0], spacing[1], spacing[2]
@@ -157,7 +190,7 @@ def trace_mip(
             dt = step / math.sqrt(dx * dx + dy * dy + dz * dz)
             t_min, t_max = clip_interval(planes, wx, wy, wz, ux, uy, uz)
             best, t, nvis, ntest, nskip = _mip_ray(
-                data, h0, h1, h2, sign, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max
+                data, h0, h1, h2, g1, sign, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max
             )
             cells_visited[row, col] = nvis
             cells_tested[row, col] = ntest

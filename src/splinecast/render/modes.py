@@ -96,12 +96,14 @@ def render_mip(model: Any, hierarchy: Any, volume: Any, camera: Any, planes: np.
     sign = 1.0 if kind == "mip" else -1.0
     if sign > 0:
         h0, h1, h2 = hierarchy.highs
+        g1 = hierarchy.lows[1]
     else:
         h0, h1, h2 = (-a for a in hierarchy.lows)
+        g1 = -hierarchy.highs[1]
     buf = _buffers(camera)
     value = np.empty(buf["depth"].shape, np.float64)
     start = time.perf_counter()
-    trace_mip(model.data, h0, h1, h2, sign, camera.pixel_basis(), np.asarray(volume.origin),
+    trace_mip(model.data, h0, h1, h2, g1, sign, camera.pixel_basis(), np.asarray(volume.origin),
               np.asarray(volume.spacing), planes, row_order, _MIP_METHODS[method],
               float(step), value, buf["depth"], buf["position"], buf["visited"], buf["tested"],
               buf["skipped"])
@@ -130,12 +132,13 @@ def _check_window(window: Any, volume: Any) -> tuple[float, float]:
 
 def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> PreintegrationTable:
     """The pre-integration table for ``tf`` and ``settings``, built once and cached."""
-    key = (json.dumps(tf.to_dict()), settings.table_size, settings.step, settings.table_steps)
+    key = (json.dumps(tf.to_dict()), settings.table_size, settings.step, settings.table_steps,
+           settings.table_layout)
     table = cache.get(key)
     if table is None:
         cache.clear()  # one table at a time: they can be large
         table = preintegrate(tf, n=settings.table_size, h0=settings.step,
-                             steps=settings.table_steps)
+                             steps=settings.table_steps, layout=settings.table_layout)
         cache[key] = table
     return table
 
@@ -152,7 +155,7 @@ def render_dvr(model: Any, hierarchy: Any, volume: Any, camera: Any, planes: np.
         raise ParameterError(f"dvr must be a DVRSettings, got {type(settings).__name__}")
     cache = {} if cache is None else cache
     start = time.perf_counter()
-    pi_mode = {"none": 0, "2d": 1, "3d": 2}[settings.preintegration]
+    pi_mode = settings.pi_mode
     if pi_mode:
         pit = _table(tf, settings, cache)
         table = pit.table
@@ -171,13 +174,15 @@ def render_dvr(model: Any, hierarchy: Any, volume: Any, camera: Any, planes: np.
     trace_dvr(model.data, act0, act1, act2, prefix, domain, pi_mode, table, domain,
               float(settings.step), lut_rgb, lut_tau, bool(settings.adaptive),
               float(settings.h_max), float(settings.exponent), term, bool(settings.shade),
-              float(settings.ambient), float(settings.diffuse), bg, camera.pixel_basis(),
+              float(settings.ambient), float(settings.diffuse), bool(settings.leap), bg,
+              camera.pixel_basis(),
               np.asarray(volume.origin), np.asarray(volume.spacing), planes, row_order,
               buf["rgba"], buf["depth"], buf["position"], samples, buf["visited"],
               buf["skipped"])
     trace_ms = (time.perf_counter() - start) * 1e3
     stats = {"mode": "dvr", "model": model.name, "step": settings.step,
              "preintegration": settings.preintegration, "adaptive": settings.adaptive,
+             "table_layout": settings.table_layout, "leap": settings.leap,
              "termination": settings.termination, "width": camera.width,
              "height": camera.height, "rays": camera.width * camera.height,
              "trace_ms": trace_ms, "table_ms": table_ms,
