@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed-stamp
 BENCH_STAMP := $(VENV)/.bench-stamp
 DEMO_PNG ?= splinecast-demo.png
 
-.PHONY: demo test bench lint clean bench-deps compare compare-quick
+.PHONY: demo test bench lint clean clean-cache bench-deps compare compare-quick
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -51,3 +51,7 @@ lint: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build src/*.egg-info
+
+# Numba's on-disk cache misses changes in functions inlined from other modules: drop it after edits.
+clean-cache:
+	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
