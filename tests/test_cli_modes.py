@@ -36,6 +36,8 @@ def test_dvr_multi_iso_clip_and_effects_run(tmp_path, capsys):
     runs = [
         ["--mode", "dvr", "--tf", str(tf_path), "--adaptive", "--termination", "0.98",
          "--step", "0.5"],
+        ["--mode", "dvr", "--tf", str(tf_path), "--adaptive", "--table-layout", "exponential",
+         "--step", "0.5"],
         ["--iso=-0.3,0", "--opacity", "0.4,0.8", "--clip", "0,0,1,0", "--clip", "1,0,0,0"],
         ["--iso", "0", "--texture", "checker", "--shading", "cel",
          "--crop=-1,0.5,-1,1,-1,1", "--smooth", "3"],

@@ -93,6 +93,74 @@ def test_adaptive_step_with_3d_table_stays_close_and_takes_fewer_samples(setup):
     assert _err(adapt, ref) < 0.05
 
 
+def test_adaptive_step_with_the_exponential_table_converges_like_the_uniform_one(setup):
+    vol, scene, cam, _, _ = setup
+    tf = sc.TransferFunction([(0.3, 0.0), (0.6, 0.6), (1.0, 0.8)], domain=(0.0, 1.0))
+    ref = _reference(vol, cam, tf)
+    errs = {}
+    for layout in ("uniform", "exponential"):
+        errs[layout] = []
+        for step in (1.0, 0.25, 0.0625):
+            settings = sc.DVRSettings(step=step, preintegration="3d", table_layout=layout,
+                                      adaptive=True, h_max=4 * step, exponent=1.0)
+            frame = scene.render(cam, mode="dvr", tf=tf, shading=BLACK, dvr=settings)
+            assert frame.stats["table_layout"] == layout
+            errs[layout].append(_err(frame, ref))
+    for layout, e in errs.items():
+        assert e[0] > e[1] > e[2], (layout, e)
+        assert e[2] < 0.01 and e[2] < e[0] / 5, (layout, e)
+    # The exponential table only holds the lengths 1, 2, 4 steps, so its adaptive step is
+    # coarser at times, but it converges at the same rate.
+    assert errs["exponential"][2] < 2.0 * errs["uniform"][2] + 1e-3
+
+
+def test_exponential_settings_hold_powers_of_two():
+    s = sc.DVRSettings(step=0.5, preintegration="3d", table_layout="exponential",
+                       adaptive=True, h_max=4.0)
+    assert s.table_steps == 4 and s.pi_mode == 3  # lengths 0.5, 1, 2, 4
+    assert sc.DVRSettings(step=0.5, preintegration="3d", table_layout="exponential",
+                          adaptive=True, h_max=3.9).table_steps == 3
+    assert sc.DVRSettings(step=0.5, preintegration="3d", adaptive=True,
+                          h_max=4.0).table_steps == 8
+    with pytest.raises(sc.ParameterError, match="table_layout"):
+        sc.DVRSettings(table_layout="log")
+
+
+@pytest.mark.parametrize("pre", ["none", "2d", "3d"])
+def test_leaping_between_samples_keeps_the_image_where_samples_are_the_same(setup, pre):
+    vol, scene, cam, _, _ = setup
+    # Visible everywhere: no cell is transparent, so both walks take the same samples.
+    tf = sc.TransferFunction([(0.0, 0.02), (0.5, 0.3), (1.0, 0.6)], domain=(0.0, 1.0),
+                             colormap="viridis")
+    cams = [cam, sc.Camera.orbit(vol, azimuth=90, elevation=0, size=(12, 9)),
+            sc.Camera.orbit(vol, azimuth=-140, elevation=-35, size=(12, 9))]
+    for c in cams:
+        for clip in (None, [(-1.0, 0.3, 0.2, 0.0)]):
+            frames = [scene.render(c, mode="dvr", tf=tf, clip=clip,
+                                   dvr=sc.DVRSettings(step=0.25, preintegration=pre,
+                                                      adaptive=True, h_max=4.0, exponent=1.0,
+                                                      leap=leap))
+                      for leap in (False, True)]
+            walk, leapt = frames
+            np.testing.assert_allclose(leapt.rgba, walk.rgba, atol=1e-6)
+            np.testing.assert_allclose(leapt.depth, walk.depth, atol=1e-6)
+            assert leapt.stats["mean_samples"] == walk.stats["mean_samples"]
+            assert leapt.stats["mean_cells_visited"] < 0.8 * walk.stats["mean_cells_visited"]
+
+
+def test_leaping_over_transparent_cells_stays_close(setup):
+    vol, scene, cam, _, _ = setup
+    tf = sc.TransferFunction([(0.3, 0.0), (0.6, 0.6), (1.0, 0.8)], domain=(0.0, 1.0))
+    ref = _reference(vol, cam, tf)
+    frames = [scene.render(cam, mode="dvr", tf=tf, shading=BLACK,
+                           dvr=sc.DVRSettings(step=0.25, preintegration="3d", adaptive=True,
+                                              h_max=2.0, exponent=1.0, leap=leap))
+              for leap in (False, True)]
+    assert frames[1].stats["mean_cells_visited"] < frames[0].stats["mean_cells_visited"]
+    for frame in frames:
+        assert _err(frame, ref) < 0.05
+
+
 @pytest.mark.parametrize("threshold", [0.9, 0.99])
 def test_early_termination_changes_pixels_by_at_most_the_remaining_transparency(setup,
                                                                                 threshold):

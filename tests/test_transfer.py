@@ -107,6 +107,39 @@ def test_reuse_recurrence_gives_the_direct_table(tf):
     np.testing.assert_allclose(reused.table, direct.table, atol=1e-6)
 
 
+@pytest.mark.parametrize("layout", ["uniform", "exponential"])
+def test_reuse_build_matches_numerical_integration_for_both_layouts(tf, layout):
+    n, h0, steps = 33, 0.5, 4
+    reused = preintegrate(tf, n=n, h0=h0, steps=steps, layout=layout)
+    direct = preintegrate(tf, n=n, h0=h0, steps=steps, layout=layout, reuse=False)
+    values, rgb, tau = tf.sample(n)
+    lengths = h0 * (2.0 ** np.arange(steps) if layout == "exponential"
+                    else np.arange(1, steps + 1))
+    np.testing.assert_allclose(reused.lengths, lengths)
+    if layout == "exponential":
+        # Eq. 13: every even diagonal (the main one included) of tables 1..K-1 is composited.
+        even = sum(n - abs(d) for d in range(-(n - 1), n) if d % 2 == 0)
+        assert reused.composited_fraction == pytest.approx(even * (steps - 1) / (steps * n * n))
+        picks = [(j, f, b) for j in (1, 2, 3) for f, b in [(0, 32), (32, 0), (7, 7), (10, 16),
+                                                            (25, 13), (14, 16), (20, 18)]]
+    else:
+        # Eq. 14 composites the diagonals whose offset shares a divisor with k.
+        assert 0.2 < reused.composited_fraction < 0.6
+        picks = [(k - 1, f, b) for k in (2, 4) for f, b in [(0, 32), (32, 0), (7, 7),
+                                                            (10, 16), (25, 13), (14, 16)]]
+    assert direct.composited_fraction == 0.0
+    np.testing.assert_allclose(reused.table, direct.table, atol=1e-6)
+    for j, f, b in picks:
+        ref = _reference_segment(values, rgb, tau, values[f], values[b], lengths[j])
+        np.testing.assert_allclose(reused.table[j, f, b], ref, atol=2e-6,
+                                   err_msg=f"{layout} table {j} entry ({f}, {b})")
+
+
+def test_bad_layout_raises(tf):
+    with pytest.raises(sc.ParameterError, match="layout"):
+        preintegrate(tf, n=8, layout="log")
+
+
 def test_apply_colormap_window_and_background():
     values = np.array([[np.nan, -1.0, 0.5, 3.0]])
     rgba = apply_colormap(values, (0.0, 1.0), "gray", background=(0.1, 0.2, 0.3, 1.0))

@@ -93,6 +93,9 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="Gaussian pre-smoothing kernel size")
     render.add_argument("--preintegration", default="2d", choices=("none", "2d", "3d"),
                         help="DVR classification (default 2d pre-integration)")
+    render.add_argument("--table-layout", default="uniform", choices=("uniform", "exponential"),
+                        help="DVR 3D pre-integration table lengths: k x step (default) or "
+                             "2^j x step")
     render.add_argument("--adaptive", action="store_true",
                         help="DVR opacity-adaptive step (up to 8 x --step; uses a 3D table)")
     render.add_argument("--termination", type=float,
@@ -135,7 +138,8 @@ def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
         pre = "3d" if args.adaptive and args.preintegration == "2d" else args.preintegration
         kwargs["dvr"] = sc.DVRSettings(step=args.step, preintegration=pre,
                                        adaptive=args.adaptive, h_max=8 * args.step,
-                                       termination=args.termination)
+                                       termination=args.termination,
+                                       table_layout=args.table_layout)
         return kwargs
     isos = _numbers(args.iso, "--iso")
     if isos is not None and (len(isos) > 1 or args.opacity):

@@ -29,6 +29,16 @@ How a table is built (our formulation; the reuse follows reference 002, eqs. 12-
   composited with ``C(f+l/x, f+l, k-k/x)``. Only diagonals with ``gcd(l, k) = 1`` are built from
   pieces. Segments from high to low values are the mirror image (the reversed transfer function).
 
+Two layouts of the 3D table:
+
+* ``"uniform"``: table ``k - 1`` holds the length ``k h0``, ``k = 1..K``, built with the reuse
+  above (eq. 14);
+* ``"exponential"``: table ``j`` holds the length ``2^j h0``, ``j = 0..K-1`` (one table per
+  level of detail when the step doubles per level). With reuse (eq. 13) only table 0 and the odd
+  diagonals of the coarser tables are built from pieces: an even diagonal ``l = 2 m`` of table
+  ``j`` is ``C(f, f+m, 2^(j-1) h0)`` composited with ``C(f+m, f+l, 2^(j-1) h0)``, both from
+  table ``j - 1`` (the diagonal ``l = 0`` included: a constant segment is two halves).
+
 Tables are computed in float64 and stored as float32.
 """
 
@@ -44,7 +54,7 @@ from ._jit import jit
 from .errors import ParameterError
 from .transfer import TransferFunction
 
-__all__ = ["PreintegrationTable", "preintegrate", "segment_rgba", "preint_lookup"]
+__all__ = ["LAYOUTS", "PreintegrationTable", "preintegrate", "segment_rgba", "preint_lookup"]
 
 # 4-point Gauss-Legendre on [0, 1].
 _GX = (0.5 - 0.5 * 0.8611363115940526, 0.5 - 0.5 * 0.3399810435848563,
@@ -198,6 +208,48 @@ def _build(tau: np.ndarray, col: np.ndarray, h0: float, steps: int, reuse: bool,
     return composited
 
 
+@jit()
+def _build_exponential(tau: np.ndarray, col: np.ndarray, h0: float, levels: int, reuse: bool,
+                       out: np.ndarray) -> int:
+    """Fill ``out[j]`` for lengths ``2^j h0``, ``j = 0..levels-1``; returns composited entries."""
+    n = tau.shape[0]
+    tau_r = tau[::-1].copy()
+    col_r = col[::-1].copy()
+    scratch = np.empty((3, max(n - 1, 1), 4))
+    composited = 0
+    for j in range(levels):
+        length = h0 * 2.0**j
+        for l in range(-(n - 1), n):
+            if not (reuse and j > 0 and l % 2 == 0):
+                if l >= 0:
+                    _direct_diagonal(tau, col, l, length, out, j, False, scratch)
+                else:
+                    _direct_diagonal(tau_r, col_r, -l, length, out, j, True, scratch)
+                continue
+            # Eq. 13: both halves (half the value range, half the length) from table j - 1.
+            half = l // 2
+            f0 = 0 if l >= 0 else -l
+            f1 = n - l if l >= 0 else n
+            for f in range(f0, f1):
+                mid = f + half
+                b = f + l
+                r, g, bb, a = _over(
+                    np.float64(out[j - 1, f, mid, 0]), np.float64(out[j - 1, f, mid, 1]),
+                    np.float64(out[j - 1, f, mid, 2]), np.float64(out[j - 1, f, mid, 3]),
+                    np.float64(out[j - 1, mid, b, 0]), np.float64(out[j - 1, mid, b, 1]),
+                    np.float64(out[j - 1, mid, b, 2]), np.float64(out[j - 1, mid, b, 3]))
+                out[j, f, b, 0] = r
+                out[j, f, b, 1] = g
+                out[j, f, b, 2] = bb
+                out[j, f, b, 3] = a
+                composited += 1
+    return composited
+
+
+#: Layouts of the 3D table accepted by :func:`preintegrate`.
+LAYOUTS = ("uniform", "exponential")
+
+
 @dataclass
 class PreintegrationTable:
     """Pre-integrated premultiplied RGBA per (front value, back value, segment length).
@@ -205,16 +257,20 @@ class PreintegrationTable:
     Attributes
     ----------
     table : ndarray, shape (K, n, n, 4), float32
-        ``table[k - 1, f, b]`` is the segment of length ``k * h0`` from value ``values[f]`` to
+        ``table[k, f, b]`` is the segment of length ``lengths[k]`` from value ``values[f]`` to
         ``values[b]``.
     domain : (lo, hi)
         Value range of the table (the transfer function's domain); values outside are clamped.
     h0 : float
-        Length unit in voxels: table ``k - 1`` holds segments of length ``k * h0``.
+        Length unit in voxels: table ``k`` holds segments of length ``(k + 1) * h0`` (uniform
+        layout) or ``2**k * h0`` (exponential layout).
     build_ms : float
         Time the build took.
     composited_fraction : float
-        Share of entries obtained by compositing shorter segments (eq. 14) rather than built.
+        Share of entries obtained by compositing shorter segments (eq. 13 or 14) rather than
+        built.
+    layout : {"uniform", "exponential"}
+        How the lengths are spaced.
     """
 
     table: np.ndarray
@@ -223,6 +279,7 @@ class PreintegrationTable:
     build_ms: float = math.nan
     composited_fraction: float = 0.0
     stats: dict = field(default_factory=dict)
+    layout: str = "uniform"
 
     @property
     def n(self) -> int:
@@ -235,13 +292,21 @@ class PreintegrationTable:
         return int(self.table.shape[0])
 
     @property
+    def lengths(self) -> np.ndarray:
+        """Segment length in voxels of each table."""
+        k = np.arange(self.steps, dtype=np.float64)
+        if self.layout == "exponential":
+            return self.h0 * 2.0**k
+        return self.h0 * (k + 1.0)
+
+    @property
     def values(self) -> np.ndarray:
         """The ``n`` data values the table's rows and columns stand for."""
         return np.linspace(self.domain[0], self.domain[1], self.n)
 
 
 def preintegrate(tf: TransferFunction, n: int = 256, h0: float = 1.0, steps: int = 1,
-                 reuse: bool = True) -> PreintegrationTable:
+                 reuse: bool = True, layout: str = "uniform") -> PreintegrationTable:
     """Build a 2D (``steps=1``) or 3D pre-integration table for ``tf``.
 
     Parameters
@@ -251,12 +316,16 @@ def preintegrate(tf: TransferFunction, n: int = 256, h0: float = 1.0, steps: int
     n : int
         Values per axis (at least 2).
     h0 : float
-        Segment length of the first table, in voxels; table ``k - 1`` has length ``k * h0``.
+        Segment length of the first table, in voxels.
     steps : int
         Number of lengths ``K`` (1 gives a 2D table for the fixed step ``h0``).
     reuse : bool
-        Use the reuse recurrence (eq. 14) where it applies; ``False`` builds every diagonal
-        directly (the naive build, same result to rounding).
+        Use the reuse recurrence (eq. 14, or eq. 13 for the exponential layout) where it
+        applies; ``False`` builds every diagonal directly (the naive build, same result to
+        rounding).
+    layout : {"uniform", "exponential"}
+        Lengths ``k * h0``, ``k = 1..K`` (uniform) or ``2**j * h0``, ``j = 0..K-1``
+        (exponential: one table per level of detail whose step doubles per level).
     """
     if not isinstance(tf, TransferFunction):
         raise ParameterError(f"tf must be a TransferFunction, got {type(tf).__name__}")
@@ -267,14 +336,17 @@ def preintegrate(tf: TransferFunction, n: int = 256, h0: float = 1.0, steps: int
         raise ParameterError(f"steps must be at least 1, got {steps}")
     if not (math.isfinite(h0) and h0 > 0):
         raise ParameterError(f"h0 must be a positive number of voxels, got {h0}")
+    if layout not in LAYOUTS:
+        raise ParameterError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
     _, rgb, tau = tf.sample(n)
     out = np.empty((steps, n, n, 4), dtype=np.float32)
+    build = _build_exponential if layout == "exponential" else _build
     start = time.perf_counter()
-    composited = _build(np.ascontiguousarray(tau), np.ascontiguousarray(rgb), float(h0), steps,
-                        bool(reuse), out)
+    composited = build(np.ascontiguousarray(tau), np.ascontiguousarray(rgb), float(h0), steps,
+                       bool(reuse), out)
     build_ms = (time.perf_counter() - start) * 1e3
     return PreintegrationTable(out, tf.domain, float(h0), build_ms,
-                               composited / np.float64(out[..., 0].size))
+                               composited / np.float64(out[..., 0].size), layout=layout)
 
 
 @jit(inline="always")

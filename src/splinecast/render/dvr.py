@@ -10,7 +10,10 @@ operator, ``C += (1 - A) c``, ``A += (1 - A) a`` (premultiplied colours):
   linearly from ``v_a`` to ``v_b``, looked up bilinearly in a table. A 2D table is for one length;
   other lengths (the last, partial step before an exit) use the opacity correction
   ``a' = 1 - (1 - a)^(L / h)`` with the colour scaled by ``a' / a``. A 3D table holds the lengths
-  ``k h0`` exactly, which is what the opacity-adaptive step uses.
+  ``k h0`` (uniform layout) or ``2^j h0`` (exponential layout) exactly, which is what the
+  opacity-adaptive step uses: its step is rounded to the nearest length in the table (for the
+  exponential layout, nearest in ``log2``); other lengths use the opacity correction from the
+  nearest table.
 
 Opacity-adaptive step (reference 002, eq. 10): ``h = h_min + (h_max - h_min) A^n`` with ``A`` the
 accumulated opacity, so the step grows where little of what follows can still be seen. Early ray
@@ -21,6 +24,14 @@ Empty space: blocks whose value range meets no visible (non-zero opacity) range 
 function are leapt over with the min/max hierarchy, and single cells are tested against the
 transfer function's prefix-sum table. The sampling restarts at the exit of a skipped region; a
 pending segment is closed at its entry with the value there.
+
+Leaping between samples (``leap``): when the next sample lies more than a voxel ahead, the ray
+walks the visible 4^3 blocks of the hierarchy's finest level instead of single cells and, once
+the block holding the next sample is reached, restarts the cell walk at the sample (as
+``walk_begin`` does at a ray's entry). Cells without a sample are then neither loaded nor tested
+against the prefix table; the sample positions and values are those of the cell-by-cell walk
+unless a cell leapt over is transparent on its own inside a visible block (the cell walk closes
+the segment there and restarts the sampling at the cell's exit, the leap composites across it).
 
 Optional gradient shading multiplies each segment's colour by ``ambient + diffuse |n . u|``
 (headlight, ``n`` the normalized field gradient at the segment's back sample).
@@ -36,17 +47,20 @@ from numba import prange
 
 from .._jit import jit
 from ..accel.minmax import inactive_block_size
-from ..accel.traversal import walk_begin, walk_step
+from ..accel.traversal import start_cell, walk_begin, walk_step
 from ..errors import ParameterError
 from ..models.trilinear import cell_monomials, local_gradient, local_value
 from ..preintegration import preint_lookup
 from .clipping import clip_interval
 from .rays import pixel_ray
 
-__all__ = ["DVRSettings", "PREINTEGRATION", "trace_dvr"]
+__all__ = ["DVRSettings", "PREINTEGRATION", "TABLE_LAYOUTS", "trace_dvr"]
 
 #: Classification kinds accepted by :class:`DVRSettings`.
 PREINTEGRATION = ("none", "2d", "3d")
+
+#: Layouts of the 3D pre-integration table accepted by :class:`DVRSettings`.
+TABLE_LAYOUTS = ("uniform", "exponential")
 
 
 @dataclass(frozen=True)
@@ -59,7 +73,11 @@ class DVRSettings:
         Sampling step in voxels (``h_min`` of the adaptive step).
     preintegration : {"none", "2d", "3d"}
         Plain classification of samples, a 2D pre-integration table for the fixed step, or a 3D
-        table over the step lengths ``k * step`` (needed for the adaptive step to be exact).
+        table over several step lengths (needed for the adaptive step to be exact).
+    table_layout : {"uniform", "exponential"}
+        Lengths of the 3D table: ``k * step`` for ``k = 1 .. ceil(h_max / step)`` (uniform,
+        eq. 14 reuse) or ``2**j * step`` up to ``h_max`` (exponential, eq. 13 reuse; the
+        adaptive step is then rounded to a power of two times ``step``).
     adaptive : bool
         Opacity-adaptive step ``h = step + (h_max - step) * A^exponent``.
     h_max, exponent : float
@@ -73,6 +91,9 @@ class DVRSettings:
         Weights of the gradient shading.
     table_size : int
         Values per axis of the pre-integration table.
+    leap : bool
+        Leap over cells that hold no sample (see the module notes); ``False`` walks and tests
+        every cell of the visible blocks.
     """
 
     step: float = 0.5
@@ -85,6 +106,8 @@ class DVRSettings:
     ambient: float = 0.3
     diffuse: float = 0.7
     table_size: int = 256
+    table_layout: str = "uniform"
+    leap: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.step) and self.step > 0):
@@ -98,16 +121,29 @@ class DVRSettings:
             raise ParameterError(f"exponent must be positive, got {self.exponent}")
         if self.termination is not None and not 0 < self.termination <= 1:
             raise ParameterError(f"termination must be in (0, 1], got {self.termination}")
+        if self.table_layout not in TABLE_LAYOUTS:
+            raise ParameterError(f"table_layout must be one of {', '.join(TABLE_LAYOUTS)}, "
+                                 f"got {self.table_layout!r}")
         if not 2 <= int(self.table_size) <= 4096:
             raise ParameterError(f"table_size must be 2..4096, got {self.table_size}")
 
     @property
     def table_steps(self) -> int:
-        """Lengths in the 3D table: ``k * step`` for ``k = 1 .. ceil(h_max / step)``."""
+        """Lengths in the 3D table: ``k * step`` for ``k = 1 .. ceil(h_max / step)``
+        (uniform), or ``2**j * step`` for ``j = 0 .. floor(log2(h_max / step))``."""
         if self.preintegration != "3d":
             return 1
         top = self.h_max if self.adaptive else self.step
+        if self.table_layout == "exponential":
+            return 1 + max(0, math.floor(math.log2(top / self.step) + 1e-9))
         return max(1, math.ceil(top / self.step - 1e-9))
+
+    @property
+    def pi_mode(self) -> int:
+        """Classification code of the kernel: 0 plain, 1 2D, 2 uniform 3D, 3 exponential 3D."""
+        if self.preintegration == "3d" and self.table_layout == "exponential":
+            return 3
+        return {"none": 0, "2d": 1, "3d": 2}[self.preintegration]
 
 
 @jit(inline="always")
@@ -149,9 +185,18 @@ def _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale
     steps = table.shape[0]
     uf = min(max((va - t_lo) * t_scale, 0.0), n - 1.0)
     ub = min(max((vb - t_lo) * t_scale, 0.0), n - 1.0)
-    k = min(max(int(length / h0 + 0.5), 1), steps)
+    if pi_mode == 3:
+        # Exponential layout: the table nearest in log2 of the length.
+        j = 0
+        if length > h0:
+            j = min(int(math.log2(length / h0) + 0.5), steps - 1)
+        k = j + 1
+        held = h0 * 2.0**j
+    else:
+        k = min(max(int(length / h0 + 0.5), 1), steps)
+        held = k * h0
     r, g, b, a = preint_lookup(table, k - 1, uf, ub)
-    ratio = length / (k * h0)
+    ratio = length / held
     if abs(ratio - 1.0) > 1e-9 and a > 0.0:
         # A length the table does not hold: correct the opacity for it (colour follows).
         a2 = -math.expm1(ratio * math.log1p(-min(a, 1.0 - 1e-12)))
@@ -160,11 +205,33 @@ def _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale
     return r, g, b, a
 
 
+@jit(inline="always")
+def _adaptive_step(pi_mode, steps, h0, h_max, exponent, acc_a):
+    """Opacity-adaptive step in voxels, rounded to a length the 3D table holds."""
+    h = h0 + (h_max - h0) * acc_a**exponent
+    if pi_mode == 2:
+        h = max(1.0, math.floor(h / h0 + 0.5)) * h0
+    elif pi_mode == 3:
+        j = 0
+        if h > h0:
+            j = min(int(math.log2(h / h0) + 0.5), steps - 1)
+        h = h0 * 2.0**j
+    return h
+
+
+@jit(inline="always")
+def _clamp_into_block(c, c_old, n):
+    """``c`` clamped into the aligned 4-cell block holding ``c_old`` and into ``[0, n-1]``."""
+    start = (c_old >> 2) << 2
+    end = min(start + 3, n - 1)
+    return min(max(c, start), end)
+
+
 @jit()
 def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, t_lo, t_scale,
              lut_rgb, lut_tau, l_lo, l_scale, adaptive, h_max, exponent, term,
              shade, ambient, diffuse, sx, sy, sz, ux, uy, uz,
-             ox, oy, oz, dx, dy, dz, t_min, t_max):
+             ox, oy, oz, dx, dy, dz, t_min, t_max, leap):
     """One ray. Returns ``(r, g, b, A, t_half, samples, visited, skipped)``."""
     nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
     nbins = prefix.shape[0] - 1
@@ -184,8 +251,33 @@ def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, 
     t_s = t
     last_i, last_j, last_k = ci, cj, ck
     done = False
+    fresh = True  # the walk (re)started in this cell: process it, never leap from it
+    steps = table.shape[0]
     while inside and not done:
         size = inactive_block_size(act0, act1, act2, ci, cj, ck)
+        if leap and size == 0 and not fresh and (t_s - t) * dnorm > 1.0:
+            # The next sample is over a voxel ahead: walk the visible 4^3 block instead.
+            b_end, b_more, bi, bj, bk, b_next = walk_step(
+                ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, 4
+            )
+            skipped += 1
+            if t_s > b_end:
+                if b_more:
+                    ci, cj, ck, t = bi, bj, bk, b_next
+                else:
+                    inside = False
+                    last_i, last_j, last_k = start_cell(ox, oy, oz, dx, dy, dz, t_far,
+                                                        nx, ny, nz)
+                continue
+            # Restart the cell walk at the next sample, which lies in this block.
+            si, sj, sk = start_cell(ox, oy, oz, dx, dy, dz, t_s, nx, ny, nz)
+            ci = _clamp_into_block(si, ci, nx)
+            cj = _clamp_into_block(sj, cj, ny)
+            ck = _clamp_into_block(sk, ck, nz)
+            t = t_s
+            fresh = True
+            continue
+        fresh = False
         t_end, inside, ni, nj, nk, t_next = walk_step(
             ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, max(size, 1)
         )
@@ -244,9 +336,7 @@ def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, 
                 v_prev = v
                 h = h0
                 if adaptive:
-                    h = h0 + (h_max - h0) * acc_a**exponent
-                    if pi_mode == 2:
-                        h = max(1.0, math.floor(h / h0 + 0.5)) * h0  # a length in the table
+                    h = _adaptive_step(pi_mode, steps, h0, h_max, exponent, acc_a)
                 t_s += h / dnorm
         ci, cj, ck, t = ni, nj, nk, t_next
     if not done and have_prev and t_prev < t_far:
@@ -287,6 +377,7 @@ def trace_dvr(
     shade: bool,
     ambient: float,
     diffuse: float,
+    leap: bool,
     background: np.ndarray,
     basis: np.ndarray,
     vol_origin: np.ndarray,
@@ -304,7 +395,8 @@ def trace_dvr(
 
     ``act0..act2``: block flags, non-zero where the transfer function is visible. ``prefix``:
     the transparency prefix table over ``prefix_range = (lo, hi)``. ``pi_mode``: 0 plain, 1 2D
-    table, 2 3D table (``table`` over ``table_range``, lengths ``k * h0``). ``lut_rgb``,
+    table, 2 3D table (``table`` over ``table_range``, lengths ``k * h0``), 3 exponential 3D
+    table (lengths ``2**j * h0``). ``leap``: leap over cells holding no sample. ``lut_rgb``,
     ``lut_tau``: the transfer function sampled evenly over ``table_range`` for plain
     classification. ``h0`` is the (minimum) step in voxels; ``term`` the early-termination
     opacity (> 1 disables it). ``depth`` and ``position`` get the distance and point where the
@@ -329,7 +421,7 @@ def trace_dvr(
                 data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, t_lo,
                 t_scale, lut_rgb, lut_tau, t_lo, l_scale, adaptive, h_max, exponent, term,
                 shade, ambient, diffuse, sx, sy, sz, ux, uy, uz,
-                ox, oy, oz, dx, dy, dz, t_min, t_max,
+                ox, oy, oz, dx, dy, dz, t_min, t_max, leap,
             )
             rest = 1.0 - ca
             rgba[row, col, 0] = min(cr + rest * background[0] * background[3], 1.0)
