@@ -5,7 +5,8 @@ noise volume, measures after JIT warm-up (medians):
 
 * isovalue change split into cube classification, tetrahedron classification, compaction and (for
   the precomputed variant) coefficient storage; active cubes, tetrahedra, tetrahedra per cube;
-* memory of the on-the-fly and precomputed variants;
+* preparation time (includes the iso-independent exact per-cube coefficient ranges) and memory of
+  the on-the-fly and precomputed variants (and of the per-cube ranges);
 * ms per frame at 1280x1024 and 1024x768 for trilinear (baseline, same process), qss and s31
   (on the fly and precomputed), and the ratio to trilinear;
 * on Marschner–Lobb, the mean and 95th-percentile angle between rendered and analytic normals.
@@ -23,6 +24,7 @@ import sys
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 
 import splinecast as sc
@@ -66,6 +68,10 @@ def bench_volume(label: str, volume: sc.Volume, isos: list[float], sizes, repeat
         start = time.perf_counter()
         scene = sc.Scene(volume, model=name, **opts)
         entry = {"model": tag, "prepare_ms": (time.perf_counter() - start) * 1e3, "sizes": []}
+        if hasattr(scene.model, "cube_lo"):
+            # Iso-independent precomputation: exact per-cube coefficient ranges (float32 pair).
+            entry["cube_bounds_bytes"] = int(scene.model.cube_lo.nbytes
+                                             + scene.model.cube_hi.nbytes)
         if hasattr(scene.model, "classify"):
             scene.set_iso(isos[1])  # warm-up
             stats = []
@@ -113,10 +119,10 @@ def markdown(results: dict) -> str:
     lines = [f"# Type-6 splines benchmark ({results['command']})", "",
              f"Machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores; timings are medians "
              "after warm-up on a shared machine (noisy).", ""]
-    lines.append("| volume | model | iso change ms (cubes / tets / compact / store) | active cubes"
-                 " | tets/cube | memory on-the-fly / precomputed MB | frame ms per size"
-                 " (x trilinear) | normal angle mean/p95 deg |")
-    lines.append("|---|---|---|---|---|---|---|---|")
+    lines.append("| volume | model | prepare ms | iso change ms (cubes / tets / compact / store)"
+                 " | active cubes | tets/cube | memory on-the-fly / precomputed MB (cube bounds)"
+                 " | frame ms per size (x trilinear) | normal angle mean/p95 deg |")
+    lines.append("|---|---|---|---|---|---|---|---|---|")
     for v in results["volumes"]:
         for e in v["models"]:
             if "cube_classify_ms" in e:
@@ -126,7 +132,8 @@ def markdown(results: dict) -> str:
                 act = f"{e['cubes_active']}"
                 tpc = f"{e['tets_per_active_cube']:.1f}"
                 mem = (f"{e['memory_on_the_fly_bytes'] / 2**20:.0f} / "
-                       f"{e['memory_precomputed_bytes'] / 2**20:.0f}")
+                       f"{e['memory_precomputed_bytes'] / 2**20:.0f}"
+                       f" ({e.get('cube_bounds_bytes', 0) / 2**20:.0f})")
             else:
                 change, act, tpc, mem = f"{e['iso_change_ms']:.1f}", "-", "-", "-"
             frames = ", ".join(
@@ -135,8 +142,8 @@ def markdown(results: dict) -> str:
                 for s in e["sizes"])
             normals = ", ".join(f"{s['normal_angle_mean_deg']:.2f}/{s['normal_angle_p95_deg']:.1f}"
                                 for s in e["sizes"] if "normal_angle_mean_deg" in s) or "-"
-            lines.append(f"| {v['volume']} | {e['model']} | {change} | {act} | {tpc} | {mem} | "
-                         f"{frames} | {normals} |")
+            lines.append(f"| {v['volume']} | {e['model']} | {e['prepare_ms']:.0f} | {change} | "
+                         f"{act} | {tpc} | {mem} | {frames} | {normals} |")
     return "\n".join(lines) + "\n"
 
 
@@ -147,6 +154,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", default=str(HERE / "results"), help="output folder")
     args = parser.parse_args()
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))  # the 2-core target
     sizes = [(1280, 1024), (1024, 768)]
     ml_isos = [0.5, 0.3, 0.4, 0.6, 0.7]
     cases = [(f"marschner-lobb {n}^3", lambda n=n: sc.demo("marschner-lobb", size=n), ml_isos,

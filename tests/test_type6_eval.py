@@ -161,3 +161,64 @@ def test_border_values_stay_in_data_range_and_options_are_checked():
         sc.Scene(vol, model="s31", root_finder="sturm")
     with pytest.raises(sc.ParameterError):
         sc.Scene(vol, model="qss", variant="qss-c")
+
+
+@pytest.mark.parametrize("kind", ["s31", "qss-b", "qss-a"])
+def test_averaging_chain_gives_the_rules_and_cube_bounds_are_exact_ranges(kind):
+    """The compiled chain (used by classification, precompute and the renderer's cube cache)
+    against the weight matrix of the rules (checked against the note in
+    test_type6_coefficients); the per-cube bounds and the scene's block ranges against the
+    range of those reference coefficients."""
+    from splinecast.accel.active_cells import store_coefficients
+
+    data = RNG.normal(size=(6, 5, 7)) * 10.0 + 3.0
+    model = _model(kind, data)
+    shape = np.asarray(data.shape, np.int64)
+    cubes = np.arange(data.size, dtype=np.int64)[::-1].copy()  # any order
+    prog = model.program
+    assert prog.n_terms < model.tables.sparse()[1].size  # cheaper than the direct rules
+    got = store_coefficients(model.pad, cubes, shape, *prog.arrays, prog.n_slots, model.n_points)
+    w = model.tables.weight_matrix()
+    ijk = np.stack(np.unravel_index(cubes, data.shape), axis=1)
+    ref = np.array([w @ model.pad[i:i + 3, j:j + 3, k:k + 3].reshape(27) for i, j, k in ijk])
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+    lo = model.cube_lo.reshape(-1)[cubes]
+    hi = model.cube_hi.reshape(-1)[cubes]
+    assert np.all(lo <= ref.min(axis=1)) and np.all(hi >= ref.max(axis=1))
+    assert np.allclose(lo, ref.min(axis=1), atol=1e-5) and np.allclose(hi, ref.max(axis=1),
+                                                                        atol=1e-5)
+    hier = sc.Scene(sc.Volume(data), model="s31" if kind == "s31" else "qss",
+                    **({} if kind == "s31" else {"variant": kind})).hierarchy
+    assert hier.lows[0].min() <= ref.min() and hier.highs[0].max() >= ref.max()
+    for level, shift in enumerate((2, 4, 6)):
+        for (i, j, k), a, b in zip(ijk, ref.min(axis=1), ref.max(axis=1), strict=True):
+            assert hier.lows[level][i >> shift, j >> shift, k >> shift] <= a
+            assert hier.highs[level][i >> shift, j >> shift, k >> shift] >= b
+
+
+@pytest.mark.parametrize("kind", ["s31", "qss-b"])
+def test_ray_restriction_matches_the_patch_along_the_segment(kind):
+    """The unrolled blossoms of the renderer against de Casteljau evaluation of the patch at
+    points of the segment (the Bernstein polynomial of the restriction must agree)."""
+    from math import comb
+
+    from splinecast.models.type6 import barycentric, ray_bernstein2, ray_bernstein3
+    from splinecast.models.type6_geometry import tet_vertices
+
+    model = _model(kind, RNG.normal(size=(5, 5, 5)))
+    tet_points, _, _, _, bary, _ = model.tables_arrays
+    cube = np.array([2, 2, 2])
+    coeffs = model.cube_coefficients(*cube)
+    d = model.degree
+    s = np.linspace(0.0, 1.0, 7)
+    for tet in range(24):
+        verts = np.array([[float(c) for c in v] for v in tet_vertices(tet)])
+        lam = RNG.dirichlet(np.ones(4), size=2)
+        a, b = lam @ verts  # two points inside the tetrahedron
+        c = np.ascontiguousarray(coeffs[tet_points[tet]])
+        ab = barycentric(bary, tet, *a) + barycentric(bary, tet, *b)
+        u = ray_bernstein3(c, *ab) if d == 3 else ray_bernstein2(c, *ab)
+        poly = sum(u[k] * comb(d, k) * s**k * (1 - s) ** (d - k) for k in range(d + 1))
+        pts = a + s[:, None] * (b - a)
+        ref, _ = _eval(model, np.tile(cube, (len(s), 1)), np.full(len(s), tet), pts)
+        np.testing.assert_allclose(poly, ref, rtol=0, atol=1e-12)

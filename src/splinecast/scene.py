@@ -100,9 +100,12 @@ class Scene:
         start = time.perf_counter()
         self.volume = volume
         self.model = MODELS[model](volume, **options)
-        self.hierarchy = MinMaxHierarchy(
-            self.model.coefficients, self.model.n_cells, self.model.support
-        )
+        if hasattr(self.model, "block_hierarchy"):  # models with their own bounds (s31, qss)
+            self.hierarchy = self.model.block_hierarchy()
+        else:
+            self.hierarchy = MinMaxHierarchy(
+                self.model.coefficients, self.model.n_cells, self.model.support
+            )
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self.classify_ms = math.nan
         #: Counts and timings of the model's own isovalue change (models with ``classify``).

@@ -3,16 +3,15 @@
 References 003/004 (section 4.1) prepare every frame's work list once per isovalue: cubes whose
 patches may contain the isovalue, then, inside them, the tetrahedra whose patch may. Here:
 
-1. **Cube classification** (vectorised bounds, compiled scan): a cube is a candidate when the
-   isovalue lies in its conservative value range (the model's ``cube_lo``/``cube_hi``: the range
-   of the 27 data values, widened for schemes with negative weights). The candidates are compacted
-   into a list of linear cube indices in the same pass.
-2. **Tetrahedron classification** (compiled, parallel over candidates): the coefficients of the
-   candidate cube are computed from its 27 values and each tetrahedron is active when the
-   isovalue lies in the range of its own Bernstein–Bézier coefficients (convex hull property:
-   the patch lies in that range, so this is conservative and much tighter than stage 1). A cube
-   is active when one of its tetrahedra is; since neighbouring tetrahedra share coefficients,
-   this is the same as the isovalue lying in the range of the cube's coefficients.
+1. **Cube classification** (compiled parallel scan and two-pass compaction): a cube is active
+   when the isovalue lies in the exact range of its coefficients (the model's ``cube_lo`` /
+   ``cube_hi``, computed once per volume, float32 rounded outward). No coefficient is computed
+   here.
+2. **Tetrahedron classification** (compiled, parallel over active cubes, ``_LANES`` cubes side
+   by side): the coefficients of the cube are computed from its 27 values by the scheme's
+   verified averaging chain and each tetrahedron is active when the isovalue lies in the range
+   of its own Bernstein–Bézier coefficients (convex hull property: the patch lies in that range,
+   so this is conservative; ranges are widened by the model's rounding tolerance).
 3. **Compaction**: active cubes (with a 24-bit tetrahedron mask each), the list of active
    tetrahedra (``slot * 24 + tet``), the cube -> slot lookup grid the kernels use and the block
    flags for empty-space leaps.
@@ -29,137 +28,219 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..models.type6 import gather27
-from .minmax import BLOCK_SHIFTS
+from ..models.type6 import _LANES, gather27_lane, run_program
+from .minmax import BLOCK_SHIFTS, MinMaxHierarchy, _coarsen
 
-__all__ = ["ActiveCells", "candidate_cubes", "classify_tets", "tet_list"]
-
-_CHUNK = 512  # candidates per work item: per-thread scratch buffers are reused within a chunk
-
+__all__ = ["ActiveCells", "CubeBoundHierarchy", "block_ranges", "candidate_cubes",
+           "classify_tets", "tet_list"]
 
 @jit(parallel=True)
-def candidate_cubes(lo: np.ndarray, hi: np.ndarray, iso: float) -> np.ndarray:
-    """Linear indices (C order) of the cubes with ``lo <= iso <= hi``, compacted in two passes."""
+def block_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Range of the cube bounds over aligned blocks of 4^3 cubes (iso-independent)."""
     nx, ny, nz = lo.shape
-    counts = np.zeros(nx, np.int64)
-    for i in prange(nx):
-        c = 0
-        for j in range(ny):
-            for k in range(nz):
-                if lo[i, j, k] <= iso and hi[i, j, k] >= iso:
-                    c += 1
-        counts[i] = c
-    starts = np.zeros(nx + 1, np.int64)
-    for i in range(nx):
-        starts[i + 1] = starts[i] + counts[i]
-    out = np.empty(starts[nx], np.int64)
-    for i in prange(nx):
-        n = starts[i]
-        for j in range(ny):
-            for k in range(nz):
-                if lo[i, j, k] <= iso and hi[i, j, k] >= iso:
-                    out[n] = (i * ny + j) * nz + k
-                    n += 1
-    return out
+    bx, by, bz = (nx + 3) >> 2, (ny + 3) >> 2, (nz + 3) >> 2
+    blo = np.empty((bx, by, bz), lo.dtype)
+    bhi = np.empty((bx, by, bz), hi.dtype)
+    for a in prange(bx):
+        for b in range(by):
+            for c in range(bz):
+                vmin = lo[4 * a, 4 * b, 4 * c]
+                vmax = hi[4 * a, 4 * b, 4 * c]
+                for i in range(4 * a, min(nx, 4 * a + 4)):
+                    for j in range(4 * b, min(ny, 4 * b + 4)):
+                        for k in range(4 * c, min(nz, 4 * c + 4)):
+                            vmin = min(vmin, lo[i, j, k])
+                            vmax = max(vmax, hi[i, j, k])
+                blo[a, b, c] = vmin
+                bhi[a, b, c] = vmax
+    return blo, bhi
 
 
 @jit(inline="always")
-def _cube_coefficients(v27, indptr, cols, vals, out):
-    for p in range(indptr.shape[0] - 1):
-        s = 0.0
-        for q in range(indptr[p], indptr[p + 1]):
-            s += vals[q] * v27[cols[q]]
-        out[p] = s
+def _scan_block(lo, hi, iso, a, b, c, out, n, write):
+    nx, ny, nz = lo.shape
+    for i in range(4 * a, min(nx, 4 * a + 4)):
+        for j in range(4 * b, min(ny, 4 * b + 4)):
+            for k in range(4 * c, min(nz, 4 * c + 4)):
+                if lo[i, j, k] <= iso and hi[i, j, k] >= iso:
+                    if write:
+                        out[n] = (i * ny + j) * nz + k
+                    n += 1
+    return n
+
+
+@jit(parallel=True)
+def candidate_cubes(
+    lo: np.ndarray, hi: np.ndarray, blo: np.ndarray, bhi: np.ndarray, iso: float,
+) -> np.ndarray:
+    """Linear indices of the cubes with ``lo <= iso <= hi``, compacted in two parallel passes.
+
+    Only the 4^3 blocks whose range (``blo``, ``bhi``) holds ``iso`` are scanned; cubes come
+    block by block (slabs of blocks in ``x`` order), which keeps later gathers local.
+    """
+    bx, by, bz = blo.shape
+    counts = np.zeros(bx + 1, np.int64)
+    dummy = np.empty(0, np.int64)
+    for a in prange(bx):
+        n = 0
+        for b in range(by):
+            for c in range(bz):
+                if blo[a, b, c] <= iso and bhi[a, b, c] >= iso:
+                    n = _scan_block(lo, hi, iso, a, b, c, dummy, n, False)
+        counts[a + 1] = n
+    for a in range(bx):
+        counts[a + 1] += counts[a]
+    out = np.empty(counts[bx], np.int64)
+    for a in prange(bx):
+        n = counts[a]
+        for b in range(by):
+            for c in range(bz):
+                if blo[a, b, c] <= iso and bhi[a, b, c] >= iso:
+                    n = _scan_block(lo, hi, iso, a, b, c, out, n, True)
+    return out
+
+
+class CubeBoundHierarchy(MinMaxHierarchy):
+    """The scene's block hierarchy built from a type-6 model's exact per-cube bounds.
+
+    Same interface as :class:`~.minmax.MinMaxHierarchy` (levels of 4, 16, 64 cubes), but the
+    finest ranges are the blocks' ranges of the cubes' coefficient ranges, which is valid for
+    every scheme (also with negative weights) and costs no pass over the data.
+    """
+
+    def __init__(self, blo: np.ndarray, bhi: np.ndarray, n_cells: tuple[int, int, int]) -> None:
+        self.n_cells = tuple(int(n) for n in n_cells)
+        self.lows = [blo]
+        self.highs = [bhi]
+        for finer, coarser in zip(BLOCK_SHIFTS[:-1], BLOCK_SHIFTS[1:], strict=True):
+            factor = 1 << (coarser - finer)
+            self.lows.append(_coarsen(self.lows[-1], factor, np.minimum, np.inf))
+            self.highs.append(_coarsen(self.highs[-1], factor, np.maximum, -np.inf))
+        self.iso = None
+        self.active = ()
+
+
+@jit(inline="always")
+def _gather_lanes(pad, cubes, start, n, ny, nz, buf):
+    for m in range(n):
+        lin = cubes[start + m]
+        gather27_lane(pad, lin // (ny * nz), (lin // nz) % ny, lin % nz, buf, m)
 
 
 @jit(parallel=True)
 def classify_tets(
     pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, tet_points: np.ndarray,
-    indptr: np.ndarray, cols: np.ndarray, vals: np.ndarray, iso: float,
+    targets: np.ndarray, ptr: np.ndarray, sources: np.ndarray, weights: np.ndarray,
+    n_slots: int, iso: float, tol: float,
 ) -> np.ndarray:
-    """24-bit masks of the tetrahedra whose coefficient range contains ``iso``, per cube."""
+    """24-bit masks of the tetrahedra whose coefficient range contains ``iso``, per cube.
+
+    The coefficients come from the model's program, ``_LANES`` cubes side by side; a range is
+    widened by ``tol`` (rounding) so the test stays conservative for the renderer's sums.
+    """
     n = cubes.shape[0]
     masks = np.zeros(n, np.uint32)
-    n_chunks = (n + _CHUNK - 1) // _CHUNK
+    n_chunks = (n + _LANES - 1) // _LANES
     ny, nz = shape[1], shape[2]
-    n_pts = indptr.shape[0] - 1
+    n_local = tet_points.shape[1]
+    lo_iso = iso - tol
+    hi_iso = iso + tol
     for chunk in prange(n_chunks):
-        v27 = np.empty(27)
-        c = np.empty(n_pts)
-        for m in range(chunk * _CHUNK, min(n, (chunk + 1) * _CHUNK)):
-            lin = cubes[m]
-            k = lin % nz
-            j = (lin // nz) % ny
-            i = lin // (ny * nz)
-            gather27(pad, i, j, k, v27)
-            _cube_coefficients(v27, indptr, cols, vals, c)
-            mask = 0
-            for t in range(24):
-                cmin = np.inf
-                cmax = -np.inf
-                for q in range(tet_points.shape[1]):
-                    v = c[tet_points[t, q]]
-                    cmin = min(cmin, v)
-                    cmax = max(cmax, v)
-                if cmin <= iso <= cmax:
-                    mask |= 1 << t
-            masks[m] = mask
+        buf = np.empty((n_slots, _LANES))
+        vmin = np.empty(_LANES)
+        vmax = np.empty(_LANES)
+        mask = np.zeros(_LANES, np.uint32)
+        start = chunk * _LANES
+        cnt = min(_LANES, n - start)
+        _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
+        run_program(buf, cnt, targets, ptr, sources, weights)
+        for t in range(24):
+            row = buf[27 + tet_points[t, 0]]
+            for m in range(cnt):
+                vmin[m] = row[m]
+                vmax[m] = row[m]
+            for q in range(1, n_local):
+                row = buf[27 + tet_points[t, q]]
+                for m in range(cnt):
+                    vmin[m] = min(vmin[m], row[m])
+                    vmax[m] = max(vmax[m], row[m])
+            bit = np.uint32(1 << t)
+            for m in range(cnt):
+                if vmin[m] <= hi_iso and vmax[m] >= lo_iso:
+                    mask[m] |= bit
+        for m in range(cnt):
+            masks[start + m] = mask[m]
     return masks
 
 
 @jit(parallel=True)
 def store_coefficients(
-    pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, indptr: np.ndarray,
-    cols: np.ndarray, vals: np.ndarray,
+    pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, targets: np.ndarray, ptr: np.ndarray,
+    sources: np.ndarray, weights: np.ndarray, n_slots: int, n_points: int,
 ) -> np.ndarray:
     """All coefficients of the given cubes, shape (n, n_points) float64."""
     n = cubes.shape[0]
-    n_pts = indptr.shape[0] - 1
-    out = np.empty((n, n_pts))
-    n_chunks = (n + _CHUNK - 1) // _CHUNK
+    out = np.empty((n, n_points))
+    n_chunks = (n + _LANES - 1) // _LANES
     ny, nz = shape[1], shape[2]
     for chunk in prange(n_chunks):
-        v27 = np.empty(27)
-        for m in range(chunk * _CHUNK, min(n, (chunk + 1) * _CHUNK)):
-            lin = cubes[m]
-            gather27(pad, lin // (ny * nz), (lin // nz) % ny, lin % nz, v27)
-            _cube_coefficients(v27, indptr, cols, vals, out[m])
+        buf = np.empty((n_slots, _LANES))
+        start = chunk * _LANES
+        cnt = min(_LANES, n - start)
+        _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
+        run_program(buf, cnt, targets, ptr, sources, weights)
+        for m in range(cnt):
+            for p in range(n_points):
+                out[start + m, p] = buf[27 + p, m]
     return out
 
 
-@jit()
+@jit(parallel=True)
 def tet_list(masks: np.ndarray) -> np.ndarray:
-    """Compact list ``slot * 24 + tet`` of the active tetrahedra of the active cubes."""
-    total = 0
-    for m in range(masks.shape[0]):
-        x = masks[m]
-        while x:
-            x &= x - 1
-            total += 1
-    out = np.empty(total, np.int32)
-    n = 0
-    for m in range(masks.shape[0]):
-        for t in range(24):
-            if (masks[m] >> t) & 1:
-                out[n] = m * 24 + t
-                n += 1
+    """Compact list ``slot * 24 + tet`` of the active tetrahedra (parallel two-pass prefix)."""
+    n = masks.shape[0]
+    n_chunks = (n + 4095) // 4096
+    counts = np.zeros(n_chunks + 1, np.int64)
+    for ch in prange(n_chunks):
+        c = 0
+        for m in range(ch * 4096, min(n, (ch + 1) * 4096)):
+            x = masks[m]
+            while x:
+                x &= x - np.uint32(1)
+                c += 1
+        counts[ch + 1] = c
+    for ch in range(n_chunks):
+        counts[ch + 1] += counts[ch]
+    out = np.empty(counts[n_chunks], np.int32)
+    for ch in prange(n_chunks):
+        o = counts[ch]
+        for m in range(ch * 4096, min(n, (ch + 1) * 4096)):
+            x = masks[m]
+            for t in range(24):
+                if (x >> t) & 1:
+                    out[o] = m * 24 + t
+                    o += 1
     return out
 
 
-@jit()
+@jit(parallel=True)
 def _update_lookup(
     slot: np.ndarray, old: np.ndarray, new: np.ndarray, act0: np.ndarray, act1: np.ndarray,
     act2: np.ndarray,
 ) -> None:
-    """Reset the old active cubes' slots to -1, then enter the new ones and their block flags."""
+    """Reset the old active cubes' slots to -1, then enter the new ones and their block flags.
+
+    Parallel: the cubes of a list are distinct, and concurrent writes of a block flag all
+    store the same value 1.
+    """
     ny, nz = slot.shape[1], slot.shape[2]
     flat = slot.reshape(-1)
-    for m in range(old.shape[0]):
+    for m in prange(old.shape[0]):
         flat[old[m]] = -1
     act0[:] = 0
     act1[:] = 0
     act2[:] = 0
-    for m in range(new.shape[0]):
+    for m in prange(new.shape[0]):
         lin = new[m]
         flat[lin] = m
         k = lin % nz
@@ -182,7 +263,8 @@ class ActiveCells:
     iso : float or None
         Isovalue of the current lists.
     cubes : ndarray of int64
-        Linear (C-order) indices of the active cubes; a cube's position here is its *slot*.
+        Linear (C-order) indices of the active cubes, listed block (4^3) by block; a cube's
+        position here is its *slot*.
     tet_mask : ndarray of uint32
         Per active cube, bit ``t`` set when tetrahedron ``t`` is active.
     tets : ndarray of int32
@@ -208,33 +290,41 @@ class ActiveCells:
             np.zeros(_block_shape(shape, s), np.uint8) for s in BLOCK_SHIFTS
         )
         self.stats: dict[str, Any] = {}
+        #: Range of the cube bounds per block of 4^3 cubes (iso-independent; skips the scan).
+        self.block_lo, self.block_hi = block_ranges(model.cube_lo, model.cube_hi)
 
     def update(self, iso: float) -> dict[str, Any]:
         """Classify and compact for ``iso``; returns counts, timings (ms) and memory (bytes)."""
         m = self.model
-        tet_points, indptr, cols, vals = m.tables_arrays[:4]
+        tet_points = m.tables_arrays[0]
+        prog = m.program
         shape = np.asarray(m.n_cells, np.int64)
         t0 = time.perf_counter()
-        candidates = candidate_cubes(m.cube_lo, m.cube_hi, iso)
+        candidates = candidate_cubes(m.cube_lo, m.cube_hi, self.block_lo, self.block_hi, iso)
         t1 = time.perf_counter()
-        masks = classify_tets(m.pad, candidates, shape, tet_points, indptr, cols, vals, iso)
+        masks = classify_tets(m.pad, candidates, shape, tet_points, *prog.arrays, prog.n_slots,
+                              iso, m.tolerance)
         t2 = time.perf_counter()
         keep = masks != 0
-        new = candidates[keep]
-        self.tet_mask = masks[keep]
+        if keep.all():
+            new, self.tet_mask = candidates, masks
+        else:
+            new, self.tet_mask = candidates[keep], masks[keep]
         self.tets = tet_list(self.tet_mask)
         _update_lookup(self.slot, self.cubes, new, self.act0, self.act1, self.act2)
         self.cubes = new
         t3 = time.perf_counter()
         if m.precompute:
-            self.coeffs = store_coefficients(m.pad, new, shape, indptr, cols, vals)
+            self.coeffs = store_coefficients(m.pad, new, shape, *prog.arrays, prog.n_slots,
+                                             m.n_points)
         else:
             self.coeffs = np.zeros((0, m.n_points))
         t4 = time.perf_counter()
         self.iso = iso
         n_cubes = int(new.shape[0])
         n_tets = int(self.tets.shape[0])
-        lookup_bytes = int(self.slot.nbytes + self.act0.nbytes + self.act1.nbytes
+        lookup_bytes = int(self.slot.nbytes + self.block_lo.nbytes + self.block_hi.nbytes
+                           + self.act0.nbytes + self.act1.nbytes
                            + self.act2.nbytes)
         lists_bytes = int(self.cubes.nbytes + self.tet_mask.nbytes + self.tets.nbytes)
         coeff_bytes_precomputed = n_cubes * m.n_points * 8
@@ -259,6 +349,7 @@ class ActiveCells:
 
     @property
     def nbytes(self) -> int:
-        """Memory held by the per-isovalue arrays."""
+        """Memory held by the per-isovalue arrays and the block ranges."""
         return int(sum(a.nbytes for a in (self.slot, self.cubes, self.tet_mask, self.tets,
-                                           self.coeffs, self.act0, self.act1, self.act2)))
+                                           self.coeffs, self.act0, self.act1, self.act2,
+                                           self.block_lo, self.block_hi)))

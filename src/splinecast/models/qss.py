@@ -26,10 +26,10 @@ from functools import lru_cache
 from ..errors import ParameterError
 from ..volume import Volume
 from .type6 import Type6Model
-from .type6_geometry import Type6Tables, derive_tables, parse_rules
+from .type6_geometry import Type6Program, Type6Tables, derive_program, derive_tables, parse_rules
 
 __all__ = ["QSS_BOUNDARY_RULES", "QSS_B_RULES", "QSS_A_RULES", "QSSModel", "qss_tables",
-           "VARIANTS"]
+           "VARIANTS", "CHAINS", "qss_program"]
 
 #: Rules shared by both variants (points on the cube's boundary).
 QSS_BOUNDARY_RULES = {
@@ -58,14 +58,39 @@ QSS_A_RULES = {
     (2, 0, 0, 0): [(F(1, 4), "i"), (F(1, 8), "f b l r t d")],
 }
 
+#: Local averaging chains (the note's "local form"), verified by ``derive_program``.
+QSS_BOUNDARY_CHAIN = [
+    ("-1/2 1/2 1/2", [(F(1, 8), "i f l t fl lt ft flt")]),  # b0020 corner
+    ("0 1/2 1/2", [(F(1, 4), "i f t ft")]),  # b0011 cube-edge midpoint
+    ("-1/4 1/2 1/4", [(F(1, 2), "@0 1/2 1/2"), (F(1, 2), "@-1/2 1/2 0")]),  # b0110
+    ("0 1/2 0", [(F(1, 4), "@0 1/2 1/2"), (F(1, 4), "@0 1/2 -1/2"),  # b0200
+                 (F(1, 4), "@1/2 1/2 0"), (F(1, 4), "@-1/2 1/2 0")]),
+]
+QSS_B_CHAIN = [
+    ("-1/4 1/4 1/4", [(F(1), "@-1/4 1/2 1/4"), (F(1), "@-1/4 1/4 1/2"),  # b1010
+                      (F(-1, 2), "@-1/2 1/2 1/2"), (F(-1, 2), "@0 1/2 1/2")]),
+    ("0 1/4 0", [(F(1, 4), "@1/4 1/4 1/4"), (F(1, 4), "@-1/4 1/4 1/4"),  # b1100
+                 (F(1, 4), "@1/4 1/4 -1/4"), (F(1, 4), "@-1/4 1/4 -1/4")]),
+    ("0 0 0", [(F(1, 8), f"@{x} {y} {z}") for x in ("1/4", "-1/4") for y in ("1/4", "-1/4")
+               for z in ("1/4", "-1/4")]),  # b2000
+]
+
 #: Variant name -> interior rules.
 VARIANTS = {"qss-b": QSS_B_RULES, "qss-a": QSS_A_RULES}
+#: Variant name -> evaluation chain (QSS-A's interior points keep their direct rules).
+CHAINS = {"qss-b": QSS_BOUNDARY_CHAIN + QSS_B_CHAIN, "qss-a": QSS_BOUNDARY_CHAIN}
 
 
 @lru_cache(maxsize=2)
 def qss_tables(variant: str = "qss-b") -> Type6Tables:
     """The derived tables (65 points per cube) of a variant, computed once per process."""
     return derive_tables(2, parse_rules({**QSS_BOUNDARY_RULES, **VARIANTS[variant]}))
+
+
+@lru_cache(maxsize=2)
+def qss_program(variant: str = "qss-b") -> Type6Program:
+    """The verified evaluation program of a variant's chain, computed once per process."""
+    return derive_program(qss_tables(variant), CHAINS[variant])
 
 
 class QSSModel(Type6Model):
@@ -97,4 +122,4 @@ class QSSModel(Type6Model):
             raise ParameterError("prefilter is only available for model s31")
         self.variant = variant
         super().__init__(volume, qss_tables(variant), prefilter=False, precompute=precompute,
-                         root_finder=root_finder)
+                         root_finder=root_finder, program=qss_program(variant))

@@ -17,9 +17,9 @@ from functools import lru_cache
 
 from ..volume import Volume
 from .type6 import Type6Model
-from .type6_geometry import Type6Tables, derive_tables, parse_rules
+from .type6_geometry import Type6Program, Type6Tables, derive_program, derive_tables, parse_rules
 
-__all__ = ["S31_RULES", "S31Model", "s31_tables"]
+__all__ = ["S31_RULES", "S31_CHAIN", "S31Model", "s31_tables", "s31_program"]
 
 #: Weights of the 13 coefficient classes on T0 (multi-index (i, j, k, l) on [v0, v1, v2, v3]).
 S31_RULES = {
@@ -49,10 +49,45 @@ S31_RULES = {
 }
 
 
+#: The same scheme as a local averaging chain (note, "local averaging chain"), used to compute all
+#: 175 coefficients of a cube with about a quarter of the multiply-adds of the direct rules.
+#: ``"@x y z"`` refers to the point computed earlier; ``derive_program`` verifies the result
+#: against the rules above in exact arithmetic.
+S31_CHAIN = [
+    ("0 1/2 1/2", [(F(1, 4), "i f t ft")]),  # auxiliary: mean at the cube-edge midpoint
+    ("-1/2 1/2 1/2", [(F(1, 8), "i f l t fl lt ft flt")]),  # b0030 corner
+    ("-1/6 1/2 1/2", [(F(2, 3), "@0 1/2 1/2"), (F(1, 3), "@-1/2 1/2 1/2")]),  # b0021
+    ("0 1/2 1/3", [(F(1, 2), "@0 1/2 1/2"), (F(1, 12), "@-1/2 1/2 0"),  # b0111
+                   (F(1, 12), "@1/2 1/2 0"), (F(1, 12), "@-1/2 1/2 1/2"),
+                   (F(1, 12), "@1/2 1/2 1/2"), (F(1, 12), "i f")]),
+    ("-1/3 1/2 1/3", [(F(1, 2), "@-1/6 1/2 1/2"), (F(1, 2), "@-1/2 1/2 1/6")]),  # b0120
+    ("-1/6 1/2 1/6", [(F(1, 2), "@0 1/2 1/3"), (F(1, 2), "@-1/3 1/2 0")]),  # b0210
+    ("0 1/2 0", [(F(1, 4), "@1/6 1/2 1/6"), (F(1, 4), "@-1/6 1/2 1/6"),  # b0300
+                 (F(1, 4), "@1/6 1/2 -1/6"), (F(1, 4), "@-1/6 1/2 -1/6")]),
+    ("-1/3 1/3 1/3", [(F(1), "@-1/3 1/2 1/3"), (F(1), "@-1/3 1/3 1/2"),  # b1020
+                      (F(-1, 2), "@-1/2 1/2 1/2"), (F(-1, 2), "@-1/6 1/2 1/2")]),
+    ("0 1/3 1/3", [(F(1), "@0 1/2 1/3"), (F(1), "@0 1/3 1/2"),  # b1011
+                   (F(-1, 2), "@-1/6 1/2 1/2"), (F(-1, 2), "@1/6 1/2 1/2")]),
+    ("-1/6 1/3 1/6", [(F(1, 2), "@0 1/3 1/3"), (F(1, 2), "@-1/3 1/3 0")]),  # b1110
+    ("0 1/3 0", [(F(1, 2), "@-1/6 1/3 1/6"), (F(1, 2), "@1/6 1/3 -1/6")]),  # b1200
+    ("-1/6 1/6 1/6", [(F(1), "@-1/6 1/3 1/6"), (F(1), "@-1/6 1/6 1/3"),  # b2010
+                      (F(-1, 2), "@-1/3 1/3 1/3"), (F(-1, 2), "@0 1/3 1/3")]),
+    ("0 1/6 0", [(F(1, 2), "@-1/6 1/6 1/6"), (F(1, 2), "@1/6 1/6 -1/6")]),  # b2100
+    ("0 0 0", [(F(1), "@0 1/6 0"), (F(1), "@0 0 1/6"),  # b3000
+               (F(-1, 2), "@-1/6 1/6 1/6"), (F(-1, 2), "@1/6 1/6 1/6")]),
+]
+
+
 @lru_cache(maxsize=1)
 def s31_tables() -> Type6Tables:
     """The derived S31 tables (175 points per cube), computed once per process."""
     return derive_tables(3, parse_rules(S31_RULES))
+
+
+@lru_cache(maxsize=1)
+def s31_program() -> Type6Program:
+    """The verified evaluation program of :data:`S31_CHAIN`, computed once per process."""
+    return derive_program(s31_tables(), S31_CHAIN)
 
 
 class S31Model(Type6Model):
@@ -86,5 +121,5 @@ class S31Model(Type6Model):
     def __init__(self, volume: Volume, prefilter: bool = False, precompute: bool = False,
                  root_finder: str = "bernstein") -> None:
         super().__init__(volume, s31_tables(), prefilter=prefilter, precompute=precompute,
-                         root_finder=root_finder)
+                         root_finder=root_finder, program=s31_program())
 

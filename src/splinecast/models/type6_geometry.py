@@ -52,6 +52,9 @@ __all__ = [
     "derive_tables",
     "Type6Tables",
     "tet_of_point",
+    "point",
+    "Type6Program",
+    "derive_program",
 ]
 
 F = Fraction
@@ -321,3 +324,117 @@ def tet_of_point(qx: float, qy: float, qz: float) -> int:
     else:
         e, qb = 1, v
     return 8 * a + (4 if qa < 0.0 else 0) + 2 * e + (1 if qb < 0.0 else 0)
+
+
+# ----------------------------------------------------------------------------- evaluation programs
+def point(text: str) -> tuple[Fraction, Fraction, Fraction]:
+    """Exact local point from ``"x y z"`` with rational entries, e.g. ``"-1/3 1/2 1/3"``."""
+    x, y, z = (F(s) for s in text.split())
+    return (x, y, z)
+
+
+class Type6Program:
+    """A verified straight-line program computing all coefficients of a cube from its 27 values.
+
+    Rows are evaluated in order; row ``r`` writes ``buffer[targets[r]] = sum_q weights[q] *
+    buffer[sources[q]]`` over ``q`` in ``ptr[r] .. ptr[r + 1]``. Buffer slots: ``0..26`` the data
+    values (offset numbering of :data:`OFFSETS`), ``27 + p`` coefficient ``p`` of the tables,
+    then auxiliary quantities. Built by :func:`derive_program`, which checks in exact arithmetic
+    that every coefficient comes out with exactly the weights of the tables.
+    """
+
+    def __init__(self, targets, ptr, sources, weights, n_slots) -> None:
+        self.targets = targets
+        self.ptr = ptr
+        self.sources = sources
+        self.weights = weights
+        self.n_slots = n_slots
+
+    @property
+    def n_terms(self) -> int:
+        """Multiply-adds per cube."""
+        return int(self.sources.shape[0])
+
+    @property
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(targets, ptr, sources, weights)`` for the compiled evaluators."""
+        return (self.targets, self.ptr, self.sources, self.weights)
+
+
+def derive_program(
+    tables: Type6Tables,
+    chain: list[tuple[str, list[tuple[Fraction, str]]]] | None = None,
+) -> Type6Program:
+    """Expand a local averaging chain by the cube's symmetries into a :class:`Type6Program`.
+
+    Parameters
+    ----------
+    tables : Type6Tables
+        The scheme; defines the coefficient numbering and the exact weights to reproduce.
+    chain : list, optional
+        Rules on the reference tetrahedron's side of the cube, evaluated in order: ``(point,
+        terms)`` with ``point`` a string for :func:`point` and each term ``(weight, ref)``, where
+        ``ref`` is either data names as in :func:`parse_rules` (each gets ``weight``) or
+        ``"@x y z"``, a point computed by an earlier rule (a coefficient, or an auxiliary
+        quantity if the point is not a domain point of the scheme). Every image of a rule under
+        the 48 symmetries is added unless its point already has a rule. Points left without a
+        rule get the tables' direct data rule (``None``: the direct rules for every point).
+
+    Raises
+    ------
+    ValueError
+        If a rule refers to an undefined point, or the composed weights of some coefficient
+        differ from the tables' (the chain is wrong).
+    """
+    number = {p: n for n, p in enumerate(tables.points)}
+    slot: dict[tuple, int] = {}
+    composed: dict[int, dict[tuple[int, int, int], Fraction]] = {}
+    rows: list[tuple[int, list[tuple[int, Fraction]]]] = []
+    n_aux = 0
+
+    def data_slot(o) -> int:
+        return 9 * (o[0] + 1) + 3 * (o[1] + 1) + o[2] + 1
+
+    for text, terms in chain or []:
+        p0 = point(text)
+        for g in SYMMETRIES:
+            gp = _apply(g, p0)
+            if gp in slot:
+                continue
+            row: list[tuple[int, Fraction]] = []
+            weights: dict[tuple[int, int, int], Fraction] = {}
+            for w, ref in terms:
+                w = F(w)
+                if ref.startswith("@"):
+                    q = _apply(g, point(ref[1:]))
+                    if q not in slot:
+                        raise ValueError(f"rule for {text}: point {ref[1:]} is not computed yet")
+                    row.append((slot[q], w))
+                    for o, v in composed[slot[q]].items():
+                        weights[o] = weights.get(o, F(0)) + w * v
+                else:
+                    for name in ref.split():
+                        o = tuple(int(v) for v in g @ np.array(_offset(name)))
+                        row.append((data_slot(o), w))
+                        weights[o] = weights.get(o, F(0)) + w
+            if gp in number:
+                s = 27 + number[gp]
+            else:
+                s = 27 + tables.n_points + n_aux
+                n_aux += 1
+            slot[gp] = s
+            composed[s] = {o: v for o, v in weights.items() if v != 0}
+            rows.append((s, row))
+    for p, n in number.items():
+        if p not in slot:
+            s = 27 + n
+            slot[p] = s
+            composed[s] = dict(tables.weights[n])
+            rows.append((s, [(data_slot(o), w) for o, w in tables.weights[n].items()]))
+        elif composed[slot[p]] != {o: w for o, w in tables.weights[n].items() if w != 0}:
+            raise ValueError(f"chain gives wrong weights at point {p}")
+    targets = np.array([s for s, _ in rows], np.int64)
+    ptr = np.cumsum([0] + [len(r) for _, r in rows]).astype(np.int64)
+    sources = np.array([s for _, r in rows for s, _ in r], np.int64)
+    weights_arr = np.array([float(w) for _, r in rows for _, w in r])
+    return Type6Program(targets, ptr, sources, weights_arr, 27 + tables.n_points + n_aux)

@@ -16,11 +16,18 @@ kernel's structure; what is particular to the type-6 splines:
   back.
 * **Ray restriction.** On a piece, the patch is a univariate Bernstein polynomial of the patch's
   degree obtained by blossoming at the piece's end points (:func:`~splinecast.models.type6.
-  ray_bernstein`); if its coefficients all have one sign the piece is skipped (convex hull),
+  ray_bernstein3`); if its coefficients all have one sign the piece is skipped (convex hull),
   otherwise the first root is found in closed form (quadratic) or by Bernstein subdivision /
   Newton from three starts (cubic, ``root_finder``).
+* **Coefficients on demand.** Only when a ray crosses an active tetrahedron of a cube are the
+  cube's coefficients computed (the model's verified averaging chain from the 27 data values)
+  into a small per-thread cache keyed by the cube's slot, so the neighbouring pixels of a row
+  that cross the same cube reuse them; a tetrahedron's 20 (10) coefficients are then read from
+  the cache (or from the stored coefficients with ``precompute=True``). The ray restriction is
+  unrolled straight-line blossoming (:func:`~splinecast.models.type6.ray_bernstein3`), and a
+  piece whose Bernstein coefficients have one sign is rejected before any root finding.
 * **Normals** come from the de Casteljau directional derivatives of the hit tetrahedron's patch
-  at the hit point (continuous across all faces for S31).
+  at the hit point (continuous across all faces for S31), from the coefficients already at hand.
 
 ``method`` and ``step`` are ignored: the type-6 kernels are always exact.
 """
@@ -36,10 +43,11 @@ from .._jit import jit
 from ..accel.minmax import inactive_block_size
 from ..accel.traversal import walk_begin, walk_step
 from ..models.type6 import (
-    gather27,
-    ray_bernstein,
-    stored_tet_coefficients,
-    tet_coefficients,
+    barycentric,
+    gather27_into,
+    ray_bernstein2,
+    ray_bernstein3,
+    run_program1,
     value_gradient,
 )
 from ..models.type6_geometry import tet_of_point
@@ -97,18 +105,37 @@ def split_cube_segment(ax: float, ay: float, az: float, ex: float, ey: float, ez
     return n
 
 
-@jit()
+#: Cubes whose coefficients a thread keeps (direct-mapped by slot; 128 x 214 float64 = 219 KB
+#: for S31, fits L2): neighbouring pixels of a tile cross the same cubes, so most cubes are
+#: computed once per tile instead of once per ray and tetrahedron.
+_CACHE = 128
+#: Rows per work item and columns per tile (see trace_type6).
+_BAND = 8
+_TILE = 8
+
+
+@jit(inline="always")
+def _same_sign(b0: float, b1: float, b2: float, b3: float) -> bool:
+    return (b0 > 0.0 and b1 > 0.0 and b2 > 0.0 and b3 > 0.0) or (
+        b0 < 0.0 and b1 < 0.0 and b2 < 0.0 and b3 < 0.0)
+
+
+@jit(inline="always")
 def _trace_ray(
-    pad, slot, tet_mask, coeffs, act0, act1, act2, tet_points, indptr, cols, vals, bary, steps,
-    degree, root_mode, precomputed, iso, ox, oy, oz, dx, dy, dz, t_min, t_max,
-    v27, c, b10a, b10b, b4a, b4b, b4c, cuts,
+    pad, slot, tet_mask, coeffs, act0, act1, act2, tet_points, targets, ptr, sources, weights,
+    bary, degree, root_mode, precomputed, iso, ox, oy, oz, dx, dy, dz, t_min, t_max,
+    keys, cache, c, cuts,
 ):
     """Trace one (shifted) index-space ray.
 
     Returns ``(t_hit or inf, i, j, k, tet, visited, tested, skipped)``; ``tested`` counts the
-    tetrahedron pieces whose ray polynomial was built.
+    tetrahedron pieces whose ray polynomial was built. On a hit, ``c`` holds the coefficients
+    of the hit tetrahedron. ``keys``/``cache`` are the thread's cube cache (on-the-fly mode):
+    entry ``s % _CACHE`` holds the program buffer (data, coefficients, auxiliaries) of the cube
+    in slot ``keys[s % _CACHE]``.
     """
     nx, ny, nz = pad.shape[0] - 2, pad.shape[1] - 2, pad.shape[2] - 2
+    n_local = tet_points.shape[1]
     visited = 0
     tested = 0
     skipped = 0
@@ -133,7 +160,8 @@ def _trace_ray(
                 ey = oy + t_end * dy - cj - 0.5 - ay
                 ez = oz + t_end * dz - ck - 0.5 - az
                 n_pieces = split_cube_segment(ax, ay, az, ex, ey, ez, cuts)
-                gathered = False
+                loaded = False
+                entry = s_slot % _CACHE
                 for piece in range(n_pieces):
                     s0 = cuts[piece]
                     s1 = cuts[piece + 1]
@@ -143,24 +171,42 @@ def _trace_ray(
                         continue
                     tested += 1
                     if precomputed:
-                        stored_tet_coefficients(coeffs, s_slot, tet, tet_points, c)
+                        for n in range(n_local):
+                            c[n] = coeffs[s_slot, tet_points[tet, n]]
                     else:
-                        if not gathered:
-                            gather27(pad, ci, cj, ck, v27)
-                            gathered = True
-                        tet_coefficients(v27, tet, tet_points, indptr, cols, vals, c)
-                    u0, u1, u2, u3 = ray_bernstein(
-                        c, degree, steps, bary, tet,
-                        ax + s0 * ex, ay + s0 * ey, az + s0 * ez,
-                        ax + s1 * ex, ay + s1 * ey, az + s1 * ez,
-                        b10a, b10b, b4a, b4b, b4c,
-                    )
+                        if not loaded:
+                            if keys[entry] != s_slot:
+                                buf = cache[entry]
+                                gather27_into(pad, ci, cj, ck, buf)
+                                run_program1(buf, targets, ptr, sources, weights)
+                                keys[entry] = s_slot
+                            loaded = True
+                        for n in range(n_local):
+                            c[n] = cache[entry, 27 + tet_points[tet, n]]
+                    a0, a1, a2, a3 = barycentric(bary, tet, ax + s0 * ex, ay + s0 * ey,
+                                                 az + s0 * ez)
+                    e0, e1, e2, e3 = barycentric(bary, tet, ax + s1 * ex, ay + s1 * ey,
+                                                 az + s1 * ez)
                     if degree == 2:
-                        r = bernstein_quadratic_first_root(u0 - iso, u1 - iso, u2 - iso)
-                    elif root_mode == 1:
-                        r = newton_cubic_first_root(u0 - iso, u1 - iso, u2 - iso, u3 - iso)
+                        u0, u1, u2 = ray_bernstein2(c, a0, a1, a2, a3, e0, e1, e2, e3)
+                        u0 -= iso
+                        u1 -= iso
+                        u2 -= iso
+                        if _same_sign(u0, u1, u2, u2):
+                            continue
+                        r = bernstein_quadratic_first_root(u0, u1, u2)
                     else:
-                        r = bernstein_cubic_first_root(u0 - iso, u1 - iso, u2 - iso, u3 - iso)
+                        u0, u1, u2, u3 = ray_bernstein3(c, a0, a1, a2, a3, e0, e1, e2, e3)
+                        u0 -= iso
+                        u1 -= iso
+                        u2 -= iso
+                        u3 -= iso
+                        if _same_sign(u0, u1, u2, u3):
+                            continue  # convex hull: no root on this piece
+                        if root_mode == 1:
+                            r = newton_cubic_first_root(u0, u1, u2, u3)
+                        else:
+                            r = bernstein_cubic_first_root(u0, u1, u2, u3)
                     if r == r:
                         s = s0 + r * (s1 - s0)
                         return t + s * (t_end - t), ci, cj, ck, tet, visited, tested, skipped
@@ -197,58 +243,65 @@ def trace_type6(
     """Trace and shade every pixel on an S31 or QSS model (common iso kernel signature).
 
     ``arrays`` is :attr:`Type6Model.arrays` = ``(pad, slot, tet_mask, coeffs, act0, act1, act2,
-    tet_points, indptr, cols, vals, bary, steps)``; ``params`` = ``[degree, root finder code,
-    precomputed]``. ``cells_tested`` counts tetrahedron pieces whose ray polynomial was built.
+    tet_points, targets, ptr, sources, weights, bary, steps)`` (the program arrays are the
+    model's :class:`~splinecast.models.type6_geometry.Type6Program`); ``params`` = ``[degree,
+    root finder code, precomputed, program slots]``. ``cells_tested`` counts tetrahedron pieces
+    whose ray polynomial was built. ``row_order`` is not used: the kernel balances its own
+    bands of rows (see the comment in the body).
     """
-    (pad, slot, tet_mask, coeffs, m_act0, m_act1, m_act2, tet_points, indptr, cols, vals,
-     bary, steps) = arrays
+    (pad, slot, tet_mask, coeffs, m_act0, m_act1, m_act2, tet_points, targets, ptr, sources,
+     weights, bary, steps) = arrays
     degree = int(params[0])
     root_mode = int(params[1])
     precomputed = params[2] != 0.0
+    n_slots = int(params[3])
     n_local = tet_points.shape[1]
     height, width = depth.shape
     sx, sy, sz = spacing[0], spacing[1], spacing[2]
     orx, ory, orz = vol_origin[0], vol_origin[1], vol_origin[2]
-    for r in prange(height):
-        row = row_order[r]
-        v27 = np.empty(27)
+    # Work items are bands of _BAND rows, traversed in tiles of _BAND x _TILE pixels so that
+    # the cube cache serves neighbouring pixels of both directions; bands are taken in a
+    # strided order (stride coprime to their number, near the golden ratio) so every thread
+    # gets a mix of busy and empty bands, like the scene's row_order.
+    n_bands = (height + _BAND - 1) // _BAND
+    stride = max(int(0.6180339887498949 * n_bands), 1)
+    while math.gcd(stride, n_bands) != 1:
+        stride += 1
+    for band_idx in prange(n_bands):
+        band = (band_idx * stride) % n_bands
+        keys = np.full(_CACHE, -1, np.int64)
+        cache = np.empty((_CACHE, n_slots))
         c = np.empty(n_local)
-        b10a = np.empty(10)
-        b10b = np.empty(10)
-        b4a = np.empty(4)
-        b4b = np.empty(4)
-        b4c = np.empty(4)
+        b10 = np.empty(10)
+        b4 = np.empty(4)
         cuts = np.empty(8)
-        for col in range(width):
-            wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-            dx, dy, dz = ux / sx, uy / sy, uz / sz
-            # +1/2: cube i of the dual grid spans [i, i + 1] in the traversal's coordinates.
-            ox = (wx - orx) / sx + 0.5
-            oy = (wy - ory) / sy + 0.5
-            oz = (wz - orz) / sz + 0.5
-            t_min, t_max = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-            t, ci, cj, ck, tet, nvis, ntest, nskip = _trace_ray(
-                pad, slot, tet_mask, coeffs, m_act0, m_act1, m_act2, tet_points, indptr, cols,
-                vals, bary, steps, degree, root_mode, precomputed, iso,
-                ox, oy, oz, dx, dy, dz, t_min, t_max,
-                v27, c, b10a, b10b, b4a, b4b, b4c, cuts,
-            )
-            cells_visited[row, col] = nvis
-            cells_tested[row, col] = ntest
-            blocks_skipped[row, col] = nskip
-            if t == math.inf:
-                store_miss(row, col, shading, rgba, depth, position, normal, face)
-                continue
-            if precomputed:
-                stored_tet_coefficients(coeffs, slot[ci, cj, ck], tet, tet_points, c)
-            else:
-                gather27(pad, ci, cj, ck, v27)
-                tet_coefficients(v27, tet, tet_points, indptr, cols, vals, c)
-            _, gx, gy, gz = value_gradient(
-                c, degree, steps, bary, tet,
-                ox + t * dx - ci - 0.5, oy + t * dy - cj - 0.5, oz + t * dz - ck - 0.5,
-                b10a, b4a,
-            )
-            # Index-space gradient to world space: d/dx_world = d/dx_index / spacing.
-            store_hit(row, col, t, wx, wy, wz, ux, uy, uz, gx / sx, gy / sy, gz / sz,
-                      inside_high, shading, rgba, depth, position, normal, face)
+        for tile in range(0, width, _TILE):
+            for row in range(band * _BAND, min(height, band * _BAND + _BAND)):
+                for col in range(tile, min(width, tile + _TILE)):
+                    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+                    dx, dy, dz = ux / sx, uy / sy, uz / sz
+                    # +1/2: cube i of the dual grid spans [i, i + 1] in the traversal's coordinates.
+                    ox = (wx - orx) / sx + 0.5
+                    oy = (wy - ory) / sy + 0.5
+                    oz = (wz - orz) / sz + 0.5
+                    t_min, t_max = clip_interval(planes, wx, wy, wz, ux, uy, uz)
+                    t, ci, cj, ck, tet, nvis, ntest, nskip = _trace_ray(
+                        pad, slot, tet_mask, coeffs, m_act0, m_act1, m_act2, tet_points, targets,
+                        ptr, sources, weights, bary, degree, root_mode, precomputed, iso,
+                        ox, oy, oz, dx, dy, dz, t_min, t_max, keys, cache, c, cuts,
+                    )
+                    cells_visited[row, col] = nvis
+                    cells_tested[row, col] = ntest
+                    blocks_skipped[row, col] = nskip
+                    if t == math.inf:
+                        store_miss(row, col, shading, rgba, depth, position, normal, face)
+                        continue
+                    # ``c`` holds the hit tetrahedron's coefficients.
+                    _, gx, gy, gz = value_gradient(
+                        c, degree, steps, bary, tet,
+                        ox + t * dx - ci - 0.5, oy + t * dy - cj - 0.5, oz + t * dz - ck - 0.5,
+                        b10, b4,
+                    )
+                    # Index-space gradient to world space: d/dx_world = d/dx_index / spacing.
+                    store_hit(row, col, t, wx, wy, wz, ux, uy, uz, gx / sx, gy / sy, gz / sz,
+                              inside_high, shading, rgba, depth, position, normal, face)
