@@ -563,7 +563,10 @@ def test_skipping_statistics_on_a_mostly_empty_volume():
         assert full.cells_visited[r, c] == len(cells)
     on_ray = np.array(on_ray)
     visited = frame.cells_visited[rows[pick], cols[pick]]
-    assert np.all(frame.blocks_skipped[rows[pick], cols[pick]] > 0)
+    skipped = frame.blocks_skipped[rows[pick], cols[pick]]
+    # every such ray either leapt over empty blocks or was cut off entirely by the clip to the
+    # box of active blocks (then it walked nothing)
+    assert np.all((skipped > 0) | (visited == 0))
     assert on_ray.mean() > 40
     assert visited.sum() <= 0.1 * on_ray.sum(), (visited.sum(), on_ray.sum())
     assert frame.stats["mean_cells_visited"] == pytest.approx(frame.cells_visited.mean())

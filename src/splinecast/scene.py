@@ -121,6 +121,27 @@ class Scene:
     def _check_iso(self, iso: Any) -> float:
         return check_iso(self.volume, iso)
 
+    def _active_box_planes(self) -> np.ndarray:
+        """Six clip planes around the blocks that can hold the current isovalue (world space).
+
+        Only for models that state where their cells lie (``cell_offset``); others get none. The
+        box is padded outwards by a millionth of a voxel so rounding can never cut a hit.
+        """
+        offset = getattr(self.model, "cell_offset", None)
+        bounds = self.hierarchy.active_cell_bounds() if offset is not None else None
+        if bounds is None:
+            return np.zeros((0, 4))
+        origin, spacing = np.asarray(self.volume.origin), np.asarray(self.volume.spacing)
+        lo = origin + (bounds[0] + offset - 1e-6) * spacing
+        hi = origin + (bounds[1] + offset + 1e-6) * spacing
+        rows = []
+        for axis in range(3):
+            normal = np.zeros(3)
+            normal[axis] = 1.0
+            rows.append([*normal, -lo[axis]])  # keeps x_axis >= lo
+            rows.append([*(-normal), hi[axis]])  # keeps x_axis <= hi
+        return np.asarray(rows)
+
     def set_iso(self, iso: float) -> float:
         """Classify the blocks for a new isovalue; returns the time it took in ms."""
         value = self._check_iso(iso)
@@ -239,6 +260,8 @@ class Scene:
         classify_ms = 0.0
         if value != self._iso:
             classify_ms = self.set_iso(value)
+        user_planes = len(planes)
+        planes = np.vstack([planes, self._active_box_planes()])
 
         h, w = camera.height, camera.width
         rgba = np.empty((h, w, 4), np.float32)
@@ -281,6 +304,6 @@ class Scene:
         if method == "sampled":
             stats["step"] = float(step)
         stats.update(self.iso_stats)
-        if len(planes):
-            stats["planes"] = len(planes)
+        if user_planes:
+            stats["planes"] = user_planes
         return Frame(rgba, depth, position, normal, face, visited, tested, skipped, stats)

@@ -114,6 +114,25 @@ class MinMaxHierarchy:
         )
         return self.active
 
+    def active_cell_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Smallest index-space box, in cells ``[lo, hi)``, holding every active finest block.
+
+        ``None`` when no block is active. Rays that miss this box cannot meet the isovalue, so
+        the renderer clips them to it before walking (cheap for objects that fill a small part
+        of the volume).
+        """
+        act = self.active[0].view(bool)
+        if not act.any():
+            return None
+        block = 1 << BLOCK_SHIFTS[0]
+        lo, hi = np.empty(3, np.int64), np.empty(3, np.int64)
+        for axis in range(3):
+            others = tuple(a for a in range(3) if a != axis)
+            used = np.flatnonzero(act.any(axis=others))
+            lo[axis] = used[0] * block
+            hi[axis] = min((used[-1] + 1) * block, self.n_cells[axis])
+        return lo, hi
+
     def classify_any(self, ranges: list[tuple[float, float]]) -> tuple[np.ndarray, ...]:
         """Active flags for blocks meeting any of several closed value intervals."""
         flags = []

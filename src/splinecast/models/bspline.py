@@ -44,9 +44,10 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import jit
-from ..errors import DataError, ParameterError
+from ..errors import ParameterError
 from ..roots.first_root import DEFAULT_ITERATIONS, POWER_FORM_FINDERS, finder_id
 from ..volume import Volume
+from .validation import require_renderable
 
 __all__ = [
     "BSplineModel",
@@ -300,18 +301,7 @@ class BSplineModel:
         tolerance: float = 1e-12,
     ) -> None:
         d = self.degree
-        if min(volume.shape) < 2:
-            raise DataError(
-                f"{volume.name}: needs at least 2 voxels along every axis, shape is {volume.shape}"
-            )
-        nan_count = volume.count_nan()
-        if nan_count:
-            raise DataError(
-                f"{volume.name}: the data contains {nan_count} NaN values; replace them "
-                "(for example with numpy.nan_to_num) before rendering"
-            )
-        if np.isinf(volume.value_range).any():
-            raise DataError(f"{volume.name}: the data contains infinite values")
+        require_renderable(volume)
         self.root_finder_id = finder_id(root_finder)
         self.root_finder = root_finder
         if iterations is None:

@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import jit
-from ..errors import DataError
 from ..volume import Volume
+from .validation import require_renderable
 
 __all__ = [
     "TrilinearModel",
@@ -143,20 +143,11 @@ class TrilinearModel:
     name = "trilinear"
     #: cell ``c`` depends on voxels ``c .. c + support`` per axis.
     support = 1
+    #: index-space coordinate of the lower corner of cell 0 (cell ``c`` spans ``[c, c + 1]``).
+    cell_offset = 0.0
 
     def __init__(self, volume: Volume) -> None:
-        if min(volume.shape) < 2:
-            raise DataError(
-                f"{volume.name}: needs at least 2 voxels along every axis, shape is {volume.shape}"
-            )
-        nan_count = volume.count_nan()
-        if nan_count:
-            raise DataError(
-                f"{volume.name}: the data contains {nan_count} NaN values; replace them "
-                "(for example with numpy.nan_to_num) before rendering"
-            )
-        if np.isinf(volume.value_range).any():
-            raise DataError(f"{volume.name}: the data contains infinite values")
+        require_renderable(volume)
         self.volume = volume
         self.data = np.ascontiguousarray(volume.data)
         self.n_cells = tuple(n - 1 for n in volume.shape)

@@ -34,7 +34,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..errors import DataError, ParameterError
+from ..errors import ParameterError
 from ..volume import Volume
 from .type6_geometry import (
     Type6Program,
@@ -44,6 +44,7 @@ from .type6_geometry import (
     derive_program,
     tet_of_point,
 )
+from .validation import require_renderable
 
 __all__ = [
     "Type6Model",
@@ -520,14 +521,7 @@ class Type6Model:
             raise ParameterError(
                 f"root_finder must be one of {', '.join(ROOT_FINDERS)}, got {root_finder!r}"
             )
-        nan_count = volume.count_nan()
-        if nan_count:
-            raise DataError(
-                f"{volume.name}: the data contains {nan_count} NaN values; replace them "
-                "(for example with numpy.nan_to_num) before rendering"
-            )
-        if np.isinf(volume.value_range).any():
-            raise DataError(f"{volume.name}: the data contains infinite values")
+        require_renderable(volume)
         self.volume = volume
         self.tables = tables
         self.prefilter = bool(prefilter)
