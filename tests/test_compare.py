@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from benchmarks.compare import methods as M  # noqa: E402
-from benchmarks.compare import metrics, runner, scenes  # noqa: E402
+from benchmarks.compare import metrics, reference, runner, scenes  # noqa: E402
 from benchmarks.compare.__main__ import run  # noqa: E402
 
 SIZE = (128, 128)
@@ -173,6 +173,86 @@ def test_vtk_mip_matches_the_dense_reference():
         method.close()
     assert img.shape == ref.shape
     assert np.mean(np.abs(img - ref)) < 0.02
+
+
+@pytest.fixture(scope="module")
+def dvr_case() -> tuple[sc.Volume, float, sc.Camera, np.ndarray]:
+    spec = scenes.ml(32)
+    vol = spec.make()
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(64, 48))
+    ref = reference.reference_dvr(vol, cam, M.dvr_transfer(vol, spec.isos[0]))
+    return vol, spec.isos[0], cam, ref
+
+
+def test_dvr_image_error_is_zero_on_itself_and_the_offset_when_offset(dvr_case):
+    _, _, _, ref = dvr_case
+    assert ref.shape == (48, 64, 3)
+    assert 0.0 < ref.mean() < 1.0 and ref.min() >= 0.0 and ref.max() <= 1.0
+    assert reference.image_error(ref, ref) == 0.0
+    assert reference.image_error(ref + 0.01, ref) == pytest.approx(0.01, abs=1e-12)
+    bumped = ref.copy()
+    bumped[..., 0] += 0.03  # one channel of three: a third of it on average
+    assert reference.image_error(bumped, ref) == pytest.approx(0.01, abs=1e-12)
+    with pytest.raises(ValueError):
+        reference.image_error(ref[:-1], ref)
+
+
+def test_dvr_reference_does_not_depend_on_its_step(dvr_case):
+    """Opacity per one-voxel slab, corrected as 1 - (1 - a)^h: halving the step barely moves it."""
+    vol, iso, cam, ref = dvr_case
+    coarse = reference.reference_dvr(vol, cam, M.dvr_transfer(vol, iso), step=0.125)
+    assert reference.image_error(coarse, ref) < 1e-3
+
+
+def test_splinecast_dvr_meets_the_dense_reference(dvr_case):
+    vol, iso, cam, ref = dvr_case
+    if M.volume_requirements("splinecast", "dvr"):
+        pytest.skip(M.volume_requirements("splinecast", "dvr"))
+    for step, bound in ((0.0, 1 / 255), (0.125, 1 / 255)):
+        img = M.SplinecastVolume(vol, (64, 48), "dvr", iso, step).image(cam)
+        assert reference.image_error(img, ref) < bound
+
+
+def test_vtk_dvr_matches_the_dense_reference(dvr_case):
+    _vtk_or_skip()
+    vol, iso, cam, ref = dvr_case
+    method = M.VtkVolume(vol, (64, 48), "dvr", iso, 0.25, "gpu")
+    try:
+        img = method.image(cam)
+    finally:
+        method.close()
+    assert reference.image_error(img, ref) < 0.02
+
+
+def test_only_volume_merges_into_the_stored_results(tmp_path, monkeypatch):
+    stored = {"command": "python -m benchmarks.compare --quick", "notes": ["kept note"],
+              "iso": [{"scene": "kept", "kind": "ml", "size": 64, "sizes": [], "methods": {},
+                       "skipped": {}}],
+              "volume": [{"scene": "old", "mode": "dvr", "sizes": [], "quality": {},
+                          "skipped": {}}],
+              "memory": {"kept": {"splinecast": {"peak_mib": 1.0, "increase_mib": 0.5}}},
+              "threads": {"splinecast": {"threads": 1}, "splinecast dvr": {"threads": 1}},
+              "vtk": {"available": False}, "machine": {}}
+    (tmp_path / "compare_quick.json").write_text(json.dumps(stored))
+
+    def fake(spec, mode, sizes, keys, repeats, log=print):
+        return {"scene": spec.label, "mode": mode, "shape": [64] * 3, "skipped": {},
+                "steps": {"splinecast": 1.0}, "tolerance": 1 / 255, "default_error": 0.001,
+                "quality": {"splinecast": {"step": 1.0, "mean_abs_error": 0.002}},
+                "sizes": [{"width": 128, "height": 128,
+                           "methods": {"splinecast": {"frame_ms": 5.0, "runs_ms": [5.0]}}}],
+                "threads": {"splinecast": {"threads": 2}}}
+
+    monkeypatch.setattr(runner, "run_volume_scene", fake)
+    results = run(quick=True, repeats=1, out=tmp_path, log=lambda *_: None, only_volume=True)
+    saved = json.loads((tmp_path / "compare_quick.json").read_text())
+    assert saved["iso"] == stored["iso"] and saved["memory"] == stored["memory"]
+    assert [r["scene"] for r in saved["volume"]] == ["marschner-lobb 64^3"] * 2
+    assert saved["threads"]["splinecast"] == {"threads": 1}
+    assert saved["threads"]["splinecast dvr"] == {"threads": 2}
+    assert "kept note" in results["notes"]
+    text = (tmp_path / "compare_quick.md").read_text()
+    assert "| marschner-lobb 64^3 | dvr | 128x128 | splinecast | 1.0 | 0.0020 | 5 |" in text
 
 
 # --------------------------------------------------------------------------- the whole suite

@@ -34,8 +34,12 @@ def machine() -> dict[str, Any]:
 
 
 def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes: bool = True,
-        log=print) -> dict[str, Any]:
-    """Run the suite and write its results; returns the results dictionary."""
+        log=print, only_volume: bool = False) -> dict[str, Any]:
+    """Run the suite and write its results; returns the results dictionary.
+
+    ``only_volume``: run only MIP/DVR and merge them into the stored results of ``out`` (the
+    isosurface, quality and memory sections of the stored JSON are kept as they are).
+    """
     start = time.perf_counter()
     vtk = M.vtk_status()
     notes: list[str] = []
@@ -64,6 +68,9 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
         "machine": machine(), "vtk": vtk, "notes": notes, "iso": [], "volume": [],
         "memory": {}, "threads": {},
     }
+    stem = "compare_quick" if quick else "compare"
+    if only_volume:
+        return run_only_volume(quick, repeats, out, stem, volume_scenes, notes, log, start)
     error_images: dict[str, dict] = {}
     for spec in suite:
         log(f"iso: {spec.label}")
@@ -73,15 +80,9 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
         for k, info in r["methods"].items():
             results["threads"][ISO_LABELS_SHORT.get(k, k)] = info["threads"]
     if volume_modes:
-        for spec in volume_scenes:
-            for mode in ("mip", "dvr"):
-                log(f"{mode}: {spec.label}")
-                r = runner.run_volume_scene(spec, mode, [sizes[-1]], VOLUME_KEYS,
-                                            repeats, log)
-                results["volume"].append(r)
-                for k, t in r["threads"].items():
-                    results["threads"][f"{k} {mode}"] = t
+        run_volume(volume_scenes, sizes[-1], repeats, results, log)
     results["notes"] += mode_notes(results["volume"], volume_modes)
+    results["volume_quality_size"] = list(runner.QUALITY_SIZE)
     if memory:
         size = sizes[-1]
         for spec in suite:
@@ -94,9 +95,52 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
                 results["memory"][spec.label] = runner.measure_memory(spec, jobs, size, log)
     results["machine"] = machine()  # the threading layer is known after the first kernel ran
     results["elapsed_s"] = time.perf_counter() - start
-    stem = "compare_quick" if quick else "compare"
     for path in report.write(results, error_images, out, stem):
         log(f"wrote {path}")
+    return results
+
+
+def run_volume(volume_scenes, size: tuple[int, int], repeats: int, results: dict[str, Any],
+               log=print) -> None:
+    """MIP and DVR of every volume scene into ``results["volume"]`` and ``results["threads"]``."""
+    for spec in volume_scenes:
+        for mode in ("mip", "dvr"):
+            log(f"{mode}: {spec.label}")
+            r = runner.run_volume_scene(spec, mode, [size], VOLUME_KEYS, repeats, log)
+            results["volume"].append(r)
+            for k, t in r["threads"].items():
+                results["threads"][f"{k} {mode}"] = t
+
+
+def run_only_volume(quick: bool, repeats: int, out: Path, stem: str, volume_scenes,
+                    notes: list[str], log, start: float) -> dict[str, Any]:
+    """Rerun MIP/DVR and merge them into the stored ``out/stem.json`` (kept: everything else)."""
+    path = out / f"{stem}.json"
+    if not path.exists():
+        raise SystemExit(f"--only-volume needs the stored results {path}; run the full suite")
+    results = json.loads(path.read_text())
+    size = (128, 128) if quick else (1024, 768)
+    old_notes = [n for n in results.get("notes", [])
+                 if not n.startswith(("splinecast MIP", "splinecast DVR", "MIP/DVR rerun"))]
+    results["volume"] = []
+    results["threads"] = {k: v for k, v in results.get("threads", {}).items()
+                          if not k.endswith((" mip", " dvr"))}
+    run_volume(volume_scenes, size, repeats, results, log)
+    results["notes"] = old_notes + [n for n in notes if n not in old_notes]
+    results["notes"] += mode_notes(results["volume"], True)
+    results["notes"].append(
+        f"MIP/DVR rerun alone (`python -m benchmarks.compare{' --quick' if quick else ''} "
+        "--only-volume`) and merged into the stored results; the isosurface, quality and memory "
+        "sections are from the earlier full run (its MIP/DVR memory figures used the steps of "
+        "that run).")
+    command = results.get("command", "python -m benchmarks.compare")
+    if "--only-volume" not in command:
+        results["command"] = command + " (MIP/DVR: --only-volume)"
+    results["volume_quality_size"] = list(runner.QUALITY_SIZE)
+    results["machine"] = machine()
+    results["volume_elapsed_s"] = time.perf_counter() - start
+    for written in report.write(results, None, out, stem):
+        log(f"wrote {written}")
     return results
 
 
@@ -126,6 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=str(RESULTS), help="output folder")
     parser.add_argument("--no-memory", action="store_true", help="skip the per-method RSS runs")
     parser.add_argument("--no-volume", action="store_true", help="skip MIP/DVR")
+    parser.add_argument("--only-volume", action="store_true",
+                        help="run only MIP/DVR and merge them into the stored results")
     parser.add_argument("--memory-worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_worker:
@@ -136,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
             job["mode"], job["step"])))
         return 0
     run(args.quick, args.repeats, Path(args.out), memory=not args.no_memory,
-        volume_modes=not args.no_volume)
+        volume_modes=not args.no_volume, only_volume=args.only_volume)
     return 0
 
 

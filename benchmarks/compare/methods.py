@@ -507,6 +507,16 @@ class SplinecastVolume(VolumeMethod):
                 if key in params:
                     self.kwargs[key] = tf
                     break
+            # Composite over black like VTK's renderer (splinecast's default background is a
+            # dark grey), so the RGB is premultiplied colour over black.
+            if "shading" in params:
+                self.kwargs["shading"] = sc.Shading(background=(0.0, 0.0, 0.0, 1.0))
+            # ``step`` > 0: that sample step (voxels), other settings at splinecast's defaults;
+            # 0: splinecast's default settings.
+            if step > 0 and "dvr" in params:
+                from splinecast.render.dvr import DVRSettings
+
+                self.kwargs["dvr"] = DVRSettings(step=step)
 
     def _render(self, cam: sc.Camera) -> sc.Frame:
         return self.scene.render(cam, **self.kwargs)
@@ -520,8 +530,8 @@ class SplinecastVolume(VolumeMethod):
             lo, hi = self.volume.value_range
             value = np.asarray(frame.value, np.float64)
             return np.where(np.isfinite(value), (value - lo) / (hi - lo), 0.0)
-        rgba = np.asarray(frame.rgba, np.float64)
-        return rgba[..., :3] * (rgba[..., 3:4] if rgba[..., 3].max() <= 1 else 1.0)
+        # Front-to-back compositing over an opaque black background: RGB is premultiplied.
+        return np.asarray(frame.rgba, np.float64)[..., :3]
 
     def threads(self) -> dict[str, Any]:
         return {"threads": splinecast_threads(), "what": "numba threads"}

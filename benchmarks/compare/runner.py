@@ -18,15 +18,16 @@ import splinecast as sc
 
 from . import methods as M
 from .metrics import surface_quality
-from .reference import reference_mip
+from .reference import image_error, reference_dvr, reference_mip
 from .scenes import SceneSpec
 
 REPO = Path(__file__).resolve().parents[2]
 #: Azimuths of the steady-frame cameras: every timed frame follows a camera rotation.
 ROTATIONS = (40.0, 50.0, 60.0, 70.0)
-#: Sample steps (voxels) tried for VTK's ray casters when matching MIP quality.
+#: Sample steps (voxels) tried when matching MIP / DVR quality (coarsest first).
 VOLUME_STEPS = (1.0, 0.5, 0.25, 0.125)
-#: Image size of the MIP quality match (the dense reference is costly at full size).
+#: Image size of the MIP / DVR quality match (the dense reference is costly at full size): the
+#: timing camera at 1/16 of the pixels; the methods render this size directly for the match.
 QUALITY_SIZE = (256, 192)
 
 
@@ -117,17 +118,24 @@ def run_volume_scene(spec: SceneSpec, mode: str, sizes: list[tuple[int, int]], k
                      repeats: int, log=print) -> dict[str, Any]:
     """MIP or DVR frame times at matched quality.
 
-    Quality is matched on MIP: for each VTK ray caster, the coarsest sample step (voxels) whose
-    image differs from a dense reference (trilinear maximum sampled every 1/16 voxel) by at most
-    the error splinecast's MIP has, or by 1/255 (the 8-bit output of VTK) when splinecast's is
-    smaller or splinecast has no MIP yet. DVR runs VTK at a fixed 0.5-voxel step (not matched).
+    Every image is compared with a dense reference at ``QUALITY_SIZE`` by mean absolute error:
+    MIP against the trilinear maximum sampled every 1/16 voxel (normalized value), DVR against
+    emission-absorption compositing of the same transfer function every 1/16 voxel on the
+    trilinear field (premultiplied RGB over black; see ``reference_dvr``). The tolerance is the
+    error of splinecast at its default settings, at least 1/255 (the 8-bit output of VTK).
+    MIP: splinecast's is exact (no step); each VTK ray caster runs at the coarsest step of
+    ``VOLUME_STEPS`` within the tolerance. DVR: splinecast and each VTK caster run at the
+    coarsest step within the tolerance. A method that never reaches it runs at the finest step.
     """
     volume = spec.make()
     iso = spec.isos[0]
     result: dict[str, Any] = {"scene": spec.label, "mode": mode, "shape": list(volume.shape),
                               "skipped": {}, "steps": {}, "quality": {}, "sizes": []}
     qcam = _camera(volume, QUALITY_SIZE)
-    reference = reference_mip(volume, qcam) if mode == "mip" else None
+    if mode == "mip":
+        reference = reference_mip(volume, qcam)
+    else:
+        reference = reference_dvr(volume, qcam, M.dvr_transfer(volume, iso))
     tolerance = 1.0 / 255.0
     active: dict[str, M.VolumeMethod] = {}
     for key in keys:
@@ -137,25 +145,24 @@ def run_volume_scene(spec: SceneSpec, mode: str, sizes: list[tuple[int, int]], k
             continue
         if key == "splinecast":
             method = M.VOLUME_METHODS[key](volume, sizes[0], mode, iso, 0.0)
-            if reference is not None:
-                err = float(np.mean(np.abs(method.image(qcam) - reference)))
+            err = image_error(method.image(qcam), reference)
+            tolerance = max(tolerance, err)
+            if mode == "mip":
                 result["quality"][key] = {"step": "exact", "mean_abs_error": err}
-                tolerance = max(tolerance, err)
-            active[key] = method
+                active[key] = method
+            else:
+                result["default_error"] = err
     for key in keys:
-        if key == "splinecast" or key in result["skipped"]:
+        if key in result["skipped"] or key in active:
             continue
         chosen, errors = VOLUME_STEPS[-1], {}
-        if reference is not None:
-            for step in VOLUME_STEPS:
-                probe = M.VOLUME_METHODS[key](volume, QUALITY_SIZE, mode, iso, step)
-                errors[step] = float(np.mean(np.abs(probe.image(qcam) - reference)))
-                probe.close()
-                if errors[step] <= tolerance:
-                    chosen = step
-                    break
-        else:
-            chosen = 0.5
+        for step in VOLUME_STEPS:
+            probe = M.VOLUME_METHODS[key](volume, QUALITY_SIZE, mode, iso, step)
+            errors[step] = image_error(probe.image(qcam), reference)
+            probe.close()
+            if errors[step] <= tolerance:
+                chosen = step
+                break
         result["steps"][key] = chosen
         result["quality"][key] = {"step": chosen, "mean_abs_error": errors.get(chosen),
                                   "errors_by_step": errors}
