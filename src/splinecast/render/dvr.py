@@ -227,6 +227,19 @@ def _clamp_into_block(c, c_old, n):
     return min(max(c, start), end)
 
 
+@jit(inline="always")
+def _composite(acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, shade_factor, t):
+    """Front-to-back "over" of a premultiplied segment colour; tracks where alpha passes 1/2."""
+    w = (1.0 - acc_a) * shade_factor
+    acc_r += w * r
+    acc_g += w * g
+    acc_b += w * b
+    acc_a += (1.0 - acc_a) * a
+    if acc_a >= 0.5 and t_half == math.inf:
+        t_half = t
+    return acc_r, acc_g, acc_b, acc_a, t_half
+
+
 @jit()
 def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, t_lo, t_scale,
              lut_rgb, lut_tau, l_lo, l_scale, adaptive, h_max, exponent, term,
@@ -297,14 +310,10 @@ def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, 
                                                  oy + t * dy - cj, oz + t * dz - ck)
                 r, g, b, a = _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau,
                                        l_lo, l_scale, v_prev, v, (t - t_prev) * dnorm)
-                w = (1.0 - acc_a) * _shade_factor(shade, ambient, diffuse, gx, gy, gz,
-                                                  sx, sy, sz, ux, uy, uz)
-                acc_r += w * r
-                acc_g += w * g
-                acc_b += w * b
-                acc_a += (1.0 - acc_a) * a
-                if acc_a >= 0.5 and t_half == math.inf:
-                    t_half = t
+                acc_r, acc_g, acc_b, acc_a, t_half = _composite(
+                    acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a,
+                    _shade_factor(shade, ambient, diffuse, gx, gy, gz, sx, sy, sz, ux, uy, uz), t,
+                )
             have_prev = False
             t_s = t_next
         elif t_end >= t:
@@ -320,14 +329,11 @@ def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, 
                                            l_lo, l_scale, v_prev, v, (t_s - t_prev) * dnorm)
                     if a > 0.0:
                         gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7, x, y, z)
-                        w = (1.0 - acc_a) * _shade_factor(shade, ambient, diffuse, gx, gy, gz,
-                                                          sx, sy, sz, ux, uy, uz)
-                        acc_r += w * r
-                        acc_g += w * g
-                        acc_b += w * b
-                        acc_a += (1.0 - acc_a) * a
-                        if acc_a >= 0.5 and t_half == math.inf:
-                            t_half = t_s
+                        acc_r, acc_g, acc_b, acc_a, t_half = _composite(
+                            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a,
+                            _shade_factor(shade, ambient, diffuse, gx, gy, gz,
+                                          sx, sy, sz, ux, uy, uz), t_s,
+                        )
                         if acc_a >= term:
                             done = True
                             break
@@ -345,14 +351,10 @@ def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, 
                                          oy + t_far * dy - last_j, oz + t_far * dz - last_k)
         r, g, b, a = _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau,
                                l_lo, l_scale, v_prev, v, (t_far - t_prev) * dnorm)
-        w = (1.0 - acc_a) * _shade_factor(shade, ambient, diffuse, gx, gy, gz,
-                                          sx, sy, sz, ux, uy, uz)
-        acc_r += w * r
-        acc_g += w * g
-        acc_b += w * b
-        acc_a += (1.0 - acc_a) * a
-        if acc_a >= 0.5 and t_half == math.inf:
-            t_half = t_far
+        acc_r, acc_g, acc_b, acc_a, t_half = _composite(
+            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a,
+            _shade_factor(shade, ambient, diffuse, gx, gy, gz, sx, sy, sz, ux, uy, uz), t_far,
+        )
     return acc_r, acc_g, acc_b, acc_a, t_half, samples, visited, skipped
 
 
