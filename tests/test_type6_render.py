@@ -178,3 +178,12 @@ def test_cli_renders_s31_with_root_finder(tmp_path, capsys):
                "newton", "--size", "24x16", "--quiet", "-o", str(tmp_path / "t.png")])
     assert rc == 2
     assert "--root-finder" in capsys.readouterr().err
+
+
+def test_sampled_method_is_refused_with_a_clear_error():
+    import splinecast as sc
+
+    vol = sc.demo("sphere", size=12)
+    cam = sc.Camera.orbit(vol, size=(8, 8))
+    with pytest.raises(sc.ParameterError, match="method='sampled' is not available for model"):
+        sc.Scene(vol, model="s31").render(cam, iso=0.0, method="sampled")

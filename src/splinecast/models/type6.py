@@ -506,6 +506,8 @@ class Type6Model:
     """
 
     name = "type6"
+    #: Render methods the kernel implements (the type-6 kernels always solve exactly).
+    methods = ("exact",)
     #: Cube ``c`` depends on padded voxels ``c .. c + 2`` per axis.
     support = 2
     degree = 3
