@@ -164,6 +164,32 @@ def _smallest_prime_factor(g: int) -> int:
     return g
 
 
+@jit(inline="always")
+def _compose_diagonal(out: np.ndarray, dst: int, first: int, second: int, l: int,
+                      step: int) -> int:
+    """Diagonal ``l`` of table ``dst`` composited from two shorter tables (eqs. 13 and 14).
+
+    Entry ``(f, f + l)`` is the segment ``f -> f + step`` of table ``first`` followed by the
+    segment ``f + step -> f + l`` of table ``second``; returns the number of entries written.
+    """
+    n = out.shape[1]
+    f0 = 0 if l >= 0 else -l
+    f1 = n - l if l >= 0 else n
+    for f in range(f0, f1):
+        mid = f + step
+        b = f + l
+        r, g, bb, a = _over(
+            np.float64(out[first, f, mid, 0]), np.float64(out[first, f, mid, 1]),
+            np.float64(out[first, f, mid, 2]), np.float64(out[first, f, mid, 3]),
+            np.float64(out[second, mid, b, 0]), np.float64(out[second, mid, b, 1]),
+            np.float64(out[second, mid, b, 2]), np.float64(out[second, mid, b, 3]))
+        out[dst, f, b, 0] = r
+        out[dst, f, b, 1] = g
+        out[dst, f, b, 2] = bb
+        out[dst, f, b, 3] = a
+    return max(f1 - f0, 0)
+
+
 @jit()
 def _build(tau: np.ndarray, col: np.ndarray, h0: float, steps: int, reuse: bool,
            out: np.ndarray) -> int:
@@ -188,23 +214,7 @@ def _build(tau: np.ndarray, col: np.ndarray, h0: float, steps: int, reuse: bool,
                 continue
             # Eq. 14: the first 1/split of the segment, then the rest.
             k1 = k // split
-            k2 = k - k1
-            step = l // split
-            f0 = 0 if l >= 0 else -l
-            f1 = n - l if l >= 0 else n
-            for f in range(f0, f1):
-                mid = f + step
-                b = f + l
-                r, gg, bb, a = _over(
-                    np.float64(out[k1 - 1, f, mid, 0]), np.float64(out[k1 - 1, f, mid, 1]),
-                    np.float64(out[k1 - 1, f, mid, 2]), np.float64(out[k1 - 1, f, mid, 3]),
-                    np.float64(out[k2 - 1, mid, b, 0]), np.float64(out[k2 - 1, mid, b, 1]),
-                    np.float64(out[k2 - 1, mid, b, 2]), np.float64(out[k2 - 1, mid, b, 3]))
-                out[k - 1, f, b, 0] = r
-                out[k - 1, f, b, 1] = gg
-                out[k - 1, f, b, 2] = bb
-                out[k - 1, f, b, 3] = a
-                composited += 1
+            composited += _compose_diagonal(out, k - 1, k1 - 1, k - k1 - 1, l, l // split)
     return composited
 
 
@@ -227,22 +237,7 @@ def _build_exponential(tau: np.ndarray, col: np.ndarray, h0: float, levels: int,
                     _direct_diagonal(tau_r, col_r, -l, length, out, j, True, scratch)
                 continue
             # Eq. 13: both halves (half the value range, half the length) from table j - 1.
-            half = l // 2
-            f0 = 0 if l >= 0 else -l
-            f1 = n - l if l >= 0 else n
-            for f in range(f0, f1):
-                mid = f + half
-                b = f + l
-                r, g, bb, a = _over(
-                    np.float64(out[j - 1, f, mid, 0]), np.float64(out[j - 1, f, mid, 1]),
-                    np.float64(out[j - 1, f, mid, 2]), np.float64(out[j - 1, f, mid, 3]),
-                    np.float64(out[j - 1, mid, b, 0]), np.float64(out[j - 1, mid, b, 1]),
-                    np.float64(out[j - 1, mid, b, 2]), np.float64(out[j - 1, mid, b, 3]))
-                out[j, f, b, 0] = r
-                out[j, f, b, 1] = g
-                out[j, f, b, 2] = bb
-                out[j, f, b, 3] = a
-                composited += 1
+            composited += _compose_diagonal(out, j, j - 1, j - 1, l, l // 2)
     return composited
 
 

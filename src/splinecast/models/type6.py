@@ -58,7 +58,6 @@ __all__ = [
     "cube_bounds",
     "run_program",
     "run_program1",
-    "gather27_into",
     "barycentric",
     "ray_bernstein3",
     "ray_bernstein2",
@@ -75,7 +74,8 @@ ROOT_FINDERS = {"bernstein": 0, "newton": 1}
 # ----------------------------------------------------------------------------- compiled helpers
 @jit(inline="always")
 def gather27(pad: np.ndarray, i: int, j: int, k: int, out: np.ndarray) -> None:
-    """The 27 data values around cube ``(i, j, k)`` (``pad`` has a one-voxel border)."""
+    """The 27 data values around cube ``(i, j, k)`` into ``out[:27]`` (``pad`` has a one-voxel
+    border)."""
     n = 0
     for a in range(3):
         for b in range(3):
@@ -290,16 +290,6 @@ def run_program1(
             acc += weights[q] * buf[sources[q]]
         buf[targets[r]] = acc
 
-
-@jit(inline="always")
-def gather27_into(pad: np.ndarray, i: int, j: int, k: int, buf: np.ndarray) -> None:
-    """The 27 data values around cube ``(i, j, k)`` into ``buf[:27]``."""
-    n = 0
-    for a in range(3):
-        for b in range(3):
-            for c in range(3):
-                buf[n] = float(pad[i + a, j + b, k + c])
-                n += 1
 
 
 @jit(parallel=True)

@@ -44,7 +44,7 @@ from ..accel.minmax import inactive_block_size
 from ..accel.traversal import walk_begin, walk_step
 from ..models.type6 import (
     barycentric,
-    gather27_into,
+    gather27,
     ray_bernstein2,
     ray_bernstein3,
     run_program1,
@@ -177,7 +177,7 @@ def _trace_ray(
                         if not loaded:
                             if keys[entry] != s_slot:
                                 buf = cache[entry]
-                                gather27_into(pad, ci, cj, ck, buf)
+                                gather27(pad, ci, cj, ck, buf)
                                 run_program1(buf, targets, ptr, sources, weights)
                                 keys[entry] = s_slot
                             loaded = True
