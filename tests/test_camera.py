@@ -205,7 +205,7 @@ def test_pixel_basis_and_compiled_rays_match_rays(ortho, size):
     vol = box_volume()
     cam = Camera.orbit(vol, azimuth=-70, elevation=15, size=size, ortho=ortho, fov=35)
     basis = cam.pixel_basis()
-    assert basis.shape == (16,) and basis.dtype == np.float64
+    assert basis.shape == (20,) and basis.dtype == np.float64
     o_ref, d_ref = cam.rays()
     o, d = _rays_via_kernel(basis, cam.width, cam.height)
     np.testing.assert_allclose(o, o_ref, rtol=0, atol=1e-14 * max(1.0, np.abs(o_ref).max()))
@@ -242,3 +242,27 @@ def test_other_bad_parameters():
     with pytest.raises(ParameterError):
         Camera.orbit(box_volume(), azimuth=float("nan"))
     assert issubclass(ParameterError, splinecast.SplinecastError)
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_tiles_render_the_full_image_bit_for_bit(ortho):
+    """Tiles (and tiles of tiles) assemble into exactly the full image's rays and pixels."""
+    import splinecast as sc
+
+    vol = sc.demo("sphere", size=20)
+    cam = Camera.orbit(vol, azimuth=25, elevation=35, size=(37, 23), ortho=ortho)
+    o_full, d_full = cam.rays()
+    scene = sc.Scene(vol)
+    full = scene.render(cam, iso=0.0)
+    for c0, r0, w, h in ((0, 0, 37, 23), (5, 3, 11, 7), (36, 22, 1, 1), (0, 10, 37, 13)):
+        tile = cam.tile(c0, r0, w, h)
+        o, d = tile.rays()
+        np.testing.assert_array_equal(o, o_full[r0:r0 + h, c0:c0 + w])
+        np.testing.assert_array_equal(d, d_full[r0:r0 + h, c0:c0 + w])
+        part = scene.render(tile, iso=0.0)
+        np.testing.assert_array_equal(part.depth, full.depth[r0:r0 + h, c0:c0 + w])
+        np.testing.assert_array_equal(part.rgba, full.rgba[r0:r0 + h, c0:c0 + w])
+    sub = cam.tile(4, 2, 20, 15).tile(3, 1, 5, 4)  # a tile of a tile refers to the full image
+    np.testing.assert_array_equal(sub.rays()[1], d_full[3:7, 7:12])
+    with pytest.raises(sc.ParameterError, match="inside"):
+        cam.tile(30, 0, 8, 5)

@@ -7,6 +7,7 @@ world space, so a ray parameter is a world distance.
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any
 
@@ -106,6 +107,9 @@ class Camera:
         if not ortho_height > 0:
             raise ParameterError(f"ortho_height must be positive, got {ortho_height}")
         self.ortho_height = float(ortho_height)
+        # The window of the full image this camera renders (see tile()): column and row of its
+        # top-left pixel and the full image's size. A plain camera renders all of its image.
+        self.region = (0, 0, self.width, self.height)
 
     @property
     def size(self) -> tuple[int, int]:
@@ -174,20 +178,47 @@ class Camera:
         return cls(position, center, up=up, fov=fov, size=(width, height), ortho=ortho,
                    ortho_height=ortho_height)
 
+    def tile(self, col0: int, row0: int, width: int, height: int) -> Camera:
+        """A camera that renders only the ``width x height`` pixels of this camera's image whose
+        top-left pixel is ``(row0, col0)``.
+
+        The tile's rays are bit-identical to the same pixels' rays of the full image, so tiles
+        rendered separately (on other threads, processes or machines) assemble into exactly the
+        full render. Tiles of a tile refer to the full image.
+
+        Raises
+        ------
+        ParameterError
+            If the window does not lie inside the image or is empty.
+        """
+        c0, r0, w, h = (int(v) for v in (col0, row0, width, height))
+        if w < 1 or h < 1 or c0 < 0 or r0 < 0 or c0 + w > self.width or r0 + h > self.height:
+            raise ParameterError(
+                f"tile ({c0}, {r0}, {w}x{h}) must lie inside the {self.width}x{self.height} image"
+            )
+        out = copy.copy(self)
+        out.width, out.height = w, h
+        base_c, base_r, full_w, full_h = self.region
+        out.region = (base_c + c0, base_r + r0, full_w, full_h)
+        return out
+
     def pixel_basis(self) -> np.ndarray:
         """Packed ray parameters for compiled kernels that generate rays per pixel.
 
-        Returns 16 float64: eye (3), forward (3), right (3), up (3), half width and half height
-        of the image window (at unit distance for perspective, in world units for orthographic),
-        an orthographic flag, and 0. :meth:`rays` and the kernels follow the same formula: pixel
-        ``(row, col)`` has screen coordinates ``sx = ((col + 0.5) / width * 2 - 1) * half_w`` and
-        ``sy = (1 - (row + 0.5) / height * 2) * half_h``.
+        Returns 20 float64: eye (3), forward (3), right (3), up (3), half width and half height
+        of the full image's window (at unit distance for perspective, in world units for
+        orthographic), an orthographic flag, 0, then the column and row of this camera's first
+        pixel in the full image and the full image's width and height (see :meth:`tile`).
+        :meth:`rays` and the kernels follow the same formula: pixel ``(row, col)`` has screen
+        coordinates ``sx = ((col + col0 + 0.5) / full_width * 2 - 1) * half_w`` and
+        ``sy = (1 - (row + row0 + 0.5) / full_height * 2) * half_h``.
         """
+        col0, row0, full_w, full_h = self.region
         half_h = 0.5 * self.ortho_height if self.ortho else math.tan(math.radians(self.fov) / 2)
-        half_w = half_h * self.width / self.height
+        half_w = half_h * full_w / full_h
         return np.concatenate(
             [self.position, self.forward, self.right, self.up,
-             [half_w, half_h, 1.0 if self.ortho else 0.0, 0.0]]
+             [half_w, half_h, 1.0 if self.ortho else 0.0, 0.0, col0, row0, full_w, full_h]]
         ).astype(np.float64)
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
@@ -202,8 +233,9 @@ class Camera:
         w, h = self.width, self.height
         basis = self.pixel_basis()
         half_w, half_h = basis[12], basis[13]
-        xs = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * half_w
-        ys = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * half_h
+        col0, row0, full_w, full_h = basis[16:20]
+        xs = ((np.arange(w) + col0 + 0.5) / full_w * 2.0 - 1.0) * half_w
+        ys = (1.0 - (np.arange(h) + row0 + 0.5) / full_h * 2.0) * half_h
         sx = xs[None, :, None]
         sy = ys[:, None, None]
         if self.ortho:

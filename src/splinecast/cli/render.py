@@ -1,44 +1,21 @@
-"""The ``splinecast`` command line: a thin front end over the public API.
-
-User mistakes print one line (``splinecast: error: ...``) naming the file or option and exit with
-status 2. Progress and timings go to stderr (``--quiet`` silences them); the path of a written image
-goes to stdout.
-"""
+"""``splinecast render FILE -o OUT.png``: one image of any model in any mode."""
 
 from __future__ import annotations
 
 import argparse
 import inspect
-import sys
 import time
 from pathlib import Path
-from typing import NoReturn
-
-import numpy as np
 
 import splinecast as sc
 
-__all__ = ["main"]
+from ._common import check_output, log, numbers
 
-_PERCENTILES = (0.5, 1, 5, 25, 50, 75, 95, 99, 99.5)
-_EXACT_STATS_LIMIT = 64_000_000  # voxels; above this, percentiles come from a strided subsample
-
-
-class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line and exit status 2."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"splinecast: error: {message} (see --help)\n")
+__all__ = ["add_parser", "run"]
 
 
-def _build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="splinecast", description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"splinecast {sc.__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-
-    info = sub.add_parser("info", help="describe a volume file: shape, dtype, spacing, values")
-    info.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
-
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
     render = sub.add_parser("render", help="render an isosurface, a MIP or a DVR image to a PNG")
     render.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
     render.add_argument("-o", "--output", required=True, help="output PNG path")
@@ -69,7 +46,6 @@ def _build_parser() -> argparse.ArgumentParser:
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     _add_mode_options(render)
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
-    return parser
 
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
@@ -102,32 +78,19 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="DVR early ray termination opacity, e.g. 0.99")
 
 
-def _numbers(text: str | None, option: str, count: int | None = None) -> list[float] | None:
-    """Comma-separated numbers of ``option`` (``count`` of them when given)."""
-    if text is None:
-        return None
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise sc.ParameterError(f"{option} must be comma-separated numbers, got {text!r}") from None
-    if count is not None and len(values) != count:
-        raise sc.ParameterError(f"{option} needs {count} numbers, got {text!r}")
-    return values
-
-
 def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
     """Scene.render keyword arguments of the mode options, validated before any rendering."""
     kwargs: dict = {"mode": args.mode}
-    clip = [_numbers(c, "--clip", 4) for c in args.clip]
+    clip = [numbers(c, "--clip", 4) for c in args.clip]
     if clip:
         kwargs["clip"] = clip
     if args.crop:
-        kwargs["crop"] = _numbers(args.crop, "--crop", 6)
+        kwargs["crop"] = numbers(args.crop, "--crop", 6)
     if args.mode in ("mip", "minip"):
         kwargs["colormap"] = args.colormap
         sc.transfer.colormap_table(args.colormap, 2)  # a bad name fails before any work
         if args.window:
-            kwargs["window"] = _numbers(args.window, "--window", 2)
+            kwargs["window"] = numbers(args.window, "--window", 2)
         kwargs["method"] = args.method
         kwargs["step"] = args.step
         return kwargs
@@ -141,11 +104,11 @@ def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
                                        termination=args.termination,
                                        table_layout=args.table_layout)
         return kwargs
-    isos = _numbers(args.iso, "--iso")
+    isos = numbers(args.iso, "--iso")
     if isos is not None and (len(isos) > 1 or args.opacity):
         kwargs["iso"] = [sc.check_iso(vol, v) for v in isos]
         if args.opacity:
-            kwargs["opacity"] = _numbers(args.opacity, "--opacity", len(isos))
+            kwargs["opacity"] = numbers(args.opacity, "--opacity", len(isos))
     else:
         kwargs["iso"] = sc.check_iso(vol, isos[0] if isos else None)
         kwargs["method"] = args.method
@@ -156,54 +119,12 @@ def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
     return kwargs
 
 
-def _log(args: argparse.Namespace, message: str) -> None:
-    if not getattr(args, "quiet", False):
-        print(message, file=sys.stderr, flush=True)
-
-
-def _check_output(path: str, suffix: str, option: str) -> None:
-    p = Path(path)
-    if p.suffix.lower() != suffix:
-        raise sc.ParameterError(f"{option} {path}: must end in {suffix}")
-    if not p.parent.exists():
-        raise sc.ParameterError(f"{option} {path}: the folder {p.parent} does not exist")
-    if p.is_dir():
-        raise sc.ParameterError(f"{option} {path}: is a folder")
-
-
-def _cmd_info(args: argparse.Namespace) -> int:
-    vol = sc.read(args.file)
-    data = vol.data
-    sample = data
-    note = ""
-    if data.size > _EXACT_STATS_LIMIT:
-        stride = int(np.ceil((data.size / _EXACT_STATS_LIMIT) ** (1 / 3)))
-        sample = data[::stride, ::stride, ::stride]
-        note = f" (percentiles from every {stride}th voxel per axis)"
-    lo, hi = vol.value_range
-    finite = sample[np.isfinite(sample)] if sample.dtype.kind == "f" else sample.reshape(-1)
-    pct = np.percentile(finite, _PERCENTILES)
-    print(f"file:      {vol.metadata.get('source', vol.name)}")
-    print(f"shape:     {' x '.join(str(n) for n in vol.shape)} (x, y, z)")
-    print(f"dtype:     {vol.dtype}")
-    print(f"spacing:   {', '.join(f'{s:g}' for s in vol.spacing)}")
-    print(f"origin:    {', '.join(f'{s:g}' for s in vol.origin)}")
-    print(f"extent:    {', '.join(f'{s:g}' for s in vol.extent)}")
-    print(f"range:     {lo:g} .. {hi:g}")
-    print(f"NaN:       {vol.count_nan()}")
-    print("percentiles" + note + ":")
-    for p, v in zip(_PERCENTILES, pct, strict=True):
-        print(f"  {p:>5g}%  {v:g}")
-    if "default_iso" in vol.metadata:
-        print(f"default iso: {vol.metadata['default_iso']:g}")
-    return 0
-
-
-def _cmd_render(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
+    """Render ``args.file`` to ``args.output``."""
     # Validate every option and output path before any work, so a mistake writes nothing.
-    _check_output(args.output, ".png", "-o")
+    check_output(args.output, ".png", "-o")
     if args.depth:
-        _check_output(args.depth, ".npy", "--depth")
+        check_output(args.depth, ".npy", "--depth")
     if args.method == "sampled" and not args.step > 0:
         raise sc.ParameterError(f"--step must be positive, got {args.step}")
     width, height = sc.camera.parse_size(args.size)
@@ -230,43 +151,24 @@ def _cmd_render(args: argparse.Namespace) -> int:
         size=(width, height), fov=args.fov, ortho=args.ortho, zoom=args.zoom,
     )
     # Progress starts only once every input is known to be valid, so a mistake is one line.
-    _log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
+    log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
     if args.smooth:
         vol = sc.smooth(vol, args.smooth)
-        _log(args, f"smoothed with a {args.smooth}^3 Gaussian")
+        log(args, f"smoothed with a {args.smooth}^3 Gaussian")
     start = time.perf_counter()
     scene = sc.Scene(vol, model=args.model, **options)
-    _log(args, f"prepared {args.model} model in {time.perf_counter() - start:.2f} s")
+    log(args, f"prepared {args.model} model in {time.perf_counter() - start:.2f} s")
     start = time.perf_counter()
     frame = scene.render(camera, inside=args.inside, **kwargs)
     st = frame.stats
     what = f"at iso {st['iso']}" if "iso" in st else st["mode"]
-    _log(args, f"rendered {width}x{height} {what} in "
+    log(args, f"rendered {width}x{height} {what} in "
                f"{time.perf_counter() - start:.2f} s (trace {st['trace_ms']:.0f} ms, "
                f"{st['hits']} hits, {st['mean_cells_visited']:.1f} cells/ray; "
                "the first run includes compilation)")
     frame.save(args.output)
     if args.depth:
         frame.save_depth(args.depth)
-        _log(args, f"wrote depth {args.depth}")
+        log(args, f"wrote depth {args.depth}")
     print(Path(args.output).resolve())
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit status."""
-    parser = _build_parser()
-    args = parser.parse_args(argv)
-    try:
-        if args.command == "info":
-            return _cmd_info(args)
-        return _cmd_render(args)
-    except sc.SplinecastError as exc:
-        print(f"splinecast: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())
