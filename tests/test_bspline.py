@@ -226,7 +226,7 @@ def test_errors(volume, camera):
     with pytest.raises(sc.ParameterError, match="iterations"):
         sc.Scene(volume, model="bspline2", iterations=0)
     with pytest.raises(sc.ParameterError, match="method"):
-        sc.Scene(volume, model="bspline2").render(camera, iso=ISO, method="sampled")
+        sc.Scene(volume, model="bspline2").render(camera, iso=ISO, method="magic")
 
 
 def test_cli_render(tmp_path):

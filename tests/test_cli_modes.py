@@ -63,3 +63,29 @@ def test_bad_mode_options_are_one_line_errors(tmp_path, capsys, extra, word):
     assert code == 2
     assert word in err and err.count("\n") == 1
     assert not png.exists()
+
+
+@pytest.mark.parametrize("model", ["trilinear", "bspline2", "qss", "s31"])
+def test_every_model_in_every_mode_from_the_cli_equals_the_api(tmp_path, capsys, model):
+    """--model M --mode X works for every combination and draws what Scene.render draws."""
+    tf_path = tmp_path / "tf.json"
+    tf = sc.TransferFunction([(-0.2, 0), (0.0, 0.8)], domain=(-0.6, 1.1))
+    tf.save(tf_path)
+    vol = sc.demo("sphere", size=16)
+    cam = sc.Camera.orbit(vol, size=(14, 12))
+    scene = sc.Scene(vol, model=model)
+    runs = [
+        (["--iso", "0"], {"iso": 0.0}),
+        (["--iso=-0.3,0", "--opacity", "0.4,0.8"], {"iso": [-0.3, 0.0], "opacity": [0.4, 0.8]}),
+        (["--mode", "mip"], {"mode": "mip"}),
+        (["--mode", "minip"], {"mode": "minip"}),
+        (["--mode", "dvr", "--tf", str(tf_path), "--step", "0.5"], {"mode": "dvr", "tf": tf}),
+    ]
+    for extra, kwargs in runs:
+        png = tmp_path / "x.png"
+        code, _, err = _run(["render", SRC, "--model", model, "--size", "14x12", "--quiet",
+                             "-o", str(png), *extra], capsys)
+        assert code == 0, err
+        frame = scene.render(cam, **kwargs)
+        np.testing.assert_array_equal(np.asarray(Image.open(png)), frame.to_uint8(),
+                                      err_msg=f"{model} {extra}")

@@ -169,7 +169,7 @@ def test_averaging_chain_gives_the_rules_and_cube_bounds_are_exact_ranges(kind):
     against the weight matrix of the rules (checked against the note in
     test_type6_coefficients); the per-cube bounds and the scene's block ranges against the
     range of those reference coefficients."""
-    from splinecast.accel.active_cells import store_coefficients
+    from splinecast.models.type6 import store_coefficients
 
     data = RNG.normal(size=(6, 5, 7)) * 10.0 + 3.0
     model = _model(kind, data)

@@ -48,7 +48,7 @@ def test_classification_is_conservative(model_name, opts):
     n_inactive = 0
     for iso in RNG.uniform(data.min(), data.max(), size=4):
         scene.set_iso(iso)
-        act = model.active
+        act = scene.active_cells
         active = np.zeros((n_c, 24), bool)
         lin = np.ravel_multi_index(cubes.T, data.shape)
         slot_of = {int(c): s for s, c in enumerate(act.cubes)}
@@ -180,10 +180,15 @@ def test_cli_renders_s31_with_root_finder(tmp_path, capsys):
     assert "--root-finder" in capsys.readouterr().err
 
 
-def test_sampled_method_is_refused_with_a_clear_error():
+def test_sampled_method_finds_the_exact_hits_at_a_small_step():
+    """The sampled method is a mode option for every model: on s31 it finds the exact first
+    hits (to bisection accuracy) wherever no crossing pair lies within one step."""
     import splinecast as sc
 
     vol = sc.demo("sphere", size=12)
-    cam = sc.Camera.orbit(vol, size=(8, 8))
-    with pytest.raises(sc.ParameterError, match="method='sampled' is not available for model"):
-        sc.Scene(vol, model="s31").render(cam, iso=0.0, method="sampled")
+    cam = sc.Camera.orbit(vol, size=(16, 12))
+    scene = sc.Scene(vol, model="s31")
+    exact = scene.render(cam, iso=0.0)
+    sampled = scene.render(cam, iso=0.0, method="sampled", step=0.05)
+    np.testing.assert_array_equal(exact.hit, sampled.hit)
+    np.testing.assert_allclose(sampled.depth[exact.hit], exact.depth[exact.hit], atol=1e-9)

@@ -13,17 +13,19 @@ from typing import Any
 
 import numpy as np
 
-from .accel.minmax import MinMaxHierarchy
+from .accel.active_cells import ActiveCells
+from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
 from .errors import ParameterError
 from .models import MODELS
 from .render.clipping import make_planes
-from .render.dvr import DVRSettings
+from .render.dvr import Dvr, DVRSettings
 from .render.effects import SurfaceEffects, apply_effects
 from .render.frame import Frame
-from .render.iso import METHODS
-from .render.kernels import ISO_KERNELS
-from .render.modes import render_dvr, render_mip, render_multi_iso
+from .render.iso import METHODS, Iso
+from .render.mip import Mip
+from .render.multi_iso import MultiIso
+from .render.segment import make_grid, render_grid
 from .render.shading import Shading
 from .transfer import TransferFunction
 from .volume import Volume
@@ -32,17 +34,6 @@ __all__ = ["Scene", "MODES", "check_iso"]
 
 #: Render modes accepted by :meth:`Scene.render`.
 MODES = ("iso", "mip", "minip", "dvr")
-
-
-def _row_order(height: int) -> np.ndarray:
-    """A permutation of rows in which every contiguous run is spread over the whole image.
-
-    Numba hands each thread a contiguous range of the parallel loop; ordering rows by the
-    fractional part of ``row * golden ratio`` gives every thread a similar mix of busy and empty
-    rows.
-    """
-    key = (np.arange(height) * 0.6180339887498949) % 1.0
-    return np.argsort(key, kind="stable").astype(np.int64)
 
 
 def check_iso(volume: Volume, iso: Any) -> float:
@@ -77,8 +68,9 @@ class Scene:
     volume : Volume
         The data to render.
     model : str
-        Reconstruction: ``"trilinear"`` (more models plug in by name, see
-        :data:`splinecast.models.MODELS`).
+        Reconstruction: ``"trilinear"``, ``"bspline1"``, ``"bspline2"``, ``"bspline3"``,
+        ``"qss"`` or ``"s31"`` (see :data:`splinecast.models.MODELS`); every model renders in
+        every mode.
     **options
         Model options (for example ``prefilter=True`` for spline models), passed to the model.
 
@@ -100,15 +92,14 @@ class Scene:
         start = time.perf_counter()
         self.volume = volume
         self.model = MODELS[model](volume, **options)
-        if hasattr(self.model, "block_hierarchy"):  # models with their own bounds (s31, qss)
-            self.hierarchy = self.model.block_hierarchy()
-        else:
-            self.hierarchy = MinMaxHierarchy(
-                self.model.coefficients, self.model.n_cells, self.model.support
-            )
+        #: The whole volume as one grid of the model (kernel arrays, block hierarchy, placement).
+        self.grid = make_grid(self.model)
+        self.hierarchy = self.grid.hierarchy
+        #: Per-isovalue work lists of models that classify their cells (s31, qss).
+        self.active_cells = ActiveCells(self.model) if hasattr(self.model, "tet_masks") else None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self.classify_ms = math.nan
-        #: Counts and timings of the model's own isovalue change (models with ``classify``).
+        #: Counts and timings of the model's own isovalue change (models with work lists).
         self.iso_stats: dict[str, Any] = {}
         self._iso: float | None = None
         self._table_cache: dict = {}  # the last pre-integration table (mode="dvr")
@@ -121,19 +112,32 @@ class Scene:
     def _check_iso(self, iso: Any) -> float:
         return check_iso(self.volume, iso)
 
-    def _active_box_planes(self) -> np.ndarray:
+    def _iso_flags(self) -> tuple[np.ndarray, ...]:
+        """Block flags of the current isovalue (the model's own work lists when it has them)."""
+        if self.active_cells is not None:
+            a = self.active_cells
+            return a.act0, a.act1, a.act2
+        return self.hierarchy.active
+
+    def _active_box_planes(self, flags: tuple[np.ndarray, ...]) -> np.ndarray:
         """Six clip planes around the blocks that can hold the current isovalue (world space).
 
-        Only for models that state where their cells lie (``cell_offset``); others get none. The
-        box is padded outwards by a millionth of a voxel so rounding can never cut a hit.
+        The box is padded outwards by a millionth of a voxel so rounding can never cut a hit.
         """
-        offset = getattr(self.model, "cell_offset", None)
-        bounds = self.hierarchy.active_cell_bounds() if offset is not None else None
-        if bounds is None:
+        act = flags[0].view(bool)
+        if not act.any():
             return np.zeros((0, 4))
+        block = 1 << BLOCK_SHIFTS[0]
+        lo_cells, hi_cells = np.empty(3), np.empty(3)
+        for axis in range(3):
+            used = np.flatnonzero(act.any(axis=tuple(a for a in range(3) if a != axis)))
+            lo_cells[axis] = used[0] * block
+            hi_cells[axis] = min((used[-1] + 1) * block, self.grid.n_cells[axis])
+        # Cell c spans [c, c + 1] in voxel index + shift.
+        shift = self.model.shift
         origin, spacing = np.asarray(self.volume.origin), np.asarray(self.volume.spacing)
-        lo = origin + (bounds[0] + offset - 1e-6) * spacing
-        hi = origin + (bounds[1] + offset + 1e-6) * spacing
+        lo = origin + (lo_cells - shift - 1e-6) * spacing
+        hi = origin + (hi_cells - shift + 1e-6) * spacing
         rows = []
         for axis in range(3):
             normal = np.zeros(3)
@@ -147,8 +151,8 @@ class Scene:
         value = self._check_iso(iso)
         start = time.perf_counter()
         self.hierarchy.classify(value)
-        if hasattr(self.model, "classify"):  # models with per-isovalue work lists (s31, qss)
-            self.iso_stats = self.model.classify(value)
+        if self.active_cells is not None:
+            self.iso_stats = self.active_cells.update(value)
         self.classify_ms = (time.perf_counter() - start) * 1e3
         self._iso = value
         return self.classify_ms
@@ -186,7 +190,7 @@ class Scene:
         iso : float or list of float, optional
             Isovalue in data units; defaults to the volume's ``metadata["default_iso"]``. A list
             renders every crossing of every isovalue, composited front to back with ``colors``
-            and ``opacity`` (trilinear model).
+            and ``opacity``.
         method : str
             ``"exact"`` (analytic first root per cell, the default) or ``"sampled"`` (fixed step
             plus bisection, the reference common viewers use). For MIP: analytic extrema per
@@ -225,15 +229,6 @@ class Scene:
             raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         if method not in METHODS:
             raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-        # A model may implement only some iso methods (B-splines: "exact").
-        model_methods = getattr(self.model, "methods", tuple(METHODS))
-        if mode == "iso" and method not in model_methods:
-            raise ParameterError(
-                f"method={method!r} is not available for model {self.model.name!r} "
-                f"(use {', '.join(model_methods)})"
-            )
-        if method == "sampled" and not (math.isfinite(step) and step > 0):
-            raise ParameterError(f"step must be a positive number of voxels, got {step}")
         inside = inside or self.volume.metadata.get("inside", "high")
         if inside not in ("high", "low"):
             raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
@@ -241,69 +236,53 @@ class Scene:
         if effects is not None and not isinstance(effects, SurfaceEffects):
             raise ParameterError(f"effects must be a SurfaceEffects, got {type(effects).__name__}")
         planes = make_planes(clip, crop)
+        stats: dict[str, Any] = {"mode": mode, "model": self.model.name}
+        grid, flags = self.grid, None
         if mode in ("mip", "minip"):
-            return render_mip(self.model, self.hierarchy, self.volume, camera, planes,
-                              _row_order(camera.height), mode, method, step, window, colormap,
-                              shading.background)
-        if mode == "dvr":
-            return render_dvr(self.model, self.hierarchy, self.volume, camera, planes,
-                              _row_order(camera.height), tf, dvr, shading.background,
-                              self._table_cache)
-        if isinstance(iso, (list, tuple, np.ndarray)):
+            setup: Any = Mip(mode, method, step, window, colormap, shading.background,
+                             self.volume.value_range)
+            stats["method"] = method
+        elif mode == "dvr":
+            setup = Dvr(tf, dvr, shading.background, self._table_cache)
+        elif isinstance(iso, (list, tuple, np.ndarray)):
             if len(iso) == 0:
                 raise ParameterError("iso must hold at least one isovalue")
-            isos = [self._check_iso(v) for v in iso]
-            return render_multi_iso(self.model, self.hierarchy, self.volume, camera, planes,
-                                    _row_order(camera.height), isos, colors, opacity,
-                                    inside == "high", shading, effects)
-        value = self._check_iso(iso)
-        classify_ms = 0.0
-        if value != self._iso:
-            classify_ms = self.set_iso(value)
-        user_planes = len(planes)
-        planes = np.vstack([planes, self._active_box_planes()])
-
-        h, w = camera.height, camera.width
-        rgba = np.empty((h, w, 4), np.float32)
-        depth = np.empty((h, w), np.float64)
-        position = np.empty((h, w, 3), np.float64)
-        normal = np.empty((h, w, 3), np.float32)
-        face = np.empty((h, w), np.int8)
-        visited = np.empty((h, w), np.int32)
-        tested = np.empty((h, w), np.int32)
-        skipped = np.empty((h, w), np.int32)
-        act0, act1, act2 = self.hierarchy.active
+            setup = MultiIso([self._check_iso(v) for v in iso], colors, opacity, inside,
+                             shading, effects)
+            stats["method"] = "exact"
+        else:
+            value = self._check_iso(iso)
+            setup = Iso(value, method, step, inside, shading)
+            classify_ms = 0.0
+            if value != self._iso:
+                classify_ms = self.set_iso(value)
+            flags = self._iso_flags()
+            if self.active_cells is not None:
+                grid = grid.with_kernel(self.model.kernel_grid(active=self.active_cells))
+            if len(planes):
+                stats["planes"] = len(planes)
+            planes = np.vstack([planes, self._active_box_planes(flags)])
+            stats.update(method=method, iso=value, classify_ms=classify_ms)
+            if method == "sampled":
+                stats["step"] = float(step)
+            stats.update(self.iso_stats)
         start = time.perf_counter()
-        ISO_KERNELS[self.model.name](
-            self.model.arrays, self.model.params, act0, act1, act2, value, camera.pixel_basis(),
-            np.asarray(self.volume.origin), np.asarray(self.volume.spacing), planes,
-            _row_order(h),
-            METHODS[method], float(step), inside == "high", shading.as_array(),
-            rgba, depth, position, normal, face, visited, tested, skipped,
-        )
-        if effects is not None and effects.active:
-            apply_effects(camera.pixel_basis(), shading.as_array(), effects.as_array(), position,
-                          normal, face, rgba)
+        out, counters = render_grid(grid, setup, camera, planes, flags)
+        frame = setup.frame(out, counters, stats)
+        if mode == "iso" and effects is not None and effects.active and not isinstance(
+                setup, MultiIso):
+            apply_effects(camera.pixel_basis(), shading.as_array(), effects.as_array(),
+                          frame.position, frame.normal, frame.face, frame.rgba)
         trace_ms = (time.perf_counter() - start) * 1e3
-        hits = int(np.count_nonzero(np.isfinite(depth)))
-        stats = {
-            "mode": mode,
-            "model": self.model.name,
-            "method": method,
-            "iso": value,
-            "width": w,
-            "height": h,
-            "rays": w * h,
-            "hits": hits,
+        visited, tested, skipped = counters
+        stats.update({
+            "width": camera.width,
+            "height": camera.height,
+            "rays": camera.width * camera.height,
+            "hits": int(np.count_nonzero(np.isfinite(frame.depth))),
             "trace_ms": trace_ms,
-            "classify_ms": classify_ms,
             "mean_cells_visited": float(visited.mean()),
             "mean_cells_tested": float(tested.mean()),
             "mean_blocks_skipped": float(skipped.mean()),
-        }
-        if method == "sampled":
-            stats["step"] = float(step)
-        stats.update(self.iso_stats)
-        if user_planes:
-            stats["planes"] = user_planes
-        return Frame(rgba, depth, position, normal, face, visited, tested, skipped, stats)
+        })
+        return frame

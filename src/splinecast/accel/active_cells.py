@@ -7,16 +7,20 @@ patches may contain the isovalue, then, inside them, the tetrahedra whose patch 
    when the isovalue lies in the exact range of its coefficients (the model's ``cube_lo`` /
    ``cube_hi``, computed once per volume, float32 rounded outward). No coefficient is computed
    here.
-2. **Tetrahedron classification** (compiled, parallel over active cubes, ``_LANES`` cubes side
-   by side): the coefficients of the cube are computed from its 27 values by the scheme's
-   verified averaging chain and each tetrahedron is active when the isovalue lies in the range
-   of its own Bernstein–Bézier coefficients (convex hull property: the patch lies in that range,
-   so this is conservative; ranges are widened by the model's rounding tolerance).
+2. **Tetrahedron classification** (the model's ``tet_masks``, compiled and parallel over the
+   candidate cubes): each tetrahedron is active when the isovalue lies in the range of its own
+   Bernstein–Bézier coefficients (convex hull property: the patch lies in that range, so this is
+   conservative).
 3. **Compaction**: active cubes (with a 24-bit tetrahedron mask each), the list of active
    tetrahedra (``slot * 24 + tet``), the cube -> slot lookup grid the kernels use and the block
    flags for empty-space leaps.
 4. Optionally (``precompute=True``), the coefficients of every active cube are stored (the
-   thesis' "high frame rate" variant) so the kernels read instead of recomputing them.
+   thesis' "high frame rate" variant, the model's ``coefficient_rows``) so the kernels read
+   instead of recomputing them.
+
+The model is passed as an object offering ``cube_lo``, ``cube_hi``, ``n_cells``, ``n_points``,
+``precompute``, ``static_nbytes``, ``tet_masks(cubes, iso)`` and ``coefficient_rows(cubes)``;
+this layer never imports a model.
 """
 
 from __future__ import annotations
@@ -28,11 +32,9 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..models.type6 import _LANES, gather27_lane, run_program
 from .minmax import BLOCK_SHIFTS, MinMaxHierarchy, _coarsen
 
-__all__ = ["ActiveCells", "CubeBoundHierarchy", "block_ranges", "candidate_cubes",
-           "classify_tets", "tet_list"]
+__all__ = ["ActiveCells", "CubeBoundHierarchy", "block_ranges", "candidate_cubes", "tet_list"]
 
 @jit(parallel=True)
 def block_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -118,81 +120,6 @@ class CubeBoundHierarchy(MinMaxHierarchy):
             self.highs.append(_coarsen(self.highs[-1], factor, np.maximum, -np.inf))
         self.iso = None
         self.active = ()
-
-
-@jit(inline="always")
-def _gather_lanes(pad, cubes, start, n, ny, nz, buf):
-    for m in range(n):
-        lin = cubes[start + m]
-        gather27_lane(pad, lin // (ny * nz), (lin // nz) % ny, lin % nz, buf, m)
-
-
-@jit(parallel=True)
-def classify_tets(
-    pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, tet_points: np.ndarray,
-    targets: np.ndarray, ptr: np.ndarray, sources: np.ndarray, weights: np.ndarray,
-    n_slots: int, iso: float, tol: float,
-) -> np.ndarray:
-    """24-bit masks of the tetrahedra whose coefficient range contains ``iso``, per cube.
-
-    The coefficients come from the model's program, ``_LANES`` cubes side by side; a range is
-    widened by ``tol`` (rounding) so the test stays conservative for the renderer's sums.
-    """
-    n = cubes.shape[0]
-    masks = np.zeros(n, np.uint32)
-    n_chunks = (n + _LANES - 1) // _LANES
-    ny, nz = shape[1], shape[2]
-    n_local = tet_points.shape[1]
-    lo_iso = iso - tol
-    hi_iso = iso + tol
-    for chunk in prange(n_chunks):
-        buf = np.empty((n_slots, _LANES))
-        vmin = np.empty(_LANES)
-        vmax = np.empty(_LANES)
-        mask = np.zeros(_LANES, np.uint32)
-        start = chunk * _LANES
-        cnt = min(_LANES, n - start)
-        _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
-        run_program(buf, cnt, targets, ptr, sources, weights)
-        for t in range(24):
-            row = buf[27 + tet_points[t, 0]]
-            for m in range(cnt):
-                vmin[m] = row[m]
-                vmax[m] = row[m]
-            for q in range(1, n_local):
-                row = buf[27 + tet_points[t, q]]
-                for m in range(cnt):
-                    vmin[m] = min(vmin[m], row[m])
-                    vmax[m] = max(vmax[m], row[m])
-            bit = np.uint32(1 << t)
-            for m in range(cnt):
-                if vmin[m] <= hi_iso and vmax[m] >= lo_iso:
-                    mask[m] |= bit
-        for m in range(cnt):
-            masks[start + m] = mask[m]
-    return masks
-
-
-@jit(parallel=True)
-def store_coefficients(
-    pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, targets: np.ndarray, ptr: np.ndarray,
-    sources: np.ndarray, weights: np.ndarray, n_slots: int, n_points: int,
-) -> np.ndarray:
-    """All coefficients of the given cubes, shape (n, n_points) float64."""
-    n = cubes.shape[0]
-    out = np.empty((n, n_points))
-    n_chunks = (n + _LANES - 1) // _LANES
-    ny, nz = shape[1], shape[2]
-    for chunk in prange(n_chunks):
-        buf = np.empty((n_slots, _LANES))
-        start = chunk * _LANES
-        cnt = min(_LANES, n - start)
-        _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
-        run_program(buf, cnt, targets, ptr, sources, weights)
-        for m in range(cnt):
-            for p in range(n_points):
-                out[start + m, p] = buf[27 + p, m]
-    return out
 
 
 @jit(parallel=True)
@@ -296,14 +223,10 @@ class ActiveCells:
     def update(self, iso: float) -> dict[str, Any]:
         """Classify and compact for ``iso``; returns counts, timings (ms) and memory (bytes)."""
         m = self.model
-        tet_points = m.tables_arrays[0]
-        prog = m.program
-        shape = np.asarray(m.n_cells, np.int64)
         t0 = time.perf_counter()
         candidates = candidate_cubes(m.cube_lo, m.cube_hi, self.block_lo, self.block_hi, iso)
         t1 = time.perf_counter()
-        masks = classify_tets(m.pad, candidates, shape, tet_points, *prog.arrays, prog.n_slots,
-                              iso, m.tolerance)
+        masks = m.tet_masks(candidates, iso)
         t2 = time.perf_counter()
         keep = masks != 0
         if keep.all():
@@ -315,8 +238,7 @@ class ActiveCells:
         self.cubes = new
         t3 = time.perf_counter()
         if m.precompute:
-            self.coeffs = store_coefficients(m.pad, new, shape, *prog.arrays, prog.n_slots,
-                                             m.n_points)
+            self.coeffs = m.coefficient_rows(new)
         else:
             self.coeffs = np.zeros((0, m.n_points))
         t4 = time.perf_counter()
@@ -341,8 +263,8 @@ class ActiveCells:
             "precompute": bool(m.precompute),
             # Memory per variant: on the fly needs the padded data, the cube bounds, the lookup
             # and the lists; precomputed adds n_active x n_points float64 coefficients.
-            "memory_on_the_fly_bytes": int(m._static_nbytes + lookup_bytes + lists_bytes),
-            "memory_precomputed_bytes": int(m._static_nbytes + lookup_bytes + lists_bytes
+            "memory_on_the_fly_bytes": int(m.static_nbytes + lookup_bytes + lists_bytes),
+            "memory_precomputed_bytes": int(m.static_nbytes + lookup_bytes + lists_bytes
                                             + coeff_bytes_precomputed),
         }
         return dict(self.stats)

@@ -133,16 +133,21 @@ class MinMaxHierarchy:
             hi[axis] = min((used[-1] + 1) * block, self.n_cells[axis])
         return lo, hi
 
-    def classify_any(self, ranges: list[tuple[float, float]]) -> tuple[np.ndarray, ...]:
-        """Active flags for blocks meeting any of several closed value intervals."""
+    def flags_for(self, ranges: list[tuple[float, float]]) -> tuple[np.ndarray, ...]:
+        """Flags (uint8 per level, finest first) of the blocks meeting any of several closed
+        value intervals; the hierarchy's own isovalue flags are left as they are."""
         flags = []
         for lo, hi in zip(self.lows, self.highs, strict=True):
             act = np.zeros(lo.shape, dtype=bool)
             for a, b in ranges:
                 act |= (lo <= b) & (hi >= a)
             flags.append(act.view(np.uint8))
+        return tuple(flags)
+
+    def classify_any(self, ranges: list[tuple[float, float]]) -> tuple[np.ndarray, ...]:
+        """Active flags for blocks meeting any of several closed value intervals."""
         self.iso = None
-        self.active = tuple(flags)
+        self.active = self.flags_for(ranges)
         return self.active
 
     @property

@@ -41,6 +41,8 @@ Per-cell polynomials
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
 from .._jit import jit
@@ -63,7 +65,14 @@ __all__ = [
     "basis_weights",
     "evaluate",
     "gradient",
+    "BSplineGrid",
 ]
+
+#: Kernel grid of the B-spline models (hooks in :mod:`.bspline_ray`): padded coefficients (cell
+#: ``c`` needs ``coeffs[c .. c + degree]``), the degree, whether the ray composition is in power
+#: form, and the root finder (:mod:`splinecast.roots.first_root` id, iterations, tolerance).
+BSplineGrid = namedtuple("BSplineGrid", ["coeffs", "degree", "power", "finder", "iterations",
+                                         "tol"])
 
 # Rows: scaled Bernstein basis u^r (1-u)^(d-r); columns: the d+1 B-spline pieces on the cell
 # (times SCALE[d]). Derived from the uniform B-spline segment polynomials; reference 000 prints
@@ -332,19 +341,25 @@ class BSplineModel:
     support = 0
 
     @property
-    def arrays(self) -> tuple[np.ndarray, ...]:
-        """The arrays the kernel takes: ``(padded coefficients,)``."""
-        return (self.coeffs,)
+    def shift(self) -> float:
+        """The traversal walks cells in ``voxel index + shift`` (the knot offset ``h``)."""
+        return knot_offset(self.degree)
 
     @property
-    def params(self) -> np.ndarray:
-        """``[degree, root finder id, iterations, tolerance, knot offset h, power form flag]``."""
-        power = 1.0 if self.root_finder_id in POWER_FORM_FINDERS else 0.0
-        return np.array(
-            [self.degree, self.root_finder_id, self.iterations, self.tolerance,
-             knot_offset(self.degree), power],
-            dtype=np.float64,
-        )
+    def prepared(self) -> np.ndarray:
+        """The padded coefficients: cell ``c`` depends on ``prepared[c .. c + degree]``."""
+        return self.coeffs
+
+    def domain(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box rendered, in voxel index space: the box spanned by the voxel centres."""
+        return np.zeros(3), np.asarray(self.volume.shape, np.float64) - 1.0
+
+    def kernel_grid(self, array: np.ndarray | None = None) -> tuple:
+        """The :class:`BSplineGrid` of ``array`` (a block of :attr:`prepared` with its ghost
+        layers; default: the whole volume)."""
+        coeffs = self.coeffs if array is None else np.ascontiguousarray(array)
+        return BSplineGrid(coeffs, self.degree, self.root_finder_id in POWER_FORM_FINDERS,
+                           self.root_finder_id, self.iterations, self.tolerance)
 
     @property
     def coefficients(self) -> np.ndarray:

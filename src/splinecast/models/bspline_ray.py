@@ -24,11 +24,22 @@ Every result is scaled by ``E = SCALE[d]^3`` like the tensor coefficients;
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._jit import jit
 from ..roots.bernstein import binomial
-from .bspline import POWER_MATRIX, SB_MATRIX, SCALE, cell_transform
+from ..roots.pieces import PolyN, polyn_workspace
+from .bspline import (
+    POWER_MATRIX,
+    SB_MATRIX,
+    SCALE,
+    BSplineGrid,
+    cell_transform,
+    local_value_gradient,
+)
+from .pieces import register
 
 __all__ = [
     "axis_basis_sb",
@@ -202,3 +213,106 @@ def segment_polynomial(
     i, j, k = (int(c) for c in cell)
     _segment(coeffs, int(degree), i, j, k, a[0], a[1], a[2], b[0], b[1], b[2], FORMS[form], out)
     return out
+
+
+# ----------------------------------------------------------------------------- ray pieces
+@jit()
+def _cell_count(grid):
+    c, d = grid.coeffs, grid.degree
+    return c.shape[0] - d, c.shape[1] - d, c.shape[2] - d
+
+
+@jit()
+def _new_scratch(grid):
+    n = 3 * grid.degree
+    inv = np.empty(n + 1)
+    scale = SCALE[grid.degree] ** 3
+    for m in range(n + 1):
+        # True-scale coefficients: the matrices carry SCALE^3, the Bernstein form C(n, m).
+        inv[m] = 1.0 / scale if grid.power else 1.0 / (scale * binomial(n, m))
+    coeffs, tmp, work, degrees, stack, spans, cand = polyn_workspace()
+    return (np.empty((4, 4, 4)), np.empty((4, 4, 4)), np.empty((3, 4, 4)), np.empty(4),
+            np.empty(7), inv, coeffs, tmp, work, degrees, stack, spans, cand)
+
+
+@jit(inline="always")
+def _ic_range(coeffs, i, j, k, d):
+    """Smallest and largest influence coefficient of cell ``(i, j, k)`` (the convex hull)."""
+    vmin = np.inf
+    vmax = -np.inf
+    for a in range(d + 1):
+        for b in range(d + 1):
+            for c in range(d + 1):
+                v = float(coeffs[i + a, j + b, k + c])
+                vmin = min(vmin, v)
+                vmax = max(vmax, v)
+    return vmin, vmax
+
+
+@jit()
+def _cell_load(grid, scratch, i, j, k):
+    return _ic_range(grid.coeffs, i, j, k, grid.degree)
+
+
+@jit()
+def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    cuts[0] = 0.0
+    cuts[1] = 1.0
+    tags[0] = 0
+    return 1
+
+
+@jit()
+def _piece_range(grid, scratch, ctx, i, j, k, tag):
+    return ctx[0], ctx[1]
+
+
+@jit()
+def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+    d = grid.degree
+    tensor, tmp, basis, inner, middle, inv = (scratch[0], scratch[1], scratch[2], scratch[3],
+                                              scratch[4], scratch[5])
+    poly = scratch[6]
+    n = 3 * d
+    if grid.power:
+        cell_transform(grid.coeffs, i, j, k, d, POWER_MATRIX[d], tensor, tmp)
+        axis_basis_power(ax, bx, d, basis[0])
+        axis_basis_power(ay, by, d, basis[1])
+        axis_basis_power(az, bz, d, basis[2])
+    else:
+        cell_transform(grid.coeffs, i, j, k, d, SB_MATRIX[d], tensor, tmp)
+        axis_basis_sb(ax, bx, d, basis[0])
+        axis_basis_sb(ay, by, d, basis[1])
+        axis_basis_sb(az, bz, d, basis[2])
+    compose(tensor, basis[0], basis[1], basis[2], d, inner, middle, poly)
+    for m in range(n + 1):
+        poly[m] *= inv[m]
+    return PolyN(poly, n, grid.power, grid.finder, grid.iterations, grid.tol, scratch[7],
+                 scratch[8], scratch[9], scratch[10], scratch[11], scratch[12])
+
+
+@jit()
+def _gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
+    _, gx, gy, gz = local_value_gradient(grid.coeffs, grid.degree, i, j, k, x, y, z)
+    return gx, gy, gz
+
+
+@jit(inline="always")
+def _locate(s, n_cells):
+    c = int(math.floor(s))
+    c = min(max(c, 0), n_cells - 1)
+    return c, s - c
+
+
+@jit()
+def _value_gradient_at(grid, scratch, x, y, z):
+    nx, ny, nz = _cell_count(grid)
+    i, u = _locate(min(max(x, 0.0), float(nx)), nx)
+    j, v = _locate(min(max(y, 0.0), float(ny)), ny)
+    k, w = _locate(min(max(z, 0.0), float(nz)), nz)
+    return local_value_gradient(grid.coeffs, grid.degree, i, j, k, u, v, w)
+
+
+register(BSplineGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
+         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly,
+         gradient=_gradient, value_gradient_at=_value_gradient_at)

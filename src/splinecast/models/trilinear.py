@@ -15,14 +15,19 @@ voxels stay in their stored dtype and are converted on load.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
 from .._jit import jit
+from ..roots.pieces import PowerCubic
 from ..volume import Volume
+from .pieces import register
 from .validation import require_renderable
 
 __all__ = [
     "TrilinearModel",
+    "TrilinearGrid",
     "cell_monomials",
     "ray_cubic",
     "local_value",
@@ -122,6 +127,69 @@ def gradient(data: np.ndarray, points: np.ndarray) -> np.ndarray:
     return out
 
 
+# ----------------------------------------------------------------------------- ray pieces
+#: Kernel grid of the trilinear model: the voxels (cell ``c`` needs voxels ``c .. c + 1``).
+TrilinearGrid = namedtuple("TrilinearGrid", ["data"])
+
+
+@jit()
+def _cell_count(grid):
+    d = grid.data
+    return d.shape[0] - 1, d.shape[1] - 1, d.shape[2] - 1
+
+
+@jit()
+def _new_scratch(grid):
+    return np.empty(0)
+
+
+@jit()
+def _cell_load(grid, scratch, i, j, k):
+    return cell_monomials(grid.data, i, j, k)
+
+
+@jit()
+def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    cuts[0] = 0.0
+    cuts[1] = 1.0
+    tags[0] = 0
+    return 1
+
+
+@jit()
+def _piece_range(grid, scratch, ctx, i, j, k, tag):
+    return ctx[0], ctx[1]
+
+
+@jit()
+def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+    c3, c2, c1, c0 = ray_cubic(ctx[2], ctx[3], ctx[4], ctx[5], ctx[6], ctx[7], ctx[8], ctx[9],
+                               ax, ay, az, bx - ax, by - ay, bz - az)
+    return PowerCubic(c0, c1, c2, c3)
+
+
+@jit()
+def _gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
+    return local_gradient(ctx[3], ctx[4], ctx[5], ctx[6], ctx[7], ctx[8], ctx[9], x, y, z)
+
+
+@jit()
+def _value_gradient_at(grid, scratch, x, y, z):
+    data = grid.data
+    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
+    i, u = _cell_and_local(min(max(x, 0.0), float(nx)), nx)
+    j, v = _cell_and_local(min(max(y, 0.0), float(ny)), ny)
+    k, w = _cell_and_local(min(max(z, 0.0), float(nz)), nz)
+    _, _, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, i, j, k)
+    gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7, u, v, w)
+    return local_value(k0, k1, k2, k3, k4, k5, k6, k7, u, v, w), gx, gy, gz
+
+
+register(TrilinearGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
+         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly,
+         gradient=_gradient, value_gradient_at=_value_gradient_at)
+
+
 class TrilinearModel:
     """Trilinear reconstruction prepared from a volume.
 
@@ -145,6 +213,8 @@ class TrilinearModel:
     support = 1
     #: index-space coordinate of the lower corner of cell 0 (cell ``c`` spans ``[c, c + 1]``).
     cell_offset = 0.0
+    #: The traversal walks cells in ``voxel index + shift`` (cell ``c`` is ``[c, c + 1]`` there).
+    shift = 0.0
 
     def __init__(self, volume: Volume) -> None:
         require_renderable(volume)
@@ -153,14 +223,18 @@ class TrilinearModel:
         self.n_cells = tuple(n - 1 for n in volume.shape)
 
     @property
-    def arrays(self) -> tuple[np.ndarray, ...]:
-        """The arrays the model's kernels take (here: the voxels)."""
-        return (self.data,)
+    def prepared(self) -> np.ndarray:
+        """The array the kernels read: cell ``c`` depends on ``prepared[c .. c + support]``."""
+        return self.data
 
-    @property
-    def params(self) -> np.ndarray:
-        """The numbers the model's kernels take (none for trilinear)."""
-        return np.zeros(1)
+    def domain(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box rendered, in voxel index space: the box spanned by the voxel centres."""
+        return np.zeros(3), np.asarray(self.volume.shape, np.float64) - 1.0
+
+    def kernel_grid(self, array: np.ndarray | None = None) -> tuple:
+        """The :class:`TrilinearGrid` of ``array`` (a block of :attr:`prepared` with its ghost
+        layer; default: the whole volume)."""
+        return TrilinearGrid(self.data if array is None else np.ascontiguousarray(array))
 
     @property
     def coefficients(self) -> np.ndarray:

@@ -27,6 +27,7 @@ Bounds
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from functools import cached_property
 from typing import Any
 
@@ -48,6 +49,8 @@ from .validation import require_renderable
 
 __all__ = [
     "Type6Model",
+    "S31Grid",
+    "QSSGrid",
     "ROOT_FINDERS",
     "gather27",
     "tet_coefficients",
@@ -66,6 +69,16 @@ __all__ = [
     "evaluate_in_tets",
     "evaluate_points",
 ]
+
+_GRID_FIELDS = ["pad", "cube_lo", "cube_hi", "slot", "tet_mask", "coeffs", "tet_points",
+                "targets", "ptr", "sources", "weights", "bary", "steps", "newton", "n_slots"]
+#: Kernel grid of the S31 model (hooks in :mod:`.type6_ray`): the clamp-padded data (cube ``c``
+#: needs ``pad[c .. c + 2]``), per-cube coefficient bounds, the optional isovalue classification
+#: (``slot``, ``tet_mask``, precomputed ``coeffs``; empty arrays without), the scheme's tables
+#: and program, the root finder choice and the program's buffer size.
+S31Grid = namedtuple("S31Grid", _GRID_FIELDS)
+#: Kernel grid of the QSS model (same fields as :data:`S31Grid`).
+QSSGrid = namedtuple("QSSGrid", _GRID_FIELDS)
 
 #: Root finders of the ray–patch intersection (``root_finder=`` option): name -> code.
 ROOT_FINDERS = {"bernstein": 0, "newton": 1}
@@ -443,6 +456,81 @@ def cube_bounds(
     return lo, hi
 
 
+@jit(inline="always")
+def _gather_lanes(pad, cubes, start, n, ny, nz, buf):
+    for m in range(n):
+        lin = cubes[start + m]
+        gather27_lane(pad, lin // (ny * nz), (lin // nz) % ny, lin % nz, buf, m)
+
+
+@jit(parallel=True)
+def classify_tets(
+    pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, tet_points: np.ndarray,
+    targets: np.ndarray, ptr: np.ndarray, sources: np.ndarray, weights: np.ndarray,
+    n_slots: int, iso: float, tol: float,
+) -> np.ndarray:
+    """24-bit masks of the tetrahedra whose coefficient range contains ``iso``, per cube.
+
+    The coefficients come from the model's program, ``_LANES`` cubes side by side; a range is
+    widened by ``tol`` (rounding) so the test stays conservative for the renderer's sums.
+    """
+    n = cubes.shape[0]
+    masks = np.zeros(n, np.uint32)
+    n_chunks = (n + _LANES - 1) // _LANES
+    ny, nz = shape[1], shape[2]
+    n_local = tet_points.shape[1]
+    lo_iso = iso - tol
+    hi_iso = iso + tol
+    for chunk in prange(n_chunks):
+        buf = np.empty((n_slots, _LANES))
+        vmin = np.empty(_LANES)
+        vmax = np.empty(_LANES)
+        mask = np.zeros(_LANES, np.uint32)
+        start = chunk * _LANES
+        cnt = min(_LANES, n - start)
+        _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
+        run_program(buf, cnt, targets, ptr, sources, weights)
+        for t in range(24):
+            row = buf[27 + tet_points[t, 0]]
+            for m in range(cnt):
+                vmin[m] = row[m]
+                vmax[m] = row[m]
+            for q in range(1, n_local):
+                row = buf[27 + tet_points[t, q]]
+                for m in range(cnt):
+                    vmin[m] = min(vmin[m], row[m])
+                    vmax[m] = max(vmax[m], row[m])
+            bit = np.uint32(1 << t)
+            for m in range(cnt):
+                if vmin[m] <= hi_iso and vmax[m] >= lo_iso:
+                    mask[m] |= bit
+        for m in range(cnt):
+            masks[start + m] = mask[m]
+    return masks
+
+
+@jit(parallel=True)
+def store_coefficients(
+    pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, targets: np.ndarray, ptr: np.ndarray,
+    sources: np.ndarray, weights: np.ndarray, n_slots: int, n_points: int,
+) -> np.ndarray:
+    """All coefficients of the given cubes, shape (n, n_points) float64."""
+    n = cubes.shape[0]
+    out = np.empty((n, n_points))
+    n_chunks = (n + _LANES - 1) // _LANES
+    ny, nz = shape[1], shape[2]
+    for chunk in prange(n_chunks):
+        buf = np.empty((n_slots, _LANES))
+        start = chunk * _LANES
+        cnt = min(_LANES, n - start)
+        _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
+        run_program(buf, cnt, targets, ptr, sources, weights)
+        for m in range(cnt):
+            for p in range(n_points):
+                out[start + m, p] = buf[27 + p, m]
+    return out
+
+
 def rounding_tolerance(pad: np.ndarray, program) -> float:
     """Bound on the difference between two ways of rounding a coefficient's sum.
 
@@ -496,8 +584,6 @@ class Type6Model:
     """
 
     name = "type6"
-    #: Render methods the kernel implements (the type-6 kernels always solve exactly).
-    methods = ("exact",)
     #: Cube ``c`` depends on padded voxels ``c .. c + 2`` per axis.
     support = 2
     degree = 3
@@ -536,66 +622,89 @@ class Type6Model:
             self.pad, *self.program.arrays, self.program.n_slots, tables.n_points,
             self.tolerance,
         )
-        # Per-isovalue state, filled by classify().
-        from ..accel.active_cells import ActiveCells  # accel sits right of models: lazy import
-
-        self.active = ActiveCells(self)
 
     # --------------------------------------------------------------------- model interface
-    @property
-    def coefficients(self) -> np.ndarray:
-        """Padded data: cube ``c`` lies in the range of ``pad[c .. c + 2]`` for convex schemes.
+    #: The traversal walks cubes in ``voxel index + shift`` (cube ``c`` is ``[c, c + 1]``).
+    shift = 0.5
+    #: The per-cell bounds of the block hierarchy are per-cube coefficient ranges.
+    cube_bounded = True
+    #: Rays are traced in tiles of 8 x 8 pixels so the per-thread cube cache serves neighbours.
+    band_rows = 8
+    tile = 8
 
-        Not used by the scene: :meth:`block_hierarchy` supplies block ranges from the exact
-        cube bounds, and the type-6 kernels use the exact flags of :meth:`classify` (both are
-        also right for QSS-B's negative weights).
-        """
+    @property
+    def prepared(self) -> np.ndarray:
+        """The clamp-padded data: cube ``c`` depends on ``prepared[c .. c + 2]``."""
         return self.pad
 
-    def block_hierarchy(self) -> Any:
-        """The scene's block hierarchy, from the exact cube bounds (no pass over the data).
+    @property
+    def coefficients(self) -> np.ndarray:
+        """The values that bound the reconstruction cube by cube (here: the padded data)."""
+        return self.pad
 
-        The generic :class:`~splinecast.accel.minmax.MinMaxHierarchy` of the padded data would
-        cost a pass over the volume and is not a valid bound for QSS-B's negative weights.
+    def domain(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box rendered, in voxel index space: ``[-1/2, n - 1/2]`` per axis."""
+        return np.full(3, -0.5), np.asarray(self.volume.shape, np.float64) - 0.5
+
+    def cube_bounds_of(self, pad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact per-cube coefficient ranges of a block of :attr:`prepared` (see
+        :func:`cube_bounds`); the model's own for its whole padded data."""
+        if pad is self.pad:
+            return self.cube_lo, self.cube_hi
+        return cube_bounds(np.ascontiguousarray(pad, dtype=self.pad.dtype), *self.program.arrays,
+                           self.program.n_slots, self.tables.n_points, self.tolerance)
+
+    def kernel_grid(self, array: np.ndarray | None = None, active: Any = None) -> tuple:
+        """The kernel grid (:data:`~.type6_ray.S31Grid` or :data:`~.type6_ray.QSSGrid`) of
+        ``array`` (a block of :attr:`prepared` with its ghost layers; default: the whole volume).
+
+        ``active`` is an isovalue classification of the whole volume
+        (:class:`splinecast.accel.active_cells.ActiveCells`): its cube slots, tetrahedron masks
+        and (with ``precompute=True``) stored coefficients then replace the bounds.
         """
-        from ..accel.active_cells import CubeBoundHierarchy
-
-        return CubeBoundHierarchy(self.active.block_lo, self.active.block_hi, self.n_cells)
+        pad = self.pad if array is None else np.ascontiguousarray(array, dtype=self.pad.dtype)
+        lo, hi = self.cube_bounds_of(pad)
+        if active is not None and array is None:
+            slot, mask, coeffs = active.slot, active.tet_mask, active.coeffs
+        else:
+            slot = np.zeros((0, 0, 0), np.int32)
+            mask = np.zeros(0, np.uint32)
+            coeffs = np.zeros((0, self.n_points))
+        tet_points, _, _, _, bary, steps = self.tables_arrays
+        cls = S31Grid if self.degree == 3 else QSSGrid
+        return cls(pad, lo, hi, slot, mask, coeffs, tet_points, *self.program.arrays, bary, steps,
+                   self.root_finder == "newton", self.program.n_slots)
 
     @property
     def n_points(self) -> int:
         """Distinct Bernstein–Bézier coefficients per cube."""
         return self.tables.n_points
 
-    def classify(self, iso: float) -> dict[str, Any]:
-        """Isovalue change: classify and compact active cubes and tetrahedra (see ActiveCells)."""
-        return self.active.update(float(iso))
+    # ------------------------------------------------------------- isovalue classification
+    def tet_masks(self, cubes: np.ndarray, iso: float) -> np.ndarray:
+        """24-bit masks of the tetrahedra of ``cubes`` (linear indices) whose coefficient range
+        holds ``iso`` (conservative; see :func:`classify_tets`)."""
+        prog = self.program
+        return classify_tets(self.pad, cubes, np.asarray(self.n_cells, np.int64),
+                             self.tables_arrays[0], *prog.arrays, prog.n_slots, float(iso),
+                             self.tolerance)
 
-    @property
-    def arrays(self) -> tuple[np.ndarray, ...]:
-        """Arrays of the type-6 iso kernels (see :mod:`splinecast.render.iso_type6`)."""
-        a = self.active
-        if a.iso is None:
-            raise RuntimeError("classify(iso) must run before rendering")
-        tet_points, _, _, _, bary, steps = self.tables_arrays
-        return (self.pad, a.slot, a.tet_mask, a.coeffs, a.act0, a.act1, a.act2, tet_points,
-                *self.program.arrays, bary, steps)
-
-    @property
-    def params(self) -> np.ndarray:
-        """``[degree, root finder code, precomputed (0/1), program slots]`` as float64."""
-        return np.array([self.degree, ROOT_FINDERS[self.root_finder], float(self.precompute),
-                         self.program.n_slots])
+    def coefficient_rows(self, cubes: np.ndarray) -> np.ndarray:
+        """All coefficients of ``cubes`` (linear indices), shape ``(len(cubes), n_points)``."""
+        prog = self.program
+        return store_coefficients(self.pad, cubes, np.asarray(self.n_cells, np.int64),
+                                  *prog.arrays, prog.n_slots, self.n_points)
 
     @cached_property
-    def _static_nbytes(self) -> int:
+    def static_nbytes(self) -> int:
+        """Memory held independently of the isovalue: padded data, cube bounds, tables."""
         return int(self.pad.nbytes + self.cube_lo.nbytes + self.cube_hi.nbytes
                    + sum(a.nbytes for a in self.tables_arrays))
 
     @property
     def nbytes(self) -> int:
-        """Memory held by the model: padded data, cube bounds, tables and per-isovalue arrays."""
-        return self._static_nbytes + self.active.nbytes
+        """Memory held by the model: padded data, cube bounds and tables."""
+        return self.static_nbytes
 
     def evaluate(self, points: np.ndarray) -> np.ndarray:
         """Spline values at index-space points, shape (m, 3) (clamped into the domain)."""

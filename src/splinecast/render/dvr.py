@@ -1,60 +1,62 @@
-"""Direct volume rendering: emission-absorption compositing front to back along each ray.
+"""Direct volume rendering: emission-absorption compositing front to back, for every model.
 
-Each ray is sampled from its entry point; consecutive samples ``(t_a, v_a)`` and ``(t_b, v_b)``
-bound a segment of length ``L`` (voxels) that is classified and composited with the "under"
+Each ray piece (a cell, or a tetrahedron of a cell, see :mod:`splinecast.models.pieces`) is cut
+into segments at the ray's samples, taken every ``step`` voxels from the ray's entry into the
+volume; a segment from parameter ``t_a`` (value ``v_a``) to ``t_b`` (value ``v_b``, the piece's
+polynomial evaluated there) of length ``L`` voxels is classified and composited with the "under"
 operator, ``C += (1 - A) c``, ``A += (1 - A) a`` (premultiplied colours):
 
-* plain classification: the sample's transfer-function value, ``a = 1 - exp(-tau(v_b) L)``,
+* plain classification: the back sample's transfer-function value, ``a = 1 - exp(-tau(v_b) L)``,
   ``c = C(v_b) a``;
 * pre-integrated (:mod:`splinecast.preintegration`): the segment's exact integral for a value going
   linearly from ``v_a`` to ``v_b``, looked up bilinearly in a table. A 2D table is for one length;
-  other lengths (the last, partial step before an exit) use the opacity correction
+  other lengths (segments cut short by a piece boundary) use the opacity correction
   ``a' = 1 - (1 - a)^(L / h)`` with the colour scaled by ``a' / a``. A 3D table holds the lengths
   ``k h0`` (uniform layout) or ``2^j h0`` (exponential layout) exactly, which is what the
   opacity-adaptive step uses: its step is rounded to the nearest length in the table (for the
-  exponential layout, nearest in ``log2``); other lengths use the opacity correction from the
-  nearest table.
+  exponential layout, nearest in ``log2``).
+
+Segments end at every piece boundary, so no segment spans two cells: a ray traced brick by brick
+meets exactly the same segments as through the whole volume, and bricks traced independently
+combine with "over" into the same image (fixed step; the adaptive step depends on the opacity in
+front). Cells whose value range is fully transparent (the transfer function's prefix-sum table,
+reference 002, section 1.5) and blocks the hierarchy marks invisible contribute nothing and are
+left out.
 
 Opacity-adaptive step (reference 002, eq. 10): ``h = h_min + (h_max - h_min) A^n`` with ``A`` the
 accumulated opacity, so the step grows where little of what follows can still be seen. Early ray
 termination stops a ray once ``A`` reaches a threshold ``A_max``: what it leaves out is at most
 ``(1 - A_max)`` per channel.
 
-Empty space: blocks whose value range meets no visible (non-zero opacity) range of the transfer
-function are leapt over with the min/max hierarchy, and single cells are tested against the
-transfer function's prefix-sum table. The sampling restarts at the exit of a skipped region; a
-pending segment is closed at its entry with the value there.
-
-Leaping between samples (``leap``): when the next sample lies more than a voxel ahead, the ray
-walks the visible 4^3 blocks of the hierarchy's finest level instead of single cells and, once
-the block holding the next sample is reached, restarts the cell walk at the sample (as
-``walk_begin`` does at a ray's entry). Cells without a sample are then neither loaded nor tested
-against the prefix table; the sample positions and values are those of the cell-by-cell walk
-unless a cell leapt over is transparent on its own inside a visible block (the cell walk closes
-the segment there and restarts the sampling at the cell's exit, the leap composites across it).
-
 Optional gradient shading multiplies each segment's colour by ``ambient + diffuse |n . u|``
-(headlight, ``n`` the normalized field gradient at the segment's back sample).
+(headlight, ``n`` the normalized gradient of the model at the segment's back end).
+
+``depth`` is where the accumulated opacity first reaches 1/2 (``inf`` if never).
 """
 
 from __future__ import annotations
 
+import json
 import math
+import time
+from collections import namedtuple
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import prange
 
 from .._jit import jit
 from ..accel.minmax import inactive_block_size
-from ..accel.traversal import start_cell, walk_begin, walk_step
 from ..errors import ParameterError
-from ..models.trilinear import cell_monomials, local_gradient, local_value
-from ..preintegration import preint_lookup
-from .clipping import clip_interval
-from .rays import pixel_ray
+from ..models.pieces import gradient
+from ..preintegration import PreintegrationTable, preint_lookup, preintegrate
+from ..roots.pieces import poly_value
+from ..transfer import TransferFunction
+from .frame import Frame
+from .mode_api import register
 
-__all__ = ["DVRSettings", "PREINTEGRATION", "TABLE_LAYOUTS", "trace_dvr"]
+__all__ = ["DVRSettings", "PREINTEGRATION", "TABLE_LAYOUTS", "DvrMode", "Dvr", "combine_dvr"]
 
 #: Classification kinds accepted by :class:`DVRSettings`.
 PREINTEGRATION = ("none", "2d", "3d")
@@ -92,8 +94,8 @@ class DVRSettings:
     table_size : int
         Values per axis of the pre-integration table.
     leap : bool
-        Leap over cells that hold no sample (see the module notes); ``False`` walks and tests
-        every cell of the visible blocks.
+        Accepted for compatibility; has no effect (segments now end at every cell, so every
+        visible cell is visited).
     """
 
     step: float = 0.5
@@ -146,13 +148,11 @@ class DVRSettings:
         return {"none": 0, "2d": 1, "3d": 2}[self.preintegration]
 
 
-@jit(inline="always")
-def _cell_value_grad(data, ci, cj, ck, x, y, z):
-    """Value and index-space gradient at local coordinates of cell ``(ci, cj, ck)``."""
-    _, _, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
-    v = local_value(k0, k1, k2, k3, k4, k5, k6, k7, x, y, z)
-    gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7, x, y, z)
-    return v, gx, gy, gz
+#: Kernel parameters (see :class:`Dvr` for their meaning).
+DvrMode = namedtuple("DvrMode", [
+    "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut_rgb",
+    "lut_tau", "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
+    "background"])
 
 
 @jit(inline="always")
@@ -220,14 +220,6 @@ def _adaptive_step(pi_mode, steps, h0, h_max, exponent, acc_a):
 
 
 @jit(inline="always")
-def _clamp_into_block(c, c_old, n):
-    """``c`` clamped into the aligned 4-cell block holding ``c_old`` and into ``[0, n-1]``."""
-    start = (c_old >> 2) << 2
-    end = min(start + 3, n - 1)
-    return min(max(c, start), end)
-
-
-@jit(inline="always")
 def _composite(acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, shade_factor, t):
     """Front-to-back "over" of a premultiplied segment colour; tracks where alpha passes 1/2."""
     w = (1.0 - acc_a) * shade_factor
@@ -240,200 +232,250 @@ def _composite(acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, shade_factor, t):
     return acc_r, acc_g, acc_b, acc_a, t_half
 
 
+@jit(inline="always")
+def _state_new(mode):
+    # acc r, g, b, a; depth where a passes 1/2; samples taken; next sample (adaptive step).
+    return 0.0, 0.0, 0.0, 0.0, math.inf, 0, math.nan
+
+
 @jit()
-def _dvr_ray(data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, t_lo, t_scale,
-             lut_rgb, lut_tau, l_lo, l_scale, adaptive, h_max, exponent, term,
-             shade, ambient, diffuse, sx, sy, sz, ux, uy, uz,
-             ox, oy, oz, dx, dy, dz, t_min, t_max, leap):
-    """One ray. Returns ``(r, g, b, A, t_half, samples, visited, skipped)``."""
-    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
-    nbins = prefix.shape[0] - 1
-    dnorm = math.sqrt(dx * dx + dy * dy + dz * dz)  # voxels per world unit along the ray
-    acc_r = 0.0
-    acc_g = 0.0
-    acc_b = 0.0
-    acc_a = 0.0
-    t_half = math.inf
-    samples = 0
-    visited = 0
-    skipped = 0
-    have_prev = False
-    t_prev = 0.0
-    v_prev = 0.0
-    inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max)
-    t_s = t
-    last_i, last_j, last_k = ci, cj, ck
-    done = False
-    fresh = True  # the walk (re)started in this cell: process it, never leap from it
-    steps = table.shape[0]
-    while inside and not done:
-        size = inactive_block_size(act0, act1, act2, ci, cj, ck)
-        if leap and size == 0 and not fresh and (t_s - t) * dnorm > 1.0:
-            # The next sample is over a voxel ahead: walk the visible 4^3 block instead.
-            b_end, b_more, bi, bj, bk, b_next = walk_step(
-                ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, 4
-            )
-            skipped += 1
-            if t_s > b_end:
-                if b_more:
-                    ci, cj, ck, t = bi, bj, bk, b_next
-                else:
-                    inside = False
-                    last_i, last_j, last_k = start_cell(ox, oy, oz, dx, dy, dz, t_far,
-                                                        nx, ny, nz)
-                continue
-            # Restart the cell walk at the next sample, which lies in this block.
-            si, sj, sk = start_cell(ox, oy, oz, dx, dy, dz, t_s, nx, ny, nz)
-            ci = _clamp_into_block(si, ci, nx)
-            cj = _clamp_into_block(sj, cj, ny)
-            ck = _clamp_into_block(sk, ck, nz)
-            t = t_s
-            fresh = True
-            continue
-        fresh = False
-        t_end, inside, ni, nj, nk, t_next = walk_step(
-            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, max(size, 1)
-        )
-        transparent = size > 0
-        if size > 0:
-            skipped += 1
-        else:
-            visited += 1
-            vmin, vmax, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
-            b0 = min(max(int((vmin - p_lo) * p_scale), 0), nbins - 1)
-            b1 = min(max(int((vmax - p_lo) * p_scale), 0), nbins - 1)
-            transparent = prefix[b1 + 1] == prefix[b0]
-        if transparent:
-            if have_prev and t > t_prev:
-                # Close the pending segment at the region's entry, then restart after it.
-                v, gx, gy, gz = _cell_value_grad(data, ci, cj, ck, ox + t * dx - ci,
-                                                 oy + t * dy - cj, oz + t * dz - ck)
-                r, g, b, a = _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau,
-                                       l_lo, l_scale, v_prev, v, (t - t_prev) * dnorm)
+def _state_load(mode, state, row, col):
+    acc, t_half, t_next, samples = state
+    return (acc[row, col, 0], acc[row, col, 1], acc[row, col, 2], acc[row, col, 3],
+            t_half[row, col], np.int64(samples[row, col]), t_next[row, col])
+
+
+@jit()
+def _state_store(mode, state, row, col, st):
+    acc, t_half, t_next, samples = state
+    acc[row, col, 0] = st[0]
+    acc[row, col, 1] = st[1]
+    acc[row, col, 2] = st[2]
+    acc[row, col, 3] = st[3]
+    t_half[row, col] = st[4]
+    samples[row, col] = st[5]
+    t_next[row, col] = st[6]
+
+
+@jit()
+def _mode_scratch(mode):
+    return np.empty(0)
+
+
+@jit()
+def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+    return st
+
+
+@jit()
+def _skip_size(mode, blocks, i, j, k, st):
+    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)
+
+
+@jit()
+def _wants(mode, st, lo, hi):
+    """Not fully transparent over ``[lo, hi]`` (prefix table; an empty range is transparent)."""
+    if not lo <= hi:
+        return False
+    nbins = mode.prefix.shape[0] - 1
+    b0 = min(max(int((lo - mode.p_lo) * mode.p_scale), 0), nbins - 1)
+    b1 = min(max(int((hi - mode.p_lo) * mode.p_scale), 0), nbins - 1)
+    return mode.prefix[b1 + 1] != mode.prefix[b0]
+
+
+@jit()
+def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    return st
+
+
+@jit()
+def _done(mode, st):
+    return st[3] >= mode.term
+
+
+@jit()
+def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
+             ax, ay, az, bx, by, bz, ray, st):
+    acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
+    ux, uy, uz = ray[3], ray[4], ray[5]
+    sx, sy, sz = ray[12], ray[13], ray[14]
+    anchor = ray[15]
+    dnorm = math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
+    dt = mode.h0 / dnorm  # the base step in world units
+    steps = mode.table.shape[0]
+    span = t1 - t0
+    # The next sample after t0: on the fixed grid anchor + m dt, or carried (adaptive step).
+    if mode.adaptive and t_next == t_next:
+        ts = t_next
+        while ts <= t0:
+            ts += _adaptive_step(mode.pi_mode, steps, mode.h0, mode.h_max, mode.exponent,
+                                 acc_a) / dnorm
+    else:
+        ts = anchor + (math.floor((t0 - anchor) / dt) + 1.0) * dt
+    ta = t0
+    va = poly_value(poly, 0.0)
+    while True:
+        sample = ts < t1
+        tb = ts if sample else t1
+        s = (tb - t0) / span if span > 0.0 else 1.0
+        vb = poly_value(poly, s)
+        length = (tb - ta) * dnorm
+        if length > 0.0:
+            r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
+                                   mode.lut_rgb, mode.lut_tau, mode.t_lo, mode.l_scale, va, vb,
+                                   length)
+            if a > 0.0:
+                factor = 1.0
+                if mode.shade:
+                    gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
+                                          ay + s * (by - ay), az + s * (bz - az))
+                    factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
+                                           sx, sy, sz, ux, uy, uz)
                 acc_r, acc_g, acc_b, acc_a, t_half = _composite(
-                    acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a,
-                    _shade_factor(shade, ambient, diffuse, gx, gy, gz, sx, sy, sz, ux, uy, uz), t,
-                )
-            have_prev = False
-            t_s = t_next
-        elif t_end >= t:
-            last_i, last_j, last_k = ci, cj, ck
-            while t_s <= t_end:
-                x = ox + t_s * dx - ci
-                y = oy + t_s * dy - cj
-                z = oz + t_s * dz - ck
-                v = local_value(k0, k1, k2, k3, k4, k5, k6, k7, x, y, z)
-                samples += 1
-                if have_prev:
-                    r, g, b, a = _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau,
-                                           l_lo, l_scale, v_prev, v, (t_s - t_prev) * dnorm)
-                    if a > 0.0:
-                        gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7, x, y, z)
-                        acc_r, acc_g, acc_b, acc_a, t_half = _composite(
-                            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a,
-                            _shade_factor(shade, ambient, diffuse, gx, gy, gz,
-                                          sx, sy, sz, ux, uy, uz), t_s,
-                        )
-                        if acc_a >= term:
-                            done = True
-                            break
-                have_prev = True
-                t_prev = t_s
-                v_prev = v
-                h = h0
-                if adaptive:
-                    h = _adaptive_step(pi_mode, steps, h0, h_max, exponent, acc_a)
-                t_s += h / dnorm
-        ci, cj, ck, t = ni, nj, nk, t_next
-    if not done and have_prev and t_prev < t_far:
-        # The last, partial step ends at the exit point.
-        v, gx, gy, gz = _cell_value_grad(data, last_i, last_j, last_k, ox + t_far * dx - last_i,
-                                         oy + t_far * dy - last_j, oz + t_far * dz - last_k)
-        r, g, b, a = _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau,
-                               l_lo, l_scale, v_prev, v, (t_far - t_prev) * dnorm)
-        acc_r, acc_g, acc_b, acc_a, t_half = _composite(
-            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a,
-            _shade_factor(shade, ambient, diffuse, gx, gy, gz, sx, sy, sz, ux, uy, uz), t_far,
-        )
-    return acc_r, acc_g, acc_b, acc_a, t_half, samples, visited, skipped
+                    acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, tb)
+        if not sample or acc_a >= mode.term:
+            break
+        samples += 1
+        ta, va = tb, vb
+        if mode.adaptive:
+            ts += _adaptive_step(mode.pi_mode, steps, mode.h0, mode.h_max, mode.exponent,
+                                 acc_a) / dnorm
+        else:
+            ts = anchor + (math.floor((ts - anchor) / dt + 0.5) + 1.0) * dt
+    return acc_r, acc_g, acc_b, acc_a, t_half, samples, ts
+
+
+@jit()
+def _ray_end(mode, grid, scratch, st, ray, t_far):
+    return st
+
+
+@jit()
+def _finish(mode, out, row, col, st, ray):
+    rgba, depth, position, samples = out
+    bg = mode.background
+    rest = 1.0 - st[3]
+    rgba[row, col, 0] = min(st[0] + rest * bg[0] * bg[3], 1.0)
+    rgba[row, col, 1] = min(st[1] + rest * bg[1] * bg[3], 1.0)
+    rgba[row, col, 2] = min(st[2] + rest * bg[2] * bg[3], 1.0)
+    rgba[row, col, 3] = st[3] + rest * bg[3]
+    t = st[4]
+    depth[row, col] = t
+    for c in range(3):
+        position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
+    samples[row, col] = st[5]
+
+
+register(DvrMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,
+         mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size, wants=_wants,
+         on_skip=_on_skip, consume=_consume, done=_done, ray_end=_ray_end, finish=_finish)
 
 
 @jit(parallel=True)
-def trace_dvr(
-    data: np.ndarray,
-    act0: np.ndarray,
-    act1: np.ndarray,
-    act2: np.ndarray,
-    prefix: np.ndarray,
-    prefix_range: np.ndarray,
-    pi_mode: int,
-    table: np.ndarray,
-    table_range: np.ndarray,
-    h0: float,
-    lut_rgb: np.ndarray,
-    lut_tau: np.ndarray,
-    adaptive: bool,
-    h_max: float,
-    exponent: float,
-    term: float,
-    shade: bool,
-    ambient: float,
-    diffuse: float,
-    leap: bool,
-    background: np.ndarray,
-    basis: np.ndarray,
-    vol_origin: np.ndarray,
-    spacing: np.ndarray,
-    planes: np.ndarray,
-    row_order: np.ndarray,
-    rgba: np.ndarray,
-    depth: np.ndarray,
-    position: np.ndarray,
-    samples: np.ndarray,
-    cells_visited: np.ndarray,
-    blocks_skipped: np.ndarray,
-) -> None:
-    """Composite every pixel front to back over ``background``.
+def combine_dvr(front: tuple, back: tuple, out: tuple) -> None:
+    """``out`` = ``front`` over ``back`` (premultiplied colour and opacity).
 
-    ``act0..act2``: block flags, non-zero where the transfer function is visible. ``prefix``:
-    the transparency prefix table over ``prefix_range = (lo, hi)``. ``pi_mode``: 0 plain, 1 2D
-    table, 2 3D table (``table`` over ``table_range``, lengths ``k * h0``), 3 exponential 3D
-    table (lengths ``2**j * h0``). ``leap``: leap over cells holding no sample. ``lut_rgb``,
-    ``lut_tau``: the transfer function sampled evenly over ``table_range`` for plain
-    classification. ``h0`` is the (minimum) step in voxels; ``term`` the early-termination
-    opacity (> 1 disables it). ``depth`` and ``position`` get the distance and point where the
-    opacity first reaches 0.5 (``inf`` and NaN if it never does).
+    The depth where the opacity passes 1/2 is the front's when it got there, else the back's
+    (exact when the front is transparent; otherwise where the back alone passes 1/2, a bound).
     """
-    height, width = depth.shape
-    sx, sy, sz = spacing[0], spacing[1], spacing[2]
-    orx, ory, orz = vol_origin[0], vol_origin[1], vol_origin[2]
-    p_lo = prefix_range[0]
-    p_scale = (prefix.shape[0] - 1) / (prefix_range[1] - prefix_range[0])
-    t_lo = table_range[0]
-    t_scale = (table.shape[1] - 1) / (table_range[1] - table_range[0])
-    l_scale = (lut_tau.shape[0] - 1) / (table_range[1] - table_range[0])
-    for r in prange(height):
-        row = row_order[r]
+    fa, fh, fn, fs = front
+    ba, bh, bn, bs = back
+    oa, oh, on, os_ = out
+    height, width = fh.shape
+    for row in prange(height):
         for col in range(width):
-            wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-            dx, dy, dz = ux / sx, uy / sy, uz / sz
-            ox, oy, oz = (wx - orx) / sx, (wy - ory) / sy, (wz - orz) / sz
-            t_min, t_max = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-            cr, cg, cb, ca, t_half, ns, nvis, nskip = _dvr_ray(
-                data, act0, act1, act2, prefix, p_lo, p_scale, pi_mode, table, h0, t_lo,
-                t_scale, lut_rgb, lut_tau, t_lo, l_scale, adaptive, h_max, exponent, term,
-                shade, ambient, diffuse, sx, sy, sz, ux, uy, uz,
-                ox, oy, oz, dx, dy, dz, t_min, t_max, leap,
-            )
-            rest = 1.0 - ca
-            rgba[row, col, 0] = min(cr + rest * background[0] * background[3], 1.0)
-            rgba[row, col, 1] = min(cg + rest * background[1] * background[3], 1.0)
-            rgba[row, col, 2] = min(cb + rest * background[2] * background[3], 1.0)
-            rgba[row, col, 3] = ca + rest * background[3]
-            depth[row, col] = t_half
-            position[row, col, 0] = wx + t_half * ux if t_half < math.inf else math.nan
-            position[row, col, 1] = wy + t_half * uy if t_half < math.inf else math.nan
-            position[row, col, 2] = wz + t_half * uz if t_half < math.inf else math.nan
-            samples[row, col] = ns
-            cells_visited[row, col] = nvis
-            blocks_skipped[row, col] = nskip
+            rest = 1.0 - fa[row, col, 3]
+            for c in range(4):
+                oa[row, col, c] = fa[row, col, c] + rest * ba[row, col, c]
+            oh[row, col] = fh[row, col] if fh[row, col] < math.inf else bh[row, col]
+            on[row, col] = bn[row, col]
+            os_[row, col] = fs[row, col] + bs[row, col]
+
+
+class Dvr:
+    """Host side of direct volume rendering: the transfer function's tables and the Frame.
+
+    Parameters
+    ----------
+    tf : TransferFunction
+        The transfer function.
+    settings : DVRSettings, optional
+        Step, classification, adaptive step, early termination, shading.
+    background : 4 floats
+        What the rays composite over.
+    cache : dict, optional
+        Keeps the last pre-integration table between renders (tables take milliseconds to
+        seconds to build).
+    """
+
+    name = "dvr"
+
+    def __init__(self, tf: TransferFunction, settings: DVRSettings | None = None,
+                 background: Any = (0.0, 0.0, 0.0, 1.0), cache: dict | None = None) -> None:
+        if not isinstance(tf, TransferFunction):
+            raise ParameterError("mode 'dvr' needs tf=TransferFunction(...)")
+        settings = settings or DVRSettings()
+        if not isinstance(settings, DVRSettings):
+            raise ParameterError(f"dvr must be a DVRSettings, got {type(settings).__name__}")
+        self.tf = tf
+        self.settings = settings
+        cache = {} if cache is None else cache
+        start = time.perf_counter()
+        pi_mode = settings.pi_mode
+        if pi_mode:
+            table = _table(tf, settings, cache).table
+        else:
+            table = np.zeros((1, 2, 2, 4), np.float32)
+        self.table_ms = (time.perf_counter() - start) * 1e3
+        _, lut_rgb, lut_tau = tf.sample(4096)
+        prefix = tf.transparency_prefix(1024)
+        lo, hi = (float(v) for v in tf.domain)
+        term = 2.0 if settings.termination is None else float(settings.termination)
+        self.params = DvrMode(
+            prefix, lo, (prefix.shape[0] - 1) / (hi - lo), pi_mode, table, float(settings.step),
+            lo, (table.shape[1] - 1) / (hi - lo), lut_rgb, lut_tau,
+            (lut_tau.shape[0] - 1) / (hi - lo), bool(settings.adaptive), float(settings.h_max),
+            float(settings.exponent), term, bool(settings.shade), float(settings.ambient),
+            float(settings.diffuse), np.asarray(background, np.float64).reshape(4))
+
+    def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
+        """Flags of the blocks whose value range meets a visible part of the transfer function."""
+        return (*hierarchy.flags_for(self.tf.visible_ranges()), np.zeros(0))
+
+    @staticmethod
+    def state(height: int, width: int) -> tuple:
+        """Per-pixel state arrays."""
+        return (np.empty((height, width, 4)), np.empty((height, width)),
+                np.empty((height, width)), np.empty((height, width), np.int32))
+
+    @staticmethod
+    def output(height: int, width: int) -> tuple:
+        """Output buffers: rgba, depth, position, samples."""
+        return (np.empty((height, width, 4), np.float32), np.empty((height, width)),
+                np.empty((height, width, 3)), np.empty((height, width), np.int32))
+
+    def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
+        """The Frame (``depth``: where the opacity passes 1/2)."""
+        rgba, depth, position, samples = out
+        h, w = depth.shape
+        s = self.settings
+        stats.update(step=s.step, preintegration=s.preintegration, adaptive=s.adaptive,
+                     table_layout=s.table_layout, termination=s.termination,
+                     table_ms=self.table_ms, mean_samples=float(samples.mean()))
+        return Frame(rgba, depth, position, np.full((h, w, 3), np.nan, np.float32),
+                     np.zeros((h, w), np.int8), *counters, stats)
+
+    combine = staticmethod(combine_dvr)
+
+
+def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> PreintegrationTable:
+    """The pre-integration table for ``tf`` and ``settings``, built once and cached."""
+    key = (json.dumps(tf.to_dict()), settings.table_size, settings.step, settings.table_steps,
+           settings.table_layout)
+    table = cache.get(key)
+    if table is None:
+        cache.clear()  # one table at a time: they can be large
+        table = preintegrate(tf, n=settings.table_size, h0=settings.step,
+                             steps=settings.table_steps, layout=settings.table_layout)
+        cache[key] = table
+    return table

@@ -1,232 +1,288 @@
-"""First-hit isosurface ray casting on the trilinear reconstruction.
+"""First-hit isosurface mode for every model: the first piece whose polynomial reaches the iso.
 
-Two methods share the ray set-up, the min/max block hierarchy and the integer traversal of
-:mod:`splinecast.accel.traversal`:
+Two methods share the driver, the model's pieces and the block hierarchy:
 
-* ``exact`` (default): per active cell the exact cubic ray profile is built, cells whose profile
-  cannot reach the isovalue are rejected from the extrema of the profile (the roots of its
-  derivative), and the first root is solved with a safeguarded Newton/bisection iteration.
+* ``exact`` (default): per piece whose range holds the isovalue, the first root of its polynomial
+  (:func:`splinecast.roots.pieces.poly_first_root`: guaranteed solvers for every form) ends the
+  ray; the normal is the model's analytic gradient at the hit.
 * ``sampled``: the reference "as common viewers do": samples every ``step`` voxels along the ray
-  (from the entry point, plus the exit point) and refines the first sign change by bisection. It
-  exists to be compared with the exact method.
+  from its entry into the volume (plus the exit point), and the first sign change refined by
+  bisection on the model's reconstruction. It exists to be compared with the exact method.
 
-Rays are generated per pixel in world space; each is mapped to index space once (``o_idx = (o -
-origin) / spacing``, ``d_idx = u / spacing``), so the ray parameter stays the world distance
-along the unit ray and is directly the depth.
+State per ray: the hit parameter and the world gradient there, and for the sampled method the
+last sample. Partial results of two segments of a ray combine by keeping the nearer hit.
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
+from typing import Any
 
 import numpy as np
 from numba import prange
 
 from .._jit import jit
 from ..accel.minmax import inactive_block_size
-from ..accel.traversal import walk_begin, walk_step
-from ..models.trilinear import cell_monomials, local_gradient, local_value, ray_cubic
-from ..roots.cubic import cubic_first_root
-from .clipping import clip_interval
+from ..errors import ParameterError
+from ..models.pieces import gradient, value_gradient_at
+from ..roots.pieces import poly_first_root, poly_value
+from .frame import Frame
+from .mode_api import register
 from .pixels import store_hit, store_miss
-from .rays import pixel_ray
+from .shading import Shading
 
-__all__ = ["trace_trilinear", "METHODS"]
+__all__ = ["IsoMode", "Iso", "METHODS", "combine_iso"]
 
 #: Method names accepted by ``Scene.render(..., method=...)``.
 METHODS = {"exact": 0, "sampled": 1}
 
 _BISECTION_STEPS = 60
 
-
-@jit()
-def _value_at(data: np.ndarray, px: float, py: float, pz: float) -> float:
-    """Trilinear value at an index-space point (clamped into the grid)."""
-    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
-    px = min(max(px, 0.0), float(nx))
-    py = min(max(py, 0.0), float(ny))
-    pz = min(max(pz, 0.0), float(nz))
-    i = min(int(px), nx - 1)
-    j = min(int(py), ny - 1)
-    k = min(int(pz), nz - 1)
-    _, _, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, i, j, k)
-    return local_value(k0, k1, k2, k3, k4, k5, k6, k7, px - i, py - j, pz - k)
+#: Kernel parameters: isovalue, method code, sampling step (voxels), which side is inside,
+#: packed shading (:meth:`Shading.as_array`).
+IsoMode = namedtuple("IsoMode", ["iso", "method", "step", "inside_high", "shading"])
 
 
 @jit()
-def _trace_ray(
-    data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max,
-):
-    """Trace one index-space ray. Returns (t_hit or inf, i, j, k, visited, tested, skipped)."""
-    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
-    visited = 0
-    tested = 0
-    skipped = 0
-    inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz, t_min, t_max)
-    t_near = t
-    # Sampled method state: the last sample's parameter and residual (NaN: no sample yet).
-    prev_t = math.nan
-    prev_g = math.nan
-    while inside:
-        size = inactive_block_size(act0, act1, act2, ci, cj, ck)
-        t_end, inside, ni, nj, nk, t_next = walk_step(
-            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, max(size, 1)
-        )
-        if size > 0:
-            skipped += 1
-            if method == 1 and t_end >= t:
-                # The block lies strictly on one side of the isovalue, so one sample gives the
-                # sign of all its samples; a change against the previous sample is refined.
-                m = math.ceil((t - t_near) / dt)
-                ts = t_near + m * dt
-                if ts <= t_end:
-                    g = _value_at(data, ox + ts * dx, oy + ts * dy, oz + ts * dz) - iso
-                    if prev_g == prev_g and (prev_g < 0.0) != (g < 0.0):
-                        return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g,
-                                       ts, g, visited, tested, skipped)
-                    prev_t = t_near + math.floor((t_end - t_near) / dt) * dt
-                    prev_g = g
-        else:
-            visited += 1
-            vmin, vmax, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
-            if vmin <= iso <= vmax and t_end >= t:
-                tested += 1
-                ax = ox + t * dx - ci
-                ay = oy + t * dy - cj
-                az = oz + t * dz - ck
-                ex = ox + t_end * dx - ci - ax
-                ey = oy + t_end * dy - cj - ay
-                ez = oz + t_end * dz - ck - az
-                if method == 0:
-                    c3, c2, c1, c0 = ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7,
-                                               ax, ay, az, ex, ey, ez)
-                    s = cubic_first_root(c3, c2, c1, c0 - iso, 0.0, 1.0)
-                    if s == s:  # not NaN
-                        return t + s * (t_end - t), ci, cj, ck, visited, tested, skipped
-                else:
-                    # Samples on the global grid t_near + m dt that fall in [t, t_end].
-                    m = math.ceil((t - t_near) / dt)
-                    ts = t_near + m * dt
-                    while ts <= t_end:
-                        s = (ts - t) / (t_end - t) if t_end > t else 0.0
-                        g = local_value(k0, k1, k2, k3, k4, k5, k6, k7,
-                                        ax + s * ex, ay + s * ey, az + s * ez) - iso
-                        if prev_g == prev_g and ((prev_g < 0.0) != (g < 0.0) or g == 0.0):
-                            return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g,
-                                           ts, g, visited, tested, skipped)
-                        if prev_g != prev_g and g == 0.0:
-                            return ts, ci, cj, ck, visited, tested, skipped
-                        prev_t, prev_g = ts, g
-                        m += 1
-                        ts = t_near + m * dt
-            elif method == 1 and t_end >= t:
-                # A rejected cell lies strictly on one side: its samples all have the sign of
-                # its corner range, so no value needs fetching unless the sign changed.
-                m = math.ceil((t - t_near) / dt)
-                ts = t_near + m * dt
-                if ts <= t_end:
-                    g_side = vmin - iso if vmin > iso else vmax - iso
-                    if prev_g == prev_g and (prev_g < 0.0) != (g_side < 0.0):
-                        g = _value_at(data, ox + ts * dx, oy + ts * dy, oz + ts * dz) - iso
-                        return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g,
-                                       ts, g, visited, tested, skipped)
-                    prev_t = t_near + math.floor((t_end - t_near) / dt) * dt
-                    prev_g = g_side
-        ci, cj, ck, t = ni, nj, nk, t_next
-    if method == 1 and prev_g == prev_g and prev_t < t_far:
-        # The sampled method also samples the exit point, so a crossing in the last partial
-        # step is not lost.
-        g = _value_at(data, ox + t_far * dx, oy + t_far * dy, oz + t_far * dz) - iso
-        if (prev_g < 0.0) != (g < 0.0) or g == 0.0:
-            return _bisect(data, iso, ox, oy, oz, dx, dy, dz, prev_t, prev_g, t_far, g,
-                           visited, tested, skipped)
-    return math.inf, -1, -1, -1, visited, tested, skipped
+def _state_new(mode):
+    return math.inf, math.nan, math.nan, math.nan, math.nan, math.nan
 
 
 @jit()
-def _bisect(data, iso, ox, oy, oz, dx, dy, dz, ta, ga, tb, gb, visited, tested, skipped):
-    """Refine a sign change of the sampled method between ``ta`` and ``tb`` by bisection."""
-    if gb == 0.0:
-        t = tb
-    else:
+def _state_load(mode, state, row, col):
+    depth, grad, prev = state
+    return (depth[row, col], grad[row, col, 0], grad[row, col, 1], grad[row, col, 2],
+            prev[row, col, 0], prev[row, col, 1])
+
+
+@jit()
+def _state_store(mode, state, row, col, st):
+    depth, grad, prev = state
+    depth[row, col] = st[0]
+    grad[row, col, 0] = st[1]
+    grad[row, col, 1] = st[2]
+    grad[row, col, 2] = st[3]
+    prev[row, col, 0] = st[4]
+    prev[row, col, 1] = st[5]
+
+
+@jit()
+def _mode_scratch(mode):
+    return np.empty(0)
+
+
+@jit()
+def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+    return st
+
+
+@jit()
+def _skip_size(mode, blocks, i, j, k, st):
+    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)
+
+
+@jit()
+def _wants(mode, st, lo, hi):
+    return lo <= mode.iso <= hi
+
+
+@jit()
+def _done(mode, st):
+    return st[0] < math.inf
+
+
+@jit()
+def _hit(grid, scratch, ray, t):
+    """State of a hit at ``t`` found by sampling: the gradient from the model at that point."""
+    _, gx, gy, gz = value_gradient_at(grid, scratch, ray[6] + t * ray[9], ray[7] + t * ray[10],
+                                      ray[8] + t * ray[11])
+    return t, gx / ray[12], gy / ray[13], gz / ray[14], math.nan, math.nan
+
+
+@jit()
+def _sample(grid, scratch, ray, t, iso):
+    v, _, _, _ = value_gradient_at(grid, scratch, ray[6] + t * ray[9], ray[7] + t * ray[10],
+                                   ray[8] + t * ray[11])
+    return v - iso
+
+
+@jit()
+def _bisect(grid, scratch, ray, iso, ta, ga, tb, gb):
+    """Refine a sign change of the sampled method between ``ta`` and ``tb``."""
+    if gb != 0.0:
         for _ in range(_BISECTION_STEPS):
             tm = 0.5 * (ta + tb)
-            gm = _value_at(data, ox + tm * dx, oy + tm * dy, oz + tm * dz) - iso
+            gm = _sample(grid, scratch, ray, tm, iso)
             if (gm < 0.0) == (ga < 0.0) and gm != 0.0:
                 ta, ga = tm, gm
             else:
                 tb, gb = tm, gm
-        t = tb
-    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
-    ci = min(max(int(math.floor(ox + t * dx)), 0), nx - 1)
-    cj = min(max(int(math.floor(oy + t * dy)), 0), ny - 1)
-    ck = min(max(int(math.floor(oz + t * dz)), 0), nz - 1)
-    return t, ci, cj, ck, visited, tested, skipped
+    return _hit(grid, scratch, ray, tb)
+
+
+@jit()
+def _dt(mode, ray):
+    """The sampling step in world units along this ray."""
+    return mode.step / math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
+
+
+@jit()
+def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    if mode.method != 1:
+        return st
+    # A stretch without the isovalue lies on one side of it: one sample gives the sign of all
+    # its samples (the range gives it without a sample when known); a change against the
+    # previous sample is refined.
+    anchor = ray[15]
+    dt = _dt(mode, ray)
+    ts = anchor + math.ceil((t0 - anchor) / dt) * dt
+    if ts > t1:
+        return st
+    prev_t, prev_g = st[4], st[5]
+    known = lo <= hi and (lo > mode.iso or hi < mode.iso)
+    if known:
+        g = lo - mode.iso if lo > mode.iso else hi - mode.iso
+        if prev_g == prev_g and (prev_g < 0.0) != (g < 0.0):
+            gs = _sample(grid, scratch, ray, ts, mode.iso)
+            return _bisect(grid, scratch, ray, mode.iso, prev_t, prev_g, ts, gs)
+    else:
+        g = _sample(grid, scratch, ray, ts, mode.iso)
+        if prev_g == prev_g and ((prev_g < 0.0) != (g < 0.0) or g == 0.0):
+            return _bisect(grid, scratch, ray, mode.iso, prev_t, prev_g, ts, g)
+        if prev_g != prev_g and g == 0.0:
+            return _hit(grid, scratch, ray, ts)
+    last = anchor + math.floor((t1 - anchor) / dt) * dt
+    return st[0], st[1], st[2], st[3], last, g
+
+
+@jit()
+def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
+             ax, ay, az, bx, by, bz, ray, st):
+    iso = mode.iso
+    if mode.method == 0:
+        s = poly_first_root(poly, iso)
+        if s == s:  # not NaN
+            gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
+                                  ay + s * (by - ay), az + s * (bz - az))
+            # Index-space gradient to world space: d/dx_world = d/dx_index / spacing.
+            return (t0 + s * (t1 - t0), gx / ray[12], gy / ray[13], gz / ray[14], st[4],
+                    st[5])
+        return st
+    anchor = ray[15]
+    dt = _dt(mode, ray)
+    m = math.ceil((t0 - anchor) / dt)
+    ts = anchor + m * dt
+    prev_t, prev_g = st[4], st[5]
+    while ts <= t1:
+        s = (ts - t0) / (t1 - t0) if t1 > t0 else 0.0
+        g = poly_value(poly, s) - iso
+        if prev_g == prev_g and ((prev_g < 0.0) != (g < 0.0) or g == 0.0):
+            return _bisect(grid, scratch, ray, iso, prev_t, prev_g, ts, g)
+        if prev_g != prev_g and g == 0.0:
+            return _hit(grid, scratch, ray, ts)
+        prev_t, prev_g = ts, g
+        m += 1
+        ts = anchor + m * dt
+    return st[0], st[1], st[2], st[3], prev_t, prev_g
+
+
+@jit()
+def _ray_end(mode, grid, scratch, st, ray, t_far):
+    # The sampled method also samples the exit point, so a crossing in the last partial step
+    # is not lost.
+    prev_t, prev_g = st[4], st[5]
+    if mode.method == 1 and st[0] == math.inf and prev_g == prev_g and prev_t < t_far:
+        g = _sample(grid, scratch, ray, t_far, mode.iso)
+        if (prev_g < 0.0) != (g < 0.0) or g == 0.0:
+            return _bisect(grid, scratch, ray, mode.iso, prev_t, prev_g, t_far, g)
+    return st
+
+
+@jit()
+def _finish(mode, out, row, col, st, ray):
+    rgba, depth, position, normal, face = out
+    if st[0] == math.inf:
+        store_miss(row, col, mode.shading, rgba, depth, position, normal, face)
+    else:
+        store_hit(row, col, st[0], ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], st[1], st[2],
+                  st[3], mode.inside_high, mode.shading, rgba, depth, position, normal, face)
+
+
+register(IsoMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,
+         mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size, wants=_wants,
+         on_skip=_on_skip, consume=_consume, done=_done, ray_end=_ray_end, finish=_finish)
 
 
 @jit(parallel=True)
-def trace_trilinear(
-    arrays: tuple,
-    params: np.ndarray,
-    act0: np.ndarray,
-    act1: np.ndarray,
-    act2: np.ndarray,
-    iso: float,
-    basis: np.ndarray,
-    vol_origin: np.ndarray,
-    spacing: np.ndarray,
-    planes: np.ndarray,
-    row_order: np.ndarray,
-    method: int,
-    step: float,
-    inside_high: bool,
-    shading: np.ndarray,
-    rgba: np.ndarray,
-    depth: np.ndarray,
-    position: np.ndarray,
-    normal: np.ndarray,
-    face: np.ndarray,
-    cells_visited: np.ndarray,
-    cells_tested: np.ndarray,
-    blocks_skipped: np.ndarray,
-) -> None:
-    """Trace and shade every pixel; results are written into the output arrays.
-
-    This is the iso kernel interface every model implements (see
-    :mod:`splinecast.render.kernels`): ``arrays`` and ``params`` are the model's prepared arrays
-    and numbers (trilinear: ``(voxels,)``, unused params), ``act0..act2`` the block flags,
-    ``basis`` is :meth:`Camera.pixel_basis` (rays are generated per pixel), ``planes`` the clip
-    planes of :mod:`splinecast.render.clipping`.
-
-    ``row_order`` is a permutation of the rows that spreads each thread's share over the whole
-    image, so threads get similar amounts of work. ``step`` is in voxel (index) units and only
-    used by the sampled method.
-    """
-    data = arrays[0]
-    height, width = depth.shape
-    sx, sy, sz = spacing[0], spacing[1], spacing[2]
-    orx, ory, orz = vol_origin[0], vol_origin[1], vol_origin[2]
-    for r in prange(height):
-        row = row_order[r]
+def combine_iso(front: tuple, back: tuple, out: tuple) -> None:
+    """``out`` = the nearer hit of two partial states of the same rays (``front`` first)."""
+    fd, fg, fp = front
+    bd, bg, bp = back
+    od, og, op = out
+    height, width = fd.shape
+    for row in prange(height):
         for col in range(width):
-            wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-            dx, dy, dz = ux / sx, uy / sy, uz / sz
-            ox, oy, oz = (wx - orx) / sx, (wy - ory) / sy, (wz - orz) / sz
-            # The sampled method's step, converted from voxels to world distance on this ray.
-            dt = step / math.sqrt(dx * dx + dy * dy + dz * dz)
-            t_min, t_max = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-            t, ci, cj, ck, nvis, ntest, nskip = _trace_ray(
-                data, act0, act1, act2, iso, ox, oy, oz, dx, dy, dz, method, dt, t_min, t_max
-            )
-            cells_visited[row, col] = nvis
-            cells_tested[row, col] = ntest
-            blocks_skipped[row, col] = nskip
-            if t == math.inf:
-                store_miss(row, col, shading, rgba, depth, position, normal, face)
-                continue
-            _, _, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
-            gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7,
-                                        ox + t * dx - ci, oy + t * dy - cj, oz + t * dz - ck)
-            # Index-space gradient to world space: d/dx_world = d/dx_index / spacing.
-            store_hit(row, col, t, wx, wy, wz, ux, uy, uz, gx / sx, gy / sy, gz / sz,
-                      inside_high, shading, rgba, depth, position, normal, face)
+            src_d, src_g = (fd, fg) if fd[row, col] <= bd[row, col] else (bd, bg)
+            od[row, col] = src_d[row, col]
+            for c in range(3):
+                og[row, col, c] = src_g[row, col, c]
+            op[row, col, 0] = bp[row, col, 0]
+            op[row, col, 1] = bp[row, col, 1]
+
+
+class Iso:
+    """Host side of the first-hit isosurface mode: parameters, buffers, the Frame.
+
+    Parameters
+    ----------
+    iso : float
+        Isovalue in data units (already checked against the data range).
+    method : {"exact", "sampled"}
+        Exact first root per piece, or fixed-step sampling plus bisection.
+    step : float
+        Sampling step of the sampled method, in voxels.
+    inside : {"high", "low"}
+        Which side of the isovalue is the object's inside.
+    shading : Shading, optional
+        Colours and lighting.
+    """
+
+    name = "iso"
+
+    def __init__(self, iso: float, method: str = "exact", step: float = 0.25,
+                 inside: str = "high", shading: Shading | None = None) -> None:
+        if method not in METHODS:
+            raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+        if method == "sampled" and not (math.isfinite(step) and step > 0):
+            raise ParameterError(f"step must be a positive number of voxels, got {step}")
+        self.method = method
+        self.shading = shading or Shading()
+        self.params = IsoMode(float(iso), METHODS[method], float(step), inside == "high",
+                              self.shading.as_array())
+
+    def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
+        """Block flags for the isovalue (``flags`` overrides, e.g. a model's own)."""
+        if flags is None:
+            flags = hierarchy.classify(self.params.iso)
+        return (*flags, np.zeros(0))
+
+    @staticmethod
+    def state(height: int, width: int) -> tuple:
+        """Per-pixel state arrays (contents undefined until reset)."""
+        return (np.empty((height, width)), np.empty((height, width, 3)),
+                np.empty((height, width, 2)))
+
+    @staticmethod
+    def output(height: int, width: int) -> tuple:
+        """Output buffers: rgba, depth, position, normal, face."""
+        return (np.empty((height, width, 4), np.float32), np.empty((height, width)),
+                np.empty((height, width, 3)), np.empty((height, width, 3), np.float32),
+                np.empty((height, width), np.int8))
+
+    def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
+        """The Frame of finished outputs."""
+        rgba, depth, position, normal, face = out
+        return Frame(rgba, depth, position, normal, face, *counters, stats)
+
+    combine = staticmethod(combine_iso)

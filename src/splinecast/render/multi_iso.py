@@ -1,223 +1,299 @@
-"""Several translucent isosurfaces at once, composited front to back.
+"""Several translucent isosurfaces at once, composited front to back, for every model.
 
-Along each ray every crossing of every isovalue is found exactly and in depth order: per cell, the
-cubic ray profile minus each isovalue inside the cell's range is split at the roots of its
-derivative into monotone pieces, and each piece with a sign change holds exactly one root (solved
-by :func:`splinecast.roots.cubic.cubic_first_root`). The cell's crossings are sorted by ray
-parameter and composited with the "under" operator, each surface with its own colour and opacity,
-so a translucent skin shows the bone beneath. A ray stops once its opacity reaches ``1 - 1e-4``.
+Along each ray every crossing of every isovalue is found exactly and in depth order: per piece,
+the roots of its polynomial minus each isovalue inside the piece's range
+(:func:`splinecast.roots.pieces.poly_roots`), sorted by ray parameter and composited with the
+"under" operator, each surface with its own colour and opacity, so a translucent skin shows the
+bone beneath (reference 004, "Blending kubischer C1-Splines"). A ray stops once its opacity
+reaches ``1 - 1e-4``.
 
 Front and back faces of a surface get the same colour (a translucent shell is seen from both
-sides); lighting and effects are those of :func:`splinecast.render.effects.surface_rgb`.
+sides); lighting and effects are those of :func:`splinecast.render.effects.surface_rgb`. The
+first crossing gives the pixel's depth, position, normal and face.
+
+Partial results of two segments of a ray combine with "over": the front colour plus the back
+colour times the front's remaining transparency.
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
+from typing import Any
 
 import numpy as np
 from numba import prange
 
 from .._jit import jit
 from ..accel.minmax import inactive_block_size
-from ..accel.traversal import walk_begin, walk_step
-from ..models.trilinear import cell_monomials, local_gradient, ray_cubic
-from ..roots.cubic import cubic_first_root, quadratic_roots
-from .clipping import clip_interval
-from .effects import surface_rgb
-from .rays import pixel_ray
+from ..errors import ParameterError
+from ..models.pieces import gradient
+from ..roots.pieces import poly_roots
+from ..transfer import COLORMAPS, colormap_table
+from .effects import NO_EFFECTS, SurfaceEffects, surface_rgb
+from .frame import Frame
+from .mode_api import register
+from .shading import Shading
 
-__all__ = ["trace_multi_iso", "cubic_roots_in_unit"]
+__all__ = ["MultiIsoMode", "MultiIso", "combine_multi_iso"]
 
-_OPAQUE = 1.0 - 1e-4
+#: A ray stops compositing at this opacity.
+OPAQUE = 1.0 - 1e-4
+
+#: Kernel parameters: isovalues, one RGB and one opacity each, which side is inside, packed
+#: shading and effects.
+MultiIsoMode = namedtuple("MultiIsoMode", ["isos", "colors", "opacity", "inside_high", "shading",
+                                           "effects"])
 
 
-@jit(inline="always")
-def cubic_roots_in_unit(c3: float, c2: float, c1: float, c0: float, out: np.ndarray,
-                        start: int) -> int:
-    """Write the roots in ``[0, 1]`` of the cubic, increasing, to ``out[start:]``; return count.
+@jit()
+def _state_new(mode):
+    # acc r, g, b, a; first crossing t, normal, face; layers; last crossing t and surface.
+    return (0.0, 0.0, 0.0, 0.0, math.inf, math.nan, math.nan, math.nan, 0, 0, -math.inf, -1)
 
-    A double root without a sign change counts only when the cubic is exactly 0 there (the
-    tangency rule of :mod:`splinecast.roots.cubic`).
-    """
-    count, e0, e1 = quadratic_roots(3.0 * c3, 2.0 * c2, c1)
-    found = 0
-    a = 0.0
-    last = -1.0
-    for piece in range(3):
-        if piece == 0:
-            if count < 1 or not (0.0 < e0 < 1.0):
-                continue
-            b = e0
-        elif piece == 1:
-            if count < 2 or not (0.0 < e1 < 1.0):
-                continue
-            b = e1
+
+@jit()
+def _state_load(mode, state, row, col):
+    acc, first, normal, face, layers, last = state
+    return (acc[row, col, 0], acc[row, col, 1], acc[row, col, 2], acc[row, col, 3],
+            first[row, col], normal[row, col, 0], normal[row, col, 1], normal[row, col, 2],
+            np.int64(face[row, col]), np.int64(layers[row, col]), last[row, col, 0],
+            np.int64(last[row, col, 1]))
+
+
+@jit()
+def _state_store(mode, state, row, col, st):
+    acc, first, normal, face, layers, last = state
+    acc[row, col, 0] = st[0]
+    acc[row, col, 1] = st[1]
+    acc[row, col, 2] = st[2]
+    acc[row, col, 3] = st[3]
+    first[row, col] = st[4]
+    normal[row, col, 0] = st[5]
+    normal[row, col, 1] = st[6]
+    normal[row, col, 2] = st[7]
+    face[row, col] = st[8]
+    layers[row, col] = st[9]
+    last[row, col, 0] = st[10]
+    last[row, col, 1] = st[11]
+
+
+@jit()
+def _mode_scratch(mode):
+    # Degree <= 9 pieces: at most 9 crossings per isovalue and piece.
+    m = mode.isos.shape[0]
+    return np.empty(9 * m + 1), np.empty(9 * m + 1, np.int64)
+
+
+@jit()
+def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+    return st
+
+
+@jit()
+def _skip_size(mode, blocks, i, j, k, st):
+    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)
+
+
+@jit()
+def _wants(mode, st, lo, hi):
+    for q in range(mode.isos.shape[0]):
+        if lo <= mode.isos[q] <= hi:
+            return True
+    return False
+
+
+@jit()
+def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    return st
+
+
+@jit()
+def _done(mode, st):
+    return st[3] >= OPAQUE
+
+
+@jit()
+def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
+             ax, ay, az, bx, by, bz, ray, st):
+    hit_s, hit_q = mscratch
+    count = 0
+    for q in range(mode.isos.shape[0]):
+        if lo <= mode.isos[q] <= hi:
+            found = poly_roots(poly, mode.isos[q], hit_s, count)
+            for h in range(count, count + found):
+                hit_q[h] = q
+            count += found
+    # Insertion sort of the (few) crossings of this piece by depth.
+    for h in range(1, count):
+        s_h, q_h = hit_s[h], hit_q[h]
+        g = h - 1
+        while g >= 0 and hit_s[g] > s_h:
+            hit_s[g + 1] = hit_s[g]
+            hit_q[g + 1] = hit_q[g]
+            g -= 1
+        hit_s[g + 1] = s_h
+        hit_q[g + 1] = q_h
+    acc_r, acc_g, acc_b, acc_a, t_first, fnx, fny, fnz, face, layers, last_t, last_q = st
+    wx, wy, wz, ux, uy, uz = ray[0], ray[1], ray[2], ray[3], ray[4], ray[5]
+    for h in range(count):
+        q = hit_q[h]
+        s = hit_s[h]
+        th = t0 + s * (t1 - t0)
+        if q == last_q and th <= last_t + 1e-12 * (1.0 + abs(th)):
+            continue  # the same crossing seen again on a shared face of two pieces
+        last_t, last_q = th, q
+        gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
+                              ay + s * (by - ay), az + s * (bz - az))
+        gx, gy, gz = gx / ray[12], gy / ray[13], gz / ray[14]
+        norm = math.sqrt(gx * gx + gy * gy + gz * gz)
+        if norm > 0.0:
+            scale = (-1.0 if mode.inside_high else 1.0) / norm
+            nxw, nyw, nzw = gx * scale, gy * scale, gz * scale
         else:
-            b = 1.0
-        s = cubic_first_root(c3, c2, c1, c0, a, b)
-        if s == s and s != last:
-            out[start + found] = s
-            found += 1
-            last = s
-        a = b
-    return found
+            nxw, nyw, nzw = -ux, -uy, -uz
+        cr, cg, cb = surface_rgb(mode.shading, mode.effects, mode.colors[q, 0],
+                                 mode.colors[q, 1], mode.colors[q, 2], nxw, nyw, nzw, ux, uy, uz,
+                                 wx + th * ux, wy + th * uy, wz + th * uz)
+        w = (1.0 - acc_a) * mode.opacity[q]
+        acc_r += w * cr
+        acc_g += w * cg
+        acc_b += w * cb
+        acc_a += w
+        layers += 1
+        if t_first == math.inf:
+            t_first, fnx, fny, fnz = th, nxw, nyw, nzw
+            face = 1 if nxw * ux + nyw * uy + nzw * uz <= 0.0 else -1
+        if acc_a >= OPAQUE:
+            break
+    return (acc_r, acc_g, acc_b, acc_a, t_first, fnx, fny, fnz, face, layers, last_t, last_q)
+
+
+@jit()
+def _ray_end(mode, grid, scratch, st, ray, t_far):
+    return st
+
+
+@jit()
+def _finish(mode, out, row, col, st, ray):
+    rgba, depth, position, normal, face, layers = out
+    sh = mode.shading
+    rest = 1.0 - st[3]
+    bg_a = sh[9]
+    rgba[row, col, 0] = min(st[0] + rest * sh[6] * bg_a, 1.0)
+    rgba[row, col, 1] = min(st[1] + rest * sh[7] * bg_a, 1.0)
+    rgba[row, col, 2] = min(st[2] + rest * sh[8] * bg_a, 1.0)
+    rgba[row, col, 3] = st[3] + rest * bg_a
+    t = st[4]
+    depth[row, col] = t
+    face[row, col] = st[8]
+    layers[row, col] = st[9]
+    for c in range(3):
+        position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
+    normal[row, col, 0] = st[5]
+    normal[row, col, 1] = st[6]
+    normal[row, col, 2] = st[7]
+
+
+register(MultiIsoMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,
+         mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size, wants=_wants,
+         on_skip=_on_skip, consume=_consume, done=_done, ray_end=_ray_end, finish=_finish)
 
 
 @jit(parallel=True)
-def trace_multi_iso(
-    data: np.ndarray,
-    act0: np.ndarray,
-    act1: np.ndarray,
-    act2: np.ndarray,
-    isos: np.ndarray,
-    colors: np.ndarray,
-    opacity: np.ndarray,
-    basis: np.ndarray,
-    vol_origin: np.ndarray,
-    spacing: np.ndarray,
-    planes: np.ndarray,
-    row_order: np.ndarray,
-    inside_high: bool,
-    shading: np.ndarray,
-    effects: np.ndarray,
-    rgba: np.ndarray,
-    depth: np.ndarray,
-    position: np.ndarray,
-    normal: np.ndarray,
-    face: np.ndarray,
-    layers: np.ndarray,
-    cells_visited: np.ndarray,
-    cells_tested: np.ndarray,
-    blocks_skipped: np.ndarray,
-) -> None:
-    """Composite all crossings of ``isos`` (colours ``colors``, opacities ``opacity``).
-
-    ``act0..act2`` flag the blocks that can hold any of the isovalues. ``depth``, ``position``,
-    ``normal`` and ``face`` describe the first crossing; ``layers`` counts the crossings
-    composited per pixel. ``shading`` is :meth:`Shading.as_array` (background, lighting),
-    ``effects`` :meth:`SurfaceEffects.as_array`.
-    """
-    height, width = depth.shape
-    m = isos.shape[0]
-    sx, sy, sz = spacing[0], spacing[1], spacing[2]
-    orx, ory, orz = vol_origin[0], vol_origin[1], vol_origin[2]
-    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
-    for r in prange(height):
-        row = row_order[r]
-        hit_s = np.empty(3 * m)
-        hit_q = np.empty(3 * m, dtype=np.int64)
+def combine_multi_iso(front: tuple, back: tuple, out: tuple) -> None:
+    """``out`` = ``front`` over ``back``: composited colour, the front's first crossing if any."""
+    fa, ff, fn, fface, fl, flast = front
+    ba, bf, bn, bface, bl, blast = back
+    oa, of, on, oface, ol, olast = out
+    height, width = ff.shape
+    for row in prange(height):
         for col in range(width):
-            wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-            dx, dy, dz = ux / sx, uy / sy, uz / sz
-            ox, oy, oz = (wx - orx) / sx, (wy - ory) / sy, (wz - orz) / sz
-            t_min, t_max = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-            acc_r = 0.0
-            acc_g = 0.0
-            acc_b = 0.0
-            acc_a = 0.0
-            t_first = math.inf
-            n_layers = 0
-            visited = 0
-            tested = 0
-            skipped = 0
-            last_t = -math.inf
-            last_q = -1
-            depth[row, col] = math.inf
-            face[row, col] = 0
+            rest = 1.0 - fa[row, col, 3]
+            for c in range(4):
+                oa[row, col, c] = fa[row, col, c] + rest * ba[row, col, c]
+            use_front = ff[row, col] < math.inf
+            of[row, col] = ff[row, col] if use_front else bf[row, col]
+            oface[row, col] = fface[row, col] if use_front else bface[row, col]
             for c in range(3):
-                position[row, col, c] = math.nan
-                normal[row, col, c] = math.nan
-            inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, nx, ny, nz,
-                                                      t_min, t_max)
-            while inside and acc_a < _OPAQUE:
-                size = inactive_block_size(act0, act1, act2, ci, cj, ck)
-                t_end, inside, ni, nj, nk, t_next = walk_step(
-                    ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, max(size, 1)
-                )
-                if size > 0:
-                    skipped += 1
-                elif t_end >= t:
-                    visited += 1
-                    vmin, vmax, k0, k1, k2, k3, k4, k5, k6, k7 = cell_monomials(data, ci, cj, ck)
-                    ax = ox + t * dx - ci
-                    ay = oy + t * dy - cj
-                    az = oz + t * dz - ck
-                    ex = ox + t_end * dx - ci - ax
-                    ey = oy + t_end * dy - cj - ay
-                    ez = oz + t_end * dz - ck - az
-                    count = 0
-                    built = False
-                    c3 = c2 = c1 = c0 = 0.0
-                    for q in range(m):
-                        if not vmin <= isos[q] <= vmax:
-                            continue
-                        if not built:
-                            c3, c2, c1, c0 = ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7,
-                                                       ax, ay, az, ex, ey, ez)
-                            built = True
-                            tested += 1
-                        found = cubic_roots_in_unit(c3, c2, c1, c0 - isos[q], hit_s, count)
-                        for h in range(count, count + found):
-                            hit_q[h] = q
-                        count += found
-                    # Insertion sort of the (few) crossings of this cell by depth.
-                    for h in range(1, count):
-                        s_h, q_h = hit_s[h], hit_q[h]
-                        g = h - 1
-                        while g >= 0 and hit_s[g] > s_h:
-                            hit_s[g + 1] = hit_s[g]
-                            hit_q[g + 1] = hit_q[g]
-                            g -= 1
-                        hit_s[g + 1] = s_h
-                        hit_q[g + 1] = q_h
-                    for h in range(count):
-                        q = hit_q[h]
-                        th = t + hit_s[h] * (t_end - t)
-                        if q == last_q and th <= last_t + 1e-12 * (1.0 + abs(th)):
-                            continue  # the same crossing seen again on a shared cell face
-                        last_t, last_q = th, q
-                        x = ox + th * dx - ci
-                        y = oy + th * dy - cj
-                        z = oz + th * dz - ck
-                        gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7, x, y, z)
-                        gx, gy, gz = gx / sx, gy / sy, gz / sz
-                        norm = math.sqrt(gx * gx + gy * gy + gz * gz)
-                        if norm > 0.0:
-                            scale = (-1.0 if inside_high else 1.0) / norm
-                            nxw, nyw, nzw = gx * scale, gy * scale, gz * scale
-                        else:
-                            nxw, nyw, nzw = -ux, -uy, -uz
-                        px, py, pz = wx + th * ux, wy + th * uy, wz + th * uz
-                        cr, cg, cb = surface_rgb(shading, effects, colors[q, 0], colors[q, 1],
-                                                 colors[q, 2], nxw, nyw, nzw, ux, uy, uz,
-                                                 px, py, pz)
-                        w = (1.0 - acc_a) * opacity[q]
-                        acc_r += w * cr
-                        acc_g += w * cg
-                        acc_b += w * cb
-                        acc_a += w
-                        n_layers += 1
-                        if t_first == math.inf:
-                            t_first = th
-                            depth[row, col] = th
-                            position[row, col, 0] = px
-                            position[row, col, 1] = py
-                            position[row, col, 2] = pz
-                            normal[row, col, 0] = nxw
-                            normal[row, col, 1] = nyw
-                            normal[row, col, 2] = nzw
-                            face[row, col] = 1 if nxw * ux + nyw * uy + nzw * uz <= 0.0 else -1
-                        if acc_a >= _OPAQUE:
-                            break
-                ci, cj, ck, t = ni, nj, nk, t_next
-            rest = 1.0 - acc_a
-            bg_a = shading[9]
-            rgba[row, col, 0] = min(acc_r + rest * shading[6] * bg_a, 1.0)
-            rgba[row, col, 1] = min(acc_g + rest * shading[7] * bg_a, 1.0)
-            rgba[row, col, 2] = min(acc_b + rest * shading[8] * bg_a, 1.0)
-            rgba[row, col, 3] = acc_a + rest * bg_a
-            layers[row, col] = n_layers
-            cells_visited[row, col] = visited
-            cells_tested[row, col] = tested
-            blocks_skipped[row, col] = skipped
+                on[row, col, c] = fn[row, col, c] if use_front else bn[row, col, c]
+            ol[row, col] = fl[row, col] + bl[row, col]
+            olast[row, col, 0] = blast[row, col, 0]
+            olast[row, col, 1] = blast[row, col, 1]
+
+
+def _per_surface(values: Any, count: int, width: int, name: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=np.float64)
+    if width > 1 and arr.ndim == 1 and arr.size == width:
+        arr = arr.reshape(1, width)  # one colour for all surfaces
+    try:
+        arr = np.broadcast_to(arr.reshape(-1, width) if width > 1 else arr.reshape(-1),
+                              (count, width) if width > 1 else (count,))
+    except ValueError:
+        raise ParameterError(f"{name} must give one value per isovalue ({count})") from None
+    if not np.all((arr >= 0) & (arr <= 1)):
+        raise ParameterError(f"{name} must be in [0, 1]")
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+class MultiIso:
+    """Host side of several translucent isosurfaces.
+
+    Parameters
+    ----------
+    isos : list of float
+        Isovalues (already checked against the data range).
+    colors : optional
+        One RGB per isovalue (default: evenly spaced on the ``bone`` colormap, in increasing
+        isovalue order).
+    opacity : optional
+        One opacity per isovalue (default 0.5, and 1 for the last).
+    inside : {"high", "low"}
+    shading : Shading, optional
+    effects : SurfaceEffects, optional
+    """
+
+    name = "iso"
+
+    def __init__(self, isos: list[float], colors: Any = None, opacity: Any = None,
+                 inside: str = "high", shading: Shading | None = None,
+                 effects: SurfaceEffects | None = None) -> None:
+        count = len(isos)
+        if colors is None:
+            order = np.argsort(np.argsort(isos))
+            palette = colormap_table(COLORMAPS["bone"], 256)
+            colors = palette[(64 + order * 191 // max(count - 1, 1)).clip(0, 255)]
+        if opacity is None:
+            opacity = [0.5] * (count - 1) + [1.0]
+        self.isos = [float(v) for v in isos]
+        self.shading = shading or Shading()
+        self.params = MultiIsoMode(
+            np.asarray(self.isos, np.float64), _per_surface(colors, count, 3, "colors"),
+            _per_surface(opacity, count, 1, "opacity"), inside == "high",
+            self.shading.as_array(), effects.as_array() if effects else NO_EFFECTS)
+
+    def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
+        """Flags of the blocks that can hold any of the isovalues."""
+        return (*hierarchy.flags_for([(v, v) for v in self.isos]), np.zeros(0))
+
+    @staticmethod
+    def state(height: int, width: int) -> tuple:
+        """Per-pixel state arrays."""
+        return (np.empty((height, width, 4)), np.empty((height, width)),
+                np.empty((height, width, 3)), np.empty((height, width), np.int8),
+                np.empty((height, width), np.int32), np.empty((height, width, 2)))
+
+    @staticmethod
+    def output(height: int, width: int) -> tuple:
+        """Output buffers: rgba, depth, position, normal, face, layers."""
+        return (np.empty((height, width, 4), np.float32), np.empty((height, width)),
+                np.empty((height, width, 3)), np.empty((height, width, 3), np.float32),
+                np.empty((height, width), np.int8), np.empty((height, width), np.int32))
+
+    def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
+        """The Frame; ``stats["mean_layers"]`` counts the crossings composited per pixel."""
+        rgba, depth, position, normal, face, layers = out
+        stats.update(iso=list(self.isos), mean_layers=float(layers.mean()))
+        return Frame(rgba, depth, position, normal, face, *counters, stats)
+
+    combine = staticmethod(combine_multi_iso)

@@ -21,7 +21,7 @@ import math
 
 from .._jit import jit
 
-__all__ = ["cubic_first_root", "quadratic_roots", "horner3"]
+__all__ = ["cubic_first_root", "quadratic_roots", "horner3", "cubic_roots_in_unit", "cubic_max"]
 
 _NEWTON_MAX_ITERATIONS = 80
 
@@ -142,3 +142,58 @@ def cubic_first_root(c3: float, c2: float, c1: float, c0: float, lo: float, hi: 
             return _refine_bracketed(c3, c2, c1, c0, a, b, ga, gb)
         a, ga = b, gb
     return math.nan
+
+
+@jit(inline="always")
+def cubic_roots_in_unit(c3: float, c2: float, c1: float, c0: float, out, start: int) -> int:
+    """Write the roots in ``[0, 1]`` of the cubic, increasing, to ``out[start:]``; return count.
+
+    The cubic is split at the roots of its derivative into monotone pieces, each holding at most
+    one root (found by :func:`cubic_first_root`). A double root without a sign change counts only
+    when the cubic is exactly 0 there (the tangency rule above).
+    """
+    count, e0, e1 = quadratic_roots(3.0 * c3, 2.0 * c2, c1)
+    found = 0
+    a = 0.0
+    last = -1.0
+    for piece in range(3):
+        if piece == 0:
+            if count < 1 or not (0.0 < e0 < 1.0):
+                continue
+            b = e0
+        elif piece == 1:
+            if count < 2 or not (0.0 < e1 < 1.0):
+                continue
+            b = e1
+        else:
+            b = 1.0
+        s = cubic_first_root(c3, c2, c1, c0, a, b)
+        if s == s and s != last:
+            out[start + found] = s
+            found += 1
+            last = s
+        a = b
+    return found
+
+
+@jit(inline="always")
+def cubic_max(c3: float, c2: float, c1: float, c0: float) -> tuple[float, float]:
+    """Largest value of the cubic on ``[0, 1]`` and the ``s`` where it is taken (first of ties).
+
+    The maximum is at an end or at a root of the derivative (a quadratic).
+    """
+    best = c0
+    s_best = 0.0
+    count, e0, e1 = quadratic_roots(3.0 * c3, 2.0 * c2, c1)
+    if count >= 1 and 0.0 < e0 < 1.0:
+        v = horner3(c3, c2, c1, c0, e0)
+        if v > best:
+            best, s_best = v, e0
+    if count >= 2 and 0.0 < e1 < 1.0:
+        v = horner3(c3, c2, c1, c0, e1)
+        if v > best:
+            best, s_best = v, e1
+    v = c3 + c2 + c1 + c0
+    if v > best:
+        best, s_best = v, 1.0
+    return best, s_best

@@ -1,0 +1,161 @@
+"""Frame times of every model in every mode, side by side with an earlier build (issue 9).
+
+Two worker processes, one importing this checkout's splinecast and one importing a baseline
+source tree (``--baseline DIR/src``, e.g. a ``git worktree`` of an earlier commit), prepare the
+same scenes; the driver asks them in turn for the same renders, so both measure under the same
+machine conditions, and reports medians after JIT warm-up and the ratio new / baseline. Cases
+the baseline cannot render (modes it did not support for a model) are measured for the new
+build only.
+
+    python benchmarks/bench_kernels.py --baseline /tmp/old/src [--quick] [--json PATH]
+
+Volumes: Marschner-Lobb 256^3 (iso 0.5) and the MNI152 MRI from ../shared/data (iso 80) when
+present; images 1024x768 (``--quick``: 64^3 and 256x192).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from _machine import describe  # noqa: E402
+
+MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
+
+# The worker: reads one JSON request per line, answers with the times in ms. It uses only the
+# public API that both builds share.
+WORKER = r'''
+import json, sys, time
+import numpy as np
+import splinecast as sc
+
+volumes, scenes = {}, {}
+
+def volume(name, size):
+    if name not in volumes:
+        volumes[name] = sc.demo("marschner-lobb", size=size) if name == "ml" else sc.read(name)
+    return volumes[name]
+
+for line in sys.stdin:
+    req = json.loads(line)
+    vol = volume(req["volume"], req["size"])
+    key = (req["volume"], req["model"])
+    if key not in scenes:
+        scenes[key] = sc.Scene(vol, model=req["model"])
+    scene = scenes[key]
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=25, size=tuple(req["image"]))
+    kwargs = dict(req["kwargs"])
+    if "tf" in kwargs:
+        kwargs["tf"] = sc.TransferFunction.from_dict(kwargs["tf"])
+    try:
+        scene.render(cam, **kwargs)  # warm-up (compilation, isovalue classification)
+        times = []
+        for _ in range(req["repeats"]):
+            start = time.perf_counter()
+            scene.render(cam, **kwargs)
+            times.append((time.perf_counter() - start) * 1e3)
+        print(json.dumps({"ms": times}), flush=True)
+    except Exception as exc:  # a mode the build does not support
+        print(json.dumps({"error": f"{type(exc).__name__}: {exc}"}), flush=True)
+'''
+
+
+class Worker:
+    """One splinecast build in a subprocess."""
+
+    def __init__(self, src: str | None) -> None:
+        env = dict(os.environ)
+        if src:
+            env["PYTHONPATH"] = src
+        self.proc = subprocess.Popen([sys.executable, "-c", WORKER], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True, env=env)
+
+    def ask(self, request: dict) -> dict:
+        self.proc.stdin.write(json.dumps(request) + "\n")
+        self.proc.stdin.flush()
+        return json.loads(self.proc.stdout.readline())
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def _cases(quick: bool) -> list[dict]:
+    ml = {"volume": "ml", "size": 64 if quick else 256, "iso": 0.5, "tf": {
+        "opacity": [[0.3, 0.0], [0.5, 0.4], [0.7, 0.0]], "domain": [0.0, 1.0],
+        "colormap": "viridis"}}
+    vols = [ml]
+    if MRI.exists() and not quick:
+        vols.append({"volume": str(MRI), "size": 0, "iso": 80.0, "tf": {
+            "opacity": [[40.0, 0.0], [90.0, 0.05], [140.0, 0.3]], "domain": [0.0, 255.0],
+            "colormap": "bone"}})
+    image = [256, 192] if quick else [1024, 768]
+    cases = []
+    for v in vols:
+        iso, tf = v["iso"], v["tf"]
+        spread = 0.1 if v["volume"] == "ml" else 30.0
+        for model in ("trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31"):
+            cases.append({**v, "model": model, "mode": "iso", "kwargs": {"iso": iso}})
+        for model in ("trilinear", "bspline3", "s31"):
+            cases.append({**v, "model": model, "mode": "mip", "kwargs": {"mode": "mip"}})
+            cases.append({**v, "model": model, "mode": "dvr", "kwargs": {"mode": "dvr", "tf": tf}})
+            cases.append({**v, "model": model, "mode": "multi-iso",
+                          "kwargs": {"iso": [iso - spread, iso, iso + spread]}})
+        for c in cases:
+            c["image"] = image
+    return cases
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", help="src folder of the baseline build")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--json", default=str(HERE / "results" / "kernels.json"))
+    args = ap.parse_args()
+    repeats = 3 if args.quick else args.repeats
+    new = Worker(None)
+    old = Worker(args.baseline) if args.baseline else None
+    rows = []
+    for case in _cases(args.quick):
+        req = {k: case[k] for k in ("volume", "size", "model", "image", "kwargs")}
+        req["repeats"] = repeats
+        # Interleave: the builds take turns, so both see the same machine.
+        a = new.ask(req)
+        b = old.ask(req) if old else {"error": "no baseline"}
+        row = {"volume": "ML 256^3" if case["volume"] == "ml" else "MRI", "model": case["model"],
+               "mode": case["mode"], "new_ms": statistics.median(a["ms"]) if "ms" in a else None,
+               "new_error": a.get("error"),
+               "base_ms": statistics.median(b["ms"]) if "ms" in b else None,
+               "base_error": b.get("error")}
+        if row["new_ms"] and row["base_ms"]:
+            row["ratio"] = row["new_ms"] / row["base_ms"]
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    new.close()
+    if old:
+        old.close()
+    out = {"machine": describe(), "quick": args.quick, "repeats": repeats, "rows": rows}
+    path = Path(args.json)
+    path.write_text(json.dumps(out, indent=1))
+    lines = [f"# Frame times, this build vs baseline ({'quick' if args.quick else 'full'})", "",
+             f"Machine: {out['machine']}", "",
+             "| volume | model | mode | new ms | baseline ms | new / baseline |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        base = f"{r['base_ms']:.1f}" if r["base_ms"] else "n/a"
+        ratio = f"{r['ratio']:.3f}" if r.get("ratio") else "-"
+        newv = f"{r['new_ms']:.1f}" if r["new_ms"] else r["new_error"]
+        lines.append(f"| {r['volume']} | {r['model']} | {r['mode']} | {newv} | {base} | {ratio} |")
+    path.with_suffix(".md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,172 @@
+"""The interface every model offers the render modes: a ray walked cell by cell, in pieces.
+
+A model prepares its data once into a *kernel grid*: a named tuple of arrays and numbers whose
+class identifies the model (``TrilinearGrid``, ``BSplineGrid``, ``S31Grid``, ``QSSGrid``). The
+grid covers a box of cells, the whole volume or one brick with its ghost layers; cell ``c`` of
+the grid depends on ``array[c .. c + support]`` per axis. The render layer walks a ray through
+the grid's cells (``splinecast.accel.traversal``) and calls the functions below on every cell it
+does not leap over; Numba resolves each call at compile time from the grid's class, so one
+driver serves every model without a function-typed argument (which its cache cannot store).
+
+Per cell, in the order a driver uses them:
+
+``cell_load(grid, scratch, i, j, k) -> ctx``
+    Whatever the model reads once per cell, as a tuple whose first two entries are a
+    conservative range ``(lo, hi)`` of the reconstruction on the cell (``lo > hi``: the cell
+    cannot contribute).
+``cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags) -> n``
+    The segment ``a + s e`` (``s in [0, 1]``, local cell coordinates in ``[0, 1]^3``) cut into
+    ``n`` pieces at ``cuts[0] = 0 < ... < cuts[n] = 1`` with a model tag per piece (the
+    tetrahedron for the type-6 splines; trilinear and B-splines have one piece).
+``piece_range(grid, scratch, ctx, i, j, k, tag) -> (lo, hi)``
+    A conservative range of the piece's polynomial, before it is built.
+``piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz) -> poly``
+    The reconstruction along the piece from local point ``a`` to ``b``, a univariate polynomial
+    of :mod:`splinecast.roots.pieces` in the model's natural form.
+``gradient(grid, scratch, ctx, i, j, k, tag, x, y, z) -> (gx, gy, gz)``
+    Gradient at local point ``(x, y, z)`` of the cell, per unit of the grid's index space.
+``value_gradient_at(grid, scratch, x, y, z) -> (v, gx, gy, gz)``
+    Value and gradient at any point of the grid's traversal space (clamped into the grid; the
+    sampled methods' bisection uses it).
+
+And once per grid: ``cell_count(grid) -> (nx, ny, nz)`` and ``new_scratch(grid)`` (per-thread
+buffers, allocated once per band of rows). A model module defines these for its grid class and
+registers them with :func:`register`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from numba.extending import overload
+
+__all__ = [
+    "register", "cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range",
+    "piece_poly", "gradient", "value_gradient_at",
+]
+
+#: Kernel grid class -> {hook name: compiled function}.
+_HOOKS: dict[type, dict[str, Any]] = {}
+_NAMES = ("cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range", "piece_poly",
+          "gradient", "value_gradient_at")
+
+
+def register(grid_class: type, **hooks: Any) -> None:
+    """Register a model's compiled functions for its kernel grid class (all of :data:`_NAMES`)."""
+    missing = set(_NAMES) - set(hooks)
+    if missing:
+        raise TypeError(f"{grid_class.__name__} is missing {', '.join(sorted(missing))}")
+    _HOOKS[grid_class] = dict(hooks)
+
+
+def _impl(grid: Any, name: str) -> Any:
+    cls = getattr(grid, "instance_class", None)
+    return _HOOKS[cls][name] if cls in _HOOKS else None
+
+
+# Each hook below is a stub for Python and an overload for compiled code that forwards to the
+# registered implementation of the grid's class (inlined, so the call costs nothing).
+
+def cell_count(grid):
+    """Cells per axis of the grid (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(cell_count)
+def _cell_count(grid):
+    f = _impl(grid, "cell_count")
+    return None if f is None else (lambda grid: f(grid))
+
+
+def new_scratch(grid):
+    """Per-thread scratch buffers of the model (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(new_scratch)
+def _new_scratch(grid):
+    f = _impl(grid, "new_scratch")
+    return None if f is None else (lambda grid: f(grid))
+
+
+def cell_load(grid, scratch, i, j, k):
+    """Per-cell context, ``ctx[0], ctx[1]`` a conservative value range (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(cell_load)
+def _cell_load(grid, scratch, i, j, k):
+    f = _impl(grid, "cell_load")
+    return None if f is None else (lambda grid, scratch, i, j, k: f(grid, scratch, i, j, k))
+
+
+def cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    """Cut a cell's segment into pieces; returns their number (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(cell_pieces)
+def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    f = _impl(grid, "cell_pieces")
+    if f is None:
+        return None
+
+    def impl(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+        return f(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags)
+    return impl
+
+
+def piece_range(grid, scratch, ctx, i, j, k, tag):
+    """Conservative value range of a piece (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(piece_range)
+def _piece_range(grid, scratch, ctx, i, j, k, tag):
+    f = _impl(grid, "piece_range")
+    if f is None:
+        return None
+    return lambda grid, scratch, ctx, i, j, k, tag: f(grid, scratch, ctx, i, j, k, tag)
+
+
+def piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+    """The piece's polynomial from local point ``a`` to ``b`` (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(piece_poly)
+def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+    f = _impl(grid, "piece_poly")
+    if f is None:
+        return None
+
+    def impl(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+        return f(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz)
+    return impl
+
+
+def gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
+    """Index-space gradient at a local point of a cell's piece (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(gradient)
+def _gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
+    f = _impl(grid, "gradient")
+    if f is None:
+        return None
+
+    def impl(grid, scratch, ctx, i, j, k, tag, x, y, z):
+        return f(grid, scratch, ctx, i, j, k, tag, x, y, z)
+    return impl
+
+
+def value_gradient_at(grid, scratch, x, y, z):
+    """Value and gradient at a point of the grid's traversal space (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(value_gradient_at)
+def _value_gradient_at(grid, scratch, x, y, z):
+    f = _impl(grid, "value_gradient_at")
+    return None if f is None else (lambda grid, scratch, x, y, z: f(grid, scratch, x, y, z))

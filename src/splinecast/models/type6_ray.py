@@ -1,0 +1,239 @@
+"""Ray pieces of the type-6 splines (models ``s31`` and ``qss``): cubes cut into tetrahedra.
+
+What is particular to these models (the interface is :mod:`.pieces`):
+
+* **Dual grid.** Cube ``(i, j, k)`` is centred on voxel ``(i, j, k)``. The traversal space is
+  voxel index + 1/2, where cube ``i`` spans ``[i, i + 1]``, so the shared integer traversal walks
+  cubes unchanged; local cube coordinates relative to the cube centre are local cell coordinates
+  minus 1/2.
+* **Tetrahedra in order.** Inside a cube the ray segment is cut where it crosses the six planes
+  ``x = +-y``, ``x = +-z``, ``y = +-z`` through the cube centre that bound the 24 tetrahedra; each
+  piece lies in one tetrahedron (found from its midpoint), and pieces come front to back.
+* **Ray restriction.** On a piece, the patch is a univariate Bernstein polynomial of the patch's
+  degree, obtained by blossoming at the piece's end points (:func:`.type6.ray_bernstein3`).
+* **Coefficients on demand.** A cube's coefficients are computed from its 27 data values by the
+  model's verified averaging chain into a small per-thread cache the first time a ray needs them,
+  so the neighbouring pixels of a tile that cross the same cube reuse them; with
+  ``precompute=True`` and an isovalue classification they are read from the stored rows.
+* **Ranges.** Without a classification a cube's range is its exact coefficient range (computed
+  once per volume) and a tetrahedron's the range of its own coefficients; with the isovalue
+  classification of :mod:`splinecast.accel.active_cells` (iso mode) a cube's slot and 24-bit
+  tetrahedron mask replace both (inactive cubes and tetrahedra are empty, active ones unbounded:
+  the classification already tested them against the isovalue).
+* **Normals** come from the de Casteljau directional derivatives of the piece's patch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import jit
+from ..roots.pieces import Bernstein2, Bernstein3
+from .pieces import register
+from .type6 import (
+    QSSGrid,
+    S31Grid,
+    barycentric,
+    gather27,
+    ray_bernstein2,
+    ray_bernstein3,
+    run_program1,
+    value_gradient,
+)
+from .type6_geometry import tet_of_point
+
+__all__ = ["split_cube_segment", "CACHE_ENTRIES"]
+
+#: Cubes a thread keeps computed (128 x 214 float64 = 219 KB for S31: fits L2).
+CACHE_ENTRIES = 128
+
+
+@jit(inline="always")
+def _plane_cut(a_u: float, a_v: float, e_u: float, e_v: float, sign: float,
+               cuts: np.ndarray, n: int) -> int:
+    """Append the segment parameter where ``u = sign * v`` is crossed, if inside (0, 1)."""
+    g0 = a_u - sign * a_v
+    ge = e_u - sign * e_v
+    if ge != 0.0:
+        s = -g0 / ge
+        if 0.0 < s < 1.0:
+            cuts[n] = s
+            return n + 1
+    return n
+
+
+@jit(inline="always")
+def split_cube_segment(ax: float, ay: float, az: float, ex: float, ey: float, ez: float,
+                       cuts: np.ndarray) -> int:
+    """Sorted break points of the segment ``a + s e`` (``s`` in [0, 1]) at tetrahedron faces.
+
+    Fills ``cuts[0..n]`` with ``0, s_1, ..., 1`` (increasing) and returns ``n``, the number of
+    pieces. ``a`` and ``e`` are in local cube coordinates (relative to the cube centre).
+    """
+    cuts[0] = 0.0
+    n = 1
+    n = _plane_cut(ax, ay, ex, ey, 1.0, cuts, n)
+    n = _plane_cut(ax, ay, ex, ey, -1.0, cuts, n)
+    n = _plane_cut(ax, az, ex, ez, 1.0, cuts, n)
+    n = _plane_cut(ax, az, ex, ez, -1.0, cuts, n)
+    n = _plane_cut(ay, az, ey, ez, 1.0, cuts, n)
+    n = _plane_cut(ay, az, ey, ez, -1.0, cuts, n)
+    # Insertion sort of at most six values.
+    for a in range(2, n):
+        v = cuts[a]
+        b = a - 1
+        while b >= 1 and cuts[b] > v:
+            cuts[b + 1] = cuts[b]
+            b -= 1
+        cuts[b + 1] = v
+    cuts[n] = 1.0
+    return n
+
+
+@jit()
+def _cell_count(grid):
+    p = grid.pad
+    return p.shape[0] - 2, p.shape[1] - 2, p.shape[2] - 2
+
+
+@jit()
+def _new_scratch(grid):
+    keys = np.full(CACHE_ENTRIES, -1, np.int64)
+    cache = np.empty((CACHE_ENTRIES, grid.n_slots))
+    return keys, cache, np.empty(grid.tet_points.shape[1]), np.empty(10), np.empty(4)
+
+
+@jit()
+def _cell_load(grid, scratch, i, j, k):
+    """``(lo, hi, slot, tetrahedron mask)`` of cube ``(i, j, k)``."""
+    if grid.slot.shape[0] > 0:
+        s = np.int64(grid.slot[i, j, k])
+        if s < 0:
+            return math.inf, -math.inf, s, np.int64(0)
+        return -math.inf, math.inf, s, np.int64(grid.tet_mask[s])
+    return (np.float64(grid.cube_lo[i, j, k]), np.float64(grid.cube_hi[i, j, k]), np.int64(-1),
+            np.int64(0xFFFFFF))
+
+
+@jit(inline="always")
+def _load_tet(grid, scratch, slot, i, j, k, tet):
+    """The coefficients of tetrahedron ``tet`` of cube ``(i, j, k)`` into ``scratch[2]``."""
+    c = scratch[2]
+    n_local = grid.tet_points.shape[1]
+    if slot >= 0 and grid.coeffs.shape[0] > 0:
+        for n in range(n_local):
+            c[n] = grid.coeffs[slot, grid.tet_points[tet, n]]
+        return c
+    keys, cache = scratch[0], scratch[1]
+    # Direct-mapped by the low bits of the cube index: distinct within any 4 x 4 x 8 cubes.
+    entry = ((i & 3) << 5) | ((j & 3) << 3) | (k & 7)
+    ny, nz = grid.pad.shape[1] - 2, grid.pad.shape[2] - 2
+    lin = (np.int64(i) * ny + j) * nz + k
+    buf = cache[entry]
+    if keys[entry] != lin:
+        gather27(grid.pad, i, j, k, buf)
+        run_program1(buf, grid.targets, grid.ptr, grid.sources, grid.weights)
+        keys[entry] = lin
+    for n in range(n_local):
+        c[n] = buf[27 + grid.tet_points[tet, n]]
+    return c
+
+
+@jit()
+def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    ax -= 0.5
+    ay -= 0.5
+    az -= 0.5
+    n = split_cube_segment(ax, ay, az, ex, ey, ez, cuts)
+    for p in range(n):
+        sm = 0.5 * (cuts[p] + cuts[p + 1])
+        tags[p] = tet_of_point(ax + sm * ex, ay + sm * ey, az + sm * ez)
+    return n
+
+
+@jit()
+def _piece_range(grid, scratch, ctx, i, j, k, tag):
+    if (ctx[3] >> tag) & 1 == 0:
+        return math.inf, -math.inf
+    if ctx[2] >= 0:
+        return -math.inf, math.inf  # classified active for the isovalue
+    c = _load_tet(grid, scratch, ctx[2], i, j, k, tag)
+    lo = c[0]
+    hi = c[0]
+    for n in range(1, c.shape[0]):
+        lo = min(lo, c[n])
+        hi = max(hi, c[n])
+    return lo, hi
+
+
+@jit()
+def _piece_poly3(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+    c = _load_tet(grid, scratch, ctx[2], i, j, k, tag)
+    a0, a1, a2, a3 = barycentric(grid.bary, tag, ax - 0.5, ay - 0.5, az - 0.5)
+    e0, e1, e2, e3 = barycentric(grid.bary, tag, bx - 0.5, by - 0.5, bz - 0.5)
+    u0, u1, u2, u3 = ray_bernstein3(c, a0, a1, a2, a3, e0, e1, e2, e3)
+    return Bernstein3(u0, u1, u2, u3, grid.newton)
+
+
+@jit()
+def _piece_poly2(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+    c = _load_tet(grid, scratch, ctx[2], i, j, k, tag)
+    a0, a1, a2, a3 = barycentric(grid.bary, tag, ax - 0.5, ay - 0.5, az - 0.5)
+    e0, e1, e2, e3 = barycentric(grid.bary, tag, bx - 0.5, by - 0.5, bz - 0.5)
+    u0, u1, u2 = ray_bernstein2(c, a0, a1, a2, a3, e0, e1, e2, e3)
+    return Bernstein2(u0, u1, u2)
+
+
+@jit()
+def _gradient_deg(grid, scratch, slot, i, j, k, tag, x, y, z, degree):
+    c = _load_tet(grid, scratch, slot, i, j, k, tag)
+    _, gx, gy, gz = value_gradient(c, degree, grid.steps, grid.bary, tag, x - 0.5, y - 0.5,
+                                   z - 0.5, scratch[3], scratch[4])
+    return gx, gy, gz
+
+
+@jit()
+def _gradient3(grid, scratch, ctx, i, j, k, tag, x, y, z):
+    return _gradient_deg(grid, scratch, ctx[2], i, j, k, tag, x, y, z, 3)
+
+
+@jit()
+def _gradient2(grid, scratch, ctx, i, j, k, tag, x, y, z):
+    return _gradient_deg(grid, scratch, ctx[2], i, j, k, tag, x, y, z, 2)
+
+
+@jit()
+def _value_gradient_deg(grid, scratch, x, y, z, degree):
+    nx, ny, nz = _cell_count(grid)
+    # Clamp into the spline's box, then find the cube and the point relative to its centre.
+    x = min(max(x, 0.0), float(nx))
+    y = min(max(y, 0.0), float(ny))
+    z = min(max(z, 0.0), float(nz))
+    i = min(int(math.floor(x)), nx - 1)
+    j = min(int(math.floor(y)), ny - 1)
+    k = min(int(math.floor(z)), nz - 1)
+    qx, qy, qz = x - i - 0.5, y - j - 0.5, z - k - 0.5
+    tet = tet_of_point(qx, qy, qz)
+    c = _load_tet(grid, scratch, np.int64(-1), i, j, k, tet)
+    return value_gradient(c, degree, grid.steps, grid.bary, tet, qx, qy, qz, scratch[3],
+                          scratch[4])
+
+
+@jit()
+def _value_gradient_at3(grid, scratch, x, y, z):
+    return _value_gradient_deg(grid, scratch, x, y, z, 3)
+
+
+@jit()
+def _value_gradient_at2(grid, scratch, x, y, z):
+    return _value_gradient_deg(grid, scratch, x, y, z, 2)
+
+
+register(S31Grid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
+         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly3,
+         gradient=_gradient3, value_gradient_at=_value_gradient_at3)
+register(QSSGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
+         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly2,
+         gradient=_gradient2, value_gradient_at=_value_gradient_at2)

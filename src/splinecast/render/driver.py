@@ -1,0 +1,266 @@
+"""The one pixel loop: every model's ray pieces through every mode, on any grid.
+
+:func:`trace` is the segment entry point of the renderer. It traces the rays of an image (or of
+a tile of it, see :meth:`splinecast.Camera.tile`) through one *grid*: a model's kernel grid
+(:mod:`splinecast.models.pieces`) covering the whole volume or one brick of it with its ghost
+layers, placed in the volume by ``geom``:
+
+====================  ========================================================================
+``geom[0:3]``         world position of voxel ``(0, 0, 0)`` of the grid's level
+``geom[3:6]``         the level's voxel spacing (level 0's spacing times the level's scale)
+``geom[6]``           the model's shift: the traversal walks cells in ``voxel index + shift``
+``geom[7:10]``        the grid's index offset: its cell 0 is cell ``offset`` of the level
+``geom[10:16]``       the rendered domain in the level's voxel index space (lo xyz, hi xyz)
+``geom[16:19]``       the level's cells per axis (a grid that ends before them has neighbours)
+====================  ========================================================================
+
+Each ray is clipped by the clip ``planes``, the domain and, when ``t_range`` is not empty, its
+own parameter interval ``t_range[row, col]``; the ray parameter is always the world distance
+along the unit ray, so depths agree between grids and levels. The mode's per-ray state comes in
+and goes out through the mode's state arrays (``load`` / ``store``), so a ray can be traced
+through several grids in turn, front to back, exactly as through one: the sample positions of
+the sampled methods and of DVR are anchored at the ray's entry into the domain, not into the
+grid. With ``final`` the mode writes the pixel's outputs at the end.
+
+Rendering a whole volume is one call (``load=False, store=False, final=True``). Rendering it
+brick by brick: reset the state arrays (:func:`reset_state`), call :func:`trace` for the bricks
+in front-to-back order per ray (``load=True, store=True``), then :func:`finalize`. Bricks traced
+independently (on other workers) give partial states that the mode's ``combine`` merges in depth
+order. Models and modes are resolved at compile time from the grid's and the mode's tuple
+classes: one loop, compiled once per (model, mode) pair and cached on disk.
+
+Work is spread over threads in bands of ``band_rows`` rows, in the order ``bands`` (a
+permutation that mixes busy and empty parts of the image), each band traversed in tiles of
+``tile`` columns so neighbouring rays reuse the model's per-thread caches.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._jit import jit
+from ..accel.traversal import walk_begin, walk_step
+from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
+from .clipping import clip_interval
+from .mode_api import (
+    consume,
+    done,
+    finish,
+    mode_scratch,
+    on_skip,
+    ray_begin,
+    ray_end,
+    skip_size,
+    state_load,
+    state_new,
+    state_store,
+    wants,
+)
+from .rays import pixel_ray
+
+__all__ = ["trace", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
+
+#: Length of the ``geom`` array.
+GEOM_SIZE = 19
+
+
+def band_order(n_bands: int) -> np.ndarray:
+    """A permutation of bands in which every contiguous run is spread over the whole image.
+
+    Numba hands each thread a contiguous range of the parallel loop; ordering bands by the
+    fractional part of ``band * golden ratio`` gives every thread a similar mix of busy and
+    empty bands.
+    """
+    key = (np.arange(n_bands) * 0.6180339887498949) % 1.0
+    return np.argsort(key, kind="stable").astype(np.int64)
+
+
+@jit(inline="always")
+def _slab(o: float, d: float, lo: float, hi: float, t0: float, t1: float) -> tuple:
+    if d == 0.0:
+        if o < lo or o > hi:
+            return math.inf, -math.inf
+        return t0, t1
+    ta = (lo - o) / d
+    tb = (hi - o) / d
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@jit(inline="always")
+def _pixel_ray(basis, geom, row, col, width, height):
+    """World ray of a pixel and the same ray in the level's voxel index space."""
+    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+    sx, sy, sz = geom[3], geom[4], geom[5]
+    return (wx, wy, wz, ux, uy, uz, ux / sx, uy / sy, uz / sz,
+            (wx - geom[0]) / sx, (wy - geom[1]) / sy, (wz - geom[2]) / sz)
+
+
+@jit()
+def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store, final,
+                 scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
+    """Trace one pixel's ray; returns (cells visited, cells tested, blocks skipped)."""
+    wx, wy, wz, ux, uy, uz, dx, dy, dz, vx, vy, vz = _pixel_ray(basis, geom, row, col, width,
+                                                                height)
+    t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
+    t0, t1 = _slab(vx, dx, geom[10], geom[13], t0, t1)
+    t0, t1 = _slab(vy, dy, geom[11], geom[14], t0, t1)
+    t0, t1 = _slab(vz, dz, geom[12], geom[15], t0, t1)
+    anchor = t0  # where the ray enters the rendered domain: the same for every grid
+    if t_range.shape[0] > 0:
+        t0 = max(t0, t_range[row, col, 0])
+        t1 = min(t1, t_range[row, col, 1])
+    ox = vx + geom[6] - geom[7]
+    oy = vy + geom[6] - geom[8]
+    oz = vz + geom[6] - geom[9]
+    # A ray lying in the plane between this grid and the next one belongs to the next one (the
+    # traversal's rule for cell faces), so bricks never trace the same stretch twice.
+    if ((dx == 0.0 and ox == ncx and geom[7] + ncx < geom[16])
+            or (dy == 0.0 and oy == ncy and geom[8] + ncy < geom[17])
+            or (dz == 0.0 and oz == ncz and geom[9] + ncz < geom[18])):
+        t1 = -math.inf
+    ray = (wx, wy, wz, ux, uy, uz, ox, oy, oz, dx, dy, dz, geom[3], geom[4], geom[5], anchor)
+    st = state_load(mode, state, row, col) if load else state_new(mode)
+    visited = 0
+    tested = 0
+    skipped = 0
+    if t0 <= t1 and not done(mode, st):
+        inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
+        if inside:
+            st = ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t, t_far)
+        while inside:
+            size = skip_size(mode, blocks, ci, cj, ck, st)
+            t_end, inside, ni, nj, nk, t_next = walk_step(
+                ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, max(size, 1)
+            )
+            if size > 0:
+                skipped += 1
+                st = on_skip(mode, grid, scr, st, ray, t, t_end, math.nan, math.nan)
+            elif t_end >= t:
+                visited += 1
+                ctx = cell_load(grid, scr, ci, cj, ck)
+                if wants(mode, st, ctx[0], ctx[1]):
+                    tested += 1
+                    ax = ox + t * dx - ci
+                    ay = oy + t * dy - cj
+                    az = oz + t * dz - ck
+                    ex = ox + t_end * dx - ci - ax
+                    ey = oy + t_end * dy - cj - ay
+                    ez = oz + t_end * dz - ck - az
+                    n = cell_pieces(grid, scr, ctx, ci, cj, ck, ax, ay, az, ex, ey, ez, cuts, tags)
+                    for p in range(n):
+                        s0 = cuts[p]
+                        s1 = cuts[p + 1]
+                        tp0 = t + s0 * (t_end - t)
+                        tp1 = t + s1 * (t_end - t)
+                        tag = tags[p]
+                        lo, hi = piece_range(grid, scr, ctx, ci, cj, ck, tag)
+                        if not wants(mode, st, lo, hi):
+                            st = on_skip(mode, grid, scr, st, ray, tp0, tp1, lo, hi)
+                            continue
+                        pax, pay, paz = ax + s0 * ex, ay + s0 * ey, az + s0 * ez
+                        pbx, pby, pbz = ax + s1 * ex, ay + s1 * ey, az + s1 * ez
+                        poly = piece_poly(grid, scr, ctx, ci, cj, ck, tag, pax, pay, paz,
+                                          pbx, pby, pbz)
+                        st = consume(mode, mscr, grid, scr, ctx, ci, cj, ck, tag, poly, lo, hi,
+                                     tp0, tp1, pax, pay, paz, pbx, pby, pbz, ray, st)
+                        if done(mode, st):
+                            break
+                else:
+                    st = on_skip(mode, grid, scr, st, ray, t, t_end, ctx[0], ctx[1])
+                if done(mode, st):
+                    break
+            ci, cj, ck, t = ni, nj, nk, t_next
+        if final:
+            st = ray_end(mode, grid, scr, st, ray, t_far)
+    if store:
+        state_store(mode, state, row, col, st)
+    if final:
+        finish(mode, out, row, col, st, ray)
+    return visited, tested, skipped
+
+
+@jit()
+def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, band, band_rows,
+                tile, load, store, final, visited, tested, skipped):
+    """Trace the pixels of one band of rows, tile by tile (one thread's work item)."""
+    height, width = visited.shape
+    ncx, ncy, ncz = cell_count(grid)
+    scr = new_scratch(grid)
+    mscr = mode_scratch(mode)
+    cuts = np.empty(8)
+    tags = np.empty(8, np.int64)
+    r0 = band * band_rows
+    r1 = min(height, r0 + band_rows)
+    for c0 in range(0, width, tile):
+        c1 = min(width, c0 + tile)
+        for row in range(r0, r1):
+            for col in range(c0, c1):
+                nv, nt, ns = _trace_pixel(
+                    grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
+                    final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz,
+                )
+                visited[row, col] += nv
+                tested[row, col] += nt
+                skipped[row, col] += ns
+
+
+@jit(parallel=True)
+def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
+          load, store, final, visited, tested, skipped):
+    """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
+
+    Parameters (all prepared by the host side, :mod:`.segment`)
+    ----------
+    grid : named tuple
+        The model's kernel grid.
+    mode : named tuple
+        The mode's parameters.
+    blocks : tuple of arrays
+        The mode's view of the grid's block hierarchy (flags or block maxima).
+    state, out : tuples of arrays
+        The mode's per-pixel state arrays and output buffers.
+    basis : ndarray
+        :meth:`Camera.pixel_basis`.
+    geom : ndarray, shape (19,)
+        Placement of the grid (module docstring).
+    planes : ndarray, shape (m, 4)
+        Clip planes.
+    t_range : ndarray, shape (height, width, 2) or (0, 0, 2)
+        Per-ray parameter interval, or none.
+    bands : ndarray of int64
+        Order of the bands of ``band_rows`` rows; ``tile`` columns per tile.
+    load, store, final : bool
+        Read the state arrays at the start, write them at the end, write the outputs.
+    visited, tested, skipped : ndarray of int32, shape (height, width)
+        Per-ray statistics, incremented.
+    """
+    # The parallel loop only hands out bands: its body stays a single call, which keeps
+    # Numba's parallel passes (and the compile time) small.
+    for b in prange(bands.shape[0]):
+        _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands[b],
+                    band_rows, tile, load, store, final, visited, tested, skipped)
+
+
+@jit(parallel=True)
+def finalize(mode, state, out, basis):
+    """Write every pixel's outputs from the state left by the last segment."""
+    height = out[0].shape[0]
+    width = out[0].shape[1]
+    for row in prange(height):
+        for col in range(width):
+            wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+            ray = (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+            finish(mode, out, row, col, state_load(mode, state, row, col), ray)
+
+
+@jit(parallel=True)
+def reset_state(mode, state, height, width):
+    """Fill the state arrays with fresh states (no segment traced yet)."""
+    for row in prange(height):
+        for col in range(width):
+            state_store(mode, state, row, col, state_new(mode))

@@ -1,0 +1,228 @@
+"""The interface every render mode offers the driver: how ray pieces become a pixel.
+
+A mode's parameters are a named tuple whose class identifies the mode (``IsoMode``,
+``MultiIsoMode``, ``MipMode``, ``DvrMode``). Its per-ray state is a tuple of numbers carried
+along the ray (first hit so far, running maximum, accumulated colour and opacity, crossings so
+far); between calls of the driver (one brick after another) it lives in the mode's *state
+arrays*. The driver (:mod:`.driver`) calls, per ray:
+
+``state_new(mode)`` or ``state_load(mode, state, row, col)`` -> ``st``
+    A fresh state, or the one left by an earlier segment of the same ray.
+``ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1)`` -> ``st``
+    Once per ray and grid, before the walk (MIP takes a lower bound of its answer here).
+``skip_size(mode, blocks, i, j, k, st)`` -> ``int``
+    Edge in cells of the block around cell ``(i, j, k)`` to leap over, 0 to process the cell.
+``wants(mode, st, lo, hi)`` -> ``bool``
+    Whether a cell or piece whose values lie in ``[lo, hi]`` can change the result.
+``on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi)`` -> ``st``
+    A stretch of the ray left out (a leapt block, ``lo`` NaN; or a cell or piece with range
+    ``[lo, hi]`` that ``wants`` refused); only the sampled methods take notice.
+``consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1, ax, ay, az,
+bx, by, bz, ray, st)`` -> ``st``
+    A piece: ray parameters ``[t0, t1]``, the model's polynomial ``poly`` in ``s in [0, 1]``,
+    local cell points ``a`` (entry) and ``b`` (exit). Gradients come from
+    :func:`splinecast.models.pieces.gradient` (resolved for the grid's model at compile time).
+``done(mode, st)`` -> ``bool``
+    Early termination.
+``ray_end(mode, grid, scratch, st, ray, t_far)`` -> ``st``
+    After the walk of the ray's last segment.
+``finish(mode, out, row, col, st, ray)``
+    Writes the pixel's outputs (colour, depth, ...).
+``state_store(mode, state, row, col, st)``
+    Keeps the state for the ray's next segment.
+
+plus ``mode_scratch(mode)`` (per-thread buffers). ``ray`` is the tuple ``(wx, wy, wz, ux, uy,
+uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)``: world origin and unit direction, the same ray in
+the grid's traversal space (``o + t d``, the parameter ``t`` staying the world distance), the
+spacing of the grid's level (index-space gradients are divided by it for world units) and the
+parameter where the ray enters the volume (the sampled methods' and DVR's sample grid starts
+there, so every brick samples at the same places). A mode module registers its functions with
+:func:`register`; each mode also states how two partial results of one ray combine (its
+``combine`` kernel), which is what brick-parallel and distributed compositing use.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from numba.extending import overload
+
+__all__ = [
+    "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
+    "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish",
+]
+
+_HOOKS: dict[type, dict[str, Any]] = {}
+_NAMES = ("state_new", "state_load", "state_store", "mode_scratch", "ray_begin", "skip_size",
+          "wants", "on_skip", "consume", "done", "ray_end", "finish")
+
+
+def register(mode_class: type, **hooks: Any) -> None:
+    """Register a mode's compiled functions for its parameter tuple class (all of them)."""
+    missing = set(_NAMES) - set(hooks)
+    if missing:
+        raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
+    _HOOKS[mode_class] = dict(hooks)
+
+
+def _impl(mode: Any, name: str) -> Any:
+    cls = getattr(mode, "instance_class", None)
+    return _HOOKS[cls][name] if cls in _HOOKS else None
+
+
+# Stubs for Python, overloads for compiled code forwarding to the mode's registered function.
+
+def state_new(mode):
+    """A fresh per-ray state (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(state_new)
+def _state_new(mode):
+    f = _impl(mode, "state_new")
+    return None if f is None else (lambda mode: f(mode))
+
+
+def state_load(mode, state, row, col):
+    """The state a previous segment left for pixel ``(row, col)`` (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(state_load)
+def _state_load(mode, state, row, col):
+    f = _impl(mode, "state_load")
+    return None if f is None else (lambda mode, state, row, col: f(mode, state, row, col))
+
+
+def state_store(mode, state, row, col, st):
+    """Keep the state of pixel ``(row, col)`` for the next segment (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(state_store)
+def _state_store(mode, state, row, col, st):
+    f = _impl(mode, "state_store")
+    if f is None:
+        return None
+    return lambda mode, state, row, col, st: f(mode, state, row, col, st)
+
+
+def mode_scratch(mode):
+    """Per-thread buffers of the mode (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(mode_scratch)
+def _mode_scratch(mode):
+    f = _impl(mode, "mode_scratch")
+    return None if f is None else (lambda mode: f(mode))
+
+
+def ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+    """Per-ray set-up before the walk through one grid (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(ray_begin)
+def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+    f = _impl(mode, "ray_begin")
+    if f is None:
+        return None
+
+    def impl(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+        return f(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1)
+    return impl
+
+
+def skip_size(mode, blocks, i, j, k, st):
+    """Edge of the block to leap over at cell ``(i, j, k)``, 0: process the cell."""
+    raise NotImplementedError
+
+
+@overload(skip_size)
+def _skip_size(mode, blocks, i, j, k, st):
+    f = _impl(mode, "skip_size")
+    return None if f is None else (lambda mode, blocks, i, j, k, st: f(mode, blocks, i, j, k, st))
+
+
+def wants(mode, st, lo, hi):
+    """Whether values in ``[lo, hi]`` can change the result (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(wants)
+def _wants(mode, st, lo, hi):
+    f = _impl(mode, "wants")
+    return None if f is None else (lambda mode, st, lo, hi: f(mode, st, lo, hi))
+
+
+def on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    """A stretch of the ray left out by skipping (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(on_skip)
+def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    f = _impl(mode, "on_skip")
+    if f is None:
+        return None
+
+    def impl(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+        return f(mode, grid, scratch, st, ray, t0, t1, lo, hi)
+    return impl
+
+
+def consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
+            ax, ay, az, bx, by, bz, ray, st):
+    """Take one ray piece into the state (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(consume)
+def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
+             ax, ay, az, bx, by, bz, ray, st):
+    f = _impl(mode, "consume")
+    if f is None:
+        return None
+
+    def impl(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
+             ax, ay, az, bx, by, bz, ray, st):
+        return f(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
+                 ax, ay, az, bx, by, bz, ray, st)
+    return impl
+
+
+def done(mode, st):
+    """Whether the ray can stop early (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(done)
+def _done(mode, st):
+    f = _impl(mode, "done")
+    return None if f is None else (lambda mode, st: f(mode, st))
+
+
+def ray_end(mode, grid, scratch, st, ray, t_far):
+    """After the walk of a ray's last segment (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(ray_end)
+def _ray_end(mode, grid, scratch, st, ray, t_far):
+    f = _impl(mode, "ray_end")
+    if f is None:
+        return None
+    return lambda mode, grid, scratch, st, ray, t_far: f(mode, grid, scratch, st, ray, t_far)
+
+
+def finish(mode, out, row, col, st, ray):
+    """Write pixel ``(row, col)``'s outputs from its final state (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(finish)
+def _finish(mode, out, row, col, st, ray):
+    f = _impl(mode, "finish")
+    return None if f is None else (lambda mode, out, row, col, st, ray: f(mode, out, row, col,
+                                                                             st, ray))

@@ -1,0 +1,189 @@
+"""Grids placed in a volume, and the host side of the segment entry point.
+
+A :class:`Grid` is a model's kernel grid (the whole volume, or one brick with the ghost layers
+its support needs) with its own block hierarchy and its placement (:mod:`.driver`). Rendering:
+
+* a whole volume: :func:`render_grid` -- one call of the driver, outputs written directly;
+* a volume cut into bricks (the multiresolution renderer, a distributed worker):
+  :func:`new_state`, then :func:`trace_segment` for each brick (front to back per ray, carrying
+  the state), then :func:`finish_state`; or trace bricks into separate states and merge them in
+  depth order with the mode's ``combine`` (:func:`combine_states`).
+
+A brick of a model is a block of the model's :attr:`prepared` array: the brick owning cells
+``[a, b)`` per axis (of the grid's traversal space) is ``prepared[a : b + support]`` placed at
+``offset = a`` (:func:`brick_grid`). Every model reconstructs inside it without reading its
+neighbours, and a ray traced through the bricks one after the other gives the same hits, values
+and colours as through the whole volume.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..accel.active_cells import CubeBoundHierarchy, block_ranges
+from ..accel.minmax import MinMaxHierarchy
+from ..errors import ParameterError
+from .clipping import NO_PLANES
+from .driver import GEOM_SIZE, band_order, finalize, reset_state, trace
+
+__all__ = ["Grid", "make_grid", "brick_grid", "render_grid", "new_state", "trace_segment",
+           "finish_state", "combine_states", "counters"]
+
+_NO_RANGE = np.zeros((0, 0, 2))
+
+
+@dataclass
+class Grid:
+    """A model's kernel grid with its block hierarchy and its placement in the volume.
+
+    Attributes
+    ----------
+    kernel : named tuple
+        The model's kernel grid (:mod:`splinecast.models.pieces`).
+    hierarchy : MinMaxHierarchy
+        Block ranges of this grid's cells (for empty-space skipping).
+    geom : ndarray, shape (19,)
+        Placement (see :mod:`.driver`).
+    n_cells : tuple of 3 int
+        Cells of the grid per axis.
+    band_rows, tile : int
+        How the driver cuts the image into work (see :mod:`.driver`; ``tile = 0``: whole rows).
+    """
+
+    kernel: tuple
+    hierarchy: Any
+    geom: np.ndarray
+    n_cells: tuple[int, int, int]
+    band_rows: int = 1
+    tile: int = 0
+
+    def with_kernel(self, kernel: tuple) -> Grid:
+        """The same grid with another kernel tuple of the same cells (e.g. iso-classified)."""
+        return Grid(kernel, self.hierarchy, self.geom, self.n_cells, self.band_rows, self.tile)
+
+
+def _hierarchy(model: Any, array: np.ndarray, n_cells: tuple[int, int, int]) -> Any:
+    if getattr(model, "cube_bounded", False):
+        lo, hi = model.cube_bounds_of(array)
+        return CubeBoundHierarchy(*block_ranges(lo, hi), n_cells)
+    return MinMaxHierarchy(array, n_cells, model.support)
+
+
+def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 0),
+              level_origin: Any = None, level_spacing: Any = None, domain: Any = None,
+              level_cells: Any = None) -> Grid:
+    """A :class:`Grid` of ``model`` over ``array`` (default: its whole prepared array).
+
+    Parameters
+    ----------
+    model : a model of :data:`splinecast.models.MODELS`
+    array : ndarray, optional
+        A block of ``model.prepared`` (or of the prepared array of another level of the same
+        data), ghost layers included: cell ``c`` of the grid needs ``array[c .. c + support]``.
+    offset : 3 ints
+        The grid's cell 0 in the level's traversal grid.
+    level_origin, level_spacing : 3 floats, optional
+        World position of the level's voxel ``(0, 0, 0)`` and its spacing (default: the
+        model's volume).
+    domain : (lo, hi), optional
+        The rendered box in the level's voxel index space (default: the model's
+        :meth:`domain`); the same for every brick of a level.
+    level_cells : 3 ints, optional
+        The level's cells per axis (default: this grid's plus its offset).
+    """
+    whole = array is None
+    arr = model.prepared if whole else np.asarray(array)
+    n_cells = tuple(int(s) - int(model.support) for s in arr.shape)
+    if min(n_cells) < 1:
+        raise ParameterError(f"a grid needs at least one cell per axis, got {n_cells} cells")
+    vol = model.volume
+    lo, hi = model.domain() if domain is None else domain
+    geom = np.empty(GEOM_SIZE)
+    geom[0:3] = vol.origin if level_origin is None else level_origin
+    geom[3:6] = vol.spacing if level_spacing is None else level_spacing
+    geom[6] = model.shift
+    geom[7:10] = offset
+    geom[10:13] = lo
+    geom[13:16] = hi
+    geom[16:19] = (np.asarray(offset) + n_cells) if level_cells is None else level_cells
+    kernel = model.kernel_grid() if whole else model.kernel_grid(arr)
+    return Grid(kernel, _hierarchy(model, arr, n_cells), geom, n_cells,
+                getattr(model, "band_rows", 1), getattr(model, "tile", 0))
+
+
+def brick_grid(model: Any, lo: Any, hi: Any) -> Grid:
+    """The grid of the brick owning cells ``[lo, hi)`` (per axis) of ``model``'s whole grid,
+    cut from ``model.prepared`` with its ghost layers."""
+    lo = [int(v) for v in lo]
+    hi = [int(v) for v in hi]
+    s = int(model.support)
+    block = model.prepared[lo[0]:hi[0] + s, lo[1]:hi[1] + s, lo[2]:hi[2] + s]
+    whole = tuple(int(n) - s for n in model.prepared.shape)
+    return make_grid(model, block, offset=lo, level_cells=whole)
+
+
+def counters(height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zeroed per-ray statistics: cells visited, cells tested, blocks skipped."""
+    return tuple(np.zeros((height, width), np.int32) for _ in range(3))  # type: ignore
+
+
+def _run(grid: Grid, mode: Any, camera: Any, blocks: tuple, state: tuple, out: tuple,
+         planes: np.ndarray, t_range: np.ndarray, load: bool, store: bool, final: bool,
+         stats: tuple) -> None:
+    h, w = camera.height, camera.width
+    band_rows = max(1, grid.band_rows)
+    tile = grid.tile if grid.tile > 0 else w
+    bands = band_order((h + band_rows - 1) // band_rows)
+    trace(grid.kernel, mode.params, blocks, state, out, camera.pixel_basis(), grid.geom,
+          np.ascontiguousarray(planes, np.float64), t_range, bands, band_rows, tile, load, store,
+          final, *stats)
+
+
+def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLANES,
+                flags: tuple | None = None) -> tuple[tuple, tuple]:
+    """Trace a whole image through one grid; returns ``(outputs, counters)``.
+
+    ``flags`` replaces the hierarchy's own classification for the iso mode.
+    """
+    h, w = camera.height, camera.width
+    out = mode.output(h, w)
+    stats = counters(h, w)
+    _run(grid, mode, camera, mode.blocks(grid.hierarchy, flags), mode.state(0, 0), out, planes,
+         _NO_RANGE, False, False, True, stats)
+    return out, stats
+
+
+def new_state(mode: Any, camera: Any) -> tuple:
+    """Fresh per-pixel state arrays of ``mode`` for ``camera``'s image."""
+    state = mode.state(camera.height, camera.width)
+    reset_state(mode.params, state, camera.height, camera.width)
+    return state
+
+
+def trace_segment(grid: Grid, mode: Any, camera: Any, state: tuple, stats: tuple,
+                  planes: np.ndarray = NO_PLANES, t_range: np.ndarray | None = None) -> None:
+    """Trace the image's rays through one grid, continuing from ``state`` (updated in place).
+
+    ``t_range`` (shape ``(height, width, 2)``) restricts each ray further; ``stats`` are the
+    per-ray counters (:func:`counters`), incremented.
+    """
+    rng = _NO_RANGE if t_range is None else np.ascontiguousarray(t_range, np.float64)
+    _run(grid, mode, camera, mode.blocks(grid.hierarchy), state,
+         mode.output(0, 0), planes, rng, True, True, False, stats)
+
+
+def finish_state(mode: Any, state: tuple, camera: Any) -> tuple:
+    """The outputs of the final per-pixel states (after the last segment)."""
+    out = mode.output(camera.height, camera.width)
+    finalize(mode.params, state, out, camera.pixel_basis())
+    return out
+
+
+def combine_states(mode: Any, front: tuple, back: tuple) -> tuple:
+    """Merge the partial states of the same rays from a front and a back segment."""
+    out = tuple(np.empty_like(a) for a in front)
+    mode.combine(front, back, out)
+    return out
