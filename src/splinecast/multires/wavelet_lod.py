@@ -65,6 +65,40 @@ class Selection:
     reconstructed: list[np.ndarray]
     octants: list[np.ndarray]
 
+    @classmethod
+    def from_active(cls, layout: WaveletLayout, active: Sequence[np.ndarray]) -> Selection:
+        """The selection with these active chunks (levels 0..J-1): neighbours, octants added.
+
+        Any policy may choose ``active`` (view-dependent, budgeted, magnitude-based) as long as
+        an active chunk's parent is active too.
+        """
+        top = layout.levels
+        active = [np.asarray(a, dtype=bool) for a in active]
+        if len(active) != top or any(a.shape != layout.chunks(j) for j, a in enumerate(active)):
+            raise ValueError("active must hold one table of layout.chunks(j) per level 0..J-1")
+        for j in range(top - 1):
+            if np.any(active[j] & ~_parents(active[j + 1], layout.chunks(j))):
+                raise ValueError(f"an active chunk of level {j} has an inactive parent")
+        reconstructed = [active[j] | _dilate(active[j]) for j in range(top)]
+        reconstructed.append(np.ones(layout.chunks(top), dtype=bool))
+        octants = [np.where(reconstructed[0], WHOLE_CHUNK, 0).astype(np.uint8)]
+        for j in range(1, top + 1):
+            shape = layout.chunks(j)
+            child = reconstructed[j - 1]
+            mask = np.zeros(shape, dtype=np.uint8)
+            for octant in range(8):
+                offset = ((octant >> 2) & 1, (octant >> 1) & 1, octant & 1)
+                kids = [2 * np.arange(n) + o for n, o in zip(shape, offset, strict=True)]
+                exists = np.ones(shape, dtype=bool)
+                for a in range(3):
+                    exists &= (kids[a] < child.shape[a]).reshape([-1 if b == a else 1
+                                                                 for b in range(3)])
+                clipped = [np.minimum(c, m - 1) for c, m in zip(kids, child.shape, strict=True)]
+                free = exists & ~child[np.ix_(*clipped)]
+                mask |= np.where(free, np.uint8(1 << octant), np.uint8(0))
+            octants.append(np.where(reconstructed[j], mask, 0).astype(np.uint8))
+        return cls(layout, active, reconstructed, octants)
+
     @property
     def chunk_count(self) -> int:
         """Reconstructed chunks on all levels (roots included)."""
@@ -163,22 +197,4 @@ def select(
             on &= np.any((lo[..., None] <= isos) & (isos <= hi[..., None]), axis=-1)
         active[j] = on
         parent = on
-    reconstructed = [active[j] | _dilate(active[j]) for j in range(top)]
-    reconstructed.append(np.ones(layout.chunks(top), dtype=bool))
-    octants = [np.where(reconstructed[0], WHOLE_CHUNK, 0).astype(np.uint8)]
-    for j in range(1, top + 1):
-        shape = layout.chunks(j)
-        child = reconstructed[j - 1]
-        mask = np.zeros(shape, dtype=np.uint8)
-        for octant in range(8):
-            offset = ((octant >> 2) & 1, (octant >> 1) & 1, octant & 1)
-            kids = [2 * np.arange(n) + o for n, o in zip(shape, offset, strict=True)]
-            exists = np.ones(shape, dtype=bool)
-            for a in range(3):
-                exists &= (kids[a] < child.shape[a]).reshape([-1 if b == a else 1
-                                                             for b in range(3)])
-            clipped = [np.minimum(c, m - 1) for c, m in zip(kids, child.shape, strict=True)]
-            free = exists & ~child[np.ix_(*clipped)]
-            mask |= np.where(free, np.uint8(1 << octant), np.uint8(0))
-        octants.append(np.where(reconstructed[j], mask, 0).astype(np.uint8))
-    return Selection(layout, active, reconstructed, octants)
+    return Selection.from_active(layout, active)
