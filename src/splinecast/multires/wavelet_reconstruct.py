@@ -28,6 +28,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from numba import prange
 
@@ -40,6 +41,8 @@ from .wavelet_transform import WaveletPyramid
 __all__ = ["Brick", "ChunkReconstructor", "ReconstructionStats"]
 
 _MIX = np.uint64(0x9E3779B97F4A7C15)
+#: Batches smaller than this run on one thread: waking the pool costs more than it saves.
+PARALLEL_MIN_CHUNKS = 32
 
 
 def _splitmix(x: np.ndarray) -> np.ndarray:
@@ -53,15 +56,14 @@ def _splitmix(x: np.ndarray) -> np.ndarray:
 
 def _owner_bits(active: np.ndarray) -> np.ndarray:
     """27-bit pattern of the active flags of each chunk's clamped 3x3x3 neighbourhood."""
+    grown = np.pad(active, 1, mode="edge").astype(np.uint64)  # edge = clamped neighbours
+    nx, ny, nz = active.shape
     bits = np.zeros(active.shape, dtype=np.uint64)
-    shape = active.shape
     bit = 0
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dz in (-1, 0, 1):
-                idx = [np.clip(np.arange(n) + o, 0, n - 1)
-                       for n, o in zip(shape, (dx, dy, dz), strict=True)]
-                bits |= active[np.ix_(*idx)].astype(np.uint64) << np.uint64(bit)
+    for dx in range(3):
+        for dy in range(3):
+            for dz in range(3):
+                bits |= grown[dx:dx + nx, dy:dy + ny, dz:dz + nz] << np.uint64(bit)
                 bit += 1
     return bits
 
@@ -340,12 +342,18 @@ class ChunkReconstructor:
                 if np.any(parent_slot < 0):
                     raise RuntimeError("a reconstructed chunk's parent is missing")
                 owners = np.zeros((children.shape[0], 3, 3, 3), dtype=np.bool_)
-                stray = _reconstruct_chunks(
-                    children, parent_slot, self._pool[j + 1], out_slot, self._pool[j],
-                    self._details[j + 1], np.asarray(lay.length(j + 1), np.int64),
-                    np.asarray(lay.detail_length(j + 1), np.int64), active, k, pad,
-                    self._p[0], self._p[1], self._g[0], self._g[1], lay.coarse_rule,
-                    lay.detail_rule, owners)
+                threads = numba.get_num_threads()
+                if children.shape[0] < PARALLEL_MIN_CHUNKS:
+                    numba.set_num_threads(1)
+                try:
+                    stray = _reconstruct_chunks(
+                        children, parent_slot, self._pool[j + 1], out_slot, self._pool[j],
+                        self._details[j + 1], np.asarray(lay.length(j + 1), np.int64),
+                        np.asarray(lay.detail_length(j + 1), np.int64), active, k, pad,
+                        self._p[0], self._p[1], self._g[0], self._g[1], lay.coarse_rule,
+                        lay.detail_rule, owners)
+                finally:
+                    numba.set_num_threads(threads)
                 if stray:
                     raise RuntimeError("details from outside a chunk's neighbourhood")
                 for off in np.argwhere(owners.any(axis=0)):
