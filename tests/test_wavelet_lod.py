@@ -256,3 +256,17 @@ def test_detail_outside_the_iso_range_is_never_reconstructed(degree):
         pts = np.stack([rng.uniform(float(b[0]), float(b[1]), 400) for b in box], axis=1)
         values = model.evaluate(pts)
         assert np.all(values > iso) or np.all(values < iso)
+
+
+def test_user_mistakes_raise_parameter_errors():
+    pyramid = decompose(np.zeros((9, 9, 9)), 3, chunk=4)
+    lay = pyramid.layout
+    with pytest.raises(sc.ParameterError, match="epsilon"):
+        select(lay, pyramid.ranges, (0, 0, 0), -1.0)
+    orphan = [np.zeros(lay.chunks(j), dtype=bool) for j in range(lay.levels)]
+    orphan[0][0, 0, 0] = True  # its parent on level 1 is inactive
+    if lay.levels > 1:
+        with pytest.raises(sc.ParameterError, match="inactive parent"):
+            Selection.from_active(lay, orphan)
+    with pytest.raises(sc.ParameterError, match="degree"):
+        decompose(np.zeros((9, 9, 9)), 4)

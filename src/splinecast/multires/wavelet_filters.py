@@ -44,6 +44,8 @@ from math import comb
 
 import numpy as np
 
+from ..errors import ParameterError
+
 __all__ = ["Filter", "SplineWavelet", "spline_wavelet", "DUAL_MOMENTS"]
 
 #: Vanishing moments Ñ of the synthesis wavelet per B-spline degree: the fewest the CDF family
@@ -162,11 +164,11 @@ def spline_wavelet(degree: int) -> SplineWavelet:
 
     Raises
     ------
-    ValueError
+    ParameterError
         For another degree.
     """
     if degree not in DUAL_MOMENTS:
-        raise ValueError(f"spline wavelets exist here for degree 1, 2, 3, not {degree!r}")
+        raise ParameterError(f"spline wavelets exist here for degree 1, 2, 3, not {degree!r}")
     order = degree + 1
     dual = DUAL_MOMENTS[degree]
     ell = (order + dual) // 2

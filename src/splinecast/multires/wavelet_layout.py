@@ -60,6 +60,7 @@ from functools import cached_property
 import numpy as np
 
 from .._jit import jit
+from ..errors import ParameterError
 
 __all__ = [
     "WS",
@@ -158,13 +159,13 @@ class WaveletLayout:
 
     def __post_init__(self) -> None:
         if self.degree not in (1, 2, 3):
-            raise ValueError(f"degree must be 1, 2 or 3, got {self.degree!r}")
+            raise ParameterError(f"degree must be 1, 2 or 3, got {self.degree!r}")
         if len(self.shape) != 3 or min(self.shape) < 2:
-            raise ValueError(f"shape must be 3 sizes of at least 2, got {self.shape!r}")
+            raise ParameterError(f"shape must be 3 sizes of at least 2, got {self.shape!r}")
         if self.levels < 1:
-            raise ValueError(f"levels must be at least 1, got {self.levels!r}")
+            raise ParameterError(f"levels must be at least 1, got {self.levels!r}")
         if self.chunk < 4 or self.chunk % 2:
-            raise ValueError(f"chunk must be even and at least 4, got {self.chunk!r}")
+            raise ParameterError(f"chunk must be even and at least 4, got {self.chunk!r}")
 
     @classmethod
     def for_volume(cls, shape: tuple[int, ...], degree: int, levels: int | None = None,
@@ -208,7 +209,7 @@ class WaveletLayout:
     def detail_length(self, level: int) -> tuple[int, int, int]:
         """Detail nodes per axis of the step that makes ``level`` (1..J) from ``level - 1``."""
         if not 1 <= level <= self.levels:
-            raise ValueError(f"detail level must be in 1..{self.levels}, got {level}")
+            raise ParameterError(f"detail level must be in 1..{self.levels}, got {level}")
         coarse = self.length(level)
         return tuple(c - 1 for c in coarse) if self.odd else coarse
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ParameterError
 from .wavelet_layout import WaveletLayout
 
 __all__ = ["Selection", "select", "WHOLE_CHUNK"]
@@ -75,10 +76,10 @@ class Selection:
         top = layout.levels
         active = [np.asarray(a, dtype=bool) for a in active]
         if len(active) != top or any(a.shape != layout.chunks(j) for j, a in enumerate(active)):
-            raise ValueError("active must hold one table of layout.chunks(j) per level 0..J-1")
+            raise ParameterError("active must hold one table of layout.chunks(j) per level 0..J-1")
         for j in range(top - 1):
             if np.any(active[j] & ~_parents(active[j + 1], layout.chunks(j))):
-                raise ValueError(f"an active chunk of level {j} has an inactive parent")
+                raise ParameterError(f"an active chunk of level {j} has an inactive parent")
         reconstructed = [active[j] | _dilate(active[j]) for j in range(top)]
         reconstructed.append(np.ones(layout.chunks(top), dtype=bool))
         octants = [np.where(reconstructed[0], WHOLE_CHUNK, 0).astype(np.uint8)]
@@ -180,7 +181,7 @@ def select(
     Selection
     """
     if not (np.isfinite(epsilon) and epsilon >= 0):
-        raise ValueError(f"epsilon must be a finite number >= 0, got {epsilon!r}")
+        raise ParameterError(f"epsilon must be a finite number >= 0, got {epsilon!r}")
     spacing = np.asarray(spacing, dtype=np.float64)
     eye_voxel = (np.asarray(eye, dtype=np.float64) - np.asarray(origin, dtype=np.float64)) / spacing
     isos = None if iso is None else np.atleast_1d(np.asarray(iso, dtype=np.float64))

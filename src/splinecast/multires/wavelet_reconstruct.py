@@ -8,10 +8,10 @@ filters, separably along z, then y, then x, as the thesis' three kernels do:
     c_j[x] = Σ_m p[x - 2m] c_(j+1)[m] + Σ_m g[x - 2m] w_(j+1)[m]      (per axis)
 
 Parent brick suffices
-    The coarse nodes a brick needs are ``k/2 idx - pad - 1 .. k/2 idx + k/2 + 1`` (for every
-    degree), which lie inside the parent's own brick ``k idx' - pad .. k idx' + k + d - pad - 1``
-    (``idx' = idx // 2``) including its ghost nodes. So a chunk depends on its parent's brick and
-    on the details in its footprint, owned by itself and its (clamped) neighbours
+    The coarse nodes a brick needs are ``k/2 idx - pad .. k/2 idx + k/2 + (d + 1) // 2 - 1``,
+    which lie inside the parent's own brick ``k idx' - pad .. k idx' + k + d - pad - 1``
+    (``idx' = idx // 2``, either half) including its ghost nodes. So a chunk depends on its
+    parent's brick and on the details in its footprint, owned by itself and its (clamped) neighbours
     ``idx - 1 .. idx + 1`` — never on a neighbouring brick of its own level.
 
 Reuse across frames
@@ -33,6 +33,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
+from ..errors import ParameterError
 from .wavelet_filters import spline_wavelet
 from .wavelet_layout import DETAIL_BANDS, WaveletLayout, reflect_index, reflect_indices
 from .wavelet_lod import Selection
@@ -217,7 +218,8 @@ class Brick:
         Chunk index on ``level``.
     coeffs : ndarray, shape (k + d, k + d, k + d)
         A ``BSplineModel``-style padded coefficient array: local cell ``c`` depends on
-        ``coeffs[c .. c + d]``; local voxel ``v`` is ``coeffs[v + pad]``.
+        ``coeffs[c .. c + d]``; local voxel ``v`` is ``coeffs[v + pad]``. A view into the
+        reconstructor's cache, valid until its next :meth:`ChunkReconstructor.update`.
     origin : ndarray, shape (3,)
         World-voxel position of local voxel 0 (multiply by spacing, add the volume origin).
     scale : float
@@ -321,7 +323,7 @@ class ChunkReconstructor:
         """Make every brick of ``selection`` current; returns what was computed and reused."""
         lay = self.layout
         if selection.layout != lay:
-            raise ValueError("selection was made for another layout")
+            raise ParameterError("selection was made for another layout")
         stats = ReconstructionStats()
         start = time.perf_counter()
         k, pad = lay.chunk, lay.pad
@@ -366,7 +368,6 @@ class ChunkReconstructor:
             stats.reused.insert(0, int(current.sum()))
             stats.detail_owners.insert(0, used)
         stats.milliseconds = (time.perf_counter() - start) * 1e3
-        self._selection = selection
         return stats
 
     def brick(self, level: int, index: tuple[int, int, int], octants: int = 0xFF) -> Brick:

@@ -31,6 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ..errors import ParameterError
 from .wavelet_filters import Filter, SplineWavelet, spline_wavelet
 from .wavelet_layout import BANDS, DETAIL_BANDS, WS, WaveletLayout, reflect_indices
 from .wavelet_ranges import block_hulls, selection_ranges
@@ -264,7 +265,7 @@ def decompose(
     """
     shape = tuple(int(s) for s in np.shape(data))
     if len(shape) != 3:
-        raise ValueError(f"data must be 3D, got shape {shape}")
+        raise ParameterError(f"data must be 3D, got shape {shape}")
     layout = WaveletLayout.for_volume(shape, degree, levels, chunk)
     wavelet = spline_wavelet(layout.degree)
     sink = MemorySink() if sink is None else sink
