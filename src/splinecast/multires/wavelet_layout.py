@@ -118,12 +118,17 @@ def reflect_indices(idx: np.ndarray, length: int, rule: int) -> tuple[np.ndarray
     return out, sign
 
 
-def default_levels(shape: tuple[int, ...], degree: int, chunk: int) -> int:
-    """Fewest levels whose coarsest level is a single chunk (the octree's root)."""
-    levels = 0
-    while any(_chunk_count(n, degree, chunk, levels) > 1 for n in shape):
+def default_levels(shape: tuple[int, ...], chunk: int) -> int:
+    """Fewest levels whose coarsest chunk spans the volume: ``2^J k >= n - 1`` on every axis.
+
+    The same for every degree (5 levels of 8^3 chunks for 128^3, as in the thesis). For even
+    degree, whose chunk regions start half a cell early, the coarsest level may then hold two
+    root chunks per axis rather than one (a level more would pad the window by 2^J voxels).
+    """
+    levels = 1
+    while any(chunk * 2**levels < n - 1 for n in shape):
         levels += 1
-    return max(levels, 1)
+    return levels
 
 
 def _region_start(degree: int) -> float:
@@ -170,10 +175,10 @@ class WaveletLayout:
     @classmethod
     def for_volume(cls, shape: tuple[int, ...], degree: int, levels: int | None = None,
                    chunk: int = 8) -> WaveletLayout:
-        """Layout with ``levels`` steps, by default the fewest that leave one root chunk."""
+        """Layout with ``levels`` steps (default: :func:`default_levels`)."""
         shape3 = tuple(int(s) for s in shape)
         if levels is None:
-            levels = default_levels(shape3, degree, chunk)
+            levels = default_levels(shape3, chunk)
         return cls(shape3, int(degree), int(levels), int(chunk))
 
     # ---------------------------------------------------------------- per-level sequences

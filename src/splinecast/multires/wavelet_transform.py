@@ -248,7 +248,7 @@ def decompose(
     degree : int
         B-spline degree 1, 2 or 3 (wavelets ψ2,2, ψ3,1, ψ4,2).
     levels : int, optional
-        Decomposition steps J; default: the fewest that leave one root chunk.
+        Decomposition steps J; default: the fewest whose coarsest chunk spans the volume.
     chunk : int
         Chunk edge k in nodes (even, at least 4).
     dtype : dtype
