@@ -1,0 +1,213 @@
+"""Spline-wavelet multiresolution benchmark (issue 12): reference 000's Table 6.4 on the CPU.
+
+1. Decomposition: time and peak traced memory (``tracemalloc``: numpy's allocations) of the
+   in-memory decomposition and of the block-streamed one (memory-mapped source and sink).
+2. View-dependent LOD for several ε (multiples of one pixel's angle, ``fov / height``) from a
+   close orbit view at 1024x768: selection ms, share of chunks, bricks drawn per level,
+   reconstruction ms from scratch (every brick of the frame computed, as the thesis does per
+   frame) and after a 2° orbit step with the cache of the previous frame (bricks reused / made).
+   Render ms and image MSE join once the bricks are rendered through the segment entry point.
+
+Run ``python benchmarks/bench_wavelet.py [--quick]``; results go to
+``benchmarks/results/wavelet[_quick].json`` and ``.md``. Medians after warm-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+import splinecast as sc
+from splinecast.multires.wavelet_lod import select
+from splinecast.multires.wavelet_reconstruct import ChunkReconstructor
+from splinecast.multires.wavelet_transform import MemmapSink, decompose
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import describe  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+PIXEL_MULTIPLES = (0, 25, 50, 100, 200, 400, 800)
+THESIS_TABLE_6_4 = {"reconstruction_ms": [7.23, 8.72, 9.25, 6.11, 6.92, 3.58],
+                    "chunks_percent": [100, 73, 40, 12, 6, 1.6]}
+
+
+def median_ms(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times)
+
+
+def peak_mib(fn) -> float:
+    tracemalloc.start()
+    fn()
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak / 2**20
+
+
+def bench_decomposition(vol, degree: int, dtype, repeats: int) -> dict:
+    data = vol.data
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "src.npy"
+        np.save(src, data)
+        mapped = np.load(src, mmap_mode="r")
+
+        def streamed(i=[0]):  # noqa: B006 - a fresh sink folder per run
+            i[0] += 1
+            return decompose(mapped, degree, dtype=dtype, block=32,
+                             sink=MemmapSink(Path(tmp) / f"pyr{i[0]}"))
+
+        in_memory = lambda: decompose(data, degree, dtype=dtype)  # noqa: E731
+        return {
+            "in_memory_ms": median_ms(in_memory, repeats),
+            "in_memory_peak_mib": peak_mib(in_memory),
+            "streamed_ms": median_ms(streamed, repeats),
+            "streamed_peak_mib": peak_mib(streamed),
+            "volume_mib": data.nbytes / 2**20,
+        }
+
+
+def bench_lod(vol, pyramid, iso: float, size, repeats: int) -> list[dict]:
+    lay = pyramid.layout
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size, zoom=2.5)
+    step = sc.Camera.orbit(vol, azimuth=32, elevation=20, size=size, zoom=2.5)
+    pixel = math.radians(cam.fov) / cam.size[1]
+    rows = []
+    for multiple in PIXEL_MULTIPLES:
+        eps = multiple * pixel
+
+        def choose(camera=cam, eps=eps):
+            return select(lay, pyramid.ranges, camera.position, eps, iso=iso,
+                          spacing=vol.spacing, origin=vol.origin)
+
+        sel = choose()
+        select_ms = median_ms(choose, repeats)
+
+        def cold(sel=sel):
+            ChunkReconstructor(pyramid).update(sel)
+
+        cold_ms = median_ms(cold, repeats)
+        warm = []
+        for _ in range(repeats):
+            rec = ChunkReconstructor(pyramid)
+            rec.update(sel)
+            moved = choose(step)
+            stats = rec.update(moved)
+            warm.append(stats)
+        drawn = {}
+        for level, _, _ in sel.drawn():
+            drawn[level] = drawn.get(level, 0) + 1
+        rows.append({
+            "epsilon_pixels": multiple,
+            "epsilon": eps,
+            "select_ms": select_ms,
+            "chunks": sel.chunk_count,
+            "chunks_percent": 100.0 * sel.share,
+            "drawn_bricks_per_level": [drawn.get(j, 0) for j in range(lay.levels + 1)],
+            "reconstruct_cold_ms": cold_ms,
+            "reconstruct_after_step_ms": statistics.median(s.milliseconds for s in warm),
+            "after_step_computed": sum(warm[-1].computed),
+            "after_step_reused": sum(warm[-1].reused),
+        })
+    return rows
+
+
+def markdown(results: dict) -> str:
+    m = results["machine"]
+    lines = [
+        "# Spline-wavelet LOD (issue 12, reference 000 Table 6.4)",
+        "",
+        f"`{results['command']}` — {m['cpu']}, {m['cores']} cores, numba "
+        f"{m['versions']['numba']}, {m['numba_threads']} threads. {results['note']}",
+        "",
+    ]
+    for v in results["volumes"]:
+        dec = v["decomposition"]
+        lines += [
+            f"## {v['label']} {v['shape'][0]}^3, degree {v['degree']}, iso {v['iso']}, "
+            f"{v['dtype']}, {v['levels']} levels, {v['chunk_total']} chunks (k = {v['chunk']})",
+            "",
+            f"Decomposition: in memory {dec['in_memory_ms']:.0f} ms, peak "
+            f"{dec['in_memory_peak_mib']:.0f} MiB; streamed (memmap in/out, 32^3 blocks) "
+            f"{dec['streamed_ms']:.0f} ms, peak {dec['streamed_peak_mib']:.0f} MiB; "
+            f"volume {dec['volume_mib']:.0f} MiB.",
+            "",
+            "| ε (pixels) | chunks | chunks % | bricks drawn per level (0..J) | select ms "
+            "| reconstruct ms | after 2° step ms (made / reused) |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in v["lod"]:
+            lines.append(
+                f"| {r['epsilon_pixels']} | {r['chunks']} | {r['chunks_percent']:.1f} | "
+                f"{' / '.join(map(str, r['drawn_bricks_per_level']))} | {r['select_ms']:.2f} | "
+                f"{r['reconstruct_cold_ms']:.1f} | {r['reconstruct_after_step_ms']:.1f} "
+                f"({r['after_step_computed']} / {r['after_step_reused']}) |")
+        lines.append("")
+    lines += [
+        "Thesis (GTX 285, Dragon 128^3, tri-cubic): reconstruction 7.23 / 8.72 / 9.25 / 6.11 / "
+        "6.92 / 3.58 ms at 100 / 73 / 40 / 12 / 6 / 1.6 % of 4681 chunks.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes, few repeats")
+    parser.add_argument("--out", default=str(HERE / "results"), help="output folder")
+    args = parser.parse_args()
+    size = (1024, 768)
+    repeats = 2 if args.quick else 5
+    if args.quick:
+        cases = [("chmutov", 64, 0.0, 3, np.float64), ("noise", 96, 0.5, 3, np.float32)]
+    else:
+        cases = [("chmutov", 128, 0.0, d, np.float64) for d in (1, 2, 3)]
+        cases.append(("noise", 512, 0.5, 3, np.float32))
+    # Warm-up: compile every kernel once outside the timings.
+    warm = sc.demo("chmutov", size=12)
+    for dtype in {np.dtype(c[4]) for c in cases}:
+        warm_pyr = decompose(warm.data, 3, chunk=4, dtype=dtype)
+        ChunkReconstructor(warm_pyr).update(select(warm_pyr.layout, warm_pyr.ranges, (0, 0, 0),
+                                                   0.0))
+    results = {
+        "machine": describe(),
+        "command": "python benchmarks/bench_wavelet.py" + (" --quick" if args.quick else ""),
+        "note": "Run on a machine shared with other jobs unless stated otherwise.",
+        "thesis_table_6_4": THESIS_TABLE_6_4,
+        "volumes": [],
+    }
+    for label, n, iso, degree, dtype in cases:
+        vol = sc.demo(label, size=n)
+        pyramid = decompose(vol.data, degree, dtype=dtype)
+        lay = pyramid.layout
+        entry = {
+            "label": label, "shape": list(vol.shape), "degree": degree, "iso": iso,
+            "dtype": np.dtype(dtype).name, "levels": lay.levels, "chunk": lay.chunk,
+            "chunk_total": lay.chunk_total(), "window": list(lay.window),
+            "decomposition": bench_decomposition(vol, degree, dtype, 1 if args.quick else 3),
+            "lod": bench_lod(vol, pyramid, iso, size, repeats),
+        }
+        results["volumes"].append(entry)
+        print(f"{label} {n}^3 degree {degree}: done", flush=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = "wavelet_quick" if args.quick else "wavelet"
+    (out / f"{stem}.json").write_text(json.dumps(results, indent=2) + "\n")
+    (out / f"{stem}.md").write_text(markdown(results))
+    print(markdown(results))
+
+
+if __name__ == "__main__":
+    main()

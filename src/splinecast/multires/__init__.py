@@ -1,0 +1,1 @@
+"""Multiresolution: pyramids, brick octrees, cuts and spline wavelets (see DESIGN.md)."""

@@ -1,0 +1,384 @@
+"""Gather-based reconstruction of selected chunks into B-spline coefficient bricks (000, §4.4).
+
+For a chunk ``(j, idx)`` the brick is the ``(k + d)^3`` level-``j`` nodes
+``k idx - pad .. k idx - pad + k + d - 1`` per axis (:mod:`.wavelet_layout`). Each node is
+gathered — never scattered — from the level-``j + 1`` coarse nodes and details under the synthesis
+filters, separably along z, then y, then x, as the thesis' three kernels do:
+
+    c_j[x] = Σ_m p[x - 2m] c_(j+1)[m] + Σ_m g[x - 2m] w_(j+1)[m]      (per axis)
+
+Parent brick suffices
+    The coarse nodes a brick needs are ``k/2 idx - pad .. k/2 idx + k/2 + (d + 1) // 2 - 1``,
+    which lie inside the parent's own brick ``k idx' - pad .. k idx' + k + d - pad - 1``
+    (``idx' = idx // 2``, either half) including its ghost nodes. So a chunk depends on its
+    parent's brick and on the details in its footprint, owned by itself and its (clamped) neighbours
+    ``idx - 1 .. idx + 1`` — never on a neighbouring brick of its own level.
+
+Reuse across frames
+    A brick's content is a function of its parent's content and of the active flags of those 27
+    owners. Its *signature* hashes exactly that (the parent's signature and 27 bits), so a brick
+    whose signature is unchanged is reused as is: lowering the detail leaves the coarser bricks
+    valid (nothing is computed), and refining starts from the finest brick already present. The
+    cache keeps every brick it made (``clear`` empties it); the roots come from the stored
+    coarsest level once.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+from numba import prange
+
+from .._jit import jit
+from ..errors import ParameterError
+from .wavelet_filters import spline_wavelet
+from .wavelet_layout import DETAIL_BANDS, WaveletLayout, reflect_index, reflect_indices
+from .wavelet_lod import Selection
+from .wavelet_transform import WaveletPyramid
+
+__all__ = ["Brick", "ChunkReconstructor", "ReconstructionStats"]
+
+_MIX = np.uint64(0x9E3779B97F4A7C15)
+#: Batches smaller than this run on one thread: waking the pool costs more than it saves.
+PARALLEL_MIN_CHUNKS = 32
+
+
+def _splitmix(x: np.ndarray) -> np.ndarray:
+    """64-bit finaliser of SplitMix64 (wrap-around arithmetic on uint64 arrays)."""
+    with np.errstate(over="ignore"):
+        x = x + _MIX
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return x ^ (x >> np.uint64(31))
+
+
+def _owner_bits(active: np.ndarray) -> np.ndarray:
+    """27-bit pattern of the active flags of each chunk's clamped 3x3x3 neighbourhood."""
+    grown = np.pad(active, 1, mode="edge").astype(np.uint64)  # edge = clamped neighbours
+    nx, ny, nz = active.shape
+    bits = np.zeros(active.shape, dtype=np.uint64)
+    bit = 0
+    for dx in range(3):
+        for dy in range(3):
+            for dz in range(3):
+                bits |= grown[dx:dx + nx, dy:dy + ny, dz:dz + nz] << np.uint64(bit)
+                bit += 1
+    return bits
+
+
+@jit()
+def _reconstruct_one(
+    child: np.ndarray, parent: np.ndarray, out: np.ndarray, details: tuple,
+    coarse_len: np.ndarray, detail_len: np.ndarray, active: np.ndarray, k: int, pad: int,
+    p_taps: np.ndarray, p_start: int, g_taps: np.ndarray, g_start: int, coarse_rule: int,
+    detail_rule: int, owners_used: np.ndarray,
+) -> int:
+    """One brick ``out`` of chunk ``child`` from its ``parent`` brick and masked details.
+
+    ``details`` are the seven subbands in :data:`DETAIL_BANDS` order. ``owners_used[a, b, c]`` is
+    set when details of the owner at offset ``(a - 1, b - 1, c - 1)`` entered the brick. Returns
+    the number of details gathered from an owner outside that 3x3x3 neighbourhood (0 by design).
+    """
+    size = out.shape[0]
+    p_stop = p_start + p_taps.shape[0] - 1
+    g_stop = g_start + g_taps.shape[0] - 1
+    half = k // 2
+    n_chunks_x, n_chunks_y, n_chunks_z = active.shape
+    stray = 0
+    first = np.empty(3, np.int64)
+    lo = np.empty((2, 3), np.int64)  # [letter L/H, axis]: first input node
+    span = np.empty((2, 3), np.int64)
+    fmax = 0
+    for a in range(3):
+        first[a] = k * child[a] - pad
+        lo[0, a] = -((-(first[a] - p_stop)) // 2)
+        lo[1, a] = -((-(first[a] - g_stop)) // 2)
+        span[0, a] = (first[a] + size - 1 - p_start) // 2 - lo[0, a] + 1
+        span[1, a] = (first[a] + size - 1 - g_start) // 2 - lo[1, a] + 1
+        fmax = max(fmax, span[0, a], span[1, a])
+    src = np.zeros((8, fmax, fmax, fmax))
+    # Gather: band 0 (LLL) from the parent brick, bands 1..7 from the detail subbands.
+    px = lo[0, 0] - (k * (child[0] // 2) - pad)
+    py = lo[0, 1] - (k * (child[1] // 2) - pad)
+    pz = lo[0, 2] - (k * (child[2] // 2) - pad)
+    for mx in range(span[0, 0]):
+        for my in range(span[0, 1]):
+            for mz in range(span[0, 2]):
+                src[0, mx, my, mz] = parent[px + mx, py + my, pz + mz]
+    for b in range(1, 8):
+        lx, ly, lz = (b >> 2) & 1, (b >> 1) & 1, b & 1
+        band = details[b - 1]
+        rx = coarse_rule if lx == 0 else detail_rule
+        ry = coarse_rule if ly == 0 else detail_rule
+        rz = coarse_rule if lz == 0 else detail_rule
+        nx = coarse_len[0] if lx == 0 else detail_len[0]
+        ny = coarse_len[1] if ly == 0 else detail_len[1]
+        nz = coarse_len[2] if lz == 0 else detail_len[2]
+        for mx in range(span[lx, 0]):
+            ix, sx = reflect_index(lo[lx, 0] + mx, nx, rx)
+            ox = min(ix // half, n_chunks_x - 1)
+            for my in range(span[ly, 1]):
+                iy, sy = reflect_index(lo[ly, 1] + my, ny, ry)
+                oy = min(iy // half, n_chunks_y - 1)
+                for mz in range(span[lz, 2]):
+                    iz, sz = reflect_index(lo[lz, 2] + mz, nz, rz)
+                    oz = min(iz // half, n_chunks_z - 1)
+                    if not active[ox, oy, oz]:
+                        continue
+                    ax = ox - child[0] + 1
+                    ay = oy - child[1] + 1
+                    az = oz - child[2] + 1
+                    if 0 <= ax <= 2 and 0 <= ay <= 2 and 0 <= az <= 2:
+                        owners_used[ax, ay, az] = True
+                    else:
+                        stray += 1
+                    src[b, mx, my, mz] = sx * sy * sz * band[ix, iy, iz]
+    # Along z: tz[pair (bx by), mx, my, z] from the (bx by L, bx by H) bands.
+    tz = np.zeros((4, fmax, fmax, size))
+    for b in range(8):
+        pair, letter = b >> 1, b & 1
+        lx, ly = (pair >> 1) & 1, pair & 1
+        taps = p_taps if letter == 0 else g_taps
+        start = p_start if letter == 0 else g_start
+        for z in range(size):
+            zg = first[2] + z
+            for t in range(taps.shape[0]):
+                if (zg - start - t) % 2 != 0:
+                    continue
+                mz = (zg - start - t) // 2 - lo[letter, 2]
+                w = taps[t]
+                for mx in range(span[lx, 0]):
+                    for my in range(span[ly, 1]):
+                        tz[pair, mx, my, z] += w * src[b, mx, my, mz]
+    # Along y: uy[bx, mx, y, z] from the (bx L, bx H) pairs.
+    uy = np.zeros((2, fmax, size, size))
+    for pair in range(4):
+        lx, letter = pair >> 1, pair & 1
+        taps = p_taps if letter == 0 else g_taps
+        start = p_start if letter == 0 else g_start
+        for y in range(size):
+            yg = first[1] + y
+            for t in range(taps.shape[0]):
+                if (yg - start - t) % 2 != 0:
+                    continue
+                my = (yg - start - t) // 2 - lo[letter, 1]
+                w = taps[t]
+                for mx in range(span[lx, 0]):
+                    for z in range(size):
+                        uy[lx, mx, y, z] += w * tz[pair, mx, my, z]
+    # Along x: the brick.
+    for x in range(size):
+        xg = first[0] + x
+        for y in range(size):
+            for z in range(size):
+                out[x, y, z] = 0.0
+        for letter in range(2):
+            taps = p_taps if letter == 0 else g_taps
+            start = p_start if letter == 0 else g_start
+            for t in range(taps.shape[0]):
+                if (xg - start - t) % 2 != 0:
+                    continue
+                mx = (xg - start - t) // 2 - lo[letter, 0]
+                w = taps[t]
+                for y in range(size):
+                    for z in range(size):
+                        out[x, y, z] += w * uy[letter, mx, y, z]
+    return stray
+
+
+@jit(parallel=True)
+def _reconstruct_chunks(
+    children: np.ndarray, parent_slot: np.ndarray, parents: np.ndarray, out_slot: np.ndarray,
+    out: np.ndarray, details: tuple, coarse_len: np.ndarray, detail_len: np.ndarray,
+    active: np.ndarray, k: int, pad: int, p_taps: np.ndarray, p_start: int,
+    g_taps: np.ndarray, g_start: int, coarse_rule: int, detail_rule: int,
+    owners_used: np.ndarray,
+) -> int:
+    """:func:`_reconstruct_one` for every child, in parallel; returns the summed stray count."""
+    stray = np.zeros(children.shape[0], np.int64)
+    for q in prange(children.shape[0]):
+        stray[q] = _reconstruct_one(
+            children[q], parents[parent_slot[q]], out[out_slot[q]], details, coarse_len,
+            detail_len, active, k, pad, p_taps, p_start, g_taps, g_start, coarse_rule,
+            detail_rule, owners_used[q])
+    return int(stray.sum())
+
+
+@dataclass
+class Brick:
+    """A reconstructed coefficient brick, ready for the ``bspline<d>`` model's kernels.
+
+    Attributes
+    ----------
+    level : int
+    index : tuple of 3 ints
+        Chunk index on ``level``.
+    coeffs : ndarray, shape (k + d, k + d, k + d)
+        A ``BSplineModel``-style padded coefficient array: local cell ``c`` depends on
+        ``coeffs[c .. c + d]``; local voxel ``v`` is ``coeffs[v + pad]``. A view into the
+        reconstructor's cache, valid until its next :meth:`ChunkReconstructor.update`.
+    origin : ndarray, shape (3,)
+        World-voxel position of local voxel 0 (multiply by spacing, add the volume origin).
+    scale : float
+        Voxels per local voxel, ``2^level``.
+    octants : int
+        Which octants of the chunk's region to draw (:data:`.wavelet_lod.WHOLE_CHUNK` = all).
+    """
+
+    level: int
+    index: tuple[int, int, int]
+    coeffs: np.ndarray
+    origin: np.ndarray
+    scale: float
+    octants: int
+
+
+@dataclass
+class ReconstructionStats:
+    """What one :meth:`ChunkReconstructor.update` did."""
+
+    computed: list[int] = field(default_factory=list)
+    reused: list[int] = field(default_factory=list)
+    milliseconds: float = 0.0
+    #: Per level 0..J-1: chunks whose details entered a computed brick this update.
+    detail_owners: list[np.ndarray] = field(default_factory=list)
+
+
+class ChunkReconstructor:
+    """Reconstructs and caches the bricks of successive selections of one pyramid.
+
+    Parameters
+    ----------
+    pyramid : WaveletPyramid
+        Its detail arrays must be numpy arrays or memory maps (read by the compiled kernel).
+    """
+
+    def __init__(self, pyramid: WaveletPyramid) -> None:
+        self.pyramid = pyramid
+        self.layout: WaveletLayout = pyramid.layout
+        lay = self.layout
+        w = spline_wavelet(lay.degree)
+        self._p = (np.ascontiguousarray(w.synthesis_low.taps), w.synthesis_low.start)
+        self._g = (np.ascontiguousarray(w.synthesis_high.taps), w.synthesis_high.start)
+        self._details = {
+            j: tuple(np.asarray(pyramid.details[j][b]) for b in DETAIL_BANDS)
+            for j in range(1, lay.levels + 1)
+        }
+        size = lay.brick_size
+        self._pool = [np.zeros((0, size, size, size), dtype=pyramid.dtype)
+                      for _ in range(lay.levels + 1)]
+        self._slot = [np.full(lay.chunks(j), -1, dtype=np.int64) for j in range(lay.levels + 1)]
+        self._sig = [np.zeros(lay.chunks(j), dtype=np.uint64) for j in range(lay.levels + 1)]
+        self._used = [0] * (lay.levels + 1)
+        self._roots()
+
+    def _roots(self) -> None:
+        lay = self.layout
+        top = lay.levels
+        shape = lay.chunks(top)
+        size = lay.brick_size
+        pool = np.empty((int(np.prod(shape)), size, size, size), dtype=self.pyramid.dtype)
+        coarse = self.pyramid.coarse[top]
+        for n, idx in enumerate(np.ndindex(*shape)):
+            rows = [reflect_indices(np.arange(size) + lay.brick_first_node(idx[a]),
+                                    lay.length(top)[a], lay.coarse_rule)[0] for a in range(3)]
+            box = np.asarray(coarse[min(rows[0]):max(rows[0]) + 1, min(rows[1]):max(rows[1]) + 1,
+                                    min(rows[2]):max(rows[2]) + 1])
+            pool[n] = box[np.ix_(rows[0] - min(rows[0]), rows[1] - min(rows[1]),
+                                 rows[2] - min(rows[2]))]
+            self._slot[top][idx] = n
+        self._pool[top] = pool
+        self._used[top] = pool.shape[0]
+        flat = np.arange(int(np.prod(shape)), dtype=np.uint64).reshape(shape)
+        self._sig[top] = _splitmix(flat + np.uint64(1))
+
+    def clear(self) -> None:
+        """Forget every brick but the roots."""
+        for j in range(self.layout.levels):
+            self._slot[j][:] = -1
+            self._used[j] = 0
+
+    def _slots_for(self, level: int, need: np.ndarray) -> np.ndarray:
+        """Slots for chunks ``need`` (new ones appended to the level's pool)."""
+        slots = self._slot[level][need]
+        fresh = slots < 0
+        count = int(fresh.sum())
+        if count:
+            start = self._used[level]
+            stop = start + count
+            pool = self._pool[level]
+            if stop > pool.shape[0]:
+                grown = np.zeros((max(stop, 2 * pool.shape[0]),) + pool.shape[1:], pool.dtype)
+                grown[:start] = pool[:start]
+                self._pool[level] = grown
+            slots[fresh] = np.arange(start, stop)
+            self._used[level] = stop
+            self._slot[level][need] = slots
+        return slots
+
+    def update(self, selection: Selection) -> ReconstructionStats:
+        """Make every brick of ``selection`` current; returns what was computed and reused."""
+        lay = self.layout
+        if selection.layout != lay:
+            raise ParameterError("selection was made for another layout")
+        stats = ReconstructionStats()
+        start = time.perf_counter()
+        k, pad = lay.chunk, lay.pad
+        for j in range(lay.levels - 1, -1, -1):
+            active = np.ascontiguousarray(selection.active[j])
+            parent_sig = self._sig[j + 1][np.ix_(*[np.arange(n) // 2 for n in lay.chunks(j)])]
+            sig = _splitmix(parent_sig ^ _splitmix(_owner_bits(active)))
+            need = selection.reconstructed[j]
+            current = need & (self._slot[j] >= 0) & (self._sig[j] == sig)
+            todo = need & ~current
+            used = np.zeros(lay.chunks(j), dtype=bool)
+            if todo.any():
+                children = np.argwhere(todo).astype(np.int64)
+                out_slot = self._slots_for(j, todo)
+                # argwhere and boolean indexing both run in C order, so they line up.
+                parent_slot = self._slot[j + 1][children[:, 0] // 2, children[:, 1] // 2,
+                                                children[:, 2] // 2]
+                if np.any(parent_slot < 0):
+                    raise RuntimeError("a reconstructed chunk's parent is missing")
+                owners = np.zeros((children.shape[0], 3, 3, 3), dtype=np.bool_)
+                threads = numba.get_num_threads()
+                if children.shape[0] < PARALLEL_MIN_CHUNKS:
+                    numba.set_num_threads(1)
+                try:
+                    stray = _reconstruct_chunks(
+                        children, parent_slot, self._pool[j + 1], out_slot, self._pool[j],
+                        self._details[j + 1], np.asarray(lay.length(j + 1), np.int64),
+                        np.asarray(lay.detail_length(j + 1), np.int64), active, k, pad,
+                        self._p[0], self._p[1], self._g[0], self._g[1], lay.coarse_rule,
+                        lay.detail_rule, owners)
+                finally:
+                    numba.set_num_threads(threads)
+                if stray:
+                    raise RuntimeError("details from outside a chunk's neighbourhood")
+                for off in np.argwhere(owners.any(axis=0)):
+                    hit = owners[:, off[0], off[1], off[2]]
+                    pos = [np.clip(children[hit, a] + off[a] - 1, 0, lay.chunks(j)[a] - 1)
+                           for a in range(3)]
+                    used[pos[0], pos[1], pos[2]] = True
+                self._sig[j][todo] = sig[todo]
+            stats.computed.insert(0, int(todo.sum()))
+            stats.reused.insert(0, int(current.sum()))
+            stats.detail_owners.insert(0, used)
+        stats.milliseconds = (time.perf_counter() - start) * 1e3
+        return stats
+
+    def brick(self, level: int, index: tuple[int, int, int], octants: int = 0xFF) -> Brick:
+        """The current brick of chunk ``index`` on ``level`` (after :meth:`update`)."""
+        slot = self._slot[level][index]
+        if slot < 0:
+            raise KeyError(f"chunk {index} of level {level} is not reconstructed")
+        lay = self.layout
+        return Brick(level, tuple(int(i) for i in index), self._pool[level][slot],
+                     lay.brick_origin(level, index), float(2**level), octants)
+
+    def bricks(self, selection: Selection) -> list[Brick]:
+        """Every brick that draws part of ``selection`` (call :meth:`update` first)."""
+        return [self.brick(j, idx, mask) for j, idx, mask in selection.drawn()]
