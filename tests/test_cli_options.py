@@ -224,3 +224,33 @@ def test_version_prints_the_package_version(capsys):
     out = capsys.readouterr().out.strip()
     assert out == f"splinecast {sc.__version__}"
     assert sc.__version__ == importlib.metadata.version("splinecast")
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--mode", "mip", "--iso", "0.3"], "--iso does not apply to --mode mip"),
+    (["--mode", "dvr", "--tf", "{tf_a}", "--opacity", "0.5"], "--opacity"),
+    (["--mode", "minip", "--inside", "low"], "--inside"),
+    (["--mode", "dvr", "--tf", "{tf_a}", "--texture", "checker"], "--texture"),
+    (["--mode", "mip", "--shading", "cel"], "--shading"),
+    (["--mode", "dvr", "--tf", "{tf_a}", "--method", "sampled"], "--method"),
+    (["--mode", "dvr", "--tf", "{tf_a}", "--colormap", "hot"], "--colormap"),
+    (["--iso", "0.5", "--window", "0,1"], "--window"),
+    (["--iso", "0.5", "--tf", "{tf_a}"], "--tf"),
+    (["--mode", "mip", "--preintegration", "none"], "--preintegration"),
+    (["--iso", "0.5", "--adaptive"], "--adaptive"),
+    (["--iso", "0.5", "--termination", "0.9"], "--termination"),
+    (["--iso", "0.3,0.6", "--method", "sampled"], "--method sampled"),
+    (["--iso", "0.5", "--opacity", "0.5", "--method", "sampled"], "--method sampled"),
+    (["--iso", "0.5", "--step", "0.1"], "--step"),
+    (["--mode", "mip", "--step", "0.1"], "--step"),
+    (["--iso", "0.5", "--texture-scale", "0.3"], "--texture-scale"),
+    (["--mode", "dvr", "--tf", "{tf_a}", "--table-layout", "exponential"], "--table-layout"),
+])
+def test_options_the_settings_would_ignore_are_refused(args, needle, tmp_path, capsys, tf_files):
+    """An option that would not change the output is a mistake: one line, status 2, no file."""
+    png = tmp_path / "out.png"
+    code, err = run_cli(["render", ML, "--size", "8x8", "--quiet", "-o", str(png),
+                         *[a.format(**tf_files) for a in args]], capsys)
+    assert code == 2
+    assert err.startswith("splinecast: error:") and err.count("\n") == 1 and needle in err
+    assert not png.exists()
