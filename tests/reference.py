@@ -10,6 +10,7 @@ that the tests compare the package against an independent computation, never aga
 * :func:`trilinear` -- the trilinear interpolant in plain numpy (lerp form, not the monomial form
   the package uses), and :class:`RefIsoCaster`, a brute-force first-hit isosurface ray caster built
   on it (see its docstring for why it cannot miss a crossing).
+* :func:`bspline` -- tensor-product B-splines evaluated by scipy (``map_coordinates``).
 * :func:`dense_dvr` -- the emission-absorption integral along rays, by dense sampling of the
   trilinear interpolant, with the transfer function evaluated from its control points.
 * Analytic test volumes: :func:`marschner_lobb`, :func:`sphere_distance`, :func:`smooth_noise`.
@@ -29,6 +30,7 @@ __all__ = [
     "mp_quadratic_roots",
     "trilinear",
     "RefIsoCaster",
+    "bspline",
     "dense_dvr",
     "marschner_lobb",
     "sphere_distance",
@@ -381,6 +383,20 @@ class RefIsoCaster:
         end = np.minimum(t1c, t_root + window / dn)
         back, _ = self.first_root(o, d, start, end, -sgn_before, iso)
         return back - t_root
+
+
+# =============================================================================== B-splines
+def bspline(coeffs: np.ndarray, degree: int, points: np.ndarray) -> np.ndarray:
+    """Tensor-product B-spline of ``degree`` with coefficients ``coeffs`` at index-space
+    ``points`` (shape (..., 3)), coefficient ``m`` centred at ``x = m``, coefficients mirrored
+    about the first and last voxel: ``scipy.ndimage.map_coordinates(coeffs, order=degree,
+    mode="mirror", prefilter=False)``, independent of splinecast's per-cell transforms."""
+    from scipy import ndimage
+
+    points = np.asarray(points, np.float64)
+    flat = ndimage.map_coordinates(np.asarray(coeffs, np.float64), points.reshape(-1, 3).T,
+                                   order=degree, mode="mirror", prefilter=False)
+    return flat.reshape(points.shape[:-1])
 
 
 # =============================================================================== volume rendering
