@@ -6,11 +6,8 @@ there (outward: ``-g/|g|`` when the object is where values are high, ``+g/|g|`` 
 evaluated just before and just after the hit along the ray.
 
 The gradient is taken by central differences of a value evaluation that shares nothing with the
-kernels' ray code: ``reference.trilinear`` (lerp form), ``reference.bspline`` (scipy's
-``map_coordinates``) and, for the type-6 splines, the models' point evaluation
-(``model.evaluate``: barycentric de Casteljau on the tetrahedron holding the point; the
-ray-restricted Bernstein polynomials and root finders of the kernel are not involved; the
-type-6 hits and normals are also checked analytically in ``test_type6_analytic.py``).
+kernels' ray code (``evaluators.py``: the lerp-form trilinear interpolant, scipy's B-splines, the
+type-6 models' point evaluation).
 
 Why 1e-6 holds: inside one polynomial piece (a cell; a half-integer cell for even-degree
 B-splines; a tetrahedron for the type-6 splines) the field has degree <= 3 per axis, so a central
@@ -26,8 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from evaluators import model_evaluator
 from pairs import MODELS_FOR_MODE
-from reference import bspline, smooth_noise, trilinear
+from reference import smooth_noise
 
 import splinecast as sc
 
@@ -60,41 +58,12 @@ def clip(volume, camera):
     return [(*n, -float(n @ volume.center))]
 
 
-def evaluator(model_name: str, volume: sc.Volume, scene: sc.Scene):
-    """``(value(p), boundary_distance(p), (lo, hi))`` in index space for a model."""
-    data = np.asarray(volume.data, np.float64)
-    hi_box = np.asarray(volume.shape, float) - 1.0
-
-    def to_planes(p, offset):
-        # distance to the nearest plane x_a = m + offset, over the three axes
-        f = p - offset
-        return np.min(np.abs(f - np.round(f)), axis=-1)
-
-    if model_name == "trilinear":
-        return (lambda p: trilinear(data, p)), (lambda p: to_planes(p, 0.0)), (0.0, hi_box)
-    if model_name.startswith("bspline"):
-        degree = int(model_name[-1])
-        offset = 0.5 if degree % 2 == 0 else 0.0  # even degree: knots between voxel centres
-        return ((lambda p: bspline(data, degree, p)), (lambda p: to_planes(p, offset)),
-                (0.0, hi_box))
-
-    def type6_boundary(p):
-        # cube faces at half-integers and the six planes x = +-y, x = +-z, y = +-z through the
-        # cube centre that separate its 24 tetrahedra
-        local = p - np.round(p)
-        x, y, z = local[..., 0], local[..., 1], local[..., 2]
-        inner = np.min(np.abs(np.stack([x - y, x + y, x - z, x + z, y - z, y + z])), axis=0)
-        return np.minimum(to_planes(p, 0.5), inner / np.sqrt(2.0))
-
-    return scene.model.evaluate, type6_boundary, (-0.5, hi_box + 0.5)
-
-
 def gradient_world(value, p, spacing):
     grads = [(value(p + H * e) - value(p - H * e)) / (2 * H) for e in np.eye(3)]
     return np.stack(grads, axis=-1) / np.asarray(spacing)
 
 
-def check_normals_and_faces(frame, volume, camera, value, boundary, domain, inside, isos):
+def check_normals_and_faces(frame, volume, camera, ev, inside, isos):
     """Assert normals to NORMAL_TOL and faces at the hits of ``frame``; returns counts."""
     origins, dirs = camera.rays()
     hit = frame.hit
@@ -102,7 +71,7 @@ def check_normals_and_faces(frame, volume, camera, value, boundary, domain, insi
     p = volume.world_to_index(frame.position[hit])
     d = dirs[hit] / np.asarray(volume.spacing)
     d /= np.linalg.norm(d, axis=-1, keepdims=True)  # unit index-space direction
-    lo, hi = domain
+    value, lo, hi = ev.value, ev.lo, ev.hi
     interior = np.all((p > lo + 2 * MARGIN) & (p < hi - 2 * MARGIN), axis=-1)
     # --- faces: which side of the crossed isovalue the ray comes from
     v = value(p)
@@ -117,7 +86,7 @@ def check_normals_and_faces(frame, volume, camera, value, boundary, domain, insi
     # --- normals: normalized world gradient, pointing away from the inside
     g = gradient_world(value, p, volume.spacing)
     gnorm = np.linalg.norm(g, axis=-1)
-    ok = interior & (boundary(p) > MARGIN) & (gnorm > 0.05)
+    ok = interior & (ev.boundary(p) > MARGIN) & (gnorm > 0.05)
     assert ok.sum() >= 0.5 * hit.sum()
     expected = (-1.0 if inside == "high" else 1.0) * g[ok] / gnorm[ok, None]
     got = frame.normal[hit][ok].astype(np.float64)
@@ -130,12 +99,11 @@ def check_normals_and_faces(frame, volume, camera, value, boundary, domain, insi
 @pytest.mark.parametrize("model_name", MODELS_FOR_MODE["iso"])
 def test_iso_normals_and_faces(volume, camera, clip, model_name, inside):
     scene = sc.Scene(volume, model=model_name)
-    value, boundary, domain = evaluator(model_name, volume, scene)
+    ev = model_evaluator(model_name, volume, scene)
     fronts = backs = 0
     for planes in (None, clip):
         frame = scene.render(camera, iso=ISO, inside=inside, clip=planes)
-        f, b = check_normals_and_faces(frame, volume, camera, value, boundary, domain, inside,
-                                       [ISO])
+        f, b = check_normals_and_faces(frame, volume, camera, ev, inside, [ISO])
         fronts, backs = fronts + f, backs + b
     assert fronts > 20 and backs > 20  # both faces were checked
 
@@ -144,8 +112,8 @@ def test_iso_normals_and_faces(volume, camera, clip, model_name, inside):
 def test_multi_iso_first_crossing_normals_and_faces(volume, camera, clip, model_name):
     """``Frame.normal``/``face`` of several isosurfaces describe the first crossing."""
     scene = sc.Scene(volume, model=model_name)
-    value, boundary, domain = evaluator(model_name, volume, scene)
+    ev = model_evaluator(model_name, volume, scene)
     isos = [-0.4, ISO, 0.9]
     for planes in (None, clip):
         frame = scene.render(camera, iso=isos, clip=planes)
-        check_normals_and_faces(frame, volume, camera, value, boundary, domain, "high", isos)
+        check_normals_and_faces(frame, volume, camera, ev, "high", isos)
