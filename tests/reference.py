@@ -10,6 +10,9 @@ that the tests compare the package against an independent computation, never aga
 * :func:`trilinear` -- the trilinear interpolant in plain numpy (lerp form, not the monomial form
   the package uses), and :class:`RefIsoCaster`, a brute-force first-hit isosurface ray caster built
   on it (see its docstring for why it cannot miss a crossing).
+* :func:`box_interval`, :func:`planes_interval`, :func:`all_crossings` -- ray intervals in a box
+  and behind clip planes, and every crossing of several isovalues along rays by dense sampling
+  and bisection of any value function.
 * :func:`bspline` -- tensor-product B-splines evaluated by scipy (``map_coordinates``).
 * :func:`dense_dvr` -- the emission-absorption integral along rays, by dense sampling of the
   trilinear interpolant, with the transfer function evaluated from its control points.
@@ -30,6 +33,9 @@ __all__ = [
     "mp_quadratic_roots",
     "trilinear",
     "RefIsoCaster",
+    "box_interval",
+    "planes_interval",
+    "all_crossings",
     "bspline",
     "dense_dvr",
     "marschner_lobb",
@@ -383,6 +389,88 @@ class RefIsoCaster:
         end = np.minimum(t1c, t_root + window / dn)
         back, _ = self.first_root(o, d, start, end, -sgn_before, iso)
         return back - t_root
+
+
+# =============================================================================== ray intervals
+def box_interval(o, d, lo, hi):
+    """``(t0, t1)`` of rays ``o + t d`` (t >= 0, shape (R, 3)) inside the box ``[lo, hi]``;
+    ``t0 > t1`` for a ray that misses it."""
+    o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
+    lo, hi = np.broadcast_to(lo, (3,)), np.broadcast_to(hi, (3,))
+    t0 = np.zeros(len(o))
+    t1 = np.full(len(o), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for a in range(3):
+            ta, tb = (lo[a] - o[:, a]) / d[:, a], (hi[a] - o[:, a]) / d[:, a]
+            par = d[:, a] == 0.0
+            inside = (o[:, a] >= lo[a]) & (o[:, a] <= hi[a])
+            t0 = np.where(par, np.where(inside, t0, np.inf), np.maximum(t0, np.minimum(ta, tb)))
+            t1 = np.where(par, np.where(inside, t1, -np.inf), np.minimum(t1, np.maximum(ta, tb)))
+    return t0, t1
+
+
+def planes_interval(W, U, planes):
+    """``(t_min, t_max)`` of world rays ``W + t U`` (t >= 0) in the half-spaces
+    ``n . x + d >= 0`` of ``planes`` (rows ``(nx, ny, nz, d)``); ``t_min > t_max`` when none."""
+    W, U = np.asarray(W, np.float64), np.asarray(U, np.float64)
+    t_min = np.zeros(len(W))
+    t_max = np.full(len(W), np.inf)
+    for plane in np.asarray(planes, np.float64).reshape(-1, 4):
+        at_origin = W @ plane[:3] + plane[3]
+        rate = U @ plane[:3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cross = -at_origin / rate
+        t_min = np.where(rate > 0, np.maximum(t_min, cross), t_min)
+        t_max = np.where(rate < 0, np.minimum(t_max, cross), t_max)
+        outside = (rate == 0) & (at_origin < 0)
+        t_min = np.where(outside, np.inf, t_min)
+        t_max = np.where(outside, -np.inf, t_max)
+    return t_min, t_max
+
+
+def all_crossings(value, o, d, t0, t1, isos, step: float = 1e-3, tangent: float = 1e-4,
+                  bisections: int = 60):
+    """Every crossing of every isovalue along index-space rays ``o + t d``, ``t in [t0, t1]``.
+
+    ``value`` maps index points (..., 3) to field values. Each ray is sampled at equal steps of at
+    most ``step`` voxels (index-space arc length); every sign change of ``value - iso`` between
+    neighbouring samples is refined by ``bisections`` halvings. Returns ``(crossings,
+    ambiguous)``: per ray a sorted array of ``(t, iso index)`` rows and a flag set when the
+    sampling cannot decide the crossings: a sample within ``tangent`` of an isovalue at a local
+    minimum of ``|value - iso|`` without a sign change (a tangency, or two crossings closer than
+    the step), or a sample exactly on an isovalue.
+    """
+    o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
+    isos = np.asarray(isos, np.float64)
+    out, ambiguous = [], np.zeros(len(o), bool)
+    for r in range(len(o)):
+        if not t0[r] < t1[r]:
+            out.append(np.zeros((0, 2)))
+            continue
+        length = (t1[r] - t0[r]) * np.linalg.norm(d[r])
+        ts = np.linspace(t0[r], t1[r], int(np.ceil(length / step)) + 1)
+        v = value(o[r] + ts[:, None] * d[r])
+        rows = []
+        for k, iso in enumerate(isos):
+            g = v - iso
+            if np.any(g == 0.0):
+                ambiguous[r] = True
+            change = np.sign(g[:-1]) != np.sign(g[1:])
+            a, b, ga = ts[:-1][change], ts[1:][change], g[:-1][change]
+            for _ in range(bisections):
+                m = 0.5 * (a + b)
+                gm = value(o[r] + m[:, None] * d[r]) - iso
+                left = np.sign(gm) == np.sign(ga)
+                a, ga = np.where(left, m, a), np.where(left, gm, ga)
+                b = np.where(left, b, m)
+            rows += [(t, k) for t in 0.5 * (a + b)]
+            absg = np.abs(g)
+            dip = (absg[1:-1] <= absg[:-2]) & (absg[1:-1] <= absg[2:]) & ~change[:-1] & ~change[1:]
+            if np.any(absg[1:-1][dip] < tangent):
+                ambiguous[r] = True
+        rows.sort()
+        out.append(np.asarray(rows, np.float64).reshape(-1, 2))
+    return out, ambiguous
 
 
 # =============================================================================== B-splines
