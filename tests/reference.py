@@ -438,39 +438,51 @@ def all_crossings(value, o, d, t0, t1, isos, step: float = 1e-3, tangent: float 
     ambiguous)``: per ray a sorted array of ``(t, iso index)`` rows and a flag set when the
     sampling cannot decide the crossings: a sample within ``tangent`` of an isovalue at a local
     minimum of ``|value - iso|`` without a sign change (a tangency, or two crossings closer than
-    the step), or a sample exactly on an isovalue.
+    the step), or a sample exactly on an isovalue. All rays are evaluated together (a few calls
+    of ``value`` on many points), so a slow-to-call evaluator stays cheap.
     """
     o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
+    t0, t1 = np.asarray(t0, np.float64), np.asarray(t1, np.float64)
     isos = np.asarray(isos, np.float64)
-    out, ambiguous = [], np.zeros(len(o), bool)
-    for r in range(len(o)):
-        if not t0[r] < t1[r]:
-            out.append(np.zeros((0, 2)))
-            continue
-        length = (t1[r] - t0[r]) * np.linalg.norm(d[r])
-        ts = np.linspace(t0[r], t1[r], int(np.ceil(length / step)) + 1)
-        v = value(o[r] + ts[:, None] * d[r])
-        rows = []
-        for k, iso in enumerate(isos):
-            g = v - iso
-            if np.any(g == 0.0):
-                ambiguous[r] = True
-            change = np.sign(g[:-1]) != np.sign(g[1:])
-            a, b, ga = ts[:-1][change], ts[1:][change], g[:-1][change]
-            for _ in range(bisections):
-                m = 0.5 * (a + b)
-                gm = value(o[r] + m[:, None] * d[r]) - iso
-                left = np.sign(gm) == np.sign(ga)
-                a, ga = np.where(left, m, a), np.where(left, gm, ga)
-                b = np.where(left, b, m)
-            rows += [(t, k) for t in 0.5 * (a + b)]
-            absg = np.abs(g)
-            dip = (absg[1:-1] <= absg[:-2]) & (absg[1:-1] <= absg[2:]) & ~change[:-1] & ~change[1:]
-            if np.any(absg[1:-1][dip] < tangent):
-                ambiguous[r] = True
-        rows.sort()
-        out.append(np.asarray(rows, np.float64).reshape(-1, 2))
-    return out, ambiguous
+    R = len(o)
+    live = t0 < t1
+    length = np.where(live, (t1 - t0) * np.linalg.norm(d, axis=1), 0.0)
+    count = np.where(live, np.ceil(length / step).astype(np.int64) + 1, 0)
+    ray = np.repeat(np.arange(R), count)  # ray of each sample, rays one after the other
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
+    frac = (np.arange(len(ray)) - first[ray]) / np.maximum(count[ray] - 1, 1)
+    ts = t0[ray] + frac * (t1[ray] - t0[ray])
+    v = value(o[ray] + ts[:, None] * d[ray]) if len(ray) else np.zeros(0)
+    same_ray = ray[1:] == ray[:-1]  # neighbouring samples on one ray
+    ambiguous = np.zeros(R, bool)
+    found_t, found_k, found_r = [], [], []
+    for k, iso in enumerate(isos):
+        g = v - iso
+        np.logical_or.at(ambiguous, ray[g == 0.0], True)
+        change = same_ray & (np.sign(g[:-1]) != np.sign(g[1:]))
+        a, b, ga = ts[:-1][change], ts[1:][change], g[:-1][change]
+        rid = ray[:-1][change]
+        for _ in range(bisections):
+            m = 0.5 * (a + b)
+            gm = value(o[rid] + m[:, None] * d[rid]) - iso if len(m) else m
+            left = np.sign(gm) == np.sign(ga)
+            a, ga = np.where(left, m, a), np.where(left, gm, ga)
+            b = np.where(left, b, m)
+        found_t.append(0.5 * (a + b))
+        found_k.append(np.full(len(a), k))
+        found_r.append(rid)
+        absg = np.abs(g)
+        mid = same_ray[:-1] & same_ray[1:]  # sample i+1 has neighbours on its own ray
+        dip = (mid & (absg[1:-1] <= absg[:-2]) & (absg[1:-1] <= absg[2:]) & ~change[:-1]
+               & ~change[1:] & (absg[1:-1] < tangent))
+        np.logical_or.at(ambiguous, ray[1:-1][dip], True)
+    t_all, k_all, r_all = (np.concatenate(x) for x in (found_t, found_k, found_r))
+    order = np.lexsort((t_all, r_all))
+    t_all, k_all, r_all = t_all[order], k_all[order], r_all[order]
+    bounds = np.searchsorted(r_all, np.arange(R + 1))
+    crossings = [np.stack([t_all[bounds[r]:bounds[r + 1]], k_all[bounds[r]:bounds[r + 1]]],
+                          axis=1).astype(np.float64) for r in range(R)]
+    return crossings, ambiguous
 
 
 # =============================================================================== B-splines
@@ -489,7 +501,7 @@ def bspline(coeffs: np.ndarray, degree: int, points: np.ndarray) -> np.ndarray:
 
 # =============================================================================== volume rendering
 def dense_dvr(data, spacing, origin, origins, directions, opacity_points, color_points, domain,
-              ds: float = 0.01, chunk: int = 256):
+              ds: float = 0.01, chunk: int = 256, planes=None):
     """Emission-absorption integral along world rays through the trilinear interpolant.
 
     The transfer function is given by its control points and evaluated with ``np.interp`` (linear
@@ -502,8 +514,9 @@ def dense_dvr(data, spacing, origin, origins, directions, opacity_points, color_
     the field is sampled at equal steps no longer than ``ds`` voxels and both
     ``Tau(s) = int tau ds`` and ``C = int c(v) tau(v) exp(-Tau) ds`` are integrated with the
     trapezoid rule (second order; kinks of the integrand at cell faces and control points cost
-    O(ds^2) each). Returns premultiplied ``rgb`` (..., 3) and opacity ``alpha`` (...) over a
-    transparent background, with the leading shape of ``origins``.
+    O(ds^2) each). ``planes`` (rows ``(nx, ny, nz, d)``, world) limit each ray further to the
+    half-spaces ``n . x + d >= 0``. Returns premultiplied ``rgb`` (..., 3) and opacity ``alpha``
+    (...) over a transparent background, with the leading shape of ``origins``.
     """
     data = np.asarray(data, np.float64)
     spacing = np.broadcast_to(np.asarray(spacing, np.float64), (3,))
@@ -524,6 +537,9 @@ def dense_dvr(data, spacing, origin, origins, directions, opacity_points, color_
     for start in range(0, W.shape[0], chunk):
         o, d = caster.to_index(W[start:start + chunk], U[start:start + chunk])
         t0, t1 = caster.clip(o, d)
+        if planes is not None:
+            p0, p1 = planes_interval(W[start:start + chunk], U[start:start + chunk], planes)
+            t0, t1 = np.maximum(t0, p0), np.minimum(t1, p1)
         speed = np.linalg.norm(d, axis=1)  # voxels per world unit
         length = np.where(t1 > t0, (t1 - t0) * speed, 0.0)  # voxels
         n = int(np.ceil(length.max() / ds)) + 1 if length.max() > 0 else 2

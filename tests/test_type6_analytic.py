@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from reference import planes_interval
 
 import splinecast as sc
 
@@ -78,16 +79,7 @@ def analytic_first_hits(camera, clip, level):
     """
     W, U = camera.rays()
     W, U = W.reshape(-1, 3), U.reshape(-1, 3)
-    t_min = np.zeros(len(W))
-    t_max = np.full(len(W), np.inf)
-    for nx, ny, nz, dd in clip or []:
-        n = np.array([nx, ny, nz])
-        at0, rate = W @ n + dd, U @ n
-        with np.errstate(divide="ignore"):
-            cross = -at0 / rate
-        t_min = np.where(rate > 0, np.maximum(t_min, cross), t_min)
-        t_max = np.where(rate < 0, np.minimum(t_max, cross), t_max)
-        t_min = np.where((rate == 0) & (at0 < 0), np.inf, t_min)
+    t_min, t_max = planes_interval(W, U, clip or [])
     o = (W - ORIGIN) / SPACING - CENTRE
     d = U / SPACING
     A = np.einsum("ri,ij,rj->r", d, M, d)
