@@ -25,7 +25,8 @@ import numpy as np
 import pytest
 from evaluators import model_evaluator
 from pairs import MODELS_FOR_MODE, pairs
-from reference import all_crossings, box_interval, planes_interval, smooth_noise
+from reference import all_crossings, box_interval, planes_interval
+from scenes import NOISE_ISO, noise_volume
 from scipy.optimize import minimize_scalar
 
 import splinecast as sc
@@ -82,17 +83,13 @@ def test_make_planes_validation():
 
 
 # ----------------------------------------------------------------------- two-sided, per ray
-SHAPE = (12, 11, 13)
-SPACING = np.array([1.0, 1.3, 0.8])
-ORIGIN = np.array([0.5, -1.0, 2.0])
-ISO = 0.2
+ISO = NOISE_ISO
 DEPTH_TOL = 1e-9  # voxels: both sides solve the same root to ~1e-12
 
 
-@pytest.fixture(scope="module")
-def noise_volume():
-    data = smooth_noise(SHAPE, seed=3, sigma=2.0).astype(np.float32)
-    return sc.Volume(data, spacing=SPACING, origin=ORIGIN)
+@pytest.fixture(scope="module", name="noise_volume")
+def noise_volume_fixture():
+    return noise_volume()
 
 
 @pytest.fixture(scope="module")

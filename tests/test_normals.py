@@ -25,14 +25,11 @@ import numpy as np
 import pytest
 from evaluators import model_evaluator
 from pairs import MODELS_FOR_MODE
-from reference import smooth_noise
+from scenes import NOISE_ISO, noise_volume
 
 import splinecast as sc
 
-SHAPE = (12, 11, 13)
-SPACING = (1.0, 1.3, 0.8)
-ORIGIN = (0.5, -1.0, 2.0)
-ISO = 0.2
+ISO = NOISE_ISO
 H = 1e-5  # finite-difference step, voxels
 MARGIN = 1e-4  # distance to piece boundaries and the domain border, voxels
 NORMAL_TOL = 1e-6
@@ -40,9 +37,7 @@ NORMAL_TOL = 1e-6
 
 @pytest.fixture(scope="module")
 def volume():
-    # float32 like most data (the kernels interpolate it in float64, as the references do)
-    data = smooth_noise(SHAPE, seed=3, sigma=2.0).astype(np.float32)
-    return sc.Volume(data, spacing=SPACING, origin=ORIGIN)
+    return noise_volume()
 
 
 @pytest.fixture(scope="module")
