@@ -501,8 +501,10 @@ def bspline(coeffs: np.ndarray, degree: int, points: np.ndarray) -> np.ndarray:
 
 # =============================================================================== volume rendering
 def dense_dvr(data, spacing, origin, origins, directions, opacity_points, color_points, domain,
-              ds: float = 0.01, chunk: int = 256, planes=None):
-    """Emission-absorption integral along world rays through the trilinear interpolant.
+              ds: float = 0.01, chunk: int = 256, planes=None, value=None, box=None):
+    """Emission-absorption integral along world rays through the trilinear interpolant (or the
+    field ``value`` of index points (..., 3) over the index-space ``box = (lo, hi)``, e.g. an
+    ``evaluators.Evaluator``'s, for other models).
 
     The transfer function is given by its control points and evaluated with ``np.interp`` (linear
     between points, constant beyond them): ``opacity_points`` are ``(value, alpha)`` with
@@ -531,12 +533,15 @@ def dense_dvr(data, spacing, origin, origins, directions, opacity_points, color_
     lo, hi = float(domain[0]), float(domain[1])
     if np.any(op[:, 1] >= 1.0):
         raise ValueError("opacity 1 has infinite extinction; use alpha < 1")
-    caster = RefIsoCaster(data, spacing, origin)  # for its box clipping only
+    if value is None:
+        value = lambda p: trilinear(data, p)  # noqa: E731
+        box = (np.zeros(3), np.asarray(data.shape, np.float64) - 1.0)
     rgb = np.zeros((W.shape[0], 3))
     alpha = np.zeros(W.shape[0])
     for start in range(0, W.shape[0], chunk):
-        o, d = caster.to_index(W[start:start + chunk], U[start:start + chunk])
-        t0, t1 = caster.clip(o, d)
+        o = (W[start:start + chunk] - origin) / spacing
+        d = U[start:start + chunk] / spacing
+        t0, t1 = box_interval(o, d, box[0], box[1])
         if planes is not None:
             p0, p1 = planes_interval(W[start:start + chunk], U[start:start + chunk], planes)
             t0, t1 = np.maximum(t0, p0), np.minimum(t1, p1)
@@ -546,7 +551,7 @@ def dense_dvr(data, spacing, origin, origins, directions, opacity_points, color_
         frac = np.linspace(0.0, 1.0, n)
         s = length[:, None] * frac  # voxels from the entry point
         t = np.where(length > 0, t0, 0.0)[:, None] + s / speed[:, None]
-        v = trilinear(data, o[:, None, :] + t[..., None] * d[:, None, :])
+        v = value(o[:, None, :] + t[..., None] * d[:, None, :])
         tau = -np.log1p(-np.interp(v, op[:, 0], op[:, 1]))
         u = np.clip((v - lo) / (hi - lo), 0.0, 1.0)
         color = np.stack([np.interp(u, cp[:, 0], cp[:, k]) for k in (1, 2, 3)], axis=-1)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from evaluators import model_evaluator
 from pairs import MODELS_FOR_MODE
 from reference import dense_dvr
 
@@ -205,11 +206,13 @@ def test_clipped_dvr_integrates_only_the_kept_interval(cases, model_name):
     crop_planes = [row for a in range(3) for row in ((*np.eye(3)[a], -lo[a]),
                                                     (*(-np.eye(3)[a]), hi[a]))]
     W, U = cam.rays()
+    scene = sc.Scene(vol, model=model_name)
+    ev = model_evaluator(model_name, vol, scene)
     ref, alpha = dense_dvr(vol.data, vol.spacing, vol.origin, W, U, case.opacity, case.colors,
-                           case.domain, ds=case.ds, planes=[plane, *crop_planes])
-    frame = sc.Scene(vol, model=model_name).render(
-        cam, mode="dvr", tf=case.tf, shading=BLACK, dvr=sc.DVRSettings(step=0.25),
-        clip=[plane], crop=crop)
+                           case.domain, ds=case.ds, planes=[plane, *crop_planes],
+                           value=ev.value, box=(ev.lo, ev.hi))
+    frame = scene.render(cam, mode="dvr", tf=case.tf, shading=BLACK,
+                         dvr=sc.DVRSettings(step=0.25), clip=[plane], crop=crop)
     err = np.abs(frame.rgba[..., :3] - ref).max()  # every pixel, visible or not
     assert err <= TARGET - case.ref_err, err * 255
     assert np.abs(ref - case.ref).max() > 20 * TARGET  # the clipping matters
