@@ -14,8 +14,8 @@
 #   libxrender1 libxt6 libx11-6  X libraries the wheel's modules link against even offscreen
 #
 # Usage: scripts/install_bench.sh [--optional]
-#   --optional  never fail (used by `make test`): report what could not be installed and exit 0,
-#               so the tests that need offscreen OpenGL skip with a reason instead.
+#   --optional  never fail: report what could not be installed and exit 0. (`make test` runs the
+#               strict form and treats a failure as optional itself, so it can retry next time.)
 # Debian/Ubuntu (apt-get) only; on other systems install the same libraries by hand.
 set -uo pipefail
 

@@ -10,6 +10,12 @@ that the tests compare the package against an independent computation, never aga
 * :func:`trilinear` -- the trilinear interpolant in plain numpy (lerp form, not the monomial form
   the package uses), and :class:`RefIsoCaster`, a brute-force first-hit isosurface ray caster built
   on it (see its docstring for why it cannot miss a crossing).
+* :func:`box_interval`, :func:`planes_interval`, :func:`all_crossings` -- ray intervals in a box
+  and behind clip planes, and every crossing of several isovalues along rays by dense sampling
+  and bisection of any value function.
+* :func:`bspline` -- tensor-product B-splines evaluated by scipy (``map_coordinates``).
+* :func:`dense_dvr` -- the emission-absorption integral along rays, by dense sampling of the
+  trilinear interpolant, with the transfer function evaluated from its control points.
 * Analytic test volumes: :func:`marschner_lobb`, :func:`sphere_distance`, :func:`smooth_noise`.
 """
 
@@ -27,6 +33,11 @@ __all__ = [
     "mp_quadratic_roots",
     "trilinear",
     "RefIsoCaster",
+    "box_interval",
+    "planes_interval",
+    "all_crossings",
+    "bspline",
+    "dense_dvr",
     "marschner_lobb",
     "sphere_distance",
     "smooth_noise",
@@ -378,6 +389,180 @@ class RefIsoCaster:
         end = np.minimum(t1c, t_root + window / dn)
         back, _ = self.first_root(o, d, start, end, -sgn_before, iso)
         return back - t_root
+
+
+# =============================================================================== ray intervals
+def box_interval(o, d, lo, hi):
+    """``(t0, t1)`` of rays ``o + t d`` (t >= 0, shape (R, 3)) inside the box ``[lo, hi]``;
+    ``t0 > t1`` for a ray that misses it."""
+    o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
+    lo, hi = np.broadcast_to(lo, (3,)), np.broadcast_to(hi, (3,))
+    t0 = np.zeros(len(o))
+    t1 = np.full(len(o), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for a in range(3):
+            ta, tb = (lo[a] - o[:, a]) / d[:, a], (hi[a] - o[:, a]) / d[:, a]
+            par = d[:, a] == 0.0
+            inside = (o[:, a] >= lo[a]) & (o[:, a] <= hi[a])
+            t0 = np.where(par, np.where(inside, t0, np.inf), np.maximum(t0, np.minimum(ta, tb)))
+            t1 = np.where(par, np.where(inside, t1, -np.inf), np.minimum(t1, np.maximum(ta, tb)))
+    return t0, t1
+
+
+def planes_interval(W, U, planes):
+    """``(t_min, t_max)`` of world rays ``W + t U`` (t >= 0) in the half-spaces
+    ``n . x + d >= 0`` of ``planes`` (rows ``(nx, ny, nz, d)``); ``t_min > t_max`` when none."""
+    W, U = np.asarray(W, np.float64), np.asarray(U, np.float64)
+    t_min = np.zeros(len(W))
+    t_max = np.full(len(W), np.inf)
+    for plane in np.asarray(planes, np.float64).reshape(-1, 4):
+        at_origin = W @ plane[:3] + plane[3]
+        rate = U @ plane[:3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cross = -at_origin / rate
+        t_min = np.where(rate > 0, np.maximum(t_min, cross), t_min)
+        t_max = np.where(rate < 0, np.minimum(t_max, cross), t_max)
+        outside = (rate == 0) & (at_origin < 0)
+        t_min = np.where(outside, np.inf, t_min)
+        t_max = np.where(outside, -np.inf, t_max)
+    return t_min, t_max
+
+
+def all_crossings(value, o, d, t0, t1, isos, step: float = 1e-3, tangent: float = 1e-4,
+                  bisections: int = 60):
+    """Every crossing of every isovalue along index-space rays ``o + t d``, ``t in [t0, t1]``.
+
+    ``value`` maps index points (..., 3) to field values. Each ray is sampled at equal steps of at
+    most ``step`` voxels (index-space arc length); every sign change of ``value - iso`` between
+    neighbouring samples is refined by ``bisections`` halvings. Returns ``(crossings,
+    ambiguous)``: per ray a sorted array of ``(t, iso index)`` rows and a flag set when the
+    sampling cannot decide the crossings: a sample within ``tangent`` of an isovalue at a local
+    minimum of ``|value - iso|`` without a sign change (a tangency, or two crossings closer than
+    the step), or a sample exactly on an isovalue. All rays are evaluated together (a few calls
+    of ``value`` on many points), so a slow-to-call evaluator stays cheap.
+    """
+    o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
+    t0, t1 = np.asarray(t0, np.float64), np.asarray(t1, np.float64)
+    isos = np.asarray(isos, np.float64)
+    R = len(o)
+    live = t0 < t1
+    length = np.where(live, (t1 - t0) * np.linalg.norm(d, axis=1), 0.0)
+    count = np.where(live, np.ceil(length / step).astype(np.int64) + 1, 0)
+    ray = np.repeat(np.arange(R), count)  # ray of each sample, rays one after the other
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
+    frac = (np.arange(len(ray)) - first[ray]) / np.maximum(count[ray] - 1, 1)
+    ts = t0[ray] + frac * (t1[ray] - t0[ray])
+    v = value(o[ray] + ts[:, None] * d[ray]) if len(ray) else np.zeros(0)
+    same_ray = ray[1:] == ray[:-1]  # neighbouring samples on one ray
+    ambiguous = np.zeros(R, bool)
+    found_t, found_k, found_r = [], [], []
+    for k, iso in enumerate(isos):
+        g = v - iso
+        np.logical_or.at(ambiguous, ray[g == 0.0], True)
+        change = same_ray & (np.sign(g[:-1]) != np.sign(g[1:]))
+        a, b, ga = ts[:-1][change], ts[1:][change], g[:-1][change]
+        rid = ray[:-1][change]
+        for _ in range(bisections):
+            m = 0.5 * (a + b)
+            gm = value(o[rid] + m[:, None] * d[rid]) - iso if len(m) else m
+            left = np.sign(gm) == np.sign(ga)
+            a, ga = np.where(left, m, a), np.where(left, gm, ga)
+            b = np.where(left, b, m)
+        found_t.append(0.5 * (a + b))
+        found_k.append(np.full(len(a), k))
+        found_r.append(rid)
+        absg = np.abs(g)
+        mid = same_ray[:-1] & same_ray[1:]  # sample i+1 has neighbours on its own ray
+        dip = (mid & (absg[1:-1] <= absg[:-2]) & (absg[1:-1] <= absg[2:]) & ~change[:-1]
+               & ~change[1:] & (absg[1:-1] < tangent))
+        np.logical_or.at(ambiguous, ray[1:-1][dip], True)
+    t_all, k_all, r_all = (np.concatenate(x) for x in (found_t, found_k, found_r))
+    order = np.lexsort((t_all, r_all))
+    t_all, k_all, r_all = t_all[order], k_all[order], r_all[order]
+    bounds = np.searchsorted(r_all, np.arange(R + 1))
+    crossings = [np.stack([t_all[bounds[r]:bounds[r + 1]], k_all[bounds[r]:bounds[r + 1]]],
+                          axis=1).astype(np.float64) for r in range(R)]
+    return crossings, ambiguous
+
+
+# =============================================================================== B-splines
+def bspline(coeffs: np.ndarray, degree: int, points: np.ndarray) -> np.ndarray:
+    """Tensor-product B-spline of ``degree`` with coefficients ``coeffs`` at index-space
+    ``points`` (shape (..., 3)), coefficient ``m`` centred at ``x = m``, coefficients mirrored
+    about the first and last voxel: ``scipy.ndimage.map_coordinates(coeffs, order=degree,
+    mode="mirror", prefilter=False)``, independent of splinecast's per-cell transforms."""
+    from scipy import ndimage
+
+    points = np.asarray(points, np.float64)
+    flat = ndimage.map_coordinates(np.asarray(coeffs, np.float64), points.reshape(-1, 3).T,
+                                   order=degree, mode="mirror", prefilter=False)
+    return flat.reshape(points.shape[:-1])
+
+
+# =============================================================================== volume rendering
+def dense_dvr(data, spacing, origin, origins, directions, opacity_points, color_points, domain,
+              ds: float = 0.01, chunk: int = 256, planes=None, value=None, box=None):
+    """Emission-absorption integral along world rays through the trilinear interpolant (or the
+    field ``value`` of index points (..., 3) over the index-space ``box = (lo, hi)``, e.g. an
+    ``evaluators.Evaluator``'s, for other models).
+
+    The transfer function is given by its control points and evaluated with ``np.interp`` (linear
+    between points, constant beyond them): ``opacity_points`` are ``(value, alpha)`` with
+    ``alpha`` the opacity of a slab one voxel (index unit) thick, so the extinction per voxel
+    length is ``tau = -ln(1 - alpha)``; ``color_points`` are ``(position, r, g, b)`` over
+    ``[0, 1]`` of ``domain`` (values outside the domain take the end colours).
+
+    Along each ray the index-space arc length ``s`` (voxels) runs over the box of voxel centres;
+    the field is sampled at equal steps no longer than ``ds`` voxels and both
+    ``Tau(s) = int tau ds`` and ``C = int c(v) tau(v) exp(-Tau) ds`` are integrated with the
+    trapezoid rule (second order; kinks of the integrand at cell faces and control points cost
+    O(ds^2) each). ``planes`` (rows ``(nx, ny, nz, d)``, world) limit each ray further to the
+    half-spaces ``n . x + d >= 0``. Returns premultiplied ``rgb`` (..., 3) and opacity ``alpha``
+    (...) over a transparent background, with the leading shape of ``origins``.
+    """
+    data = np.asarray(data, np.float64)
+    spacing = np.broadcast_to(np.asarray(spacing, np.float64), (3,))
+    origin = np.broadcast_to(np.asarray(origin, np.float64), (3,))
+    W = np.asarray(origins, np.float64)
+    U = np.asarray(directions, np.float64)
+    W, U = np.broadcast_arrays(W, U)
+    shape = W.shape[:-1]
+    W, U = W.reshape(-1, 3), U.reshape(-1, 3)
+    op = np.asarray(opacity_points, np.float64)
+    cp = np.asarray(color_points, np.float64)
+    lo, hi = float(domain[0]), float(domain[1])
+    if np.any(op[:, 1] >= 1.0):
+        raise ValueError("opacity 1 has infinite extinction; use alpha < 1")
+    if value is None:
+        value = lambda p: trilinear(data, p)  # noqa: E731
+        box = (np.zeros(3), np.asarray(data.shape, np.float64) - 1.0)
+    rgb = np.zeros((W.shape[0], 3))
+    alpha = np.zeros(W.shape[0])
+    for start in range(0, W.shape[0], chunk):
+        o = (W[start:start + chunk] - origin) / spacing
+        d = U[start:start + chunk] / spacing
+        t0, t1 = box_interval(o, d, box[0], box[1])
+        if planes is not None:
+            p0, p1 = planes_interval(W[start:start + chunk], U[start:start + chunk], planes)
+            t0, t1 = np.maximum(t0, p0), np.minimum(t1, p1)
+        speed = np.linalg.norm(d, axis=1)  # voxels per world unit
+        length = np.where(t1 > t0, (t1 - t0) * speed, 0.0)  # voxels
+        n = int(np.ceil(length.max() / ds)) + 1 if length.max() > 0 else 2
+        frac = np.linspace(0.0, 1.0, n)
+        s = length[:, None] * frac  # voxels from the entry point
+        t = np.where(length > 0, t0, 0.0)[:, None] + s / speed[:, None]
+        v = value(o[:, None, :] + t[..., None] * d[:, None, :])
+        tau = -np.log1p(-np.interp(v, op[:, 0], op[:, 1]))
+        u = np.clip((v - lo) / (hi - lo), 0.0, 1.0)
+        color = np.stack([np.interp(u, cp[:, 0], cp[:, k]) for k in (1, 2, 3)], axis=-1)
+        h = (length / (n - 1))[:, None]  # the step of each ray
+        optical = np.concatenate(
+            [np.zeros((len(h), 1)), np.cumsum(0.5 * h * (tau[:, 1:] + tau[:, :-1]), axis=1)],
+            axis=1)
+        f = color * (tau * np.exp(-optical))[..., None]
+        rgb[start:start + chunk] = np.sum(0.5 * h[..., None] * (f[:, 1:] + f[:, :-1]), axis=1)
+        alpha[start:start + chunk] = -np.expm1(-optical[:, -1])
+    return rgb.reshape(*shape, 3), alpha.reshape(shape)
 
 
 # =============================================================================== test volumes

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from reference import bspline as spline
 from scipy import ndimage
 
 import splinecast as sc
@@ -39,11 +40,6 @@ def coefficient_array(volume, degree, prefilter):
     if prefilter:
         data = ndimage.spline_filter(data, order=degree, mode="mirror")
     return data
-
-
-def spline(coeffs, degree, points_index):
-    return ndimage.map_coordinates(coeffs, points_index.reshape(-1, 3).T, order=degree,
-                                   mode="mirror", prefilter=False).reshape(points_index.shape[:-1])
 
 
 def reference_depths(volume, camera, coeffs, degree, iso=ISO):

@@ -1,5 +1,6 @@
-"""The render modes of issue 5 from the command line: MIP, DVR, several isosurfaces, clipping,
-effects, smoothing; and one-line errors (status 2) for bad mode options."""
+"""The render modes of issue 5 from the command line: MIP against the API, and one-line errors
+(status 2) for bad mode options. Every option's effect is compared with the API render, option by
+option, in ``test_cli_options.py``."""
 
 from __future__ import annotations
 
@@ -28,26 +29,6 @@ def test_mip_matches_the_api(tmp_path, capsys):
     cam = sc.Camera.orbit(vol, size=(20, 16))
     frame = sc.Scene(vol).render(cam, mode="mip", window=(-0.5, 0.5))
     np.testing.assert_array_equal(np.asarray(Image.open(png)), frame.to_uint8())
-
-
-def test_dvr_multi_iso_clip_and_effects_run(tmp_path, capsys):
-    tf_path = tmp_path / "tf.json"
-    sc.TransferFunction([(-0.2, 0), (0.0, 0.8)], domain=(-0.6, 1.1)).save(tf_path)
-    runs = [
-        ["--mode", "dvr", "--tf", str(tf_path), "--adaptive", "--termination", "0.98",
-         "--step", "0.5"],
-        ["--mode", "dvr", "--tf", str(tf_path), "--adaptive", "--table-layout", "exponential",
-         "--step", "0.5"],
-        ["--iso=-0.3,0", "--opacity", "0.4,0.8", "--clip", "0,0,1,0", "--clip", "1,0,0,0"],
-        ["--iso", "0", "--texture", "checker", "--shading", "cel",
-         "--crop=-1,0.5,-1,1,-1,1", "--smooth", "3"],
-    ]
-    for extra in runs:
-        png = tmp_path / "x.png"
-        code, _, err = _run(["render", SRC, "--size", "12x10", "--quiet", "-o", str(png),
-                             *extra], capsys)
-        assert code == 0, err
-        assert Image.open(png).size == (12, 10)
 
 
 @pytest.mark.parametrize("extra, word", [

@@ -13,6 +13,28 @@ from ._common import check_output, log, numbers
 
 __all__ = ["add_parser", "run"]
 
+#: Options only some modes read: flag -> (attribute, modes). Given with another mode they would be
+#: ignored without a word, so :func:`_refuse_ignored_options` refuses them instead.
+_MODE_ONLY = {
+    "--iso": ("iso", ("iso",)),
+    "--opacity": ("opacity", ("iso",)),
+    "--inside": ("inside", ("iso",)),
+    "--texture": ("texture", ("iso",)),
+    "--texture-scale": ("texture_scale", ("iso",)),
+    "--shading": ("shading", ("iso",)),
+    "--method": ("method", ("iso", "mip", "minip")),
+    "--colormap": ("colormap", ("mip", "minip")),
+    "--window": ("window", ("mip", "minip")),
+    "--tf": ("tf", ("dvr",)),
+    "--preintegration": ("preintegration", ("dvr",)),
+    "--table-layout": ("table_layout", ("dvr",)),
+    "--adaptive": ("adaptive", ("dvr",)),
+    "--termination": ("termination", ("dvr",)),
+}
+
+#: The render subcommand's option defaults (attribute -> default), filled by :func:`add_parser`.
+_DEFAULTS: dict[str, object] = {}
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
@@ -46,6 +68,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     _add_mode_options(render)
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
+    _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
 
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
@@ -76,6 +99,29 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="DVR opacity-adaptive step (up to 8 x --step; uses a 3D table)")
     render.add_argument("--termination", type=float,
                         help="DVR early ray termination opacity, e.g. 0.99")
+
+
+def _refuse_ignored_options(args: argparse.Namespace) -> None:
+    """Refuse an option set away from its default that the chosen settings would not read."""
+
+    def given(attribute: str) -> bool:
+        return getattr(args, attribute) != _DEFAULTS.get(attribute)
+
+    for flag, (attribute, modes) in _MODE_ONLY.items():
+        if given(attribute) and args.mode not in modes:
+            raise sc.ParameterError(f"{flag} does not apply to --mode {args.mode} "
+                                    f"(only to --mode {'/'.join(modes)})")
+    several = args.mode == "iso" and (args.opacity or (args.iso and "," in args.iso))
+    if several and args.method != "exact":
+        raise sc.ParameterError("--method sampled takes a single --iso value "
+                                "(several isosurfaces are always exact)")
+    if given("step") and args.mode != "dvr" and (args.method != "sampled" or several):
+        raise sc.ParameterError("--step applies to --method sampled and --mode dvr only")
+    if given("texture_scale") and not args.texture:
+        raise sc.ParameterError("--texture-scale needs --texture")
+    if given("table_layout") and not args.adaptive:
+        raise sc.ParameterError("--table-layout needs --adaptive (it lays out the adaptive "
+                                "step's table lengths)")
 
 
 def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
@@ -127,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.depth, ".npy", "--depth")
     if args.method == "sampled" and not args.step > 0:
         raise sc.ParameterError(f"--step must be positive, got {args.step}")
+    _refuse_ignored_options(args)
     width, height = sc.camera.parse_size(args.size)
 
     start = time.perf_counter()

@@ -1,0 +1,35 @@
+"""Which (model, mode) pairs the renderer implements today: the parametrizations of the tests that
+must hold for every pair (normals and faces, clipping and cropping, multi-isosurface crossings).
+
+The kernel rewrite ("every model in every mode") extends these lists; ``test_pairs.py`` fails
+as soon as a pair outside them starts to render, as a reminder to add it here so the tests cover
+it.
+"""
+
+from __future__ import annotations
+
+#: Every reconstruction model, by its ``Scene(model=...)`` name.
+ALL_MODELS = ("trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31")
+
+#: Render modes (``"multi-iso"`` is ``mode="iso"`` with a list of isovalues).
+ALL_MODES = ("iso", "multi-iso", "mip", "minip", "dvr")
+
+#: mode -> models whose kernels exist for it today.
+MODELS_FOR_MODE: dict[str, list[str]] = {
+    "iso": list(ALL_MODELS),
+    "multi-iso": ["trilinear"],
+    "mip": ["trilinear"],
+    "minip": ["trilinear"],
+    "dvr": ["trilinear"],
+}
+
+
+def pairs(*modes: str) -> list[tuple[str, str]]:
+    """``(model, mode)`` for the implemented pairs of ``modes`` (all modes by default)."""
+    return [(model, mode) for mode in (modes or ALL_MODES) for model in MODELS_FOR_MODE[mode]]
+
+
+def missing_pairs() -> list[tuple[str, str]]:
+    """``(model, mode)`` pairs not implemented today."""
+    return [(model, mode) for mode in ALL_MODES for model in ALL_MODELS
+            if model not in MODELS_FOR_MODE[mode]]
