@@ -14,22 +14,10 @@ ALL_MODELS = ("trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31")
 #: Render modes (``"multi-iso"`` is ``mode="iso"`` with a list of isovalues).
 ALL_MODES = ("iso", "multi-iso", "mip", "minip", "dvr")
 
-#: mode -> models whose kernels exist for it today.
-MODELS_FOR_MODE: dict[str, list[str]] = {
-    "iso": list(ALL_MODELS),
-    "multi-iso": ["trilinear"],
-    "mip": ["trilinear"],
-    "minip": ["trilinear"],
-    "dvr": ["trilinear"],
-}
+#: mode -> models whose kernels exist for it: every model renders in every mode.
+MODELS_FOR_MODE: dict[str, list[str]] = {mode: list(ALL_MODELS) for mode in ALL_MODES}
 
 
 def pairs(*modes: str) -> list[tuple[str, str]]:
     """``(model, mode)`` for the implemented pairs of ``modes`` (all modes by default)."""
     return [(model, mode) for mode in (modes or ALL_MODES) for model in MODELS_FOR_MODE[mode]]
-
-
-def missing_pairs() -> list[tuple[str, str]]:
-    """``(model, mode)`` pairs not implemented today."""
-    return [(model, mode) for mode in ALL_MODES for model in ALL_MODELS
-            if model not in MODELS_FOR_MODE[mode]]

@@ -1,41 +1,33 @@
-"""Every model in every mode, against references that evaluate the model's 3D reconstruction
-directly (``model_reference``), never the renderer's ray pieces.
+"""Every model in MIP, minIP and DVR, and reference 004's blending of translucent s31 surfaces,
+against references that evaluate the model's 3D reconstruction directly (``evaluators``), never
+the renderer's ray pieces. (First hits, normals and faces of every model: ``test_normals.py``
+and the per-model tests; every crossing of several isosurfaces: ``test_multi_iso.py``; clipping
+in every mode: ``test_clipping.py``.)
 
-* iso: dense sampling along each ray (every 0.01 voxel) plus bisection; a hit is a genuine root
-  of the reconstruction, never later than the first sampled crossing, and every sampled crossing
-  is hit; normals against finite differences of the reconstruction;
-* several isosurfaces: all crossings of every isovalue per ray (the composited opacity counts
-  them) and the first one's depth;
 * MIP / minIP: never below a dense sample and within 1e-6 of the refined extremum;
 * DVR: a dense emission-absorption integral whose transfer function comes from its control
-  points (``np.interp``): the error shrinks with the step and is within 1/255 at the defaults.
+  points (``reference.dense_dvr``): the error shrinks with the step, and the largest error over
+  the visible pixels is within 1/255 at the default settings for a transfer function whose
+  opacity changes gradually over the data.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from model_reference import (
-    crossings,
-    domain_interval,
-    dvr_reference,
-    field,
-    gradient_fd,
-    ray_samples,
-)
-from reference import smooth_noise
+from evaluators import model_evaluator
+from reference import all_crossings, box_interval, dense_dvr, smooth_noise
 from scipy.optimize import minimize_scalar
 
 import splinecast as sc
 
 MODELS = ["trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31"]
-ISO = 0.2
 TRANSPARENT = sc.Shading(background=(0.0, 0.0, 0.0, 0.0))
 
 
 @pytest.fixture(scope="module")
 def volume():
-    data = smooth_noise((11, 10, 12), seed=7, sigma=1.6)
+    data = smooth_noise((11, 10, 12), seed=7, sigma=1.6).astype(np.float32)
     return sc.Volume(data, spacing=(1.0, 1.2, 0.9), origin=(-3.0, 1.0, 0.5))
 
 
@@ -49,111 +41,60 @@ def scene(request, volume):
     return sc.Scene(volume, model=request.param)
 
 
-def _rays(camera):
-    origins, dirs = camera.rays()
-    for row in range(camera.height):
-        for col in range(camera.width):
-            yield row, col, origins[row, col], dirs[row, col]
-
-
-def test_iso_first_hits_against_dense_sampling(scene, camera):
-    f = field(scene)
-    frame = scene.render(camera, iso=ISO)
-    spacing, origin = np.asarray(scene.volume.spacing), np.asarray(scene.volume.origin)
-    hits = 0
-    for row, col, o, u in _rays(camera):
-        ref = crossings(scene, f, o, u, ISO, first_only=True)
-        t = frame.depth[row, col]
-        if ref:
-            assert np.isfinite(t), (row, col)
-        if not np.isfinite(t):
-            continue
-        hits += 1
-        tol = 1e-6 / np.linalg.norm(u / spacing)  # a millionth of a voxel, in world units
-        if ref:
-            assert t <= ref[0] + tol, (row, col)  # never after the first sampled crossing
-        p = (o + t * u - origin) / spacing
-        assert abs(f(p[None, :])[0] - ISO) < 1e-7  # a genuine root of the reconstruction
-        g = gradient_fd(scene, f, o + t * u)
-        if np.linalg.norm(g) > 1e-3:  # outward normal: against the gradient (inside = high)
-            n = frame.normal[row, col]
-            assert np.dot(n, -g / np.linalg.norm(g)) > 1 - 1e-5, (row, col)
-    assert hits > 20
-
-
-def test_several_isosurfaces_every_crossing(scene, camera):
-    f = field(scene)
-    isos = [-0.5, ISO, 0.6]
-    frame = scene.render(camera, iso=isos, opacity=[0.3, 0.3, 0.3], shading=TRANSPARENT)
-    layered = 0
-    for row, col, o, u in _rays(camera):
-        found = sorted(t for v in isos for t in crossings(scene, f, o, u, v))
-        alpha = 1.0 - 0.7 ** len(found)
-        assert frame.rgba[row, col, 3] == pytest.approx(alpha, abs=1e-6), (row, col)
-        if found:
-            assert frame.depth[row, col] == pytest.approx(found[0], abs=1e-6)
-            layered += len(found) > 1
-        else:
-            assert not np.isfinite(frame.depth[row, col])
-    assert layered > 10
+def _index_rays(volume, camera):
+    W, U = camera.rays()
+    spacing, origin = np.asarray(volume.spacing), np.asarray(volume.origin)
+    return W.reshape(-1, 3), U.reshape(-1, 3), (W.reshape(-1, 3) - origin) / spacing, \
+        U.reshape(-1, 3) / spacing
 
 
 @pytest.mark.parametrize("kind", ["mip", "minip"])
-def test_projection_against_refined_dense_extremum(scene, camera, kind):
-    f = field(scene)
+def test_projection_against_refined_dense_extremum(scene, volume, camera, kind):
+    ev = model_evaluator(scene.model.name, volume, scene)
     frame = scene.render(camera, mode=kind)
     sign = 1.0 if kind == "mip" else -1.0
-    spacing, origin = np.asarray(scene.volume.spacing), np.asarray(scene.volume.origin)
+    _, _, o, d = _index_rays(volume, camera)
+    t0, t1 = box_interval(o, d, ev.lo, ev.hi)
+    values = frame.value.reshape(-1)
     checked = 0
-    for row, col, o, u in list(_rays(camera))[::3]:
-        t0, t1 = domain_interval(scene, o, u)
-        if not t0 < t1:
-            assert np.isnan(frame.value[row, col])
+    for r in range(0, len(o), 3):
+        if not t0[r] < t1[r]:
+            assert np.isnan(values[r])
             continue
-        ts, vs, _ = ray_samples(scene, f, o, u, t0, t1, 0.005)
-        best = int(np.argmax(sign * vs))
-        lo_t, hi_t = ts[max(best - 1, 0)], ts[min(best + 1, len(ts) - 1)]
-
-        def neg(t, o=o, u=u):
-            return -sign * f(((o + t * u - origin) / spacing)[None, :])[0]
-        res = minimize_scalar(neg, bounds=(lo_t, hi_t), method="bounded",
-                              options={"xatol": 1e-12})
-        refined = max(sign * vs[best], -res.fun)
-        got = sign * frame.value[row, col]
-        assert got >= (sign * vs).max() - 1e-12
-        assert abs(got - refined) < 1e-6
+        n = int((t1[r] - t0[r]) * np.linalg.norm(d[r]) / 0.005) + 2
+        ts = np.linspace(t0[r], t1[r], n)
+        vs = sign * ev.value(o[r] + ts[:, None] * d[r])
+        best = int(np.argmax(vs))
+        res = minimize_scalar(lambda t, r=r: -sign * ev.value((o[r] + t * d[r])[None])[0],
+                              bounds=(ts[max(best - 1, 0)], ts[min(best + 1, n - 1)]),
+                              method="bounded", options={"xatol": 1e-12})
+        got = sign * values[r]
+        assert got >= vs.max() - 1e-12
+        assert abs(got - max(vs[best], -res.fun)) < 1e-6
         checked += 1
     assert checked >= 15
 
 
 TF_POINTS = [(-0.6, 0.0), (-0.1, 0.35), (0.4, 0.0), (0.8, 0.5)]
 TF_DOMAIN = (-2.0, 2.0)
+VIRIDIS = np.asarray(sc.transfer.COLORMAPS["viridis"])
 
 
-@pytest.fixture(scope="module")
-def tf():
-    return sc.TransferFunction(TF_POINTS, domain=TF_DOMAIN, colormap="viridis")
+def test_dvr_converges_to_the_emission_absorption_integral(scene, volume, camera):
+    ev = model_evaluator(scene.model.name, volume, scene)
+    W, U, _, _ = _index_rays(volume, camera)
+    ref, alpha = dense_dvr(volume.data, volume.spacing, volume.origin, W, U, TF_POINTS, VIRIDIS,
+                           TF_DOMAIN, ds=0.005, value=ev.value, box=(ev.lo, ev.hi))
+    visible = alpha >= 1 / 255
+    assert visible.mean() > 0.3
+    tf = sc.TransferFunction(TF_POINTS, domain=TF_DOMAIN, colormap="viridis")
 
-
-def _dvr_error(scene, camera, tf, settings, refs):
-    frame = scene.render(camera, mode="dvr", tf=tf, dvr=settings, shading=TRANSPARENT)
-    err = 0.0
-    for (row, col), (rgb, alpha) in refs.items():
-        err = max(err, float(np.abs(frame.rgba[row, col, :3] - rgb).max()),
-                  abs(float(frame.rgba[row, col, 3]) - alpha))
-    return err
-
-
-def test_dvr_converges_to_the_emission_absorption_integral(scene, camera, tf):
-    f = field(scene)
-    refs = {(row, col): dvr_reference(scene, f, o, u, TF_POINTS, "viridis", TF_DOMAIN)
-            for row, col, o, u in list(_rays(camera))[::2]}
-    assert max(a for _, a in refs.values()) > 0.3  # something is visible
-    errs = [_dvr_error(scene, camera, tf, sc.DVRSettings(step=s, table_size=1024), refs)
-            for s in (1.0, 0.25, 0.0625)]
-    assert errs[0] > errs[2] and errs[2] < 0.2 * errs[0] + 1e-4
-    # The largest error over every checked pixel at the default settings.
-    assert _dvr_error(scene, camera, tf, sc.DVRSettings(), refs) < 1.0 / 255.0
+    def error(settings):
+        frame = scene.render(camera, mode="dvr", tf=tf, dvr=settings, shading=TRANSPARENT)
+        return float(np.abs(frame.rgba.reshape(-1, 4)[:, :3] - ref)[visible].max())
+    errs = [error(sc.DVRSettings(step=s, table_size=1024)) for s in (1.0, 0.25, 0.0625)]
+    assert errs[0] > errs[2] and errs[2] < 0.2 * errs[0] + 1e-4, errs
+    assert error(sc.DVRSettings()) < 1.0 / 255.0  # the largest error at the defaults
 
 
 def test_three_nested_translucent_s31_surfaces_blend_in_depth_order():
@@ -170,23 +111,28 @@ def test_three_nested_translucent_s31_surfaces_blend_in_depth_order():
     shading = sc.Shading(background=(0.0, 0.0, 0.0, 0.0))
     frame = scene.render(cam, iso=isos, colors=colors, opacity=opacity, shading=shading,
                          inside="low")
-    f = field(scene)
+    ev = model_evaluator("s31", vol, scene)
+    W, U, o, d = _index_rays(vol, cam)
+    t0, t1 = box_interval(o, d, ev.lo, ev.hi)
+    found, ambiguous = all_crossings(ev.value, o, d, t0, t1, isos)
+    spacing = np.asarray(vol.spacing)
+    rgba, depth = frame.rgba.reshape(-1, 4), frame.depth.reshape(-1)
     deep = 0
-    for row, col, o, u in _rays(cam):
-        hits = sorted((t, q) for q, v in enumerate(isos) for t in crossings(scene, f, o, u, v))
-        deep += len(hits) >= 5
-        acc = np.zeros(3)
-        alpha = 0.0
-        for t, q in hits:
-            g = gradient_fd(scene, f, o + t * u)
-            cos = abs(np.dot(g / np.linalg.norm(g), u))
+    for r in np.flatnonzero(~ambiguous):
+        acc, alpha = np.zeros(3), 0.0
+        for t, q in found[r]:
+            p = o[r] + t * d[r]
+            g = np.array([(ev.value((p + e)[None])[0] - ev.value((p - e)[None])[0]) / 2e-5
+                          for e in np.eye(3) * 1e-5]) / spacing
+            cos = abs(np.dot(g / np.linalg.norm(g), U[r]))
             light = shading.ambient + shading.diffuse * cos
-            rgb = np.minimum(colors[q] * light + shading.specular * cos**shading.shininess, 1.0)
-            acc += (1.0 - alpha) * opacity[q] * rgb
-            alpha += (1.0 - alpha) * opacity[q]
-        np.testing.assert_allclose(frame.rgba[row, col, :3], acc, atol=1e-5,
-                                   err_msg=f"pixel {row, col}")
-        assert frame.rgba[row, col, 3] == pytest.approx(alpha, abs=1e-6)
-        if hits:
-            assert frame.depth[row, col] == pytest.approx(hits[0][0], abs=1e-6)
+            rgb = np.minimum(colors[int(q)] * light + shading.specular * cos**shading.shininess,
+                             1.0)
+            acc += (1.0 - alpha) * opacity[int(q)] * rgb
+            alpha += (1.0 - alpha) * opacity[int(q)]
+        np.testing.assert_allclose(rgba[r, :3], acc, atol=1e-5, err_msg=f"ray {r}")
+        assert rgba[r, 3] == pytest.approx(alpha, abs=1e-6)
+        if len(found[r]):
+            assert depth[r] == pytest.approx(found[r][0, 0], abs=1e-6)
+        deep += len(found[r]) >= 5
     assert deep > 10  # rays through all three shells (six crossings) are checked
