@@ -15,6 +15,7 @@ import numpy as np
 
 from .accel.minmax import MinMaxHierarchy
 from .camera import Camera
+from .defaults import auto_iso, auto_transfer_function, auto_window
 from .errors import ParameterError
 from .models import MODELS
 from .render.clipping import make_planes
@@ -46,17 +47,16 @@ def _row_order(height: int) -> np.ndarray:
 
 
 def check_iso(volume: Volume, iso: Any) -> float:
-    """Validate an isovalue for ``volume`` (``None`` means its ``metadata["default_iso"]``).
+    """Validate an isovalue for ``volume`` (``None`` means :func:`~splinecast.auto_iso`: its
+    ``metadata["default_iso"]``, else Otsu's threshold of the non-background values).
 
     Raises
     ------
     ParameterError
-        If there is no isovalue, it is not a number, or it lies outside the data range.
+        If the isovalue is not a number or lies outside the data range.
     """
     if iso is None:
-        iso = volume.metadata.get("default_iso")
-        if iso is None:
-            raise ParameterError("iso is required (no default isovalue for this volume)")
+        iso = auto_iso(volume)
     try:
         value = float(iso)
     except (TypeError, ValueError):
@@ -184,7 +184,8 @@ class Scene:
             ``"mip"`` / ``"minip"``: maximum / minimum intensity projection (``Frame.value``);
             ``"dvr"``: direct volume rendering through ``tf``.
         iso : float or list of float, optional
-            Isovalue in data units; defaults to the volume's ``metadata["default_iso"]``. A list
+            Isovalue in data units; default :func:`~splinecast.auto_iso` (the volume's
+            ``metadata["default_iso"]``, else Otsu's threshold of the histogram). A list
             renders every crossing of every isovalue, composited front to back with ``colors``
             and ``opacity`` (trilinear model).
         method : str
@@ -209,9 +210,11 @@ class Scene:
         effects : SurfaceEffects, optional
             Procedural texture and cel shading of isosurfaces.
         window, colormap : optional
-            MIP/minIP display: value window ``(lo, hi)`` (default: the data range) and colormap.
-        tf : TransferFunction
-            Transfer function of ``mode="dvr"``.
+            MIP/minIP display: value window ``(lo, hi)`` (default :func:`~splinecast.auto_window`:
+            percentiles of the non-background values) and colormap.
+        tf : TransferFunction, optional
+            Transfer function of ``mode="dvr"`` (default
+            :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).
         dvr : DVRSettings, optional
             Step, pre-integration, adaptive step, early termination, shading of ``mode="dvr"``.
 
@@ -242,10 +245,12 @@ class Scene:
             raise ParameterError(f"effects must be a SurfaceEffects, got {type(effects).__name__}")
         planes = make_planes(clip, crop)
         if mode in ("mip", "minip"):
+            window = auto_window(self.volume) if window is None else window
             return render_mip(self.model, self.hierarchy, self.volume, camera, planes,
                               _row_order(camera.height), mode, method, step, window, colormap,
                               shading.background)
         if mode == "dvr":
+            tf = auto_transfer_function(self.volume) if tf is None else tf
             return render_dvr(self.model, self.hierarchy, self.volume, camera, planes,
                               _row_order(camera.height), tf, dvr, shading.background,
                               self._table_cache)

@@ -22,9 +22,9 @@ import numpy as np
 
 from .errors import DataError, ParameterError
 
-__all__ = ["Volume", "SUPPORTED_DTYPES"]
+__all__ = ["Volume", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported"]
 
-#: dtypes kept as they are; anything else is rejected rather than silently converted.
+#: dtypes the renderers use as they are (no copy).
 SUPPORTED_DTYPES = (
     np.dtype(np.uint8),
     np.dtype(np.int8),
@@ -35,6 +35,73 @@ SUPPORTED_DTYPES = (
     np.dtype(np.float32),
     np.dtype(np.float64),
 )
+
+#: dtypes accepted and converted by :func:`exact_supported` to the smallest supported dtype that
+#: holds every value exactly (bool becomes a uint8 view without a copy).
+CONVERTED_DTYPES = (
+    np.dtype(np.bool_),
+    np.dtype(np.int64),
+    np.dtype(np.uint64),
+    np.dtype(np.float16),
+)
+
+# Candidates for integer data, smallest first; at equal size unsigned before signed, so 0..255
+# labels become uint8. float64 comes last: it holds integers exactly up to 2**53 in magnitude.
+_INTEGER_TARGETS = tuple(np.dtype(t) for t in (np.uint8, np.int8, np.uint16, np.int16,
+                                                np.uint32, np.int32))
+
+
+def exact_supported(data: np.ndarray, label: str = "data") -> np.ndarray:
+    """Return ``data`` with a dtype of :data:`SUPPORTED_DTYPES`, holding exactly the same values.
+
+    Supported dtypes pass through unchanged (a memory map stays one). ``bool`` becomes a uint8
+    view (no copy); ``float16`` becomes float32; ``int64`` and ``uint64`` (NumPy's and PyVista's
+    default integer types, typical for label volumes) become the smallest of uint8, int8,
+    uint16, int16, uint32, int32 whose range holds the data's minimum and maximum, else float64
+    if every value is exactly representable there (always for magnitudes up to 2**53). The
+    conversion copies the array.
+
+    Parameters
+    ----------
+    data : ndarray
+        The voxels, in native byte order.
+    label : str
+        Name of the array or file for the error message.
+
+    Raises
+    ------
+    DataError
+        If no supported dtype holds every value exactly (large 64-bit integers), or the dtype is
+        neither supported nor convertible (complex, object, strings, ...).
+    """
+    dtype = data.dtype
+    if dtype in SUPPORTED_DTYPES:
+        return data
+    if dtype == np.bool_:
+        return data.view(np.uint8)
+    if dtype == np.float16:
+        return data.astype(np.float32)
+    if dtype not in CONVERTED_DTYPES:
+        names = ", ".join(str(d) for d in SUPPORTED_DTYPES + CONVERTED_DTYPES)
+        raise DataError(f"{label}: voxel type {dtype} is not supported (use one of {names})")
+    if data.size == 0:
+        return data.astype(np.uint8)
+    lo, hi = int(data.min()), int(data.max())  # Python ints: exact for every int64/uint64
+    for target in _INTEGER_TARGETS:
+        info = np.iinfo(target)
+        if info.min <= lo and hi <= info.max:
+            return data.astype(target)
+    as_float = data.astype(np.float64)
+    # Exact when the round trip through float64 gives the same integers back. Casting a float
+    # at or above 2**63 to int64 (2**64 to uint64) is undefined, so such maxima (which rounding
+    # may produce from the largest integers) are ruled out before the round trip.
+    limit = 2.0**63 if dtype == np.int64 else 2.0**64
+    if float(as_float.max()) < limit and np.array_equal(as_float.astype(dtype), data):
+        return as_float
+    raise DataError(
+        f"{label}: {dtype} values {lo}..{hi} cannot be held exactly by any supported voxel "
+        "type (float64 is exact only up to 2**53); rescale or relabel the data"
+    )
 
 
 def _as_triple(value: Any, name: str) -> tuple[float, float, float]:
@@ -52,7 +119,8 @@ class Volume:
     data : array_like, shape (nx, ny, nz)
         Voxel values, indexed ``data[i, j, k]`` with ``i`` along x. The dtype is kept (uint8,
         int8, uint16, int16, uint32, int32, float32, float64); a ``numpy.memmap`` stays
-        memory-mapped.
+        memory-mapped. bool, float16, int64 and uint64 are converted to the smallest of those
+        that holds every value exactly (see :func:`exact_supported`).
     spacing : float or sequence of 3 floats, optional
         Distance between voxel centres along x, y, z in world units (default 1).
     origin : sequence of 3 floats, optional
@@ -81,13 +149,9 @@ class Volume:
             data = np.asarray(data)
         if data.ndim != 3:
             raise ParameterError(f"data must be a 3D array, got shape {data.shape}")
-        if data.dtype == np.bool_:
-            data = data.view(np.uint8)
-        if data.dtype not in SUPPORTED_DTYPES:
-            raise ParameterError(
-                f"data dtype {data.dtype} is not supported "
-                f"(use one of {', '.join(str(d) for d in SUPPORTED_DTYPES)})"
-            )
+        if not data.dtype.isnative:
+            data = data.astype(data.dtype.newbyteorder("="))
+        data = exact_supported(data, metadata.get("name", "data") if metadata else "data")
         self.data: np.ndarray = data
         self.spacing: tuple[float, float, float] = _as_triple(spacing, "spacing")
         if min(self.spacing) <= 0:
