@@ -71,7 +71,7 @@ SAMPLE_VOXELS = 4_000_000
 #: Largest number of histogram bins of Otsu's threshold.
 HISTOGRAM_BINS = 1024
 #: Opacity of a one-voxel slab at the top of the default DVR ramp.
-DVR_MAX_OPACITY = 0.05
+DVR_MAX_OPACITY = 0.1
 #: Percentiles of the non-background values that bound the default MIP / minIP window.
 WINDOW_PERCENTILES = (0.1, 99.9)
 #: Percentile of the non-background values where the default DVR opacity ramp reaches its top.
