@@ -15,6 +15,7 @@ Readers convert their format to this convention; nothing else in the package tra
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -22,7 +23,8 @@ import numpy as np
 
 from .errors import DataError, ParameterError
 
-__all__ = ["Volume", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported"]
+__all__ = ["Volume", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported",
+           "OrientationWarning"]
 
 #: dtypes the renderers use as they are (no copy).
 SUPPORTED_DTYPES = (
@@ -104,6 +106,21 @@ def exact_supported(data: np.ndarray, label: str = "data") -> np.ndarray:
     )
 
 
+class OrientationWarning(UserWarning):
+    """The file's voxel axes were flipped, permuted or (for oblique data) rotated to fit x, y, z,
+    or a VTK image's direction matrix was not applied."""
+
+
+def _vtk_arrays(attributes: Any) -> dict[str, Any]:
+    """Name -> numeric data array of a vtkPointData / vtkCellData (string arrays left out)."""
+    arrays = {}
+    for index in range(attributes.GetNumberOfArrays()):
+        arr = attributes.GetArray(index)  # None for non-numeric arrays
+        if arr is not None:
+            arrays[arr.GetName() or f"array {index}"] = arr
+    return arrays
+
+
 def _as_triple(value: Any, name: str) -> tuple[float, float, float]:
     arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,))
     if not np.all(np.isfinite(arr)):
@@ -159,6 +176,109 @@ class Volume:
         self.origin: tuple[float, float, float] = _as_triple(origin, "origin")
         self.metadata: dict[str, Any] = dict(metadata or {})
         self._value_range: tuple[float, float] | None = None
+
+    @classmethod
+    def from_vtk(cls, image: Any, array: str | None = None,
+                 metadata: Mapping[str, Any] | None = None) -> Volume:
+        """A volume from a ``vtkImageData`` or ``pyvista.ImageData`` (neither is imported here).
+
+        Parameters
+        ----------
+        image : vtkImageData or pyvista.ImageData
+            The image. Its point data are the voxels: VTK stores them x fastest, so the flat
+            array becomes ``data[i, j, k]`` (a view, no copy) and voxel ``(i, j, k)`` of the
+            image's extent is at ``origin + (i, j, k) * spacing``, splinecast's convention. An
+            image with cell data only gives one voxel per cell, centred in it.
+        array : str, optional
+            Name of the point (or cell) data array; needed when there are several.
+        metadata : mapping, optional
+            Added to the volume's metadata (``"name"`` is used in messages).
+
+        Returns
+        -------
+        Volume
+            Sharing memory with the VTK array (modify a copy, not the VTK object, to keep the
+            volume unchanged); ``metadata["array"]`` names the array. int64, uint64, bool and
+            float16 arrays are converted (see :func:`exact_supported`).
+
+        Raises
+        ------
+        ParameterError
+            Not image data, no numeric array, an unknown or ambiguous ``array`` (the message
+            lists the names) or an array with several components.
+
+        Warns
+        -----
+        OrientationWarning
+            When the image has a direction matrix other than the identity: it is not applied
+            (the voxels are placed axis-aligned, as VTK filters that predate direction matrices
+            do).
+
+        Examples
+        --------
+        >>> import pyvista as pv  # doctest: +SKIP
+        >>> grid = pv.ImageData(dimensions=(40, 30, 20), spacing=(1, 1, 2))  # doctest: +SKIP
+        >>> grid["density"] = values.ravel(order="F")  # doctest: +SKIP
+        >>> vol = sc.Volume.from_vtk(grid)  # doctest: +SKIP
+        """
+        meta = dict(metadata or {})
+        label = str(meta.get("name", "the VTK image"))
+        needed = ("GetDimensions", "GetExtent", "GetSpacing", "GetOrigin", "GetPointData",
+                  "GetCellData")
+        if not all(hasattr(image, name) for name in needed):
+            raise ParameterError(
+                f"{label}: expected a vtkImageData or pyvista.ImageData, got "
+                f"{type(image).__name__}"
+            )
+        points, cells = _vtk_arrays(image.GetPointData()), _vtk_arrays(image.GetCellData())
+        if array is not None:
+            pool = points if array in points else cells
+            if array not in pool:
+                names = ", ".join(repr(n) for n in [*points, *cells]) or "none"
+                raise ParameterError(f"{label}: no data array {array!r} (arrays: {names})")
+        else:
+            pool = points or cells
+            if not pool:
+                raise ParameterError(f"{label}: the image has no numeric point or cell data")
+            if len(pool) > 1:
+                names = ", ".join(repr(n) for n in pool)
+                raise ParameterError(f"{label}: several data arrays ({names}); choose one with "
+                                     "array=NAME")
+            array = next(iter(pool))
+        vtk_array = pool[array]
+        if vtk_array.GetNumberOfComponents() != 1:
+            raise ParameterError(
+                f"{label}: array {array!r} has {vtk_array.GetNumberOfComponents()} components; "
+                "splinecast renders scalar data (pick or compute one component)"
+            )
+        from vtkmodules.util.numpy_support import vtk_to_numpy  # present with any VTK object
+
+        flat = vtk_to_numpy(vtk_array)
+        dims = np.asarray(image.GetDimensions(), dtype=np.int64)
+        spacing = np.asarray(image.GetSpacing(), dtype=np.float64)
+        first = np.asarray(image.GetExtent()[::2], dtype=np.float64)
+        if pool is not points:  # one voxel per cell, at the cell's centre
+            dims = np.maximum(dims - 1, 1)
+            first = first + 0.5
+        if flat.size != int(np.prod(dims)):
+            raise ParameterError(f"{label}: array {array!r} has {flat.size} values for "
+                                 f"{'x'.join(str(n) for n in dims)} voxels")
+        if hasattr(image, "GetDirectionMatrix"):
+            matrix = image.GetDirectionMatrix()
+            direction = np.array([[matrix.GetElement(r, c) for c in range(3)] for r in range(3)])
+            if not np.allclose(direction, np.eye(3), rtol=0.0, atol=1e-6):
+                warnings.warn(
+                    f"{label}: the direction matrix {direction.round(6).tolist()} is not applied;"
+                    " the voxels are placed along x, y, z",
+                    OrientationWarning,
+                    stacklevel=2,
+                )
+        # x varies fastest: C order over (z, y, x), transposed (a view) to data[i, j, k].
+        data = flat.reshape(dims[::-1]).transpose(2, 1, 0)
+        origin = np.asarray(image.GetOrigin(), dtype=np.float64) + first * spacing
+        meta.setdefault("name", label)
+        meta["array"] = array
+        return cls(data, spacing=spacing, origin=origin, metadata=meta)
 
     # ------------------------------------------------------------------ geometry
     @property

@@ -19,6 +19,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render = sub.add_parser("render", help="render an isosurface, a MIP or a DVR image to a PNG")
     render.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
     render.add_argument("-o", "--output", required=True, help="output PNG path")
+    render.add_argument("--array", help="data array of a VTK file holding several")
     render.add_argument("--iso", help="isovalue(s) in data units, comma-separated for several "
                         "translucent surfaces (default: the demo's, else Otsu's threshold of "
                         "the histogram; printed)")
@@ -162,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     width, height = sc.camera.parse_size(args.size)
 
     start = time.perf_counter()
-    vol = sc.read(args.file)
+    vol = sc.read(args.file, array=args.array)
     read_s = time.perf_counter() - start
     if args.model not in sc.MODELS:
         valid = ", ".join(sc.MODELS)
