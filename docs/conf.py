@@ -24,7 +24,7 @@ extensions = [
     "numpydoc",
     "sphinx_gallery.gen_gallery",
 ]
-templates_path: list[str] = []
+templates_path = ["_templates"]  # the class page documents its methods
 exclude_patterns = ["_build", "gallery/*.ipynb", "gallery/*.py.md5", "gallery/*.zip"]
 
 # The gallery's scraper is a function: Sphinx cannot pickle it, so every build is a full one.
