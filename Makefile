@@ -7,12 +7,12 @@ STAMP := $(VENV)/.installed-stamp
 BENCH_STAMP := $(VENV)/.bench-stamp
 DEMO_PNG ?= splinecast-demo.png
 
-.PHONY: demo test bench lint clean clean-cache bench-deps compare compare-quick
+.PHONY: demo test bench lint clean clean-cache bench-deps compare compare-quick docs
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[all,test]'
+	$(PY) -m pip install --quiet -e '.[all,test,docs]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -50,11 +50,16 @@ compare: bench-deps
 compare-quick: bench-deps
 	$(PY) benchmarks/compare.py --quick
 
+# Documentation site into docs/_build/html (offline; runs every gallery example for its pictures).
+docs: $(STAMP)
+	$(PY) -m sphinx -b html -q docs docs/_build/html
+	@echo "docs: $(CURDIR)/docs/_build/html/index.html"
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 
 clean:
-	rm -rf $(VENV) build src/*.egg-info
+	rm -rf $(VENV) build src/*.egg-info docs/_build docs/generated docs/gallery
 
 # Numba's on-disk cache misses changes in functions inlined from other modules: drop it after edits.
 clean-cache:

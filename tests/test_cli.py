@@ -33,7 +33,8 @@ def test_render_writes_png_and_depth(tmp_path, capsys):
     assert d.shape == (30, 40)
     # The same render through the API gives the same depth buffer.
     vol = sc.demo("sphere", size=24)
-    cam = sc.Camera.orbit(vol, azimuth=30, elevation=10, size=(40, 30))
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=10, size=(40, 30),
+                          fit=sc.content_box(vol, iso=0.0))  # the CLI's default --fit content
     np.testing.assert_array_equal(sc.Scene(vol).render(cam, iso=0.0).depth, d)
     # Hits are exactly where the image is not background.
     background = np.all(image == image[0, 0], axis=-1)

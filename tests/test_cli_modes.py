@@ -26,13 +26,13 @@ def test_mip_matches_the_api(tmp_path, capsys):
                          "20x16", "--quiet", "-o", str(png)], capsys)
     assert code == 0 and out.strip().endswith("mip.png")
     vol = sc.demo("sphere", size=16)
-    cam = sc.Camera.orbit(vol, size=(20, 16))
+    cam = sc.Camera.orbit(vol, size=(20, 16), fit=sc.content_box(vol))  # --fit content
     frame = sc.Scene(vol).render(cam, mode="mip", window=(-0.5, 0.5))
     np.testing.assert_array_equal(np.asarray(Image.open(png)), frame.to_uint8())
 
 
 @pytest.mark.parametrize("extra, word", [
-    (["--mode", "dvr"], "--tf"),
+    (["--mode", "dvr", "--tf", "no-such-tf.json"], "no-such-tf.json"),
     (["--clip", "1,0,0"], "--clip"),
     (["--iso=0,-0.2", "--opacity", "0.5"], "--opacity"),
     (["--mode", "mip", "--window", "a,b"], "--window"),
@@ -65,7 +65,7 @@ def test_every_model_in_every_mode_from_the_cli_equals_the_api(tmp_path, capsys,
     for extra, kwargs in runs:
         png = tmp_path / "x.png"
         code, _, err = _run(["render", SRC, "--model", model, "--size", "14x12", "--quiet",
-                             "-o", str(png), *extra], capsys)
+                             "--fit", "box", "-o", str(png), *extra], capsys)
         assert code == 0, err
         frame = scene.render(cam, **kwargs)
         np.testing.assert_array_equal(np.asarray(Image.open(png)), frame.to_uint8(),

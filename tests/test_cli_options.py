@@ -57,6 +57,8 @@ def api_frame(src: str, *, smooth: int | None = None, model: str = "trilinear",
     if smooth:
         vol = sc.smooth(vol, smooth)
     cam_kw = {"azimuth": 30.0, "elevation": 20.0, "size": SIZE, "fov": 30.0, **(camera or {})}
+    if cam_kw.get("fit") == "content":  # what the visible content spans (sc.content_box)
+        cam_kw["fit"] = sc.content_box(vol, iso=render.get("iso"))
     cam = sc.Camera.orbit(vol, **cam_kw)
     return sc.Scene(vol, model=model, **(model_options or {})).render(cam, **render)
 
@@ -76,6 +78,8 @@ CASES = [
     Case("fov", ["--iso", "0.5", "--fov", "50"], {**ISO, "camera": {"fov": 50.0}}, ISO),
     Case("zoom", ["--iso", "0.5", "--zoom", "1.7"], {**ISO, "camera": {"zoom": 1.7}}, ISO),
     Case("ortho", ["--iso", "0.5", "--ortho"], {**ISO, "camera": {"ortho": True}}, ISO),
+    Case("fit", ["--iso", "0.5", "--fit", "content"], {**ISO, "camera": {"fit": "content"}},
+         ISO),
     # --- isosurface ---------------------------------------------------------------------
     Case("iso", ["--iso", "0.62"], {"iso": 0.62}, ISO),
     Case("iso-default", [], {"iso": None}, {"iso": 0.62}),  # the demo's default_iso (0.5)
@@ -187,8 +191,9 @@ def test_option_gives_the_api_render(case, tmp_path, capsys, tf_files):
     png, depth = tmp_path / "out.png", tmp_path / "depth.npy"
     args = [a.format(**tf_files) for a in case.cli]
     size = [] if case.id == "size" else ["--size", "x".join(map(str, SIZE))]
+    # "--fit box": the whole grid's framing, the API's default; the "fit" case sets content.
     code, err = run_cli(["render", case.src, *size, "--quiet", "-o", str(png),
-                         "--depth", str(depth), *args], capsys)
+                         "--depth", str(depth), "--fit", "box", *args], capsys)
     assert code == 0, err
     got = np.asarray(Image.open(png))
     expected = api_frame(case.src, **case.api)
@@ -211,8 +216,9 @@ def test_every_render_option_has_a_case():
     parser = _build_parser()
     render = parser._subparsers._group_actions[0].choices["render"]
     options = {s for a in render._actions for s in a.option_strings if s.startswith("--")}
-    # Output options and --help are checked by the other tests of this module and test_cli.py.
-    covered = {"--output", "--depth", "--quiet", "--help", "--mode"}
+    # Output options and --help are checked by the other tests of this module and test_cli.py;
+    # --array picks a point-data array of VTK files (tests/test_vtkimage.py).
+    covered = {"--output", "--depth", "--quiet", "--help", "--mode", "--array"}
     used = {a.split("=")[0] for c in CASES for a in c.cli if a.startswith("--")}
     assert options - covered - used == set()
 

@@ -239,7 +239,12 @@ def test_early_termination_changes_pixels_by_at_most_the_remaining_transparency(
 def test_dvr_parameter_errors(cases, scenes):
     scene, cam = scenes["noise-ramp"], cases["noise-ramp"].camera
     with pytest.raises(sc.ParameterError, match="tf"):
-        scene.render(cam, mode="dvr")
+        scene.render(cam, mode="dvr", tf="bone")
+    # No tf: the automatic one (tests/test_defaults.py), not an error.
+    np.testing.assert_array_equal(scene.render(cam, mode="dvr").rgba,
+                                  scene.render(cam, mode="dvr",
+                                               tf=sc.auto_transfer_function(
+                                                   cases["noise-ramp"].volume)).rgba)
     with pytest.raises(sc.ParameterError, match="preintegration"):
         sc.DVRSettings(preintegration="4d")
     with pytest.raises(sc.ParameterError, match="termination"):

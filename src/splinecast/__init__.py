@@ -13,6 +13,7 @@ Coordinate convention: see :mod:`splinecast.volume`.
 """
 
 from .camera import Camera
+from .defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .errors import DataError, ParameterError, ReadError, SplinecastError
 from .io import demo, read, write
 from .models import MODELS
@@ -42,7 +43,11 @@ __all__ = [
     "SurfaceEffects",
     "TransferFunction",
     "Volume",
+    "auto_iso",
+    "auto_transfer_function",
+    "auto_window",
     "check_iso",
+    "content_box",
     "demo",
     "preintegrate",
     "read",

@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import ParameterError
 
-__all__ = ["Camera", "parse_size"]
+__all__ = ["Camera", "parse_size", "FIT_MARGIN"]
 
 
 def parse_size(size: Any) -> tuple[int, int]:
@@ -43,6 +43,53 @@ def parse_size(size: Any) -> tuple[int, int]:
     if width * height > 64_000_000:
         raise ParameterError(f"size {width}x{height} is too large (more than 64 megapixels)")
     return width, height
+
+
+#: Room left around a fitted box: its projection spans at most 1 / FIT_MARGIN of the image.
+FIT_MARGIN = 1.08
+
+
+def _fit_box(fit: Any, volume: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """``None`` for ``fit="box"``, else the validated world box ``(lo, hi)``."""
+    if isinstance(fit, str):
+        if fit != "box":
+            raise ParameterError(
+                f"fit must be 'box' or a world box (lo, hi) such as "
+                f"splinecast.content_box(volume, iso=...), got {fit!r}"
+            )
+        return None
+    try:
+        box = np.asarray(fit, dtype=np.float64)
+    except (TypeError, ValueError):
+        box = np.zeros(0)
+    if box.shape != (2, 3) or not np.all(np.isfinite(box)) or np.any(box[1] < box[0]):
+        raise ParameterError(
+            f"fit must be 'box' or a world box (lo, hi) with lo <= hi, got {fit!r}"
+        )
+    return box[0], box[1]
+
+
+def _fit_corners(lo: np.ndarray, hi: np.ndarray, basis: Camera, half_fov: float,
+                 aspect: float) -> tuple[float, float]:
+    """Distance from the box centre at which a perspective ``basis`` camera sees all eight
+    corners of ``[lo, hi]`` (with :data:`FIT_MARGIN`), and the half height of the window an
+    orthographic camera needs for the same."""
+    center = 0.5 * (lo + hi)
+    corners = np.array([[(lo, hi)[b >> a & 1][a] for a in range(3)] for b in range(8)]) - center
+    across = np.abs(corners @ basis.right) * FIT_MARGIN  # horizontal offset from the view axis
+    above = np.abs(corners @ basis.up) * FIT_MARGIN
+    ahead = corners @ basis.forward  # depth relative to the centre, positive away from the eye
+    # A corner at depth (d + ahead) is inside the view when |across| <= tan_x (d + ahead) and
+    # |above| <= tan_y (d + ahead).
+    tan_y = math.tan(half_fov)
+    tan_x = tan_y * aspect
+    needed = np.maximum(across / tan_x, above / tan_y) - ahead
+    depth_room = float(np.max(-ahead)) + 1e-9 * (1.0 + float(np.max(np.abs(corners))))
+    distance = max(float(np.max(needed)), depth_room)
+    if not distance > 0:  # a single point: frame a unit sphere around it
+        distance = 1.0 / math.sin(min(half_fov, math.atan(tan_x)))
+    half_height = max(float(np.max(above)), float(np.max(across)) / aspect) or 1.0
+    return distance, half_height
 
 
 def _unit(v: np.ndarray, name: str) -> np.ndarray:
@@ -127,13 +174,14 @@ class Camera:
         fov: float = 30.0,
         ortho: bool = False,
         zoom: float = 1.0,
+        fit: Any = "box",
     ) -> Camera:
         """A camera on a sphere around the centre of ``volume``, looking at the centre.
 
         Parameters
         ----------
         volume : Volume
-            The volume to frame (its world bounding box is used).
+            The volume to frame.
         azimuth, elevation : float
             Angles in degrees. Azimuth 0 looks from +x towards the centre, 90 from +y; elevation
             is measured from the xy-plane towards +z, which is also the up direction.
@@ -147,36 +195,54 @@ class Camera:
             Orthographic projection (the window then just fits the box).
         zoom : float
             Magnification (> 1 moves closer / narrows the window).
+        fit : "box" or (lo, hi)
+            What to frame. ``"box"`` (default): the volume's whole bounding box, through its
+            bounding sphere, so the framing is the same from every direction. A world-space
+            box ``(lo, hi)`` (two 3-vectors), typically ``sc.content_box(volume, iso=...)``:
+            the camera looks at its centre from just far enough that its eight corners fit
+            the image seen from this direction (with a small margin), so the object fills the
+            frame the way VTK's ``ResetCamera(bounds)`` does for the visible actors.
+
+        Examples
+        --------
+        >>> import splinecast as sc
+        >>> vol = sc.demo("sphere", size=32)
+        >>> cam = sc.Camera.orbit(vol, fit=sc.content_box(vol, iso=0.0), size=(64, 64))
         """
         if not (math.isfinite(azimuth) and math.isfinite(elevation)):
             raise ParameterError("azimuth and elevation must be finite numbers")
         if not zoom > 0:
             raise ParameterError(f"zoom must be positive, got {zoom}")
-        lo, hi = volume.bounds
+        box = _fit_box(fit, volume)
+        lo, hi = box if box is not None else volume.bounds
         center = 0.5 * (lo + hi)
         radius = 0.5 * float(np.linalg.norm(hi - lo)) or 1.0
         width, height = parse_size(size)
         half_fov = math.radians(fov) / 2.0
         # The bounding sphere must fit the narrower of the two fields of view.
         half_fov_min = min(half_fov, math.atan(math.tan(half_fov) * width / height))
-        if distance is None:
-            distance = radius / math.sin(half_fov_min) / zoom
-        if not distance > 0:
+        if distance is not None and not distance > 0:
             raise ParameterError(f"distance must be positive, got {distance}")
         az, el = math.radians(azimuth), math.radians(elevation)
         direction = np.array(
             [math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)]
         )
-        position = center + distance * direction
         up = np.array([0.0, 0.0, 1.0])
         if abs(math.cos(el)) < 1e-9:
             up = np.array([-math.cos(az), -math.sin(az), 0.0]) * math.copysign(1.0, math.sin(el))
-        ortho_height = None
-        if ortho:
-            aspect = width / height
-            ortho_height = 2.0 * radius * max(1.0, 1.0 / aspect) / zoom
-        return cls(position, center, up=up, fov=fov, size=(width, height), ortho=ortho,
-                   ortho_height=ortho_height)
+        aspect = width / height
+        ortho_height = 2.0 * radius * max(1.0, 1.0 / aspect) / zoom if ortho else None
+        fit_distance = radius / math.sin(half_fov_min)
+        if box is not None:
+            # The view's basis does not depend on the distance: take it from a unit camera.
+            basis = cls(center + direction, center, up=up, size=(width, height))
+            fit_distance, half_height = _fit_corners(lo, hi, basis, half_fov, aspect)
+            if ortho:
+                ortho_height = 2.0 * half_height / zoom
+        if distance is None:
+            distance = fit_distance / zoom
+        return cls(center + distance * direction, center, up=up, fov=fov, size=(width, height),
+                   ortho=ortho, ortho_height=ortho_height)
 
     def tile(self, col0: int, row0: int, width: int, height: int) -> Camera:
         """A camera that renders only the ``width x height`` pixels of this camera's image whose

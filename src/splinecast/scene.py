@@ -16,6 +16,7 @@ import numpy as np
 from .accel.active_cells import ActiveCells
 from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
+from .defaults import auto_iso, auto_transfer_function, auto_window
 from .errors import ParameterError
 from .models import MODELS
 from .render.clipping import make_planes
@@ -37,17 +38,16 @@ MODES = ("iso", "mip", "minip", "dvr")
 
 
 def check_iso(volume: Volume, iso: Any) -> float:
-    """Validate an isovalue for ``volume`` (``None`` means its ``metadata["default_iso"]``).
+    """Validate an isovalue for ``volume`` (``None`` means :func:`~splinecast.auto_iso`: its
+    ``metadata["default_iso"]``, else Otsu's threshold of the non-background values).
 
     Raises
     ------
     ParameterError
-        If there is no isovalue, it is not a number, or it lies outside the data range.
+        If the isovalue is not a number or lies outside the data range.
     """
     if iso is None:
-        iso = volume.metadata.get("default_iso")
-        if iso is None:
-            raise ParameterError("iso is required (no default isovalue for this volume)")
+        iso = auto_iso(volume)
     try:
         value = float(iso)
     except (TypeError, ValueError):
@@ -188,7 +188,8 @@ class Scene:
             ``"mip"`` / ``"minip"``: maximum / minimum intensity projection (``Frame.value``);
             ``"dvr"``: direct volume rendering through ``tf``.
         iso : float or list of float, optional
-            Isovalue in data units; defaults to the volume's ``metadata["default_iso"]``. A list
+            Isovalue in data units; default :func:`~splinecast.auto_iso` (the volume's
+            ``metadata["default_iso"]``, else Otsu's threshold of the histogram). A list
             renders every crossing of every isovalue, composited front to back with ``colors``
             and ``opacity``.
         method : str
@@ -213,9 +214,11 @@ class Scene:
         effects : SurfaceEffects, optional
             Procedural texture and cel shading of isosurfaces.
         window, colormap : optional
-            MIP/minIP display: value window ``(lo, hi)`` (default: the data range) and colormap.
-        tf : TransferFunction
-            Transfer function of ``mode="dvr"``.
+            MIP/minIP display: value window ``(lo, hi)`` (default :func:`~splinecast.auto_window`:
+            percentiles of the non-background values) and colormap.
+        tf : TransferFunction, optional
+            Transfer function of ``mode="dvr"`` (default
+            :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).
         dvr : DVRSettings, optional
             Step, pre-integration, adaptive step, early termination, shading of ``mode="dvr"``.
 
@@ -239,10 +242,12 @@ class Scene:
         stats: dict[str, Any] = {"mode": mode, "model": self.model.name}
         grid, flags = self.grid, None
         if mode in ("mip", "minip"):
+            window = auto_window(self.volume) if window is None else window
             setup: Any = Mip(mode, method, step, window, colormap, shading.background,
                              self.volume.value_range)
             stats["method"] = method
         elif mode == "dvr":
+            tf = auto_transfer_function(self.volume) if tf is None else tf
             setup = Dvr(tf, dvr, shading.background, self._table_cache)
         elif isinstance(iso, (list, tuple, np.ndarray)):
             if len(iso) == 0:

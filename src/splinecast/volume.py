@@ -15,6 +15,7 @@ Readers convert their format to this convention; nothing else in the package tra
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -22,9 +23,10 @@ import numpy as np
 
 from .errors import DataError, ParameterError
 
-__all__ = ["Volume", "SUPPORTED_DTYPES"]
+__all__ = ["Volume", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported",
+           "OrientationWarning"]
 
-#: dtypes kept as they are; anything else is rejected rather than silently converted.
+#: dtypes the renderers use as they are (no copy).
 SUPPORTED_DTYPES = (
     np.dtype(np.uint8),
     np.dtype(np.int8),
@@ -35,6 +37,88 @@ SUPPORTED_DTYPES = (
     np.dtype(np.float32),
     np.dtype(np.float64),
 )
+
+#: dtypes accepted and converted by :func:`exact_supported` to the smallest supported dtype that
+#: holds every value exactly (bool becomes a uint8 view without a copy).
+CONVERTED_DTYPES = (
+    np.dtype(np.bool_),
+    np.dtype(np.int64),
+    np.dtype(np.uint64),
+    np.dtype(np.float16),
+)
+
+# Candidates for integer data, smallest first; at equal size unsigned before signed, so 0..255
+# labels become uint8. float64 comes last: it holds integers exactly up to 2**53 in magnitude.
+_INTEGER_TARGETS = tuple(np.dtype(t) for t in (np.uint8, np.int8, np.uint16, np.int16,
+                                                np.uint32, np.int32))
+
+
+def exact_supported(data: np.ndarray, label: str = "data") -> np.ndarray:
+    """Return ``data`` with a dtype of :data:`SUPPORTED_DTYPES`, holding exactly the same values.
+
+    Supported dtypes pass through unchanged (a memory map stays one). ``bool`` becomes a uint8
+    view (no copy); ``float16`` becomes float32; ``int64`` and ``uint64`` (NumPy's and PyVista's
+    default integer types, typical for label volumes) become the smallest of uint8, int8,
+    uint16, int16, uint32, int32 whose range holds the data's minimum and maximum, else float64
+    if every value is exactly representable there (always for magnitudes up to 2**53). The
+    conversion copies the array.
+
+    Parameters
+    ----------
+    data : ndarray
+        The voxels, in native byte order.
+    label : str
+        Name of the array or file for the error message.
+
+    Raises
+    ------
+    DataError
+        If no supported dtype holds every value exactly (large 64-bit integers), or the dtype is
+        neither supported nor convertible (complex, object, strings, ...).
+    """
+    dtype = data.dtype
+    if dtype in SUPPORTED_DTYPES:
+        return data
+    if dtype == np.bool_:
+        return data.view(np.uint8)
+    if dtype == np.float16:
+        return data.astype(np.float32)
+    if dtype not in CONVERTED_DTYPES:
+        names = ", ".join(str(d) for d in SUPPORTED_DTYPES + CONVERTED_DTYPES)
+        raise DataError(f"{label}: voxel type {dtype} is not supported (use one of {names})")
+    if data.size == 0:
+        return data.astype(np.uint8)
+    lo, hi = int(data.min()), int(data.max())  # Python ints: exact for every int64/uint64
+    for target in _INTEGER_TARGETS:
+        info = np.iinfo(target)
+        if info.min <= lo and hi <= info.max:
+            return data.astype(target)
+    as_float = data.astype(np.float64)
+    # Exact when the round trip through float64 gives the same integers back. Casting a float
+    # at or above 2**63 to int64 (2**64 to uint64) is undefined, so such maxima (which rounding
+    # may produce from the largest integers) are ruled out before the round trip.
+    limit = 2.0**63 if dtype == np.int64 else 2.0**64
+    if float(as_float.max()) < limit and np.array_equal(as_float.astype(dtype), data):
+        return as_float
+    raise DataError(
+        f"{label}: {dtype} values {lo}..{hi} cannot be held exactly by any supported voxel "
+        "type (float64 is exact only up to 2**53); rescale or relabel the data"
+    )
+
+
+class OrientationWarning(UserWarning):
+    """The file's voxel axes were flipped, permuted or (for oblique data) rotated to fit x, y, z,
+    or a VTK image's direction matrix was not applied."""
+
+
+def _vtk_arrays(attributes: Any) -> dict[str, Any]:
+    """Name -> numeric data array of a vtkPointData / vtkCellData (string arrays left out)."""
+    arrays = {}
+    for index in range(attributes.GetNumberOfArrays()):
+        arr = attributes.GetArray(index)  # None for non-numeric arrays
+        if arr is not None:
+            arrays[arr.GetName() or f"array {index}"] = arr
+    return arrays
 
 
 def _as_triple(value: Any, name: str) -> tuple[float, float, float]:
@@ -52,7 +136,8 @@ class Volume:
     data : array_like, shape (nx, ny, nz)
         Voxel values, indexed ``data[i, j, k]`` with ``i`` along x. The dtype is kept (uint8,
         int8, uint16, int16, uint32, int32, float32, float64); a ``numpy.memmap`` stays
-        memory-mapped.
+        memory-mapped. bool, float16, int64 and uint64 are converted to the smallest of those
+        that holds every value exactly (see :func:`exact_supported`).
     spacing : float or sequence of 3 floats, optional
         Distance between voxel centres along x, y, z in world units (default 1).
     origin : sequence of 3 floats, optional
@@ -81,13 +166,9 @@ class Volume:
             data = np.asarray(data)
         if data.ndim != 3:
             raise ParameterError(f"data must be a 3D array, got shape {data.shape}")
-        if data.dtype == np.bool_:
-            data = data.view(np.uint8)
-        if data.dtype not in SUPPORTED_DTYPES:
-            raise ParameterError(
-                f"data dtype {data.dtype} is not supported "
-                f"(use one of {', '.join(str(d) for d in SUPPORTED_DTYPES)})"
-            )
+        if not data.dtype.isnative:
+            data = data.astype(data.dtype.newbyteorder("="))
+        data = exact_supported(data, metadata.get("name", "data") if metadata else "data")
         self.data: np.ndarray = data
         self.spacing: tuple[float, float, float] = _as_triple(spacing, "spacing")
         if min(self.spacing) <= 0:
@@ -95,6 +176,109 @@ class Volume:
         self.origin: tuple[float, float, float] = _as_triple(origin, "origin")
         self.metadata: dict[str, Any] = dict(metadata or {})
         self._value_range: tuple[float, float] | None = None
+
+    @classmethod
+    def from_vtk(cls, image: Any, array: str | None = None,
+                 metadata: Mapping[str, Any] | None = None) -> Volume:
+        """A volume from a ``vtkImageData`` or ``pyvista.ImageData`` (neither is imported here).
+
+        Parameters
+        ----------
+        image : vtkImageData or pyvista.ImageData
+            The image. Its point data are the voxels: VTK stores them x fastest, so the flat
+            array becomes ``data[i, j, k]`` (a view, no copy) and voxel ``(i, j, k)`` of the
+            image's extent is at ``origin + (i, j, k) * spacing``, splinecast's convention. An
+            image with cell data only gives one voxel per cell, centred in it.
+        array : str, optional
+            Name of the point (or cell) data array; needed when there are several.
+        metadata : mapping, optional
+            Added to the volume's metadata (``"name"`` is used in messages).
+
+        Returns
+        -------
+        Volume
+            Sharing memory with the VTK array (modify a copy, not the VTK object, to keep the
+            volume unchanged); ``metadata["array"]`` names the array. int64, uint64, bool and
+            float16 arrays are converted (see :func:`exact_supported`).
+
+        Raises
+        ------
+        ParameterError
+            Not image data, no numeric array, an unknown or ambiguous ``array`` (the message
+            lists the names) or an array with several components.
+
+        Warns
+        -----
+        OrientationWarning
+            When the image has a direction matrix other than the identity: it is not applied
+            (the voxels are placed axis-aligned, as VTK filters that predate direction matrices
+            do).
+
+        Examples
+        --------
+        >>> import pyvista as pv  # doctest: +SKIP
+        >>> grid = pv.ImageData(dimensions=(40, 30, 20), spacing=(1, 1, 2))  # doctest: +SKIP
+        >>> grid["density"] = values.ravel(order="F")  # doctest: +SKIP
+        >>> vol = sc.Volume.from_vtk(grid)  # doctest: +SKIP
+        """
+        meta = dict(metadata or {})
+        label = str(meta.get("name", "the VTK image"))
+        needed = ("GetDimensions", "GetExtent", "GetSpacing", "GetOrigin", "GetPointData",
+                  "GetCellData")
+        if not all(hasattr(image, name) for name in needed):
+            raise ParameterError(
+                f"{label}: expected a vtkImageData or pyvista.ImageData, got "
+                f"{type(image).__name__}"
+            )
+        points, cells = _vtk_arrays(image.GetPointData()), _vtk_arrays(image.GetCellData())
+        if array is not None:
+            pool = points if array in points else cells
+            if array not in pool:
+                names = ", ".join(repr(n) for n in [*points, *cells]) or "none"
+                raise ParameterError(f"{label}: no data array {array!r} (arrays: {names})")
+        else:
+            pool = points or cells
+            if not pool:
+                raise ParameterError(f"{label}: the image has no numeric point or cell data")
+            if len(pool) > 1:
+                names = ", ".join(repr(n) for n in pool)
+                raise ParameterError(f"{label}: several data arrays ({names}); choose one with "
+                                     "array=NAME")
+            array = next(iter(pool))
+        vtk_array = pool[array]
+        if vtk_array.GetNumberOfComponents() != 1:
+            raise ParameterError(
+                f"{label}: array {array!r} has {vtk_array.GetNumberOfComponents()} components; "
+                "splinecast renders scalar data (pick or compute one component)"
+            )
+        from vtkmodules.util.numpy_support import vtk_to_numpy  # present with any VTK object
+
+        flat = vtk_to_numpy(vtk_array)
+        dims = np.asarray(image.GetDimensions(), dtype=np.int64)
+        spacing = np.asarray(image.GetSpacing(), dtype=np.float64)
+        first = np.asarray(image.GetExtent()[::2], dtype=np.float64)
+        if pool is not points:  # one voxel per cell, at the cell's centre
+            dims = np.maximum(dims - 1, 1)
+            first = first + 0.5
+        if flat.size != int(np.prod(dims)):
+            raise ParameterError(f"{label}: array {array!r} has {flat.size} values for "
+                                 f"{'x'.join(str(n) for n in dims)} voxels")
+        if hasattr(image, "GetDirectionMatrix"):
+            matrix = image.GetDirectionMatrix()
+            direction = np.array([[matrix.GetElement(r, c) for c in range(3)] for r in range(3)])
+            if not np.allclose(direction, np.eye(3), rtol=0.0, atol=1e-6):
+                warnings.warn(
+                    f"{label}: the direction matrix {direction.round(6).tolist()} is not applied;"
+                    " the voxels are placed along x, y, z",
+                    OrientationWarning,
+                    stacklevel=2,
+                )
+        # x varies fastest: C order over (z, y, x), transposed (a view) to data[i, j, k].
+        data = flat.reshape(dims[::-1]).transpose(2, 1, 0)
+        origin = np.asarray(image.GetOrigin(), dtype=np.float64) + first * spacing
+        meta.setdefault("name", label)
+        meta["array"] = array
+        return cls(data, spacing=spacing, origin=origin, metadata=meta)
 
     # ------------------------------------------------------------------ geometry
     @property

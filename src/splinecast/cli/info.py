@@ -18,11 +18,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     info = sub.add_parser("info", help="describe a volume file: shape, dtype, spacing, values")
     info.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
+    info.add_argument("--array", help="data array of a VTK file holding several")
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the description of ``args.file``."""
-    vol = sc.read(args.file)
+    vol = sc.read(args.file, array=args.array)
     data = vol.data
     sample = data
     note = ""

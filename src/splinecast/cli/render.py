@@ -41,8 +41,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render = sub.add_parser("render", help="render an isosurface, a MIP or a DVR image to a PNG")
     render.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
     render.add_argument("-o", "--output", required=True, help="output PNG path")
+    render.add_argument("--array", help="data array of a VTK file holding several")
     render.add_argument("--iso", help="isovalue(s) in data units, comma-separated for several "
-                        "translucent surfaces (default: the demo's)")
+                        "translucent surfaces (default: the demo's, else Otsu's threshold of "
+                        "the histogram; printed)")
     render.add_argument("--model", default="trilinear", help="reconstruction (default trilinear)")
     render.add_argument("--root-finder", choices=("bernstein", "rfbs", "sturm", "newton"),
                         help="first-root solver of spline models (default: the model's)")
@@ -59,6 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--fov", type=float, default=30.0, help="vertical field of view, degrees")
     render.add_argument("--zoom", type=float, default=1.0, help="magnification (default 1)")
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
+    render.add_argument("--fit", default="content", choices=("content", "box"),
+                        help="frame what the isovalue or transfer function shows (default) or "
+                             "the whole grid")
     render.add_argument("--method", default="exact", choices=("exact", "sampled"),
                         help="exact analytic roots (default) or fixed-step sampling")
     render.add_argument("--step", type=float, default=0.25,
@@ -76,10 +81,12 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--mode", default="iso", choices=("iso", "mip", "minip", "dvr"),
                         help="isosurface (default), max/min intensity projection, or DVR")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
-    render.add_argument("--tf", help="transfer function JSON file (--mode dvr)")
+    render.add_argument("--tf", help="transfer function JSON file (--mode dvr; default: an "
+                        "opacity ramp from the histogram, printed)")
     render.add_argument("--colormap", default="gray",
                         help="colormap of --mode mip/minip (default gray)")
-    render.add_argument("--window", help="LO,HI value window of --mode mip/minip")
+    render.add_argument("--window", help="LO,HI value window of --mode mip/minip (default: "
+                        "percentiles of the histogram, printed)")
     render.add_argument("--clip", action="append", default=[], metavar="NX,NY,NZ,D",
                         help="clip plane keeping nx*x+ny*y+nz*z+d >= 0 (repeatable)")
     render.add_argument("--crop", metavar="X0,X1,Y0,Y1,Z0,Z1", help="world-space box to keep")
@@ -124,9 +131,11 @@ def _refuse_ignored_options(args: argparse.Namespace) -> None:
                                 "step's table lengths)")
 
 
-def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
-    """Scene.render keyword arguments of the mode options, validated before any rendering."""
+def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[str]]:
+    """Scene.render keyword arguments of the mode options, validated before any rendering, and
+    what was chosen automatically (printed once everything is known to be valid)."""
     kwargs: dict = {"mode": args.mode}
+    notes: list[str] = []
     clip = [numbers(c, "--clip", 4) for c in args.clip]
     if clip:
         kwargs["clip"] = clip
@@ -137,19 +146,29 @@ def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
         sc.transfer.colormap_table(args.colormap, 2)  # a bad name fails before any work
         if args.window:
             kwargs["window"] = numbers(args.window, "--window", 2)
+        else:
+            kwargs["window"] = sc.auto_window(vol)
+            notes.append("window {:g}..{:g} (automatic: {:g}th-{:g}th percentiles of the "
+                "non-background values; set --window LO,HI)".format(
+                    *kwargs["window"], *sc.defaults.WINDOW_PERCENTILES))
         kwargs["method"] = args.method
         kwargs["step"] = args.step
-        return kwargs
+        return kwargs, notes
     if args.mode == "dvr":
-        if not args.tf:
-            raise sc.ParameterError("--mode dvr needs --tf FILE.json")
-        kwargs["tf"] = sc.TransferFunction.load(args.tf)
+        if args.tf:
+            kwargs["tf"] = sc.TransferFunction.load(args.tf)
+        else:
+            kwargs["tf"] = tf = sc.auto_transfer_function(vol)
+            (v0, _), (v1, a1) = tf.opacity_points[0], tf.opacity_points[-1]
+            notes.append(f"transfer function: opacity 0 at {v0:g} rising to {a1:g} per voxel at "
+                      f"{v1:g}, {tf.colormap} colours (automatic, from the histogram; set "
+                      "--tf FILE.json)")
         pre = "3d" if args.adaptive and args.preintegration == "2d" else args.preintegration
         kwargs["dvr"] = sc.DVRSettings(step=args.step, preintegration=pre,
                                        adaptive=args.adaptive, h_max=8 * args.step,
                                        termination=args.termination,
                                        table_layout=args.table_layout)
-        return kwargs
+        return kwargs, notes
     isos = numbers(args.iso, "--iso")
     if isos is not None and (len(isos) > 1 or args.opacity):
         kwargs["iso"] = [sc.check_iso(vol, v) for v in isos]
@@ -157,12 +176,26 @@ def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
             kwargs["opacity"] = numbers(args.opacity, "--opacity", len(isos))
     else:
         kwargs["iso"] = sc.check_iso(vol, isos[0] if isos else None)
+        if not isos:
+            how = ("the volume's default" if vol.metadata.get("default_iso") is not None
+                   else "automatic: Otsu's threshold of the non-background histogram")
+            notes.append(f"iso {kwargs['iso']:g} ({how}; set --iso)")
         kwargs["method"] = args.method
         kwargs["step"] = args.step
     if args.texture or args.shading == "cel":
         kwargs["effects"] = sc.SurfaceEffects(texture=args.texture, scale=args.texture_scale,
                                               cel_bands=4 if args.shading == "cel" else 0)
-    return kwargs
+    return kwargs, notes
+
+
+def _fit(args: argparse.Namespace, vol: sc.Volume, kwargs: dict) -> object:
+    """``Camera.orbit``'s ``fit``: the box of what the mode shows, or ``"box"``."""
+    if args.fit == "box":
+        return "box"
+    if args.mode == "dvr":
+        return sc.content_box(vol, tf=kwargs["tf"])
+    # MIP/minIP frame the object the automatic isovalue finds.
+    return sc.content_box(vol, iso=kwargs.get("iso"), inside=args.inside)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -177,7 +210,7 @@ def run(args: argparse.Namespace) -> int:
     width, height = sc.camera.parse_size(args.size)
 
     start = time.perf_counter()
-    vol = sc.read(args.file)
+    vol = sc.read(args.file, array=args.array)
     read_s = time.perf_counter() - start
     if args.model not in sc.MODELS:
         valid = ", ".join(sc.MODELS)
@@ -192,13 +225,16 @@ def run(args: argparse.Namespace) -> int:
         if name not in accepted:
             raise sc.ParameterError(f"{flag} does not apply to model {args.model}")
         options[name] = value
-    kwargs = _mode_kwargs(args, vol)
+    kwargs, notes = _mode_kwargs(args, vol)
     camera = sc.Camera.orbit(
         vol, azimuth=args.azimuth, elevation=args.elevation, distance=args.distance,
         size=(width, height), fov=args.fov, ortho=args.ortho, zoom=args.zoom,
+        fit=_fit(args, vol, kwargs),
     )
     # Progress starts only once every input is known to be valid, so a mistake is one line.
     log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
+    for note in notes:
+        log(args, note)
     if args.smooth:
         vol = sc.smooth(vol, args.smooth)
         log(args, f"smoothed with a {args.smooth}^3 Gaussian")

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ReadError, SplinecastError
-from ..volume import SUPPORTED_DTYPES, Volume
+from ..errors import DataError, ReadError, SplinecastError
+from ..volume import CONVERTED_DTYPES, SUPPORTED_DTYPES, Volume, exact_supported
 
 __all__ = ["require", "finish_volume", "fmt_shape", "native", "check_dtype", "one_line"]
 
@@ -50,10 +50,10 @@ def fmt_shape(shape: Any) -> str:
 
 
 def check_dtype(dtype: np.dtype, label: str) -> np.dtype:
-    """Reject voxel types that :class:`Volume` cannot hold, naming the file."""
+    """Reject voxel types that :class:`Volume` can neither hold nor convert, naming the file."""
     dtype = np.dtype(dtype)
-    if dtype.newbyteorder("=") not in SUPPORTED_DTYPES and dtype != np.bool_:
-        names = ", ".join(str(d) for d in SUPPORTED_DTYPES)
+    if dtype.newbyteorder("=") not in SUPPORTED_DTYPES + CONVERTED_DTYPES:
+        names = ", ".join(str(d) for d in SUPPORTED_DTYPES + CONVERTED_DTYPES)
         raise ReadError(f"{label}: voxel type {dtype} is not supported (use one of {names})")
     return dtype
 
@@ -90,7 +90,10 @@ def finish_volume(
     if min(data.shape) < 1:
         raise ReadError(f"{label}: the volume is empty (shape {fmt_shape(data.shape)})")
     check_dtype(data.dtype, label)
-    data = native(data)
+    try:  # int64, uint64, bool, float16 -> the smallest supported dtype holding them exactly
+        data = exact_supported(native(data), label)
+    except DataError as exc:
+        raise ReadError(str(exc)) from None
     sp = np.broadcast_to(np.asarray(spacing, dtype=np.float64), (3,))
     if not np.all(np.isfinite(sp)) or np.any(sp <= 0):
         raise ReadError(f"{label}: voxel spacing must be three positive numbers, got {tuple(sp)}")

@@ -29,11 +29,14 @@ _EXTENSIONS = {
     ".tiff": "tiff",
     ".dcm": "dicom",
     ".json": "sidecar",
+    ".vti": "vti",
+    ".vtk": "vtk",
 }
 #: Formats whose files always start with a recognisable signature.
-_SIGNED = {"npy", "npz", "nrrd", "tiff", "nifti"}
+_SIGNED = {"npy", "npz", "nrrd", "tiff", "nifti", "vti", "vtk"}
 _SUPPORTED_READ = (
-    ".npy .npz .mhd .mha .nrrd .nhdr .nii .nii.gz .tif .tiff .dcm, raw + .json, a DICOM folder"
+    ".npy .npz .mhd .mha .nrrd .nhdr .nii .nii.gz .tif .tiff .dcm .vti .vtk, raw + .json, "
+    "a DICOM folder"
 )
 _NIFTI1_MAGIC = (b"n+1\0", b"ni1\0")
 _NIFTI2_MAGIC = (b"n+2\0", b"ni2\0")
@@ -69,6 +72,10 @@ def sniff(path: Path) -> str | None:
         return "nifti" if _is_nifti(inner) else None
     if head.lstrip().startswith((b"ObjectType", b"NDims")):
         return "metaimage"
+    if head.startswith(b"# vtk DataFile"):
+        return "vtk"
+    if head.lstrip().startswith((b"<?xml", b"<VTKFile")) and b"<VTKFile" in head:
+        return "vti"
     return None
 
 
@@ -114,12 +121,16 @@ def _reader(kind: str) -> Callable[[Path], Volume]:
         from .dicom import read_dicom_file
 
         return read_dicom_file
+    if kind in ("vti", "vtk"):
+        from .vtkimage import read_legacy_vtk, read_vti
+
+        return read_vti if kind == "vti" else read_legacy_vtk
     from .sidecar import read_sidecar
 
     return read_sidecar
 
 
-def read(path: str | os.PathLike[str]) -> Volume:
+def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume:
     """Read a volume from a file, a DICOM folder or a ``demo:`` name.
 
     Parameters
@@ -129,7 +140,11 @@ def read(path: str | os.PathLike[str]) -> Volume:
         ``.tif``/``.tiff``, raw data with a ``.json`` sidecar, a ``.dcm`` slice), a folder holding
         a DICOM series, or ``"demo:<name>?size=N&..."`` for a synthetic volume (see
         :func:`splinecast.io.demo`). The format is recognised by the file's signature when it has
-        one, by its extension otherwise.
+        one, by its extension otherwise. VTK image data: ``.vti`` (XML, any encoding) and legacy
+        ``.vtk`` structured points (needs ``pip install 'splinecast[vtk]'``).
+    array : str, optional
+        The point-data array to read from a VTK file that holds several (the error message of a
+        read without it lists their names). Other formats hold one array and refuse it.
 
     Returns
     -------
@@ -151,7 +166,11 @@ def read(path: str | os.PathLike[str]) -> Volume:
     OrientationWarning
         When axes were flipped, permuted or an oblique rotation was dropped to fit x, y, z.
     """
+    if array is not None and not isinstance(array, str):
+        raise ParameterError(f"array must be the name of a data array, got {array!r}")
     if isinstance(path, str) and path.startswith("demo:"):
+        if array is not None:
+            raise ParameterError(f"array={array!r} applies to VTK files, not to {path}")
         from .synthetic import demo_from_uri
 
         return demo_from_uri(path)
@@ -159,6 +178,8 @@ def read(path: str | os.PathLike[str]) -> Volume:
     if not path.exists():
         raise ReadError(f"{path}: no such file or folder")
     if path.is_dir():
+        if array is not None:
+            raise ParameterError(f"array={array!r} applies to VTK files, not to the folder {path}")
         from .dicom import read_dicom_series
 
         return read_dicom_series(path)
@@ -180,6 +201,10 @@ def read(path: str | os.PathLike[str]) -> Volume:
         kind = by_extension
     else:
         raise ReadError(_unknown_message(path))
+    if kind in ("vti", "vtk"):
+        return _reader(kind)(path, array)  # type: ignore[call-arg]
+    if array is not None:
+        raise ParameterError(f"array={array!r} applies to VTK files (.vti, .vtk), not to {path}")
     return _reader(kind)(path)
 
 
@@ -196,7 +221,7 @@ def _unknown_message(path: Path) -> str:
 
 
 # --------------------------------------------------------------------------- writing
-_WRITERS = (".npy", ".npz", ".mhd", ".raw", ".nrrd")
+_WRITERS = (".npy", ".npz", ".mhd", ".raw", ".nrrd", ".vti")
 
 
 def write(volume: Volume, path: str | os.PathLike[str]) -> None:
@@ -209,7 +234,8 @@ def write(volume: Volume, path: str | os.PathLike[str]) -> None:
     path : str or path-like
         ``.npy`` (voxels only), ``.npz`` (voxels, spacing, origin), ``.mhd`` (writes ``name.mhd``
         and ``name.raw``), ``.raw`` (writes ``name.raw`` and the JSON sidecar ``name.json``) or
-        ``.nrrd`` (needs pynrrd). Raw data is little-endian with x varying fastest.
+        ``.nrrd`` (needs pynrrd) or ``.vti`` (VTK XML image data, appended zlib-compressed binary;
+        needs vtk). Raw data is little-endian with x varying fastest.
 
     Raises
     ------
@@ -235,6 +261,8 @@ def write(volume: Volume, path: str | os.PathLike[str]) -> None:
         from .metaimage import write_metaimage as writer
     elif suffix == ".raw":
         from .sidecar import write_sidecar as writer
+    elif suffix == ".vti":
+        from .vtkimage import write_vti as writer
     else:
         from .nrrdfile import write_nrrd as writer
     writer(volume, path)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ReadError
+from ..volume import OrientationWarning  # defined with the convention it protects
 
 __all__ = ["OrientationWarning", "align_to_world"]
 
@@ -26,8 +27,6 @@ _AXES = "xyz"
 _TOL = 1e-4
 
 
-class OrientationWarning(UserWarning):
-    """The file's voxel axes were flipped, permuted or (for oblique data) rotated to fit x, y, z."""
 
 
 def align_to_world(

@@ -67,6 +67,16 @@ class Frame:
         """The colour buffer as 8-bit RGBA."""
         return (np.clip(self.rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
+    def _repr_png_(self) -> bytes:
+        """PNG bytes of the colour buffer: Jupyter and IPython show a Frame as its image."""
+        import io
+
+        from PIL import Image
+
+        buffer = io.BytesIO()
+        Image.fromarray(self.to_uint8(), mode="RGBA").save(buffer, format="PNG")
+        return buffer.getvalue()
+
     def save(self, path: str | os.PathLike) -> None:
         """Write the colour buffer as a PNG (written to a temporary file, then moved)."""
         from PIL import Image

@@ -1,0 +1,287 @@
+"""What splinecast shows when it is not told: isovalue, MIP window, transfer function, framing.
+
+A newcomer types ``splinecast render head.nii.gz -o head.png`` without knowing the data's values;
+VTK, napari and PyVista show something sensible in that case, and so does splinecast. Every
+default here is computed from the volume's histogram with a documented rule, and the command line
+prints what it chose so that the user learns the numbers to change.
+
+Background
+    The voxels at the volume's minimum value: the zero padding around an MRI head, the air
+    outside a CT's field of view, the empty space of a label volume or a mask. They are left out
+    of every statistic below, so a large empty region cannot pull a threshold towards itself
+    (removing the handful of voxels at the minimum of a volume without such a region changes
+    nothing noticeable).
+
+Sampling
+    Statistics come from at most :data:`SAMPLE_VOXELS` voxels: a volume with more is read with the
+    same stride along every axis (a strided view; a memory map reads only those pages). NaN and
+    infinite values are ignored.
+
+Isovalue (:func:`auto_iso`)
+    ``metadata["default_iso"]`` when the volume has one (the demo volumes do), else Otsu's
+    threshold of the non-background values: the split of their histogram that maximises the
+    variance between the two classes (Otsu 1979). For integer data the histogram has one bin per
+    integer (up to :data:`HISTOGRAM_BINS` bins) and the threshold lies halfway between two
+    integers, so no voxel sits exactly on the surface. When the non-background voxels hold a
+    single value (a mask), the isovalue is halfway between it and the background.
+
+MIP / minIP window (:func:`auto_window`)
+    The 0.1st and 99.9th percentiles of the non-background values (a projection picks extreme
+    values along every ray, so the window reaches far into the tails, but a few outliers such
+    as metal in a CT cannot compress it); the data range when those coincide.
+
+DVR transfer function (:func:`auto_transfer_function`)
+    Opacity rises linearly from 0 at the isovalue of :func:`auto_iso` (where the object starts) to
+    :data:`DVR_MAX_OPACITY` per voxel at the 99.5th percentile of the non-background values, and
+    stays there above it; the ``viridis`` colormap (perceptually uniform) spans the same range.
+
+Framing (:func:`content_box`)
+    The world box of the voxels the isovalue or transfer function makes visible, for
+    :meth:`splinecast.Camera.orbit`'s ``fit``.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from typing import Any
+
+import numpy as np
+
+from .errors import ParameterError
+from .transfer import TransferFunction
+from .volume import Volume
+
+__all__ = [
+    "SAMPLE_VOXELS",
+    "HISTOGRAM_BINS",
+    "DVR_MAX_OPACITY",
+    "WINDOW_PERCENTILES",
+    "DVR_TOP_PERCENTILE",
+    "sample_values",
+    "otsu_threshold",
+    "auto_iso",
+    "auto_window",
+    "auto_transfer_function",
+    "content_box",
+]
+
+#: Largest number of voxels a statistic reads; bigger volumes are strided evenly.
+SAMPLE_VOXELS = 4_000_000
+#: Largest number of histogram bins of Otsu's threshold.
+HISTOGRAM_BINS = 1024
+#: Opacity of a one-voxel slab at the top of the default DVR ramp.
+DVR_MAX_OPACITY = 0.1
+#: Percentiles of the non-background values that bound the default MIP / minIP window.
+WINDOW_PERCENTILES = (0.1, 99.9)
+#: Percentile of the non-background values where the default DVR opacity ramp reaches its top.
+DVR_TOP_PERCENTILE = 99.5
+
+# Statistics already computed for a volume (keyed weakly: they go when the volume goes).
+_CACHE: weakref.WeakKeyDictionary[Volume, dict[str, Any]] = weakref.WeakKeyDictionary()
+
+
+def _stride(shape: tuple[int, ...], max_voxels: int) -> int:
+    """The smallest equal per-axis stride that leaves at most ``max_voxels`` voxels."""
+    stride = max(1, math.ceil((math.prod(shape) / max_voxels) ** (1.0 / 3.0)))
+    while math.prod(-(-n // stride) for n in shape) > max_voxels:
+        stride += 1
+    return stride
+
+
+def _cached(volume: Volume, key: str, compute: Any) -> Any:
+    entry = _CACHE.setdefault(volume, {})
+    if key not in entry:
+        entry[key] = compute()
+    return entry[key]
+
+
+def sample_values(volume: Volume, max_voxels: int = SAMPLE_VOXELS) -> np.ndarray:
+    """The finite, non-background voxel values the defaults are computed from (float64, 1D).
+
+    At most ``max_voxels`` voxels are read (an even stride along every axis). The background is
+    the volume's minimum value; when every voxel holds it, the result is empty.
+    """
+    stride = _stride(volume.shape, max_voxels)
+    values = np.asarray(volume.data[::stride, ::stride, ::stride], dtype=np.float64).ravel()
+    values = values[np.isfinite(values)]
+    return values[values > volume.value_range[0]]
+
+
+def otsu_threshold(values: np.ndarray, integer: bool = False,
+                   bins: int = HISTOGRAM_BINS) -> float:
+    """Otsu's threshold of ``values``: the histogram split maximising the between-class variance.
+
+    Parameters
+    ----------
+    values : ndarray
+        Finite values (any shape), at least two distinct ones.
+    integer : bool
+        The values are integers: bins are whole numbers wide and centred on integers, so the
+        threshold lies halfway between two integers.
+    bins : int
+        Largest number of bins.
+
+    Returns
+    -------
+    float
+        A value strictly between the smallest and largest of ``values``: voxels above it form
+        one class, voxels below the other.
+    """
+    values = np.asarray(values, dtype=np.float64).ravel()
+    lo, hi = float(values.min()), float(values.max())
+    if not hi > lo:
+        raise ParameterError("Otsu's threshold needs at least two distinct values")
+    if integer:
+        width = max(1, math.ceil((hi - lo + 1) / bins))
+        n = int((hi - lo) // width) + 1
+        edges = lo - 0.5 + width * np.arange(n + 1)
+        counts = np.bincount(((values - lo) // width).astype(np.int64), minlength=n)
+        centres = lo + width * np.arange(n) + 0.5 * (width - 1)
+    else:
+        counts, edges = np.histogram(values, bins=bins, range=(lo, hi))
+        centres = 0.5 * (edges[:-1] + edges[1:])
+    counts = counts.astype(np.float64)
+    # Class 0 is bins 0..k, class 1 bins k+1..; the between-class variance is
+    # w0 * w1 * (mu0 - mu1)^2 with weights w and means mu of the two classes.
+    w0 = np.cumsum(counts)[:-1]
+    s0 = np.cumsum(counts * centres)[:-1]
+    total, total_sum = counts.sum(), float(np.dot(counts, centres))
+    w1 = total - w0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        between = w0 * w1 * (s0 / w0 - (total_sum - s0) / w1) ** 2
+    between[(w0 == 0) | (w1 == 0)] = -1.0
+    k = int(np.argmax(between))
+    return float(edges[k + 1])
+
+
+def auto_iso(volume: Volume) -> float:
+    """The isovalue shown when none is given (see the module's description).
+
+    Returns ``volume.metadata["default_iso"]`` when present, else Otsu's threshold of the
+    non-background values; for a constant volume, its value (the image is then empty).
+
+    Examples
+    --------
+    >>> import numpy as np, splinecast as sc
+    >>> data = np.zeros((20, 20, 20), np.uint8)
+    >>> data[5:15, 5:15, 5:15] = 100        # a mask: one value besides the background
+    >>> sc.auto_iso(sc.Volume(data))
+    50.0
+    """
+    if volume.metadata.get("default_iso") is not None:
+        return float(volume.metadata["default_iso"])
+
+    def compute() -> float:
+        lo = volume.value_range[0]
+        values = sample_values(volume)
+        if values.size == 0:
+            return float(lo)  # constant volume: nothing to show
+        vmin, vmax = float(values.min()), float(values.max())
+        if vmax == vmin:
+            return 0.5 * (lo + vmin)
+        integer = volume.dtype.kind in "iu"
+        return otsu_threshold(values, integer=integer)
+
+    return _cached(volume, "iso", compute)
+
+
+def auto_window(volume: Volume) -> tuple[float, float]:
+    """The MIP / minIP value window shown when none is given: ``(lo, hi)``, ``lo < hi``.
+
+    The :data:`WINDOW_PERCENTILES` of the non-background values, or the data range (widened by
+    one when the volume is constant) when those coincide.
+    """
+    def compute() -> tuple[float, float]:
+        values = sample_values(volume)
+        if values.size:
+            lo, hi = (float(v) for v in np.percentile(values, WINDOW_PERCENTILES))
+            if hi > lo:
+                return lo, hi
+        lo, hi = volume.value_range
+        return (float(lo), float(hi) if hi > lo else float(lo) + 1.0)
+
+    return _cached(volume, "window", compute)
+
+
+def auto_transfer_function(volume: Volume) -> TransferFunction:
+    """The DVR transfer function used when none is given.
+
+    Opacity ramps linearly from 0 at :func:`auto_iso` to :data:`DVR_MAX_OPACITY` at the 99.5th
+    percentile of the non-background values (and stays there above it); the ``viridis``
+    colormap spans the ramp.
+    """
+    def compute() -> TransferFunction:
+        start = auto_iso(volume)
+        values = sample_values(volume)
+        values = values[values > start]
+        end = float(np.percentile(values, DVR_TOP_PERCENTILE)) if values.size else start
+        if not end > start:
+            # Nothing (or one value) above the isovalue: ramp over the rest of the data range.
+            end = max(volume.value_range[1], start + 1.0)
+            end = end if end > start else start + 1.0
+        return TransferFunction([(start, 0.0), (end, DVR_MAX_OPACITY)], domain=(start, end),
+                                colormap="viridis")
+
+    return _cached(volume, "tf", compute)
+
+
+def content_box(volume: Volume, iso: Any = None, tf: TransferFunction | None = None,
+                inside: str | None = None,
+                max_voxels: int = SAMPLE_VOXELS) -> tuple[np.ndarray, np.ndarray]:
+    """World-space box ``(lo, hi)`` around what an isovalue or a transfer function shows.
+
+    Give it to :meth:`splinecast.Camera.orbit` as ``fit=`` to frame the object rather than the
+    whole grid (as VTK's ``ResetCamera(bounds)`` frames the visible actors).
+
+    Parameters
+    ----------
+    volume : Volume
+        The data.
+    iso : float or list of float, optional
+        Isovalue(s); the box holds every voxel on the object's side of the (lowest, for
+        ``inside="high"``) isovalue, grown by one voxel since the surface passes between voxels.
+        Default: :func:`auto_iso`.
+    tf : TransferFunction, optional
+        Instead of ``iso``: the box holds every voxel the transfer function gives a non-zero
+        opacity, grown by one voxel (the reconstruction blends it with its neighbours).
+    inside : {"high", "low"}, optional
+        Which side of the isovalue is the object; default ``volume.metadata["inside"]`` or
+        ``"high"``.
+    max_voxels : int
+        Volumes with more voxels are examined at an even stride; the box then grows by the stride
+        so that voxels between the samples stay inside it.
+
+    Returns
+    -------
+    lo, hi : ndarray, shape (3,)
+        World corners, clipped to the volume's bounds; the volume's bounds when nothing would be
+        visible.
+    """
+    inside = inside or volume.metadata.get("inside", "high")
+    if inside not in ("high", "low"):
+        raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
+    stride = _stride(volume.shape, max_voxels)
+    data = volume.data[::stride, ::stride, ::stride]
+    if tf is not None:
+        if not isinstance(tf, TransferFunction):
+            raise ParameterError(f"tf must be a TransferFunction, got {type(tf).__name__}")
+        mask = np.zeros(data.shape, dtype=bool)
+        for a, b in tf.visible_ranges():
+            mask |= (data >= a) & (data <= b)
+    else:
+        isos = auto_iso(volume) if iso is None else iso
+        isos = np.atleast_1d(np.asarray(isos, dtype=np.float64))
+        if isos.size == 0 or not np.all(np.isfinite(isos)):
+            raise ParameterError(f"iso must be finite numbers, got {iso!r}")
+        mask = data >= isos.min() if inside == "high" else data <= isos.max()
+    lo_world, hi_world = volume.bounds
+    hits = [np.flatnonzero(mask.any(axis=other)) for other in ((1, 2), (0, 2), (0, 1))]
+    if any(h.size == 0 for h in hits):
+        return lo_world, hi_world
+    grow = stride  # one voxel of the full grid beyond each sample (the stride covers it)
+    first = np.array([h[0] * stride - grow for h in hits], dtype=np.float64)
+    last = np.array([h[-1] * stride + grow for h in hits], dtype=np.float64)
+    first = np.maximum(first, 0.0)
+    last = np.minimum(last, np.asarray(volume.shape, dtype=np.float64) - 1.0)
+    return volume.index_to_world(first), volume.index_to_world(last)
