@@ -28,10 +28,12 @@ from .state import RenderRequest, resized_camera
 __all__ = ["FrameRenderer", "RenderedImage"]
 
 #: Render time a stripe aims at: the longest a superseded frame keeps the render thread busy.
-STRIPE_MS = 120.0
+STRIPE_MS = 150.0
 #: Stripe height when nothing is known yet about the cost of a frame.
 _FIRST_STRIPE_ROWS = 128
-_MIN_STRIPE_ROWS = 16
+_MIN_STRIPE_ROWS = 32
+#: Smaller images are dominated by fixed costs per call and teach the cost model nothing.
+_MIN_LEARN_PIXELS = 32_768
 
 
 @dataclass
@@ -66,10 +68,15 @@ class FrameRenderer:
         An already prepared scene (``sc.view(scene)``); it is kept for its model.
     max_scenes : int
         How many prepared models to keep (each holds the model's arrays; s31 and qss are large).
+    stripe_rows : int, optional
+        Fixed stripe height; by default chosen from the cost of recent frames so a stripe takes
+        about :data:`STRIPE_MS`.
     """
 
-    def __init__(self, volume: Volume, scene: Scene | None = None, max_scenes: int = 2) -> None:
+    def __init__(self, volume: Volume, scene: Scene | None = None, max_scenes: int = 2,
+                 stripe_rows: int | None = None) -> None:
         self.volume = volume
+        self._stripe_rows_fixed = stripe_rows
         self._pinned = scene
         self._scenes: OrderedDict[str, Scene] = OrderedDict()
         self._max_scenes = max(1, int(max_scenes))
@@ -110,6 +117,8 @@ class FrameRenderer:
         return per_pixel * request.camera.width * request.camera.height * scale * scale
 
     def _learn(self, request: RenderRequest, pixels: int, ms: float) -> None:
+        if pixels < _MIN_LEARN_PIXELS:
+            return
         key = self._cost_key(request)
         measured = ms / max(pixels, 1)
         previous = self._cost.get(key)
@@ -151,6 +160,8 @@ class FrameRenderer:
         return RenderedImage(image, stats, render_ms, camera.height / request.camera.height)
 
     def _stripe_rows(self, request: RenderRequest, width: int, height: int) -> int:
+        if self._stripe_rows_fixed is not None:
+            return max(1, min(height, self._stripe_rows_fixed))
         per_pixel = self._cost.get(self._cost_key(request))
         if per_pixel is None:
             return min(height, _FIRST_STRIPE_ROWS)

@@ -46,7 +46,7 @@ STATIC_FILES = {
 }
 
 # The page may be shown inside a Jupyter notebook served from another local port.
-_FRAME_ANCESTORS = ("'self' http://localhost:* http://127.0.0.1:* http://[::1]:* "
+_FRAME_ANCESTORS = ("'self' http://localhost:* http://127.0.0.1:* "
                     "https://localhost:* https://127.0.0.1:*")
 _SECURITY_HEADERS = {
     "Content-Security-Policy": (

@@ -282,6 +282,8 @@ def _camera_fields(camera: dict[str, Any]) -> dict[str, Any]:
     if not _ZOOM_RANGE[0] <= out["zoom"] <= _ZOOM_RANGE[1]:
         raise ParameterError(f"camera.zoom must be in [{_ZOOM_RANGE[0]:g}, {_ZOOM_RANGE[1]:g}], "
                              f"got {out['zoom']:g}")
+    if not 0.0 < out["fov"] < 180.0:  # checked before Camera.orbit derives a distance from it
+        raise ParameterError(f"camera.fov must be between 0 and 180 degrees, got {out['fov']:g}")
     if max(abs(p) for p in out["pan"]) > _PAN_LIMIT:
         raise ParameterError(f"camera.pan must be within +-{_PAN_LIMIT:g} view heights")
     return out
