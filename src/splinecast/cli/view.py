@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import signal
-import sys
 import time
 import webbrowser
 
@@ -41,13 +40,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 async def _serve(server: object, args: argparse.Namespace) -> None:
-    from splinecast.viewer.security import is_loopback
-
-    url = await server.start()
+    url = await server.start()  # warns on stderr when the host is not this machine only
     print(url, flush=True)
-    if not is_loopback(args.host):
-        print(f"splinecast: warning: listening on {args.host}; other machines can reach the "
-              "viewer, protected by its token only", file=sys.stderr, flush=True)
     log(args, "serving; press Ctrl-C to stop")
     if not args.no_browser:
         webbrowser.open(url)

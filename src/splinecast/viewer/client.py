@@ -120,7 +120,7 @@ class ViewerClient:
         """Ask for a full-resolution PNG of ``state``; returns the request id."""
         return await self.send("screenshot", state)
 
-    async def receive(self, timeout: float = 60.0) -> ReceivedFrame | dict[str, Any]:
+    async def receive(self, timeout: float = 600.0) -> ReceivedFrame | dict[str, Any]:
         """The next message: a :class:`ReceivedFrame` or a JSON message (dict)."""
         import aiohttp
 
@@ -135,7 +135,7 @@ class ViewerClient:
         raise ConnectionError(f"the server closed the connection ({message.type.name}, "
                               f"{message.data!r})")
 
-    async def frame(self, ident: int, final: bool = True, timeout: float = 60.0
+    async def frame(self, ident: int, final: bool = True, timeout: float = 600.0
                     ) -> ReceivedFrame:
         """Wait for a frame of request ``ident`` (the final one unless ``final=False``).
 

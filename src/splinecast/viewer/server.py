@@ -141,10 +141,10 @@ class ViewerServer:
 
     async def start(self) -> str:
         """Bind, start serving, and return :attr:`url`."""
-        if not security.is_loopback(self.host):
-            log.warning("the viewer listens on %s: other machines can reach it; the token "
-                        "is the only protection", self.host)
         sock = self._bind()
+        if not security.is_loopback(self.host):
+            log.warning("splinecast: warning: the viewer listens on %s: other machines can "
+                        "reach it, and its token is the only protection", self.host)
         self.port = sock.getsockname()[1]
         self._allowed = security.allowed_hosts(self.host, self.port)
         self._loop = asyncio.get_running_loop()
