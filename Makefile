@@ -5,6 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 BENCH_STAMP := $(VENV)/.bench-stamp
+BROWSER_STAMP := $(VENV)/.browser-stamp
 DEMO_PNG ?= splinecast-demo.png
 
 .PHONY: demo test bench lint clean clean-cache bench-deps compare compare-quick
@@ -19,7 +20,7 @@ demo: $(STAMP)
 	@$(VENV)/bin/splinecast render 'demo:marschner-lobb?size=128' --iso 0.5 --size 768x768 \
 		--azimuth 30 --elevation 25 --zoom 1.2 --quiet -o $(DEMO_PNG)
 
-test: $(STAMP) $(BENCH_STAMP)
+test: $(STAMP) $(BENCH_STAMP) $(BROWSER_STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
@@ -33,6 +34,12 @@ $(BENCH_STAMP): pyproject.toml scripts/install_bench.sh $(STAMP)
 	$(PY) -m pip install --quiet -e '.[all,test,bench]' \
 		|| echo "bench extra not installed: VTK/scikit-image comparison tests will skip"
 	touch $(BENCH_STAMP)
+
+# Headless Chromium for the viewer's browser tests (issue 13), optional for `make test`: Debian's
+# chromium via apt (scripts/install_browser.sh); if it cannot be installed those tests skip.
+$(BROWSER_STAMP): scripts/install_browser.sh $(STAMP)
+	bash scripts/install_browser.sh --optional
+	touch $(BROWSER_STAMP)
 
 # Strict variant: fails when the system libraries or the extra cannot be installed.
 bench-deps: $(STAMP)

@@ -39,9 +39,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
-async def _serve(server: object, args: argparse.Namespace) -> None:
+async def _serve(server: object, args: argparse.Namespace, read: str) -> None:
     url = await server.start()  # warns on stderr when the host is not this machine only
     print(url, flush=True)
+    # Progress only once the server listens, so a mistake stays a single line.
+    log(args, read)
     log(args, "serving; press Ctrl-C to stop")
     if not args.no_browser:
         webbrowser.open(url)
@@ -72,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
     server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,
                           port=args.port)
-    log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {time.perf_counter() - start:.2f} s")
-    asyncio.run(_serve(server, args))
+    read = f"read {vol.name}: {vol.shape} {vol.dtype} in {time.perf_counter() - start:.2f} s"
+    asyncio.run(_serve(server, args, read))
     log(args, "stopped")
     return 0
