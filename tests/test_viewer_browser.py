@@ -100,11 +100,17 @@ def expected(vol, state: dict, size: tuple[int, int]) -> np.ndarray:
     options = {"mode": mode}
     if mode == "iso":
         options["iso"] = state["iso"]
+        if isinstance(state["iso"], list):
+            options["opacity"] = state["opacity"]
     elif mode in ("mip", "minip"):
         options.update(window=state["window"], colormap=state["colormap"])
     else:
+        dvr, light = state["dvr"], state["lighting"]
         options.update(tf=sc.TransferFunction.from_dict(state["tf"]),
-                       dvr=sc.DVRSettings(step=state["dvr"]["step"]))
+                       dvr=sc.DVRSettings(step=dvr["step"], shade=dvr["shade"],
+                                          preintegration=dvr["preintegration"],
+                                          termination=dvr["termination"],
+                                          ambient=light["ambient"], diffuse=light["diffuse"]))
     return sc.Scene(vol, model=state["model"]).render(camera, **options).to_uint8()
 
 
@@ -166,6 +172,22 @@ def test_isovalue_slider_shows_the_new_isosurface(page, vol):
     lo, hi = vol.value_range
     assert iso < before and lo < iso < hi
     assert float(page.input_value("#iso-value")) == pytest.approx(iso, rel=1e-4)
+    assert_page_shows(page, vol)
+
+
+def test_adding_and_removing_isosurfaces(page, vol):
+    after_id = last_id(page)
+    page.click("#add-surface")
+    wait_final(page, after_id)
+    state = page.evaluate("window.splinecastViewer.state")
+    assert isinstance(state["iso"], list) and len(state["iso"]) == 2
+    assert state["opacity"][0] < 1 and state["opacity"][1] == 1
+    assert page.locator("#surfaces li").count() == 2
+    assert_page_shows(page, vol)
+    after_id = last_id(page)
+    page.locator("#surfaces li button").nth(1).click()
+    wait_final(page, after_id)
+    assert not isinstance(page.evaluate("window.splinecastViewer.state.iso"), list)
     assert_page_shows(page, vol)
 
 

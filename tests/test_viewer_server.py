@@ -177,7 +177,12 @@ def test_frames_equal_scene_render_for_every_mode(vol):
         ({"mode": "dvr", "tf": tf, "dvr": {"step": 0.5, "shade": True},
           "lighting": {"ambient": 0.2, "diffuse": 0.6}},
          {"mode": "dvr", "tf": sc.TransferFunction.from_dict(tf),
-          "dvr": sc.DVRSettings(step=0.5, shade=True, ambient=0.2, diffuse=0.6)}),
+          "dvr": sc.DVRSettings(step=0.5, shade=True, ambient=0.2, diffuse=0.6,
+                                termination=0.99)}),
+        ({"mode": "dvr", "tf": tf, "dvr": {"termination": None, "preintegration": "none",
+                                           "step": 0.3}},
+         {"mode": "dvr", "tf": sc.TransferFunction.from_dict(tf),
+          "dvr": sc.DVRSettings(step=0.3, preintegration="none")}),
         ({"clip": [[1.0, 0.0, 0.0, 0.1]], "crop": [-1, 1, -0.8, 1, -1, 0.7],
           "lighting": {"specular": 0.0, "shininess": 10.0}},
          {"iso": 0.5, "clip": [(1, 0, 0, 0.1)], "crop": (-1, 1, -0.8, 1, -1, 0.7),
@@ -218,7 +223,7 @@ def test_every_model_and_mode_gives_scene_render_or_its_error():
                         expected = str(exc)
                     state = {"model": model, "mode": mode, "iso": 0.0, "size": [24, 18]}
                     if mode == "dvr":
-                        state["tf"] = tf.to_dict()
+                        state.update(tf=tf.to_dict(), dvr={"termination": None})
                     ident = await client.render(state)
                     try:
                         got = (await client.frame(ident)).image

@@ -164,7 +164,9 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "window": [lo, hi if hi > lo else lo + 1.0],
         "colormap": "gray",
         "tf": _default_tf(volume, isos[0]),
-        "dvr": {"step": 0.5, "shade": False, "preintegration": "2d", "termination": None},
+        # Early ray termination at 99% opacity (what interactive volume renderers do): frames
+        # several times faster, at most 1% darker per channel than compositing to the end.
+        "dvr": {"step": 0.5, "shade": False, "preintegration": "2d", "termination": 0.99},
         "lighting": {name: getattr(shading, name) for name in _LIGHTING_FIELDS},
         "clip": [],
         "crop": None,

@@ -83,7 +83,9 @@
         const current = this.surfaces[this.selected];
         const span = this.hi - this.lo;
         const value = Math.min(this.hi, current.value + 0.1 * span);
-        this.surfaces.push({ value, opacity: 0.5 });
+        // Surfaces nest: the ones already there become translucent so the new one shows.
+        for (const s of this.surfaces) s.opacity = Math.min(s.opacity, 0.4);
+        this.surfaces.push({ value, opacity: 1 });
         this.selected = this.surfaces.length - 1;
         this._applySurfaces();
         this.onChange(false);
@@ -218,6 +220,10 @@
         if (Number.isFinite(v) && v > 0) { this.state.dvr.step = v; this.onChange(false); }
       });
       $("dvr-shade").addEventListener("change", (e) => { this.state.dvr.shade = e.target.checked; this.onChange(false); });
+      $("dvr-termination").addEventListener("change", (e) => {
+        this.state.dvr.termination = e.target.checked ? 0.99 : null;
+        this.onChange(false);
+      });
     }
 
     _drawTf() {
@@ -330,6 +336,7 @@
       $("tf-colormap").value = s.tf.colormap || "viridis";
       $("dvr-step").value = s.dvr.step;
       $("dvr-shade").checked = s.dvr.shade;
+      $("dvr-termination").checked = s.dvr.termination !== null;
       this._drawTf();
       $("ortho").checked = s.camera.ortho;
       for (const [name, input] of Object.entries(this.lightSliders)) input.value = s.lighting[name];

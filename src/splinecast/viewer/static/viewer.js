@@ -30,6 +30,7 @@
     ready: false,
     framesDrawn: 0,
     lastFrame: null, // header of the last frame drawn
+    frameLog: [], // {id, pass, final, scale, render_ms, latency_ms, at} of recent frames drawn
     lastError: null,
     get state() { return state; },
     get hello() { return hello; },
@@ -151,6 +152,11 @@
       if (header.id > errorId) hideError();
       api.framesDrawn += 1;
       api.lastFrame = header;
+      const sent = sentAt.get(header.id);
+      api.frameLog.push({ id: header.id, pass: header.pass, final: header.final,
+                          scale: header.scale, render_ms: header.render_ms, at: performance.now(),
+                          latency_ms: sent === undefined ? null : performance.now() - sent });
+      if (api.frameLog.length > 2000) api.frameLog.shift();
       showStatus(header);
     });
   }
