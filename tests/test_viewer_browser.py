@@ -248,7 +248,7 @@ def test_screenshot_downloads_the_full_resolution_png(page, vol, tmp_path):
     path = tmp_path / info.value.suggested_filename
     info.value.save_as(path)
     assert path.suffix == ".png"
-    saved = np.asarray(Image.open(path))
+    saved = np.asarray(Image.open(path).convert("RGBA"))  # opaque images are saved as RGB
     state = page.evaluate("window.splinecastViewer.state")
     size = page.evaluate("[document.getElementById('canvas').width,"
                          " document.getElementById('canvas').height]")

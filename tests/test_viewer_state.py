@@ -6,11 +6,13 @@ numpy's histogram, PIL round trips.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import splinecast as sc
 from splinecast.viewer import protocol
@@ -204,8 +206,13 @@ def test_png_is_lossless_and_jpeg_is_close():
     rng = np.random.default_rng(0)
     smooth = np.clip(np.linspace(0, 255, 48)[None, :, None] + rng.normal(0, 2, (32, 48, 4)),
                      0, 255).astype(np.uint8)
-    smooth[..., 3] = 255
+    # Translucent pixels: all four channels kept.
     np.testing.assert_array_equal(decode_image(encode_image(smooth, "png")), smooth)
+    # Opaque images go without alpha (a quarter less to compress) and come back the same.
+    smooth[..., 3] = 255
+    opaque = encode_image(smooth, "png")
+    assert Image.open(io.BytesIO(opaque)).mode == "RGB"
+    np.testing.assert_array_equal(decode_image(opaque), smooth)
     jpeg = decode_image(encode_image(smooth, "jpeg"))
-    assert jpeg.shape == (32, 48, 3)
-    assert np.abs(jpeg.astype(int) - smooth[..., :3]).mean() < 4
+    assert jpeg.shape == (32, 48, 4) and np.all(jpeg[..., 3] == 255)
+    assert np.abs(jpeg[..., :3].astype(int) - smooth[..., :3]).mean() < 4

@@ -44,7 +44,7 @@ class ReceivedFrame:
 
     @property
     def image(self) -> np.ndarray:
-        """The decoded image, uint8 ``(height, width, 3 or 4)``."""
+        """The decoded image, RGBA uint8 ``(height, width, 4)``."""
         return decode_image(self.data)
 
 

@@ -6,7 +6,8 @@ Scheduling rules (the interaction model of the issue):
   replaced by a newer one; a frame being rendered is abandoned at its next stripe boundary when a
   newer request arrives (:mod:`.renderer`). A superseded request gets no frame.
 * **Dragging:** ``"interactive": true`` requests are rendered at a reduced scale chosen from the
-  cost of recent frames (aiming at :attr:`Session.interactive_ms`) and sent as JPEG.
+  cost of recent frames (aiming at :attr:`Session.interactive_ms`, 40 ms, since a request may
+  also wait for the frame in flight) and sent as JPEG.
 * **Settling:** :attr:`Session.settle_s` (0.3 s) after the last interactive request, the same state
   is rendered at full resolution and sent as PNG (lossless). A request with
   ``"interactive": false`` (a click, a typed value) skips the wait.
@@ -86,7 +87,7 @@ class Session:
     #: Seconds without interactive requests after which the full-resolution frame follows.
     settle_s = 0.3
     #: Render time aimed at for reduced frames while dragging (ms).
-    interactive_ms = 60.0
+    interactive_ms = 40.0
     #: Full frames expected to take longer than this (ms) are preceded by a coarse one.
     progressive_ms = 250.0
 
