@@ -156,19 +156,24 @@ async def measure(url: str, state: dict, drag_s: float, releases: int) -> dict:
         ident = await client.render(state)  # warm-up: scene preparation, compilation
         await client.frame(ident)
         _, azimuth, _ = await drag(client, state, min(1.0, drag_s), 0.0)  # warm-up
-        release_ms, drag_latency, fps, scales = [], [], [], []
+        release_ms, drag_latency, drag_render, fps, scales = [], [], [], [], []
         frames, azimuth, duration = await drag(client, state, drag_s, azimuth)
         drag_latency += [(f.received - client.sent_at(f.header["id"])) * 1e3 for f in frames]
+        drag_render += [f.header["render_ms"] for f in frames]
         fps.append(len(frames) / duration)
         scales += [f.header["scale"] for f in frames]
+        release_render = []
         for _ in range(releases):
             frames, azimuth, duration = await drag(client, state, 0.4, azimuth)
             ident = await client.render({**state, "camera": {"azimuth": azimuth}})
             final = await client.frame(ident)
             release_ms.append((final.received - client.sent_at(ident)) * 1e3)
-        return {"drag_latency_ms": percentiles(drag_latency), "drag_fps": statistics.mean(fps),
+            release_render.append(final.header["render_ms"] + final.header["encode_ms"])
+        return {"drag_latency_ms": percentiles(drag_latency),
+                "drag_render_ms": percentiles(drag_render), "drag_fps": statistics.mean(fps),
                 "drag_scales": sorted(set(scales)), "release_ms": percentiles(release_ms),
-                "release_samples_ms": release_ms}
+                "release_samples_ms": release_ms,
+                "release_render_encode_ms": percentiles(release_render)}
 
 
 def browser_once(spec: dict, size: tuple[int, int], drag_s: float, releases: int) -> dict:
@@ -243,17 +248,19 @@ def write_markdown(result: dict, path: Path) -> None:
         "Direct: `Scene.render` of the full frame in one process (median after warm-up), "
         "measured in the same run.",
         "",
-        "| scene | drag p50 ms | drag p95 ms | drag fps | reduced scales | release p50 ms "
-        "| release p95 ms | direct ms | release / direct |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| scene | drag p50 ms | drag p95 ms | server render p50 ms (drag) | drag fps | "
+        "reduced scales | release p50 ms | release p95 ms | server render+encode p50 ms "
+        "(release) | direct ms | release / direct |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in result["scenes"]:
         d, r = row["drag_latency_ms"], row["release_ms"]
         scales = ", ".join(f"1/{round(1 / s)}" for s in row["drag_scales"])
         lines.append(
-            f"| {row['name']} | {d['p50']:.0f} | {d['p95']:.0f} | {row['drag_fps']:.1f} | "
-            f"{scales} | {r['p50']:.0f} | {r['p95']:.0f} | {row['direct_ms']:.0f} | "
-            f"{r['p50'] / row['direct_ms']:.2f} |")
+            f"| {row['name']} | {d['p50']:.0f} | {d['p95']:.0f} | "
+            f"{row['drag_render_ms']['p50']:.0f} | {row['drag_fps']:.1f} | {scales} | "
+            f"{r['p50']:.0f} | {r['p95']:.0f} | {row['release_render_encode_ms']['p50']:.0f} | "
+            f"{row['direct_ms']:.0f} | {r['p50'] / row['direct_ms']:.2f} |")
     b = result.get("browser")
     if b:
         lines += ["", f"Through the page in headless Chromium ({result['browser_scene']}):", ""]

@@ -13,7 +13,7 @@ Scheduling rules (the interaction model of the issue):
   ``"interactive": false`` (a click, a typed value) skips the wait.
 * **Progressive refinement:** a full-resolution frame expected to take longer than
   :attr:`Session.progressive_ms` is preceded by a coarse one, unless the client already shows a
-  reduced frame of the same state.
+  reduced frame (it comes from a drag).
 * **Screenshots** are rendered at full resolution as PNG and are never superseded.
 * **More detail later:** :meth:`Session.refresh` re-renders the last settled state at full
   resolution; a brick loader (multiresolution volumes) calls it through
@@ -106,7 +106,7 @@ class Session:
         self._wake = asyncio.Event()
         self._settle: asyncio.TimerHandle | None = None
         self._settled: _Job | None = None  # the last full-resolution view request
-        self._shown_key: str | None = None  # state of the last view frame sent
+        self._shown_final = True  # whether the last view frame sent was a full one (or none)
         self._closed = False
 
     @property
@@ -188,7 +188,9 @@ class Session:
         passes = []
         estimate = self.renderer.estimate_ms(job.request)
         slow = estimate is None or estimate > self.progressive_ms
-        if job.kind == "final" and slow and self._shown_key != job.request.key:
+        # A coarse frame helps after a jump (a new mode, a click); coming from a drag, the
+        # client already shows a reduced frame close to this state.
+        if job.kind == "final" and slow and self._shown_final:
             divisor = self._divisor(job.request, self.interactive_ms, default=4)
             passes.append(_Pass("coarse", 1.0 / max(divisor, 2), "jpeg", False))
         passes.append(_Pass("full", 1.0, "png", True))
@@ -225,7 +227,7 @@ class Session:
             image, data, encode_ms = result
             await self._send_bytes(pack_frame(self._header(job, step, image, encode_ms), data))
             if job.kind != "screenshot":
-                self._shown_key = job.request.key
+                self._shown_final = step.final
                 if step.final:
                     self._settled = job
 

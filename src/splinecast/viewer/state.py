@@ -29,7 +29,6 @@ The fields (see ``docs/viewer-protocol.md`` for the full table)::
 from __future__ import annotations
 
 import copy
-import json
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -85,8 +84,6 @@ class RenderRequest:
         The full-resolution camera.
     options : dict
         Keyword arguments of :meth:`splinecast.Scene.render` besides the camera.
-    key : str
-        Canonical JSON of the complete state: two requests with equal keys render equal images.
     state : dict
         The complete state (defaults filled in).
     """
@@ -95,7 +92,6 @@ class RenderRequest:
     mode: str
     camera: Camera
     options: dict[str, Any]
-    key: str
     state: dict[str, Any]
 
 
@@ -397,5 +393,4 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
     size = _size(full["size"], max_pixels)
     camera = orbit_camera(volume, camera_fields, size)
     options = _mode_options(full, volume)
-    key = json.dumps(full, sort_keys=True)
-    return RenderRequest(model, mode, camera, options, key, full)
+    return RenderRequest(model, mode, camera, options, full)
