@@ -91,11 +91,18 @@ def canvas_pixels(page) -> np.ndarray:
 def expected(vol, state: dict, size: tuple[int, int]) -> np.ndarray:
     """Scene.render of the page's state, for the fields these tests change."""
     cam_state = state["camera"]
-    assert cam_state["pan"] == [0, 0]
     camera = sc.Camera.orbit(vol, azimuth=cam_state["azimuth"],
                              elevation=cam_state["elevation"], size=size,
                              fov=cam_state["fov"], ortho=cam_state["ortho"],
                              zoom=cam_state["zoom"])
+    if any(cam_state["pan"]):
+        # Pan moves eye and target sideways by pan x view height at the target.
+        distance = np.linalg.norm(camera.look_at - camera.position)
+        view_height = 2 * distance * np.tan(np.radians(camera.fov) / 2)
+        shift = (cam_state["pan"][0] * camera.right + cam_state["pan"][1] * camera.up)
+        shift = shift * view_height
+        camera = sc.Camera(camera.position + shift, camera.look_at + shift, up=camera.up,
+                           fov=camera.fov, size=size)
     mode = state["mode"]
     options = {"mode": mode}
     if mode == "iso":
@@ -156,6 +163,62 @@ def test_dragging_orbits_the_camera(page, vol):
     assert camera["elevation"] == pytest.approx(before_state["elevation"] + 25 * 0.4)
     after = assert_page_shows(page, vol)
     assert np.mean(np.any(after != before, axis=-1)) > 0.05
+
+
+def test_wheel_zooms_and_the_full_frame_follows_when_it_rests(page, vol):
+    box = page.locator("#canvas").bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    zoom = page.evaluate("window.splinecastViewer.state.camera.zoom")
+    after_id = last_id(page)
+    page.mouse.wheel(0, -200)
+    wait_final(page, after_id)  # no release event: the server settles on its own
+    assert page.evaluate("window.splinecastViewer.state.camera.zoom") > zoom
+    assert_page_shows(page, vol)
+
+
+def test_shift_drag_pans(page, vol):
+    box = page.locator("#canvas").bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    height = page.evaluate("document.getElementById('canvas').clientHeight")
+    after_id = last_id(page)
+    page.keyboard.down("Shift")
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + 40, y - 20, steps=5)
+    page.mouse.up()
+    page.keyboard.up("Shift")
+    wait_final(page, after_id)
+    pan = page.evaluate("window.splinecastViewer.state.camera.pan")
+    # The data follows the pointer: the camera moves the other way.
+    assert pan == pytest.approx([-40 / height, -20 / height])
+    assert_page_shows(page, vol)
+
+
+def test_two_finger_pinch_zooms(page, vol):
+    """Real touch input through the DevTools protocol: two fingers moving apart."""
+    cdp = page.context.new_cdp_session(page)
+    cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 2})
+    box = page.locator("#canvas").bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    zoom = page.evaluate("window.splinecastViewer.state.camera.zoom")
+    pan = page.evaluate("window.splinecastViewer.state.camera.pan")
+    after_id = last_id(page)
+
+    def touch(kind, spread):
+        points = [{"x": x - spread, "y": y, "id": 0}, {"x": x + spread, "y": y, "id": 1}]
+        cdp.send("Input.dispatchTouchEvent",
+                 {"type": kind, "touchPoints": points if kind != "touchEnd" else []})
+
+    touch("touchStart", 20)
+    for spread in range(25, 61, 5):
+        touch("touchMove", spread)
+    touch("touchEnd", 60)
+    wait_final(page, after_id)
+    camera = page.evaluate("window.splinecastViewer.state.camera")
+    assert camera["zoom"] == pytest.approx(zoom * 3, rel=1e-6)  # fingers 40 -> 120 px apart
+    assert camera["pan"] == pytest.approx(pan)  # the midpoint did not move
+    cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": False})
+    assert_page_shows(page, vol)
 
 
 def test_isovalue_slider_shows_the_new_isosurface(page, vol):

@@ -215,3 +215,29 @@ def test_png_is_lossless_and_jpeg_is_close():
     jpeg = decode_image(encode_image(smooth, "jpeg"))
     assert jpeg.shape == (32, 48, 4) and np.all(jpeg[..., 3] == 255)
     assert np.abs(jpeg[..., :3].astype(int) - smooth[..., :3]).mean() < 4
+
+
+# ------------------------------------------------------------------------------ security
+def test_host_and_origin_rules():
+    from splinecast.viewer import security
+
+    allowed = security.allowed_hosts("127.0.0.1", 8765)
+    assert allowed == {"127.0.0.1:8765", "localhost:8765", "[::1]:8765"}
+    assert security.host_allowed("LOCALHOST:8765", allowed)
+    for host in (None, "", "localhost", "127.0.0.1:8766", "evil.example:8765",
+                 "127.0.0.1.evil.example:8765", "127.0.0.1:8765@evil.example"):
+        assert not security.host_allowed(host, allowed), host
+    assert security.origin_allowed(None, allowed)  # not a browser
+    assert security.origin_allowed("http://localhost:8765", allowed)
+    for origin in ("null", "", "http://localhost:8766", "https://localhost:8765",
+                   "http://evil.example", "http://user@localhost:8765",
+                   "http://localhost:8765/page", "file://", "http://[::1"):
+        assert not security.origin_allowed(origin, allowed), origin
+    # An explicitly bound name is allowed too; a wildcard address adds no name.
+    assert "myhost:80" in security.allowed_hosts("myhost", 80)
+    assert security.allowed_hosts("0.0.0.0", 80) == security.allowed_hosts("127.0.0.1", 80)
+    assert security.is_loopback("127.0.0.2") and security.is_loopback("::1")
+    assert not security.is_loopback("0.0.0.0") and not security.is_loopback("example.org")
+    assert security.check_token(None, "abc") == 401 and security.check_token("", "abc") == 401
+    assert security.check_token("abd", "abc") == 403 and security.check_token("abc", "abc") is None
+    assert len({security.new_token() for _ in range(50)}) == 50
