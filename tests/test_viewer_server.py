@@ -13,6 +13,7 @@ import contextlib
 import json
 import os
 import time
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ import pytest
 import splinecast as sc
 from splinecast.viewer.client import ServerError, ViewerClient
 from splinecast.viewer.renderer import FrameRenderer
-from splinecast.viewer.server import ViewerServer
+from splinecast.viewer.server import STATIC_FILES, ViewerServer
 from splinecast.viewer.session import Session
 from splinecast.viewer.state import default_state, parse_state
 
@@ -120,8 +121,12 @@ def test_only_the_fixed_files_are_served(vol):
             assert status == 200
             # The page carries the token to its own scripts; nothing else is templated in.
             assert f"viewer.js?token={token}".encode() in page
-            for name in ("viewer.js", "orbit.js", "controls.js", "histogram.js", "viewer.css"):
-                assert (await raw_request(port, f"/{name}?token={token}"))[0] == 200
+            for path, (_, content_type) in STATIC_FILES.items():
+                status, body = await raw_request(port, f"{path}?token={token}")
+                assert status == 200 and f"Content-Type: {content_type}".encode() in body
+            # Every file the page needs is in the list (and nothing in the folder is left out).
+            folder = resources.files("splinecast.viewer").joinpath("static")
+            assert {f.name for f in folder.iterdir()} == {n for n, _ in STATIC_FILES.values()}
             attempts = ["/../../../../etc/passwd", "/%2e%2e/%2e%2e/%2e%2e/etc/passwd",
                         "/..%2f..%2f..%2fetc%2fpasswd", "/%2E%2E%2F%2E%2E%2Fetc/passwd",
                         "/viewer.js/../../server.py", "/static/../server.py",
