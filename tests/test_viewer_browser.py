@@ -104,7 +104,7 @@ def expected(vol, state: dict, size: tuple[int, int]) -> np.ndarray:
         camera = sc.Camera(camera.position + shift, camera.look_at + shift, up=camera.up,
                            fov=camera.fov, size=size)
     mode = state["mode"]
-    options = {"mode": mode}
+    options = {"mode": mode, "clip": state["clip"] or None, "crop": state["crop"]}
     if mode == "iso":
         options["iso"] = state["iso"]
         if isinstance(state["iso"], list):
@@ -219,6 +219,20 @@ def test_two_finger_pinch_zooms(page, vol):
     assert camera["pan"] == pytest.approx(pan)  # the midpoint did not move
     cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": False})
     assert_page_shows(page, vol)
+
+
+def test_clip_plane_cuts_at_the_slider_position(page, vol):
+    after_id = last_id(page)
+    page.check("#clip-on")
+    wait_final(page, after_id)
+    # The position slider starts in the middle: the plane x = centre, keeping x >= centre.
+    clip = page.evaluate("window.splinecastViewer.state.clip")
+    assert clip == [[1, 0, 0, pytest.approx(-vol.center[0], abs=1e-12)]]
+    assert_page_shows(page, vol)
+    after_id = last_id(page)
+    page.uncheck("#clip-on")
+    wait_final(page, after_id)
+    assert page.evaluate("window.splinecastViewer.state.clip") == []
 
 
 def test_isovalue_slider_shows_the_new_isosurface(page, vol):
