@@ -5,6 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 BENCH_STAMP := $(VENV)/.bench-stamp
+BROWSER_STAMP := $(VENV)/.browser-stamp
 DEMO_PNG ?= splinecast-demo.png
 
 .PHONY: demo test bench lint clean clean-cache bench-deps compare compare-quick docs
@@ -19,7 +20,7 @@ demo: $(STAMP)
 	@$(VENV)/bin/splinecast render 'demo:marschner-lobb?size=128' --iso 0.5 --size 768x768 \
 		--azimuth 30 --elevation 25 --zoom 1.2 --quiet -o $(DEMO_PNG)
 
-test: $(STAMP) $(BENCH_STAMP)
+test: $(STAMP) $(BENCH_STAMP) $(BROWSER_STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
@@ -37,6 +38,14 @@ $(BENCH_STAMP): pyproject.toml scripts/install_bench.sh $(STAMP)
 	if [ $$ok = 1 ]; then touch $(BENCH_STAMP); else \
 		echo "optional comparison set-up incomplete: the VTK/scikit-image tests will skip" \
 			"with the reason; the next 'make test' tries again"; fi
+
+# Headless Chromium for the viewer's browser tests (issue 13), optional for `make test`: Debian's
+# chromium via apt (scripts/install_browser.sh); if it cannot be installed those tests skip with
+# the reason. As for the bench stamp, only success is remembered: a failure is retried next time.
+$(BROWSER_STAMP): scripts/install_browser.sh $(STAMP)
+	@if bash scripts/install_browser.sh; then touch $(BROWSER_STAMP); else \
+		echo "chromium not installed: the browser tests will skip with the reason;" \
+			"the next 'make test' tries again"; fi
 
 # Strict variant: fails when the system libraries or the extra cannot be installed.
 bench-deps: $(STAMP)

@@ -52,5 +52,15 @@ __all__ = [
     "preintegrate",
     "read",
     "smooth",
+    "view",
     "write",
 ]
+
+
+def __getattr__(name: str):
+    # sc.view is imported on first use, so `import splinecast` never loads the viewer.
+    if name == "view":
+        from .viewer import view
+
+        return view
+    raise AttributeError(f"module 'splinecast' has no attribute {name!r}")

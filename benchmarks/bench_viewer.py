@@ -1,0 +1,324 @@
+"""Viewer benchmark (issue 13): interaction latency of `splinecast view`, driven like a user.
+
+For each scene the server runs as its own process (`splinecast view FILE --no-browser`) and a
+WebSocket client (`splinecast.viewer.client.ViewerClient`) drives it:
+
+* **dragging:** an interactive request every 16 ms (a 60 Hz pointer) turning the camera by 1.5
+  degrees; for every reduced frame received, the latency from the request it shows to its arrival;
+  frames per second received while dragging; the reduced scales the server chose;
+* **release:** after a short drag, the request of the final state (``interactive: false``, as the
+  page sends on pointer-up); latency to the full-resolution PNG frame.
+
+Baseline, measured in the same run before the server starts: ``Scene.render`` of the full-size
+frame in this process (median after warm-up), so ``release / direct`` is the viewer's overhead
+(protocol, PNG encoding, transfer, scheduling). Once, the same is measured through the real page
+in headless Chromium (Playwright), from the page's own frame log.
+
+Scenes: Marschner-Lobb 256^3 (trilinear and s31 isosurfaces) and the MNI152 MRI from
+../shared/data in DVR (``examples/tf-mri.json``), at 1024x768. ``--quick``: Marschner-Lobb 64^3,
+512x384, shorter drags (what to run on a busy machine).
+
+Run ``python benchmarks/bench_viewer.py [--quick] [--no-browser]``; results go to
+``benchmarks/results/viewer[_quick].json`` and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import splinecast as sc
+from splinecast.viewer.client import ViewerClient
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import describe  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+MRI = ROOT.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
+TF_MRI = ROOT / "examples" / "tf-mri.json"
+POINTER_HZ = 60.0
+DEGREES_PER_EVENT = 1.5
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+
+def percentiles(values: list[float]) -> dict:
+    if not values:
+        return {"p50": None, "p95": None, "n": 0}
+    return {"p50": float(np.percentile(values, 50)), "p95": float(np.percentile(values, 95)),
+            "n": len(values)}
+
+
+def scenes(quick: bool) -> list[dict]:
+    ml = "demo:marschner-lobb?size=64" if quick else "demo:marschner-lobb?size=256"
+    out = [
+        {"name": "ml-trilinear-iso", "source": ml, "model": "trilinear", "mode": "iso",
+         "state": {"iso": 0.5}},
+        {"name": "ml-s31-iso", "source": ml, "model": "s31", "mode": "iso",
+         "state": {"iso": 0.5}},
+    ]
+    if MRI.exists():
+        tf = json.loads(TF_MRI.read_text())
+        out.append({"name": "mri-trilinear-dvr", "source": str(MRI), "model": "trilinear",
+                    "mode": "dvr", "state": {"tf": tf}})
+    else:
+        print(f"skipping the MRI: {MRI} not found", file=sys.stderr)
+    return out
+
+
+def direct_render_ms(scene_spec: dict, size: tuple[int, int], repeats: int) -> float:
+    """Median Scene.render time of the first viewer frame's state, in this process."""
+    vol = sc.read(scene_spec["source"])
+    scene = sc.Scene(vol, model=scene_spec["model"])
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size)
+    options: dict = {"mode": scene_spec["mode"]}
+    if scene_spec["mode"] == "iso":
+        options["iso"] = scene_spec["state"]["iso"]
+    else:
+        options["tf"] = sc.TransferFunction.from_dict(scene_spec["state"]["tf"])
+        # The viewer's DVR defaults: 0.5-voxel step, 2D table, termination at 0.99.
+        options["dvr"] = sc.DVRSettings(step=0.5, termination=0.99)
+    scene.render(cam, **options)  # compile and warm up
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        scene.render(cam, **options)
+        times.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times)
+
+
+class Server:
+    """`splinecast view` in a subprocess; the URL is the first line it prints."""
+
+    def __init__(self, spec: dict) -> None:
+        cmd = [sys.executable, "-m", "splinecast.cli", "view", spec["source"], "--model",
+               spec["model"], "--mode", spec["mode"], "--no-browser", "--quiet"]
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
+        self.url = self.proc.stdout.readline().strip()
+        if not self.url.startswith("http://"):
+            self.stop()
+            raise RuntimeError(f"splinecast view did not print its URL: {self.url!r}")
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(60)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+async def drag(client: ViewerClient, state: dict, seconds: float, azimuth: float
+               ) -> tuple[list, float, float]:
+    """Interactive requests at the pointer rate for ``seconds``; returns the reduced frames
+    received meanwhile, the final azimuth and the drag's duration.
+
+    Between two requests the client waits for messages (so arrival times are exact) rather
+    than running a second task: no receive is ever cancelled from outside.
+    """
+    frames: list = []
+    start = time.perf_counter()
+    period = 1.0 / POINTER_HZ
+    sent = 0
+    while (now := time.perf_counter()) < start + seconds:
+        due = start + sent * period
+        if now >= due:
+            azimuth += DEGREES_PER_EVENT
+            await client.render({**state, "camera": {"azimuth": azimuth}}, interactive=True)
+            sent += 1
+            continue
+        try:
+            got = await client.receive(timeout=due - now)
+        except TimeoutError:
+            continue
+        if not isinstance(got, dict) and got.header["pass"] == "interactive":
+            frames.append(got)
+    return frames, azimuth, time.perf_counter() - start
+
+
+async def measure(url: str, state: dict, drag_s: float, releases: int) -> dict:
+    async with ViewerClient(url) as client:
+        ident = await client.render(state)  # warm-up: scene preparation, compilation
+        await client.frame(ident)
+        _, azimuth, _ = await drag(client, state, min(1.0, drag_s), 0.0)  # warm-up
+        release_ms, drag_latency, drag_render, fps, scales = [], [], [], [], []
+        frames, azimuth, duration = await drag(client, state, drag_s, azimuth)
+        drag_latency += [(f.received - client.sent_at(f.header["id"])) * 1e3 for f in frames]
+        drag_render += [f.header["render_ms"] for f in frames]
+        fps.append(len(frames) / duration)
+        scales += [f.header["scale"] for f in frames]
+        release_render = []
+        for _ in range(releases):
+            frames, azimuth, duration = await drag(client, state, 0.4, azimuth)
+            ident = await client.render({**state, "camera": {"azimuth": azimuth}})
+            final = await client.frame(ident)
+            release_ms.append((final.received - client.sent_at(ident)) * 1e3)
+            release_render.append(final.header["render_ms"] + final.header["encode_ms"])
+        return {"drag_latency_ms": percentiles(drag_latency),
+                "drag_render_ms": percentiles(drag_render), "drag_fps": statistics.mean(fps),
+                "drag_scales": sorted(set(scales)), "release_ms": percentiles(release_ms),
+                "release_samples_ms": release_ms,
+                "release_render_encode_ms": percentiles(release_render)}
+
+
+def browser_once(spec: dict, size: tuple[int, int], drag_s: float, releases: int) -> dict:
+    """The same measurements through the page in headless Chromium (page-side timings)."""
+    from playwright.sync_api import sync_playwright
+
+    chromium = os.environ.get("SPLINECAST_CHROMIUM") or shutil.which("chromium")
+    if chromium is None:
+        return {"skipped": "chromium is not installed (scripts/install_browser.sh)"}
+    server = Server(spec)
+    panel = 300  # the control panel's width in CSS pixels (viewer.css)
+    try:
+        with sync_playwright() as pw, tempfile.TemporaryDirectory() as profile:
+            context = pw.chromium.launch_persistent_context(
+                profile, executable_path=chromium, headless=True, args=CHROMIUM_ARGS,
+                viewport={"width": size[0] + panel, "height": size[1]})
+            page = context.new_page()
+            page.set_default_timeout(600_000)
+            page.goto(server.url)
+            wait = ("(n) => { const v = window.splinecastViewer; return v && v.lastFrame &&"
+                    " v.lastFrame.final && v.lastFrame.id > n; }")
+            page.wait_for_function(wait, arg=0, timeout=600_000)
+            canvas = page.evaluate("[document.getElementById('canvas').width,"
+                                   " document.getElementById('canvas').height]")
+            box = page.locator("#canvas").bounding_box()
+            x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+            drag_latency, fps, release_ms = [], [], []
+            for i in range(releases + 1):
+                seconds = drag_s if i == 0 else 0.4
+                page.evaluate("window.splinecastViewer.frameLog = []")
+                page.mouse.move(x, y)
+                page.mouse.down()
+                start = time.perf_counter()
+                step = 0
+                while time.perf_counter() - start < seconds:
+                    step += 1
+                    page.mouse.move(x + 2 * (step % 100), y)
+                    page.wait_for_timeout(1000 / POINTER_HZ)
+                duration = time.perf_counter() - start
+                before = page.evaluate("window.splinecastViewer.lastFrame.id")
+                page.mouse.up()
+                page.wait_for_function(wait, arg=before, timeout=600_000)
+                log = page.evaluate("window.splinecastViewer.frameLog")
+                moving = [f for f in log if f["pass"] == "interactive"]
+                if i == 0:
+                    drag_latency = [f["latency_ms"] for f in moving if f["latency_ms"]]
+                    fps.append(len(moving) / duration)
+                else:
+                    release_ms += [f["latency_ms"] for f in log
+                                   if f["final"] and f["id"] > before and f["latency_ms"]]
+            context.close()
+    finally:
+        server.stop()
+    return {"canvas": canvas, "drag_latency_ms": percentiles(drag_latency),
+            "drag_fps": statistics.mean(fps) if fps else None,
+            "release_ms": percentiles(release_ms)}
+
+
+def write_markdown(result: dict, path: Path) -> None:
+    m = result["machine"]
+    w, h = result["size"]
+    lines = [
+        "# Viewer benchmark",
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} logical cores, Numba threading layer "
+        f"{m.get('numba_threading_layer')}. Command: `{result['command']}`. "
+        f"{result['note']}",
+        "",
+        f"Image {w}x{h}. Dragging: interactive requests at {POINTER_HZ:g} Hz; latency from a "
+        "request to the reduced JPEG frame showing it; fps = reduced frames received per "
+        "second. Release: latency from the final request to the full-resolution PNG frame. "
+        "Direct: `Scene.render` of the full frame in one process (median after warm-up), "
+        "measured in the same run.",
+        "",
+        "| scene | drag p50 ms | drag p95 ms | server render p50 ms (drag) | drag fps | "
+        "reduced scales | release p50 ms | release p95 ms | server render+encode p50 ms "
+        "(release) | direct ms | release / direct |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in result["scenes"]:
+        d, r = row["drag_latency_ms"], row["release_ms"]
+        scales = ", ".join(f"1/{round(1 / s)}" for s in row["drag_scales"])
+        lines.append(
+            f"| {row['name']} | {d['p50']:.0f} | {d['p95']:.0f} | "
+            f"{row['drag_render_ms']['p50']:.0f} | {row['drag_fps']:.1f} | {scales} | "
+            f"{r['p50']:.0f} | {r['p95']:.0f} | {row['release_render_encode_ms']['p50']:.0f} | "
+            f"{row['direct_ms']:.0f} | {r['p50'] / row['direct_ms']:.2f} |")
+    b = result.get("browser")
+    if b:
+        lines += ["", f"Through the page in headless Chromium ({result['browser_scene']}):", ""]
+        if "skipped" in b:
+            lines.append(f"skipped: {b['skipped']}")
+        else:
+            d, r = b["drag_latency_ms"], b["release_ms"]
+            lines += [
+                "| canvas | drag p50 ms | drag p95 ms | drag fps | release p50 ms | "
+                "release p95 ms |",
+                "|---|---|---|---|---|---|",
+                f"| {b['canvas'][0]}x{b['canvas'][1]} | {d['p50']:.0f} | {d['p95']:.0f} | "
+                f"{b['drag_fps']:.1f} | {r['p50']:.0f} | {r['p95']:.0f} |",
+            ]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small volume and image, short")
+    parser.add_argument("--no-browser", action="store_true", help="skip the Chromium run")
+    args = parser.parse_args()
+    size = (512, 384) if args.quick else (1024, 768)
+    drag_s = 1.5 if args.quick else 8.0
+    releases = 3 if args.quick else 10
+    repeats = 3 if args.quick else 7
+    rows = []
+    specs = scenes(args.quick)
+    for spec in specs:
+        print(f"{spec['name']}: direct render ...", file=sys.stderr, flush=True)
+        direct = direct_render_ms(spec, size, repeats)
+        print(f"{spec['name']}: viewer ...", file=sys.stderr, flush=True)
+        server = Server(spec)
+        try:
+            state = {**spec["state"], "size": list(size)}
+            row = asyncio.run(measure(server.url, state, drag_s, releases))
+        finally:
+            server.stop()
+        row.update(name=spec["name"], source=spec["source"], model=spec["model"],
+                   mode=spec["mode"], direct_ms=direct)
+        rows.append(row)
+        print(json.dumps(row), file=sys.stderr, flush=True)
+    result = {
+        "command": "python benchmarks/bench_viewer.py" + (" --quick" if args.quick else ""),
+        "note": "Percentiles over one run; on a shared machine (other jobs running) the "
+                "timings are noisy.",
+        "machine": describe(), "size": list(size), "scenes": rows,
+    }
+    if not args.no_browser:
+        result["browser_scene"] = specs[0]["name"]
+        print("browser ...", file=sys.stderr, flush=True)
+        result["browser"] = browser_once(specs[0], size, drag_s, min(releases, 3))
+    stem = "viewer_quick" if args.quick else "viewer"
+    out = HERE / "results"
+    (out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_markdown(result, out / f"{stem}.md")
+    print(out / f"{stem}.md")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,80 @@
+"""``splinecast view FILE``: the interactive viewer in the browser.
+
+Prints the page's URL (with its access token) as the first line of stdout, opens the default
+browser unless ``--no-browser``, and serves until Ctrl-C (exit status 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import time
+import webbrowser
+
+import splinecast as sc
+
+from ._common import log, numbers
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    view = sub.add_parser("view", help="explore a volume interactively in the web browser")
+    view.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
+    view.add_argument("--model", default="trilinear",
+                      help=f"initial reconstruction ({', '.join(sc.MODELS)}; default trilinear)")
+    view.add_argument("--mode", default="iso", choices=sc.scene.MODES,
+                      help="initial render mode (default iso)")
+    view.add_argument("--iso", help="initial isovalue(s) in data units, comma-separated "
+                      "(default: the volume's, else the middle of the data range)")
+    view.add_argument("--port", type=int, default=0,
+                      help="port to listen on (default: any free port)")
+    view.add_argument("--host", default="127.0.0.1",
+                      help="address to listen on (default 127.0.0.1, this machine only; "
+                           "another address lets other machines in, protected by the token only)")
+    view.add_argument("--no-browser", action="store_true",
+                      help="do not open a web browser; just print the URL")
+    view.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+async def _serve(server: object, args: argparse.Namespace, read: str) -> None:
+    url = await server.start()  # warns on stderr when the host is not this machine only
+    print(url, flush=True)
+    # Progress only once the server listens, so a mistake stays a single line.
+    log(args, read)
+    log(args, "serving; press Ctrl-C to stop")
+    if not args.no_browser:
+        webbrowser.open(url)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        await stop.wait()
+    finally:
+        await server.stop()
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve ``args.file`` until interrupted."""
+    # Imported here: the other subcommands never pay for the server library.
+    from splinecast.viewer.handle import require_aiohttp
+
+    require_aiohttp()
+    from splinecast.viewer.server import ViewerServer
+
+    if args.model not in sc.MODELS:
+        raise sc.ParameterError(f"--model must be one of {', '.join(sc.MODELS)}, "
+                                f"got {args.model!r}")
+    start = time.perf_counter()
+    vol = sc.read(args.file)
+    isos = numbers(args.iso, "--iso")
+    iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
+    server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,
+                          port=args.port)
+    read = f"read {vol.name}: {vol.shape} {vol.dtype} in {time.perf_counter() - start:.2f} s"
+    asyncio.run(_serve(server, args, read))
+    log(args, "stopped")
+    return 0

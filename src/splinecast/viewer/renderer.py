@@ -1,0 +1,185 @@
+"""Rendering of validated requests for the viewer: a scene per model, images at a reduced scale,
+full images in horizontal stripes that a newer request can abandon.
+
+Everything here runs on the viewer's one render thread (see :mod:`.session`): a :class:`Scene`
+is not safe to use from two threads at once, and the compiled kernels already use every core, so
+frames of several clients are rendered one after another.
+
+Stripes are windows of the full image (:meth:`Camera.tile`): their rays are bit-identical to the
+full image's, so a frame assembled from stripes equals ``Scene.render`` of the whole camera. They
+exist so a slow frame can be given up between stripes when the user has already moved on.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..scene import Scene
+from ..volume import Volume
+from .state import RenderRequest, resized_camera
+
+__all__ = ["FrameRenderer", "RenderedImage"]
+
+#: Render time a stripe aims at: the longest a superseded frame keeps the render thread busy.
+STRIPE_MS = 150.0
+#: Stripe height when nothing is known yet about the cost of a frame.
+_FIRST_STRIPE_ROWS = 128
+_MIN_STRIPE_ROWS = 32
+#: Smaller images are dominated by fixed costs per call and teach the cost model nothing.
+_MIN_LEARN_PIXELS = 32_768
+
+
+@dataclass
+class RenderedImage:
+    """An image rendered for a request.
+
+    Attributes
+    ----------
+    rgba : ndarray, (height, width, 4) uint8
+    stats : dict
+        The frame's statistics (``Frame.stats``; per-stripe counts summed or averaged).
+    render_ms : float
+        Wall time of the render, including preparing a model's scene if that was needed.
+    scale : float
+        Image size relative to the request's full size.
+    """
+
+    rgba: np.ndarray
+    stats: dict[str, Any] = field(default_factory=dict)
+    render_ms: float = 0.0
+    scale: float = 1.0
+
+
+class FrameRenderer:
+    """Renders :class:`RenderRequest` objects of one volume, keeping recent scenes.
+
+    Parameters
+    ----------
+    volume : Volume
+        The data on display.
+    scene : Scene, optional
+        An already prepared scene (``sc.view(scene)``); it is kept for its model.
+    max_scenes : int
+        How many prepared models to keep (each holds the model's arrays; s31 and qss are large).
+    stripe_rows : int, optional
+        Fixed stripe height; by default chosen from the cost of recent frames so a stripe takes
+        about :data:`STRIPE_MS`.
+    """
+
+    def __init__(self, volume: Volume, scene: Scene | None = None, max_scenes: int = 2,
+                 stripe_rows: int | None = None) -> None:
+        self.volume = volume
+        self._stripe_rows_fixed = stripe_rows
+        self._pinned = scene
+        self._scenes: OrderedDict[str, Scene] = OrderedDict()
+        self._max_scenes = max(1, int(max_scenes))
+        # Milliseconds per pixel of recent renders, by (model, mode, several isovalues).
+        self._cost: dict[tuple[str, str, bool], float] = {}
+
+    # ------------------------------------------------------------------------------ scenes
+    def has_scene(self, model: str) -> bool:
+        """Whether the model's scene is prepared (otherwise the next render prepares it)."""
+        return (self._pinned is not None and self._pinned.model.name == model) or (
+            model in self._scenes)
+
+    def scene(self, model: str) -> Scene:
+        """The prepared scene of ``model``, building it if needed (least recent one dropped)."""
+        if self._pinned is not None and self._pinned.model.name == model:
+            return self._pinned
+        scene = self._scenes.get(model)
+        if scene is None:
+            budget = self._max_scenes - (self._pinned is not None)
+            while self._scenes and len(self._scenes) >= max(budget, 1):
+                self._scenes.popitem(last=False)
+            scene = Scene(self.volume, model=model)
+            self._scenes[model] = scene
+        self._scenes.move_to_end(model)
+        return scene
+
+    # ------------------------------------------------------------------------- cost model
+    @staticmethod
+    def _cost_key(request: RenderRequest) -> tuple[str, str, bool]:
+        return request.model, request.mode, isinstance(request.options.get("iso"), list)
+
+    def estimate_ms(self, request: RenderRequest, scale: float = 1.0) -> float | None:
+        """Expected render time at ``scale`` from recent renders of the same kind (None if
+        there were none)."""
+        per_pixel = self._cost.get(self._cost_key(request))
+        if per_pixel is None:
+            return None
+        return per_pixel * request.camera.width * request.camera.height * scale * scale
+
+    def _learn(self, request: RenderRequest, pixels: int, ms: float) -> None:
+        if pixels < _MIN_LEARN_PIXELS:
+            return
+        key = self._cost_key(request)
+        measured = ms / max(pixels, 1)
+        previous = self._cost.get(key)
+        if previous is None or measured < previous / 4:  # first runs include compilation
+            self._cost[key] = measured
+        else:
+            self._cost[key] = 0.5 * (previous + measured)
+
+    # -------------------------------------------------------------------------- rendering
+    def render(self, request: RenderRequest, scale: float = 1.0,
+               abort: Callable[[], bool] | None = None) -> RenderedImage | None:
+        """Render ``request`` at ``scale`` times its size; ``None`` if ``abort()`` said stop.
+
+        ``abort`` is asked between stripes. Errors of the request (a combination of model and
+        mode the library refuses, an isovalue outside the range) raise ParameterError.
+        """
+        start = time.perf_counter()
+        scene = self.scene(request.model)
+        camera = request.camera
+        if scale != 1.0:
+            width = max(1, round(camera.width * scale))
+            height = max(1, round(camera.height * scale))
+            camera = resized_camera(camera, width, height)
+        rows = self._stripe_rows(request, camera.width, camera.height)
+        image = np.empty((camera.height, camera.width, 4), np.uint8)
+        parts: list[tuple[int, dict[str, Any]]] = []
+        for row0 in range(0, camera.height, rows):
+            if abort is not None and parts and abort():
+                return None
+            height = min(rows, camera.height - row0)
+            window = camera if height == camera.height else camera.tile(
+                0, row0, camera.width, height)
+            frame = scene.render(window, **request.options)
+            image[row0:row0 + height] = frame.to_uint8()
+            parts.append((height, frame.stats))
+        render_ms = (time.perf_counter() - start) * 1e3
+        self._learn(request, camera.width * camera.height, render_ms)
+        stats = _merge_stats(parts, camera.width, camera.height)
+        return RenderedImage(image, stats, render_ms, camera.height / request.camera.height)
+
+    def _stripe_rows(self, request: RenderRequest, width: int, height: int) -> int:
+        if self._stripe_rows_fixed is not None:
+            return max(1, min(height, self._stripe_rows_fixed))
+        per_pixel = self._cost.get(self._cost_key(request))
+        if per_pixel is None:
+            return min(height, _FIRST_STRIPE_ROWS)
+        rows = int(STRIPE_MS / max(per_pixel * width, 1e-9))
+        return min(height, max(_MIN_STRIPE_ROWS, rows))
+
+
+def _merge_stats(parts: list[tuple[int, dict[str, Any]]], width: int,
+                 height: int) -> dict[str, Any]:
+    """One frame's statistics from its stripes': times and hits summed, means weighted by rows."""
+    if not parts:
+        raise ParameterError("nothing was rendered")
+    stats = dict(parts[-1][1])
+    for key in ("trace_ms", "hits"):
+        if all(key in s for _, s in parts):
+            stats[key] = sum(s[key] for _, s in parts)
+    for key in stats:
+        if key.startswith("mean_") and all(key in s for _, s in parts):
+            stats[key] = sum(rows * s[key] for rows, s in parts) / height
+    stats.update(width=width, height=height, rays=width * height, stripes=len(parts))
+    return stats

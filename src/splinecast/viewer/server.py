@@ -1,0 +1,250 @@
+"""The viewer's HTTP and WebSocket server (aiohttp): one page, a fixed list of static files, and
+a WebSocket per open page.
+
+Requests pass three checks before anything else (:mod:`.security`): the ``Host`` header (403),
+the token (401 missing, 403 wrong) and, for the WebSocket, the ``Origin`` (403). Static files are
+looked up by exact path in :data:`STATIC_FILES`; every other path is 404, so no path from the
+browser ever reaches the file system. Frames are rendered on one worker thread shared by all
+clients (:mod:`.session`, :mod:`.renderer`) so the event loop keeps answering while a frame is
+being traced.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import html
+import logging
+import socket
+from concurrent.futures import ThreadPoolExecutor
+from importlib import resources
+from typing import Any
+
+from aiohttp import WSMsgType, web
+
+from ..errors import ParameterError
+from ..scene import Scene
+from ..volume import Volume
+from . import security
+from .protocol import MAX_MESSAGE_BYTES, PROTOCOL_VERSION, hello_message
+from .renderer import FrameRenderer
+from .session import Session
+from .state import MAX_PIXELS, default_state
+
+__all__ = ["ViewerServer", "STATIC_FILES"]
+
+log = logging.getLogger("splinecast.viewer")
+
+#: URL path -> (file in the package's ``static`` folder, content type). Nothing else is served.
+STATIC_FILES = {
+    "/": ("index.html", "text/html"),
+    "/viewer.css": ("viewer.css", "text/css"),
+    "/viewer.js": ("viewer.js", "text/javascript"),
+    "/orbit.js": ("orbit.js", "text/javascript"),
+    "/histogram.js": ("histogram.js", "text/javascript"),
+    "/controls.js": ("controls.js", "text/javascript"),
+}
+
+# The page may be shown inside a Jupyter notebook served from another local port.
+_FRAME_ANCESTORS = ("'self' http://localhost:* http://127.0.0.1:* "
+                    "https://localhost:* https://127.0.0.1:*")
+_SECURITY_HEADERS = {
+    "Content-Security-Policy": (
+        "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
+        f"connect-src 'self'; base-uri 'none'; form-action 'none'; "
+        f"frame-ancestors {_FRAME_ANCESTORS}"),
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+    "Cache-Control": "no-store",
+}
+
+
+def _read_static(name: str) -> bytes:
+    return resources.files("splinecast.viewer").joinpath("static", name).read_bytes()
+
+
+class ViewerServer:
+    """A viewer for one volume (or prepared scene), served on a local port.
+
+    Parameters
+    ----------
+    data : Volume or Scene
+        What to show; a Scene's prepared model is kept, other models are prepared on demand.
+    model : str, optional
+        Initial model (default: the scene's, or ``"trilinear"``).
+    mode : str
+        Initial render mode.
+    iso : float or list of float, optional
+        Initial isovalue(s) (default: ``metadata["default_iso"]`` or the middle of the range).
+    host : str
+        Address to bind; anything but a loopback address must be asked for explicitly and is
+        logged as a warning (the token is then the only protection).
+    port : int
+        Port to bind; 0 picks a free one.
+    token : str, optional
+        The access token (default: a fresh random one).
+    max_pixels : int
+        Largest image a client may ask for.
+    """
+
+    def __init__(self, data: Volume | Scene, model: str | None = None, mode: str = "iso",
+                 iso: Any = None, host: str = "127.0.0.1", port: int = 0,
+                 token: str | None = None, max_pixels: int = MAX_PIXELS) -> None:
+        if isinstance(data, Scene):
+            scene, volume = data, data.volume
+            model = model or data.model.name
+        elif isinstance(data, Volume):
+            scene, volume = None, data
+            model = model or "trilinear"
+        else:
+            raise ParameterError(f"the viewer shows a splinecast.Volume or Scene, got "
+                                 f"{type(data).__name__}")
+        if not isinstance(port, int) or not 0 <= port <= 65535:
+            raise ParameterError(f"port must be an integer in 0..65535, got {port!r}")
+        self.volume = volume
+        self.defaults = default_state(volume, model=model, mode=mode, iso=iso)
+        self.renderer = FrameRenderer(volume, scene)
+        self.host = host
+        self.port = port
+        self.token = token or security.new_token()
+        self.max_pixels = int(max_pixels)
+        self._hello = hello_message(volume, self.defaults, {
+            "max_pixels": self.max_pixels, "max_message_bytes": MAX_MESSAGE_BYTES,
+            "settle_ms": round(Session.settle_s * 1e3)})
+        self._allowed: frozenset[str] = frozenset()
+        self._sessions: set[Session] = set()
+        self._sockets: set[web.WebSocketResponse] = set()
+        self._executor: ThreadPoolExecutor | None = None
+        self._runner: web.AppRunner | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    # ------------------------------------------------------------------------- lifecycle
+    @property
+    def url(self) -> str:
+        """The page's address with its token (valid once :meth:`start` returned)."""
+        host = self.host if self.host not in ("", "0.0.0.0", "::") else "127.0.0.1"
+        if ":" in host:
+            host = f"[{host}]"
+        return f"http://{host}:{self.port}/?token={self.token}"
+
+    def _bind(self) -> socket.socket:
+        try:
+            family, kind, proto, _, address = socket.getaddrinfo(
+                self.host, self.port, type=socket.SOCK_STREAM)[0]
+            sock = socket.socket(family, kind, proto)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind(address)
+        except OSError as exc:
+            raise ParameterError(f"cannot listen on {self.host}:{self.port}: "
+                                 f"{exc.strerror or exc}") from None
+        return sock
+
+    async def start(self) -> str:
+        """Bind, start serving, and return :attr:`url`."""
+        sock = self._bind()
+        if not security.is_loopback(self.host):
+            log.warning("splinecast: warning: the viewer listens on %s: other machines can "
+                        "reach it, and its token is the only protection", self.host)
+        self.port = sock.getsockname()[1]
+        self._allowed = security.allowed_hosts(self.host, self.port)
+        self._loop = asyncio.get_running_loop()
+        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="splinecast-render")
+        app = web.Application(middlewares=[self._guard], client_max_size=MAX_MESSAGE_BYTES)
+        app.router.add_get("/ws", self._websocket)
+        app.router.add_get("/{path:.*}", self._static)
+        app.on_shutdown.append(self._close_sockets)
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        await self._runner.setup()
+        await web.SockSite(self._runner, sock).start()
+        return self.url
+
+    async def stop(self) -> None:
+        """Close every connection and stop serving."""
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+            self._executor = None
+
+    def refresh_all(self) -> None:
+        """Ask every client's session to re-render its last full frame (from any thread): the
+        hook for data that gets more detailed over time (bricks of a pyramid arriving)."""
+        if self._loop is not None:
+            for session in list(self._sessions):
+                self._loop.call_soon_threadsafe(session.refresh)
+
+    async def _close_sockets(self, app: web.Application) -> None:
+        for ws in list(self._sockets):
+            await ws.close(code=1001, message=b"server shutting down")
+
+    # -------------------------------------------------------------------------- requests
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        if not security.host_allowed(request.headers.get("Host"), self._allowed):
+            return self._refuse(403, "this server answers local host names only")
+        status = security.check_token(request.query.get("token"), self.token)
+        if status is not None:
+            return self._refuse(status, "missing token" if status == 401 else "wrong token")
+        if request.path == "/ws" and not security.origin_allowed(
+                request.headers.get("Origin"), self._allowed):
+            return self._refuse(403, "cross-site WebSocket refused")
+        response = await handler(request)
+        response.headers.update(_SECURITY_HEADERS)
+        return response
+
+    @staticmethod
+    def _refuse(status: int, reason: str) -> web.Response:
+        return web.Response(status=status, text=f"{status}: {reason}\n",
+                            headers=_SECURITY_HEADERS)
+
+    async def _static(self, request: web.Request) -> web.Response:
+        entry = STATIC_FILES.get(request.path)
+        if entry is None:
+            return self._refuse(404, "not found")
+        name, content_type = entry
+        body = _read_static(name)
+        if name == "index.html":
+            body = body.replace(b"{{token}}", html.escape(self.token).encode())
+            body = body.replace(b"{{version}}", str(PROTOCOL_VERSION).encode())
+        return web.Response(body=body, content_type=content_type, charset="utf-8")
+
+    async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, compress=False)
+        await ws.prepare(request)
+        loop = asyncio.get_running_loop()
+        executor = self._executor
+
+        async def run_in_thread(fn: Any) -> Any:
+            return await loop.run_in_executor(executor, fn)
+
+        async def send_text(message: dict[str, Any]) -> None:
+            with contextlib.suppress(ConnectionError):
+                if not ws.closed:
+                    await ws.send_json(message)
+
+        async def send_bytes(data: bytes) -> None:
+            with contextlib.suppress(ConnectionError):
+                if not ws.closed:
+                    await ws.send_bytes(data)
+
+        session = Session(self.renderer, run_in_thread, send_text, send_bytes, self.defaults,
+                          self.max_pixels)
+        self._sessions.add(session)
+        self._sockets.add(ws)
+        worker = asyncio.create_task(session.run())
+        try:
+            await send_text(self._hello)
+            async for message in ws:
+                if message.type in (WSMsgType.TEXT, WSMsgType.BINARY):
+                    await session.handle_text(message.data)
+                elif message.type == WSMsgType.ERROR:
+                    break
+        finally:
+            session.close()
+            worker.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await worker
+            self._sessions.discard(session)
+            self._sockets.discard(ws)
+        return ws

@@ -1,0 +1,263 @@
+"""One client of the viewer: which frames to render for it, in which order and at what size.
+
+Scheduling rules (the interaction model of the issue):
+
+* **One frame in flight, the newest request wins.** A request waiting for the render thread is
+  replaced by a newer one; a frame being rendered is abandoned at its next stripe boundary when a
+  newer request arrives (:mod:`.renderer`). A superseded request gets no frame.
+* **Dragging:** ``"interactive": true`` requests are rendered at a reduced scale chosen from the
+  cost of recent frames (aiming at :attr:`Session.interactive_ms`, 40 ms, since a request may
+  also wait for the frame in flight) and sent as JPEG.
+* **Settling:** :attr:`Session.settle_s` (0.3 s) after the last interactive request, the same state
+  is rendered at full resolution and sent as PNG (lossless). A request with
+  ``"interactive": false`` (a click, a typed value) skips the wait.
+* **Progressive refinement:** a full-resolution frame expected to take longer than
+  :attr:`Session.progressive_ms` is preceded by a coarse one, unless the client already shows a
+  reduced frame (it comes from a drag).
+* **Screenshots** are rendered at full resolution as PNG and are never superseded.
+* **More detail later:** :meth:`Session.refresh` re-renders the last settled state at full
+  resolution; a brick loader (multiresolution volumes) calls it through
+  ``loop.call_soon_threadsafe`` when bricks arrive, without the client asking.
+
+The session knows nothing of sockets: the server gives it two coroutines that send a text and a
+binary message, and a function that runs a callable on the render thread.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+from ..errors import SplinecastError
+from ..volume import Volume
+from .encoding import encode_image
+from .protocol import decode_request, json_safe_stats, pack_frame
+from .renderer import FrameRenderer, RenderedImage
+from .state import RenderRequest, parse_state
+
+__all__ = ["Session"]
+
+log = logging.getLogger("splinecast.viewer")
+
+SendText = Callable[[dict[str, Any]], Awaitable[None]]
+SendBytes = Callable[[bytes], Awaitable[None]]
+RunInThread = Callable[[Callable[[], Any]], Awaitable[Any]]
+
+_MAX_DIVISOR = 8
+
+
+@dataclass(frozen=True)
+class _Job:
+    kind: str  # "interactive", "final", "refresh" or "screenshot"
+    ident: int
+    request: RenderRequest
+
+
+@dataclass(frozen=True)
+class _Pass:
+    name: str  # "interactive", "coarse", "full" or "screenshot" (the frame header's "pass")
+    scale: float
+    fmt: str
+    final: bool
+
+
+class Session:
+    """The frames of one connected client.
+
+    Parameters
+    ----------
+    renderer : FrameRenderer
+        Shared by every session of a server (it owns the prepared scenes).
+    run_in_thread : callable
+        ``await run_in_thread(fn)`` runs ``fn()`` on the render thread and returns its result.
+    send_text, send_bytes : coroutine functions
+        Send a JSON message / a binary frame message to the client.
+    defaults : dict
+        The complete default state (:func:`~splinecast.viewer.state.default_state`).
+    max_pixels : int
+        Largest image a request may ask for.
+    """
+
+    #: Seconds without interactive requests after which the full-resolution frame follows.
+    settle_s = 0.3
+    #: Render time aimed at for reduced frames while dragging (ms).
+    interactive_ms = 40.0
+    #: Full frames expected to take longer than this (ms) are preceded by a coarse one.
+    progressive_ms = 250.0
+
+    def __init__(self, renderer: FrameRenderer, run_in_thread: RunInThread,
+                 send_text: SendText, send_bytes: SendBytes, defaults: dict[str, Any],
+                 max_pixels: int) -> None:
+        self.renderer = renderer
+        self._run = run_in_thread
+        self._send_text = send_text
+        self._send_bytes = send_bytes
+        self._defaults = defaults
+        self._max_pixels = max_pixels
+        self._view: _Job | None = None
+        self._shot: _Job | None = None
+        self._generation = 0  # counts view requests; a render compares it to know it is stale
+        self._wake = asyncio.Event()
+        self._settle: asyncio.TimerHandle | None = None
+        self._settled: _Job | None = None  # the last full-resolution view request
+        self._shown_final = True  # whether the last view frame sent was a full one (or none)
+        self._closed = False
+
+    @property
+    def volume(self) -> Volume:
+        """The data on display."""
+        return self.renderer.volume
+
+    # --------------------------------------------------------------------------- requests
+    async def handle_text(self, text: Any) -> None:
+        """Handle one message from the client; a mistake is answered with an ``error``."""
+        ident = None
+        try:
+            message = decode_request(text)
+            ident = message["id"]
+            request = parse_state(message["state"], self.volume, self._defaults,
+                                  self._max_pixels)
+        except SplinecastError as exc:
+            await self._error(ident, str(exc))
+            return
+        if message["type"] == "screenshot":
+            self._shot = _Job("screenshot", ident, request)
+            self._wake.set()
+            return
+        self._cancel_settle()
+        if message["interactive"]:
+            job = _Job("interactive", ident, request)
+            loop = asyncio.get_running_loop()
+            self._settle = loop.call_later(self.settle_s, self._submit_view,
+                                           _Job("final", ident, request))
+        else:
+            job = _Job("final", ident, request)
+        self._submit_view(job)
+
+    def refresh(self) -> None:
+        """Render the last full-resolution state again (call on the event loop's thread, e.g.
+        via ``loop.call_soon_threadsafe``): for data that got more detailed since."""
+        if self._settled is not None and self._view is None:
+            job = self._settled
+            self._submit_view(_Job("refresh", job.ident, job.request))
+
+    def close(self) -> None:
+        """Stop: waiting requests are dropped and :meth:`run` returns."""
+        self._closed = True
+        self._cancel_settle()
+        self._generation += 1
+        self._wake.set()
+
+    def _cancel_settle(self) -> None:
+        if self._settle is not None:
+            self._settle.cancel()
+            self._settle = None
+
+    def _submit_view(self, job: _Job) -> None:
+        self._view = job
+        self._generation += 1
+        self._wake.set()
+
+    # ---------------------------------------------------------------------------- the loop
+    async def run(self) -> None:
+        """Render waiting requests until :meth:`close` (one at a time, newest first)."""
+        while not self._closed:
+            await self._wake.wait()
+            self._wake.clear()
+            while not self._closed:
+                if self._shot is not None:
+                    job, self._shot = self._shot, None
+                elif self._view is not None:
+                    job, self._view = self._view, None
+                else:
+                    break
+                await self._serve(job)
+
+    def _passes(self, job: _Job) -> list[_Pass]:
+        if job.kind == "screenshot":
+            return [_Pass("screenshot", 1.0, "png", True)]
+        if job.kind == "interactive":
+            divisor = self._divisor(job.request, self.interactive_ms, default=2)
+            return [_Pass("interactive", 1.0 / divisor, "jpeg", False)]
+        passes = []
+        estimate = self.renderer.estimate_ms(job.request)
+        slow = estimate is None or estimate > self.progressive_ms
+        # A coarse frame helps after a jump (a new mode, a click); coming from a drag, the
+        # client already shows a reduced frame close to this state.
+        if job.kind == "final" and slow and self._shown_final:
+            divisor = self._divisor(job.request, self.interactive_ms, default=4)
+            passes.append(_Pass("coarse", 1.0 / max(divisor, 2), "jpeg", False))
+        passes.append(_Pass("full", 1.0, "png", True))
+        return passes
+
+    def _divisor(self, request: RenderRequest, target_ms: float, default: int) -> int:
+        """``k`` such that a frame at ``1/k`` of the full size takes about ``target_ms``."""
+        estimate = self.renderer.estimate_ms(request)
+        if estimate is None:
+            return default
+        return min(_MAX_DIVISOR, max(1, math.ceil(math.sqrt(estimate / target_ms))))
+
+    async def _serve(self, job: _Job) -> None:
+        generation = self._generation
+        stale = None if job.kind == "screenshot" else (lambda: self._generation != generation)
+        if not self.renderer.has_scene(job.request.model):
+            await self._send_text({"type": "status", "id": job.ident,
+                                   "message": f"preparing model {job.request.model}"})
+        for step in self._passes(job):
+            if stale is not None and stale():
+                return
+            work = partial(self._render_and_encode, job.request, step, stale)
+            try:
+                result = await self._run(work)
+            except SplinecastError as exc:
+                await self._error(job.ident, str(exc))
+                return
+            except Exception as exc:  # a bug must not end the server: log it, tell the page
+                log.exception("rendering failed")
+                await self._error(job.ident, f"internal error: {type(exc).__name__}: {exc}")
+                return
+            if result is None:
+                return
+            image, data, encode_ms = result
+            await self._send_bytes(pack_frame(self._header(job, step, image, encode_ms), data))
+            if job.kind != "screenshot":
+                self._shown_final = step.final
+                if step.final:
+                    self._settled = job
+
+    def _render_and_encode(self, request: RenderRequest, step: _Pass,
+                           stale: Callable[[], bool] | None
+                           ) -> tuple[RenderedImage, bytes, float] | None:
+        """On the render thread: the image of one pass and its encoded bytes."""
+        image = self.renderer.render(request, step.scale, stale)
+        if image is None:
+            return None
+        start = time.perf_counter()
+        data = encode_image(image.rgba, step.fmt)
+        return image, data, (time.perf_counter() - start) * 1e3
+
+    @staticmethod
+    def _header(job: _Job, step: _Pass, image: RenderedImage, encode_ms: float) -> dict:
+        height, width = image.rgba.shape[:2]
+        return {
+            "type": "frame",
+            "id": job.ident,
+            "pass": step.name,
+            "final": step.final,
+            "format": step.fmt,
+            "width": width,
+            "height": height,
+            "scale": image.scale,
+            "render_ms": round(image.render_ms, 2),
+            "encode_ms": round(encode_ms, 2),
+            "stats": json_safe_stats(image.stats),
+        }
+
+    async def _error(self, ident: int | None, message: str) -> None:
+        await self._send_text({"type": "error", "id": ident, "message": message})

@@ -1,0 +1,396 @@
+"""The viewer's render state: the JSON a page (or any other client) sends, validated into a
+:class:`~splinecast.Camera` and the keyword arguments of :meth:`splinecast.Scene.render`.
+
+Every field of a state is optional: an omitted field takes its value from
+:func:`default_state` (which the server sends to the page in its ``hello`` message), so a client
+may send ``{"mode": "mip"}`` and nothing else. Unknown fields are refused, so a misspelt field
+never silently does nothing. JSON can carry any type where a number is expected, so this module
+checks *types*; *ranges* are checked by the library's own constructors (:meth:`Camera.orbit`,
+:func:`~splinecast.camera.parse_size`, :func:`~splinecast.check_iso`,
+:class:`~splinecast.TransferFunction`, :class:`~splinecast.DVRSettings`,
+:class:`~splinecast.Shading`, :func:`~splinecast.render.clipping.make_planes`) and by
+:meth:`Scene.render` itself, so the viewer accepts exactly what the Python API accepts. Every
+mistake raises :class:`~splinecast.errors.ParameterError` with a message naming the field.
+
+The fields (see ``docs/viewer-protocol.md`` for the full table)::
+
+    model, mode                    names from splinecast.MODELS and splinecast.scene.MODES
+    camera {azimuth, elevation, zoom, pan: [x, y], fov, ortho}
+    size [width, height]           full-resolution image size in pixels
+    iso                            a number, or a list of numbers (several translucent surfaces)
+    opacity                        one opacity per isovalue of a list (optional)
+    window [lo, hi] | null, colormap          MIP / minIP display
+    tf {domain, opacity, colormap}            DVR transfer function (TransferFunction.to_dict)
+    dvr {step, shade, preintegration, termination}
+    lighting {ambient, diffuse, specular, shininess}
+    clip [[nx, ny, nz, d], ...], crop [x0, x1, y0, y1, z0, z1] | null    world coordinates
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..camera import Camera, parse_size
+from ..errors import ParameterError
+from ..models import MODELS
+from ..render.clipping import make_planes
+from ..render.dvr import DVRSettings
+from ..render.shading import Shading
+from ..scene import MODES, check_iso
+from ..transfer import COLORMAPS, TransferFunction
+from ..volume import Volume
+
+__all__ = [
+    "RenderRequest",
+    "default_state",
+    "default_iso",
+    "parse_state",
+    "orbit_camera",
+    "resized_camera",
+    "MAX_PIXELS",
+]
+
+#: Largest image (pixels) a client may ask for unless the server is configured otherwise.
+MAX_PIXELS = 4096 * 4096
+#: Most isovalues of a multi-isosurface state, clip planes, and transfer-function points.
+MAX_ISOS = 16
+MAX_CLIP_PLANES = 6
+MAX_TF_POINTS = 256
+#: Bounds that keep a camera's numbers far from overflow (the library checks the rest).
+_ZOOM_RANGE = (1e-3, 1e3)
+_PAN_LIMIT = 100.0
+
+_TOP_FIELDS = ("model", "mode", "camera", "size", "iso", "opacity", "window", "colormap", "tf",
+               "dvr", "lighting", "clip", "crop")
+_CAMERA_FIELDS = ("azimuth", "elevation", "zoom", "pan", "fov", "ortho")
+_LIGHTING_FIELDS = ("ambient", "diffuse", "specular", "shininess")
+_DVR_FIELDS = ("step", "shade", "preintegration", "termination")
+
+
+@dataclass(frozen=True)
+class RenderRequest:
+    """A validated state: what to render and how.
+
+    Attributes
+    ----------
+    model, mode : str
+        Reconstruction and render mode.
+    camera : Camera
+        The full-resolution camera.
+    options : dict
+        Keyword arguments of :meth:`splinecast.Scene.render` besides the camera.
+    state : dict
+        The complete state (defaults filled in).
+    """
+
+    model: str
+    mode: str
+    camera: Camera
+    options: dict[str, Any]
+    state: dict[str, Any]
+
+
+def default_iso(volume: Volume) -> float:
+    """The volume's ``metadata["default_iso"]``, or the middle of its data range."""
+    iso = volume.metadata.get("default_iso")
+    if iso is not None:
+        return float(iso)
+    lo, hi = volume.value_range
+    return 0.5 * (lo + hi)
+
+
+def _default_tf(volume: Volume, iso: float) -> dict[str, Any]:
+    """A ramp from just below the default isovalue to the top of the range (``bone`` colours).
+
+    A volume may bring its own as ``metadata["default_tf"]`` (the dictionary form of
+    :meth:`TransferFunction.to_dict`).
+    """
+    given = volume.metadata.get("default_tf")
+    if given is not None:
+        return TransferFunction.from_dict(given).to_dict()
+    lo, hi = volume.value_range
+    if not hi > lo:
+        hi = lo + 1.0
+    start = max(lo, iso - 0.1 * (hi - lo))
+    iso = min(max(iso, start), hi)
+    points = [(start, 0.0), (iso, 0.05), (hi, 0.6)]
+    if start == iso:
+        points = [(iso, 0.0), (hi, 0.6)]
+    return TransferFunction(points, (lo, hi), "bone").to_dict()
+
+
+def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
+                  iso: Any = None) -> dict[str, Any]:
+    """The complete state a viewer starts from (and that omitted fields take).
+
+    Parameters
+    ----------
+    volume : Volume
+        The data on display: the isovalue, window and transfer function are placed in its range.
+    model, mode : str
+        Initial reconstruction and render mode.
+    iso : float or list of float, optional
+        Initial isovalue(s); by default :func:`default_iso`.
+
+    Raises
+    ------
+    ParameterError
+        An unknown model or mode, or an isovalue outside the data range.
+    """
+    _check_choice(model, MODELS, "model")
+    _check_choice(mode, MODES, "mode")
+    if iso is None:
+        iso = default_iso(volume)
+    isos = [check_iso(volume, v) for v in (iso if isinstance(iso, list | tuple) else [iso])]
+    lo, hi = volume.value_range
+    shading = Shading()
+    return {
+        "model": model,
+        "mode": mode,
+        "camera": {"azimuth": 30.0, "elevation": 20.0, "zoom": 1.0, "pan": [0.0, 0.0],
+                   "fov": 30.0, "ortho": False},
+        "size": [1024, 768],
+        "iso": isos[0] if len(isos) == 1 else isos,
+        "opacity": None,
+        "window": [lo, hi if hi > lo else lo + 1.0],
+        "colormap": "gray",
+        "tf": _default_tf(volume, isos[0]),
+        # Early ray termination at 99% opacity (what interactive volume renderers do): frames
+        # several times faster, at most 1% darker per channel than compositing to the end.
+        "dvr": {"step": 0.5, "shade": False, "preintegration": "2d", "termination": 0.99},
+        "lighting": {name: getattr(shading, name) for name in _LIGHTING_FIELDS},
+        "clip": [],
+        "crop": None,
+    }
+
+
+# ------------------------------------------------------------------------------ type checks
+def _check_choice(value: Any, choices: Any, name: str) -> str:
+    if not isinstance(value, str) or value not in choices:
+        raise ParameterError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
+    return value
+
+
+def _check_fields(value: Any, fields: tuple[str, ...], name: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise ParameterError(f"{name} must be an object, got {type(value).__name__}")
+    unknown = sorted(str(k) for k in value if k not in fields)
+    if unknown:
+        raise ParameterError(f"{name} has no field {unknown[0]!r} (valid: {', '.join(fields)})")
+    return value
+
+
+def _number(value: Any, name: str) -> float:
+    """A finite JSON number (``bool`` is not one)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ParameterError(f"{name} must be a number, got {value!r}")
+    out = float(value)
+    if not math.isfinite(out):
+        raise ParameterError(f"{name} must be a finite number, got {value!r}")
+    return out
+
+
+def _numbers(value: Any, name: str, count: int | None = None,
+             max_count: int | None = None) -> list[float]:
+    if not isinstance(value, list):
+        raise ParameterError(f"{name} must be a list of numbers, got {value!r}")
+    if count is not None and len(value) != count:
+        raise ParameterError(f"{name} must hold {count} numbers, got {len(value)}")
+    if max_count is not None and len(value) > max_count:
+        raise ParameterError(f"{name} holds at most {max_count} numbers, got {len(value)}")
+    return [_number(v, f"{name}[{i}]") for i, v in enumerate(value)]
+
+
+def _boolean(value: Any, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise ParameterError(f"{name} must be true or false, got {value!r}")
+    return value
+
+
+def _merged(base: dict[str, Any], given: Any, fields: tuple[str, ...], name: str) -> dict:
+    out = dict(base)
+    out.update(_check_fields(given, fields, name))
+    return out
+
+
+# ---------------------------------------------------------------------------------- cameras
+def orbit_camera(volume: Volume, camera: dict[str, Any], size: tuple[int, int]) -> Camera:
+    """The camera of a state's ``camera`` fields (already complete and type-checked).
+
+    :meth:`Camera.orbit` around the volume's centre, then moved sideways by ``pan`` (in units of
+    the view's height at the centre: ``pan = [0.5, 0]`` moves the centre half a view height to
+    the left of the image centre, as dragging the data to the left does).
+    """
+    cam = Camera.orbit(volume, azimuth=camera["azimuth"], elevation=camera["elevation"],
+                       size=size, fov=camera["fov"], ortho=camera["ortho"], zoom=camera["zoom"])
+    px, py = camera["pan"]
+    if px == 0.0 and py == 0.0:
+        return cam
+    if cam.ortho:
+        view_height = cam.ortho_height
+    else:
+        distance = float(np.linalg.norm(cam.look_at - cam.position))
+        view_height = 2.0 * distance * math.tan(math.radians(cam.fov) / 2.0)
+    shift = (px * cam.right + py * cam.up) * view_height
+    return Camera(cam.position + shift, cam.look_at + shift, up=cam.up, fov=cam.fov,
+                  size=size, ortho=cam.ortho, ortho_height=cam.ortho_height)
+
+
+def resized_camera(camera: Camera, width: int, height: int) -> Camera:
+    """The same view at another image size (for reduced-resolution frames).
+
+    The vertical field of view (or orthographic window height) is kept; the horizontal one
+    follows the new aspect ratio, which differs from the original by rounding only.
+    """
+    return Camera(camera.position, camera.look_at, up=camera.up, fov=camera.fov,
+                  size=(width, height), ortho=camera.ortho, ortho_height=camera.ortho_height)
+
+
+# ---------------------------------------------------------------------------------- parsing
+def _complete(state: Any, defaults: dict[str, Any]) -> dict[str, Any]:
+    """The state with every omitted field taken from ``defaults`` (nested objects field-wise)."""
+    given = _check_fields(state, _TOP_FIELDS, "state")
+    full = copy.deepcopy(defaults)
+    for key, value in given.items():
+        if key == "camera":
+            full[key] = _merged(defaults[key], value, _CAMERA_FIELDS, "camera")
+        elif key == "lighting":
+            full[key] = _merged(defaults[key], value, _LIGHTING_FIELDS, "lighting")
+        elif key == "dvr":
+            full[key] = _merged(defaults[key], value, _DVR_FIELDS, "dvr")
+        else:
+            full[key] = value
+    return full
+
+
+def _camera_fields(camera: dict[str, Any]) -> dict[str, Any]:
+    out = {
+        "azimuth": _number(camera["azimuth"], "camera.azimuth"),
+        "elevation": _number(camera["elevation"], "camera.elevation"),
+        "zoom": _number(camera["zoom"], "camera.zoom"),
+        "pan": _numbers(camera["pan"], "camera.pan", 2),
+        "fov": _number(camera["fov"], "camera.fov"),
+        "ortho": _boolean(camera["ortho"], "camera.ortho"),
+    }
+    if not _ZOOM_RANGE[0] <= out["zoom"] <= _ZOOM_RANGE[1]:
+        raise ParameterError(f"camera.zoom must be in [{_ZOOM_RANGE[0]:g}, {_ZOOM_RANGE[1]:g}], "
+                             f"got {out['zoom']:g}")
+    if not 0.0 < out["fov"] < 180.0:  # checked before Camera.orbit derives a distance from it
+        raise ParameterError(f"camera.fov must be between 0 and 180 degrees, got {out['fov']:g}")
+    if max(abs(p) for p in out["pan"]) > _PAN_LIMIT:
+        raise ParameterError(f"camera.pan must be within +-{_PAN_LIMIT:g} view heights")
+    return out
+
+
+def _size(value: Any, max_pixels: int) -> tuple[int, int]:
+    if not (isinstance(value, list) and len(value) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
+        raise ParameterError(f"size must be two integers [width, height], got {value!r}")
+    width, height = parse_size(value)
+    if width * height > max_pixels:
+        raise ParameterError(f"size {width}x{height} is larger than this server's limit of "
+                             f"{max_pixels} pixels")
+    return width, height
+
+
+def _iso_options(state: dict[str, Any], volume: Volume) -> dict[str, Any]:
+    iso = state["iso"]
+    if not isinstance(iso, list):
+        return {"iso": check_iso(volume, _number(iso, "iso"))}
+    if not 1 <= len(iso) <= MAX_ISOS:
+        raise ParameterError(f"iso must hold 1 to {MAX_ISOS} isovalues, got {len(iso)}")
+    options: dict[str, Any] = {"iso": [check_iso(volume, v) for v in _numbers(iso, "iso")]}
+    if state["opacity"] is not None:
+        options["opacity"] = _numbers(state["opacity"], "opacity", len(iso))
+    return options
+
+
+def _transfer_function(tf: Any) -> TransferFunction:
+    tf = _check_fields(tf, ("domain", "opacity", "colormap"), "tf")
+    if "domain" not in tf or "opacity" not in tf:
+        raise ParameterError("tf needs 'domain' and 'opacity'")
+    domain = _numbers(tf["domain"], "tf.domain", 2)
+    points = tf["opacity"]
+    if not isinstance(points, list) or not 1 <= len(points) <= MAX_TF_POINTS:
+        raise ParameterError(f"tf.opacity must be a list of 1 to {MAX_TF_POINTS} [value, alpha]")
+    opacity = [_numbers(p, f"tf.opacity[{i}]", 2) for i, p in enumerate(points)]
+    colormap = _check_choice(tf.get("colormap", "viridis"), COLORMAPS, "tf.colormap")
+    return TransferFunction(opacity, domain, colormap)
+
+
+def _dvr_settings(dvr: dict[str, Any], lighting: dict[str, float]) -> DVRSettings:
+    termination = dvr["termination"]
+    if termination is not None:
+        termination = _number(termination, "dvr.termination")
+    preintegration = dvr["preintegration"]
+    if not isinstance(preintegration, str):
+        raise ParameterError(f"dvr.preintegration must be a name, got {preintegration!r}")
+    return DVRSettings(step=_number(dvr["step"], "dvr.step"), preintegration=preintegration,
+                       termination=termination, shade=_boolean(dvr["shade"], "dvr.shade"),
+                       ambient=lighting["ambient"], diffuse=lighting["diffuse"])
+
+
+def _mode_options(state: dict[str, Any], volume: Volume) -> dict[str, Any]:
+    mode = state["mode"]
+    lighting = {k: _number(state["lighting"][k], f"lighting.{k}") for k in _LIGHTING_FIELDS}
+    shading = Shading(**lighting)
+    options: dict[str, Any] = {"mode": mode, "shading": shading}
+    clip = state["clip"]
+    if not isinstance(clip, list) or len(clip) > MAX_CLIP_PLANES:
+        raise ParameterError(f"clip must be a list of at most {MAX_CLIP_PLANES} planes")
+    clip = [_numbers(p, f"clip[{i}]", 4) for i, p in enumerate(clip)]
+    crop = state["crop"]
+    if crop is not None:
+        crop = _numbers(crop, "crop", 6)
+    make_planes(clip, crop)  # refuses zero normals and empty boxes with the library's message
+    if clip:
+        options["clip"] = clip
+    if crop is not None:
+        options["crop"] = crop
+    if mode == "iso":
+        options.update(_iso_options(state, volume))
+    elif mode in ("mip", "minip"):
+        window = state["window"]
+        if window is not None:
+            window = _numbers(window, "window", 2)
+        options["window"] = window
+        options["colormap"] = _check_choice(state["colormap"], COLORMAPS, "colormap")
+    elif mode == "dvr":
+        options["tf"] = _transfer_function(state["tf"])
+        options["dvr"] = _dvr_settings(state["dvr"], lighting)
+    return options
+
+
+def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
+                max_pixels: int = MAX_PIXELS) -> RenderRequest:
+    """Validate a client's state into a :class:`RenderRequest`.
+
+    Parameters
+    ----------
+    state : dict
+        The state as decoded from JSON; omitted fields come from ``defaults``.
+    volume : Volume
+        The data on display (isovalues are checked against its range).
+    defaults : dict
+        A complete state, as made by :func:`default_state`.
+    max_pixels : int
+        The largest image size allowed.
+
+    Raises
+    ------
+    ParameterError
+        One line naming the first field that is wrong.
+    """
+    full = _complete(state, defaults)
+    model = _check_choice(full["model"], MODELS, "model")
+    mode = _check_choice(full["mode"], MODES, "mode")
+    camera_fields = _camera_fields(full["camera"])
+    size = _size(full["size"], max_pixels)
+    camera = orbit_camera(volume, camera_fields, size)
+    options = _mode_options(full, volume)
+    return RenderRequest(model, mode, camera, options, full)

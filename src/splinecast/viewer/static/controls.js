@@ -1,0 +1,354 @@
+// The control panel: every widget reads and writes the render state, then calls
+// onChange(interactive) — true while a slider or point is being dragged, false when it is let go
+// or a value is chosen. The lists of models, modes and colormaps come from the server's hello
+// message, so the page offers exactly what the library has; whether a combination works is the
+// server's to say (its error appears on the page).
+(function () {
+  "use strict";
+  const SC = (window.SC = window.SC || {});
+  const SLIDER_STEPS = 1000;
+
+  function $(id) { return document.getElementById(id); }
+
+  function fill(select, names) {
+    select.replaceChildren(...names.map((n) => new Option(n, n)));
+  }
+
+  function format(v) {
+    const a = Math.abs(v);
+    if (a !== 0 && (a >= 1e5 || a < 1e-3)) return v.toExponential(3);
+    return String(Number(v.toPrecision(5)));
+  }
+
+  class Controls {
+    constructor(hello, state, onChange) {
+      this.hello = hello;
+      this.state = state;
+      this.onChange = onChange;
+      const hist = hello.histogram;
+      this.lo = hist.lo;
+      this.hi = hist.hi;
+      this.bounds = hello.volume.bounds; // [[x0, y0, z0], [x1, y1, z1]] world
+      this.isoHistogram = new SC.Histogram($("iso-histogram"), hist);
+      this.windowHistogram = new SC.Histogram($("window-histogram"), hist);
+      this.tfEditor = new SC.TransferFunctionEditor($("tf-editor"), hist, (interactive) => {
+        this.state.tf.opacity = this.tfEditor.points.map((p) => [p[0], p[1]]);
+        this.onChange(interactive);
+      });
+      this.surfaces = [];
+      this.selected = 0;
+      this._buildSelectors();
+      this._buildIso();
+      this._buildWindow();
+      this._buildDvr();
+      this._buildClip();
+      this._buildLighting();
+      $("ortho").addEventListener("change", (e) => {
+        this.state.camera.ortho = e.target.checked;
+        this.onChange(false);
+      });
+      $("volume-name").textContent = `${hello.volume.name} · ${hello.volume.shape.join("×")} ` +
+        `${hello.volume.dtype}`;
+      this.sync();
+    }
+
+    // Value <-> slider position over the histogram's range.
+    toSlider(v) { return Math.round(((v - this.lo) / (this.hi - this.lo)) * SLIDER_STEPS); }
+    fromSlider(s) { return this.lo + (Number(s) / SLIDER_STEPS) * (this.hi - this.lo); }
+
+    // ------------------------------------------------------------------ model and mode
+    _buildSelectors() {
+      fill($("model"), this.hello.models);
+      fill($("mode"), this.hello.modes);
+      $("model").addEventListener("change", (e) => { this.state.model = e.target.value; this.onChange(false); });
+      $("mode").addEventListener("change", (e) => this.setMode(e.target.value));
+    }
+
+    setMode(mode) {
+      this.state.mode = mode;
+      this.sync();
+      this.onChange(false);
+    }
+
+    // ------------------------------------------------------------------ isosurfaces
+    _buildIso() {
+      const slider = $("iso-slider");
+      slider.addEventListener("input", () => this.setIso(this.fromSlider(slider.value), true));
+      slider.addEventListener("change", () => this.setIso(this.fromSlider(slider.value), false));
+      $("iso-value").addEventListener("change", (e) => {
+        const v = Number(e.target.value);
+        if (Number.isFinite(v)) this.setIso(Math.min(this.hi, Math.max(this.lo, v)), false);
+      });
+      $("add-surface").addEventListener("click", () => {
+        const current = this.surfaces[this.selected];
+        const span = this.hi - this.lo;
+        const value = Math.min(this.hi, current.value + 0.1 * span);
+        // Surfaces nest: the ones already there become translucent so the new one shows.
+        for (const s of this.surfaces) s.opacity = Math.min(s.opacity, 0.4);
+        this.surfaces.push({ value, opacity: 1 });
+        this.selected = this.surfaces.length - 1;
+        this._applySurfaces();
+        this.onChange(false);
+      });
+    }
+
+    setIso(value, interactive) {
+      this.surfaces[this.selected].value = value;
+      this._applySurfaces(!interactive);
+      this.onChange(interactive);
+    }
+
+    stepIso(direction) {
+      const s = this.surfaces[this.selected];
+      this.setIso(Math.min(this.hi, Math.max(this.lo, s.value + direction * 0.01 * (this.hi - this.lo))), false);
+    }
+
+    _applySurfaces(rebuild = true) {
+      const s = this.surfaces;
+      if (s.length === 1) {
+        this.state.iso = s[0].value;
+        this.state.opacity = null;
+      } else {
+        this.state.iso = s.map((x) => x.value);
+        this.state.opacity = s.map((x) => x.opacity);
+      }
+      $("iso-slider").value = this.toSlider(s[this.selected].value);
+      $("iso-value").value = format(s[this.selected].value);
+      if (rebuild) this._surfaceList();
+      else this._surfaceValues();
+      this._drawIso();
+    }
+
+    _surfaceList() {
+      const list = $("surfaces");
+      list.replaceChildren();
+      if (this.surfaces.length < 2) return;
+      this.surfaces.forEach((s, i) => {
+        const li = document.createElement("li");
+        li.className = i === this.selected ? "selected" : "";
+        const value = document.createElement("span");
+        value.className = "value";
+        value.textContent = format(s.value);
+        const opacity = document.createElement("input");
+        opacity.type = "range";
+        opacity.min = "0";
+        opacity.max = "100";
+        opacity.value = String(Math.round(s.opacity * 100));
+        opacity.title = "opacity";
+        opacity.addEventListener("input", () => { s.opacity = opacity.value / 100; this._applySurfaces(false); this.onChange(true); });
+        opacity.addEventListener("change", () => this.onChange(false));
+        const remove = document.createElement("button");
+        remove.type = "button";
+        remove.textContent = "×";
+        remove.title = "remove this surface";
+        remove.addEventListener("click", (e) => {
+          e.stopPropagation();
+          this.surfaces.splice(i, 1);
+          this.selected = Math.min(this.selected, this.surfaces.length - 1);
+          this._applySurfaces();
+          this.onChange(false);
+        });
+        li.addEventListener("click", () => { this.selected = i; this._applySurfaces(); });
+        li.append(value, opacity, remove);
+        list.append(li);
+      });
+    }
+
+    _surfaceValues() {
+      const spans = $("surfaces").querySelectorAll(".value");
+      spans.forEach((span, i) => { span.textContent = format(this.surfaces[i].value); });
+    }
+
+    _drawIso() {
+      this.isoHistogram.draw({
+        markers: this.surfaces.map((s, i) => ({
+          value: s.value, color: i === this.selected ? "#e8b45a" : "#8fa6d6", width: 2,
+        })),
+      });
+    }
+
+    // ------------------------------------------------------------------ MIP window
+    _buildWindow() {
+      fill($("mip-colormap"), Object.keys(this.hello.colormaps));
+      const low = $("window-low");
+      const high = $("window-high");
+      const update = (which, interactive) => {
+        let a = Number(low.value);
+        let b = Number(high.value);
+        if (a >= b) { // keep lo < hi: push the other handle
+          if (which === "low") {
+            b = Math.min(SLIDER_STEPS, a + 1);
+            a = b - 1;
+          } else {
+            a = Math.max(0, b - 1);
+            b = a + 1;
+          }
+          low.value = a;
+          high.value = b;
+        }
+        this.state.window = [this.fromSlider(a), this.fromSlider(b)];
+        this._drawWindow();
+        this.onChange(interactive);
+      };
+      low.addEventListener("input", () => update("low", true));
+      high.addEventListener("input", () => update("high", true));
+      low.addEventListener("change", () => update("low", false));
+      high.addEventListener("change", () => update("high", false));
+      $("mip-colormap").addEventListener("change", (e) => {
+        this.state.colormap = e.target.value;
+        this._drawWindow();
+        this.onChange(false);
+      });
+    }
+
+    _drawWindow() {
+      const w = this.state.window || [this.lo, this.hi];
+      $("window-label").textContent = `window ${format(w[0])} … ${format(w[1])}`;
+      this.windowHistogram.draw({ window: w, gradient: this.hello.colormaps[this.state.colormap] });
+    }
+
+    // ------------------------------------------------------------------ DVR
+    _buildDvr() {
+      fill($("tf-colormap"), Object.keys(this.hello.colormaps));
+      $("tf-colormap").addEventListener("change", (e) => {
+        this.state.tf.colormap = e.target.value;
+        this._drawTf();
+        this.onChange(false);
+      });
+      $("dvr-step").addEventListener("change", (e) => {
+        const v = Number(e.target.value);
+        if (Number.isFinite(v) && v > 0) { this.state.dvr.step = v; this.onChange(false); }
+      });
+      $("dvr-shade").addEventListener("change", (e) => { this.state.dvr.shade = e.target.checked; this.onChange(false); });
+      $("dvr-termination").addEventListener("change", (e) => {
+        this.state.dvr.termination = e.target.checked ? 0.99 : null;
+        this.onChange(false);
+      });
+    }
+
+    _drawTf() {
+      this.tfEditor.set(this.state.tf.opacity, this.hello.colormaps[this.state.tf.colormap || "viridis"]);
+    }
+
+    // ------------------------------------------------------------------ clip plane and crop box
+    _buildClip() {
+      for (const id of ["clip-on", "clip-axis", "clip-flip"]) {
+        $(id).addEventListener("change", () => { this._applyClip(); this.onChange(false); });
+      }
+      $("clip-position").addEventListener("input", () => { this._applyClip(); this.onChange(true); });
+      $("clip-position").addEventListener("change", () => { this._applyClip(); this.onChange(false); });
+      $("clip-position").value = SLIDER_STEPS / 2;
+      const box = $("crop-sliders");
+      this.cropSliders = [];
+      ["x", "y", "z"].forEach((axis) => {
+        ["min", "max"].forEach((end) => {
+          const label = document.createElement("label");
+          label.className = "row";
+          label.textContent = `${axis} ${end}`;
+          const input = document.createElement("input");
+          input.type = "range";
+          input.min = "0";
+          input.max = String(SLIDER_STEPS);
+          input.value = end === "min" ? "0" : String(SLIDER_STEPS);
+          input.addEventListener("input", () => { this._applyCrop(); this.onChange(true); });
+          input.addEventListener("change", () => { this._applyCrop(); this.onChange(false); });
+          label.append(input);
+          box.append(label);
+          this.cropSliders.push(input);
+        });
+      });
+      $("crop-on").addEventListener("change", () => { this._applyCrop(); this.onChange(false); });
+    }
+
+    _world(axis, fraction) {
+      const [lo, hi] = [this.bounds[0][axis], this.bounds[1][axis]];
+      return lo + fraction * (hi - lo);
+    }
+
+    _applyClip() {
+      if (!$("clip-on").checked) { this.state.clip = []; return; }
+      const axis = Number($("clip-axis").value);
+      const c = this._world(axis, Number($("clip-position").value) / SLIDER_STEPS);
+      const n = [0, 0, 0];
+      const sign = $("clip-flip").checked ? -1 : 1;
+      n[axis] = sign;
+      this.state.clip = [[n[0], n[1], n[2], -sign * c]]; // keeps sign * (x_axis - c) >= 0
+    }
+
+    toggleClip() {
+      $("clip-on").checked = !$("clip-on").checked;
+      this._applyClip();
+      this.onChange(false);
+    }
+
+    _applyCrop() {
+      if (!$("crop-on").checked) { this.state.crop = null; return; }
+      const crop = [];
+      for (let axis = 0; axis < 3; axis++) {
+        let a = Number(this.cropSliders[2 * axis].value);
+        let b = Number(this.cropSliders[2 * axis + 1].value);
+        if (b <= a) { b = Math.min(SLIDER_STEPS, a + 1); a = b - 1; } // a box needs lo < hi
+        crop.push(this._world(axis, a / SLIDER_STEPS), this._world(axis, b / SLIDER_STEPS));
+      }
+      this.state.crop = crop;
+    }
+
+    // ------------------------------------------------------------------ lighting
+    _buildLighting() {
+      const box = $("lighting-sliders");
+      this.lightSliders = {};
+      const ranges = { ambient: [0, 1], diffuse: [0, 1.5], specular: [0, 1], shininess: [1, 200] };
+      for (const [name, [lo, hi]] of Object.entries(ranges)) {
+        const label = document.createElement("label");
+        label.className = "row";
+        label.textContent = name;
+        const input = document.createElement("input");
+        input.type = "range";
+        input.min = String(lo);
+        input.max = String(hi);
+        input.step = String((hi - lo) / 100);
+        input.addEventListener("input", () => { this.state.lighting[name] = Number(input.value); this.onChange(true); });
+        input.addEventListener("change", () => this.onChange(false));
+        label.append(input);
+        box.append(label);
+        this.lightSliders[name] = input;
+      }
+    }
+
+    // ------------------------------------------------------------------ state -> widgets
+    sync() {
+      const s = this.state;
+      $("model").value = s.model;
+      $("mode").value = s.mode;
+      for (const section of document.querySelectorAll("section[data-modes]")) {
+        section.hidden = !section.dataset.modes.split(" ").includes(s.mode);
+      }
+      const isos = Array.isArray(s.iso) ? s.iso : [s.iso];
+      const opacity = s.opacity || isos.map((_, i) => (i === isos.length - 1 ? 1 : 0.5));
+      this.surfaces = isos.map((v, i) => ({ value: v, opacity: opacity[i] }));
+      this.selected = Math.min(this.selected, this.surfaces.length - 1);
+      this._applySurfaces();
+      const w = s.window || [this.lo, this.hi];
+      $("window-low").value = this.toSlider(w[0]);
+      $("window-high").value = this.toSlider(w[1]);
+      $("mip-colormap").value = s.colormap;
+      this._drawWindow();
+      $("tf-colormap").value = s.tf.colormap || "viridis";
+      $("dvr-step").value = s.dvr.step;
+      $("dvr-shade").checked = s.dvr.shade;
+      $("dvr-termination").checked = s.dvr.termination !== null;
+      this._drawTf();
+      $("ortho").checked = s.camera.ortho;
+      for (const [name, input] of Object.entries(this.lightSliders)) input.value = s.lighting[name];
+    }
+
+    // Canvases drawn at their CSS size: redraw when the panel appears or the window resizes.
+    redraw() {
+      this._drawIso();
+      this._drawWindow();
+      this._drawTf();
+    }
+  }
+
+  SC.Controls = Controls;
+})();
