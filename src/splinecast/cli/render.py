@@ -11,7 +11,8 @@ import splinecast as sc
 
 from ._common import check_output, log, numbers
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
+           "mode_kwargs", "orbit_options"]
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -21,6 +22,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("-o", "--output", required=True, help="output PNG path")
     render.add_argument("--iso", help="isovalue(s) in data units, comma-separated for several "
                         "translucent surfaces (default: the demo's)")
+    render.add_argument("--azimuth", type=float, default=30.0,
+                        help="degrees around z (default 30)")
+    render.add_argument("--elevation", type=float, default=20.0,
+                        help="degrees above xy (default 20)")
+    add_render_options(render)
+    render.add_argument("--depth", help="also save the depth buffer to this .npy file")
+    render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
+
+
+def add_render_options(render: argparse.ArgumentParser) -> None:
+    """The options every rendering subcommand shares: model, camera (but the angles), method
+    and modes. ``--iso``, ``--azimuth`` and ``--elevation`` are the caller's (a movie sweeps
+    them)."""
     render.add_argument("--model", default="trilinear", help="reconstruction (default trilinear)")
     render.add_argument("--root-finder", choices=("bernstein", "rfbs", "sturm", "newton"),
                         help="first-root solver of spline models (default: the model's)")
@@ -29,10 +43,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--prefilter", action="store_true",
                         help="B-spline models: interpolate the voxels instead of smoothing them")
     render.add_argument("--size", default="512x512", help="image WIDTHxHEIGHT (default 512x512)")
-    render.add_argument("--azimuth", type=float, default=30.0,
-                        help="degrees around z (default 30)")
-    render.add_argument("--elevation", type=float, default=20.0,
-                        help="degrees above xy (default 20)")
     render.add_argument("--distance", type=float, help="camera distance from the volume centre")
     render.add_argument("--fov", type=float, default=30.0, help="vertical field of view, degrees")
     render.add_argument("--zoom", type=float, default=1.0, help="magnification (default 1)")
@@ -43,9 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         help="sampling step in voxels for --method sampled (default 0.25)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default from the data)")
-    render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     _add_mode_options(render)
-    render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
 
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
@@ -78,8 +86,11 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="DVR early ray termination opacity, e.g. 0.99")
 
 
-def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
-    """Scene.render keyword arguments of the mode options, validated before any rendering."""
+def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
+    """Scene.render keyword arguments of the mode options, validated before any rendering.
+
+    ``vol`` is only asked for its value range and metadata (a VolumeInfo will do).
+    """
     kwargs: dict = {"mode": args.mode}
     clip = [numbers(c, "--clip", 4) for c in args.clip]
     if clip:
@@ -119,19 +130,17 @@ def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
     return kwargs
 
 
-def run(args: argparse.Namespace) -> int:
-    """Render ``args.file`` to ``args.output``."""
-    # Validate every option and output path before any work, so a mistake writes nothing.
-    check_output(args.output, ".png", "-o")
-    if args.depth:
-        check_output(args.depth, ".npy", "--depth")
+def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
+    """Validate the options :func:`add_render_options` added that need no volume; returns the
+    image ``(width, height)``."""
     if args.method == "sampled" and not args.step > 0:
         raise sc.ParameterError(f"--step must be positive, got {args.step}")
-    width, height = sc.camera.parse_size(args.size)
+    return sc.camera.parse_size(args.size)
 
-    start = time.perf_counter()
-    vol = sc.read(args.file)
-    read_s = time.perf_counter() - start
+
+def model_options(args: argparse.Namespace) -> dict:
+    """The model's keyword arguments from ``--root-finder``, ``--iterations``, ``--prefilter``,
+    refusing those the model does not take."""
     if args.model not in sc.MODELS:
         valid = ", ".join(sc.MODELS)
         raise sc.ParameterError(f"--model must be one of {valid}, got {args.model!r}")
@@ -145,11 +154,30 @@ def run(args: argparse.Namespace) -> int:
         if name not in accepted:
             raise sc.ParameterError(f"{flag} does not apply to model {args.model}")
         options[name] = value
-    kwargs = _mode_kwargs(args, vol)
-    camera = sc.Camera.orbit(
-        vol, azimuth=args.azimuth, elevation=args.elevation, distance=args.distance,
-        size=(width, height), fov=args.fov, ortho=args.ortho, zoom=args.zoom,
-    )
+    return options
+
+
+def orbit_options(args: argparse.Namespace) -> dict:
+    """``Camera.orbit`` keyword arguments of the camera options (all but the angles)."""
+    return {"distance": args.distance, "size": sc.camera.parse_size(args.size), "fov": args.fov,
+            "ortho": args.ortho, "zoom": args.zoom}
+
+
+def run(args: argparse.Namespace) -> int:
+    """Render ``args.file`` to ``args.output``."""
+    # Validate every option and output path before any work, so a mistake writes nothing.
+    check_output(args.output, ".png", "-o")
+    if args.depth:
+        check_output(args.depth, ".npy", "--depth")
+    width, height = check_render_args(args)
+
+    start = time.perf_counter()
+    vol = sc.read(args.file)
+    read_s = time.perf_counter() - start
+    options = model_options(args)
+    kwargs = mode_kwargs(args, vol)
+    camera = sc.Camera.orbit(vol, azimuth=args.azimuth, elevation=args.elevation,
+                             **orbit_options(args))
     # Progress starts only once every input is known to be valid, so a mistake is one line.
     log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
     if args.smooth:
