@@ -121,6 +121,8 @@ def test_tiles_stream_as_they_complete_and_cover_the_image_once(scenes, volume):
     assert sorted(calls, key=lambda t: (t.row0, t.col0)) == sorted(
         tiles, key=lambda t: (t.row0, t.col0))
     assert_frames_equal(frame, local)
+    image = scenes["trilinear"].render(cam, iso=0.5, tile_size=16, image_only=True)
+    np.testing.assert_array_equal(image, local.to_uint8())
 
 
 def test_automatic_tiles_and_positional_arguments_match_scene_render(scenes, volume):

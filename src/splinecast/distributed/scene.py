@@ -151,7 +151,9 @@ class DistributedScene:
 
     # ------------------------------------------------------------------ one frame, by tiles
     def render(self, camera: Camera, *args: Any, tile_size: int | str = "auto",
-               on_tile: Callable[[Tile, Frame], None] | None = None, **kwargs: Any) -> Frame:
+               image_only: bool = False,
+               on_tile: Callable[[Tile, Frame | np.ndarray], None] | None = None,
+               **kwargs: Any) -> Frame | np.ndarray:
         """Render one image, cut into tiles rendered on the workers.
 
         Takes the arguments of :meth:`splinecast.Scene.render` and returns the same
@@ -168,22 +170,37 @@ class DistributedScene:
         tile_size : int or "auto"
             Tile edge in pixels; ``"auto"`` gives every worker thread about four tiles
             (see :func:`~splinecast.distributed.tiles.auto_tile_size`).
+        image_only : bool
+            Return only the 8-bit RGBA image (``Frame.to_uint8()`` of the full render): the
+            workers then send 4 bytes per pixel instead of the Frame's 73.
         on_tile : callable, optional
-            Called as ``on_tile(tile, frame)`` with each tile as it arrives, for progressive
-            display; see also :meth:`render_tiles`.
+            Called as ``on_tile(tile, frame)`` with each tile as it arrives (its 8-bit image
+            with ``image_only``), for progressive display; see also :meth:`render_tiles`.
         """
         start = time.perf_counter()
-        canvas = FrameCanvas(camera)
-        for tile, frame in self.render_tiles(camera, *args, tile_size=tile_size, **kwargs):
-            canvas.paste(tile, frame)
+        tiles = self.render_tiles(camera, *args, tile_size=tile_size, image_only=image_only,
+                                  **kwargs)
+        if image_only:
+            image = np.empty((camera.height, camera.width, 4), np.uint8)
+        else:
+            canvas = FrameCanvas(camera)
+        for tile, part in tiles:
+            if image_only:
+                image[tile.rows, tile.cols] = part
+            else:
+                canvas.paste(tile, part)
             if on_tile is not None:
-                on_tile(tile, frame)
+                on_tile(tile, part)
+        if image_only:
+            return image
         return canvas.frame(wall_ms=(time.perf_counter() - start) * 1e3)
 
     def render_tiles(self, camera: Camera, *args: Any, tile_size: int | str = "auto",
-                     **kwargs: Any) -> Iterator[tuple[Tile, Frame]]:
+                     image_only: bool = False, **kwargs: Any
+                     ) -> Iterator[tuple[Tile, Frame | np.ndarray]]:
         """Render one image by tiles and yield ``(tile, frame)`` pairs in the order they
-        complete (a progressive display pastes ``frame`` at ``tile.rows, tile.cols``).
+        complete (a progressive display pastes ``frame.rgba``, or the 8-bit image with
+        ``image_only``, at ``tile.rows, tile.cols``).
 
         Tiles are scheduled from the image centre outwards. Leaving the loop early cancels the
         tiles not yet rendered. Arguments as for :meth:`render`.
@@ -195,7 +212,7 @@ class DistributedScene:
             tile_size = auto_tile_size(camera.width, camera.height, self.threads)
         tiles = tile_grid(camera, tile_size)
         futures = [self.client.submit(worker.render_tile, self.source, camera, tile, options,
-                                      pure=False, priority=len(tiles) - i)
+                                      image_only, pure=False, priority=len(tiles) - i)
                    for i, tile in enumerate(tiles)]
         try:
             for future in as_completed(futures):
@@ -216,7 +233,7 @@ class DistributedScene:
             render options (an isovalue or transfer-function sweep).
         image_only : bool
             Yield each frame's 8-bit RGBA image (``Frame.to_uint8()``) instead of the whole
-            :class:`Frame`: all a movie needs, and about 1/15 of the bytes to move.
+            :class:`Frame`: all a movie needs, and 4 of the Frame's 73 bytes per pixel.
         in_flight : int, optional
             Frames submitted ahead of the one the caller is waiting for (default: four per
             worker thread). Bounds the memory held by finished frames waiting for their turn.

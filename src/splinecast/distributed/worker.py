@@ -101,18 +101,16 @@ def forget(source: SceneSource) -> bool:
         return _scenes.pop(source, None) is not None
 
 
-def render_tile(source: SceneSource, camera: Camera, tile: Tile, options: dict[str, Any]
-                ) -> tuple[Tile, Frame]:
+def render_tile(source: SceneSource, camera: Camera, tile: Tile, options: dict[str, Any],
+                image_only: bool = False) -> tuple[Tile, Frame | np.ndarray]:
     """Render the ``tile`` window of ``camera``'s image with ``Scene.render(**options)``."""
-    with _lock:
-        _use_worker_threads()
-        return tile, _scene(source).render(tile.camera(camera), **options)
+    return tile, render_shot(source, tile.camera(camera), options, image_only)
 
 
 def render_shot(source: SceneSource, camera: Camera, options: dict[str, Any],
                 image_only: bool = False) -> Frame | np.ndarray:
-    """Render one whole frame; with ``image_only`` return just its 8-bit RGBA image, which is
-    all a movie needs and a small fraction of the frame's buffers."""
+    """Render one image; with ``image_only`` return just its 8-bit RGBA colours, which is all
+    a movie or a display needs and 1/18 of the frame's buffers."""
     with _lock:
         _use_worker_threads()
         frame = _scene(source).render(camera, **options)
