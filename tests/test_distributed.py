@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -205,20 +206,33 @@ def test_mri_from_a_file_path_equals_the_local_render(client):
 
 
 def test_a_worker_killed_during_a_batch_is_survived(client, scenes, volume):
-    """Kill one worker process (SIGKILL, as a crash or the OOM killer would) as soon as the
-    first frame is back: its frames are recomputed on the other worker and every frame still
-    equals the local render. Runs last: the nanny restarts the worker afterwards."""
+    """Kill one worker process (SIGKILL, as a crash or the OOM killer would) in the middle of
+    a batch: its frames are recomputed on the other worker and every frame still equals the
+    local render. The other worker is held on a Dask Event until the kill, so every frame
+    starts on the victim and the kill surely loses work. Runs last: the nanny restarts the
+    killed worker afterwards."""
     path = orbit_path(volume, 10, azimuth=(0, 300), size=(60, 60))
     pids = client.run(os.getpid)
+    victim, survivor = sorted(pids)
+
+    def hold(name):
+        distributed.Event(name).wait()
+
+    release = distributed.Event("release-survivor", client=client)
+    blocker = client.submit(hold, "release-survivor", workers=[survivor], pure=False)
+    deadline = time.monotonic() + 60
+    while not client.processing(workers=[survivor])[survivor]:
+        assert time.monotonic() < deadline, "the survivor never started the holding task"
+        time.sleep(0.01)
     frames = []
-    lost = None
     for frame in scenes["s31"].render_many(path, iso=0.5):
-        if lost is None:
-            busy = {w: keys for w, keys in client.processing().items() if keys}
-            assert busy, "no worker had a task in flight: the test would prove nothing"
-            victim, lost = sorted(busy.items())[0]
+        if not frames:
+            lost = client.processing(workers=[victim])[victim]
+            assert lost, "the victim had no task in flight: the test would prove nothing"
             os.kill(pids[victim], signal.SIGKILL)
+            release.set()
         frames.append(frame)
+    blocker.result()
     assert len(frames) == 10
     scene = sc.Scene(volume, model="s31")
     for cam, frame in zip(path, frames, strict=True):

@@ -180,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
             images = render_locally(scene, shots, image_only=True)
         else:
             images = dscene.render_many(shots, image_only=True)
+        # An interrupted loop cancels the frames in flight while the client is still open.
+        stack.callback(images.close)
         progress = Progress(args.frames, "frames", enabled=not args.quiet)
         with writer:
             for image in images:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import inspect
 import os
 import time
-from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from typing import TYPE_CHECKING, Any
 
@@ -121,7 +120,7 @@ class DistributedScene:
                                       allow_other_workers=True, pure=False)
                    for a in addresses] or [self.client.submit(worker.prepare, self.source,
                                                               pure=False)]
-        results = self.client.gather(futures)
+        results = [result for _, result in self._as_completed(futures)]
         errors = [r for r in results if isinstance(r, SplinecastError)]
         if errors:
             n = len(errors) - 1
@@ -205,8 +204,6 @@ class DistributedScene:
         Tiles are scheduled from the image centre outwards. Leaving the loop early cancels the
         tiles not yet rendered. Arguments as for :meth:`render`.
         """
-        from distributed import as_completed
-
         options = _render_options(camera, args, kwargs)
         if tile_size == "auto":
             tile_size = auto_tile_size(camera.width, camera.height, self.threads)
@@ -215,10 +212,10 @@ class DistributedScene:
                                       image_only, pure=False, priority=len(tiles) - i)
                    for i, tile in enumerate(tiles)]
         try:
-            for future in as_completed(futures):
-                yield self._result(future)
+            for _, result in self._as_completed(futures):
+                yield result
         finally:
-            self.client.cancel(futures)
+            self._cancel(futures)
 
     # ------------------------------------------------------------------ many frames
     def render_many(self, cameras: Camera | Shot | Iterable[Camera | Shot], *,
@@ -246,36 +243,64 @@ class DistributedScene:
             In the order of ``cameras``, each as soon as it and every frame before it are done;
             earlier frames are scheduled first. Leaving the loop early cancels the rest.
         """
+        from distributed import as_completed
+
         shots = as_shots(cameras, **kwargs)
         requests = [(s.camera, _render_options(s.camera, (), dict(s.options))) for s in shots]
         window = in_flight or 4 * self.threads
-        pending: deque[Future] = deque()
-        submitted = 0
+        running = as_completed(with_results=True)
+        index: dict[str, int] = {}  # future key -> frame number, for the futures in flight
+        futures: dict[str, Future] = {}
+        finished: dict[int, Any] = {}  # results that arrived before their turn
 
-        def submit_next() -> None:
-            nonlocal submitted
-            camera, options = requests[submitted]
-            pending.append(self.client.submit(worker.render_shot, self.source, camera, options,
-                                              image_only, pure=False, priority=-submitted))
-            submitted += 1
+        def submit(i: int) -> None:
+            camera, options = requests[i]
+            future = self.client.submit(worker.render_shot, self.source, camera, options,
+                                        image_only, pure=False, priority=-i)
+            index[future.key], futures[future.key] = i, future
+            running.add(future)
 
         try:
-            while submitted < len(requests) and len(pending) < window:
-                submit_next()
-            while pending:
-                result = self._result(pending.popleft())
-                if submitted < len(requests):
-                    submit_next()
-                yield result
+            for i in range(min(window, len(requests))):
+                submit(i)
+            for turn in range(len(requests)):
+                while turn not in finished:
+                    future, result = self._next(running)
+                    finished[index.pop(future.key)] = result
+                    del futures[future.key]
+                if turn + window < len(requests):
+                    submit(turn + window)
+                yield finished.pop(turn)
         finally:
-            self.client.cancel(list(pending))
+            self._cancel(list(futures.values()))
+
+    def _as_completed(self, futures: list[Future]) -> Iterator[tuple[Future, Any]]:
+        """``(future, result)`` pairs as the futures finish."""
+        from distributed import as_completed
+
+        running = as_completed(futures, with_results=True)
+        for _ in futures:
+            yield self._next(running)
 
     @staticmethod
-    def _result(future: Future) -> Any:
-        """The future's result; a user error from a worker is raised as one clear exception."""
+    def _next(running: Any) -> tuple[Future, Any]:
+        """The next finished ``(future, result)`` of a Dask ``as_completed`` with results.
+
+        Waiting happens on a plain condition variable in this thread (results are fetched by
+        the client's event loop), so Ctrl-C interrupts it cleanly; a user error from a worker
+        is raised without the worker's traceback, since its message already names the file or
+        parameter.
+        """
         try:
-            return future.result()
+            future, result = next(running)
         except SplinecastError as exc:
-            # Its message already names the file or parameter; the worker's traceback would
-            # only bury it.
             raise exc.with_traceback(None) from None
+        if isinstance(result, BaseException):  # cancelled behind our back
+            raise result
+        return future, result
+
+    def _cancel(self, futures: list[Future]) -> None:
+        """Cancel what a loop left early no longer needs (unless the client is already gone:
+        a generator may be collected after its client closed)."""
+        if futures and self.client.status == "running":
+            self.client.cancel(futures)
