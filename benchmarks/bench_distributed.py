@@ -119,7 +119,7 @@ def main() -> None:
     scene.render(big_cam, iso=iso)  # compile / load kernels before the workers start
 
     clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                dashboard_address=None, silence_logs=40) for n in (1, 2)}
+                                dashboard_address=":0", silence_logs=40) for n in (1, 2)}
     clients = {n: Client(c) for n, c in clusters.items()}
     try:
         scenes = {n: DistributedScene(source, c) for n, c in clients.items()}

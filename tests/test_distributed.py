@@ -58,7 +58,7 @@ def client(volume):
     for model, mode in CASES:
         sc.Scene(volume, model=model).render(cam, **MODE_OPTIONS[mode])
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=40)
+                                       dashboard_address=":0", silence_logs=40)
     with cluster, distributed.Client(cluster) as client:
         yield client
 

@@ -133,8 +133,9 @@ def _dask_client(args: argparse.Namespace) -> Iterator[Any]:
             yield client
         return
     # Worker logs stay quiet below errors: a user mistake is reported once, by the client.
+    # Any free port for the HTTP server: several local clusters may run on one machine.
     with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=40) as cluster, \
+                      dashboard_address=":0", silence_logs=40) as cluster, \
             Client(cluster) as client:
         yield client
 

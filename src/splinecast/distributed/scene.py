@@ -112,7 +112,7 @@ class DistributedScene:
     def _prepare_workers(self) -> VolumeInfo:
         """Open the source on every current worker (one task each, in parallel) and return the
         volume's header; raise the first worker's error, naming the worker and the path."""
-        addresses = sorted(self.client.scheduler_info(n_workers=-1)["workers"])
+        addresses = sorted(self.client.nthreads())
         # Each task asks for its worker but may run elsewhere: a worker that dies meanwhile
         # must not leave a task waiting forever for it. An empty cluster (adaptive, still
         # starting) gets one unpinned task, run by the first worker that arrives.
@@ -248,7 +248,7 @@ class DistributedScene:
         shots = as_shots(cameras, **kwargs)
         requests = [(s.camera, _render_options(s.camera, (), dict(s.options))) for s in shots]
         window = in_flight or 4 * self.threads
-        running = as_completed(with_results=True)
+        running = as_completed()
         index: dict[str, int] = {}  # future key -> frame number, for the futures in flight
         futures: dict[str, Future] = {}
         finished: dict[int, Any] = {}  # results that arrived before their turn
@@ -278,26 +278,24 @@ class DistributedScene:
         """``(future, result)`` pairs as the futures finish."""
         from distributed import as_completed
 
-        running = as_completed(futures, with_results=True)
+        running = as_completed(futures)
         for _ in futures:
             yield self._next(running)
 
     @staticmethod
     def _next(running: Any) -> tuple[Future, Any]:
-        """The next finished ``(future, result)`` of a Dask ``as_completed`` with results.
+        """The next finished ``(future, result)`` of a Dask ``as_completed``.
 
-        Waiting happens on a plain condition variable in this thread (results are fetched by
-        the client's event loop), so Ctrl-C interrupts it cleanly; a user error from a worker
-        is raised without the worker's traceback, since its message already names the file or
-        parameter.
+        The wait for a task happens on a plain condition variable in this thread, so Ctrl-C
+        interrupts it cleanly; only then is the (finished) result fetched, one at a time. A
+        user error from a worker is raised without the worker's traceback, since its message
+        already names the file or parameter.
         """
+        future = next(running)
         try:
-            future, result = next(running)
+            return future, future.result()
         except SplinecastError as exc:
             raise exc.with_traceback(None) from None
-        if isinstance(result, BaseException):  # cancelled behind our back
-            raise result
-        return future, result
 
     def _cancel(self, futures: list[Future]) -> None:
         """Cancel what a loop left early no longer needs (unless the client is already gone:
