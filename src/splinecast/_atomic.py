@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import os
 import secrets
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from .errors import ParameterError
 
-__all__ = ["atomic_outputs"]
+__all__ = ["atomic_outputs", "atomic_folder"]
 
 
 @contextmanager
@@ -41,6 +42,37 @@ def atomic_outputs(*targets: Path) -> Iterator[list[Path]]:
         raise ParameterError(f"{targets[0]}: cannot write: {reason}") from exc
     except BaseException:
         _remove(temps)
+        raise
+
+
+@contextmanager
+def atomic_folder(target: Path) -> Iterator[Path]:
+    """Yield a temporary folder beside ``target`` and move it onto ``target`` on success.
+
+    An existing ``target`` folder is replaced as a whole (the caller decides whether it may
+    be); if the body raises, the temporary folder and everything in it are removed.
+
+    Raises
+    ------
+    ParameterError
+        When the folder cannot be created there.
+    """
+    temp = target.parent / f".{target.name}.{secrets.token_hex(4)}.part"
+    try:
+        temp.mkdir()
+    except OSError as exc:
+        raise ParameterError(f"{target}: cannot write: {exc.strerror or exc}") from exc
+    try:
+        yield temp
+        old = None
+        if target.exists():  # a folder cannot be renamed onto a non-empty one: move it aside
+            old = target.parent / f".{target.name}.{secrets.token_hex(4)}.old"
+            os.replace(target, old)
+        os.replace(temp, target)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(temp, ignore_errors=True)
         raise
 
 

@@ -189,9 +189,14 @@ def auto_iso(volume: Volume) -> float:
 def auto_window(volume: Volume) -> tuple[float, float]:
     """The MIP / minIP value window shown when none is given: ``(lo, hi)``, ``lo < hi``.
 
-    The :data:`WINDOW_PERCENTILES` of the non-background values, or the data range (widened by
-    one when the volume is constant) when those coincide.
+    ``volume.metadata["default_window"]`` when present, else the :data:`WINDOW_PERCENTILES` of
+    the non-background values, or the data range (widened by one when the volume is constant)
+    when those coincide.
     """
+    if volume.metadata.get("default_window") is not None:
+        lo, hi = (float(v) for v in volume.metadata["default_window"])
+        return lo, hi
+
     def compute() -> tuple[float, float]:
         values = sample_values(volume)
         if values.size:
@@ -209,8 +214,12 @@ def auto_transfer_function(volume: Volume) -> TransferFunction:
 
     Opacity ramps linearly from 0 at :func:`auto_iso` to :data:`DVR_MAX_OPACITY` at the 99.5th
     percentile of the non-background values (and stays there above it); the ``viridis``
-    colormap spans the ramp.
+    colormap spans the ramp. ``volume.metadata["default_tf"]`` (a
+    :meth:`TransferFunction.to_dict`) replaces it when present.
     """
+    if volume.metadata.get("default_tf") is not None:
+        return TransferFunction.from_dict(volume.metadata["default_tf"])
+
     def compute() -> TransferFunction:
         start = auto_iso(volume)
         values = sample_values(volume)

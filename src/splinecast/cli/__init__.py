@@ -13,7 +13,7 @@ import sys
 
 import splinecast as sc
 
-from . import info, render, view
+from . import info, movie, render, view
 from ._common import Parser
 
 __all__ = ["main", "COMMANDS"]
@@ -23,6 +23,7 @@ COMMANDS = {
     "info": info,
     "render": render,
     "view": view,
+    "movie": movie,
 }
 
 

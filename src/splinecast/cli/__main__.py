@@ -4,4 +4,7 @@ import sys
 
 from . import main
 
-sys.exit(main())
+# The guard matters: worker processes of `splinecast movie --workers N` are spawned and import
+# the main module again; they must not run the command line a second time.
+if __name__ == "__main__":
+    sys.exit(main())

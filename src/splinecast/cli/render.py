@@ -11,7 +11,8 @@ import splinecast as sc
 
 from ._common import check_output, log, numbers
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
+           "mode_kwargs", "orbit_options"]
 
 #: Options only some modes read: flag -> (attribute, modes). Given with another mode they would be
 #: ignored without a word, so :func:`_refuse_ignored_options` refuses them instead.
@@ -45,6 +46,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--iso", help="isovalue(s) in data units, comma-separated for several "
                         "translucent surfaces (default: the demo's, else Otsu's threshold of "
                         "the histogram; printed)")
+    render.add_argument("--azimuth", type=float, default=30.0,
+                        help="degrees around z (default 30)")
+    render.add_argument("--elevation", type=float, default=20.0,
+                        help="degrees above xy (default 20)")
+    render.add_argument("--fit", default="content", choices=("content", "box"),
+                        help="frame what the isovalue or transfer function shows (default) or "
+                             "the whole grid")
+    add_render_options(render)
+    render.add_argument("--depth", help="also save the depth buffer to this .npy file")
+    render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
+    _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
+
+
+def add_render_options(render: argparse.ArgumentParser) -> None:
+    """The options every rendering subcommand shares: model, camera (but the angles), method
+    and modes. ``--iso``, ``--azimuth`` and ``--elevation`` are the caller's (a movie sweeps
+    them)."""
     render.add_argument("--model", default="trilinear", help="reconstruction (default trilinear)")
     render.add_argument("--root-finder", choices=("bernstein", "rfbs", "sturm", "newton"),
                         help="first-root solver of spline models (default: the model's)")
@@ -53,27 +71,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--prefilter", action="store_true",
                         help="B-spline models: interpolate the voxels instead of smoothing them")
     render.add_argument("--size", default="512x512", help="image WIDTHxHEIGHT (default 512x512)")
-    render.add_argument("--azimuth", type=float, default=30.0,
-                        help="degrees around z (default 30)")
-    render.add_argument("--elevation", type=float, default=20.0,
-                        help="degrees above xy (default 20)")
     render.add_argument("--distance", type=float, help="camera distance from the volume centre")
     render.add_argument("--fov", type=float, default=30.0, help="vertical field of view, degrees")
     render.add_argument("--zoom", type=float, default=1.0, help="magnification (default 1)")
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
-    render.add_argument("--fit", default="content", choices=("content", "box"),
-                        help="frame what the isovalue or transfer function shows (default) or "
-                             "the whole grid")
     render.add_argument("--method", default="exact", choices=("exact", "sampled"),
                         help="exact analytic roots (default) or fixed-step sampling")
     render.add_argument("--step", type=float, default=0.25,
                         help="sampling step in voxels for --method sampled (default 0.25)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default from the data)")
-    render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     _add_mode_options(render)
-    render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
-    _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
 
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
@@ -81,12 +89,10 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--mode", default="iso", choices=("iso", "mip", "minip", "dvr"),
                         help="isosurface (default), max/min intensity projection, or DVR")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
-    render.add_argument("--tf", help="transfer function JSON file (--mode dvr; default: an "
-                        "opacity ramp from the histogram, printed)")
+    render.add_argument("--tf", help="transfer function JSON file (--mode dvr)")
     render.add_argument("--colormap", default="gray",
                         help="colormap of --mode mip/minip (default gray)")
-    render.add_argument("--window", help="LO,HI value window of --mode mip/minip (default: "
-                        "percentiles of the histogram, printed)")
+    render.add_argument("--window", help="LO,HI value window of --mode mip/minip")
     render.add_argument("--clip", action="append", default=[], metavar="NX,NY,NZ,D",
                         help="clip plane keeping nx*x+ny*y+nz*z+d >= 0 (repeatable)")
     render.add_argument("--crop", metavar="X0,X1,Y0,Y1,Z0,Z1", help="world-space box to keep")
@@ -131,9 +137,13 @@ def _refuse_ignored_options(args: argparse.Namespace) -> None:
                                 "step's table lengths)")
 
 
-def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[str]]:
+def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[str]]:
     """Scene.render keyword arguments of the mode options, validated before any rendering, and
-    what was chosen automatically (printed once everything is known to be valid)."""
+    what was chosen automatically (printed once everything is known to be valid).
+
+    ``vol`` is only asked for its value range, metadata and the automatic choices of
+    :mod:`splinecast.defaults` (a distributed scene's ``VolumeInfo`` carries those).
+    """
     kwargs: dict = {"mode": args.mode}
     notes: list[str] = []
     clip = [numbers(c, "--clip", 4) for c in args.clip]
@@ -198,20 +208,18 @@ def _fit(args: argparse.Namespace, vol: sc.Volume, kwargs: dict) -> object:
     return sc.content_box(vol, iso=kwargs.get("iso"), inside=args.inside)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Render ``args.file`` to ``args.output``."""
-    # Validate every option and output path before any work, so a mistake writes nothing.
-    check_output(args.output, ".png", "-o")
-    if args.depth:
-        check_output(args.depth, ".npy", "--depth")
+def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
+    """Validate the options :func:`add_render_options` added that need no volume; returns the
+    image ``(width, height)``."""
     if args.method == "sampled" and not args.step > 0:
         raise sc.ParameterError(f"--step must be positive, got {args.step}")
     _refuse_ignored_options(args)
-    width, height = sc.camera.parse_size(args.size)
+    return sc.camera.parse_size(args.size)
 
-    start = time.perf_counter()
-    vol = sc.read(args.file, array=args.array)
-    read_s = time.perf_counter() - start
+
+def model_options(args: argparse.Namespace) -> dict:
+    """The model's keyword arguments from ``--root-finder``, ``--iterations``, ``--prefilter``,
+    refusing those the model does not take."""
     if args.model not in sc.MODELS:
         valid = ", ".join(sc.MODELS)
         raise sc.ParameterError(f"--model must be one of {valid}, got {args.model!r}")
@@ -225,12 +233,30 @@ def run(args: argparse.Namespace) -> int:
         if name not in accepted:
             raise sc.ParameterError(f"{flag} does not apply to model {args.model}")
         options[name] = value
-    kwargs, notes = _mode_kwargs(args, vol)
-    camera = sc.Camera.orbit(
-        vol, azimuth=args.azimuth, elevation=args.elevation, distance=args.distance,
-        size=(width, height), fov=args.fov, ortho=args.ortho, zoom=args.zoom,
-        fit=_fit(args, vol, kwargs),
-    )
+    return options
+
+
+def orbit_options(args: argparse.Namespace) -> dict:
+    """``Camera.orbit`` keyword arguments of the camera options (all but the angles)."""
+    return {"distance": args.distance, "size": sc.camera.parse_size(args.size), "fov": args.fov,
+            "ortho": args.ortho, "zoom": args.zoom}
+
+
+def run(args: argparse.Namespace) -> int:
+    """Render ``args.file`` to ``args.output``."""
+    # Validate every option and output path before any work, so a mistake writes nothing.
+    check_output(args.output, ".png", "-o")
+    if args.depth:
+        check_output(args.depth, ".npy", "--depth")
+    width, height = check_render_args(args)
+
+    start = time.perf_counter()
+    vol = sc.read(args.file, array=args.array)
+    read_s = time.perf_counter() - start
+    options = model_options(args)
+    kwargs, notes = mode_kwargs(args, vol)
+    camera = sc.Camera.orbit(vol, azimuth=args.azimuth, elevation=args.elevation,
+                             fit=_fit(args, vol, kwargs), **orbit_options(args))
     # Progress starts only once every input is known to be valid, so a mistake is one line.
     log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
     for note in notes:

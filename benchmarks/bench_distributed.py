@@ -1,0 +1,260 @@
+"""Sort-first scale-out on Dask (issue 14): scaling from 1 to 2 single-threaded workers, overhead
+against the local 2-thread render, and a projection to a 64-worker cluster.
+
+On a LocalCluster of single-threaded worker processes, after warm-up (scene prepared on every
+worker, kernels loaded), medians of repeated runs, interleaved (1 worker, 2 workers, local) so a
+change in the machine's load hits all three alike:
+
+* a movie: ``F`` frames of a turntable rendered as one batch (``render_many``, 8-bit images
+  back, as ``splinecast movie`` does) on 1 and 2 workers (target >= 1.8x), and locally in this
+  process on 2 Numba threads (``render_locally``; distributed/local target <= 1.25x);
+* one large frame by tiles (``DistributedScene.render``, every buffer of the Frame back, and
+  with ``image_only=True`` just the 8-bit image) on 1 and 2 workers (target >= 1.6x), and
+  ``Scene.render`` locally on 2 threads;
+* the parameters of a simple cost model: per-task overhead (a batch of empty tasks), client
+  transfer rate (gathering a 16 MiB result), single-thread render times, and the cost of one
+  compositing step (an "over" of two full-size premultiplied RGBA float32 images with depth,
+  in numpy: what sort-last will do per reduction level).
+
+From these it projects 1..64 workers (table in the results): a movie costs
+``F * t_frame / W + F * (t_task + bytes_frame / B)`` (the client handles every frame), a frame by
+tiles ``t_frame / W + 4 W * t_task + bytes_frame / B`` (about four tiles per worker, every byte
+reaches the client), and a sort-last frame (not built yet: it needs the pyramid store and the
+kernels' segment entry point) ``t_frame / W + log2(W) * (t_over + bytes_image / B)``.
+
+Run ``python benchmarks/bench_distributed.py [--quick]``; results go to
+``benchmarks/results/distributed[_quick].json`` and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+import splinecast as sc
+from splinecast.distributed import DistributedScene, orbit_path, render_locally
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import describe  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+WORKER_COUNTS = (1, 2, 4, 8, 16, 32, 64)
+
+
+def timed(fn) -> float:
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def _noop(i: int) -> int:
+    return i
+
+
+def _payload(nbytes: int) -> np.ndarray:
+    return np.ones(nbytes, np.uint8)
+
+
+def task_overhead(client, count: int) -> float:
+    """Seconds per task of a batch of empty tasks (scheduler, worker and client costs)."""
+    client.gather(client.map(_noop, range(count), pure=False))  # warm
+    return timed(lambda: client.gather(client.map(_noop, range(count), pure=False))) / count
+
+
+def transfer_rate(client, nbytes: int = 16 << 20, repeats: int = 3) -> float:
+    """Bytes per second from a worker to the client (the result is computed first, then
+    fetched and timed)."""
+    from distributed import wait
+
+    times = []
+    for _ in range(repeats):
+        future = client.submit(_payload, nbytes, pure=False)
+        wait(future)
+        times.append(timed(future.result))
+    return nbytes / statistics.median(times)
+
+
+def over_step(width: int, height: int, repeats: int) -> float:
+    """Seconds of one compositing step of two full-size partial images (premultiplied RGBA
+    float32 plus depth): nearer one over farther one, per pixel."""
+    rng = np.random.default_rng(0)
+    a, b = (rng.random((height, width, 4), np.float32) for _ in range(2))
+    da, db = (rng.random((height, width), np.float32) for _ in range(2))
+
+    def step():
+        front = (da <= db)[..., None]
+        near, far = np.where(front, a, b), np.where(front, b, a)
+        return near + far * (1.0 - near[..., 3:4]), np.minimum(da, db)
+
+    step()
+    return statistics.median(timed(step) for _ in range(repeats))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes, a few repeats")
+    args = parser.parse_args()
+    from distributed import Client, LocalCluster
+
+    if args.quick:
+        source, iso, frames, movie_size, big, repeats = (
+            "demo:marschner-lobb?size=64", 0.5, 24, (256, 256), (1024, 1024), 3)
+    else:
+        source, iso, frames, movie_size, big, repeats = (
+            "demo:marschner-lobb?size=128", 0.5, 120, (512, 512), (2048, 2048), 5)
+    load_before = os.getloadavg()
+    volume = sc.read(source)
+    scene = sc.Scene(volume)
+    path = orbit_path(volume, frames, size=movie_size)
+    big_cam = sc.Camera.orbit(volume, azimuth=40, elevation=25, size=big)
+    scene.render(big_cam, iso=iso)  # compile / load kernels before the workers start
+
+    clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                dashboard_address=":0", silence_logs=40) for n in (1, 2)}
+    clients = {n: Client(c) for n, c in clusters.items()}
+    try:
+        scenes = {n: DistributedScene(source, c) for n, c in clients.items()}
+        for ds in scenes.values():  # warm-up: kernels loaded, tables built on every worker
+            list(ds.render_many(path[:4], iso=iso, image_only=True))
+            ds.render(big_cam, iso=iso)
+
+        runs: dict[str, list[float]] = {k: [] for k in (
+            "movie_1w", "movie_2w", "movie_local2", "frame_1w", "frame_2w", "frame_local2",
+            "image_1w", "image_2w", "image_local2", "frame_local1", "movie_frame_local1")}
+        threads = numba.get_num_threads()
+        for _ in range(repeats):
+            for n in (1, 2):
+                runs[f"movie_{n}w"].append(timed(lambda n=n: list(
+                    scenes[n].render_many(path, iso=iso, image_only=True))))
+                runs[f"frame_{n}w"].append(timed(lambda n=n: scenes[n].render(big_cam,
+                                                                              iso=iso)))
+                runs[f"image_{n}w"].append(timed(lambda n=n: scenes[n].render(
+                    big_cam, iso=iso, image_only=True)))
+            runs["movie_local2"].append(timed(lambda: list(
+                render_locally(scene, sc.distributed.as_shots(path, iso=iso),
+                               image_only=True))))
+            runs["frame_local2"].append(timed(lambda: scene.render(big_cam, iso=iso)))
+            runs["image_local2"].append(timed(lambda: scene.render(big_cam, iso=iso).to_uint8()))
+            numba.set_num_threads(1)
+            runs["frame_local1"].append(timed(lambda: scene.render(big_cam, iso=iso)))
+            runs["movie_frame_local1"].append(timed(lambda: scene.render(path[0], iso=iso)))
+            numba.set_num_threads(threads)
+        med = {k: statistics.median(v) for k, v in runs.items()}
+        tiles_2w = scenes[2].render(big_cam, iso=iso).stats["tiles"]
+        t_task = task_overhead(clients[2], 400)
+        rate = transfer_rate(clients[2])
+    finally:
+        for c in clients.values():
+            c.close()
+        for c in clusters.values():
+            c.close()
+    t_over = over_step(*big, repeats)
+
+    frame = scene.render(big_cam, iso=iso)
+    frame_bytes = sum(getattr(frame, n).nbytes for n in (
+        "rgba", "depth", "position", "normal", "face", "cells_visited", "cells_tested",
+        "blocks_skipped"))
+    movie_image_bytes = movie_size[0] * movie_size[1] * 4
+    partial_bytes = big[0] * big[1] * (16 + 4)  # RGBA float32 + float32 depth
+    t_frame1 = med["frame_local1"]
+    t_movie_frame1 = med["movie_frame_local1"]
+    projection = []
+    for w in WORKER_COUNTS:
+        movie = frames * t_movie_frame1 / w + frames * (t_task + movie_image_bytes / rate)
+        tiles = t_frame1 / w + 4 * w * t_task + frame_bytes / rate
+        sort_last = t_frame1 / w + math.log2(w) * (t_over + partial_bytes / rate)
+        projection.append({
+            "workers": w, "movie_s": movie, "movie_fps": frames / movie,
+            "movie_speedup": (frames * (t_movie_frame1 + t_task + movie_image_bytes / rate))
+            / movie, "tiles_frame_s": tiles, "tiles_speedup": (t_frame1 + frame_bytes / rate)
+            / tiles, "sort_last_frame_s": sort_last, "sort_last_speedup": t_frame1 / sort_last,
+        })
+    result = {
+        "machine": describe(),
+        "load_average_before": load_before,
+        "load_average_after": os.getloadavg(),
+        "command": "python benchmarks/bench_distributed.py" + (" --quick" if args.quick else ""),
+        "source": source, "iso": iso, "frames": frames, "movie_size": movie_size,
+        "frame_size": big, "repeats": repeats, "tiles_on_2_workers": tiles_2w,
+        "runs_s": runs, "median_s": med,
+        "movie_speedup_1_to_2": med["movie_1w"] / med["movie_2w"],
+        "frame_speedup_1_to_2": med["frame_1w"] / med["frame_2w"],
+        "image_speedup_1_to_2": med["image_1w"] / med["image_2w"],
+        "image_overhead_vs_local": med["image_2w"] / med["image_local2"],
+        "movie_overhead_vs_local": med["movie_2w"] / med["movie_local2"],
+        "frame_overhead_vs_local": med["frame_2w"] / med["frame_local2"],
+        "model": {"task_overhead_s": t_task, "transfer_bytes_per_s": rate,
+                  "over_step_s": t_over, "frame_bytes": frame_bytes,
+                  "movie_image_bytes": movie_image_bytes, "partial_image_bytes": partial_bytes,
+                  "frame_1thread_s": t_frame1, "movie_frame_1thread_s": t_movie_frame1},
+        "projection": projection,
+    }
+    stem = "distributed_quick" if args.quick else "distributed"
+    out = HERE / "results"
+    out.mkdir(exist_ok=True)
+    (out / f"{stem}.json").write_text(json.dumps(result, indent=1))
+    (out / f"{stem}.md").write_text(markdown(result))
+    print(markdown(result))
+
+
+def markdown(r: dict) -> str:
+    m, med, mo = r["machine"], r["median_s"], r["model"]
+    (mw, mh), (fw, fh) = r["movie_size"], r["frame_size"]
+    lines = [
+        "# Distributed benchmark: sort-first on Dask (issue 14)",
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} cores, numba {m['versions']['numba']}, load "
+        f"average {r['load_average_before'][0]:.1f} before / {r['load_average_after'][0]:.1f} "
+        f"after (a shared machine: other jobs ran meanwhile). Command: `{r['command']}`. "
+        f"Volume `{r['source']}`, iso {r['iso']}, trilinear. LocalCluster of single-threaded "
+        f"worker processes; medians of {r['repeats']} interleaved runs after warm-up.",
+        "",
+        "| what | 1 worker s | 2 workers s | local 2 threads s | speed-up 1 -> 2 (target) | "
+        "2 workers / local (target <= 1.25) |",
+        "|---|---|---|---|---|---|",
+        f"| movie, {r['frames']} frames {mw}x{mh} (8-bit images back) | {med['movie_1w']:.2f} "
+        f"| {med['movie_2w']:.2f} | {med['movie_local2']:.2f} | "
+        f"{r['movie_speedup_1_to_2']:.2f}x (>= 1.8) | {r['movie_overhead_vs_local']:.2f}x |",
+        f"| one frame {fw}x{fh} by tiles ({r['tiles_on_2_workers']} tiles on 2 workers; "
+        f"whole Frame back) | {med['frame_1w']:.2f} | {med['frame_2w']:.2f} | "
+        f"{med['frame_local2']:.2f} | {r['frame_speedup_1_to_2']:.2f}x (>= 1.6) | "
+        f"{r['frame_overhead_vs_local']:.2f}x |",
+        f"| the same frame, 8-bit image only (`image_only=True`) | {med['image_1w']:.2f} | "
+        f"{med['image_2w']:.2f} | {med['image_local2']:.2f} | "
+        f"{r['image_speedup_1_to_2']:.2f}x (>= 1.6) | {r['image_overhead_vs_local']:.2f}x |",
+        "",
+        "Model parameters (measured in the same run): per-task overhead "
+        f"{mo['task_overhead_s'] * 1e3:.2f} ms (400 empty tasks on 2 workers), worker -> "
+        f"client transfer {mo['transfer_bytes_per_s'] / 2**20:.0f} MiB/s, one compositing "
+        f"step of two {fw}x{fh} RGBA float32 + depth images {mo['over_step_s'] * 1e3:.0f} ms "
+        f"(numpy), Frame buffers {mo['frame_bytes'] / 2**20:.0f} MiB, single-thread render "
+        f"{mo['frame_1thread_s']:.2f} s ({fw}x{fh}) and {mo['movie_frame_1thread_s'] * 1e3:.0f}"
+        f" ms ({mw}x{mh}).",
+        "",
+        "Projection to larger clusters (single-threaded workers, model in the module "
+        "docstring; sort-last is not built yet, its row is what the model predicts):",
+        "",
+        "| workers | movie s | movie frames/s | movie speed-up | tiled frame s | tiled "
+        "speed-up | sort-last frame s | sort-last speed-up |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for p in r["projection"]:
+        lines.append(
+            f"| {p['workers']} | {p['movie_s']:.2f} | {p['movie_fps']:.1f} | "
+            f"{p['movie_speedup']:.1f}x | {p['tiles_frame_s']:.3f} | {p['tiles_speedup']:.1f}x "
+            f"| {p['sort_last_frame_s']:.3f} | {p['sort_last_speedup']:.1f}x |")
+    lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()

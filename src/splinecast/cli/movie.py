@@ -1,0 +1,194 @@
+"""``splinecast movie FILE --frames N -o OUT``: a turntable or a sweep as MP4, GIF or PNG frames.
+
+Without ``--workers`` or ``--scheduler`` the movie renders in this process, one frame after
+another, each on all cores (Numba threads); no Dask is needed. ``--workers N`` starts a local Dask
+cluster of N single-threaded worker processes, ``--scheduler ADDRESS`` uses a running cluster
+whose workers can open FILE; there each frame is one task. Frames are written in order as they
+complete, and the movie appears under its name only when the last one is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import splinecast as sc
+from splinecast.distributed import (
+    MovieWriter,
+    SceneSource,
+    Shot,
+    orbit_path,
+    ramp,
+    render_locally,
+)
+
+from ._common import log, numbers
+from ._progress import Progress
+from .render import (
+    add_render_options,
+    check_render_args,
+    mode_kwargs,
+    model_options,
+    orbit_options,
+)
+
+__all__ = ["add_parser", "run"]
+
+#: Start of the default turntable, the same view as ``splinecast render``'s default.
+DEFAULT_AZIMUTH = 30.0
+DEFAULT_ELEVATION = 20.0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    movie = sub.add_parser(
+        "movie", help="render a turntable or an isovalue sweep to MP4, GIF or PNG frames",
+        description="Render a turntable (by default one full turn) or a sweep of the camera "
+                    "angles or the isovalue, locally or on a Dask cluster.")
+    movie.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
+    movie.add_argument("-o", "--output", required=True,
+                       help="OUT.mp4, OUT.gif, or a folder (OUT/) for frame_0000.png, ...")
+    movie.add_argument("--frames", type=int, required=True, help="number of frames")
+    movie.add_argument("--azimuth", metavar="A0[:A1]",
+                       help="degrees around z, fixed or from A0 to A1 (default: a full turn "
+                            "30:390 when nothing else is swept, else 30)")
+    movie.add_argument("--elevation", metavar="E0[:E1]",
+                       help="degrees above xy, fixed or from E0 to E1 (default 20)")
+    movie.add_argument("--iso", metavar="V0[:V1]",
+                       help="isovalue in data units, fixed, a V0:V1 sweep, or comma-separated "
+                            "for several translucent surfaces (default: the demo's)")
+    movie.add_argument("--fps", type=float, default=24.0, help="frames per second (default 24)")
+    movie.add_argument("--quality", type=float, default=8.0,
+                       help="MP4 quality from 1 to 10 (default 8)")
+    where = movie.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="render on a local Dask cluster of N single-threaded processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="render on the Dask cluster at ADDRESS (tcp://host:8786); its "
+                            "workers must be able to open FILE")
+    add_render_options(movie)
+    movie.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def _range(text: str | None, option: str) -> float | tuple[float, float] | None:
+    """``"A"`` -> A, ``"A0:A1"`` -> (A0, A1), None -> None."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    if len(parts) > 2:
+        raise sc.ParameterError(f"{option} must be V or V0:V1, got {text!r}")
+    values = [numbers(p, option, 1)[0] for p in parts]
+    return values[0] if len(values) == 1 else (values[0], values[1])
+
+
+def _shots(args: argparse.Namespace, volume: Any, kwargs: dict[str, Any],
+           iso_sweep: tuple[float, float] | None) -> list[Shot]:
+    """One Shot per frame: the turntable's cameras and, for a sweep, each frame's isovalue."""
+    elevation = _range(args.elevation, "--elevation")
+    azimuth = _range(args.azimuth, "--azimuth")
+    if azimuth is None:
+        swept = isinstance(elevation, tuple) or iso_sweep is not None
+        azimuth = DEFAULT_AZIMUTH if swept else (DEFAULT_AZIMUTH, DEFAULT_AZIMUTH + 360.0)
+    cameras = orbit_path(volume, args.frames, azimuth=azimuth,
+                         elevation=DEFAULT_ELEVATION if elevation is None else elevation,
+                         **orbit_options(args))
+    if iso_sweep is None:
+        return [Shot(camera, kwargs) for camera in cameras]
+    isos = ramp(iso_sweep, args.frames, "--iso")
+    return [Shot(camera, {**kwargs, "iso": float(v)})
+            for camera, v in zip(cameras, isos, strict=True)]
+
+
+def _iso_sweep(args: argparse.Namespace) -> tuple[float, float] | None:
+    """The ``--iso V0:V1`` sweep, if any; leaves ``args.iso`` at V0 for the option checks."""
+    if args.iso is None or ":" not in args.iso:
+        return None
+    sweep = _range(args.iso, "--iso")
+    if args.mode != "iso" or "," in args.iso:
+        raise sc.ParameterError("--iso V0:V1 sweeps one isosurface: use it with --mode iso")
+    args.iso = repr(sweep[0])
+    return sweep
+
+
+@contextlib.contextmanager
+def _dask_client(args: argparse.Namespace) -> Iterator[Any]:
+    """A client of the cluster ``--scheduler`` names, or of a local one of ``--workers``
+    single-threaded processes (shut down afterwards)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise sc.ParameterError("--workers/--scheduler need Dask: "
+                                "pip install 'splinecast[distributed]'") from None
+    if args.scheduler:
+        try:
+            client = Client(args.scheduler, timeout="10s")
+        except OSError as exc:
+            raise sc.ParameterError(f"--scheduler {args.scheduler}: cannot connect ({exc})"
+                                    ) from None
+        with client:
+            yield client
+        return
+    # Worker logs stay quiet below errors: a user mistake is reported once, by the client.
+    # Any free port for the HTTP server: several local clusters may run on one machine.
+    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                      dashboard_address=":0", silence_logs=40) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+def run(args: argparse.Namespace) -> int:
+    """Render the movie ``args.output``."""
+    # Validate every option and the output before any work, so a mistake writes nothing.
+    width, height = check_render_args(args)
+    if args.frames < 1:
+        raise sc.ParameterError(f"--frames must be at least 1, got {args.frames}")
+    if args.workers is not None and args.workers < 1:
+        raise sc.ParameterError(f"--workers must be at least 1, got {args.workers}")
+    iso_sweep = _iso_sweep(args)
+    _range(args.azimuth, "--azimuth")
+    _range(args.elevation, "--elevation")
+    writer = MovieWriter(args.output, (width, height), args.frames, fps=args.fps,
+                         quality=args.quality)
+    options = model_options(args)
+    source = SceneSource(args.file, args.model, options, args.smooth)
+
+    start = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        if args.workers is None and args.scheduler is None:
+            scene = sc.Scene(source.read(), model=args.model, **options)
+            volume = scene.volume
+            where = "in this process"
+        else:
+            from splinecast.distributed import DistributedScene
+
+            client = stack.enter_context(_dask_client(args))
+            dscene = DistributedScene(source, client)
+            volume = dscene.volume
+            where = f"on {len(client.nthreads())} Dask workers"
+        kwargs, notes = mode_kwargs(args, volume)
+        for note in notes:
+            log(args, note)
+        kwargs["inside"] = args.inside
+        if iso_sweep is not None:
+            for v in iso_sweep:
+                sc.check_iso(volume, v)
+        shots = _shots(args, volume, kwargs, iso_sweep)
+        log(args, f"{volume.name}: {volume.shape} prepared ({args.model}) in "
+                  f"{time.perf_counter() - start:.2f} s {where}")
+        if args.workers is None and args.scheduler is None:
+            images = render_locally(scene, shots, image_only=True)
+        else:
+            images = dscene.render_many(shots, image_only=True)
+        # An interrupted loop cancels the frames in flight while the client is still open.
+        stack.callback(images.close)
+        progress = Progress(args.frames, "frames", enabled=not args.quiet)
+        with writer:
+            for image in images:
+                writer.write(image)
+                progress.update()
+    print(Path(args.output).resolve())
+    return 0

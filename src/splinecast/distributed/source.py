@@ -1,0 +1,133 @@
+"""What a worker opens: a :class:`SceneSource` names the data and the model, never holds them.
+
+A distributed render ships this small description to the workers instead of the volume; each
+worker process opens it once, prepares the model and keeps the :class:`~splinecast.Scene`
+(:mod:`.worker`). :class:`VolumeInfo` is the small summary of the opened volume that travels
+back, enough for the client to aim cameras and check isovalues without reading the data itself.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..defaults import auto_iso, auto_transfer_function, auto_window
+from ..errors import ParameterError
+from ..io import read
+from ..models import MODELS
+from ..models.smoothing import smooth as smooth_volume
+from ..scene import Scene
+from ..volume import Volume
+
+__all__ = ["SceneSource", "VolumeInfo"]
+
+
+@dataclass(frozen=True)
+class SceneSource:
+    """A volume every worker can open, the reconstruction model and its options.
+
+    Parameters
+    ----------
+    location : str or os.PathLike
+        A file or folder path (anything :func:`splinecast.read` reads) or a ``"demo:NAME?..."``
+        spec. A relative path is made absolute against the client's working directory, so
+        workers started elsewhere on a shared file system find the same file.
+    model : str
+        Reconstruction model name (see :data:`splinecast.MODELS`).
+    options : dict, optional
+        Model options (``prefilter=True``, ``root_finder="newton"``, ...); values must be
+        hashable since the source is the key of the workers' scene cache.
+    smooth : int, optional
+        Gaussian pre-smoothing kernel size (3 or 5), applied on the workers after reading.
+    """
+
+    location: str
+    model: str = "trilinear"
+    options: tuple[tuple[str, Any], ...] = field(default=())
+    smooth: int | None = None
+
+    def __init__(self, location: str | os.PathLike, model: str = "trilinear",
+                 options: dict[str, Any] | None = None, smooth: int | None = None) -> None:
+        text = os.fspath(location)
+        if not isinstance(text, str) or not text:
+            raise ParameterError(f"source must be a path or a demo: spec, got {location!r}")
+        if not text.startswith("demo:") and "://" not in text:
+            text = os.path.abspath(text)
+        if model not in MODELS:
+            raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+        accepted = inspect.signature(MODELS[model]).parameters
+        for name in options or {}:
+            if name == "volume" or name not in accepted:
+                raise ParameterError(f"model option {name!r} does not apply to model {model}")
+        items = tuple(sorted((options or {}).items()))
+        try:
+            hash(items)
+        except TypeError:
+            raise ParameterError(f"model options must be hashable values, got {dict(items)}"
+                                 ) from None
+        object.__setattr__(self, "location", text)
+        object.__setattr__(self, "model", model)
+        object.__setattr__(self, "options", items)
+        object.__setattr__(self, "smooth", None if smooth is None else int(smooth))
+
+    def read(self) -> Volume:
+        """Read (and pre-smooth) the volume; raises :class:`~splinecast.ReadError` naming the
+        location when it cannot."""
+        volume = read(self.location)
+        return smooth_volume(volume, self.smooth) if self.smooth else volume
+
+    def open(self) -> Scene:
+        """Read the volume and prepare the model: the expensive step workers do once."""
+        return Scene(self.read(), model=self.model, **dict(self.options))
+
+    def __str__(self) -> str:
+        return self.location
+
+
+@dataclass(frozen=True)
+class VolumeInfo:
+    """The header of a volume opened on the workers: geometry, value range and metadata.
+
+    It stands in for the :class:`~splinecast.Volume` where only these are needed, e.g.
+    ``Camera.orbit(info, ...)`` and ``check_iso(info, iso)``.
+    """
+
+    name: str
+    shape: tuple[int, int, int]
+    dtype: str
+    spacing: tuple[float, float, float]
+    origin: tuple[float, float, float]
+    value_range: tuple[float, float]
+    metadata: dict[str, Any]
+
+    @classmethod
+    def of(cls, volume: Volume) -> VolumeInfo:
+        """The header of ``volume``, with the automatic choices of :mod:`splinecast.defaults`
+        (computed from the data, which the header does not hold) in its metadata."""
+        metadata = dict(volume.metadata)
+        metadata["default_iso"] = auto_iso(volume)
+        metadata.setdefault("default_window", auto_window(volume))
+        metadata.setdefault("default_tf", auto_transfer_function(volume).to_dict())
+        return cls(volume.name, volume.shape, str(volume.dtype), volume.spacing, volume.origin,
+                   volume.value_range, metadata)
+
+    @property
+    def extent(self) -> tuple[float, float, float]:
+        """World size of the box spanned by the voxel centres (as :attr:`Volume.extent`)."""
+        return tuple((n - 1) * s for n, s in zip(self.shape, self.spacing, strict=True))
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space corners ``(lo, hi)`` (as :attr:`Volume.bounds`)."""
+        lo = np.array(self.origin)
+        return lo, lo + np.array(self.extent)
+
+    @property
+    def center(self) -> np.ndarray:
+        """World position of the box centre."""
+        lo, hi = self.bounds
+        return 0.5 * (lo + hi)

@@ -1,0 +1,250 @@
+"""Sort-first rendering on a Dask LocalCluster (2 worker processes, 1 thread each) against the
+local ``Scene.render`` of the same volume: every buffer of the assembled frame, tile by tile
+and frame by frame; a worker killed during a batch; a path the workers cannot open; the movie
+command on the cluster.
+
+One cluster serves the whole module (starting one costs seconds).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import splinecast as sc
+from splinecast.cli import main
+from splinecast.distributed import FrameCanvas, Shot, orbit_path, tile_grid
+from splinecast.distributed.tiles import PIXEL_FIELDS
+
+distributed = pytest.importorskip("distributed", reason="needs the distributed extra (Dask)")
+
+SRC = "demo:marschner-lobb?size=20"
+MNI = Path(__file__).resolve().parents[2] / "shared" / "data" / "mni152_t1_1mm.nii.gz"
+TF = sc.TransferFunction([(0.3, 0.0), (0.5, 0.6), (0.8, 0.9)], domain=(0.0, 1.0))
+#: Mode -> Scene.render options of the equality tests.
+MODE_OPTIONS = {
+    "iso": {"iso": 0.5},
+    "multi-iso": {"iso": [0.3, 0.6]},
+    "mip": {"mode": "mip"},
+    "dvr": {"mode": "dvr", "tf": TF, "dvr": sc.DVRSettings(step=0.5)},
+}
+#: (model, mode) pairs rendered on the cluster and locally. s31 MIP/DVR join here (one line
+#: each) once the kernels render every model in every mode.
+CASES = [
+    ("trilinear", "iso"),
+    ("trilinear", "multi-iso"),
+    ("trilinear", "mip"),
+    ("trilinear", "dvr"),
+    ("s31", "iso"),
+]
+
+
+@pytest.fixture(scope="module")
+def volume():
+    return sc.read(SRC)
+
+
+@pytest.fixture(scope="module")
+def client(volume):
+    # Compile every kernel the tests use here first: the workers then load them from Numba's
+    # on-disk cache instead of compiling them again, two at a time, from an empty cache.
+    cam = sc.Camera.orbit(volume, size=(4, 4))
+    for model, mode in CASES:
+        sc.Scene(volume, model=model).render(cam, **MODE_OPTIONS[mode])
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0", silence_logs=40)
+    with cluster, distributed.Client(cluster) as client:
+        yield client
+
+
+@pytest.fixture(scope="module")
+def scenes(client):
+    """One DistributedScene per model, shared by the tests (workers keep them prepared)."""
+    return {model: sc.distributed.DistributedScene(SRC, client, model=model)
+            for model in ("trilinear", "s31")}
+
+
+def assert_frames_equal(got: sc.Frame, want: sc.Frame, rgba_atol: float = 0.0) -> None:
+    """Every per-ray buffer equal (NaN where NaN); ``rgba`` within ``rgba_atol``."""
+    assert got.size == want.size
+    for name in PIXEL_FIELDS:
+        a, b = getattr(got, name), getattr(want, name)
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        if name == "rgba" and rgba_atol:
+            np.testing.assert_allclose(a, b, rtol=0, atol=rgba_atol)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=name)
+    assert (got.value is None) == (want.value is None)
+    if want.value is not None:
+        np.testing.assert_array_equal(got.value, want.value)
+
+
+@pytest.mark.parametrize(("model", "mode"), CASES)
+def test_tiled_render_equals_the_local_render(scenes, volume, model, mode):
+    # 70x45 in 24-pixel tiles: ragged last row and column of tiles.
+    cam = sc.Camera.orbit(volume, azimuth=35, elevation=25, size=(70, 45))
+    options = MODE_OPTIONS[mode]
+    local = sc.Scene(volume, model=model).render(cam, **options)
+    frame = scenes[model].render(cam, tile_size=24, **options)
+    assert_frames_equal(frame, local, rgba_atol=1e-6 if mode == "dvr" else 0.0)
+    assert local.hit.any() and not local.hit.all()  # the comparison covers hits and misses
+    st = frame.stats
+    assert st["tiles"] == 3 * 2 and st["wall_ms"] > 0
+    for key in ("mode", "model", "width", "height", "rays", "hits", "mean_cells_visited",
+                "mean_cells_tested", "mean_blocks_skipped"):
+        assert st[key] == local.stats[key], key
+    if mode == "dvr":  # per-ray count not kept in the frame: a ray-weighted mean of the tiles
+        assert st["mean_samples"] == pytest.approx(local.stats["mean_samples"], rel=1e-12)
+
+
+def test_tiles_stream_as_they_complete_and_cover_the_image_once(scenes, volume):
+    cam = sc.Camera.orbit(volume, size=(50, 40))
+    local = sc.Scene(volume).render(cam, iso=0.5)
+    seen = np.zeros((40, 50), int)
+    tiles = []
+    for tile, frame in scenes["trilinear"].render_tiles(cam, iso=0.5, tile_size=16):
+        seen[tile.rows, tile.cols] += 1
+        np.testing.assert_array_equal(frame.rgba, local.rgba[tile.rows, tile.cols])
+        np.testing.assert_array_equal(frame.depth, local.depth[tile.rows, tile.cols])
+        tiles.append(tile)
+    assert (seen == 1).all()
+    assert sorted(tiles, key=lambda t: (t.row0, t.col0)) == sorted(
+        tile_grid(cam, 16), key=lambda t: (t.row0, t.col0))
+    calls = []
+    frame = scenes["trilinear"].render(cam, iso=0.5, tile_size=16,
+                                       on_tile=lambda t, f: calls.append(t))
+    assert sorted(calls, key=lambda t: (t.row0, t.col0)) == sorted(
+        tiles, key=lambda t: (t.row0, t.col0))
+    assert_frames_equal(frame, local)
+    image = scenes["trilinear"].render(cam, iso=0.5, tile_size=16, image_only=True)
+    np.testing.assert_array_equal(image, local.to_uint8())
+
+
+def test_automatic_tiles_and_positional_arguments_match_scene_render(scenes, volume):
+    cam = sc.Camera.orbit(volume, size=(160, 128))
+    local = sc.Scene(volume).render(cam, "iso", 0.4)
+    frame = scenes["trilinear"].render(cam, "iso", 0.4)  # positional, as Scene.render takes
+    assert_frames_equal(frame, local)
+    assert frame.stats["tiles"] == 3 * 2  # 4 per worker thread wanted, but 64 px at least
+
+
+def test_a_batch_of_frames_is_a_camera_path_or_a_sweep_in_order(scenes, volume):
+    path = orbit_path(volume, 5, azimuth=(0, 120), size=(32, 24))
+    scene = sc.Scene(volume)
+    frames = list(scenes["trilinear"].render_many(path, iso=0.5, in_flight=2))
+    assert len(frames) == 5
+    for cam, frame in zip(path, frames, strict=True):
+        assert_frames_equal(frame, scene.render(cam, iso=0.5))
+    sweep = [Shot(path[0], {"iso": v}) for v in (0.3, 0.5, 0.7)]
+    images = list(scenes["trilinear"].render_many(sweep, image_only=True))
+    for shot, image in zip(sweep, images, strict=True):
+        assert image.dtype == np.uint8
+        np.testing.assert_array_equal(image, scene.render(path[0], **shot.options).to_uint8())
+    assert not np.array_equal(images[0], images[2])  # the sweep did change the isovalue
+
+
+def test_the_workers_keep_the_prepared_scene(client, scenes):
+    from splinecast.distributed import worker
+
+    counts = client.run(lambda: len(worker._scenes))
+    assert len(counts) == 2 and all(n >= 1 for n in counts.values())
+    source = scenes["trilinear"].source
+    assert all(client.run(lambda: source in worker._scenes).values())
+
+
+def test_a_path_the_workers_cannot_open_is_one_clear_error(client, tmp_path):
+    missing = tmp_path / "missing.nii.gz"
+    with pytest.raises(sc.ReadError) as info:
+        sc.distributed.DistributedScene(missing, client)
+    message = str(info.value)
+    assert str(missing) in message and "worker tcp://" in message and "\n" not in message
+    assert info.value.__cause__ is None
+
+
+def test_bad_render_options_fail_like_a_local_render(scenes, volume):
+    cam = sc.Camera.orbit(volume, size=(16, 16))
+    with pytest.raises(TypeError):
+        scenes["trilinear"].render(cam, isovalue=0.5)  # a name Scene.render does not take
+    with pytest.raises(sc.ParameterError, match="outside the data range"):
+        scenes["trilinear"].render(cam, iso=7.0)
+    with pytest.raises(sc.ParameterError, match="model option"):
+        sc.distributed.DistributedScene(SRC, scenes["trilinear"].client, model="trilinear",
+                                        prefilter=True)
+
+
+def test_movie_on_the_cluster_writes_the_local_frames(client, tmp_path, capsys):
+    out = tmp_path / "frames"
+    code = main(["movie", SRC, "--frames", "4", "--azimuth", "10:100", "--iso", "0.5",
+                 "--size", "40x30", "--scheduler", client.scheduler.address, "-o", f"{out}/"])
+    _, err = capsys.readouterr()
+    assert code == 0 and "4/4" in err
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [f"frame_{i:04d}.png" for i in range(4)]
+    volume = sc.read(SRC)
+    scene = sc.Scene(volume)
+    for name, cam in zip(names, orbit_path(volume, 4, azimuth=(10, 100), size=(40, 30)),
+                         strict=True):
+        want = scene.render(cam, iso=0.5).to_uint8()
+        np.testing.assert_array_equal(np.asarray(Image.open(out / name)), want)
+
+
+@pytest.mark.skipif(not MNI.exists(), reason=f"real data not found: {MNI} (../shared/data)")
+def test_mri_from_a_file_path_equals_the_local_render(client):
+    volume = sc.read(MNI)
+    scene = sc.distributed.DistributedScene(MNI, client)
+    assert scene.volume.shape == volume.shape and scene.volume.value_range == volume.value_range
+    cam = sc.Camera.orbit(scene.volume, azimuth=60, size=(48, 40))
+    assert_frames_equal(scene.render(cam, iso=80, tile_size=20),
+                        sc.Scene(volume).render(cam, iso=80))
+    scene.close()
+
+
+def test_a_worker_killed_during_a_batch_is_survived(client, scenes, volume):
+    """Kill one worker process (SIGKILL, as a crash or the OOM killer would) in the middle of
+    a batch: its frames are recomputed on the other worker and every frame still equals the
+    local render. The other worker is held on a Dask Event until the kill, so every frame
+    starts on the victim and the kill surely loses work. Runs last: the nanny restarts the
+    killed worker afterwards."""
+    path = orbit_path(volume, 10, azimuth=(0, 300), size=(60, 60))
+    pids = client.run(os.getpid)
+    victim, survivor = sorted(pids)
+
+    def hold(name):
+        distributed.Event(name).wait()
+
+    release = distributed.Event("release-survivor", client=client)
+    blocker = client.submit(hold, "release-survivor", workers=[survivor], pure=False)
+    deadline = time.monotonic() + 60
+    while not client.processing(workers=[survivor])[survivor]:
+        assert time.monotonic() < deadline, "the survivor never started the holding task"
+        time.sleep(0.01)
+    frames = []
+    for frame in scenes["s31"].render_many(path, iso=0.5):
+        if not frames:
+            lost = client.processing(workers=[victim])[victim]
+            assert lost, "the victim had no task in flight: the test would prove nothing"
+            os.kill(pids[victim], signal.SIGKILL)
+            release.set()
+        frames.append(frame)
+    blocker.result()
+    assert len(frames) == 10
+    scene = sc.Scene(volume, model="s31")
+    for cam, frame in zip(path, frames, strict=True):
+        assert_frames_equal(frame, scene.render(cam, iso=0.5))
+    client.wait_for_workers(2, timeout=60)
+
+
+def test_canvas_refuses_an_incomplete_frame(volume):
+    cam = sc.Camera.orbit(volume, size=(20, 20))
+    canvas = FrameCanvas(cam)
+    tile = tile_grid(cam, 10)[0]
+    canvas.paste(tile, sc.Scene(volume).render(tile.camera(cam), iso=0.5))
+    assert not canvas.complete
+    with pytest.raises(ValueError, match="100 of 400 pixels"):
+        canvas.frame()
