@@ -13,7 +13,7 @@ import sys
 
 import splinecast as sc
 
-from . import info, render
+from . import info, pyramid, render
 from ._common import Parser
 
 __all__ = ["main", "COMMANDS"]
@@ -22,6 +22,7 @@ __all__ = ["main", "COMMANDS"]
 COMMANDS = {
     "info": info,
     "render": render,
+    "pyramid": pyramid,
 }
 
 
