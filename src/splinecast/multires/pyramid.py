@@ -2,10 +2,10 @@
 
 Downsampling (the choice decides the NGFF translation; see also :mod:`.octree`)
 -------------------------------------------------------------------------------
-Vertex-centred: coarse voxel ``c`` sits exactly on fine voxel ``2 c`` and holds the binomial
-average ``(f[2c-1] + 2 f[2c] + f[2c+1]) / 4`` along every halved axis (the separable 3x3x3
-``[1, 2, 1] / 4`` filter, exact for linear data, zero response at the fine Nyquist frequency), with
-the fine grid mirrored about its first and last voxel (``f[-1] = f[1]``) outside. A halved axis of
+Vertex-centred (:mod:`.downsample`): coarse voxel ``c`` sits exactly on fine voxel ``2 c`` and
+holds the binomial average ``(f[2c-1] + 2 f[2c] + f[2c+1]) / 4`` along every halved axis (the
+separable 3x3x3 ``[1, 2, 1] / 4`` filter, exact for linear data, zero response at the fine Nyquist
+frequency), with the fine grid mirrored about its first and last voxel outside. A halved axis of
 ``n`` voxels gives ``n // 2 + 1`` coarse ones, so every level spans at least the whole box of
 level 0. Consequences:
 
@@ -50,15 +50,16 @@ from ..io._common import fmt_shape, require
 from ..io.ngff import multiscales_attributes, ngff_unit, to_ngff
 from ..io.omezarr import ATTRIBUTE, Level, MultiscaleVolume
 from ..volume import SUPPORTED_DTYPES, Volume
+from .downsample import binomial_halve, fine_range
 from .octree import GHOST, brick_counts
 from .tables import MINMAX, window_minmax, write_table
 
-__all__ = ["build_pyramid", "plan_levels", "downsample_axis", "DOWNSAMPLING"]
+__all__ = ["build_pyramid", "plan_levels", "DOWNSAMPLING"]
 
 #: NGFF ``multiscales[0]["type"]`` of pyramids built here.
 DOWNSAMPLING = "binomial-vertex-centred"
 _SHARD_VOXELS = 128  # target shard side: 2 MiB of uint8 per shard file
-_SLAB = 32  # output planes per downsampling step inside a task (bounds its temporaries)
+_SLAB = 32  # output planes per downsampling step inside a task (bounds the temporaries)
 
 
 # --------------------------------------------------------------------------- planning
@@ -88,44 +89,6 @@ def plan_levels(
                 factor[a] *= 2
         plan.append((tuple(shape), tuple(factor)))
     return plan  # type: ignore[return-value]
-
-
-def downsample_axis(block: np.ndarray, axis: int) -> np.ndarray:
-    """Halve ``block`` along ``axis`` with the ``[1, 2, 1] / 4`` filter.
-
-    ``block`` holds fine voxels ``2 o0 - 1 .. 2 o1 + 1`` (already mirrored where they fall outside
-    the level) and the result coarse voxels ``o0 .. o1``: ``block.shape[axis] = 2 (o1 - o0) + 3``.
-    """
-    n = (block.shape[axis] - 3) // 2 + 1
-
-    def part(start: int) -> np.ndarray:
-        index = [slice(None)] * block.ndim
-        index[axis] = slice(start, start + 2 * n - 1, 2)
-        return block[tuple(index)]
-
-    return 0.25 * part(0) + 0.5 * part(1) + 0.25 * part(2)
-
-
-def _mirror(index: np.ndarray, n: int) -> np.ndarray:
-    """Indices reflected about the first and last voxel (``-1 -> 1``, ``n -> n - 2``)."""
-    if n == 1:
-        return np.zeros_like(index)
-    period = 2 * (n - 1)
-    index = np.abs(index) % period
-    return np.where(index > n - 1, period - index, index)
-
-
-def _work_dtype(dtype: np.dtype) -> np.dtype:
-    """float32 is exact for the filter on 8- and 16-bit data; wider types need float64."""
-    return np.dtype(np.float32) if dtype.itemsize <= 2 or dtype == np.float32 else np.dtype(
-        np.float64)
-
-
-def _cast(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
-    if dtype.kind in "iu":
-        info = np.iinfo(dtype)
-        return np.clip(np.rint(values), info.min, info.max).astype(dtype)
-    return values.astype(dtype)
 
 
 # --------------------------------------------------------------------------- sources
@@ -225,34 +188,19 @@ def _copy_task(source: _Source, array: Any, lo: np.ndarray, hi: np.ndarray, bric
 def _downsample_task(fine: Level, halve: tuple[bool, bool, bool], shape: tuple[int, int, int],
                      array: Any, lo: np.ndarray, hi: np.ndarray,
                      brick: int) -> tuple[np.ndarray, np.ndarray]:
-    """Level L+1: compute one shard (plus the ghost ring its bricks' ranges need) from level L."""
+    """Level L+1: compute one shard (plus the ghost ring its bricks' ranges need) from level L,
+    a slab of planes at a time so the fine voxels held stay small."""
     out_shape = np.array(shape)
     ext_lo = np.maximum(lo - GHOST, 0)
     ext_hi = np.minimum(hi + GHOST + 1, out_shape)
-    dtype = fine.dtype
-    work = _work_dtype(dtype)
+    fine_shape = np.array(fine.shape)
     slabs = []
     for s0 in range(int(ext_lo[0]), int(ext_hi[0]), _SLAB):
-        s1 = min(s0 + _SLAB, int(ext_hi[0]))
         out_lo = np.array([s0, ext_lo[1], ext_lo[2]])
-        out_hi = np.array([s1, ext_hi[1], ext_hi[2]])
-        # Fine indices each output voxel needs, mirrored at the fine level's ends.
-        wanted = []
-        for a in range(3):
-            if halve[a]:
-                idx = np.arange(2 * out_lo[a] - 1, 2 * out_hi[a])
-            else:
-                idx = np.arange(out_lo[a], out_hi[a])
-            wanted.append(_mirror(idx, fine.shape[a]))
-        read_lo = np.array([w.min() for w in wanted])
-        read_hi = np.array([w.max() + 1 for w in wanted])
+        out_hi = np.array([min(s0 + _SLAB, int(ext_hi[0])), ext_hi[1], ext_hi[2]])
+        read_lo, read_hi = fine_range(out_lo, out_hi, halve, fine_shape)
         block = fine.read(read_lo, read_hi)
-        block = block[np.ix_(*(w - r for w, r in zip(wanted, read_lo, strict=True)))]
-        values = block.astype(work)
-        for a in range(3):
-            if halve[a]:
-                values = downsample_axis(values, a)
-        slabs.append(_cast(values, dtype))
+        slabs.append(binomial_halve(block, read_lo, fine_shape, halve, out_lo, out_hi - out_lo))
     out = np.concatenate(slabs, axis=0)
     core = tuple(slice(int(a), int(b)) for a, b in zip(lo - ext_lo, hi - ext_lo, strict=True))
     _write(array, lo, hi, out[core])
@@ -300,6 +248,7 @@ def build_pyramid(
     *,
     unit: str | None = None,
     name: str | None = None,
+    shard: int | None = None,
     workers: int | None = None,
     progress: bool = True,
 ) -> MultiscaleVolume:
@@ -324,6 +273,9 @@ def build_pyramid(
         the source's, when its header says.
     name : str, optional
         The image's name in the metadata (default: the store's file name).
+    shard : int, optional
+        Voxels per shard (file) side, a multiple of ``brick`` (default: about 128). One task
+        writes one shard: peak memory grows with its cube.
     workers : int, optional
         Threads (default: up to 4, at most the cores). Peak memory grows with it.
     progress : bool
@@ -363,7 +315,11 @@ def build_pyramid(
     if unit is not None and unit_name is None:
         raise ParameterError(f"unit {unit!r} is not a length unit (try millimeter, micrometer)")
     plan = plan_levels(src.shape, src.spacing, brick, levels)
-    shard = brick * max(1, _SHARD_VOXELS // brick)
+    if shard is None:
+        shard = brick * max(1, _SHARD_VOXELS // brick)
+    elif int(shard) != shard or shard < brick or shard % brick:
+        raise ParameterError(f"shard must be a multiple of brick={brick}, got {shard!r}")
+    shard = int(shard)
     workers = workers or max(1, min(4, os.cpu_count() or 1))
     import dask
 
@@ -424,7 +380,7 @@ def build_pyramid(
                 "description": "coarse voxel c = (f[2c-1] + 2 f[2c] + f[2c+1]) / 4 along every "
                                "halved axis, mirrored at the ends; voxel centres shared with "
                                "level 0 (translation unchanged)",
-                "method": "splinecast.multires.pyramid.downsample_axis",
+                "method": "splinecast.multires.downsample.binomial_halve",
             },
         )
         ours = dict(root.attrs.get(ATTRIBUTE, {}))

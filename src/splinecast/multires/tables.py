@@ -114,6 +114,8 @@ def window_minmax(
     bricks_lo = np.asarray(bricks_lo, dtype=np.int64)
     bricks_hi = np.asarray(bricks_hi, dtype=np.int64)
     shape = np.asarray(level_shape, dtype=np.int64)
+    if np.any(bricks_hi <= bricks_lo):  # a region holding only the last voxel of a level
+        return np.zeros((*np.maximum(bricks_hi - bricks_lo, 0), 2))
     # Separable: reduce each axis over every brick's window in turn (windows overlap by 2 ghost
     # layers, so a plain reshape does not do).
     mins, maxs = lo_data, hi_data
