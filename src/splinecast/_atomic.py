@@ -75,7 +75,14 @@ def atomic_directory(target: Path, overwrite: bool = False) -> Iterator[Path]:
     temp = target.parent / f".{target.name}.{secrets.token_hex(4)}.part"
     try:
         temp.mkdir()
+    except OSError as exc:
+        raise ParameterError(f"{target}: cannot write: {exc.strerror or exc}") from exc
+    try:
         yield temp
+    except BaseException:
+        _remove_tree(temp)
+        raise
+    try:
         if target.exists():
             aside = target.parent / f".{target.name}.{secrets.token_hex(4)}.old"
             os.replace(target, aside)
@@ -86,10 +93,10 @@ def atomic_directory(target: Path, overwrite: bool = False) -> Iterator[Path]:
     except OSError as exc:
         _remove_tree(temp)
         raise ParameterError(f"{target}: cannot write: {exc.strerror or exc}") from exc
-    except BaseException:
-        _remove_tree(temp)
-        raise
 
 
 def _remove_tree(path: Path) -> None:
-    shutil.rmtree(path, ignore_errors=True)  # best effort, like _remove
+    if path.is_dir():
+        shutil.rmtree(path, ignore_errors=True)  # best effort, like _remove
+    else:
+        _remove([path])

@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_directory
-from ..errors import ParameterError
+from ..errors import ParameterError, ReadError
 from ..io._common import fmt_shape, require
 from ..io.ngff import multiscales_attributes, ngff_unit, to_ngff
 from ..io.omezarr import ATTRIBUTE, Level, MultiscaleVolume
@@ -107,7 +107,11 @@ class _Source:
 
 def _from_array(data: Any, label: str, **kw: Any) -> _Source:
     def read(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        return np.array(data[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]])
+        try:
+            return np.array(data[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]])
+        except OSError as exc:  # a memory-mapped file that shrank, a disk error
+            raise ReadError(f"{label}: cannot read voxels {lo.tolist()}..{hi.tolist()}: "
+                            f"{exc}") from None
 
     return _Source(tuple(int(n) for n in data.shape), data.dtype, read, label, **kw)
 
