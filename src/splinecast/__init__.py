@@ -28,9 +28,27 @@ from .volume import Volume
 
 __version__ = "0.1.0"
 
+#: Names loaded on first use, so that ``import splinecast`` never imports zarr or dask.
+_LAZY = {
+    "build_pyramid": ("splinecast.multires.pyramid", "build_pyramid"),
+    "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
+    "multires": ("splinecast.multires", None),
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        module, attribute = _LAZY[name]
+        loaded = importlib.import_module(module)
+        return loaded if attribute is None else getattr(loaded, attribute)
+    raise AttributeError(f"module 'splinecast' has no attribute {name!r}")
+
 __all__ = [
     "Camera",
     "MODELS",
+    "MultiscaleVolume",
     "DVRSettings",
     "DataError",
     "Frame",
@@ -42,6 +60,7 @@ __all__ = [
     "SurfaceEffects",
     "TransferFunction",
     "Volume",
+    "build_pyramid",
     "check_iso",
     "demo",
     "preintegrate",
