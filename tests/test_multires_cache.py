@@ -61,6 +61,10 @@ def test_octree_bricks_nest_and_windows_have_ghosts(sphere):
             np.testing.assert_array_equal(klo.min(axis=0), lo[0])
             np.testing.assert_array_equal(khi.max(axis=0), hi[0])
             assert _boxes_volume(klo, khi) == pytest.approx(_boxes_volume(lo, hi))
+    cut = select_cut(octree, _camera(sc.read(path)), lod=2.0)
+    for n in range(len(cut)):  # the cut's per-level boxes are its level-0 boxes over 2^level
+        np.testing.assert_allclose(cut.level_lo[n] * 2 ** cut.keys[n, 0], cut.box_lo[n])
+        np.testing.assert_allclose(cut.level_hi[n] * 2 ** cut.keys[n, 0], cut.box_hi[n])
     first, stop = octree.window(1, np.array([[1, 1, 1]]))
     np.testing.assert_array_equal(first[0], [B - GHOST] * 3)
     np.testing.assert_array_equal(stop[0] - first[0], [B + 1 + 2 * GHOST] * 3)

@@ -57,6 +57,8 @@ class Cut:
         part of the volume without overlap).
     world_lo, world_hi : ndarray (n, 3)
         The same boxes in world coordinates.
+    level_lo, level_hi : ndarray (n, 3)
+        The same boxes in the index space of each brick's own level.
     nbytes : int
         Bytes of the cut's bricks.
     requests : list of key
@@ -75,6 +77,8 @@ class Cut:
     box_hi: np.ndarray
     world_lo: np.ndarray
     world_hi: np.ndarray
+    level_lo: np.ndarray
+    level_hi: np.ndarray
     nbytes: int
     requests: list[Key] = field(default_factory=list)
     prefetch: list[Key] = field(default_factory=list)
@@ -269,16 +273,19 @@ def _assemble(octree: BrickOctree, levels: list[_Level], value_filter: ValueFilt
         prio.append(lv.priority[take])
     key_arr = np.concatenate(keys).astype(np.int64) if keys else np.zeros((0, 4), np.int64)
     priority = np.concatenate(prio) if prio else np.zeros(0)
-    box_lo = np.zeros((len(key_arr), 3))
-    box_hi = np.zeros((len(key_arr), 3))
+    box_lo, box_hi = np.zeros((len(key_arr), 3)), np.zeros((len(key_arr), 3))
+    level_lo, level_hi = np.zeros((len(key_arr), 3)), np.zeros((len(key_arr), 3))
     nbytes = 0
     for level in np.unique(key_arr[:, 0]):
         rows = key_arr[:, 0] == level
         box_lo[rows], box_hi[rows] = octree.box(int(level), key_arr[rows, 1:])
+        scale, offset = octree.level_map(int(level))
+        level_lo[rows] = box_lo[rows] * scale + offset
+        level_hi[rows] = box_hi[rows] * scale + offset
         nbytes += int(octree.brick_bytes(int(level), key_arr[rows, 1:]).sum())
     volume = octree.volume
     cut = Cut(key_arr, priority, box_lo, box_hi, volume.index_to_world(box_lo),
-              volume.index_to_world(box_hi), nbytes, limited=limited)
+              volume.index_to_world(box_hi), level_lo, level_hi, nbytes, limited=limited)
 
     # What the cache must keep, and what to read, coarse first.
     want: dict[Key, float] = {}

@@ -17,7 +17,6 @@ a finite voxel has ``(+inf, -inf)``, an empty range.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -131,8 +130,3 @@ def window_minmax(
         mins = np.concatenate(parts_min, axis=axis)
         maxs = np.concatenate(parts_max, axis=axis)
     return np.stack([mins.astype(np.float64), maxs.astype(np.float64)], axis=-1)
-
-
-def table_path(root: Path, name: str, level: int) -> Path:
-    """Folder of a stored table array (for tests and tools that inspect a store)."""
-    return root / TABLES_GROUP / name / str(level)
