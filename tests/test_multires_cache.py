@@ -330,3 +330,43 @@ def test_budget_below_the_coarsest_level_is_refused(sphere):
     data, path = sphere
     with pytest.raises(sc.ParameterError, match="smaller than the coarsest level"):
         BrickCache(sc.read(path), 1000)
+
+
+def test_store_without_tables_learns_ranges_and_covers_shifted_levels(sphere, tmp_path):
+    """An ome-zarr-py-style store (no tables, coarse voxels half a fine voxel off): unknown
+    ranges are read, learnt, and then prune; every brick's window covers its box plus ghosts."""
+    import zarr
+
+    data, _ = sphere
+    group = zarr.open_group(str(tmp_path / "foreign.zarr"), mode="w")
+    zyx = data.transpose(2, 1, 0)
+    datasets = []
+    for n, level in enumerate([zyx, zyx[::2, ::2, ::2][: zyx.shape[0] // 2, : zyx.shape[1] // 2,
+                                                        : zyx.shape[2] // 2]]):
+        array = group.create_array(f"s{n}", shape=level.shape, dtype=level.dtype,
+                                   chunks=(16, 16, 16))
+        array[...] = level
+        scale = [zyx.shape[a] / level.shape[a] for a in range(3)]
+        datasets.append({"path": f"s{n}", "coordinateTransformations": [
+            {"type": "scale", "scale": scale},
+            {"type": "translation", "translation": [s / 2 - 0.5 for s in scale]}]})
+    group.attrs["ome"] = {"version": "0.5", "multiscales": [{
+        "axes": [{"name": a, "type": "space"} for a in "zyx"], "datasets": datasets}]}
+    mv = sc.read(tmp_path / "foreign.zarr")
+    with BrickStream(mv, "64MiB", lod=1e-9, loads_per_frame=1000, brick=B) as stream:
+        assert np.isnan(stream.octree.ranges[0]).all()
+        cam = _camera(mv)
+        for _ in range(40):
+            fb = stream.frame(cam, ValueFilter.iso(RADIUS), timeout=5)
+            if fb.complete and fb.stats["requested"] == 0:
+                break
+        fb = stream.frame(cam, ValueFilter.iso(RADIUS), timeout=5)
+        assert fb.complete and not np.isnan(stream.octree.ranges[0]).any()
+        assert fb.stats["cut_bricks"] < np.prod(stream.octree.counts[0])  # empty ones pruned
+        for item in fb.items:
+            brick, n = item.brick, item.n
+            assert brick.data.min() <= RADIUS <= brick.data.max()
+            first = np.array(brick.first)
+            last = first + np.array(brick.data.shape) - 1
+            assert np.all(first <= np.floor(fb.cut.level_lo[n] + 1e-9) - GHOST)
+            assert np.all(last >= np.ceil(fb.cut.level_hi[n] - 1e-9) + GHOST)

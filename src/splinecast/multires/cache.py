@@ -146,7 +146,7 @@ class BrickCache:
         self._stop = False
         self._thread: threading.Thread | None = None
         self._pin_coarsest()
-        self._apply_ranges()
+        self.update_ranges()
         if start:
             self.start()
 
@@ -233,7 +233,9 @@ class BrickCache:
         with self._cond:
             self._ranges.append((key, lo, hi))
 
-    def _apply_ranges(self) -> None:
+    def update_ranges(self) -> None:
+        """Enter the value ranges learnt from bricks read since the last call into the octree
+        (stores without tables); call it from the thread that selects cuts, before selecting."""
         with self._cond:
             updates, self._ranges = self._ranges, []
         for key, lo, hi in updates:
@@ -328,7 +330,7 @@ class BrickCache:
                 prefetch: Iterable[Key] = ()) -> None:
         """Replace what the loader reads: ``keys`` in this order, then ``prefetch``; ``keep``
         (plus ``keys``) must not be evicted for it. Bricks resident or unavailable are skipped."""
-        self._apply_ranges()
+        self.update_ranges()
         keys = list(keys)
         with self._cond:
             self._keep = set(keep) | set(keys)

@@ -62,15 +62,17 @@ class BrickStream:
         prefetched bricks.
     prefetch : int
         Bricks to prefetch per frame when the loader is idle.
+    brick : int, optional
+        Cells per brick (default: the pyramid's, 32 for stores splinecast did not write).
     """
 
     def __init__(self, volume: MultiscaleVolume, budget: Any = "1GiB", *, lod: float = 1.0,
                  loads_per_frame: int = 64, border: str = "edge", cut_fraction: float = 0.8,
-                 prefetch: int = 64) -> None:
+                 prefetch: int = 64, brick: int | None = None) -> None:
         if not 0 < cut_fraction <= 1:
             raise ParameterError(f"cut_fraction must be in (0, 1], got {cut_fraction!r}")
         self.volume = volume
-        self.octree = BrickOctree(volume)
+        self.octree = BrickOctree(volume, brick=brick)
         self.cache = BrickCache(volume, budget, octree=self.octree, border=border,
                                 loads_per_frame=loads_per_frame)
         self.lod = lod
@@ -82,6 +84,7 @@ class BrickStream:
               timeout: float | None = None) -> FrameBricks:
         """Choose, load (within the frame's budget) and resolve the bricks for ``camera``."""
         t0 = time.perf_counter()
+        self.cache.update_ranges()
         budget = max(int(self.cache.budget * self.cut_fraction), self.cache.pinned_bytes)
         cut = select_cut(self.octree, camera, self.lod if lod is None else lod, budget=budget,
                          value_filter=value_filter, resident=self.cache.is_resident,
