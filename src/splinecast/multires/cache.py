@@ -292,7 +292,14 @@ class BrickCache:
                     self._cond.wait()
                 if self._stop:
                     return
-                batch = self._next_batch()
+                try:
+                    batch = self._next_batch()
+                except Exception as exc:  # a bug must not stop the loading for good
+                    self._warnings.append(f"brick loader: {type(exc).__name__}: {exc}")
+                    self._queue.clear()
+                    self._needed.clear()
+                    self._cond.notify_all()
+                    continue
                 self._inflight.update(batch)
             if not batch:
                 continue
