@@ -29,9 +29,30 @@ from .volume import Volume
 
 __version__ = "0.1.0"
 
+#: Names loaded on first use, so that ``import splinecast`` never imports zarr, dask or the
+#: viewer's server.
+_LAZY = {
+    "build_pyramid": ("splinecast.multires.pyramid", "build_pyramid"),
+    "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
+    "multires": ("splinecast.multires", None),
+    "view": ("splinecast.viewer", "view"),
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        module, attribute = _LAZY[name]
+        loaded = importlib.import_module(module)
+        return loaded if attribute is None else getattr(loaded, attribute)
+    raise AttributeError(f"module 'splinecast' has no attribute {name!r}")
+
+
 __all__ = [
     "Camera",
     "MODELS",
+    "MultiscaleVolume",
     "DVRSettings",
     "DataError",
     "Frame",
@@ -46,6 +67,7 @@ __all__ = [
     "auto_iso",
     "auto_transfer_function",
     "auto_window",
+    "build_pyramid",
     "check_iso",
     "content_box",
     "demo",
@@ -56,11 +78,3 @@ __all__ = [
     "write",
 ]
 
-
-def __getattr__(name: str):
-    # sc.view is imported on first use, so `import splinecast` never loads the viewer.
-    if name == "view":
-        from .viewer import view
-
-        return view
-    raise AttributeError(f"module 'splinecast' has no attribute {name!r}")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from .errors import ParameterError
 
-__all__ = ["atomic_outputs", "atomic_folder"]
+__all__ = ["atomic_outputs", "atomic_folder", "atomic_directory"]
 
 
 @contextmanager
@@ -82,3 +82,52 @@ def _remove(paths: list[Path]) -> None:
             path.unlink(missing_ok=True)
         except OSError:
             pass  # best effort: the original error is the one worth reporting
+
+
+@contextmanager
+def atomic_directory(target: Path, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary folder beside ``target`` and rename it to ``target`` on success.
+
+    For outputs that are folders (a Zarr store). A reader never sees a half-written folder under
+    the final name: while the body runs, only ``.NAME.XXXXXXXX.part`` exists; if the body raises,
+    that folder is deleted. With ``overwrite``, an existing ``target`` is first renamed aside and
+    deleted after the new folder took its place.
+
+    Raises
+    ------
+    ParameterError
+        When the parent folder does not exist, ``target`` exists and ``overwrite`` is false, or
+        the folder cannot be created or renamed.
+    """
+    if not target.parent.is_dir():
+        raise ParameterError(f"{target}: folder {target.parent} does not exist")
+    if target.exists() and not overwrite:
+        raise ParameterError(f"{target}: already exists (pass overwrite=True or --overwrite)")
+    temp = target.parent / f".{target.name}.{secrets.token_hex(4)}.part"
+    try:
+        temp.mkdir()
+    except OSError as exc:
+        raise ParameterError(f"{target}: cannot write: {exc.strerror or exc}") from exc
+    try:
+        yield temp
+    except BaseException:
+        _remove_tree(temp)
+        raise
+    try:
+        if target.exists():
+            aside = target.parent / f".{target.name}.{secrets.token_hex(4)}.old"
+            os.replace(target, aside)
+            os.replace(temp, target)
+            _remove_tree(aside)
+        else:
+            os.replace(temp, target)
+    except OSError as exc:
+        _remove_tree(temp)
+        raise ParameterError(f"{target}: cannot write: {exc.strerror or exc}") from exc
+
+
+def _remove_tree(path: Path) -> None:
+    if path.is_dir():
+        shutil.rmtree(path, ignore_errors=True)  # best effort, like _remove
+    else:
+        _remove([path])

@@ -23,7 +23,7 @@ import numpy as np
 
 from .errors import DataError, ParameterError
 
-__all__ = ["Volume", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported",
+__all__ = ["Volume", "GridGeometry", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported",
            "OrientationWarning"]
 
 #: dtypes the renderers use as they are (no copy).
@@ -128,7 +128,50 @@ def _as_triple(value: Any, name: str) -> tuple[float, float, float]:
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
-class Volume:
+class GridGeometry:
+    """World placement of a regular grid: what :class:`Volume` and a lazy multiscale volume share.
+
+    Subclasses set ``shape`` (voxels along x, y, z), ``spacing`` and ``origin`` (x, y, z, world
+    units); everything here follows from those three by the convention of this module.
+    """
+
+    shape: tuple[int, int, int]
+    spacing: tuple[float, float, float]
+    origin: tuple[float, float, float]
+
+    @property
+    def extent(self) -> tuple[float, float, float]:
+        """World size of the box spanned by the voxel centres, ``(shape - 1) * spacing``."""
+        return tuple(  # type: ignore[return-value]
+            (n - 1) * s for n, s in zip(self.shape, self.spacing, strict=True)
+        )
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space corners ``(lo, hi)`` of the reconstruction box."""
+        lo = np.array(self.origin)
+        return lo, lo + np.array(self.extent)
+
+    @property
+    def center(self) -> np.ndarray:
+        """World position of the centre of the reconstruction box."""
+        lo, hi = self.bounds
+        return 0.5 * (lo + hi)
+
+    def index_to_world(self, ijk: Any) -> np.ndarray:
+        """Map (fractional) voxel indices, shape (..., 3), to world positions."""
+        return np.asarray(self.origin) + np.asarray(ijk, dtype=np.float64) * np.asarray(
+            self.spacing
+        )
+
+    def world_to_index(self, xyz: Any) -> np.ndarray:
+        """Map world positions, shape (..., 3), to fractional voxel indices."""
+        return (np.asarray(xyz, dtype=np.float64) - np.asarray(self.origin)) / np.asarray(
+            self.spacing
+        )
+
+
+class Volume(GridGeometry):
     """A scalar field sampled on a regular 3D grid.
 
     Parameters
@@ -295,37 +338,6 @@ class Volume:
     def name(self) -> str:
         """A human-readable name for messages (the file name when read from disk)."""
         return str(self.metadata.get("name", "volume"))
-
-    @property
-    def extent(self) -> tuple[float, float, float]:
-        """World size of the box spanned by the voxel centres, ``(shape - 1) * spacing``."""
-        return tuple(  # type: ignore[return-value]
-            (n - 1) * s for n, s in zip(self.shape, self.spacing, strict=True)
-        )
-
-    @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """World-space corners ``(lo, hi)`` of the reconstruction box."""
-        lo = np.array(self.origin)
-        return lo, lo + np.array(self.extent)
-
-    @property
-    def center(self) -> np.ndarray:
-        """World position of the centre of the reconstruction box."""
-        lo, hi = self.bounds
-        return 0.5 * (lo + hi)
-
-    def index_to_world(self, ijk: Any) -> np.ndarray:
-        """Map (fractional) voxel indices, shape (..., 3), to world positions."""
-        return np.asarray(self.origin) + np.asarray(ijk, dtype=np.float64) * np.asarray(
-            self.spacing
-        )
-
-    def world_to_index(self, xyz: Any) -> np.ndarray:
-        """Map world positions, shape (..., 3), to fractional voxel indices."""
-        return (np.asarray(xyz, dtype=np.float64) - np.asarray(self.origin)) / np.asarray(
-            self.spacing
-        )
 
     # ------------------------------------------------------------------ values
     @property

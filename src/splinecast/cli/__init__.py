@@ -13,7 +13,7 @@ import sys
 
 import splinecast as sc
 
-from . import info, movie, render, view
+from . import info, movie, pyramid, render, view
 from ._common import Parser
 
 __all__ = ["main", "COMMANDS"]
@@ -24,6 +24,7 @@ COMMANDS = {
     "render": render,
     "view": view,
     "movie": movie,
+    "pyramid": pyramid,
 }
 
 

@@ -1,4 +1,5 @@
-"""``splinecast info FILE``: shape, dtype, spacing, origin, value range and percentiles."""
+"""``splinecast info FILE``: shape, dtype, spacing, origin, value range and percentiles; the levels
+of a multiscale (Zarr) volume."""
 
 from __future__ import annotations
 
@@ -17,13 +18,15 @@ _EXACT_STATS_LIMIT = 64_000_000  # voxels; above this, percentiles come from a s
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     info = sub.add_parser("info", help="describe a volume file: shape, dtype, spacing, values")
-    info.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
+    info.add_argument("file", help="volume file, DICOM folder, Zarr folder or demo:NAME?size=N")
     info.add_argument("--array", help="data array of a VTK file holding several")
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the description of ``args.file``."""
     vol = sc.read(args.file, array=args.array)
+    if not isinstance(vol, sc.Volume):
+        return _multiscale(vol)
     data = vol.data
     sample = data
     note = ""
@@ -47,4 +50,32 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {p:>5g}%  {v:g}")
     if "default_iso" in vol.metadata:
         print(f"default iso: {vol.metadata['default_iso']:g}")
+    return 0
+
+
+def _multiscale(mv) -> int:
+    """Describe a lazy multiscale volume from its metadata and stored tables (no voxel read,
+    except the coarsest level when the store has no value range)."""
+    from splinecast.multires.budget import format_bytes
+
+    lo, hi = mv.value_range
+    exact = "" if mv.metadata.get("value_range_exact") else " (estimated from the coarsest level)"
+    print(f"file:      {mv.metadata.get('source', mv.name)}")
+    print(f"format:    {mv.metadata.get('format')}")
+    print(f"shape:     {' x '.join(str(n) for n in mv.shape)} (x, y, z)")
+    print(f"dtype:     {mv.dtype}")
+    unit = f" {mv.metadata['units']}" if mv.metadata.get("units") else ""
+    print(f"spacing:   {', '.join(f'{s:g}' for s in mv.spacing)}{unit}")
+    print(f"origin:    {', '.join(f'{s:g}' for s in mv.origin)}")
+    print(f"extent:    {', '.join(f'{s:g}' for s in mv.extent)}")
+    print(f"range:     {lo:g} .. {hi:g}{exact}")
+    if mv.brick:
+        print(f"bricks:    {mv.brick}^3 cells, tables: {', '.join(mv.tables()) or 'none'}")
+    print(f"levels:    {len(mv.levels)}")
+    print(f"  {'level':>5}  {'shape (x, y, z)':<20} {'spacing':<24} {'chunks':<12} size")
+    for lv in mv.levels:
+        shape = "x".join(str(n) for n in lv.shape)
+        spacing = ", ".join(f"{s:g}" for s in lv.spacing)
+        chunks = "x".join(str(n) for n in lv.chunks)
+        print(f"  {lv.index:>5}  {shape:<20} {spacing:<24} {chunks:<12} {format_bytes(lv.nbytes)}")
     return 0

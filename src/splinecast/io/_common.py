@@ -16,7 +16,10 @@ from ..volume import CONVERTED_DTYPES, SUPPORTED_DTYPES, Volume, exact_supported
 __all__ = ["require", "finish_volume", "fmt_shape", "native", "check_dtype", "one_line"]
 
 #: pip name of each optional import, for the install hint.
-_PACKAGES = {"nrrd": "pynrrd", "nibabel": "nibabel", "pydicom": "pydicom", "tifffile": "tifffile"}
+_PACKAGES = {"nrrd": "pynrrd", "nibabel": "nibabel", "pydicom": "pydicom", "tifffile": "tifffile",
+             "zarr": "zarr", "dask.array": "dask"}
+#: The extra of splinecast that installs a package (default: io).
+_EXTRAS = {"zarr": "multires", "dask.array": "multires"}
 
 
 def require(
@@ -35,7 +38,8 @@ def require(
     except ImportError:
         package = _PACKAGES.get(module, module)
         name = Path(path).name or str(path)
-        raise error(f"{action} {name} needs {package}: pip install 'splinecast[io]'") from None
+        extra = _EXTRAS.get(module, "io")
+        raise error(f"{action} {name} needs {package}: pip install 'splinecast[{extra}]'") from None
 
 
 def one_line(exc: BaseException) -> str:

@@ -7,10 +7,14 @@ import os
 import zlib
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import ParameterError, ReadError
 from ..volume import SUPPORTED_DTYPES, Volume
 from .sidecar import find_sidecar
+
+if TYPE_CHECKING:
+    from .omezarr import MultiscaleVolume
 
 __all__ = ["read", "write", "sniff"]
 
@@ -36,7 +40,7 @@ _EXTENSIONS = {
 _SIGNED = {"npy", "npz", "nrrd", "tiff", "nifti", "vti", "vtk"}
 _SUPPORTED_READ = (
     ".npy .npz .mhd .mha .nrrd .nhdr .nii .nii.gz .tif .tiff .dcm .vti .vtk, raw + .json, "
-    "a DICOM folder"
+    "a DICOM folder, an OME-Zarr or Zarr folder"
 )
 _NIFTI1_MAGIC = (b"n+1\0", b"ni1\0")
 _NIFTI2_MAGIC = (b"n+2\0", b"ni2\0")
@@ -130,28 +134,31 @@ def _reader(kind: str) -> Callable[[Path], Volume]:
     return read_sidecar
 
 
-def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume:
-    """Read a volume from a file, a DICOM folder or a ``demo:`` name.
+def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume | MultiscaleVolume:
+    """Read a volume from a file, a DICOM folder, a Zarr folder or a ``demo:`` name.
 
     Parameters
     ----------
     path : str or path-like
         A file (``.npy``, ``.npz``, ``.mhd``/``.mha``, ``.nrrd``/``.nhdr``, ``.nii``/``.nii.gz``,
         ``.tif``/``.tiff``, raw data with a ``.json`` sidecar, a ``.dcm`` slice), a folder holding
-        a DICOM series, or ``"demo:<name>?size=N&..."`` for a synthetic volume (see
-        :func:`splinecast.io.demo`). The format is recognised by the file's signature when it has
-        one, by its extension otherwise. VTK image data: ``.vti`` (XML, any encoding) and legacy
-        ``.vtk`` structured points (needs ``pip install 'splinecast[vtk]'``).
+        a DICOM series, an OME-Zarr image or Zarr array folder (``x.zarr``), or
+        ``"demo:<name>?size=N&..."`` for a synthetic volume (see :func:`splinecast.io.demo`). The
+        format is recognised by the file's signature when it has one, by its extension otherwise.
+        VTK image data: ``.vti`` (XML, any encoding) and legacy ``.vtk`` structured points (needs
+        ``pip install 'splinecast[vtk]'``).
     array : str, optional
         The point-data array to read from a VTK file that holds several (the error message of a
         read without it lists their names). Other formats hold one array and refuse it.
 
     Returns
     -------
-    Volume
-        With ``metadata["name"]`` (the file name or the ``demo:`` string), ``metadata["source"]``
-        (the full path) and ``metadata["format"]``. Uncompressed npy, raw, MetaImage, NRRD, NIfTI
-        and TIFF data stay memory-mapped; big-endian data is copied once into native order.
+    Volume or MultiscaleVolume
+        A Zarr folder gives a lazy :class:`~splinecast.io.omezarr.MultiscaleVolume` (metadata
+        read, voxels not); everything else a :class:`Volume`. Both have ``metadata["name"]`` (the
+        file name or the ``demo:`` string), ``metadata["source"]`` (the full path) and
+        ``metadata["format"]``. Uncompressed npy, raw, MetaImage, NRRD, NIfTI and TIFF data stay
+        memory-mapped; big-endian data is copied once into native order.
 
     Raises
     ------
@@ -180,6 +187,10 @@ def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume:
     if path.is_dir():
         if array is not None:
             raise ParameterError(f"array={array!r} applies to VTK files, not to the folder {path}")
+        from .omezarr import is_zarr, open_zarr
+
+        if is_zarr(path) or path.suffix.lower() == ".zarr":
+            return open_zarr(path)
         from .dicom import read_dicom_series
 
         return read_dicom_series(path)

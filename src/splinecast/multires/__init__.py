@@ -1,1 +1,37 @@
-"""Multiresolution: pyramids, brick octrees, cuts and spline wavelets (see DESIGN.md)."""
+"""Multiresolution: OME-Zarr brick pyramids, the brick octree, level of detail, the brick cache
+and its loader thread, cut selection, spline wavelets (see DESIGN.md).
+
+Nothing here is imported by ``import splinecast``; the names below load their module (and
+zarr/dask) on first use::
+
+    from splinecast.multires import build_pyramid, BrickStream
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: Public name -> module that defines it.
+_EXPORTS = {
+    "build_pyramid": "pyramid",
+    "BrickOctree": "octree",
+    "GHOST": "octree",
+    "BrickCache": "cache",
+    "Brick": "cache",
+    "BrickUnavailableWarning": "cache",
+    "select_cut": "lod",
+    "Cut": "lod",
+    "ValueFilter": "relevance",
+    "BrickStream": "stream",
+    "write_table": "tables",
+    "parse_bytes": "budget",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,449 @@
+"""The RAM brick cache and its loader thread.
+
+:class:`BrickCache` holds bricks (arrays with ghost layers, see :mod:`.octree`) within a hard
+byte budget. A background thread reads the bricks it is asked for, in the order given, from the
+store; the bricks of the coarsest level are read when the cache opens and never leave, so every
+frame can show the whole volume at some resolution. A frame asks for its cut
+(:meth:`BrickCache.request`), waits for at most its load budget (:meth:`BrickCache.wait`), and
+draws every brick that is not resident yet from its finest resident ancestor
+(:meth:`BrickCache.resolve`). Rendering the same view again converges to the complete cut.
+
+Budget accounting: the bytes of the resident brick arrays never exceed ``budget`` (checked before
+each insertion; ``peak_bytes`` records the maximum). A brick that does not fit without evicting
+what the current view needs is not loaded (``dropped``). Transient buffers of one read (the union
+window of up to 8 sibling bricks and its padded copies) are the fixed overhead on top of the
+budget; ``benchmarks/bench_multires.py`` measures it.
+
+Faults: a read that fails (missing or corrupt chunk, store deleted, I/O error) marks the brick
+unavailable; the next call from the rendering thread issues a :class:`BrickUnavailableWarning`
+naming the chunk, and the brick keeps being drawn from its ancestor. The store is opened read-only:
+nothing is ever written into it.
+"""
+
+from __future__ import annotations
+
+import threading
+import warnings
+from collections import OrderedDict
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError, ReadError
+from ..io.omezarr import MultiscaleVolume
+from .budget import format_bytes, parse_bytes
+from .lod import Cut
+from .octree import BrickOctree
+
+__all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS"]
+
+Key = tuple[int, int, int, int]
+#: Ghost filling beyond a level's ends, as the models pad a whole volume: ``"edge"`` repeats the
+#: last voxel (trilinear, qss, s31), ``"reflect"`` mirrors about it (the B-spline models).
+BORDERS = ("edge", "reflect")
+
+
+class BrickUnavailableWarning(UserWarning):
+    """A brick could not be read; a coarser level is drawn in its place."""
+
+
+@dataclass(frozen=True, eq=False)
+class Brick:
+    """A brick's voxels with ghost layers, and where they sit.
+
+    Attributes
+    ----------
+    key : (level, i, j, k)
+    data : ndarray (nx, ny, nz)
+        C-contiguous, the store's dtype, ``data[u, v, w]`` along x, y, z. Voxels outside the
+        level are filled by the cache's border rule.
+    first : (3,) int
+        Level index of ``data[0, 0, 0]`` (negative at the low border: ghosts).
+    origin, spacing : (3,) float
+        World position of ``data[0, 0, 0]`` and world distance between its voxels: voxel ``u``
+        is at ``origin + u * spacing``.
+    offset, scale : (3,) float
+        The same in level-0 (volume) index units: ``x0 = offset + u * scale``, so the brick is
+        the grid ``data`` with index offset ``offset`` and scale ``scale`` in the volume.
+    """
+
+    key: Key
+    data: np.ndarray
+    first: tuple[int, int, int]
+    origin: tuple[float, float, float]
+    spacing: tuple[float, float, float]
+    offset: tuple[float, float, float]
+    scale: tuple[float, float, float]
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.data.nbytes)
+
+
+@dataclass(frozen=True)
+class DrawItem:
+    """What to draw for brick ``n`` of a cut: its own brick, or an ancestor substituted for it."""
+
+    n: int
+    brick: Brick
+    substituted: bool
+
+
+class BrickCache:
+    """Resident bricks of a multiscale volume within a byte budget, filled by a loader thread.
+
+    Parameters
+    ----------
+    volume : MultiscaleVolume
+    budget : int or str
+        Hard limit for the bytes of resident bricks (``"2GiB"``, ``"512MB"``, bytes).
+    octree : BrickOctree, optional
+        Default: ``BrickOctree(volume)``.
+    border : {"edge", "reflect"}
+        How ghosts beyond a level's ends are filled (the model's boundary rule).
+    loads_per_frame : int
+        Load budget M: :meth:`wait` returns after this many bricks were read in the frame.
+    start : bool
+        Start the loader thread now (else call :meth:`start`).
+
+    Raises
+    ------
+    ParameterError
+        Bad budget or border, or a budget smaller than the coarsest level's bricks (checked
+        before reading them).
+    ReadError
+        The coarsest level cannot be read.
+    """
+
+    def __init__(self, volume: MultiscaleVolume, budget: Any = "1GiB", *,
+                 octree: BrickOctree | None = None, border: str = "edge",
+                 loads_per_frame: int = 64, start: bool = True) -> None:
+        if border not in BORDERS:
+            raise ParameterError(f"border must be one of {', '.join(BORDERS)}, got {border!r}")
+        if not isinstance(loads_per_frame, int) or loads_per_frame < 1:
+            raise ParameterError(f"loads_per_frame must be a positive integer, "
+                                 f"got {loads_per_frame!r}")
+        self.volume = volume
+        self.octree = octree or BrickOctree(volume)
+        self.budget = parse_bytes(budget, "budget")
+        self.border = border
+        self.loads_per_frame = loads_per_frame
+        self._cond = threading.Condition()
+        self._bricks: OrderedDict[Key, Brick] = OrderedDict()  # least recently used first
+        self._bytes = 0
+        self.peak_bytes = 0
+        self._pinned: set[Key] = set()
+        self._keep: set[Key] = set()
+        self._queue: list[Key] = []
+        self._needed: set[Key] = set()
+        self._inflight: set[Key] = set()
+        self._failed: dict[Key, str] = {}
+        self._warnings: list[str] = []
+        self._ranges: list[tuple[Key, float, float]] = []
+        self._counts = dict(loaded=0, loaded_frame=0, evicted=0, dropped=0, substituted=0)
+        self._stop = False
+        self._thread: threading.Thread | None = None
+        self._pin_coarsest()
+        self.update_ranges()
+        if start:
+            self.start()
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        """Start the loader thread (once)."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="splinecast-brick-loader",
+                                            daemon=True)
+            self._thread.start()
+
+    def close(self, timeout: float = 10.0) -> None:
+        """Stop the loader thread and wait for it (a read in progress finishes first)."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def __enter__(self) -> BrickCache:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ reading
+    def _pin_coarsest(self) -> None:
+        roots = self.octree.roots()
+        need = int(self.octree.brick_bytes(self.octree.coarsest, roots).sum())
+        if need > self.budget:
+            raise ParameterError(
+                f"budget {format_bytes(self.budget)} is smaller than the coarsest level of "
+                f"{self.volume.path} ({format_bytes(need)}), which stays resident"
+            )
+        keys = [(self.octree.coarsest, *map(int, idx)) for idx in roots]
+        for key, brick in zip(keys, self._read(keys), strict=True):
+            self._insert(brick)
+            self._pinned.add(key)
+
+    def _read(self, keys: list[Key]) -> list[Brick]:
+        """Read bricks of one level with one store read (their union window); no lock held."""
+        level_index = keys[0][0]
+        level = self.volume.level(level_index)
+        index = np.array([k[1:] for k in keys], dtype=np.int64)
+        first, stop = self.octree.window(level_index, index)
+        shape = np.array(level.shape)
+        have_lo = np.clip(first.min(axis=0), 0, shape - 1)
+        have_hi = np.clip(stop.max(axis=0), have_lo + 1, shape)
+        block = level.read(have_lo, have_hi)
+        scale, offset = self.octree.level_map(level_index)
+        out = []
+        for n, key in enumerate(keys):
+            lo = np.clip(first[n], 0, shape - 1)
+            hi = np.clip(stop[n], lo + 1, shape)
+            part = block[tuple(slice(a, b) for a, b in zip(lo - have_lo, hi - have_lo,
+                                                            strict=True))]
+            pads = [(int(a), int(b)) for a, b in zip(lo - first[n], stop[n] - hi, strict=True)]
+            data = np.pad(part, pads, mode=self.border) if any(a or b for a, b in pads) else (
+                np.ascontiguousarray(part))
+            origin = np.asarray(level.origin) + first[n] * np.asarray(level.spacing)
+            out.append(Brick(
+                key=key, data=np.ascontiguousarray(data),
+                first=tuple(int(v) for v in first[n]),  # type: ignore[arg-type]
+                origin=tuple(float(v) for v in origin),  # type: ignore[arg-type]
+                spacing=tuple(float(v) for v in level.spacing),  # type: ignore[arg-type]
+                offset=tuple(float(v) for v in (first[n] - offset) / scale),  # type: ignore
+                scale=tuple(float(v) for v in 1.0 / scale),  # type: ignore[arg-type]
+            ))
+            self._note_range(key, data)
+        return out
+
+    def _note_range(self, key: Key, data: np.ndarray) -> None:
+        """Queue the range of a brick read from a store without tables (applied by the caller's
+        thread, which owns the octree)."""
+        p = self.octree.position(key[0])
+        if not np.isnan(self.octree.ranges[p][key[1:]][0]):
+            return
+        values = data[np.isfinite(data)] if data.dtype.kind == "f" else data
+        lo, hi = (float(values.min()), float(values.max())) if values.size else (np.inf, -np.inf)
+        with self._cond:
+            self._ranges.append((key, lo, hi))
+
+    def update_ranges(self) -> None:
+        """Enter the value ranges learnt from bricks read since the last call into the octree
+        (stores without tables); call it from the thread that selects cuts, before selecting."""
+        with self._cond:
+            updates, self._ranges = self._ranges, []
+        for key, lo, hi in updates:
+            self.octree.set_range(key, lo, hi)
+
+    # ------------------------------------------------------------------ residency (locked)
+    def _insert(self, brick: Brick) -> bool:
+        if brick.key in self._bricks:
+            return True
+        if not self._make_room(brick.nbytes):
+            self._counts["dropped"] += 1
+            return False
+        self._bricks[brick.key] = brick
+        self._bytes += brick.nbytes
+        self.peak_bytes = max(self.peak_bytes, self._bytes)
+        return True
+
+    def _make_room(self, nbytes: int) -> bool:
+        if self._bytes + nbytes <= self.budget:
+            return True
+        for key in list(self._bricks):  # least recently used first
+            if key in self._pinned or key in self._keep:
+                continue
+            self._bytes -= self._bricks.pop(key).nbytes
+            self._counts["evicted"] += 1
+            if self._bytes + nbytes <= self.budget:
+                return True
+        return False
+
+    # ------------------------------------------------------------------ the loader thread
+    def _next_batch(self) -> list[Key]:
+        """The next wanted brick and its queued siblings (read together)."""
+        while self._queue:
+            key = self._queue.pop(0)
+            if key in self._bricks or key in self._failed or key in self._inflight:
+                self._needed.discard(key)
+                continue
+            parent = self.octree.parent(key)
+            batch = [key]
+            for other in list(self._queue):
+                if len(batch) == 8:
+                    break
+                if (other[0] == key[0] and other not in self._bricks and other not in self._failed
+                        and other not in self._inflight and self.octree.parent(other) == parent):
+                    batch.append(other)
+                    self._queue.remove(other)
+            return batch
+        return []
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._stop and not self._queue:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                try:
+                    batch = self._next_batch()
+                except Exception as exc:  # a bug must not stop the loading for good
+                    self._warnings.append(f"brick loader: {type(exc).__name__}: {exc}")
+                    self._queue.clear()
+                    self._needed.clear()
+                    self._cond.notify_all()
+                    continue
+                self._inflight.update(batch)
+            if not batch:
+                continue
+            bricks, failures = self._read_safely(batch)
+            with self._cond:
+                for brick in bricks:
+                    if self._insert(brick):
+                        self._counts["loaded"] += 1
+                        self._counts["loaded_frame"] += 1
+                for key, message in failures.items():
+                    self._failed[key] = message
+                    self._warnings.append(message)
+                for key in batch:
+                    self._inflight.discard(key)
+                    self._needed.discard(key)
+                self._cond.notify_all()
+
+    def _read_safely(self, batch: list[Key]) -> tuple[list[Brick], dict[Key, str]]:
+        try:
+            return self._read(batch), {}
+        except Exception:  # isolate the culprit: read the bricks one by one
+            bricks, failures = [], {}
+            for key in batch:
+                try:
+                    bricks.extend(self._read([key]))
+                except ReadError as exc:
+                    failures[key] = f"brick {key} unavailable ({exc}); drawing a coarser level"
+                except Exception as exc:  # never let the loader thread die
+                    failures[key] = (f"brick {key} unavailable ({type(exc).__name__}: {exc}); "
+                                     "drawing a coarser level")
+            return bricks, failures
+
+    # ------------------------------------------------------------------ the rendering thread
+    def request(self, keys: Iterable[Key], keep: Iterable[Key] = (),
+                prefetch: Iterable[Key] = ()) -> None:
+        """Replace what the loader reads: ``keys`` in this order, then ``prefetch``; ``keep``
+        (plus ``keys``) must not be evicted for it. Bricks resident or unavailable are skipped."""
+        self.update_ranges()
+        keys = list(keys)
+        with self._cond:
+            self._keep = set(keep) | set(keys)
+            wanted = [k for k in keys if k not in self._bricks and k not in self._failed]
+            self._needed = set(wanted)
+            self._queue = wanted + [k for k in prefetch if k not in self._bricks
+                                    and k not in self._failed and k not in self._needed]
+            self._cond.notify_all()
+
+    def request_cut(self, cut: Cut) -> None:
+        """:meth:`request` the bricks of a cut (its requests, keep set and prefetch list)."""
+        self.request(cut.requests, keep=cut.keep, prefetch=cut.prefetch)
+
+    def begin_frame(self) -> None:
+        """Start counting this frame's loads and substitutions."""
+        with self._cond:
+            self._counts["loaded_frame"] = 0
+            self._counts["substituted"] = 0
+
+    def wait(self, max_loads: int | None = None, timeout: float | None = None) -> int:
+        """Block until the requested bricks are resident (or unavailable), ``max_loads``
+        (default: ``loads_per_frame``) bricks were read in this frame, or ``timeout`` seconds
+        passed. Returns the number of bricks read in this frame."""
+        limit = self.loads_per_frame if max_loads is None else int(max_loads)
+        with self._cond:
+            self._cond.wait_for(
+                lambda: not self._needed or self._counts["loaded_frame"] >= limit
+                or not self.running, timeout)
+            loaded = self._counts["loaded_frame"]
+        self._flush_warnings()
+        return loaded
+
+    def get(self, key: Key) -> Brick | None:
+        """The resident brick ``key`` (marked as recently used) or ``None``."""
+        with self._cond:
+            brick = self._bricks.get(tuple(key))
+            if brick is not None:
+                self._bricks.move_to_end(brick.key)
+            return brick
+
+    def is_resident(self, key: Key) -> bool:
+        return tuple(key) in self._bricks
+
+    def is_unavailable(self, key: Key) -> bool:
+        return tuple(key) in self._failed
+
+    def ancestor(self, key: Key) -> Brick:
+        """The finest resident ancestor of ``key`` (the coarsest level is always resident)."""
+        for parent in self.octree.ancestors(tuple(key)):
+            brick = self.get(parent)
+            if brick is not None:
+                return brick
+        raise RuntimeError(f"no resident ancestor of {key}: the coarsest level must be pinned")
+
+    def resolve(self, cut: Cut) -> list[DrawItem]:
+        """What to draw for each brick of ``cut``: itself if resident, else its finest resident
+        ancestor (counted in ``stats()["substituted"]``)."""
+        self._flush_warnings()
+        items = []
+        substituted = 0
+        for n in range(len(cut)):
+            key = cut.key(n)
+            brick = self.get(key)
+            if brick is None:
+                brick = self.ancestor(key)
+                substituted += 1
+            items.append(DrawItem(n, brick, brick.key != key))
+        with self._cond:
+            self._counts["substituted"] = substituted
+        return items
+
+    def _flush_warnings(self) -> None:
+        with self._cond:
+            pending, self._warnings = self._warnings, []
+        for message in pending:
+            warnings.warn(message, BrickUnavailableWarning, stacklevel=3)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the resident bricks."""
+        return self._bytes
+
+    @property
+    def pinned_bytes(self) -> int:
+        return sum(self._bricks[k].nbytes for k in self._pinned)
+
+    def stats(self) -> dict[str, Any]:
+        """Counts for ``frame.stats``: resident bricks and bytes, budget, requested (still to
+        read), loaded (this frame / in total), substituted (last :meth:`resolve`), unavailable,
+        evicted, dropped (did not fit), complete (nothing substituted)."""
+        with self._cond:
+            return {
+                "resident": len(self._bricks),
+                "resident_bytes": self._bytes,
+                "peak_bytes": self.peak_bytes,
+                "budget": self.budget,
+                "requested": len(self._needed),
+                "loaded_this_frame": self._counts["loaded_frame"],
+                "loaded": self._counts["loaded"],
+                "substituted": self._counts["substituted"],
+                "complete": self._counts["substituted"] == 0,
+                "unavailable": len(self._failed),
+                "evicted": self._counts["evicted"],
+                "dropped": self._counts["dropped"],
+            }
+
+    def __repr__(self) -> str:
+        return (f"BrickCache({self.volume.name}, {len(self._bricks)} bricks, "
+                f"{format_bytes(self._bytes)} of {format_bytes(self.budget)})")

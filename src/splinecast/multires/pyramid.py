@@ -1,0 +1,407 @@
+"""Building an OME-Zarr 0.5 brick pyramid from any volume, chunk by chunk, in bounded memory.
+
+Downsampling (the choice decides the NGFF translation; see also :mod:`.octree`)
+-------------------------------------------------------------------------------
+Vertex-centred (:mod:`.downsample`): coarse voxel ``c`` sits exactly on fine voxel ``2 c`` and
+holds the binomial average ``(f[2c-1] + 2 f[2c] + f[2c+1]) / 4`` along every halved axis (the
+separable 3x3x3 ``[1, 2, 1] / 4`` filter, exact for linear data, zero response at the fine Nyquist
+frequency), with the fine grid mirrored about its first and last voxel outside. A halved axis of
+``n`` voxels gives ``n // 2 + 1`` coarse ones, so every level spans at least the whole box of
+level 0. Consequences:
+
+- Level ``L`` has ``scale = spacing * f_L`` and the *same* ``translation`` as level 0 (``f_L`` the
+  power of two by which the axis was halved); the coarse voxel centres are a subset of the fine
+  ones. (A 2x2x2 mean would put them half a fine voxel further along, ``translation +=
+  (f_L - 1) / 2 * spacing``, and brick boundaries of adjacent levels would not line up.)
+- Brick ``b`` of ``B`` cells on level ``L`` covers level-0 voxels ``[b B f_L, (b + 1) B f_L]``
+  exactly: the octree's bricks nest, and fine and coarse grids share the points of a coarse
+  brick's faces, which is what crack-free level boundaries need.
+
+Which axes are halved: at each level, every axis longer than one brick whose current voxel size is
+within 1.5x of the finest such axis (anisotropic stacks, e.g. spacing (0.2, 0.2, 1) um, first get
+halved in x and y only, as ome-zarr-py and ngff-zarr do). Levels are added until the coarsest fits
+in one brick (or ``levels`` are made).
+
+Storage: one Zarr v3 array per level (``0``, ``1``, ...; dimension names ``z, y, x``), chunks of one
+brick (``B^3``) in shards of about ``128^3`` voxels, zstd with a checksum (so a damaged chunk is
+detected instead of decoded into garbage), every chunk written (a missing file is then damage, not
+"fill value"). Per-brick value ranges go to the ``minmax`` table (:mod:`.tables`).
+
+Memory: the work is split into one task per output shard (dask, a few threads). A task holds one
+shard of its level and at most a slab of the finer level around it, so peak memory depends on the
+shard size and the number of threads, never on the volume's size.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._atomic import atomic_directory
+from ..errors import ParameterError, ReadError
+from ..io._common import fmt_shape, require
+from ..io.ngff import multiscales_attributes, ngff_unit, to_ngff
+from ..io.omezarr import ATTRIBUTE, Level, MultiscaleVolume
+from ..volume import SUPPORTED_DTYPES, Volume
+from .downsample import binomial_halve, fine_range
+from .octree import GHOST, brick_counts
+from .tables import MINMAX, window_minmax, write_table
+
+__all__ = ["build_pyramid", "plan_levels", "DOWNSAMPLING"]
+
+#: NGFF ``multiscales[0]["type"]`` of pyramids built here.
+DOWNSAMPLING = "binomial-vertex-centred"
+_SHARD_VOXELS = 128  # target shard side: 2 MiB of uint8 per shard file
+_SLAB = 32  # output planes per downsampling step inside a task (bounds the temporaries)
+
+
+# --------------------------------------------------------------------------- planning
+def plan_levels(
+    shape: Any, spacing: Any, brick: int, levels: int | None = None
+) -> list[tuple[tuple[int, int, int], tuple[int, int, int]]]:
+    """Shapes and per-axis factors of the pyramid's levels, finest first.
+
+    Returns a list of ``(shape, factor)`` (x, y, z each), ``factor`` the power of two by which
+    each axis was halved relative to level 0.
+
+    >>> plan_levels((100, 100, 20), (1, 1, 1), 32)
+    [((100, 100, 20), (1, 1, 1)), ((51, 51, 20), (2, 2, 1)), ((26, 26, 20), (4, 4, 1))]
+    """
+    shape = [int(n) for n in shape]
+    factor = [1, 1, 1]
+    plan = [(tuple(shape), tuple(factor))]
+    while levels is None or len(plan) < levels:
+        long = [a for a in range(3) if shape[a] > brick + 1]  # more than one brick of cells
+        if not long:
+            break
+        size = [spacing[a] * factor[a] for a in range(3)]
+        finest = min(size[a] for a in long)
+        for a in long:
+            if size[a] <= 1.5 * finest:
+                shape[a] = shape[a] // 2 + 1
+                factor[a] *= 2
+        plan.append((tuple(shape), tuple(factor)))
+    return plan  # type: ignore[return-value]
+
+
+# --------------------------------------------------------------------------- sources
+class _Source:
+    """Random access to the source volume in splinecast order: ``read(lo, hi)`` -> (x, y, z)."""
+
+    def __init__(self, shape: tuple[int, int, int], dtype: np.dtype,
+                 read: Callable[[np.ndarray, np.ndarray], np.ndarray], label: str,
+                 spacing: Any = (1.0, 1.0, 1.0), origin: Any = (0.0, 0.0, 0.0),
+                 metadata: dict[str, Any] | None = None, dask: Any = None) -> None:
+        self.shape, self.dtype, self.read, self.label = shape, np.dtype(dtype), read, label
+        self.spacing, self.origin = tuple(spacing), tuple(origin)
+        self.metadata = metadata or {}
+        self.dask = dask  # a dask array source is written to level 0 by dask itself
+
+
+def _from_array(data: Any, label: str, **kw: Any) -> _Source:
+    def read(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        try:
+            return np.array(data[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]])
+        except OSError as exc:  # a memory-mapped file that shrank, a disk error
+            raise ReadError(f"{label}: cannot read voxels {lo.tolist()}..{hi.tolist()}: "
+                            f"{exc}") from None
+
+    return _Source(tuple(int(n) for n in data.shape), data.dtype, read, label, **kw)
+
+
+def _from_level(level: Level, label: str, **kw: Any) -> _Source:
+    return _Source(level.shape, level.dtype, level.read, label, **kw)
+
+
+def _open_source(source: Any) -> _Source:
+    """Wrap any accepted source; nothing is read here."""
+    if isinstance(source, (str, os.PathLike)):
+        from ..io import read
+
+        source = read(source)
+    if isinstance(source, MultiscaleVolume):
+        level = source.levels[0]
+        return _from_level(level, str(source.path), spacing=source.spacing,
+                           origin=source.origin, metadata=dict(source.metadata))
+    if isinstance(source, Volume):
+        return _from_array(source.data, source.name, spacing=source.spacing,
+                           origin=source.origin, metadata=dict(source.metadata))
+    module = type(source).__module__
+    if module.startswith("dask"):
+        src = _Source(tuple(int(n) for n in source.shape), source.dtype, lambda lo, hi: None,
+                      "dask array", dask=source)
+        return src
+    if module.startswith("zarr"):
+        from ..io.omezarr import _plain_array  # the reader's axis rules for bare arrays
+
+        level = _plain_array(Path("zarr array"), source, "zarr array").levels[0]
+        level.folder = None  # not a local folder of ours: no file checks
+        return _from_level(level, "zarr array")
+    if hasattr(source, "shape") and hasattr(source, "dtype") and len(source.shape) == 3:
+        return _from_array(source, "array")
+    raise ParameterError(
+        f"source must be a path, a Volume, a MultiscaleVolume or a 3D array, got {type(source)}"
+    )
+
+
+# --------------------------------------------------------------------------- tasks
+def _shard_regions(shape: tuple[int, ...], shard: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    counts = [max(1, math.ceil(n / shard)) for n in shape]
+    for i in range(counts[0]):
+        for j in range(counts[1]):
+            for k in range(counts[2]):
+                lo = np.array([i, j, k]) * shard
+                yield lo, np.minimum(lo + shard, shape)
+
+
+def _write(array: Any, lo: np.ndarray, hi: np.ndarray, block: np.ndarray) -> None:
+    """Write an (x, y, z) block into a level array stored in NGFF order (z, y, x)."""
+    region = tuple(slice(int(a), int(b)) for a, b in zip(to_ngff(lo), to_ngff(hi), strict=True))
+    array[region] = np.ascontiguousarray(block.transpose(2, 1, 0))
+
+
+def _bricks_of(lo: np.ndarray, hi: np.ndarray, counts: np.ndarray, brick: int):
+    """Bricks whose first cell lies in the shard ``[lo, hi)``."""
+    b_lo = lo // brick
+    b_hi = np.minimum(-(-hi // brick), counts)
+    return b_lo, np.maximum(b_hi, b_lo)
+
+
+def _copy_task(source: _Source, array: Any, lo: np.ndarray, hi: np.ndarray, brick: int,
+               write: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Level 0: copy one shard from the source, and measure its bricks' value ranges."""
+    shape = np.array(source.shape)
+    ext_lo = np.maximum(lo - GHOST, 0)
+    ext_hi = np.minimum(hi + GHOST + 1, shape)
+    block = source.read(ext_lo, ext_hi)
+    if write:
+        core = tuple(slice(int(a), int(b)) for a, b in zip(lo - ext_lo, hi - ext_lo, strict=True))
+        _write(array, lo, hi, block[core])
+    counts = brick_counts(source.shape, brick)
+    b_lo, b_hi = _bricks_of(lo, hi, counts, brick)
+    return b_lo, window_minmax(block, ext_lo, b_lo, b_hi, brick, GHOST, shape)
+
+
+def _downsample_task(fine: Level, halve: tuple[bool, bool, bool], shape: tuple[int, int, int],
+                     array: Any, lo: np.ndarray, hi: np.ndarray,
+                     brick: int) -> tuple[np.ndarray, np.ndarray]:
+    """Level L+1: compute one shard (plus the ghost ring its bricks' ranges need) from level L,
+    a slab of planes at a time so the fine voxels held stay small."""
+    out_shape = np.array(shape)
+    ext_lo = np.maximum(lo - GHOST, 0)
+    ext_hi = np.minimum(hi + GHOST + 1, out_shape)
+    fine_shape = np.array(fine.shape)
+    slabs = []
+    for s0 in range(int(ext_lo[0]), int(ext_hi[0]), _SLAB):
+        out_lo = np.array([s0, ext_lo[1], ext_lo[2]])
+        out_hi = np.array([min(s0 + _SLAB, int(ext_hi[0])), ext_hi[1], ext_hi[2]])
+        read_lo, read_hi = fine_range(out_lo, out_hi, halve, fine_shape)
+        block = fine.read(read_lo, read_hi)
+        slabs.append(binomial_halve(block, read_lo, fine_shape, halve, out_lo, out_hi - out_lo))
+    out = np.concatenate(slabs, axis=0)
+    core = tuple(slice(int(a), int(b)) for a, b in zip(lo - ext_lo, hi - ext_lo, strict=True))
+    _write(array, lo, hi, out[core])
+    counts = brick_counts(shape, brick)
+    b_lo, b_hi = _bricks_of(lo, hi, counts, brick)
+    return b_lo, window_minmax(out, ext_lo, b_lo, b_hi, brick, GHOST, out_shape)
+
+
+# --------------------------------------------------------------------------- progress
+class _Progress:
+    """Task counts of one level on stderr, at most twice a second (dask callback)."""
+
+    def __init__(self, label: str, total: int, enabled: bool) -> None:
+        self.label, self.total, self.enabled = label, total, enabled
+        self.done = 0
+        self.last = 0.0
+        self.start = time.perf_counter()
+
+    def callback(self) -> Any:
+        from dask.callbacks import Callback
+
+        return Callback(posttask=self._posttask)
+
+    def _posttask(self, *args: Any) -> None:
+        self.done += 1
+        now = time.perf_counter()
+        if self.enabled and now - self.last > 0.5 and self.done < self.total:
+            self.last = now
+            print(f"\r{self.label}: {min(self.done, self.total)}/{self.total} shards "
+                  f"({now - self.start:.1f} s)", end="", file=sys.stderr, flush=True)
+
+    def finish(self) -> None:
+        if self.enabled:
+            print(f"\r{self.label}: {self.total}/{self.total} shards "
+                  f"({time.perf_counter() - self.start:.1f} s)", file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------- build
+def build_pyramid(
+    source: Any,
+    path: str | os.PathLike[str],
+    brick: int = 32,
+    levels: int | None = None,
+    overwrite: bool = False,
+    *,
+    unit: str | None = None,
+    name: str | None = None,
+    shard: int | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+) -> MultiscaleVolume:
+    """Write ``source`` as an OME-Zarr 0.5 brick pyramid at ``path``.
+
+    Parameters
+    ----------
+    source : path, Volume, MultiscaleVolume, zarr.Array, dask or numpy array
+        Anything :func:`splinecast.read` reads (raw data stays memory-mapped), or an array: numpy
+        and dask arrays are indexed ``[i, j, k]`` with ``i`` along x like ``Volume.data``; a bare
+        ``zarr.Array`` follows its dimension names, else NGFF's ``z, y, x``.
+    path : path
+        The store to create (a folder, conventionally ``name.zarr``).
+    brick : int
+        Cells per brick along each axis (the same on every level); also the chunk size.
+    levels : int, optional
+        At most this many levels (default: until the coarsest fits in one brick).
+    overwrite : bool
+        Replace an existing store at ``path``.
+    unit : str, optional
+        Length unit of the spacing (``"millimeter"``, ``"mm"``, ``"micrometer"``, ...); by default
+        the source's, when its header says.
+    name : str, optional
+        The image's name in the metadata (default: the store's file name).
+    shard : int, optional
+        Voxels per shard (file) side, a multiple of ``brick`` (default: about 128). One task
+        writes one shard: peak memory grows with its cube.
+    workers : int, optional
+        Threads (default: up to 4, at most the cores). Peak memory grows with it.
+    progress : bool
+        Print per-level progress on stderr.
+
+    Returns
+    -------
+    MultiscaleVolume
+        The written store, opened lazily.
+
+    Raises
+    ------
+    ParameterError
+        Bad ``brick``/``levels``/``unit``, an existing store without ``overwrite``, a missing
+        folder, or an unsupported source. Nothing is left at ``path`` on any failure: the store is
+        written under a temporary name beside it and renamed when complete.
+    """
+    zarr = require("zarr", path, action="writing", error=ParameterError)
+    from zarr.codecs import ZstdCodec
+
+    path = Path(os.fspath(path))
+    integer = isinstance(brick, (int, np.integer)) and not isinstance(brick, bool)
+    if not integer or not 4 <= brick <= 1024:
+        raise ParameterError(f"brick must be an integer from 4 to 1024, got {brick!r}")
+    brick = int(brick)
+    if levels is not None and (isinstance(levels, bool) or int(levels) != levels or levels < 1):
+        raise ParameterError(f"levels must be a positive integer, got {levels!r}")
+    if path.exists() and not overwrite:
+        raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
+    src = _open_source(source)
+    if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
+        raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
+                             f"shape {src.shape}")
+    if min(src.shape) < 1:
+        raise ParameterError(f"{src.label}: the volume is empty ({fmt_shape(src.shape)})")
+    unit_name = ngff_unit(unit if unit is not None else src.metadata.get("units"))
+    if unit is not None and unit_name is None:
+        raise ParameterError(f"unit {unit!r} is not a length unit (try millimeter, micrometer)")
+    plan = plan_levels(src.shape, src.spacing, brick, levels)
+    if shard is None:
+        shard = brick * max(1, _SHARD_VOXELS // brick)
+    elif int(shard) != shard or shard < brick or shard % brick:
+        raise ParameterError(f"shard must be a multiple of brick={brick}, got {shard!r}")
+    shard = int(shard)
+    workers = workers or max(1, min(4, os.cpu_count() or 1))
+    import dask
+
+    with atomic_directory(path, overwrite=overwrite) as temp:
+        root = zarr.open_group(os.fspath(temp), mode="w")
+        arrays, ranges = [], []
+        for index, (shape, _factor) in enumerate(plan):
+            arrays.append(root.create_array(
+                str(index), shape=tuple(to_ngff(shape)), dtype=src.dtype.newbyteorder("="),
+                chunks=(brick,) * 3, shards=(shard,) * 3,
+                compressors=ZstdCodec(level=3, checksum=True), fill_value=0,
+                dimension_names=("z", "y", "x"), config={"write_empty_chunks": True},
+            ))
+        for index, (shape, factor) in enumerate(plan):
+            regions = list(_shard_regions(shape, shard))
+            label = f"{path.name} level {index} ({fmt_shape(shape)})"
+            bar = _Progress(label, len(regions), progress)
+            if index == 0:
+                write = src.dask is None
+                if not write:  # dask writes a dask source itself, then tasks read it back
+                    data = src.dask.transpose(2, 1, 0).rechunk((shard,) * 3)
+                    with dask.config.set(scheduler="threads", num_workers=workers):
+                        data.store(arrays[0], lock=False)
+                    reader = _from_level(_level_view(arrays[0], shape, index), src.label)
+                else:
+                    reader = src
+                tasks = [dask.delayed(_copy_task)(reader, arrays[0], lo, hi, brick, write)
+                         for lo, hi in regions]
+            else:
+                fine = _level_view(arrays[index - 1], plan[index - 1][0], index - 1)
+                halve = tuple(factor[a] != plan[index - 1][1][a] for a in range(3))
+                tasks = [dask.delayed(_downsample_task)(fine, halve, shape, arrays[index], lo,
+                                                       hi, brick) for lo, hi in regions]
+            with bar.callback():
+                results = dask.compute(*tasks, scheduler="threads", num_workers=workers)
+            bar.finish()
+            counts = brick_counts(shape, brick)
+            table = np.empty((*counts, 2), dtype=np.float64)
+            for b_lo, block in results:
+                b_hi = b_lo + np.array(block.shape[:3])
+                table[b_lo[0]:b_hi[0], b_lo[1]:b_hi[1], b_lo[2]:b_hi[2]] = block
+            ranges.append(table)
+        for index, table in enumerate(ranges):
+            write_table(root, MINMAX, index, table,
+                        "value range [min, max] of each brick's voxels with ghosts "
+                        f"({GHOST} per side); (+inf, -inf) when none is finite")
+        lows = ranges[0][..., 0]
+        highs = ranges[0][..., 1]
+        value_range = [float(lows.min()), float(highs.max())]
+        origin = src.origin
+        datasets = [
+            (str(i), tuple(s * f for s, f in zip(src.spacing, factor, strict=True)), origin)
+            for i, (_shape, factor) in enumerate(plan)
+        ]
+        attrs = multiscales_attributes(
+            name or path.name, datasets, unit=unit_name, downsampling=DOWNSAMPLING,
+            downsampling_metadata={
+                "description": "coarse voxel c = (f[2c-1] + 2 f[2c] + f[2c+1]) / 4 along every "
+                               "halved axis, mirrored at the ends; voxel centres shared with "
+                               "level 0 (translation unchanged)",
+                "method": "splinecast.multires.downsample.binomial_halve",
+            },
+        )
+        ours = dict(root.attrs.get(ATTRIBUTE, {}))
+        keep = {k: src.metadata[k] for k in ("inside", "default_iso", "modality")
+                if k in src.metadata and isinstance(src.metadata[k], (str, int, float))}
+        ours.update({
+            "version": 1, "brick": brick, "ghost": GHOST, "complete_chunks": True,
+            "value_range": value_range, "source": str(src.metadata.get("source", src.label)),
+            "source_metadata": keep,
+        })
+        root.attrs.update({**attrs, ATTRIBUTE: ours})
+    from ..io.omezarr import open_zarr
+
+    return open_zarr(path)
+
+
+def _level_view(array: Any, shape: tuple[int, int, int], index: int) -> Level:
+    """A just-written level array as a :class:`Level` (reads go through the reader's code)."""
+    return Level(index=index, path=str(index), array=array, shape=shape,
+                 spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), label=f"level {index}")
