@@ -42,7 +42,8 @@ MODES = ["iso", "multi", "mip", "minip", "dvr"]
 
 @pytest.fixture(scope="module")
 def volume():
-    return sc.Volume(smooth_noise((20, 19, 21), seed=3, sigma=2.0))
+    # float32, like the demo volumes: the kernels compiled for them serve this test too.
+    return sc.Volume(smooth_noise((20, 19, 21), seed=3, sigma=2.0).astype(np.float32))
 
 
 def _setup(mode: str, vol: sc.Volume):
