@@ -203,8 +203,10 @@ def test_fit_box_keeps_the_bounding_sphere():
     half_fov = np.radians(15)
     np.testing.assert_allclose(np.linalg.norm(a.position - vol.center), radius / np.sin(half_fov))
     np.testing.assert_array_equal(a.position, b.position)
-    with pytest.raises(sc.ParameterError, match="fit must be 'box' or a world box"):
-        sc.Camera.orbit(vol, fit="content")
+    with pytest.raises(sc.ParameterError, match="fit='content' needs to know what is visible"):
+        sc.Camera.orbit(vol, fit="content")  # a bare volume has no isovalue
+    with pytest.raises(sc.ParameterError, match="fit must be 'box', 'content' or a world box"):
+        sc.Camera.orbit(vol, fit="contents")
     with pytest.raises(sc.ParameterError, match="lo <= hi"):
         sc.Camera.orbit(vol, fit=((0, 0, 0), (1, -1, 1)))
 
@@ -225,6 +227,9 @@ def test_content_framing_fills_the_image_with_a_small_object(ortho):
     fit = sc.Camera.orbit(vol, size=(48, 40), ortho=ortho, fit=content_box(vol))
     assert hit_extent(scene.render(box).hit) < 0.25  # the problem of the issue
     assert hit_extent(scene.render(fit).hit) >= 0.5
+    # fit="content" on the scene frames what its (automatic) isovalue shows: the same camera.
+    by_scene = sc.Camera.orbit(scene, size=(48, 40), ortho=ortho, fit="content")
+    np.testing.assert_array_equal(by_scene.position, fit.position)
 
 
 def drawn_pixels(image: np.ndarray) -> np.ndarray:

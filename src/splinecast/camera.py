@@ -50,14 +50,29 @@ FIT_MARGIN = 1.08
 
 
 def _fit_box(fit: Any, volume: Any) -> tuple[np.ndarray, np.ndarray] | None:
-    """``None`` for ``fit="box"``, else the validated world box ``(lo, hi)``."""
+    """``None`` for ``fit="box"``, else the validated world box ``(lo, hi)``.
+
+    ``fit="content"`` asks ``volume`` for its visible content (``volume.content_box()``): a
+    :class:`splinecast.Scene` knows its isovalue or transfer function; a bare volume does not,
+    and gets ``fit=splinecast.content_box(volume, iso=...)`` instead.
+    """
     if isinstance(fit, str):
-        if fit != "box":
+        if fit == "content":
+            content = getattr(volume, "content_box", None)
+            if not callable(content):
+                raise ParameterError(
+                    "fit='content' needs to know what is visible: pass a Scene "
+                    "(Camera.orbit(scene, fit='content')) or "
+                    "fit=splinecast.content_box(volume, iso=...)"
+                )
+            fit = content()
+        elif fit != "box":
             raise ParameterError(
-                f"fit must be 'box' or a world box (lo, hi) such as "
+                f"fit must be 'box', 'content' or a world box (lo, hi) such as "
                 f"splinecast.content_box(volume, iso=...), got {fit!r}"
             )
-        return None
+        else:
+            return None
     try:
         box = np.asarray(fit, dtype=np.float64)
     except (TypeError, ValueError):
@@ -180,8 +195,8 @@ class Camera:
 
         Parameters
         ----------
-        volume : Volume
-            The volume to frame.
+        volume : Volume or Scene
+            What to frame (anything with world ``bounds``; ``fit="content"`` needs a Scene).
         azimuth, elevation : float
             Angles in degrees. Azimuth 0 looks from +x towards the centre, 90 from +y; elevation
             is measured from the xy-plane towards +z, which is also the up direction.
@@ -195,19 +210,22 @@ class Camera:
             Orthographic projection (the window then just fits the box).
         zoom : float
             Magnification (> 1 moves closer / narrows the window).
-        fit : "box" or (lo, hi)
+        fit : "box", "content" or (lo, hi)
             What to frame. ``"box"`` (default): the volume's whole bounding box, through its
-            bounding sphere, so the framing is the same from every direction. A world-space
-            box ``(lo, hi)`` (two 3-vectors), typically ``sc.content_box(volume, iso=...)``:
-            the camera looks at its centre from just far enough that its eight corners fit
-            the image seen from this direction (with a small margin), so the object fills the
-            frame the way VTK's ``ResetCamera(bounds)`` does for the visible actors.
+            bounding sphere, so the framing is the same from every direction. ``"content"``:
+            the part a Scene's isovalue or transfer function makes visible
+            (:meth:`Scene.content_box`). A world-space box ``(lo, hi)`` (two 3-vectors),
+            typically ``sc.content_box(volume, iso=...)``. For the last two the camera looks at
+            the box's centre from just far enough that its eight corners fit the image seen from
+            this direction (with a small margin), so the object fills the frame the way VTK's
+            ``ResetCamera(bounds)`` does for the visible actors.
 
         Examples
         --------
         >>> import splinecast as sc
         >>> vol = sc.demo("sphere", size=32)
         >>> cam = sc.Camera.orbit(vol, fit=sc.content_box(vol, iso=0.0), size=(64, 64))
+        >>> cam = sc.Camera.orbit(sc.Scene(vol), fit="content", size=(64, 64))
         """
         if not (math.isfinite(azimuth) and math.isfinite(elevation)):
             raise ParameterError("azimuth and elevation must be finite numbers")

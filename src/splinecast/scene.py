@@ -16,7 +16,7 @@ import numpy as np
 from .accel.active_cells import ActiveCells
 from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
-from .defaults import auto_iso, auto_transfer_function, auto_window
+from .defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .errors import ParameterError
 from .models import MODELS
 from .render.clipping import make_planes
@@ -103,6 +103,20 @@ class Scene:
         self.iso_stats: dict[str, Any] = {}
         self._iso: float | None = None
         self._table_cache: dict = {}  # the last pre-integration table (mode="dvr")
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space corners of the volume (so a camera can frame a Scene)."""
+        return self.volume.bounds
+
+    def content_box(self, iso: Any = None, tf: TransferFunction | None = None,
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """World box of what an isovalue or a transfer function shows (see
+        :func:`splinecast.content_box`): ``tf`` if given, else ``iso``, else the isovalue last
+        rendered, else the automatic one. ``Camera.orbit(scene, fit="content")`` frames it."""
+        if tf is None and iso is None:
+            iso = self._iso
+        return content_box(self.volume, iso=iso, tf=tf)
 
     @property
     def iso(self) -> float | None:
