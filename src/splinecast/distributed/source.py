@@ -13,15 +13,13 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from ..defaults import auto_iso, auto_transfer_function, auto_window
 from ..errors import ParameterError
 from ..io import read
 from ..models import MODELS
 from ..models.smoothing import smooth as smooth_volume
 from ..scene import Scene
-from ..volume import Volume
+from ..volume import GridGeometry, Volume
 
 __all__ = ["SceneSource", "VolumeInfo"]
 
@@ -89,7 +87,7 @@ class SceneSource:
 
 
 @dataclass(frozen=True)
-class VolumeInfo:
+class VolumeInfo(GridGeometry):
     """The header of a volume opened on the workers: geometry, value range and metadata.
 
     It stands in for the :class:`~splinecast.Volume` where only these are needed, e.g.
@@ -114,20 +112,3 @@ class VolumeInfo:
         metadata.setdefault("default_tf", auto_transfer_function(volume).to_dict())
         return cls(volume.name, volume.shape, str(volume.dtype), volume.spacing, volume.origin,
                    volume.value_range, metadata)
-
-    @property
-    def extent(self) -> tuple[float, float, float]:
-        """World size of the box spanned by the voxel centres (as :attr:`Volume.extent`)."""
-        return tuple((n - 1) * s for n, s in zip(self.shape, self.spacing, strict=True))
-
-    @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """World-space corners ``(lo, hi)`` (as :attr:`Volume.bounds`)."""
-        lo = np.array(self.origin)
-        return lo, lo + np.array(self.extent)
-
-    @property
-    def center(self) -> np.ndarray:
-        """World position of the box centre."""
-        lo, hi = self.bounds
-        return 0.5 * (lo + hi)
