@@ -40,9 +40,11 @@ from typing import Any
 
 from numba.extending import overload
 
+from .._jit import jit
+
 __all__ = [
     "register", "cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range",
-    "piece_poly", "gradient", "value_gradient_at",
+    "piece_poly", "gradient", "value_gradient_at", "whole_cell", "cell_range",
 ]
 
 #: Kernel grid class -> {hook name: compiled function}.
@@ -170,3 +172,20 @@ def value_gradient_at(grid, scratch, x, y, z):
 def _value_gradient_at(grid, scratch, x, y, z):
     f = _impl(grid, "value_gradient_at")
     return None if f is None else (lambda grid, scratch, x, y, z: f(grid, scratch, x, y, z))
+
+
+# Hooks shared by the models whose cell is a single piece (trilinear, B-splines).
+
+@jit()
+def whole_cell(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    """``cell_pieces`` of a model whose whole cell is one polynomial piece."""
+    cuts[0] = 0.0
+    cuts[1] = 1.0
+    tags[0] = 0
+    return 1
+
+
+@jit()
+def cell_range(grid, scratch, ctx, i, j, k, tag):
+    """``piece_range`` of a one-piece cell: the cell's own range from ``cell_load``."""
+    return ctx[0], ctx[1]

@@ -45,9 +45,14 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from numba.extending import overload
 
+from .._jit import jit
+from ..accel.minmax import inactive_block_size
+
 __all__ = [
+    "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish",
 ]
@@ -226,3 +231,36 @@ def _finish(mode, out, row, col, st, ray):
     f = _impl(mode, "finish")
     return None if f is None else (lambda mode, out, row, col, st, ray: f(mode, out, row, col,
                                                                              st, ray))
+
+
+# Hooks several modes share: nothing to do at that point, or leaping over the blocks the mode's
+# flags (``blocks[0..2]``, one per hierarchy level) mark as unable to contribute.
+
+@jit()
+def no_scratch(mode):
+    """``mode_scratch`` of a mode that needs no per-thread buffers."""
+    return np.empty(0)
+
+
+@jit()
+def unchanged_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+    """``ray_begin`` with nothing to prepare."""
+    return st
+
+
+@jit()
+def unchanged_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    """``on_skip`` of a mode that ignores what it leaves out."""
+    return st
+
+
+@jit()
+def unchanged_end(mode, grid, scratch, st, ray, t_far):
+    """``ray_end`` with nothing to finish."""
+    return st
+
+
+@jit()
+def flagged_block_size(mode, blocks, i, j, k, st):
+    """``skip_size`` from the mode's block flags (0: process the cell)."""
+    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)
