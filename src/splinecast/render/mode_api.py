@@ -75,7 +75,8 @@ def _impl(mode: Any, name: str) -> Any:
     return _HOOKS[cls][name] if cls in _HOOKS else None
 
 
-# Stubs for Python, overloads for compiled code forwarding to the mode's registered function.
+# Stubs for Python, overloads for compiled code that compile the mode's registered function in
+# their place (its Python source, so no forwarding layer is compiled on top).
 
 def state_new(mode):
     """A fresh per-ray state (compiled code only)."""
@@ -85,7 +86,7 @@ def state_new(mode):
 @overload(state_new)
 def _state_new(mode):
     f = _impl(mode, "state_new")
-    return None if f is None else (lambda mode: f(mode))
+    return None if f is None else f.py_func
 
 
 def state_load(mode, state, row, col):
@@ -96,7 +97,7 @@ def state_load(mode, state, row, col):
 @overload(state_load)
 def _state_load(mode, state, row, col):
     f = _impl(mode, "state_load")
-    return None if f is None else (lambda mode, state, row, col: f(mode, state, row, col))
+    return None if f is None else f.py_func
 
 
 def state_store(mode, state, row, col, st):
@@ -107,9 +108,7 @@ def state_store(mode, state, row, col, st):
 @overload(state_store)
 def _state_store(mode, state, row, col, st):
     f = _impl(mode, "state_store")
-    if f is None:
-        return None
-    return lambda mode, state, row, col, st: f(mode, state, row, col, st)
+    return None if f is None else f.py_func
 
 
 def mode_scratch(mode):
@@ -120,7 +119,7 @@ def mode_scratch(mode):
 @overload(mode_scratch)
 def _mode_scratch(mode):
     f = _impl(mode, "mode_scratch")
-    return None if f is None else (lambda mode: f(mode))
+    return None if f is None else f.py_func
 
 
 def ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
@@ -131,12 +130,7 @@ def ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
 @overload(ray_begin)
 def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     f = _impl(mode, "ray_begin")
-    if f is None:
-        return None
-
-    def impl(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
-        return f(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1)
-    return impl
+    return None if f is None else f.py_func
 
 
 def skip_size(mode, blocks, i, j, k, st):
@@ -147,7 +141,7 @@ def skip_size(mode, blocks, i, j, k, st):
 @overload(skip_size)
 def _skip_size(mode, blocks, i, j, k, st):
     f = _impl(mode, "skip_size")
-    return None if f is None else (lambda mode, blocks, i, j, k, st: f(mode, blocks, i, j, k, st))
+    return None if f is None else f.py_func
 
 
 def wants(mode, st, lo, hi):
@@ -158,7 +152,7 @@ def wants(mode, st, lo, hi):
 @overload(wants)
 def _wants(mode, st, lo, hi):
     f = _impl(mode, "wants")
-    return None if f is None else (lambda mode, st, lo, hi: f(mode, st, lo, hi))
+    return None if f is None else f.py_func
 
 
 def on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
@@ -169,12 +163,7 @@ def on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
 @overload(on_skip)
 def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     f = _impl(mode, "on_skip")
-    if f is None:
-        return None
-
-    def impl(mode, grid, scratch, st, ray, t0, t1, lo, hi):
-        return f(mode, grid, scratch, st, ray, t0, t1, lo, hi)
-    return impl
+    return None if f is None else f.py_func
 
 
 def consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
@@ -187,14 +176,7 @@ def consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, 
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
     f = _impl(mode, "consume")
-    if f is None:
-        return None
-
-    def impl(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
-        return f(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-                 ax, ay, az, bx, by, bz, ray, st)
-    return impl
+    return None if f is None else f.py_func
 
 
 def done(mode, st):
@@ -205,7 +187,7 @@ def done(mode, st):
 @overload(done)
 def _done(mode, st):
     f = _impl(mode, "done")
-    return None if f is None else (lambda mode, st: f(mode, st))
+    return None if f is None else f.py_func
 
 
 def ray_end(mode, grid, scratch, st, ray, t_far):
@@ -216,9 +198,7 @@ def ray_end(mode, grid, scratch, st, ray, t_far):
 @overload(ray_end)
 def _ray_end(mode, grid, scratch, st, ray, t_far):
     f = _impl(mode, "ray_end")
-    if f is None:
-        return None
-    return lambda mode, grid, scratch, st, ray, t_far: f(mode, grid, scratch, st, ray, t_far)
+    return None if f is None else f.py_func
 
 
 def finish(mode, out, row, col, st, ray):
@@ -229,8 +209,7 @@ def finish(mode, out, row, col, st, ray):
 @overload(finish)
 def _finish(mode, out, row, col, st, ray):
     f = _impl(mode, "finish")
-    return None if f is None else (lambda mode, out, row, col, st, ray: f(mode, out, row, col,
-                                                                             st, ray))
+    return None if f is None else f.py_func
 
 
 # Hooks several modes share: nothing to do at that point, or leaping over the blocks the mode's
