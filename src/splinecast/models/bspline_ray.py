@@ -39,7 +39,7 @@ from .bspline import (
     cell_transform,
     local_value_gradient,
 )
-from .pieces import register
+from .pieces import cell_range, register, whole_cell
 
 __all__ = [
     "axis_basis_sb",
@@ -255,19 +255,6 @@ def _cell_load(grid, scratch, i, j, k):
 
 
 @jit()
-def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-    cuts[0] = 0.0
-    cuts[1] = 1.0
-    tags[0] = 0
-    return 1
-
-
-@jit()
-def _piece_range(grid, scratch, ctx, i, j, k, tag):
-    return ctx[0], ctx[1]
-
-
-@jit()
 def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
     d = grid.degree
     tensor, tmp, basis, inner, middle, inv = (scratch[0], scratch[1], scratch[2], scratch[3],
@@ -314,5 +301,5 @@ def _value_gradient_at(grid, scratch, x, y, z):
 
 
 register(BSplineGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
-         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly,
+         cell_pieces=whole_cell, piece_range=cell_range, piece_poly=_piece_poly,
          gradient=_gradient, value_gradient_at=_value_gradient_at)

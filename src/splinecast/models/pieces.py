@@ -40,9 +40,11 @@ from typing import Any
 
 from numba.extending import overload
 
+from .._jit import jit
+
 __all__ = [
     "register", "cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range",
-    "piece_poly", "gradient", "value_gradient_at",
+    "piece_poly", "gradient", "value_gradient_at", "whole_cell", "cell_range",
 ]
 
 #: Kernel grid class -> {hook name: compiled function}.
@@ -64,8 +66,9 @@ def _impl(grid: Any, name: str) -> Any:
     return _HOOKS[cls][name] if cls in _HOOKS else None
 
 
-# Each hook below is a stub for Python and an overload for compiled code that forwards to the
-# registered implementation of the grid's class (inlined, so the call costs nothing).
+# Each hook below is a stub for Python and an overload for compiled code that compiles the
+# registered implementation of the grid's class in its place (its Python source, so no
+# forwarding layer is compiled on top).
 
 def cell_count(grid):
     """Cells per axis of the grid (compiled code only)."""
@@ -75,7 +78,7 @@ def cell_count(grid):
 @overload(cell_count)
 def _cell_count(grid):
     f = _impl(grid, "cell_count")
-    return None if f is None else (lambda grid: f(grid))
+    return None if f is None else f.py_func
 
 
 def new_scratch(grid):
@@ -86,7 +89,7 @@ def new_scratch(grid):
 @overload(new_scratch)
 def _new_scratch(grid):
     f = _impl(grid, "new_scratch")
-    return None if f is None else (lambda grid: f(grid))
+    return None if f is None else f.py_func
 
 
 def cell_load(grid, scratch, i, j, k):
@@ -97,7 +100,7 @@ def cell_load(grid, scratch, i, j, k):
 @overload(cell_load)
 def _cell_load(grid, scratch, i, j, k):
     f = _impl(grid, "cell_load")
-    return None if f is None else (lambda grid, scratch, i, j, k: f(grid, scratch, i, j, k))
+    return None if f is None else f.py_func
 
 
 def cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
@@ -108,12 +111,7 @@ def cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags)
 @overload(cell_pieces)
 def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
     f = _impl(grid, "cell_pieces")
-    if f is None:
-        return None
-
-    def impl(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-        return f(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags)
-    return impl
+    return None if f is None else f.py_func
 
 
 def piece_range(grid, scratch, ctx, i, j, k, tag):
@@ -124,9 +122,7 @@ def piece_range(grid, scratch, ctx, i, j, k, tag):
 @overload(piece_range)
 def _piece_range(grid, scratch, ctx, i, j, k, tag):
     f = _impl(grid, "piece_range")
-    if f is None:
-        return None
-    return lambda grid, scratch, ctx, i, j, k, tag: f(grid, scratch, ctx, i, j, k, tag)
+    return None if f is None else f.py_func
 
 
 def piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
@@ -137,12 +133,7 @@ def piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
 @overload(piece_poly)
 def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
     f = _impl(grid, "piece_poly")
-    if f is None:
-        return None
-
-    def impl(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-        return f(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz)
-    return impl
+    return None if f is None else f.py_func
 
 
 def gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
@@ -153,12 +144,7 @@ def gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
 @overload(gradient)
 def _gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
     f = _impl(grid, "gradient")
-    if f is None:
-        return None
-
-    def impl(grid, scratch, ctx, i, j, k, tag, x, y, z):
-        return f(grid, scratch, ctx, i, j, k, tag, x, y, z)
-    return impl
+    return None if f is None else f.py_func
 
 
 def value_gradient_at(grid, scratch, x, y, z):
@@ -169,4 +155,21 @@ def value_gradient_at(grid, scratch, x, y, z):
 @overload(value_gradient_at)
 def _value_gradient_at(grid, scratch, x, y, z):
     f = _impl(grid, "value_gradient_at")
-    return None if f is None else (lambda grid, scratch, x, y, z: f(grid, scratch, x, y, z))
+    return None if f is None else f.py_func
+
+
+# Hooks shared by the models whose cell is a single piece (trilinear, B-splines).
+
+@jit()
+def whole_cell(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    """``cell_pieces`` of a model whose whole cell is one polynomial piece."""
+    cuts[0] = 0.0
+    cuts[1] = 1.0
+    tags[0] = 0
+    return 1
+
+
+@jit()
+def cell_range(grid, scratch, ctx, i, j, k, tag):
+    """``piece_range`` of a one-piece cell: the cell's own range from ``cell_load``."""
+    return ctx[0], ctx[1]

@@ -22,7 +22,7 @@ import numpy as np
 from .._jit import jit
 from ..roots.pieces import PowerCubic
 from ..volume import Volume
-from .pieces import register
+from .pieces import cell_range, register, whole_cell
 from .validation import require_renderable
 
 __all__ = [
@@ -149,19 +149,6 @@ def _cell_load(grid, scratch, i, j, k):
 
 
 @jit()
-def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-    cuts[0] = 0.0
-    cuts[1] = 1.0
-    tags[0] = 0
-    return 1
-
-
-@jit()
-def _piece_range(grid, scratch, ctx, i, j, k, tag):
-    return ctx[0], ctx[1]
-
-
-@jit()
 def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
     c3, c2, c1, c0 = ray_cubic(ctx[2], ctx[3], ctx[4], ctx[5], ctx[6], ctx[7], ctx[8], ctx[9],
                                ax, ay, az, bx - ax, by - ay, bz - az)
@@ -186,7 +173,7 @@ def _value_gradient_at(grid, scratch, x, y, z):
 
 
 register(TrilinearGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
-         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly,
+         cell_pieces=whole_cell, piece_range=cell_range, piece_poly=_piece_poly,
          gradient=_gradient, value_gradient_at=_value_gradient_at)
 
 

@@ -47,14 +47,20 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..accel.minmax import inactive_block_size
 from ..errors import ParameterError
 from ..models.pieces import gradient
 from ..preintegration import PreintegrationTable, preint_lookup, preintegrate
 from ..roots.pieces import poly_value
 from ..transfer import TransferFunction
 from .frame import Frame
-from .mode_api import register
+from .mode_api import (
+    flagged_block_size,
+    no_scratch,
+    register,
+    unchanged_begin,
+    unchanged_end,
+    unchanged_skip,
+)
 
 __all__ = ["DVRSettings", "PREINTEGRATION", "TABLE_LAYOUTS", "DvrMode", "Dvr", "combine_dvr"]
 
@@ -258,21 +264,6 @@ def _state_store(mode, state, row, col, st):
 
 
 @jit()
-def _mode_scratch(mode):
-    return np.empty(0)
-
-
-@jit()
-def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
-    return st
-
-
-@jit()
-def _skip_size(mode, blocks, i, j, k, st):
-    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)
-
-
-@jit()
 def _wants(mode, st, lo, hi):
     """Not fully transparent over ``[lo, hi]`` (prefix table; an empty range is transparent)."""
     if not lo <= hi:
@@ -281,11 +272,6 @@ def _wants(mode, st, lo, hi):
     b0 = min(max(int((lo - mode.p_lo) * mode.p_scale), 0), nbins - 1)
     b1 = min(max(int((hi - mode.p_lo) * mode.p_scale), 0), nbins - 1)
     return mode.prefix[b1 + 1] != mode.prefix[b0]
-
-
-@jit()
-def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
-    return st
 
 
 @jit()
@@ -346,11 +332,6 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
 
 
 @jit()
-def _ray_end(mode, grid, scratch, st, ray, t_far):
-    return st
-
-
-@jit()
 def _finish(mode, out, row, col, st, ray):
     rgba, depth, position, samples = out
     bg = mode.background
@@ -366,9 +347,19 @@ def _finish(mode, out, row, col, st, ray):
     samples[row, col] = st[5]
 
 
-register(DvrMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,
-         mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size, wants=_wants,
-         on_skip=_on_skip, consume=_consume, done=_done, ray_end=_ray_end, finish=_finish)
+register(DvrMode,
+         state_new=_state_new,
+         state_load=_state_load,
+         state_store=_state_store,
+         mode_scratch=no_scratch,
+         ray_begin=unchanged_begin,
+         skip_size=flagged_block_size,
+         wants=_wants,
+         on_skip=unchanged_skip,
+         consume=_consume,
+         done=_done,
+         ray_end=unchanged_end,
+         finish=_finish)
 
 
 @jit(parallel=True)

@@ -23,12 +23,11 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..accel.minmax import inactive_block_size
 from ..errors import ParameterError
 from ..models.pieces import gradient, value_gradient_at
 from ..roots.pieces import poly_first_root, poly_value
 from .frame import Frame
-from .mode_api import register
+from .mode_api import flagged_block_size, no_scratch, register, unchanged_begin
 from .pixels import store_hit, store_miss
 from .shading import Shading
 
@@ -65,21 +64,6 @@ def _state_store(mode, state, row, col, st):
     grad[row, col, 2] = st[3]
     prev[row, col, 0] = st[4]
     prev[row, col, 1] = st[5]
-
-
-@jit()
-def _mode_scratch(mode):
-    return np.empty(0)
-
-
-@jit()
-def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
-    return st
-
-
-@jit()
-def _skip_size(mode, blocks, i, j, k, st):
-    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)
 
 
 @jit()
@@ -209,9 +193,19 @@ def _finish(mode, out, row, col, st, ray):
                   st[3], mode.inside_high, mode.shading, rgba, depth, position, normal, face)
 
 
-register(IsoMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,
-         mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size, wants=_wants,
-         on_skip=_on_skip, consume=_consume, done=_done, ray_end=_ray_end, finish=_finish)
+register(IsoMode,
+         state_new=_state_new,
+         state_load=_state_load,
+         state_store=_state_store,
+         mode_scratch=no_scratch,
+         ray_begin=unchanged_begin,
+         skip_size=flagged_block_size,
+         wants=_wants,
+         on_skip=_on_skip,
+         consume=_consume,
+         done=_done,
+         ray_end=_ray_end,
+         finish=_finish)
 
 
 @jit(parallel=True)

@@ -36,7 +36,7 @@ from ..errors import ParameterError
 from ..roots.pieces import poly_max, poly_value
 from ..transfer import apply_colormap, colormap_table
 from .frame import Frame
-from .mode_api import register
+from .mode_api import no_scratch, register, unchanged_end, unchanged_skip
 
 __all__ = ["MipMode", "Mip", "combine_mip"]
 
@@ -62,11 +62,6 @@ def _state_store(mode, state, row, col, st):
     best, where = state
     best[row, col] = st[0]
     where[row, col] = st[1]
-
-
-@jit()
-def _mode_scratch(mode):
-    return np.empty(0)
 
 
 @jit()
@@ -110,11 +105,6 @@ def _wants(mode, st, lo, hi):
 
 
 @jit()
-def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
-    return st
-
-
-@jit()
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
     best, where = st[0], st[1]
@@ -143,11 +133,6 @@ def _done(mode, st):
 
 
 @jit()
-def _ray_end(mode, grid, scratch, st, ray, t_far):
-    return st
-
-
-@jit()
 def _finish(mode, out, row, col, st, ray):
     value, depth, position = out
     t = st[1]
@@ -164,9 +149,19 @@ def _finish(mode, out, row, col, st, ray):
         position[row, col, 2] = ray[2] + t * ray[5]
 
 
-register(MipMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,
-         mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size, wants=_wants,
-         on_skip=_on_skip, consume=_consume, done=_done, ray_end=_ray_end, finish=_finish)
+register(MipMode,
+         state_new=_state_new,
+         state_load=_state_load,
+         state_store=_state_store,
+         mode_scratch=no_scratch,
+         ray_begin=_ray_begin,
+         skip_size=_skip_size,
+         wants=_wants,
+         on_skip=unchanged_skip,
+         consume=_consume,
+         done=_done,
+         ray_end=unchanged_end,
+         finish=_finish)
 
 
 @jit(parallel=True)

@@ -45,9 +45,14 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from numba.extending import overload
 
+from .._jit import jit
+from ..accel.minmax import inactive_block_size
+
 __all__ = [
+    "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish",
 ]
@@ -70,7 +75,8 @@ def _impl(mode: Any, name: str) -> Any:
     return _HOOKS[cls][name] if cls in _HOOKS else None
 
 
-# Stubs for Python, overloads for compiled code forwarding to the mode's registered function.
+# Stubs for Python, overloads for compiled code that compile the mode's registered function in
+# their place (its Python source, so no forwarding layer is compiled on top).
 
 def state_new(mode):
     """A fresh per-ray state (compiled code only)."""
@@ -80,7 +86,7 @@ def state_new(mode):
 @overload(state_new)
 def _state_new(mode):
     f = _impl(mode, "state_new")
-    return None if f is None else (lambda mode: f(mode))
+    return None if f is None else f.py_func
 
 
 def state_load(mode, state, row, col):
@@ -91,7 +97,7 @@ def state_load(mode, state, row, col):
 @overload(state_load)
 def _state_load(mode, state, row, col):
     f = _impl(mode, "state_load")
-    return None if f is None else (lambda mode, state, row, col: f(mode, state, row, col))
+    return None if f is None else f.py_func
 
 
 def state_store(mode, state, row, col, st):
@@ -102,9 +108,7 @@ def state_store(mode, state, row, col, st):
 @overload(state_store)
 def _state_store(mode, state, row, col, st):
     f = _impl(mode, "state_store")
-    if f is None:
-        return None
-    return lambda mode, state, row, col, st: f(mode, state, row, col, st)
+    return None if f is None else f.py_func
 
 
 def mode_scratch(mode):
@@ -115,7 +119,7 @@ def mode_scratch(mode):
 @overload(mode_scratch)
 def _mode_scratch(mode):
     f = _impl(mode, "mode_scratch")
-    return None if f is None else (lambda mode: f(mode))
+    return None if f is None else f.py_func
 
 
 def ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
@@ -126,12 +130,7 @@ def ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
 @overload(ray_begin)
 def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     f = _impl(mode, "ray_begin")
-    if f is None:
-        return None
-
-    def impl(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
-        return f(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1)
-    return impl
+    return None if f is None else f.py_func
 
 
 def skip_size(mode, blocks, i, j, k, st):
@@ -142,7 +141,7 @@ def skip_size(mode, blocks, i, j, k, st):
 @overload(skip_size)
 def _skip_size(mode, blocks, i, j, k, st):
     f = _impl(mode, "skip_size")
-    return None if f is None else (lambda mode, blocks, i, j, k, st: f(mode, blocks, i, j, k, st))
+    return None if f is None else f.py_func
 
 
 def wants(mode, st, lo, hi):
@@ -153,7 +152,7 @@ def wants(mode, st, lo, hi):
 @overload(wants)
 def _wants(mode, st, lo, hi):
     f = _impl(mode, "wants")
-    return None if f is None else (lambda mode, st, lo, hi: f(mode, st, lo, hi))
+    return None if f is None else f.py_func
 
 
 def on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
@@ -164,12 +163,7 @@ def on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
 @overload(on_skip)
 def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     f = _impl(mode, "on_skip")
-    if f is None:
-        return None
-
-    def impl(mode, grid, scratch, st, ray, t0, t1, lo, hi):
-        return f(mode, grid, scratch, st, ray, t0, t1, lo, hi)
-    return impl
+    return None if f is None else f.py_func
 
 
 def consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
@@ -182,14 +176,7 @@ def consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, 
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
     f = _impl(mode, "consume")
-    if f is None:
-        return None
-
-    def impl(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
-        return f(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-                 ax, ay, az, bx, by, bz, ray, st)
-    return impl
+    return None if f is None else f.py_func
 
 
 def done(mode, st):
@@ -200,7 +187,7 @@ def done(mode, st):
 @overload(done)
 def _done(mode, st):
     f = _impl(mode, "done")
-    return None if f is None else (lambda mode, st: f(mode, st))
+    return None if f is None else f.py_func
 
 
 def ray_end(mode, grid, scratch, st, ray, t_far):
@@ -211,9 +198,7 @@ def ray_end(mode, grid, scratch, st, ray, t_far):
 @overload(ray_end)
 def _ray_end(mode, grid, scratch, st, ray, t_far):
     f = _impl(mode, "ray_end")
-    if f is None:
-        return None
-    return lambda mode, grid, scratch, st, ray, t_far: f(mode, grid, scratch, st, ray, t_far)
+    return None if f is None else f.py_func
 
 
 def finish(mode, out, row, col, st, ray):
@@ -224,5 +209,37 @@ def finish(mode, out, row, col, st, ray):
 @overload(finish)
 def _finish(mode, out, row, col, st, ray):
     f = _impl(mode, "finish")
-    return None if f is None else (lambda mode, out, row, col, st, ray: f(mode, out, row, col,
-                                                                             st, ray))
+    return None if f is None else f.py_func
+
+
+# Hooks several modes share: nothing to do at that point, or leaping over the blocks the mode's
+# flags (``blocks[0..2]``, one per hierarchy level) mark as unable to contribute.
+
+@jit()
+def no_scratch(mode):
+    """``mode_scratch`` of a mode that needs no per-thread buffers."""
+    return np.empty(0)
+
+
+@jit()
+def unchanged_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+    """``ray_begin`` with nothing to prepare."""
+    return st
+
+
+@jit()
+def unchanged_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    """``on_skip`` of a mode that ignores what it leaves out."""
+    return st
+
+
+@jit()
+def unchanged_end(mode, grid, scratch, st, ray, t_far):
+    """``ray_end`` with nothing to finish."""
+    return st
+
+
+@jit()
+def flagged_block_size(mode, blocks, i, j, k, st):
+    """``skip_size`` from the mode's block flags (0: process the cell)."""
+    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)

@@ -25,14 +25,13 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..accel.minmax import inactive_block_size
 from ..errors import ParameterError
 from ..models.pieces import gradient
 from ..roots.pieces import poly_roots
 from ..transfer import COLORMAPS, colormap_table
 from .effects import NO_EFFECTS, SurfaceEffects, surface_rgb
 from .frame import Frame
-from .mode_api import register
+from .mode_api import flagged_block_size, register, unchanged_begin, unchanged_end, unchanged_skip
 from .shading import Shading
 
 __all__ = ["MultiIsoMode", "MultiIso", "combine_multi_iso"]
@@ -86,26 +85,11 @@ def _mode_scratch(mode):
 
 
 @jit()
-def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
-    return st
-
-
-@jit()
-def _skip_size(mode, blocks, i, j, k, st):
-    return inactive_block_size(blocks[0], blocks[1], blocks[2], i, j, k)
-
-
-@jit()
 def _wants(mode, st, lo, hi):
     for q in range(mode.isos.shape[0]):
         if lo <= mode.isos[q] <= hi:
             return True
     return False
-
-
-@jit()
-def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
-    return st
 
 
 @jit()
@@ -170,11 +154,6 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
 
 
 @jit()
-def _ray_end(mode, grid, scratch, st, ray, t_far):
-    return st
-
-
-@jit()
 def _finish(mode, out, row, col, st, ray):
     rgba, depth, position, normal, face, layers = out
     sh = mode.shading
@@ -195,9 +174,19 @@ def _finish(mode, out, row, col, st, ray):
     normal[row, col, 2] = st[7]
 
 
-register(MultiIsoMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,
-         mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size, wants=_wants,
-         on_skip=_on_skip, consume=_consume, done=_done, ray_end=_ray_end, finish=_finish)
+register(MultiIsoMode,
+         state_new=_state_new,
+         state_load=_state_load,
+         state_store=_state_store,
+         mode_scratch=_mode_scratch,
+         ray_begin=unchanged_begin,
+         skip_size=flagged_block_size,
+         wants=_wants,
+         on_skip=unchanged_skip,
+         consume=_consume,
+         done=_done,
+         ray_end=unchanged_end,
+         finish=_finish)
 
 
 @jit(parallel=True)
