@@ -16,7 +16,8 @@
   with ``t = 1/4``. Without an eye ``I = R(b, x)``; without an interest point ``I = R(b, eye)``;
   with neither, ``I = 1``.
 * **Error** ``E(b) = D*(b) I(b)`` (eq. 7) and ``E(cut) = sum E(b) / sum n(b)`` (eq. 8).
-* **Error reduction per child** ``ER(b) = (E(b) - sum_c E(c)) / |c|`` (eq. 9), over visible children.
+* **Error reduction per child** ``ER(b) = (E(b) - sum_c E(c)) / |c|`` (eq. 9), over the visible
+  children.
 
 Priorities. ``P = E`` ("naive") or ``P = ER`` ("improved") for nodes that can be split; a node
 without visible children cannot, its priority is ``-inf``. Split-and-collapse converges to the

@@ -74,7 +74,8 @@ class BrickTree:
             raise ParameterError("parent must be a non-empty 1D array of node ids")
         roots = np.flatnonzero(parent < 0)
         if roots.size != 1:
-            raise ParameterError(f"a brick tree needs exactly one root (parent -1), got {roots.size}")
+            raise ParameterError(
+                f"a brick tree needs exactly one root (parent -1), got {roots.size}")
         if np.any(parent >= k):
             raise ParameterError("parent holds ids outside the tree")
         self.parent = parent
