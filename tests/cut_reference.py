@@ -9,6 +9,7 @@ voxel with scipy's interpolation.
 * :func:`all_cuts` -- every cut of a tree (exponential; small trees only).
 * :func:`is_valid_cut` -- covers every visible leaf exactly once, holds no invisible node.
 * :func:`voxel_distortion` -- eq. (1)-(2) summed over the voxels of a brick.
+* :func:`smooth_volume` -- a smooth random field with some noise (test data).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ __all__ = [
     "all_cuts",
     "is_valid_cut",
     "voxel_distortion",
+    "smooth_volume",
 ]
 
 
@@ -144,3 +146,11 @@ def voxel_distortion(source: np.ndarray, coarse: np.ndarray, level: int, lo, hi,
     a = luv_of_bins[bin_of(src)]
     b = luv_of_bins[bin_of(approx)]
     return float(np.sqrt(((a - b) ** 2).sum(axis=-1)).sum())
+
+
+def smooth_volume(shape, seed: int, dtype=np.uint8) -> np.ndarray:
+    """Smooth random field plus 5% noise, scaled to 0..255."""
+    rng = np.random.default_rng(seed)
+    field = ndimage.gaussian_filter(rng.random(shape), 2.0) + 0.05 * rng.random(shape)
+    field = (field - field.min()) / np.ptp(field) * 255
+    return field.astype(dtype)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cut_reference import voxel_distortion
+from cut_reference import smooth_volume, voxel_distortion
 
 import splinecast as sc
 from splinecast.multires.colour import classified_luv, distortion_table, srgb_to_luv
@@ -32,16 +32,6 @@ from splinecast.multires.mean_pyramid import mean_downsample, mean_pyramid
 MNI = Path(__file__).resolve().parents[2] / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 TF = sc.TransferFunction([(30, 0.0), (60, 0.05), (90, 0.1), (140, 0.6), (255, 0.9)],
                          domain=(0, 255), colormap="bone")
-
-
-def smooth_volume(shape, seed, dtype=np.uint8):
-    """Smooth random field plus noise, scaled to 0..255."""
-    rng = np.random.default_rng(seed)
-    from scipy import ndimage
-
-    field = ndimage.gaussian_filter(rng.random(shape), 2.0) + 0.05 * rng.random(shape)
-    field = (field - field.min()) / np.ptp(field) * 255
-    return field.astype(dtype) if np.dtype(dtype).kind != "f" else field.astype(dtype)
 
 
 def test_srgb_to_luv_matches_published_values():

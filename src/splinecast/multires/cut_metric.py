@@ -220,13 +220,14 @@ class ArrayMetric:
         self.epoch = 0
         self.tf_epoch = 0
         self.rank = rank(tree)
+        self.visible: np.ndarray | None = None
         self.set(error, visible)
 
     def set(self, error: np.ndarray, visible: np.ndarray | None = None) -> None:
         """New errors (and visibility): a new epoch; a new ``tf_epoch`` when visibility changed."""
         tree = self.tree
-        new_visible = np.ones(tree.size, bool) if visible is None else np.asarray(visible, bool)
-        if hasattr(self, "visible") and not np.array_equal(new_visible, self.visible):
+        new_visible = np.ones(tree.size, bool) if visible is None else np.array(visible, bool)
+        if self.visible is not None and not np.array_equal(new_visible, self.visible):
             self.tf_epoch += 1
         self.visible = new_visible
         self._error = np.asarray(error, np.float64)

@@ -11,12 +11,16 @@ Each frame starts from the previous cut instead of the root (section 3.5):
   cut and DL); if only N would be exceeded, collapse the lowest-priority collapsible parent and try
   again. Stop, in the paper's order, when (1) the priority of ``S0`` is not positive (no split
   reduces the error), (2) splitting ``S0`` would exceed M, (3) splitting ``S0`` would exceed N and
-  the next collapsible parent does not rank below ``S0``, or collapsing it would exceed M.
+  the next collapsible parent does not rank below ``S0``, or collapsing it would exceed M (we
+  count the split it makes room for too, so a frame never pays a collapse for a split M forbids).
 * Downloads count the bricks of the new cut that were not resident (not in the previous frame's
   cut): a split downloads its non-resident children, a collapse its parent if not resident, and a
   brick downloaded earlier this frame and removed again is not downloaded.
 * Incomplete trees: a split adds ``|children| - 1`` bricks (zero for a single child), a collapse
-  frees as many; a collapse that frees nothing never helps a split and is skipped.
+  frees as many. One split may need several collapses, and a parent with a single visible child
+  frees nothing; as in the paper, each collapse is done as soon as the parent ranks below ``S0``
+  (if the next one does not, the split waits: the cut has still moved toward the greedy cut, the
+  fixed point of the updates).
 * **Transfer-function changes** (section 3.6): transparent nodes leave the cut; then (i) the
   remaining cut nodes and their ancestors are marked, (ii) a walk from the root over visible nodes
   stops at cut nodes and inserts every unmarked node it meets; while the cut exceeds N (or the
@@ -299,14 +303,14 @@ class SplitCollapse:
                     stop = STOP_REASONS[2]
                     break
                 c_key, c0 = c_head
-                frees = self._split_units(self.visible_children(c0))
-                if frees <= 0 or not self.can_collapse(c0):
-                    skipped_c.append(self.collapse_queue.pop())  # cannot help this split
+                if not self.can_collapse(c0):
+                    skipped_c.append(self.collapse_queue.pop())  # pinned (paging)
                     continue
-                # C0 must rank below S0 in split order: P(C0) < P(S0), ties by rank.
-                ranks_below = (c_key[0], c_key[1]) < (-s_key[0], -s_key[1])
-                if (not ranks_below or c0 == int(self.tree.parent[s0])
-                        or not self._fits_loads(self._collapse_loads(c0))):
+                # C0 must rank below S0 in split order (P(C0) < P(S0), ties by rank), and the
+                # collapse plus the split it makes room for must fit M.
+                loads = self._collapse_loads(c0) + self._split_loads(kids)
+                if (c_key >= (-s_key[0], -s_key[1]) or c0 == int(self.tree.parent[s0])
+                        or not self._fits_loads(loads)):
                     stop = STOP_REASONS[2]
                     break
                 self.collapse(c0)
