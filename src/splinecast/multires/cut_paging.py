@@ -50,8 +50,9 @@ class ExtendedCut(SplitCollapse):
 
     def __init__(self, metric: Any, capacity: int, render_cut: Any,
                  loads_per_plan: int | None = None):
+        self.in_render = np.zeros(metric.tree.size, bool)
+        self.in_render[np.asarray(render_cut, np.int64)] = True
         super().__init__(metric, render_cut, capacity, loads_per_plan, count_ancestors=True)
-        self.in_render = np.zeros(self.tree.size, bool)
         self.cached = self._cached_tree()
         self.resident = self.cached.copy()
         self.set_render_cut(render_cut)

@@ -35,6 +35,7 @@ never collapsing a parent of the rendering cut, maintains the extended cut of th
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,6 +71,8 @@ class CutUpdate:
     over_budget : bool
         A transfer-function repair could not get under N and M by collapsing (the cut is valid
         but larger than asked; the next frames collapse further).
+    timings : dict
+        Milliseconds spent re-prioritising (and repairing), refining, and committing.
     """
 
     cut: np.ndarray
@@ -126,7 +129,8 @@ class SplitCollapse:
         self._visible_children: dict[int, np.ndarray] = {}
         self.count = self._recount()
         self._begin_frame()
-        self._rebuild_sets()
+        # A starting cut made under another transfer function is repaired like an edited one.
+        self.over_budget = self.repair()
 
     # ------------------------------------------------------------------------- structure
     def visible_children(self, node: int) -> np.ndarray:
@@ -375,18 +379,27 @@ class SplitCollapse:
 
     def step(self, allow_split: Any = None) -> CutUpdate:
         """One frame: repair if the transfer function changed, re-prioritise if anything
-        changed, refine, and report what to download and evict."""
-        repaired = over = False
+        changed, refine, and report what to download and evict (with phase timings in ms)."""
+        repaired = False
+        over = self.over_budget
+        t0 = time.perf_counter()
         if self.metric.tf_epoch != self._tf_epoch:
             over = self.repair()
             self._tf_epoch = self.metric.tf_epoch
             repaired = True
         elif self.metric.epoch != self._epoch:
             self.reprioritize()
+        t1 = time.perf_counter()
         stop, splits, collapses = self.refine(allow_split)
+        t2 = time.perf_counter()
         downloads, evicted = self._commit_frame()
-        return CutUpdate(np.sort(np.fromiter(self.cut, np.int64, len(self.cut))), downloads,
-                         evicted, splits, collapses, stop, repaired, over)
+        self.over_budget = False
+        cut = np.sort(np.fromiter(self.cut, np.int64, len(self.cut)))
+        t3 = time.perf_counter()
+        timings = {"prioritize_ms": (t1 - t0) * 1e3, "refine_ms": (t2 - t1) * 1e3,
+                   "commit_ms": (t3 - t2) * 1e3}
+        return CutUpdate(cut, downloads, evicted, splits, collapses, stop, repaired, over,
+                         timings)
 
 
 class CutUpdater(SplitCollapse):
