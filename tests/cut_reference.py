@@ -10,6 +10,7 @@ voxel with scipy's interpolation.
 * :func:`is_valid_cut` -- covers every visible leaf exactly once, holds no invisible node.
 * :func:`voxel_distortion` -- eq. (1)-(2) summed over the voxels of a brick.
 * :func:`smooth_volume` -- a smooth random field with some noise (test data).
+* :func:`reference_priorities` -- eq. (9) and the monotone clamp, node by node in Python.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ __all__ = [
     "is_valid_cut",
     "voxel_distortion",
     "smooth_volume",
+    "reference_priorities",
 ]
 
 
@@ -154,3 +156,21 @@ def smooth_volume(shape, seed: int, dtype=np.uint8) -> np.ndarray:
     field = ndimage.gaussian_filter(rng.random(shape), 2.0) + 0.05 * rng.random(shape)
     field = (field - field.min()) / np.ptp(field) * 255
     return field.astype(dtype)
+
+
+def reference_priorities(parent: list[int], error: np.ndarray, visible: np.ndarray,
+                         improved: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``(ER, P)`` per node: ER over visible children (-inf without any), P = ER or E for
+    splittable nodes, clamped by the parent's P, root first."""
+    kids = children_lists(parent)
+    n = len(parent)
+    er = np.full(n, -np.inf)
+    for b in range(n):
+        vis = [k for k in kids[b] if visible[k]]
+        if vis:
+            er[b] = (error[b] - sum(error[k] for k in vis)) / len(vis)
+    raw = er.copy() if improved else np.where(np.isfinite(er), error, -np.inf)
+    prio = np.empty(n)
+    for b in _postorder(parent)[::-1]:  # parents before children
+        prio[b] = raw[b] if parent[b] < 0 else min(raw[b], prio[parent[b]])
+    return er, prio

@@ -58,7 +58,10 @@ def test_distortion_table_is_a_distance_of_premultiplied_colours():
 
 
 def test_quantizer_bins_are_the_values_for_8_bit_data():
-    q = Quantizer.for_data(np.uint8, (3, 200))
+    default = Quantizer.for_data(np.uint8, (3, 200))
+    assert (default.lo, default.hi, default.bins) == (0.0, 255.0, 64)
+    np.testing.assert_allclose(default.values[[0, 1, -1]], [0, 255 / 63, 255])
+    q = Quantizer.for_data(np.uint8, (3, 200), bins=256)
     assert (q.lo, q.hi, q.bins) == (0.0, 255.0, 256)
     np.testing.assert_array_equal(q.bin_of(np.arange(256)), np.arange(256))
     np.testing.assert_array_equal(q.values, np.arange(256))
@@ -178,6 +181,7 @@ def test_histograms_round_trip_through_plain_arrays(small_pyramid):
     assert back.quantizer == hist.quantizer
     np.testing.assert_array_equal(back.keys, hist.keys)
     assert hist.keys.dtype == np.uint16 and hist.counts.dtype == np.uint32
+    assert hist.quantizer.bins == 64
     assert hist.nbytes == hist.offsets.nbytes + 6 * hist.keys.size
 
 
@@ -198,7 +202,7 @@ def test_mri_d_from_histograms_equals_d_from_voxels():
     src = np.ascontiguousarray(vol.data[60:124, 70:134, 50:114])  # a 64^3 crop, 16^3 bricks
     tree = regular_brick_tree(src.shape, 16)
     levels = mean_pyramid(src, tree.grid.levels)
-    q = Quantizer.for_data(src.dtype, (0, 255))
+    q = Quantizer.for_data(src.dtype, (0, 255), bins=256)  # exact 8-bit bins
     hist = pyramid_histograms(levels, 16, q)
     tf = sc.TransferFunction.load(Path(__file__).resolve().parents[1] / "examples"
                                   / "tf-mri.json")

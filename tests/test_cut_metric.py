@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from cut_reference import smooth_volume
+from cut_reference import reference_priorities, smooth_volume
 
 import splinecast as sc
 from splinecast.multires.cut_histograms import Quantizer, leaf_value_ranges, pyramid_histograms
@@ -20,9 +20,8 @@ from splinecast.multires.cut_metric import (
     ArrayMetric,
     CutMetric,
     cut_error,
-    error_reduction,
+    histogram_distortion,
     importance,
-    monotone_priority,
     visible_nodes,
 )
 from splinecast.multires.cut_tree import BrickTree, regular_brick_tree
@@ -95,15 +94,38 @@ def test_ranges_are_hierarchical_so_transparency_is():
 def test_error_reduction_and_monotone_clamp_by_hand():
     #      0 (E 10)
     #    1 (E 2)   2 (E 5)        3 is 1's child, 4 and 5 are 2's, 6 is 4's
-    tree = BrickTree.from_parents([-1, 0, 0, 1, 2, 2, 4])
+    parent = [-1, 0, 0, 1, 2, 2, 4]
+    tree = BrickTree.from_parents(parent)
     error = np.array([10, 2, 5, 0, 1, 0, 0], float)
-    er = error_reduction(tree, error, np.ones(7, bool))
+    metric = ArrayMetric(tree, error)
+    er = metric.error_reduction(np.arange(7))
     np.testing.assert_allclose(er[:3], [(10 - 7) / 2, 2.0, (5 - 1) / 2])
     assert er[4] == 1.0 and np.all(np.isneginf(er[[3, 5, 6]]))
-    p = monotone_priority(tree, er)
+    p = metric.priority(np.arange(7))
     np.testing.assert_allclose(p[:3], [1.5, 1.5, 1.5])  # children capped by the root's 1.5
     assert p[4] == 1.0
-    assert cut_error(tree, error, [1, 2]) == pytest.approx(7 / tree.voxels[[1, 2]].sum())
+    naive = ArrayMetric(tree, error, improved=False).priority(np.arange(7))
+    np.testing.assert_allclose(naive[:3], [10, 2, 5])
+    # E(cut) divides by the voxels of the visible finest nodes (3, 5, 6 here: 1 voxel each).
+    assert cut_error(tree, error, [1, 2], np.ones(7, bool)) == pytest.approx(7 / 3)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_array_metric_matches_the_reference_on_random_trees(seed):
+    from cut_reference import block_monotone_errors, hierarchical_visibility, random_parents
+
+    rng = np.random.default_rng(seed)
+    parent = random_parents(rng, 200)
+    error = block_monotone_errors(rng, parent) if seed % 2 else rng.exponential(1, len(parent))
+    visible = hierarchical_visibility(rng, parent)
+    visible[0] = True
+    tree = BrickTree.from_parents(parent)
+    for improved in (False, True):
+        er, prio = reference_priorities(parent, error, visible, improved)
+        metric = ArrayMetric(tree, error, visible, improved)
+        order = rng.permutation(tree.size)  # any query order: ancestors computed on demand
+        np.testing.assert_allclose(metric.priority(order), prio[order])
+        np.testing.assert_allclose(metric.error_reduction(order), er[order])
 
 
 @pytest.fixture(scope="module")
@@ -123,17 +145,18 @@ TF_B = sc.TransferFunction([(90, 0.0), (110, 0.6), (150, 0.1)], domain=(0, 255),
 
 
 def _whole_tree_priorities(metric: CutMetric, improved: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Second code path: every node's E at once, then ER and the clamp over whole arrays."""
+    """Second code path: every node's D from the histograms at once (vectorized), the fix-up and
+    E over whole arrays, then ER and the clamp node by node in Python (cut_reference)."""
     tree = metric.tree
-    everything = np.arange(tree.size)
-    raw = metric.raw_distortion(everything)
+    raw = histogram_distortion(metric.histograms, metric.table)
     kids_sum = np.zeros(tree.size)
     child = np.flatnonzero((tree.parent >= 0) & metric.visible)
     np.add.at(kids_sum, tree.parent[child], raw[child])
     fixed = np.maximum(raw, kids_sum)
     error = fixed * importance(tree.box_min, tree.box_max, metric.interest, metric.region,
                                metric.eye)
-    return error, ArrayMetric(tree, error, metric.visible, improved).priority(everything)
+    _, prio = reference_priorities([int(p) for p in tree.parent], error, metric.visible, improved)
+    return error, prio
 
 
 @pytest.mark.parametrize("improved", [False, True])
@@ -143,7 +166,8 @@ def test_lazy_hull_priorities_equal_the_whole_tree_computation(pyramid, improved
                        improved=improved)
     hull = np.array([tree.root, *tree.children_of(tree.root)[:3]])
     lazy = metric.priority(hull)               # computed for these nodes (and ancestors) only
-    assert (metric._raw_at == metric.tf_epoch).sum() < tree.size  # noqa: SLF001 - laziness
+    state = metric._state  # noqa: SLF001 - checking laziness
+    assert (state.raw_at == metric.tf_epoch).sum() < tree.size
     error, full = _whole_tree_priorities(CutMetric(tree, hist, TF_A, interest=(10, 30, 5),
                                                    eye=(-50, 20, 20), improved=improved),
                                          improved)

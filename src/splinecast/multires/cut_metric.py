@@ -29,15 +29,18 @@ at which point the parent held the highest priority), and it makes the update's 
 greedy cut. Ties are broken by a strict order in which a parent precedes its children: first by
 depth, then by id (:func:`rank`).
 
-Two implementations of one small protocol (``visible``, ``epoch``, ``tf_epoch``, ``priority``,
-``error``) feed the selection and update algorithms: :class:`CutMetric` (histograms, transfer
-function, interest point, eye; computed lazily per node and cached) and :class:`ArrayMetric`
-(given per-node errors, for tests and abstract trees).
+Two classes share one small protocol (``tree``, ``visible``, ``rank``, ``epoch``, ``tf_epoch``,
+``priority(nodes)``, ``error(nodes)``) that the selection and update algorithms use:
+:class:`CutMetric` (histograms, transfer function, interest point or region, eye) and
+:class:`ArrayMetric` (given per-node errors, for abstract trees and tests). Both compute per node,
+in compiled code, only what is asked for and cache it until an input changes (the epochs): a frame
+touches the hull (the cut, its ancestors, its children, and the grandchildren the fix-up reads) and
+the children of the nodes it splits, never the whole tree.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import prange
@@ -54,8 +57,6 @@ __all__ = [
     "visible_nodes",
     "histogram_distortion",
     "importance",
-    "error_reduction",
-    "monotone_priority",
     "rank",
     "cut_error",
     "ArrayMetric",
@@ -85,19 +86,23 @@ def visible_nodes(tree: BrickTree, tf: TransferFunction, bins: int = TRANSPARENC
 
 
 # ------------------------------------------------------------------------------ distortion
+@jit(nogil=True, inline="always")
+def _node_distortion(offsets, keys, counts, table, b):
+    acc = 0.0
+    for e in range(offsets[b], offsets[b + 1]):
+        acc += counts[e] * table[keys[e]]
+    return acc
+
+
 @jit(parallel=True, nogil=True)
-def _sum_distortion(offsets, keys, counts, table, nodes, out):
+def _sum_distortion_parallel(offsets, keys, counts, table, nodes, out):
     for t in prange(nodes.shape[0]):
-        b = nodes[t]
-        acc = 0.0
-        for e in range(offsets[b], offsets[b + 1]):
-            acc += counts[e] * table[keys[e]]
-        out[t] = acc
+        out[t] = _node_distortion(offsets, keys, counts, table, nodes[t])
 
 
 def histogram_distortion(hist: BrickHistograms, table: np.ndarray,
                          nodes: np.ndarray | None = None) -> np.ndarray:
-    """Raw ``D(b) = sum H_b(u, v) D(u, v)`` (eq. 1) for ``nodes`` (default: all).
+    """Raw ``D(b) = sum H_b(u, v) D(u, v)`` (eq. 1) for ``nodes`` (default: all), in parallel.
 
     ``table`` is :func:`.colour.distortion_table` for the histograms' bin values.
     """
@@ -105,21 +110,79 @@ def histogram_distortion(hist: BrickHistograms, table: np.ndarray,
         nodes = np.arange(hist.offsets.shape[0] - 1)
     nodes = np.ascontiguousarray(nodes, np.int64)
     out = np.empty(nodes.shape[0], np.float64)
-    _sum_distortion(hist.offsets, hist.keys, hist.counts, np.ascontiguousarray(table).ravel(),
-                    nodes, out)
+    _sum_distortion_parallel(hist.offsets, hist.keys, hist.counts,
+                             np.ascontiguousarray(table, np.float64).ravel(), nodes, out)
     return out
 
 
 # ------------------------------------------------------------------------------ importance
-def _box_point_distance(box_min: np.ndarray, box_max: np.ndarray, p: np.ndarray) -> np.ndarray:
-    gap = np.maximum(np.maximum(box_min - p, p - box_max), 0.0)
-    return np.sqrt(np.einsum("ij,ij->i", gap, gap))
+# A view is a float64 vector: [has_interest, is_region, px, py, pz, lo xyz, hi xyz, has_eye,
+# ex, ey, ez, t]; built by _view_vector.
+_VIEW_SIZE = 16
 
 
-def _box_box_distance(box_min: np.ndarray, box_max: np.ndarray, lo: np.ndarray,
-                      hi: np.ndarray) -> np.ndarray:
-    gap = np.maximum(np.maximum(box_min - hi, lo - box_max), 0.0)
-    return np.sqrt(np.einsum("ij,ij->i", gap, gap))
+def _view_vector(interest: Any, region: Any, eye: Any, t: float) -> np.ndarray:
+    v = np.zeros(_VIEW_SIZE)
+    if region is not None:
+        lo, hi = (np.asarray(x, np.float64).reshape(3) for x in region)
+        v[0:2] = 1.0
+        v[2:5] = 0.5 * (lo + hi)
+        v[5:8], v[8:11] = lo, hi
+    elif interest is not None:
+        v[0] = 1.0
+        v[2:5] = np.asarray(interest, np.float64).reshape(3)
+    if eye is not None:
+        v[11] = 1.0
+        v[12:15] = np.asarray(eye, np.float64).reshape(3)
+    v[15] = t
+    return v
+
+
+@jit(nogil=True, inline="always")
+def _gap(a0, a1, b0, b1):
+    """Distance between the intervals [a0, a1] and [b0, b1] (0 when they overlap)."""
+    return max(b0 - a1, a0 - b1, 0.0)
+
+
+@jit(nogil=True)
+def _importance_one(bmin, bmax, view):
+    """Eqs. (5)-(6) for one box."""
+    d0 = bmax[0] - bmin[0]
+    d1 = bmax[1] - bmin[1]
+    d2 = bmax[2] - bmin[2]
+    diag = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    r_x = -1.0
+    if view[0] != 0.0:
+        g0 = _gap(bmin[0], bmax[0], view[2], view[2])
+        g1 = _gap(bmin[1], bmax[1], view[3], view[3])
+        g2 = _gap(bmin[2], bmax[2], view[4], view[4])
+        d = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)  # to the point, or to the region's centre
+        if view[1] != 0.0:
+            g0 = _gap(bmin[0], bmax[0], view[5], view[8])
+            g1 = _gap(bmin[1], bmax[1], view[6], view[9])
+            g2 = _gap(bmin[2], bmax[2], view[7], view[10])
+            d = 0.5 * (d + np.sqrt(g0 * g0 + g1 * g1 + g2 * g2))
+        r_x = diag / (diag + d) if diag + d > 0.0 else 1.0
+    r_eye = -1.0
+    if view[11] != 0.0:
+        g0 = _gap(bmin[0], bmax[0], view[12], view[12])
+        g1 = _gap(bmin[1], bmax[1], view[13], view[13])
+        g2 = _gap(bmin[2], bmax[2], view[14], view[14])
+        d = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        r_eye = diag / (diag + d) if diag + d > 0.0 else 1.0
+    if r_x >= 0.0 and r_eye >= 0.0:
+        return (1.0 - view[15]) * r_x + view[15] * r_eye
+    if r_x >= 0.0:
+        return r_x
+    if r_eye >= 0.0:
+        return r_eye
+    return 1.0
+
+
+@jit(nogil=True)
+def _importance_boxes(box_min, box_max, view, out):
+    for i in range(box_min.shape[0]):
+        out[i] = _importance_one(box_min[i], box_max[i], view)
 
 
 def importance(box_min: np.ndarray, box_max: np.ndarray, interest: Any = None,
@@ -139,51 +202,146 @@ def importance(box_min: np.ndarray, box_max: np.ndarray, interest: Any = None,
     t : float
         Weight of the eye term (the paper's choice, 1/4).
     """
-    box_min = np.asarray(box_min, np.float64).reshape(-1, 3)
-    box_max = np.asarray(box_max, np.float64).reshape(-1, 3)
-    diag = np.linalg.norm(box_max - box_min, axis=1)
-
-    def ratio(d: np.ndarray) -> np.ndarray:
-        den = diag + d
-        return np.where(den > 0, diag / np.where(den > 0, den, 1.0), 1.0)
-
-    d_x = None
-    if region is not None:
-        lo, hi = (np.asarray(v, np.float64).reshape(3) for v in region)
-        d_x = 0.5 * (_box_box_distance(box_min, box_max, lo, hi)
-                     + _box_point_distance(box_min, box_max, 0.5 * (lo + hi)))
-    elif interest is not None:
-        d_x = _box_point_distance(box_min, box_max, np.asarray(interest, np.float64).reshape(3))
-    d_eye = None if eye is None else _box_point_distance(
-        box_min, box_max, np.asarray(eye, np.float64).reshape(3))
-    if d_x is not None and d_eye is not None:
-        return (1.0 - t) * ratio(d_x) + t * ratio(d_eye)
-    if d_x is not None:
-        return ratio(d_x)
-    if d_eye is not None:
-        return ratio(d_eye)
-    return np.ones(diag.shape[0])
+    box_min = np.ascontiguousarray(box_min, np.float64).reshape(-1, 3)
+    box_max = np.ascontiguousarray(box_max, np.float64).reshape(-1, 3)
+    out = np.empty(box_min.shape[0])
+    _importance_boxes(box_min, box_max, _view_vector(interest, region, eye, t), out)
+    return out
 
 
-# ---------------------------------------------------------------------- reduction, priority
-def error_reduction(tree: BrickTree, error: np.ndarray, visible: np.ndarray,
-                    nodes: np.ndarray | None = None) -> np.ndarray:
-    """``ER(b)`` of eq. (9) over visible children; ``-inf`` for nodes without any."""
-    nodes = np.arange(tree.size) if nodes is None else np.asarray(nodes, np.int64)
-    kids, owner = tree.children_with_owner(nodes, np.asarray(visible, bool))
-    total = np.bincount(owner, weights=error[kids], minlength=nodes.shape[0])
-    count = np.bincount(owner, minlength=nodes.shape[0])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        er = (error[nodes] - total) / count
-    return np.where(count > 0, er, -np.inf)
+# ---------------------------------------------------------------- per-node lazy computation
+class _State(NamedTuple):
+    """Everything the compiled per-node functions read and cache (one metric's state).
+
+    ``epochs`` holds [transfer-function epoch, view epoch, priority epoch, improved (0/1)]; a
+    cached value is valid when its ``*_at`` entry equals the matching epoch.
+    """
+
+    parent: np.ndarray
+    child_start: np.ndarray
+    children: np.ndarray
+    visible: np.ndarray
+    box_min: np.ndarray
+    box_max: np.ndarray
+    h_offsets: np.ndarray
+    h_keys: np.ndarray
+    h_counts: np.ndarray
+    table: np.ndarray
+    viewing: np.ndarray
+    epochs: np.ndarray
+    raw: np.ndarray
+    raw_at: np.ndarray
+    fixed: np.ndarray
+    fixed_at: np.ndarray
+    imp: np.ndarray
+    imp_at: np.ndarray
+    prio: np.ndarray
+    prio_at: np.ndarray
+    stack: np.ndarray
 
 
-def monotone_priority(tree: BrickTree, raw: np.ndarray) -> np.ndarray:
-    """``P(b) = min(raw(b), P(parent))`` for every node (root first)."""
-    p = np.asarray(raw, np.float64).copy()
-    for nodes in tree.depth_layers()[1:]:
-        p[nodes] = np.minimum(p[nodes], p[tree.parent[nodes]])
-    return p
+@jit(nogil=True)
+def _raw_d(s, b):
+    """D(b) from the histogram (eq. 1)."""
+    if s.raw_at[b] != s.epochs[0]:
+        s.raw[b] = _node_distortion(s.h_offsets, s.h_keys, s.h_counts, s.table, b)
+        s.raw_at[b] = s.epochs[0]
+    return s.raw[b]
+
+
+@jit(nogil=True)
+def _fixed_d(s, b):
+    """D*(b) = max(D(b), sum of the visible children's D): the fix-up of section 3.2.1."""
+    if s.fixed_at[b] != s.epochs[0]:
+        below = 0.0
+        for t in range(s.child_start[b], s.child_start[b + 1]):
+            k = s.children[t]
+            if s.visible[k]:
+                below += _raw_d(s, k)
+        s.fixed[b] = max(_raw_d(s, b), below)
+        s.fixed_at[b] = s.epochs[0]
+    return s.fixed[b]
+
+
+@jit(nogil=True)
+def _imp(s, b):
+    if s.imp_at[b] != s.epochs[1]:
+        s.imp[b] = _importance_one(s.box_min[b], s.box_max[b], s.viewing)
+        s.imp_at[b] = s.epochs[1]
+    return s.imp[b]
+
+
+@jit(nogil=True)
+def _err(s, b):
+    """E(b) = D*(b) I(b) (eq. 7)."""
+    return _fixed_d(s, b) * _imp(s, b)
+
+
+@jit(nogil=True)
+def _er(s, b):
+    """ER(b) (eq. 9) over the visible children; -inf without any."""
+    total = 0.0
+    n = 0
+    for t in range(s.child_start[b], s.child_start[b + 1]):
+        k = s.children[t]
+        if s.visible[k]:
+            total += _err(s, k)
+            n += 1
+    if n == 0:
+        return -np.inf
+    return (_err(s, b) - total) / n
+
+
+@jit(nogil=True)
+def _raw_priority(s, b):
+    er = _er(s, b)
+    if s.epochs[3] != 0 or er == -np.inf:
+        return er
+    return _err(s, b)
+
+
+@jit(nogil=True)
+def _prio(s, b):
+    """Monotone priority min(P_raw(b), P(parent)); computes stale ancestors first."""
+    epoch = s.epochs[2]
+    if s.prio_at[b] == epoch:
+        return s.prio[b]
+    top = 0
+    a = b
+    while a >= 0 and s.prio_at[a] != epoch:
+        s.stack[top] = a
+        top += 1
+        a = s.parent[a]
+    cap = s.prio[a] if a >= 0 else np.inf
+    while top > 0:
+        top -= 1
+        a = s.stack[top]
+        cap = min(_raw_priority(s, a), cap)
+        s.prio[a] = cap
+        s.prio_at[a] = epoch
+    return s.prio[b]
+
+
+@jit(nogil=True)
+def _map_nodes(s, nodes, what, out):
+    """One of the per-node quantities for every node of ``nodes``."""
+    for i in range(nodes.shape[0]):
+        b = nodes[i]
+        if what == 0:
+            out[i] = _prio(s, b)
+        elif what == 1:
+            out[i] = _err(s, b)
+        elif what == 2:
+            out[i] = _fixed_d(s, b)
+        elif what == 3:
+            out[i] = _raw_d(s, b)
+        elif what == 4:
+            out[i] = _imp(s, b)
+        else:
+            out[i] = _er(s, b)
+
+
+_PRIORITY, _ERROR, _FIXED, _RAW, _IMPORTANCE, _REDUCTION = range(6)
 
 
 def rank(tree: BrickTree) -> np.ndarray:
@@ -191,14 +349,88 @@ def rank(tree: BrickTree) -> np.ndarray:
     return tree.depth.astype(np.int64) * tree.size + np.arange(tree.size)
 
 
-def cut_error(tree: BrickTree, error: np.ndarray, cut: np.ndarray) -> float:
-    """``E(cut)`` of eq. (8): the cut's summed error per source voxel it covers."""
+def cut_error(tree: BrickTree, error: np.ndarray, cut: np.ndarray, visible: np.ndarray) -> float:
+    """``E(cut)`` of eq. (8): the cut's summed error per source voxel of the visible region.
+
+    Eq. (8) divides by ``sum n(b)`` over the cut, "the number of source voxels approximated by
+    the cut", a constant the paper then drops. With transparent bricks left out it is not quite
+    constant (a coarse brick also covers its transparent children's voxels), so we divide by the
+    voxels of the visible finest bricks, the same for every cut: comparing cuts by E(cut) is then
+    comparing their error sums, which is what the optimum minimizes.
+    """
     cut = np.asarray(cut, np.int64)
-    return float(error[cut].sum() / max(int(tree.voxels[cut].sum()), 1))
+    visible = np.asarray(visible, bool)
+    kids_visible = np.zeros(tree.size, bool)
+    child = np.flatnonzero((tree.parent >= 0) & visible)
+    kids_visible[tree.parent[child]] = True
+    region = int(tree.voxels[visible & ~kids_visible].sum())
+    return float(error[cut].sum() / max(region, 1))
 
 
-# ------------------------------------------------------------------------------- protocol
-class ArrayMetric:
+class _LazyMetric:
+    """Caches, epochs and the per-node queries shared by :class:`CutMetric` and
+    :class:`ArrayMetric`."""
+
+    def __init__(self, tree: BrickTree, histograms: BrickHistograms | None, improved: bool,
+                 t: float):
+        k = tree.size
+        self.tree = tree
+        self.improved = improved
+        self.t = t
+        self.rank = rank(tree)
+        self.epoch = 0
+        self.tf_epoch = 0
+        self._view_epoch = 0
+        self.visible = np.ones(k, bool)
+        if histograms is None:
+            offsets, keys, counts, table = (np.zeros(k + 1, np.int64), np.zeros(0, np.uint16),
+                                            np.zeros(0, np.uint32), np.zeros(1))
+        else:
+            offsets, keys, counts = histograms.offsets, histograms.keys, histograms.counts
+            table = np.zeros(histograms.quantizer.bins ** 2)
+        self._state = _State(
+            parent=tree.parent, child_start=tree.child_start, children=tree.children,
+            visible=self.visible, box_min=tree.box_min, box_max=tree.box_max,
+            h_offsets=offsets, h_keys=keys, h_counts=counts, table=table,
+            viewing=np.zeros(_VIEW_SIZE), epochs=np.array([0, 0, 0, int(improved)], np.int64),
+            raw=np.zeros(k), raw_at=np.full(k, -1, np.int64),
+            fixed=np.zeros(k), fixed_at=np.full(k, -1, np.int64),
+            imp=np.zeros(k), imp_at=np.full(k, -1, np.int64),
+            prio=np.zeros(k), prio_at=np.full(k, -1, np.int64),
+            stack=np.zeros(int(tree.depth.max()) + 2, np.int64))
+
+    def _bump(self, transfer: bool, view: bool) -> None:
+        if transfer:
+            self.tf_epoch += 1
+        if view:
+            self._view_epoch += 1
+        self.epoch += 1
+        self._state.epochs[:3] = (self.tf_epoch, self._view_epoch, self.epoch)
+
+    def _query(self, nodes: Any, what: int) -> np.ndarray:
+        nodes = np.ascontiguousarray(nodes, np.int64).reshape(-1)
+        out = np.empty(nodes.shape[0])
+        _map_nodes(self._state, nodes, what, out)
+        return out
+
+    def priority(self, nodes: Any) -> np.ndarray:
+        """Monotone split priority of ``nodes``."""
+        return self._query(nodes, _PRIORITY)
+
+    def error(self, nodes: Any) -> np.ndarray:
+        """``E(b) = D*(b) I(b)`` (eq. 7)."""
+        return self._query(nodes, _ERROR)
+
+    def error_reduction(self, nodes: Any) -> np.ndarray:
+        """``ER(b)`` (eq. 9); ``-inf`` for nodes without visible children."""
+        return self._query(nodes, _REDUCTION)
+
+    def all_errors(self) -> np.ndarray:
+        """``E`` of every node (whole tree; for references and benchmarks)."""
+        return self.error(np.arange(self.tree.size))
+
+
+class ArrayMetric(_LazyMetric):
     """Priorities from given per-node errors ``E`` (abstract trees, tests, benchmarks).
 
     Parameters
@@ -215,48 +447,26 @@ class ArrayMetric:
 
     def __init__(self, tree: BrickTree, error: np.ndarray, visible: np.ndarray | None = None,
                  improved: bool = True):
-        self.tree = tree
-        self.improved = improved
-        self.epoch = 0
-        self.tf_epoch = 0
-        self.rank = rank(tree)
-        self.visible: np.ndarray | None = None
+        super().__init__(tree, None, improved, 0.25)
+        s = self._state
+        s.imp[:] = 1.0
         self.set(error, visible)
 
     def set(self, error: np.ndarray, visible: np.ndarray | None = None) -> None:
         """New errors (and visibility): a new epoch; a new ``tf_epoch`` when visibility changed."""
-        tree = self.tree
-        new_visible = np.ones(tree.size, bool) if visible is None else np.array(visible, bool)
-        if self.visible is not None and not np.array_equal(new_visible, self.visible):
-            self.tf_epoch += 1
-        self.visible = new_visible
-        self._error = np.asarray(error, np.float64)
-        reduction = error_reduction(tree, self._error, self.visible)
-        raw = reduction if self.improved else np.where(np.isfinite(reduction), self._error,
-                                                       -np.inf)
-        self._priority = monotone_priority(tree, raw)
-        self.epoch += 1
-
-    def error(self, nodes: np.ndarray) -> np.ndarray:
-        """``E`` of ``nodes``."""
-        return self._error[np.asarray(nodes, np.int64)]
-
-    def priority(self, nodes: np.ndarray) -> np.ndarray:
-        """Monotone priority of ``nodes``."""
-        return self._priority[np.asarray(nodes, np.int64)]
-
-    def all_errors(self) -> np.ndarray:
-        """``E`` of every node."""
-        return self._error
+        new_visible = (np.ones(self.tree.size, bool) if visible is None
+                       else np.asarray(visible, bool))
+        changed = not np.array_equal(new_visible, self.visible)
+        self.visible[:] = new_visible
+        self._bump(transfer=changed, view=False)
+        s = self._state
+        s.fixed[:] = np.asarray(error, np.float64)   # E given directly: D* = E and I = 1
+        s.fixed_at[:] = self.tf_epoch
+        s.imp_at[:] = self._view_epoch
 
 
-class CutMetric:
+class CutMetric(_LazyMetric):
     """``E``, ``ER`` and priorities of a brick pyramid under a transfer function and a view.
-
-    Values are computed per node when first asked for and cached until the transfer function
-    (distortion, visibility) or the view (importance) changes, so a frame touches only the nodes
-    the cut algorithms look at: the hull (the cut, its ancestors, its children; reference 002
-    section 3.6) and the children of nodes split this frame.
 
     Parameters
     ----------
@@ -279,124 +489,41 @@ class CutMetric:
         if histograms.offsets.shape[0] != tree.size + 1:
             raise ParameterError(f"histograms describe {histograms.offsets.shape[0] - 1} nodes, "
                                  f"the tree has {tree.size}")
-        self.tree = tree
+        super().__init__(tree, histograms, improved, t)
         self.histograms = histograms
-        self.improved = improved
-        self.t = t
-        self.rank = rank(tree)
-        k = tree.size
-        self.epoch = 0
-        self.tf_epoch = 0
-        self._view_epoch = 0
-        self._raw = np.zeros(k)
-        self._raw_at = np.full(k, -1, np.int64)      # tf_epoch the raw D was computed for
-        self._fixed = np.zeros(k)
-        self._fixed_at = np.full(k, -1, np.int64)
-        self._imp = np.zeros(k)
-        self._imp_at = np.full(k, -1, np.int64)      # view epoch
-        self._prio = np.zeros(k)
-        self._prio_at = np.full(k, -1, np.int64)     # epoch
-        self._has_hist = histograms.offsets[1:] > histograms.offsets[:-1]
         self.set_transfer_function(tf)
         self.set_view(interest=interest, region=region, eye=eye)
 
-    # ------------------------------------------------------------------------------ inputs
     def set_transfer_function(self, tf: TransferFunction) -> None:
         """New transfer function: new pair table and visibility; every D becomes stale."""
         self.tf = tf
         self.table = distortion_table(tf, self.histograms.quantizer.values).ravel()
-        self.visible = visible_nodes(self.tree, tf)
-        self.tf_epoch += 1
-        self.epoch += 1
+        self._state.table[:] = self.table
+        self.visible[:] = visible_nodes(self.tree, tf)
+        self._bump(transfer=True, view=False)
 
     def set_view(self, interest: Any = None, region: Any = None, eye: Any = None) -> None:
         """New interest point or region and eye: every importance becomes stale."""
         self.interest, self.region, self.eye = interest, region, eye
-        self._view_epoch += 1
-        self.epoch += 1
+        self._state.viewing[:] = _view_vector(interest, region, eye, self.t)
+        self._bump(transfer=False, view=True)
 
-    # ---------------------------------------------------------------------------- per node
-    def raw_distortion(self, nodes: np.ndarray) -> np.ndarray:
-        """``D(b)`` from the histograms (eq. 1), computed for stale nodes only."""
-        nodes = np.asarray(nodes, np.int64)
-        stale = nodes[self._raw_at[nodes] != self.tf_epoch]
-        if stale.size:
-            stale = np.unique(stale)
-            with_hist = stale[self._has_hist[stale]]
-            self._raw[stale] = 0.0
-            if with_hist.size:
-                self._raw[with_hist] = histogram_distortion(self.histograms, self.table,
-                                                            with_hist)
-            self._raw_at[stale] = self.tf_epoch
-        return self._raw[nodes]
+    def raw_distortion(self, nodes: Any) -> np.ndarray:
+        """``D(b)`` from the histograms (eq. 1)."""
+        return self._query(nodes, _RAW)
 
-    def distortion(self, nodes: np.ndarray) -> np.ndarray:
+    def distortion(self, nodes: Any) -> np.ndarray:
         """``D*(b) = max(D(b), sum of the visible children's D)``: the fixed-up distortion."""
-        nodes = np.asarray(nodes, np.int64)
-        stale = nodes[self._fixed_at[nodes] != self.tf_epoch]
-        if stale.size:
-            stale = np.unique(stale)
-            kids, owner = self.tree.children_with_owner(stale, self.visible)
-            below = np.bincount(owner, weights=self.raw_distortion(kids),
-                                minlength=stale.shape[0])
-            self._fixed[stale] = np.maximum(self.raw_distortion(stale), below)
-            self._fixed_at[stale] = self.tf_epoch
-        return self._fixed[nodes]
+        return self._query(nodes, _FIXED)
 
-    def importance(self, nodes: np.ndarray) -> np.ndarray:
+    def importance(self, nodes: Any) -> np.ndarray:
         """``I(b)`` (eq. 6) under the current view."""
-        nodes = np.asarray(nodes, np.int64)
-        stale = nodes[self._imp_at[nodes] != self._view_epoch]
-        if stale.size:
-            self._imp[stale] = importance(self.tree.box_min[stale], self.tree.box_max[stale],
-                                          self.interest, self.region, self.eye, self.t)
-            self._imp_at[stale] = self._view_epoch
-        return self._imp[nodes]
+        return self._query(nodes, _IMPORTANCE)
 
-    def error(self, nodes: np.ndarray) -> np.ndarray:
-        """``E(b) = D*(b) I(b)`` (eq. 7)."""
-        return self.distortion(nodes) * self.importance(nodes)
-
-    def error_reduction(self, nodes: np.ndarray) -> np.ndarray:
-        """``ER(b)`` (eq. 9); ``-inf`` for nodes without visible children."""
-        nodes = np.asarray(nodes, np.int64)
-        kids, owner = self.tree.children_with_owner(nodes, self.visible)
-        total = np.bincount(owner, weights=self.error(kids), minlength=nodes.shape[0])
-        count = np.bincount(owner, minlength=nodes.shape[0])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            er = (self.error(nodes) - total) / count
-        return np.where(count > 0, er, -np.inf)
-
-    def priority(self, nodes: np.ndarray) -> np.ndarray:
-        """Monotone split priority of ``nodes`` (computing the ancestors' first when stale)."""
-        nodes = np.asarray(nodes, np.int64)
-        stale = nodes[self._prio_at[nodes] != self.epoch]
-        if stale.size:
-            stale = np.unique(stale)
-            parents = self.tree.parent[stale]
-            parents = parents[parents >= 0]
-            missing = np.unique(parents[self._prio_at[parents] != self.epoch])
-            if missing.size:
-                self.priority(missing)  # recursion depth is at most the tree's depth
-            if self.improved:
-                raw = self.error_reduction(stale)
-            else:
-                splittable = np.isfinite(self.error_reduction(stale))
-                raw = np.where(splittable, self.error(stale), -np.inf)
-            par = self.tree.parent[stale]
-            cap = np.where(par >= 0, self._prio[np.maximum(par, 0)], np.inf)
-            self._prio[stale] = np.minimum(raw, cap)
-            self._prio_at[stale] = self.epoch
-        return self._prio[nodes]
-
-    # -------------------------------------------------------------------------- whole tree
     def update_all_distortions(self) -> np.ndarray:
-        """Recompute ``D*`` for every node (the "full octree" update); returns it."""
-        everything = np.arange(self.tree.size)
-        self._raw_at[:] = -1
-        self._fixed_at[:] = -1
-        return self.distortion(everything)
-
-    def all_errors(self) -> np.ndarray:
-        """``E`` of every node (whole tree; for references and benchmarks)."""
-        return self.error(np.arange(self.tree.size))
+        """Recompute ``D*`` for every node (the "full octree" update, raw D in parallel)."""
+        s = self._state
+        s.raw[:] = histogram_distortion(self.histograms, self.table)
+        s.raw_at[:] = self.tf_epoch
+        s.fixed_at[:] = -1
+        return self.distortion(np.arange(self.tree.size))
