@@ -37,7 +37,7 @@ def ids(*letters):
 @pytest.mark.parametrize("capacity", [1, 3, 8])
 def test_partial_queue_pops_in_key_order(capacity):
     rng = np.random.default_rng(capacity)
-    queue = PartialQueue(capacity)
+    queue = PartialQueue(capacity, 1000)
     reference: dict[int, tuple[float, int]] = {}
     nodes = np.arange(40)
     keys = rng.integers(0, 6, 40).astype(float)  # many ties on the primary key
@@ -61,7 +61,9 @@ def test_partial_queue_pops_in_key_order(capacity):
             assert node == best and key == reference.pop(best)
         assert len(queue) == len(reference)
         assert len(queue._a) <= capacity  # noqa: SLF001 - the sorted part stays within M
-    assert sorted(queue) == sorted(reference)
+    assert sorted(queue.nodes().tolist()) == sorted(reference)
+    for node, key in reference.items():
+        assert queue.key(node) == key
 
 
 # ------------------------------------------------------------------------- stop conditions

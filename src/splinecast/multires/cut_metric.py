@@ -144,30 +144,29 @@ def _gap(a0, a1, b0, b1):
     return max(b0 - a1, a0 - b1, 0.0)
 
 
-@jit(nogil=True)
-def _importance_one(bmin, bmax, view):
-    """Eqs. (5)-(6) for one box."""
-    d0 = bmax[0] - bmin[0]
-    d1 = bmax[1] - bmin[1]
-    d2 = bmax[2] - bmin[2]
-    diag = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+@jit(nogil=True, inline="always")
+def _importance_one(box_min, box_max, b, view):
+    """Eqs. (5)-(6) for box ``b`` (scalar reads: a row slice would cost an array object)."""
+    x0, y0, z0 = box_min[b, 0], box_min[b, 1], box_min[b, 2]
+    x1, y1, z1 = box_max[b, 0], box_max[b, 1], box_max[b, 2]
+    diag = np.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2 + (z1 - z0) ** 2)
     r_x = -1.0
     if view[0] != 0.0:
-        g0 = _gap(bmin[0], bmax[0], view[2], view[2])
-        g1 = _gap(bmin[1], bmax[1], view[3], view[3])
-        g2 = _gap(bmin[2], bmax[2], view[4], view[4])
+        g0 = _gap(x0, x1, view[2], view[2])
+        g1 = _gap(y0, y1, view[3], view[3])
+        g2 = _gap(z0, z1, view[4], view[4])
         d = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)  # to the point, or to the region's centre
         if view[1] != 0.0:
-            g0 = _gap(bmin[0], bmax[0], view[5], view[8])
-            g1 = _gap(bmin[1], bmax[1], view[6], view[9])
-            g2 = _gap(bmin[2], bmax[2], view[7], view[10])
+            g0 = _gap(x0, x1, view[5], view[8])
+            g1 = _gap(y0, y1, view[6], view[9])
+            g2 = _gap(z0, z1, view[7], view[10])
             d = 0.5 * (d + np.sqrt(g0 * g0 + g1 * g1 + g2 * g2))
         r_x = diag / (diag + d) if diag + d > 0.0 else 1.0
     r_eye = -1.0
     if view[11] != 0.0:
-        g0 = _gap(bmin[0], bmax[0], view[12], view[12])
-        g1 = _gap(bmin[1], bmax[1], view[13], view[13])
-        g2 = _gap(bmin[2], bmax[2], view[14], view[14])
+        g0 = _gap(x0, x1, view[12], view[12])
+        g1 = _gap(y0, y1, view[13], view[13])
+        g2 = _gap(z0, z1, view[14], view[14])
         d = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
         r_eye = diag / (diag + d) if diag + d > 0.0 else 1.0
     if r_x >= 0.0 and r_eye >= 0.0:
@@ -182,7 +181,7 @@ def _importance_one(bmin, bmax, view):
 @jit(nogil=True)
 def _importance_boxes(box_min, box_max, view, out):
     for i in range(box_min.shape[0]):
-        out[i] = _importance_one(box_min[i], box_max[i], view)
+        out[i] = _importance_one(box_min, box_max, i, view)
 
 
 def importance(box_min: np.ndarray, box_max: np.ndarray, interest: Any = None,
@@ -240,105 +239,145 @@ class _State(NamedTuple):
     stack: np.ndarray
 
 
+# The per-node functions take plain arrays, unpacked from the state once per kernel call, and test
+# the caches in line; only a cache miss calls a (non-inlined) fill function. Compiled loops that
+# pass arrays into inlined helpers or pull them out of a tuple on every iteration pay reference-
+# count updates for each, ~100 ns per node. The argument groups are always the same:
+# D = (child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
+# fixed_at, tf) and I = (box_min, box_max, viewing, imp, imp_at, view).
 @jit(nogil=True)
-def _raw_d(s, b):
-    """D(b) from the histogram (eq. 1)."""
-    if s.raw_at[b] != s.epochs[0]:
-        s.raw[b] = _node_distortion(s.h_offsets, s.h_keys, s.h_counts, s.table, b)
-        s.raw_at[b] = s.epochs[0]
-    return s.raw[b]
+def _raw_fill(offsets, keys, counts, table, raw, raw_at, tf, b):
+    """D(b) from the histogram (eq. 1), stored in the cache."""
+    raw[b] = _node_distortion(offsets, keys, counts, table, b)
+    raw_at[b] = tf
+    return raw[b]
 
 
 @jit(nogil=True)
-def _fixed_d(s, b):
+def _fixed_fill(child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
+                fixed_at, tf, b):
     """D*(b) = max(D(b), sum of the visible children's D): the fix-up of section 3.2.1."""
-    if s.fixed_at[b] != s.epochs[0]:
-        below = 0.0
-        for t in range(s.child_start[b], s.child_start[b + 1]):
-            k = s.children[t]
-            if s.visible[k]:
-                below += _raw_d(s, k)
-        s.fixed[b] = max(_raw_d(s, b), below)
-        s.fixed_at[b] = s.epochs[0]
-    return s.fixed[b]
+    below = 0.0
+    for t in range(child_start[b], child_start[b + 1]):
+        k = children[t]
+        if visible[k]:
+            below += raw[k] if raw_at[k] == tf else _raw_fill(offsets, keys, counts, table,
+                                                              raw, raw_at, tf, k)
+    own = raw[b] if raw_at[b] == tf else _raw_fill(offsets, keys, counts, table, raw, raw_at,
+                                                   tf, b)
+    fixed[b] = max(own, below)
+    fixed_at[b] = tf
+    return fixed[b]
 
 
 @jit(nogil=True)
-def _imp(s, b):
-    if s.imp_at[b] != s.epochs[1]:
-        s.imp[b] = _importance_one(s.box_min[b], s.box_max[b], s.viewing)
-        s.imp_at[b] = s.epochs[1]
-    return s.imp[b]
+def _fill_family(child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
+                 fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view, b):
+    """Make D* and I of ``b`` and of its visible children valid (E = D* I, eq. 7)."""
+    for t in range(child_start[b], child_start[b + 1] + 1):
+        k = children[t] if t < child_start[b + 1] else b   # the children, then b itself
+        if k != b and not visible[k]:
+            continue
+        if fixed_at[k] != tf:
+            _fixed_fill(child_start, children, visible, offsets, keys, counts, table, raw,
+                        raw_at, fixed, fixed_at, tf, k)
+        if imp_at[k] != view:  # in line: a call per node would cost more than the formula
+            imp[k] = _importance_one(box_min, box_max, k, viewing)
+            imp_at[k] = view
 
 
-@jit(nogil=True)
-def _err(s, b):
-    """E(b) = D*(b) I(b) (eq. 7)."""
-    return _fixed_d(s, b) * _imp(s, b)
-
-
-@jit(nogil=True)
-def _er(s, b):
-    """ER(b) (eq. 9) over the visible children; -inf without any."""
+@jit(nogil=True, inline="always")
+def _er_cached(child_start, children, visible, fixed, imp, b):
+    """ER(b) (eq. 9) from valid D* and I; -inf without visible children."""
     total = 0.0
-    n = 0
-    for t in range(s.child_start[b], s.child_start[b + 1]):
-        k = s.children[t]
-        if s.visible[k]:
-            total += _err(s, k)
-            n += 1
-    if n == 0:
+    count = 0
+    for t in range(child_start[b], child_start[b + 1]):
+        k = children[t]
+        if visible[k]:
+            total += fixed[k] * imp[k]
+            count += 1
+    if count == 0:
         return -np.inf
-    return (_err(s, b) - total) / n
+    return (fixed[b] * imp[b] - total) / count
 
 
 @jit(nogil=True)
-def _raw_priority(s, b):
-    er = _er(s, b)
-    if s.epochs[3] != 0 or er == -np.inf:
-        return er
-    return _err(s, b)
-
-
-@jit(nogil=True)
-def _prio(s, b):
-    """Monotone priority min(P_raw(b), P(parent)); computes stale ancestors first."""
-    epoch = s.epochs[2]
-    if s.prio_at[b] == epoch:
-        return s.prio[b]
-    top = 0
-    a = b
-    while a >= 0 and s.prio_at[a] != epoch:
-        s.stack[top] = a
-        top += 1
-        a = s.parent[a]
-    cap = s.prio[a] if a >= 0 else np.inf
-    while top > 0:
-        top -= 1
-        a = s.stack[top]
-        cap = min(_raw_priority(s, a), cap)
-        s.prio[a] = cap
-        s.prio_at[a] = epoch
-    return s.prio[b]
+def _priorities(parent, child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
+                fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view, prio, prio_at,
+                epoch, improved, stack, nodes, out):
+    """Monotone priorities ``min(P_raw(b), P(parent))`` of ``nodes`` (P_raw = ER, or E for the
+    naive priority), stale ancestors first, in three passes: list the stale nodes parents first,
+    fill the E of each and of its visible children, then ER and P."""
+    todo = np.empty(nodes.shape[0] * (stack.shape[0] + 1), np.int64)
+    n = 0
+    for i in range(nodes.shape[0]):
+        top = 0
+        a = nodes[i]
+        while a >= 0 and prio_at[a] != epoch and prio_at[a] != -2:
+            stack[top] = a
+            top += 1
+            a = parent[a]
+        while top > 0:  # root side first, so a parent precedes its children in todo
+            top -= 1
+            todo[n] = stack[top]
+            prio_at[stack[top]] = -2  # queued
+            n += 1
+    for j in range(n):
+        _fill_family(child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
+                     fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view, todo[j])
+    for j in range(n):
+        b = todo[j]
+        p = _er_cached(child_start, children, visible, fixed, imp, b)
+        if not improved and p != -np.inf:
+            p = fixed[b] * imp[b]  # naive: P = E for splittable nodes
+        a = parent[b]
+        prio[b] = min(p, prio[a]) if a >= 0 else p
+        prio_at[b] = epoch
+    for i in range(nodes.shape[0]):
+        out[i] = prio[nodes[i]]
 
 
 @jit(nogil=True)
 def _map_nodes(s, nodes, what, out):
-    """One of the per-node quantities for every node of ``nodes``."""
+    """One of the per-node quantities (``what``: see _PRIORITY...) for every node of ``nodes``.
+
+    Priorities are ``min(P_raw(b), P(parent))`` (P_raw = ER, or E for the naive priority), the
+    stale ancestors of a node computed first, root down.
+    """
+    (parent, child_start, children, visible, box_min, box_max, offsets, keys, counts, table,
+     viewing, epochs, raw, raw_at, fixed, fixed_at, imp, imp_at, prio, prio_at, stack) = s
+    tf, view, epoch, improved = epochs[0], epochs[1], epochs[2], epochs[3]
+    if what == 0:
+        _priorities(parent, child_start, children, visible, offsets, keys, counts, table, raw,
+                    raw_at, fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view,
+                    prio, prio_at, epoch, improved, stack, nodes, out)
+        return
     for i in range(nodes.shape[0]):
         b = nodes[i]
-        if what == 0:
-            out[i] = _prio(s, b)
-        elif what == 1:
-            out[i] = _err(s, b)
-        elif what == 2:
-            out[i] = _fixed_d(s, b)
-        elif what == 3:
-            out[i] = _raw_d(s, b)
+        if what == 3:
+            out[i] = raw[b] if raw_at[b] == tf else _raw_fill(offsets, keys, counts, table, raw,
+                                                              raw_at, tf, b)
+        elif what == 2 or what == 1:
+            d = fixed[b] if fixed_at[b] == tf else _fixed_fill(
+                child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
+                fixed_at, tf, b)
+            if what == 2:
+                out[i] = d
+            else:
+                if imp_at[b] != view:
+                    imp[b] = _importance_one(box_min, box_max, b, viewing)
+                    imp_at[b] = view
+                out[i] = d * imp[b]
         elif what == 4:
-            out[i] = _imp(s, b)
+            if imp_at[b] != view:
+                imp[b] = _importance_one(box_min, box_max, b, viewing)
+                imp_at[b] = view
+            out[i] = imp[b]
         else:
-            out[i] = _er(s, b)
+            _fill_family(child_start, children, visible, offsets, keys, counts, table, raw,
+                         raw_at, fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at,
+                         view, b)
+            out[i] = _er_cached(child_start, children, visible, fixed, imp, b)
 
 
 _PRIORITY, _ERROR, _FIXED, _RAW, _IMPORTANCE, _REDUCTION = range(6)

@@ -122,8 +122,8 @@ class SplitCollapse:
         self.cut: set[int] = set(cut.tolist())
         self.resident = self.in_cut.copy()
         capacity = max(1, load_budget if load_budget is not None else 64)
-        self.split_queue = PartialQueue(capacity)      # S, key (-P, rank)
-        self.collapse_queue = PartialQueue(capacity)   # C, key (P, -rank)
+        self.split_queue = PartialQueue(capacity, k)      # S, key (-P, rank)
+        self.collapse_queue = PartialQueue(capacity, k)   # C, key (P, -rank)
         self._epoch = None
         self._tf_epoch = metric.tf_epoch
         self._visible_children: dict[int, np.ndarray] = {}
@@ -214,8 +214,8 @@ class SplitCollapse:
 
     def reprioritize(self) -> None:
         """New priorities for S and C (the hull), then a partial sort of each: O(N + M log M)."""
-        splittable = np.fromiter(self.split_queue, np.int64, len(self.split_queue))
-        collapsible = np.fromiter(self.collapse_queue, np.int64, len(self.collapse_queue))
+        splittable = self.split_queue.nodes()
+        collapsible = self.collapse_queue.nodes()
         self._sort_queues(splittable, collapsible)
 
     def _sort_queues(self, splittable: np.ndarray, collapsible: np.ndarray) -> None:

@@ -9,7 +9,9 @@ before A's last entry (which then moves to B if A is full) and into B otherwise;
 binary search in A or O(1) in B; only when A runs empty is B partially sorted again.
 
 A is a Python list kept sorted with :mod:`bisect` (O(log M) comparisons plus a memmove of at most
-M pointers, negligible for M in the hundreds); B is a dict.
+M pointers, negligible for M in the hundreds). B is three numpy arrays (node, primary key,
+secondary key) with a node-to-slot index, so a re-prioritisation never builds N Python objects:
+removal swaps the last slot into the hole.
 
 Keys are ``(primary, secondary)`` pairs of a float and an int, smallest first.
 """
@@ -17,7 +19,6 @@ Keys are ``(primary, secondary)`` pairs of a float and an int, smallest first.
 from __future__ import annotations
 
 import bisect
-from collections.abc import Iterator
 
 import numpy as np
 
@@ -25,36 +26,50 @@ __all__ = ["PartialQueue"]
 
 Key = tuple[float, int]
 
+_IN_A = -2
+_ABSENT = -1
+
 
 class PartialQueue:
-    """Nodes ordered by ``(primary, secondary)`` keys, smallest first; only ``capacity`` sorted.
+    """Nodes ``0..size-1`` ordered by ``(primary, secondary)`` keys, smallest first; only the
+    ``capacity`` smallest kept sorted.
 
     Parameters
     ----------
     capacity : int
         Size of the sorted part A (the paper's M).
+    size : int
+        Node ids are below this (the tree's K).
     """
 
-    def __init__(self, capacity: int):
+    def __init__(self, capacity: int, size: int):
         self.capacity = max(1, int(capacity))
         self._a: list[tuple[Key, int]] = []
         self._a_key: dict[int, Key] = {}
-        self._b: dict[int, Key] = {}
+        self._slot = np.full(int(size), _ABSENT, np.int64)   # B slot, _IN_A or _ABSENT
+        self._b_node = np.zeros(64, np.int64)
+        self._b_primary = np.zeros(64)
+        self._b_secondary = np.zeros(64, np.int64)
+        self._nb = 0
         self.partial_sorts = 0
 
     def __len__(self) -> int:
-        return len(self._a) + len(self._b)
+        return len(self._a) + self._nb
 
     def __contains__(self, node: int) -> bool:
-        return node in self._a_key or node in self._b
+        return self._slot[node] != _ABSENT
 
-    def __iter__(self) -> Iterator[int]:
-        yield from self._a_key
-        yield from self._b
+    def nodes(self) -> np.ndarray:
+        """Every node in the queue (A first, then B; no particular order within B)."""
+        a = np.fromiter(self._a_key, np.int64, len(self._a_key))
+        return np.concatenate([a, self._b_node[:self._nb]])
 
     def key(self, node: int) -> Key:
         """The key a node was inserted with."""
-        return self._a_key[node] if node in self._a_key else self._b[node]
+        slot = int(self._slot[node])
+        if slot == _IN_A:
+            return self._a_key[node]
+        return (float(self._b_primary[slot]), int(self._b_secondary[slot]))
 
     # ------------------------------------------------------------------------- partial sort
     def rebuild(self, nodes: np.ndarray, primary: np.ndarray, secondary: np.ndarray) -> None:
@@ -64,6 +79,9 @@ class PartialQueue:
         secondary = np.asarray(secondary, np.int64)
         n = nodes.shape[0]
         self.partial_sorts += 1
+        for node in self._a_key:
+            self._slot[node] = _ABSENT
+        self._slot[self._b_node[:self._nb]] = _ABSENT
         if n > self.capacity:
             # Everything strictly below the capacity-th primary key is in A; the ties at that key
             # compete on the secondary key.
@@ -73,54 +91,87 @@ class PartialQueue:
             head = np.arange(n)
         order = head[np.lexsort((secondary[head], primary[head]))]
         a_idx = order[:self.capacity]
-        in_a = np.zeros(n, bool)
-        in_a[a_idx] = True
-        self._a = [((p, s), b) for p, s, b in zip(primary[a_idx].tolist(),
-                                                  secondary[a_idx].tolist(),
-                                                  nodes[a_idx].tolist(), strict=True)]
+        self._a = list(zip(zip(primary[a_idx].tolist(), secondary[a_idx].tolist(), strict=True),
+                           nodes[a_idx].tolist(), strict=True))
         self._a_key = {b: k for k, b in self._a}
-        rest = ~in_a
-        self._b = dict(zip(nodes[rest].tolist(), zip(primary[rest].tolist(),
-                                                     secondary[rest].tolist(), strict=True),
-                           strict=True))
+        self._slot[nodes[a_idx]] = _IN_A
+        rest = np.ones(n, bool)
+        rest[a_idx] = False
+        self._set_b(nodes[rest], primary[rest], secondary[rest])
+
+    def _set_b(self, nodes: np.ndarray, primary: np.ndarray, secondary: np.ndarray) -> None:
+        nb = nodes.shape[0]
+        cap = max(64, 2 * nb)
+        self._b_node = np.zeros(cap, np.int64)
+        self._b_primary = np.zeros(cap)
+        self._b_secondary = np.zeros(cap, np.int64)
+        self._b_node[:nb] = nodes
+        self._b_primary[:nb] = primary
+        self._b_secondary[:nb] = secondary
+        self._slot[nodes] = np.arange(nb)
+        self._nb = nb
 
     def _refill(self) -> None:
         """A ran empty: partially sort B into a new A."""
-        if not self._b:
-            return
-        nodes = np.fromiter(self._b.keys(), np.int64, len(self._b))
-        keys = list(self._b.values())
-        primary = np.fromiter((k[0] for k in keys), np.float64, len(keys))
-        secondary = np.fromiter((k[1] for k in keys), np.int64, len(keys))
-        self.rebuild(nodes, primary, secondary)
+        if self._nb:
+            nb = self._nb
+            self.rebuild(self._b_node[:nb].copy(), self._b_primary[:nb].copy(),
+                         self._b_secondary[:nb].copy())
+
+    def _push_b(self, node: int, key: Key) -> None:
+        if self._nb == self._b_node.shape[0]:
+            grow = self._b_node.shape[0]
+            self._b_node = np.concatenate([self._b_node, np.zeros(grow, np.int64)])
+            self._b_primary = np.concatenate([self._b_primary, np.zeros(grow)])
+            self._b_secondary = np.concatenate([self._b_secondary, np.zeros(grow, np.int64)])
+        slot = self._nb
+        self._b_node[slot] = node
+        self._b_primary[slot] = key[0]
+        self._b_secondary[slot] = key[1]
+        self._slot[node] = slot
+        self._nb += 1
+
+    def _remove_b(self, node: int) -> None:
+        slot = int(self._slot[node])
+        last = self._nb - 1
+        if slot != last:  # the last slot fills the hole
+            moved = int(self._b_node[last])
+            self._b_node[slot] = moved
+            self._b_primary[slot] = self._b_primary[last]
+            self._b_secondary[slot] = self._b_secondary[last]
+            self._slot[moved] = slot
+        self._slot[node] = _ABSENT
+        self._nb = last
 
     # --------------------------------------------------------------------------- operations
     def push(self, node: int, key: Key) -> None:
         """Insert ``node`` (not already present) with ``key``."""
-        if not self._a and self._b:
+        if not self._a and self._nb:
             self._refill()
-        if (not self._b and len(self._a) < self.capacity) or (self._a and key < self._a[-1][0]):
+        if (not self._nb and len(self._a) < self.capacity) or (self._a and key < self._a[-1][0]):
             bisect.insort(self._a, (key, node))
             self._a_key[node] = key
+            self._slot[node] = _IN_A
             if len(self._a) > self.capacity:
                 last_key, last = self._a.pop()
                 del self._a_key[last]
-                self._b[last] = last_key
+                self._push_b(last, last_key)
         else:
-            self._b[node] = key
+            self._push_b(node, key)
 
     def remove(self, node: int) -> None:
         """Remove ``node`` (which must be present)."""
-        key = self._a_key.pop(node, None)
-        if key is None:
-            del self._b[node]
+        if self._slot[node] != _IN_A:
+            self._remove_b(node)
             return
+        key = self._a_key.pop(node)
         i = bisect.bisect_left(self._a, (key, node))
         del self._a[i]
+        self._slot[node] = _ABSENT
 
     def discard(self, node: int) -> None:
         """Remove ``node`` if present."""
-        if node in self:
+        if self._slot[node] != _ABSENT:
             self.remove(node)
 
     def peek(self) -> tuple[Key, int] | None:
