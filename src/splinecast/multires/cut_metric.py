@@ -245,7 +245,7 @@ class _State(NamedTuple):
 # count updates for each, ~100 ns per node. The argument groups are always the same:
 # D = (child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
 # fixed_at, tf) and I = (box_min, box_max, viewing, imp, imp_at, view).
-@jit(nogil=True)
+@jit(nogil=True, inline="always")
 def _raw_fill(offsets, keys, counts, table, raw, raw_at, tf, b):
     """D(b) from the histogram (eq. 1), stored in the cache."""
     raw[b] = _node_distortion(offsets, keys, counts, table, b)
@@ -253,7 +253,7 @@ def _raw_fill(offsets, keys, counts, table, raw, raw_at, tf, b):
     return raw[b]
 
 
-@jit(nogil=True)
+@jit(nogil=True, inline="always")
 def _fixed_fill(child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
                 fixed_at, tf, b):
     """D*(b) = max(D(b), sum of the visible children's D): the fix-up of section 3.2.1."""

@@ -341,21 +341,24 @@ class SplitCollapse:
         tree = self.tree
         visible = self.metric.visible
         self._visible_children.clear()
-        for node in [b for b in self.cut if not visible[b]]:
-            self._leave(node)
         cut = np.fromiter(self.cut, np.int64, len(self.cut))
+        for node in cut[~visible[cut]].tolist():
+            self._leave(node)
+        cut = cut[visible[cut]]
+        # (i) mark the cut and its ancestors; (ii) the walk from the root over visible nodes
+        # visits exactly the marked nodes above the cut (all ancestors of a cut node are marked
+        # and visible) and inserts their unmarked visible children: one vectorized step.
         marked = np.zeros(tree.size, bool)
         marked[cut] = True
-        marked[tree.ancestors_of(cut)] = True
-        stack = [tree.root] if visible[tree.root] else []
-        while stack:
-            node = stack.pop()
-            if self.in_cut[node]:
-                continue
-            if not marked[node]:
-                self._enter(node)
-                continue
-            stack.extend(self.visible_children(node).tolist())
+        above = tree.ancestors_of(cut)
+        marked[above] = True
+        kids, _ = tree.children_with_owner(above, visible)
+        inserts = kids[~marked[kids]].tolist()
+        if not cut.size and visible[tree.root]:
+            inserts = [tree.root]
+        for node in inserts:
+            self._enter(node)
+        self.inserted = np.array(inserts, np.int64)
         self.count = self._recount()
         self._rebuild_sets()
         skipped: list[tuple[tuple[float, int], int]] = []
