@@ -66,6 +66,24 @@ def test_partial_queue_pops_in_key_order(capacity):
         assert queue.key(node) == key
 
 
+def test_a_frame_sorts_each_queue_once():
+    """O(N + M log M) per re-prioritisation: one partial sort of S and one of C when the
+    priorities change, none when nothing changed."""
+    rng, parent, tree, visible = _case(3, max_nodes=400)
+    error = block_monotone_errors(rng, parent)
+    metric = ArrayMetric(tree, error, visible)
+    updater = CutUpdater(metric, budget=60, load_budget=None)
+    _run_until_stable(updater, [int(p) for p in tree.parent], visible, 60, None)
+    before = (updater.split_queue.partial_sorts, updater.collapse_queue.partial_sorts)
+    metric.set(error * 1.5, visible)  # new priorities (same order): re-prioritise, no operation
+    frame = updater.update()
+    after = (updater.split_queue.partial_sorts, updater.collapse_queue.partial_sorts)
+    assert frame.splits == frame.collapses == 0
+    assert after == (before[0] + 1, before[1] + 1)
+    updater.update()  # nothing changed: no re-prioritisation at all
+    assert (updater.split_queue.partial_sorts, updater.collapse_queue.partial_sorts) == after
+
+
 # ------------------------------------------------------------------------- stop conditions
 def test_zero_error_stops_first():
     tree, _ = fig2()

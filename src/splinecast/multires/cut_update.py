@@ -358,7 +358,6 @@ class SplitCollapse:
             inserts = [tree.root]
         for node in inserts:
             self._enter(node)
-        self.inserted = np.array(inserts, np.int64)
         self.count = self._recount()
         self._rebuild_sets()
         skipped: list[tuple[tuple[float, int], int]] = []
