@@ -74,6 +74,9 @@ def test_fig2_greedy_runs():
     improved = greedy_cut(ArrayMetric(tree, error, improved=True), 3)
     assert names(naive) == {"C", "D", "E"} and error[naive].sum() == 11
     assert names(improved) == {"B", "F", "G"} and error[improved].sum() == 10
+    # Filling: B and F are set aside (4 bricks), G's single child fits: {B, F, Q}, the optimum.
+    filled = greedy_cut(ArrayMetric(tree, error, improved=True), 3, fill=True)
+    assert names(filled) == {"B", "F", "Q"} and error[filled].sum() == 9
 
 
 def test_fig2_download_aware_optimum():
@@ -107,9 +110,15 @@ def test_optimum_never_worse_than_greedy_and_cuts_are_valid(seed):
     assert is_valid_cut(parent, visible, cut) and len(cut) <= budget
     assert total == pytest.approx(error[cut].sum())
     for improved in (False, True):
-        greedy = greedy_cut(ArrayMetric(tree, error, visible, improved=improved), budget)
-        assert is_valid_cut(parent, visible, greedy) and len(greedy) <= budget
-        assert total <= error[greedy].sum() + 1e-9
+        metric = ArrayMetric(tree, error, visible, improved=improved)
+        greedy = greedy_cut(metric, budget)
+        filled = greedy_cut(metric, budget, fill=True)
+        for cut_ in (greedy, filled):
+            assert is_valid_cut(parent, visible, cut_) and len(cut_) <= budget
+            assert total <= error[cut_].sum() + 1e-9
+        # Filling only adds splits of positive priority, each lowering the error (block-
+        # monotone errors), so it never does worse than stopping.
+        assert error[filled].sum() <= error[greedy].sum() + 1e-9
 
 
 @pytest.mark.parametrize("seed", range(25))

@@ -15,19 +15,21 @@
   of the box-to-region and box-to-region-centre distances; ``I(b) = (1 - t) R(b, x) + t R(b, eye)``
   with ``t = 1/4``. Without an eye ``I = R(b, x)``; without an interest point ``I = R(b, eye)``;
   with neither, ``I = 1``.
-* **Error** ``E(b) = D*(b) I(b)`` (eq. 7) and ``E(cut) = sum E(b) / sum n(b)`` (eq. 8).
+* **Error** ``E(b) = D*(b) I(b)`` (eq. 7) and ``E(cut)``, the summed error per source voxel
+  (eq. 8; :func:`cut_error` says which voxels).
 * **Error reduction per child** ``ER(b) = (E(b) - sum_c E(c)) / |c|`` (eq. 9), over the visible
   children.
 
 Priorities. ``P = E`` ("naive") or ``P = ER`` ("improved") for nodes that can be split; a node
 without visible children cannot, its priority is ``-inf``. Split-and-collapse converges to the
 greedy cut only for a *monotonic* priority (reference 002 citing ROAM [19]): a child never ranks
-above its parent. ``E`` is monotonic, ``ER`` is not always, so both are made monotonic the way
-ROAM does: ``P(b) = min(P_raw(b), P(parent))``. For the greedy selection from the root this
-changes nothing but the order of ties (a node enters the queue only after its parent was popped,
-at which point the parent held the highest priority), and it makes the update's fixed point the
-greedy cut. Ties are broken by a strict order in which a parent precedes its children: first by
-depth, then by id (:func:`rank`).
+above its parent. ``E`` is monotonic, ``ER`` is not always (on the MNI152 tree about 1% of the
+nodes out-rank their parent), so a node's priority is capped at its parent's:
+``P(b) = min(P_raw(b), P(parent))``. The greedy selection from the root pops the same nodes in
+the same order except within a group capped to one value (a node enters the queue only after its
+parent was popped, when the parent held the highest priority), and the update's fixed point becomes
+the greedy cut. Ties are broken by a strict order in which a parent precedes its children: first
+by depth, then by id (:func:`rank`).
 
 Two classes share one small protocol (``tree``, ``visible``, ``rank``, ``epoch``, ``tf_epoch``,
 ``priority(nodes)``, ``error(nodes)``) that the selection and update algorithms use:
