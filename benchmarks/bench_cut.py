@@ -79,7 +79,9 @@ def synthetic(n: int, out: np.ndarray, seed: int = 0) -> np.ndarray:
     On ``[-1, 1]^3``: a damped radial wave ``0.25 cos(6 pi r) exp(-2 r^2)``; a high-frequency
     product of sines (wavelength ~ n/13 voxels) whose amplitude varies smoothly in space; and
     value noise (random lattices of 17^3 and 65^3 points, interpolated linearly): some regions
-    are smooth, some need fine bricks, so the cut selection has real choices to make.
+    are smooth, some need fine bricks. Outside a lumpy ellipsoid the field drops to near 0,
+    "air" the transfer function makes transparent, so the brick tree is incomplete along that
+    boundary, as for a scanned body: the cut selection has real choices to make.
     """
     rng = np.random.default_rng(seed)
     axis = np.linspace(-1.0, 1.0, n)
@@ -94,10 +96,14 @@ def synthetic(n: int, out: np.ndarray, seed: int = 0) -> np.ndarray:
         amp = 0.5 * (1.0 + np.sin(2.0 * x + 3.0 * y - z))
         f = (0.5 + 0.25 * np.cos(6 * np.pi * r) * np.exp(-2 * r * r)
              + 0.12 * amp * np.sin(40 * x + 3) * np.sin(37 * y + 1) * np.sin(43 * z + 2))
+        noise = []
         for lattice, m, a in lattices:
             t = (_interp_matrix(xs, m) @ lattice.reshape(m, m * m)).reshape(-1, m, m)
             t = np.einsum("jb,ibc->ijc", wy[m], t)
-            f += a * (t @ wy[m].T)
+            noise.append(t @ wy[m].T)
+            f += a * noise[-1]
+        body = (x / 0.85) ** 2 + (y / 0.7) ** 2 + (z / 0.95) ** 2 + 0.8 * noise[0] < 1.0
+        f = np.where(body, f, 0.03 + 0.02 * noise[1])
         out[x0:x0 + slab] = np.clip(f * 255, 0, 255).astype(np.uint8)
     return out
 
