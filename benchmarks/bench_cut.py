@@ -484,18 +484,20 @@ def plot(results: dict, path: Path) -> bool:
             name = f"{v['name']} {brick}^3 (N={run['N']})"
             rows = run["samples"]["pi"] + run["samples"]["tf"]
             if rows:
+                colour = f"C{len(labels)}"
                 for key, style in (("naive", ":"), ("improved", "-"), ("improved_fill", "--")):
                     if key not in rows[0]:
                         continue
                     ratio = [100 * (r[key] / r["optimal"] - 1) for r in rows]
-                    left.plot(ratio, style, label=f"{name} {key}")
+                    left.plot(ratio, style, color=colour,
+                              label=name if key == "improved" else None)
             labels.append(name)
             pi.append(run["update_cpu_ms"]["improved_pi"]["median"])
             tf.append(run["update_cpu_ms"]["improved_tf"]["median"])
     left.set_xlabel("sampled frame (interest point moves, then transfer-function edits)")
     left.set_ylabel("E(cut) above the optimum, %")
     left.set_title("Greedy selection vs optimum (dotted naive, solid improved, dashed fill)")
-    left.legend(fontsize=6, ncol=2)
+    left.legend(fontsize=7)
     x = np.arange(len(labels))
     right.bar(x - 0.2, pi, 0.4, label="interest point moves")
     right.bar(x + 0.2, tf, 0.4, label="transfer-function edits (repair + hull D)")
