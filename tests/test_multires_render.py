@@ -3,7 +3,7 @@
 References, independent of the code under test:
 
 - the in-memory :class:`splinecast.Scene` render of the finest level (a cut whose bricks are all
-  on level 0 must give the same image: depths to 1e-9, MIP exact, DVR within 1e-6);
+  on level 0 must give the same image: depths to 1e-9, MIP to 1e-12, DVR within 1e-6);
 - the analytic sphere and torus (signed distance fields): with a small budget the cut mixes
   levels, and every ray whose line passes through the solid's core must hit the surface (no
   hole at a level boundary) within the coarsest drawn level's reconstruction error of it;
@@ -93,7 +93,10 @@ def test_whole_finest_level_in_budget_equals_the_in_memory_render(noise, model, 
 def _assert_same(mode: str, whole: sc.Frame, frame: sc.Frame, what: str) -> None:
     if mode in ("mip", "minip"):
         np.testing.assert_array_equal(np.isnan(whole.value), np.isnan(frame.value), err_msg=what)
-        np.testing.assert_array_equal(whole.value, frame.value, err_msg=what)
+        # Exact up to rounding: a ray entering a brick mid-cell parametrizes the cell's
+        # polynomial from another point (as tests/test_bricks.py allows).
+        np.testing.assert_allclose(frame.value, whole.value, rtol=1e-12, atol=1e-12,
+                                   err_msg=what)
         return
     if mode == "dvr":
         np.testing.assert_allclose(frame.rgba, whole.rgba, atol=1e-6, err_msg=what)
