@@ -107,3 +107,190 @@ def _assert_same(mode: str, whole: sc.Frame, frame: sc.Frame, what: str) -> None
     np.testing.assert_allclose(frame.depth[hit], whole.depth[hit], rtol=0, atol=1e-9,
                                err_msg=what)
     np.testing.assert_allclose(frame.rgba, whole.rgba, atol=1e-6, err_msg=what)
+
+
+# --------------------------------------------------------------------------- level boundaries
+SHAPES = {"sphere": (sphere_sdf, 0.15), "torus": (torus_sdf, 0.08)}  # sdf, core depth (world)
+
+
+@pytest.fixture(scope="module")
+def shapes(tmp_path_factory) -> dict[str, tuple[sc.Volume, Path]]:
+    """The demo sphere and torus distance fields (48^3, float64) as pyramids of 8^3 bricks."""
+    out = {}
+    for name in SHAPES:
+        demo = sc.demo(name, size=48)
+        vol = sc.Volume(demo.data.astype(np.float64), spacing=demo.spacing, origin=demo.origin,
+                        metadata=demo.metadata)
+        path = tmp_path_factory.mktemp(name) / f"{name}.zarr"
+        sc.build_pyramid(vol, path, brick=B, shard=16, progress=False)
+        out[name] = (vol, path)
+    return out
+
+
+def _checkerboard_cut(mv, model: str):
+    """A cut that puts levels 0, 1 and 2 side by side in every direction: level-2 bricks with an
+    odd index sum stay whole, the others split into level-1 bricks, of which those with an even
+    index sum split into level-0 bricks. Brick arrays come from the levels read whole and padded
+    by numpy with the model's border rule (independent of the cache)."""
+    from splinecast.multires.draw import CutRenderer, Piece
+    from splinecast.multires.octree import GHOST, BrickOctree
+    from splinecast.multires.scene import BORDER_RULES
+
+    tree = BrickOctree(mv)
+    padded = {}
+    for level in (0, 1, 2):
+        lv = mv.level(level)
+        padded[level] = np.pad(lv.read((0, 0, 0), lv.shape), GHOST, mode=BORDER_RULES[model])
+
+    def piece(level, index):
+        first, stop = (a[0] for a in tree.window(level, np.array([index])))
+        lo, hi = (a[0] for a in tree.box(level, np.array([index])))
+        window = tuple(slice(int(f) + GHOST, int(s) + GHOST) for f, s in zip(first, stop,
+                                                                               strict=True))
+        key = (level, *map(int, index))
+        return Piece(key, key, level, np.ascontiguousarray(padded[level][window]),
+                     tuple(int(v) for v in first), lo, hi)
+
+    pieces = []
+    for i2 in np.indices(tree.counts[2]).reshape(3, -1).T:
+        if i2.sum() % 2:
+            pieces.append(piece(2, i2))
+            continue
+        for i1 in tree.children(2, i2[None]):
+            if i1.sum() % 2:
+                pieces.append(piece(1, i1))
+                continue
+            pieces.extend(piece(0, i0) for i0 in tree.children(1, i1[None]))
+    coarse = mv.level(-1)
+    prepared = sc.MODELS[model](sc.Volume(coarse.read((0, 0, 0), coarse.shape)))
+    return pieces, tree, prepared, CutRenderer
+
+
+def _level_errors(mv, model: str, sdf, spacing: float) -> dict[int, float]:
+    """Largest |reconstruction - exact distance| of each level on a shell around the surface
+    (world units), from the models' own point evaluators (not the ray kernels)."""
+    from evaluators import model_evaluator
+
+    rng = np.random.default_rng(0)
+    world = rng.uniform(-0.95, 0.95, (60000, 3))
+    world = world[np.abs(sdf(*world.T)) < 3 * spacing]
+    errors = {}
+    for level in (0, 1, 2):
+        lv = mv.level(level)
+        vol = sc.Volume(lv.read((0, 0, 0), lv.shape), spacing=lv.spacing, origin=lv.origin)
+        scene = sc.Scene(vol, model=model) if model in ("qss", "s31") else None
+        ev = model_evaluator(model, vol, scene)
+        index = (world - np.asarray(lv.origin)) / np.asarray(lv.spacing)
+        errors[level] = float(np.abs(ev.value(index) - sdf(*world.T)).max())
+    return errors
+
+
+def _core_rays(cam: sc.Camera, sdf, depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rays whose line passes at least ``depth`` inside the solid, and where along each ray the
+    solid is deepest (dense sampling of the exact distance)."""
+    origins, directions = cam.rays()
+    reach = np.linalg.norm(cam.position)
+    ts = np.linspace(reach - 1.8, reach + 1.8, 1200)
+    points = origins[..., None, :] + directions[..., None, :] * ts[:, None]
+    values = sdf(points[..., 0], points[..., 1], points[..., 2])
+    return values.min(axis=-1) < -depth, ts[values.argmin(axis=-1)]
+
+
+def _holes(renderer, pieces, cam, sdf, depth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Core rays that miss the surface or hit it behind the solid's core (through a hole), the
+    exact distance at every hit, and the core mask."""
+    from splinecast.render.iso import Iso
+
+    out, _ = renderer.render(pieces, Iso(0.0, inside="low"), cam)
+    t_hit, position = out[1], out[2]
+    core, t_core = _core_rays(cam, sdf, depth)
+    hit = np.isfinite(t_hit)
+    bad = core & (~hit | (t_hit > t_core))
+    return bad, np.abs(sdf(*position[hit].T)), core
+
+
+def _orbit(vol, count: int = 4) -> list[sc.Camera]:
+    views = [(20, -30), (110, 15), (215, 50), (290, -10)][:count]
+    return [sc.Camera.orbit(vol, azimuth=a, elevation=e, size=(56, 56), zoom=2.0)
+            for a, e in views]
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("shape", SHAPES)
+def test_no_holes_where_levels_meet(shapes, model, shape):
+    """Levels 0, 1, 2 side by side (faces, edges, corners): every ray through the solid's core
+    hits the surface in front of the core, within the drawn levels' reconstruction error."""
+    from splinecast.multires.seams import NESTED_DEGREE, Seams
+
+    vol, path = shapes[shape]
+    sdf, depth = SHAPES[shape]
+    mv = sc.read(path)
+    pieces, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
+    assert {p.level for p in pieces} == {0, 1, 2}
+    renderer = CutRenderer(prepared, tree, Seams(prepared))
+    tolerance = max(_level_errors(mv, model, sdf, vol.spacing[0]).values()) * 1.05 + 1e-9
+    for cam in _orbit(vol):
+        bad, error, core = _holes(renderer, pieces, cam, sdf, depth)
+        what = f"{model} {shape} azimuth {cam.position.round(2)}"
+        assert core.sum() > 300, what
+        assert bad.sum() == 0, f"{what}: {bad.sum()} rays through the core miss the surface"
+        assert error.max() <= tolerance, f"{what}: hit {error.max():.4g} > {tolerance:.4g} off"
+        assert renderer.stats["pieces_changed_at_seams"] > 0
+        if model in NESTED_DEGREE:  # the restriction alone closes the seams
+            assert renderer.stats["seam_closure_hits"] == 0, what
+
+
+def test_without_seam_treatment_the_same_cut_has_holes(shapes):
+    """The check above can fail: drawn as they are, the bricks leave holes."""
+    from splinecast.multires.seams import Seams
+
+    vol, path = shapes["torus"]
+    sdf, depth = SHAPES["torus"]
+    pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), "trilinear")
+    plain = CutRenderer(prepared, tree, None)
+    fixed = CutRenderer(prepared, tree, Seams(prepared))
+    holes = sum(_holes(plain, pieces, cam, sdf, depth)[0].sum() for cam in _orbit(vol))
+    assert holes > 10
+    assert sum(_holes(fixed, pieces, cam, sdf, depth)[0].sum() for cam in _orbit(vol)) == 0
+
+
+def _shared_boundary_points(a, b, rng, count: int = 40) -> np.ndarray | None:
+    """Random level-0 points on the common boundary of two touching boxes (or None)."""
+    lo = np.maximum(a.box_lo, b.box_lo)
+    hi = np.minimum(a.box_hi, b.box_hi)
+    if np.any(lo > hi):
+        return None
+    return lo + rng.random((count, 3)) * (hi - lo)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_reconstructions_agree_on_faces_between_levels(shapes, model):
+    """Nested models (trilinear, bspline1, bspline3): after the restriction the finer and the
+    coarser brick reconstruct the same values on every face, edge and corner they share. The
+    others: the gap shrinks well below the untreated one."""
+    from splinecast.multires.seams import NESTED_DEGREE, Seams
+
+    vol, path = shapes["torus"]
+    pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), model)
+    renderer = CutRenderer(prepared, tree)
+    changes = Seams(prepared).plan(pieces, renderer)
+    rng = np.random.default_rng(1)
+    gap_before, gap_after, pairs = 0.0, 0.0, 0
+    for a in pieces:
+        for b in pieces:
+            if b.level <= a.level:
+                continue
+            points = _shared_boundary_points(a, b, rng)
+            if points is None:
+                continue
+            pairs += 1
+            coarse = renderer.evaluate(b, points, changes)
+            gap_after = max(gap_after, np.abs(renderer.evaluate(a, points, changes) - coarse).max())
+            gap_before = max(gap_before, np.abs(renderer.evaluate(a, points) -
+                                                renderer.evaluate(b, points)).max())
+    assert pairs > 50
+    assert gap_before > 1e-3
+    if model in NESTED_DEGREE:
+        assert gap_after < 1e-12, f"{model}: {gap_after:.3g}"
+    else:
+        assert gap_after < gap_before / 3, f"{model}: {gap_after:.3g} vs {gap_before:.3g}"

@@ -48,7 +48,7 @@ from ..camera import Camera
 from ..render.clipping import NO_PLANES
 from ..render.segment import Grid, counters, finish_state, make_grid, new_state, trace_segment
 from .order import front_to_back
-from .probe import box_ranges
+from .probe import box_ranges, sample_grid
 
 __all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect"]
 
@@ -203,6 +203,20 @@ class CutRenderer:
             return grid, False
         array, first = self.prepared(piece)
         return self.grid(piece.level, change.apply(array), first), True
+
+    def evaluate(self, piece: Piece, points: np.ndarray, changes: dict | None = None) -> np.ndarray:
+        """The reconstruction a piece draws (with its seam ``changes``, if any) at level-0 index
+        points (n, 3)."""
+        array, first = self.prepared(piece)
+        change = (changes or {}).get(piece.key)
+        if change is not None:
+            array = change.apply(array)
+        grid = self.grid(piece.level, array, first)
+        local = (self.levels[piece.level].from_level0(points) + self.model.shift
+                 - grid.geom[7:10])
+        out = np.empty(len(local))
+        sample_grid(grid.kernel, np.ascontiguousarray(local), out)
+        return out
 
     def forget(self, keep: Iterable[Hashable]) -> None:
         """Drop the grids and arrays of bricks not in ``keep`` (the cache may evict them)."""

@@ -202,10 +202,9 @@ class Seams:
         if grid is None:
             grid = grids[source.key] = renderer.grid(source.level, array, first)
         fine, coarse = renderer.levels[level], renderer.levels[source.level]
-        level0 = (where - fine.offset) / fine.scale
-        points = coarse.from_level0(level0) + self.model.shift - grid.geom[7:10]
+        points = coarse.from_level0((where - fine.offset) / fine.scale) + self.model.shift
         out = np.empty(len(points))
-        sample_grid(grid.kernel, np.ascontiguousarray(points), out)
+        sample_grid(grid.kernel, np.ascontiguousarray(points - grid.geom[7:10]), out)
         return out
 
 
