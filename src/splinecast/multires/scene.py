@@ -54,6 +54,10 @@ from .stream import BrickStream, FrameBricks
 
 __all__ = ["MultiscaleScene", "pieces_of", "BORDER_RULES"]
 
+#: Most rounds of ``load_budget`` bricks a ``complete=True`` frame waits for (a cut that keeps
+#: changing, in a store whose ranges are learnt while reading, ends there).
+_MAX_ROUNDS = 10_000
+
 #: Ghost filling at a level's ends per model: the border rule each model applies to a whole
 #: volume (the B-splines mirror the coefficients, the others repeat the outer voxel).
 BORDER_RULES = {"trilinear": "edge", "bspline1": "reflect", "bspline2": "reflect",
@@ -107,7 +111,7 @@ class MultiscaleScene:
         The coarsest level cannot be read.
     """
 
-    def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "1GiB",
+    def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "2GiB",
                  lod: float = 1.0, load_budget: int = 64, *, seams: bool = True,
                  brick: int | None = None, **options: Any) -> None:
         if not isinstance(volume, MultiscaleVolume):
@@ -191,6 +195,7 @@ class MultiscaleScene:
         lod: float | None = None,
         wait: bool = True,
         timeout: float | None = None,
+        complete: bool = False,
     ) -> Frame:
         """Render one image of the current cut (see :meth:`splinecast.Scene.render` for the
         mode options).
@@ -203,7 +208,10 @@ class MultiscaleScene:
             Wait for up to ``load_budget`` bricks of the cut (default); ``False`` draws what is
             resident at once.
         timeout : float, optional
-            Longest wait in seconds.
+            Longest wait in seconds (per ``load_budget`` bricks).
+        complete : bool
+            Wait until every brick of the cut is resident or known to be unreadable (a still
+            image: the command line); default: draw after ``load_budget`` bricks.
 
         Returns
         -------
@@ -217,8 +225,12 @@ class MultiscaleScene:
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
             check_iso=self._check_iso, model=self.model.name)
         start = time.perf_counter()
-        bricks = self.stream.frame(camera, self._filter(request.setup), lod=lod, wait=wait,
-                                   timeout=timeout)
+        value_filter = self._filter(request.setup)
+        bricks = self.stream.frame(camera, value_filter, lod=lod, wait=wait, timeout=timeout)
+        rounds = 1
+        while complete and bricks.stats["requested"] and rounds < _MAX_ROUNDS:
+            bricks = self.stream.frame(camera, value_filter, lod=lod, timeout=timeout)
+            rounds += 1
         pieces = pieces_of(bricks)
         request.stats["cut_ms"] = (time.perf_counter() - start) * 1e3
         start = time.perf_counter()
