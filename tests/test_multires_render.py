@@ -26,7 +26,7 @@ pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.io.synthetic import SPHERE_RADIUS, sphere_sdf, torus_sdf  # noqa: E402
+from splinecast.io.synthetic import sphere_sdf, torus_sdf  # noqa: E402
 from splinecast.multires.cache import BrickUnavailableWarning  # noqa: E402
 from splinecast.multires.scene import MultiscaleScene  # noqa: E402
 
@@ -178,8 +178,7 @@ def _level_errors(mv, model: str, sdf, spacing: float) -> dict[int, float]:
     for level in (0, 1, 2):
         lv = mv.level(level)
         vol = sc.Volume(lv.read((0, 0, 0), lv.shape), spacing=lv.spacing, origin=lv.origin)
-        scene = sc.Scene(vol, model=model) if model in ("qss", "s31") else None
-        ev = model_evaluator(model, vol, scene)
+        ev = model_evaluator(model, vol, sc.Scene(vol, model=model))
         index = (world - np.asarray(lv.origin)) / np.asarray(lv.spacing)
         errors[level] = float(np.abs(ev.value(index) - sdf(*world.T)).max())
     return errors
@@ -294,3 +293,128 @@ def test_reconstructions_agree_on_faces_between_levels(shapes, model):
         assert gap_after < 1e-12, f"{model}: {gap_after:.3g}"
     else:
         assert gap_after < gap_before / 3, f"{model}: {gap_after:.3g} vs {gap_before:.3g}"
+
+
+# --------------------------------------------------------------------------- the brick stream
+def _torus_camera(vol) -> sc.Camera:
+    return sc.Camera.orbit(vol, azimuth=35, elevation=40, size=(56, 48), zoom=2.0)
+
+
+def test_frames_converge_without_holes_while_bricks_arrive(shapes):
+    """A small load budget: the first frames draw ancestors for missing bricks (levels mixed by
+    substitution), have no holes, and the view converges to the complete cut."""
+    vol, path = shapes["torus"]
+    sdf, depth = SHAPES["torus"]
+    cam = _torus_camera(vol)
+    core, t_core = _core_rays(cam, sdf, depth)
+    with sc.Scene(sc.read(path), budget="64MiB", lod=1.5, load_budget=4) as scene:
+        first = scene.render(cam, iso=0.0)
+        assert not first.stats["complete"] and first.stats["substituted"] > 0
+        assert first.stats["pieces_changed_at_seams"] > 0  # ancestors meet finer bricks
+        frames = [first]
+        for _ in range(200):
+            frames.append(scene.render(cam, iso=0.0))
+            if frames[-1].stats["complete"]:
+                break
+        assert frames[-1].stats["complete"]
+        for frame in frames:
+            hit = np.isfinite(frame.depth)
+            bad = core & (~hit | (frame.depth > t_core))
+            assert bad.sum() == 0, frame.stats
+        final = scene.render(cam, iso=0.0)
+        np.testing.assert_array_equal(final.depth, frames[-1].depth)  # converged: it stays
+
+
+def _snapshot(root: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
+            for p in root.rglob("*") if p.is_file()}
+
+
+def test_corrupt_chunk_while_rendering_draws_a_coarser_level_and_names_the_chunk(shapes,
+                                                                                 tmp_path):
+    vol, path = shapes["sphere"]
+    sdf, depth = SHAPES["sphere"]
+    copy = tmp_path / "damaged.zarr"
+    shutil.copytree(path, copy)
+    # Level 0, the shard of voxels x 0..15, y and z 16..31: the sphere's side facing -x.
+    shard = copy / "0" / "c" / "1" / "1" / "0"
+    raw = bytearray(shard.read_bytes())
+    raw[100:400] = bytes(300)
+    shard.write_bytes(bytes(raw))
+    before = _snapshot(copy)
+    cam = sc.Camera((-2.6, 0.35, 0.3), (0.0, 0.0, 0.0), size=(48, 48), fov=30)
+    core, t_core = _core_rays(cam, sdf, depth)
+    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5) as scene:
+        with pytest.warns(BrickUnavailableWarning, match=r"0/c/1/1/0"):
+            frame = scene.render(cam, iso=0.0, complete=True, timeout=10)
+        stats = frame.stats
+        assert stats["unavailable"] > 0 and not stats["complete"] and stats["substituted"] > 0
+        assert stats["cut_levels"] == {0: stats["cut_bricks"]}  # the cut wants level 0 ...
+        hit = np.isfinite(frame.depth)
+        assert not (core & (~hit | (frame.depth > t_core))).any()  # ... and has no hole
+        again = scene.render(cam, iso=0.0)  # a known fault is not read again
+        np.testing.assert_array_equal(again.depth, frame.depth)
+    assert _snapshot(copy) == before  # nothing was written into the store
+
+
+def test_store_deleted_while_rendering(shapes, tmp_path):
+    vol, path = shapes["sphere"]
+    copy = tmp_path / "gone.zarr"
+    shutil.copytree(path, copy)
+    cam = sc.Camera((-2.6, 0.35, 0.3), (0.0, 0.0, 0.0), size=(40, 40), fov=30)
+    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5) as scene:
+        scene.render(cam, iso=0.0, wait=False)  # the coarsest level only
+        shutil.rmtree(copy)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            frame = scene.render(cam, iso=0.0, complete=True, timeout=10)
+        assert any(issubclass(w.category, BrickUnavailableWarning) and "gone" in str(w.message)
+                   for w in caught)
+        assert np.isfinite(frame.depth).sum() > 100  # drawn from what is resident
+
+
+def test_bad_options_are_refused_with_one_line(noise):
+    vol, path = noise
+    mv = sc.read(path)
+    with pytest.raises(sc.ParameterError, match="prefilter=True is not available"):
+        sc.Scene(mv, model="bspline3", prefilter=True)
+    with pytest.raises(sc.ParameterError, match="budget"):
+        sc.Scene(mv, budget="a lot")
+    with sc.Scene(mv, budget="64MiB") as scene:
+        with pytest.raises(sc.ParameterError, match="iso=9 is outside the data range"):
+            scene.render(_cameras(vol)[0], iso=9.0)
+        with pytest.raises(sc.ParameterError, match="lod"):
+            scene.render(_cameras(vol)[0], iso=0.3, lod=-1)
+
+
+def test_type6_prefilter_in_bricks_equals_the_whole_volume(noise):
+    """The Laplacian prefilter is local: per brick, with the level's border re-clamped, it gives
+    the in-memory s31 render exactly."""
+    vol, path = noise
+    reference = sc.Scene(vol, model="s31", prefilter=True)
+    with sc.Scene(sc.read(path), model="s31", prefilter=True, budget="64MiB", lod=1e-6) as scene:
+        for cam in _cameras(vol):
+            _assert_same("iso", reference.render(cam, iso=0.3),
+                         scene.render(cam, iso=0.3, complete=True), "s31 prefilter")
+
+
+def test_cli_renders_a_pyramid(shapes, tmp_path, capsys):
+    from splinecast.cli import main
+
+    vol, path = shapes["sphere"]
+    out = tmp_path / "sphere.png"
+    assert main([ "render", str(path), "--budget", "64MiB", "--lod", "2", "--size", "48x40",
+                 "-o", str(out)]) == 0
+    assert out.is_file()
+    assert "complete" in capsys.readouterr().err
+    for argv, message in (
+        (["--budget", "lots"], "--budget must be a size"),
+        (["--lod", "0"], "--lod must be a positive number"),
+        (["--smooth", "3"], "--smooth does not apply"),
+    ):
+        assert main(["render", str(path), *argv, "-o", str(tmp_path / "x.png")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "x.png").exists()
+    assert main(["render", "demo:sphere?size=16", "--lod", "2", "-o", str(out)]) == 2
+    assert "--lod applies to multiscale" in capsys.readouterr().err

@@ -31,7 +31,7 @@ Tracing
     boxes one after the other exactly as it crosses the bricks of one volume (``tests/
     test_bricks.py``), and a cut whose boxes all come from level 0 renders the in-memory image.
     Boxes at the volume's border are extended to the model's domain (the type-6 splines render
-    half a voxel beyond the outer voxel centres).
+    half a voxel beyond the outer voxel centres); see :meth:`CutRenderer.box`.
 """
 
 from __future__ import annotations
@@ -227,16 +227,23 @@ class CutRenderer:
 
     # ------------------------------------------------------------------ rendering
     def box(self, piece: Piece) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The piece's level-0 box extended to the model's domain at the volume's border, and
-        which of its upper faces are the domain's (closed to rays lying in them)."""
-        lo = np.asarray(piece.box_lo, dtype=np.float64).copy()
-        hi = np.asarray(piece.box_hi, dtype=np.float64).copy()
+        """The level-0 box a piece draws, and which of its upper faces are the domain's (closed
+        to rays lying in them).
+
+        The cut's box moved by ``-shift`` level-0 voxels, so that boxes of level 0 end on cell
+        boundaries also for the models whose cells are centred on voxels (even B-splines,
+        type-6): a ray then meets the same cells, cut at the same places, as in the whole
+        volume (DVR's segments end at every cell boundary). Moving every box alike keeps them a
+        partition. At the volume's border the box reaches the model's domain.
+        """
+        lo = np.asarray(piece.box_lo, dtype=np.float64)
+        hi = np.asarray(piece.box_hi, dtype=np.float64)
         d_lo, d_hi = self.domain0
-        end = d_hi - self.margin
-        lo[lo <= 0.0] = d_lo[lo <= 0.0]
-        closed = hi >= end
-        hi[closed] = d_hi[closed]
-        return lo, hi, closed
+        shift = float(self.model.shift)
+        first, last = lo <= 0.0, hi >= d_hi - self.margin
+        lo = np.where(first, d_lo, lo - shift)
+        hi = np.where(last, d_hi, hi - shift)
+        return lo, hi, last
 
     def render(self, pieces: Sequence[Piece], setup: Any, camera: Camera,
                planes: np.ndarray = NO_PLANES) -> tuple[tuple, tuple]:
