@@ -1,8 +1,8 @@
-"""Multiresolution benchmark, build part: a synthetic volume streamed into an OME-Zarr pyramid.
+"""Multiresolution benchmark: a synthetic volume streamed into an OME-Zarr pyramid and rendered.
 
-Run ``python benchmarks/bench_multires.py [--quick] [--parts build,cache] [--workdir DIR]``;
+Run ``python benchmarks/bench_multires.py [--quick] [--parts build,cache,render] [--workdir DIR]``;
 results go to ``benchmarks/results/multires[_quick].json`` and ``.md``. Parts not run keep their
-previous results (the render part joins when the renderer of a cut is wired; keep it separate).
+previous results.
 
 - ``build``: a ``N^3`` uint8 volume (2048^3 = 8 GiB; ``--quick``: 192^3), smooth with structure at
   all scales (a sum of sine octaves with amplitude ``2^-0.7k``), written slice by slice as a raw
@@ -13,6 +13,16 @@ previous results (the render part joins when the renderer of a cut is wired; kee
 - ``cache``: a :class:`~splinecast.multires.stream.BrickStream` with a byte budget renders the
   cut of several views to completion in a fresh process; the overhead is the peak anonymous
   memory above the process before the stream opened, minus the cache's own peak bytes.
+- ``render``: ``Scene(pyramid, budget=1GiB)`` (``--quick``: 4 MiB, so that level 0 does not fit
+  either) renders one view at 1024x768 (``--quick``: 256x192), isosurface and DVR, each in a
+  fresh process after a warm-up in that process that compiles the kernels (on another scene):
+  time to open the scene, to the first (incomplete) image, until the cut is complete; steady
+  frame time (median of 5); bricks read per frame; peak RSS and peak anonymous memory above the
+  process before the scene opened, against the cache's own peak. Baseline in the same run: the
+  in-memory ``Scene`` of the finest level that fits in the budget (2048^3: level 2, 513^3), same
+  view, median of 5 after warm-up; and the image error of both against the finest level
+  rendered in memory (``--quick``) or, when it does not fit in ``--reference-budget``, the
+  multiresolution render at ``lod=0.5`` with that budget.
 """
 
 from __future__ import annotations
@@ -62,6 +72,8 @@ def make_source(path: Path, n: int) -> None:
 
 _CHILD = textwrap.dedent("""
     import json, resource, sys, threading, time
+    sys.path.insert(0, sys.argv[3])
+    from bench_multires import render_job
     def anon():
         for line in open("/proc/self/status"):
             if line.startswith("RssAnon"):
@@ -86,6 +98,9 @@ _CHILD = textwrap.dedent("""
         for z0 in range(0, vol.shape[2], 128):
             total += int(np.asarray(vol.data[:, :, z0:z0 + 128]).sum(dtype=np.int64))
         result = {"seconds": time.perf_counter() - t}
+    elif job in ("render", "memory"):
+        result = render_job(job, args, anon, sample, stop, peak)
+        before = result.pop("before")
     else:
         from splinecast.multires.stream import BrickStream
         from splinecast.multires.relevance import ValueFilter
@@ -111,8 +126,162 @@ _CHILD = textwrap.dedent("""
 """)
 
 
+# --------------------------------------------------------------------------- render part
+def _view(mv, size):
+    import splinecast as sc
+
+    return sc.Camera.orbit(mv, azimuth=30, elevation=25, size=tuple(size), zoom=1.3)
+
+
+def _modes():
+    import splinecast as sc
+
+    tf = sc.TransferFunction([(140.0, 0.0), (170.0, 0.08), (255.0, 0.3)], domain=(0.0, 255.0))
+    return {"iso": {"mode": "iso", "iso": 128.0}, "dvr": {"mode": "dvr", "tf": tf}}
+
+
+def render_job(job: str, args: dict, anon, sample, stop, peak) -> dict:
+    """One mode in a fresh process: the multiresolution scene (``render``) or the in-memory
+    scene of one level (``memory``); images go to ``args["image"]`` (.npz)."""
+    import threading
+    import time
+
+    import splinecast as sc
+
+    mv = sc.read(args["store"])
+    options = _modes()[args["mode"]]
+    cam = _view(mv, args["size"])
+    if job == "memory":
+        vol = mv.level(args["level"]).to_volume(max_bytes=2**40)
+        scene = sc.Scene(vol)
+        scene.render(cam, **options)  # compiles, classifies
+        before = anon()
+        threading.Thread(target=sample, daemon=True).start()
+        times = []
+        for _ in range(5):
+            t = time.perf_counter()
+            frame = scene.render(cam, **options)
+            times.append(time.perf_counter() - t)
+        np.savez(args["image"], depth=frame.depth, rgba=frame.rgba)
+        return {"before": before, "steady_s": float(np.median(times)), "times": times,
+                "level": args["level"], "shape": list(vol.shape)}
+    # Warm-up on another scene: compile the kernels for the store's dtype and for the float64
+    # arrays of bricks changed at seams (a small image until its cut is complete).
+    small = _view(mv, (96, 72))
+    with sc.Scene(mv, budget=args["budget"], lod=args["lod"], load_budget=8) as warm:
+        for _ in range(200):
+            if warm.render(small, **options).stats["complete"]:
+                break
+    before = anon()
+    threading.Thread(target=sample, daemon=True).start()
+    t0 = time.perf_counter()
+    scene = sc.Scene(mv, budget=args["budget"], lod=args["lod"])
+    open_s = time.perf_counter() - t0
+    frame = scene.render(cam, **options)
+    first_s = time.perf_counter() - t0
+    first = frame.stats
+    loads, frames = [frame.stats["loaded_this_frame"]], 1
+    while not frame.stats["complete"] and frames < 2000:
+        frame = scene.render(cam, **options)
+        loads.append(frame.stats["loaded_this_frame"])
+        frames += 1
+    complete_s = time.perf_counter() - t0
+    times = []
+    for _ in range(5):
+        t = time.perf_counter()
+        frame = scene.render(cam, **options)
+        times.append(time.perf_counter() - t)
+    st = frame.stats
+    np.savez(args["image"], depth=frame.depth, rgba=frame.rgba)
+    scene.close()
+    keep = ("cut_bricks", "cut_levels", "pieces_traced", "pieces_changed_at_seams",
+            "resident_bytes", "peak_bytes", "budget", "loaded", "evicted", "trace_ms", "cut_ms")
+    return {"before": before, "open_s": open_s, "first_s": first_s, "complete_s": complete_s,
+            "frames_to_complete": frames, "steady_s": float(np.median(times)), "times": times,
+            "loads_per_frame_mean": float(np.mean(loads)), "loads_per_frame_max": int(max(loads)),
+            "first_frame": {k: first[k] for k in ("substituted", "cut_bricks", "trace_ms")},
+            "final": {k: st[k] for k in keep if k in st}}
+
+
+def _image_error(a: dict, b: dict, mode: str, voxel: float) -> dict:
+    if mode == "dvr":
+        return {"mean_abs_rgba": float(np.abs(a["rgba"] - b["rgba"]).mean()),
+                "max_abs_rgba": float(np.abs(a["rgba"] - b["rgba"]).max())}
+    ha, hb = np.isfinite(a["depth"]), np.isfinite(b["depth"])
+    both = ha & hb
+    diff = np.abs(a["depth"][both] - b["depth"][both]) / voxel
+    return {"hit_mismatch": float((ha != hb).mean()),
+            "mean_depth_voxels": float(diff.mean()) if diff.size else 0.0,
+            "p99_depth_voxels": float(np.percentile(diff, 99)) if diff.size else 0.0}
+
+
+def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
+                reference_budget: int) -> dict:
+    """Both modes, the in-memory baseline and the image errors."""
+    import splinecast as sc
+    from splinecast.multires.budget import parse_bytes
+
+    mv = sc.read(store)
+    limit = parse_bytes(budget, "budget")
+    fits = [lv.index for lv in mv.levels if lv.nbytes <= limit]
+    level = fits[0]
+    out: dict = {"budget": limit, "size": list(size), "memory_level": level,
+                 "memory_shape": list(mv.level(level).shape), "modes": {}}
+    for mode in ("iso", "dvr"):
+        images = {name: work / f"{mode}_{name}.npz" for name in ("multi", "memory", "ref")}
+        multi = child("render", store=str(store), mode=mode, size=list(size), budget=budget,
+                      lod=1.0, image=str(images["multi"]))
+        memory = child("memory", store=str(store), mode=mode, size=list(size), level=level,
+                       image=str(images["memory"]))
+        if mv.levels[0].nbytes <= reference_budget:
+            ref = child("memory", store=str(store), mode=mode, size=list(size), level=0,
+                        image=str(images["ref"]))
+            ref_what = "level 0 in memory"
+        else:
+            ref = child("render", store=str(store), mode=mode, size=list(size),
+                        budget=reference_budget, lod=0.5, image=str(images["ref"]))
+            ref_what = f"multiresolution, lod 0.5, budget {mib(reference_budget)}"
+        loaded = {k: dict(np.load(v)) for k, v in images.items()}
+        voxel = float(min(mv.spacing))
+        multi["overhead"] = multi["peak_anon_above_start"] - multi["final"]["peak_bytes"]
+        out["modes"][mode] = {
+            "multires": multi, "memory": memory, "reference": ref_what, "reference_run": ref,
+            "error_multires": _image_error(loaded["multi"], loaded["ref"], mode, voxel),
+            "error_memory": _image_error(loaded["memory"], loaded["ref"], mode, voxel)}
+    return out
+
+
+def render_markdown(r: dict) -> list[str]:
+    w, h = r["size"]
+    shape = "x".join(str(v) for v in r["memory_shape"])
+    lines = [f"## Render ({w}x{h}, budget {mib(r['budget'])}, trilinear, lod 1)", "",
+             f"In-memory baseline: level {r['memory_level']} ({shape}), the finest that fits in "
+             "the budget. Errors against the finest level "
+             f"({r['modes']['iso']['reference']}).", "",
+             "| mode | open | first image | complete (frames) | steady | in-memory | ratio | "
+             "bricks read / frame (mean, max) | cut bricks | peak RSS | peak anon above start | "
+             "cache peak | overhead |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for mode, m in r["modes"].items():
+        a, b = m["multires"], m["memory"]
+        lines.append(
+            f"| {mode} | {a['open_s']:.2f} s | {a['first_s']:.2f} s | {a['complete_s']:.2f} s "
+            f"({a['frames_to_complete']}) | {a['steady_s'] * 1e3:.0f} ms | "
+            f"{b['steady_s'] * 1e3:.0f} ms | {a['steady_s'] / b['steady_s']:.2f}x | "
+            f"{a['loads_per_frame_mean']:.0f}, {a['loads_per_frame_max']} | "
+            f"{a['final']['cut_bricks']} | {mib(a['maxrss'])} | "
+            f"{mib(a['peak_anon_above_start'])} | {mib(a['final']['peak_bytes'])} | "
+            f"{mib(a['overhead'])} |")
+    lines += ["", "| mode | error of the multiresolution image | error of the in-memory level |",
+              "|---|---|---|"]
+    for mode, m in r["modes"].items():
+        def fmt(e):
+            return ", ".join(f"{k} {v:.4g}" for k, v in e.items())
+        lines.append(f"| {mode} | {fmt(m['error_multires'])} | {fmt(m['error_memory'])} |")
+    return lines + [""]
+
+
 def child(job: str, **args) -> dict:
-    done = subprocess.run([sys.executable, "-c", _CHILD, job, json.dumps(args)],
+    done = subprocess.run([sys.executable, "-c", _CHILD, job, json.dumps(args), str(HERE)],
                           capture_output=True, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -143,13 +312,17 @@ def markdown(results: dict) -> str:
                   f"| {mib(c['budget'])} | {mib(c['cache_peak_bytes'])} | "
                   f"{mib(c['peak_anon_above_start'])} | {mib(c['overhead'])} | {c['frames']} | "
                   f"{c['loaded']} | {c['evicted']} |", ""]
+    if results.get("render"):
+        lines += render_markdown(results["render"])
     return "\n".join(lines) + "\n"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="192^3 instead of 2048^3")
-    parser.add_argument("--parts", default="build,cache")
+    parser.add_argument("--parts", default="build,cache,render")
+    parser.add_argument("--reference-budget", default="4GiB",
+                        help="largest level 0 rendered in memory as the error reference")
     parser.add_argument("--workdir", help="where the source and the store go (default: temp)")
     parser.add_argument("--repeats", type=int, help="build repeats (default 3 quick, 1 full)")
     parser.add_argument("--out", default=str(HERE / "results"))
@@ -190,6 +363,16 @@ def main() -> None:
         results["cache"] = c
     else:
         results["cache"] = old.get("cache")
+    if "render" in parts:
+        from splinecast.multires.budget import parse_bytes
+
+        if not store.exists():
+            child("build", source=str(source), out=str(store))
+        size = (256, 192) if args.quick else (1024, 768)
+        results["render"] = render_part(store, "4MiB" if args.quick else "1GiB", size, work,
+                                        parse_bytes(args.reference_budget, "--reference-budget"))
+    else:
+        results["render"] = old.get("render")
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{stem}.json").write_text(json.dumps(results, indent=1) + "\n")
     (out / f"{stem}.md").write_text(markdown(results))

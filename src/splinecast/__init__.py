@@ -23,7 +23,7 @@ from .render.dvr import DVRSettings
 from .render.effects import SurfaceEffects
 from .render.frame import Frame
 from .render.shading import Shading
-from .scene import Scene, check_iso
+from .scene import Scene, check_iso, register_scene_type
 from .transfer import TransferFunction
 from .volume import Volume
 
@@ -34,9 +34,20 @@ __version__ = "0.1.0"
 _LAZY = {
     "build_pyramid": ("splinecast.multires.pyramid", "build_pyramid"),
     "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
+    "MultiscaleScene": ("splinecast.multires.scene", "MultiscaleScene"),
     "multires": ("splinecast.multires", None),
     "view": ("splinecast.viewer", "view"),
 }
+
+
+def _multiscale_scene(volume, *args, **kwargs):
+    """``Scene(MultiscaleVolume, ...)``: the renderer of cuts (loaded with zarr on first use)."""
+    from .multires.scene import MultiscaleScene
+
+    return MultiscaleScene(volume, *args, **kwargs)
+
+
+register_scene_type("splinecast.io.omezarr.MultiscaleVolume", _multiscale_scene)
 
 
 def __getattr__(name: str):
@@ -52,6 +63,7 @@ def __getattr__(name: str):
 __all__ = [
     "Camera",
     "MODELS",
+    "MultiscaleScene",
     "MultiscaleVolume",
     "DVRSettings",
     "DataError",

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -31,7 +33,8 @@ from .render.shading import Shading
 from .transfer import TransferFunction
 from .volume import Volume
 
-__all__ = ["Scene", "MODES", "check_iso"]
+__all__ = ["Scene", "MODES", "check_iso", "RenderRequest", "prepare_render", "finish_frame",
+           "register_scene_type"]
 
 #: Render modes accepted by :meth:`Scene.render`.
 MODES = ("iso", "mip", "minip", "dvr")
@@ -60,6 +63,30 @@ def check_iso(volume: Volume, iso: Any) -> float:
     return value
 
 
+#: Scene types for volumes other than :class:`Volume`: qualified class name of the volume ->
+#: factory (see :func:`register_scene_type`).
+_SCENE_TYPES: dict[str, Callable[..., Any]] = {}
+
+
+def register_scene_type(volume_class: str, factory: Callable[..., Any]) -> None:
+    """Make ``Scene(volume, ...)`` return ``factory(volume, ...)`` for another kind of volume.
+
+    ``volume_class`` is the qualified name of the volume's class (or of a base class), for
+    example ``"splinecast.io.omezarr.MultiscaleVolume"``: the layers above this module register
+    their scenes here (``splinecast/__init__.py`` registers
+    :class:`splinecast.multires.scene.MultiscaleScene`), so this module never imports them.
+    """
+    _SCENE_TYPES[volume_class] = factory
+
+
+def _scene_factory(volume: Any) -> Callable[..., Any] | None:
+    for klass in type(volume).__mro__:
+        factory = _SCENE_TYPES.get(f"{klass.__module__}.{klass.__qualname__}")
+        if factory is not None:
+            return factory
+    return None
+
+
 class Scene:
     """A volume, its reconstruction model, and the acceleration structure for rendering.
 
@@ -83,6 +110,15 @@ class Scene:
     >>> frame.depth.shape
     (48, 64)
     """
+
+    def __new__(cls, volume: Any = None, *args: Any, **kwargs: Any) -> Any:
+        # A volume of another kind (a lazy multiscale OME-Zarr image) gets the scene registered
+        # for it (register_scene_type); a Volume gets this class.
+        if cls is Scene and not isinstance(volume, Volume):
+            factory = _scene_factory(volume)
+            if factory is not None:
+                return factory(volume, *args, **kwargs)
+        return super().__new__(cls)
 
     def __init__(self, volume: Volume, model: str = "trilinear", **options: Any) -> None:
         if not isinstance(volume, Volume):
@@ -240,68 +276,124 @@ class Scene:
         -------
         Frame
         """
-        if not isinstance(camera, Camera):
-            raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
-        if mode not in MODES:
-            raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
-        if method not in METHODS:
-            raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-        inside = inside or self.volume.metadata.get("inside", "high")
-        if inside not in ("high", "low"):
-            raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
-        shading = shading or Shading()
-        if effects is not None and not isinstance(effects, SurfaceEffects):
-            raise ParameterError(f"effects must be a SurfaceEffects, got {type(effects).__name__}")
-        planes = make_planes(clip, crop)
-        stats: dict[str, Any] = {"mode": mode, "model": self.model.name}
-        grid, flags = self.grid, None
-        if mode in ("mip", "minip"):
-            window = auto_window(self.volume) if window is None else window
-            setup: Any = Mip(mode, method, step, window, colormap, shading.background,
-                             self.volume.value_range)
-            stats["method"] = method
-        elif mode == "dvr":
-            tf = auto_transfer_function(self.volume) if tf is None else tf
-            setup = Dvr(tf, dvr, shading.background, self._table_cache)
-        elif isinstance(iso, (list, tuple, np.ndarray)):
-            if len(iso) == 0:
-                raise ParameterError("iso must hold at least one isovalue")
-            setup = MultiIso([self._check_iso(v) for v in iso], colors, opacity, inside,
-                             shading, effects)
-            stats["method"] = "exact"
-        else:
-            value = self._check_iso(iso)
-            setup = Iso(value, method, step, inside, shading)
+        request = prepare_render(
+            self.volume, camera, mode, iso, method, step, shading, inside, clip=clip,
+            crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
+            colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
+            check_iso=self._check_iso, model=self.model.name)
+        grid, flags, planes, stats = self.grid, None, request.planes, request.stats
+        if request.iso is not None:
             classify_ms = 0.0
-            if value != self._iso:
-                classify_ms = self.set_iso(value)
+            if request.iso != self._iso:
+                classify_ms = self.set_iso(request.iso)
             flags = self._iso_flags()
             if self.active_cells is not None:
                 grid = grid.with_kernel(self.model.kernel_grid(active=self.active_cells))
-            if len(planes):
-                stats["planes"] = len(planes)
             planes = np.vstack([planes, self._active_box_planes(flags)])
-            stats.update(method=method, iso=value, classify_ms=classify_ms)
-            if method == "sampled":
-                stats["step"] = float(step)
+            stats["classify_ms"] = classify_ms
             stats.update(self.iso_stats)
         start = time.perf_counter()
-        out, counters = render_grid(grid, setup, camera, planes, flags)
-        frame = setup.frame(out, counters, stats)
-        if mode == "iso" and effects is not None and effects.active and not isinstance(
-                setup, MultiIso):
-            apply_effects(camera.pixel_basis(), shading.as_array(), effects.as_array(),
-                          frame.position, frame.normal, frame.face, frame.rgba)
-        trace_ms = (time.perf_counter() - start) * 1e3
-        visited, tested, skipped = counters
-        stats.update({
-            "width": camera.width,
-            "height": camera.height,
-            "rays": camera.width * camera.height,
-            "hits": int(np.count_nonzero(np.isfinite(frame.depth))),
-            "trace_ms": trace_ms,
-            "mean_cells_visited": float(visited.mean()),
-            "mean_cells_tested": float(tested.mean()),
-            "mean_blocks_skipped": float(skipped.mean()),
-        })
-        return frame
+        out, counters = render_grid(grid, request.setup, camera, planes, flags)
+        return finish_frame(request, out, counters, camera, start)
+
+
+@dataclass
+class RenderRequest:
+    """A validated :meth:`Scene.render` call: the mode's host object and what the frame reports.
+
+    Attributes
+    ----------
+    setup : Iso, MultiIso, Mip or Dvr
+        The mode (:mod:`splinecast.render`), with its parameters and buffers.
+    planes : ndarray (m, 4)
+        Clip planes of ``clip`` and ``crop``.
+    stats : dict
+        The frame's statistics so far (mode, model, method, isovalue, ...).
+    iso : float or None
+        The isovalue of a single isosurface (``mode="iso"`` with one value), else ``None``.
+    shading : Shading
+    effects : SurfaceEffects or None
+    """
+
+    setup: Any
+    planes: np.ndarray
+    stats: dict[str, Any]
+    iso: float | None
+    shading: Shading
+    effects: SurfaceEffects | None
+
+
+def prepare_render(
+    volume: Any, camera: Camera, mode: str, iso: Any, method: str, step: float,
+    shading: Shading | None, inside: str | None, *, clip: Any, crop: Any, colors: Any,
+    opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
+    tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
+    check_iso: Any, model: str,
+) -> RenderRequest:
+    """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
+    type: in memory, multiresolution).
+
+    ``volume`` supplies the automatic choices (:mod:`splinecast.defaults`), the metadata and the
+    value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
+    """
+    if not isinstance(camera, Camera):
+        raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
+    if mode not in MODES:
+        raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    if method not in METHODS:
+        raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    inside = inside or volume.metadata.get("inside", "high")
+    if inside not in ("high", "low"):
+        raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
+    shading = shading or Shading()
+    if effects is not None and not isinstance(effects, SurfaceEffects):
+        raise ParameterError(f"effects must be a SurfaceEffects, got {type(effects).__name__}")
+    planes = make_planes(clip, crop)
+    stats: dict[str, Any] = {"mode": mode, "model": model}
+    value = None
+    if mode in ("mip", "minip"):
+        window = auto_window(volume) if window is None else window
+        setup: Any = Mip(mode, method, step, window, colormap, shading.background,
+                         volume.value_range)
+        stats["method"] = method
+    elif mode == "dvr":
+        tf = auto_transfer_function(volume) if tf is None else tf
+        setup = Dvr(tf, dvr, shading.background, table_cache)
+    elif isinstance(iso, (list, tuple, np.ndarray)):
+        if len(iso) == 0:
+            raise ParameterError("iso must hold at least one isovalue")
+        setup = MultiIso([check_iso(v) for v in iso], colors, opacity, inside, shading, effects)
+        stats["method"] = "exact"
+    else:
+        value = check_iso(iso)
+        setup = Iso(value, method, step, inside, shading)
+        if len(planes):
+            stats["planes"] = len(planes)
+        stats.update(method=method, iso=value)
+        if method == "sampled":
+            stats["step"] = float(step)
+    return RenderRequest(setup, planes, stats, value, shading, effects)
+
+
+def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Camera,
+                 start: float) -> Frame:
+    """The :class:`Frame` of a traced image: surface effects applied, per-ray counts and the
+    time since ``start`` (``time.perf_counter()``) in ``stats``."""
+    setup, stats, effects = request.setup, request.stats, request.effects
+    frame = setup.frame(out, counters, stats)
+    if isinstance(setup, Iso) and effects is not None and effects.active:
+        apply_effects(camera.pixel_basis(), request.shading.as_array(), effects.as_array(),
+                      frame.position, frame.normal, frame.face, frame.rgba)
+    trace_ms = (time.perf_counter() - start) * 1e3
+    visited, tested, skipped = counters
+    stats.update({
+        "width": camera.width,
+        "height": camera.height,
+        "rays": camera.width * camera.height,
+        "hits": int(np.count_nonzero(np.isfinite(frame.depth))),
+        "trace_ms": trace_ms,
+        "mean_cells_visited": float(visited.mean()),
+        "mean_cells_tested": float(tested.mean()),
+        "mean_blocks_skipped": float(skipped.mean()),
+    })
+    return frame

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import inspect
+import math
 import time
 from pathlib import Path
 
 import splinecast as sc
 
+from ..multires.budget import parse_bytes
 from ._common import check_output, log, numbers
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
@@ -54,6 +57,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         help="frame what the isovalue or transfer function shows (default) or "
                              "the whole grid")
     add_render_options(render)
+    render.add_argument("--budget", help="multiscale (OME-Zarr) volumes: RAM for bricks, e.g. "
+                        "512MiB or 2GiB (default 2GiB)")
+    render.add_argument("--lod", type=float, help="multiscale volumes: refine while a voxel "
+                        "covers more than this many pixels (default 1)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
     _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
@@ -242,6 +249,23 @@ def orbit_options(args: argparse.Namespace) -> dict:
             "ortho": args.ortho, "zoom": args.zoom}
 
 
+def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool) -> None:
+    """``--budget``/``--lod`` only for multiscale volumes; ``--smooth`` only for the others."""
+    if multiscale:
+        if args.smooth:
+            raise sc.ParameterError(f"--smooth does not apply to the multiscale volume "
+                                    f"{args.file} (it would read every voxel)")
+        if args.budget is not None:
+            parse_bytes(args.budget, "--budget")
+        if args.lod is not None and not (math.isfinite(args.lod) and args.lod > 0):
+            raise sc.ParameterError(f"--lod must be a positive number of pixels, got {args.lod}")
+        return
+    for flag, value in (("--budget", args.budget), ("--lod", args.lod)):
+        if value is not None:
+            raise sc.ParameterError(f"{flag} applies to multiscale (OME-Zarr) volumes only; "
+                                    f"{args.file} is read into memory whole")
+
+
 def run(args: argparse.Namespace) -> int:
     """Render ``args.file`` to ``args.output``."""
     # Validate every option and output path before any work, so a mistake writes nothing.
@@ -253,31 +277,51 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     vol = sc.read(args.file, array=args.array)
     read_s = time.perf_counter() - start
-    options = model_options(args)
-    kwargs, notes = mode_kwargs(args, vol)
-    camera = sc.Camera.orbit(vol, azimuth=args.azimuth, elevation=args.elevation,
-                             fit=_fit(args, vol, kwargs), **orbit_options(args))
-    # Progress starts only once every input is known to be valid, so a mistake is one line.
-    log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
-    for note in notes:
-        log(args, note)
-    if args.smooth:
-        vol = sc.smooth(vol, args.smooth)
-        log(args, f"smoothed with a {args.smooth}^3 Gaussian")
-    start = time.perf_counter()
-    scene = sc.Scene(vol, model=args.model, **options)
-    log(args, f"prepared {args.model} model in {time.perf_counter() - start:.2f} s")
-    start = time.perf_counter()
-    frame = scene.render(camera, inside=args.inside, **kwargs)
-    st = frame.stats
-    what = f"at iso {st['iso']}" if "iso" in st else st["mode"]
-    log(args, f"rendered {width}x{height} {what} in "
-               f"{time.perf_counter() - start:.2f} s (trace {st['trace_ms']:.0f} ms, "
-               f"{st['hits']} hits, {st['mean_cells_visited']:.1f} cells/ray; "
-               "the first run includes compilation)")
-    frame.save(args.output)
-    if args.depth:
-        frame.save_depth(args.depth)
-        log(args, f"wrote depth {args.depth}")
-    print(Path(args.output).resolve())
+    multiscale = not isinstance(vol, sc.Volume)
+    _refuse_multiscale_options(args, multiscale)
+    with contextlib.ExitStack() as stack:
+        options = model_options(args)
+        scene = None
+        if multiscale:  # nothing but the coarsest level is read here; the loader stops at the end
+            scene = stack.enter_context(sc.Scene(
+                vol, model=args.model, budget=args.budget or "2GiB",
+                lod=1.0 if args.lod is None else args.lod, **options))
+        info = scene.preview if multiscale else vol
+        kwargs, notes = mode_kwargs(args, info)
+        camera = sc.Camera.orbit(vol, azimuth=args.azimuth, elevation=args.elevation,
+                                 fit=_fit(args, info, kwargs), **orbit_options(args))
+        # Progress starts only once every input is known to be valid, so a mistake is one line.
+        if multiscale:
+            log(args, f"opened {vol.name}: {len(vol.levels)} levels, {vol.shape} {vol.dtype} in "
+                      f"{read_s:.2f} s (coarsest level read)")
+        else:
+            log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
+        for note in notes:
+            log(args, note)
+        if args.smooth:
+            vol = sc.smooth(vol, args.smooth)
+            log(args, f"smoothed with a {args.smooth}^3 Gaussian")
+        start = time.perf_counter()
+        if scene is None:
+            scene = sc.Scene(vol, model=args.model, **options)
+            log(args, f"prepared {args.model} model in {time.perf_counter() - start:.2f} s")
+        start = time.perf_counter()
+        extra = {"complete": True} if multiscale else {}  # a still image: the whole cut, read
+        frame = scene.render(camera, inside=args.inside, **extra, **kwargs)
+        st = frame.stats
+        what = f"at iso {st['iso']}" if "iso" in st else st["mode"]
+        log(args, f"rendered {width}x{height} {what} in "
+                   f"{time.perf_counter() - start:.2f} s (trace {st['trace_ms']:.0f} ms, "
+                   f"{st['hits']} hits, {st['mean_cells_visited']:.1f} cells/ray; "
+                   "the first run includes compilation)")
+        if multiscale:
+            levels = ", ".join(f"{n} of level {lv}" for lv, n in sorted(st["cut_levels"].items()))
+            state = "complete" if st["complete"] else "incomplete"
+            log(args, f"cut: {st['cut_bricks']} bricks ({levels}), {st['loaded']} read, "
+                      f"{st['unavailable']} unreadable, {state}")
+        frame.save(args.output)
+        if args.depth:
+            frame.save_depth(args.depth)
+            log(args, f"wrote depth {args.depth}")
+        print(Path(args.output).resolve())
     return 0

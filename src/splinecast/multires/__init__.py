@@ -26,6 +26,10 @@ _EXPORTS = {
     "BrickStream": "stream",
     "write_table": "tables",
     "parse_bytes": "budget",
+    "MultiscaleScene": "scene",
+    "CutRenderer": "draw",
+    "Piece": "draw",
+    "Seams": "seams",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -1,0 +1,336 @@
+"""The renderer of a cut: every box of a multiresolution cut traced from its own brick, front to
+back per ray, through the segment entry point of the render driver.
+
+Pieces
+    A :class:`Piece` is one box of a cut (level-0 index space) and the brick that reconstructs
+    it: an array of one level's values with ghost layers (voxels, or B-spline coefficients for
+    the B-spline models, whose coefficients are the voxels), the level index of its first
+    element and a key naming its contents. A brick drawn in place of a missing descendant (a
+    substitution) is a piece whose level is coarser than the cut's brick; several pieces may
+    share one array. Anything that produces pieces can be rendered: the brick stream of an
+    OME-Zarr pyramid (:mod:`.scene`), spline-wavelet reconstructions, a distributed worker's
+    share of the bricks.
+
+Grids
+    A piece's array becomes the model's kernel grid (:func:`splinecast.render.segment.make_grid`)
+    with the level's placement: index offset ``first + pad`` (``pad`` the model's border layers,
+    so that the grid's cell ``c`` reads the same voxels as cell ``offset + c`` of the whole
+    level), the level's origin and spacing and the rendered domain in the level's index space.
+    The grid covers the whole brick; each ray is restricted to the piece's box with a per-ray
+    parameter interval (:func:`.probe.box_ranges`, the driver's ``t_range``), so boxes that cut
+    through cells (the even B-spline and the type-6 models, whose cells are centred on voxels,
+    or an ancestor drawn over a descendant's box) need nothing special. Grids of unmodified
+    bricks are kept between frames while their bricks are in the cut; grids of bricks changed at
+    a seam are built when traced (:mod:`.seams`).
+
+Tracing
+    The pieces are put in front-to-back order (:mod:`.order`), and each is traced over the
+    screen rectangle its box projects to (a tile camera: the same rays as the full image): the
+    mode's per-pixel state of that rectangle is copied out, carried through the piece by
+    :func:`~splinecast.render.segment.trace_segment` and copied back. A ray thus crosses the
+    boxes one after the other exactly as it crosses the bricks of one volume (``tests/
+    test_bricks.py``), and a cut whose boxes all come from level 0 renders the in-memory image.
+    Boxes at the volume's border are extended to the model's domain (the type-6 splines render
+    half a voxel beyond the outer voxel centres); see :meth:`CutRenderer.box`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Hashable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..camera import Camera
+from ..render.clipping import NO_PLANES
+from ..render.segment import Grid, counters, finish_state, make_grid, new_state, trace_segment
+from .order import front_to_back
+from .probe import box_ranges, sample_grid
+
+__all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect"]
+
+
+@dataclass(frozen=True, eq=False)
+class Piece:
+    """One box of a cut and the brick array that reconstructs it.
+
+    Attributes
+    ----------
+    cut_key : (level, i, j, k)
+        The cut's brick whose box this is (orders the pieces front to back).
+    key : hashable
+        Names the array's contents (a brick's key): pieces with the same key share one grid.
+    level : int
+        Level of the array (coarser than ``cut_key[0]`` when an ancestor stands in).
+    data : ndarray (nx, ny, nz)
+        The level's values ``first .. first + shape - 1`` with ghost layers (at least the
+        model's support on every side of the box).
+    first : (3,) int
+        Level index of ``data[0, 0, 0]``.
+    box_lo, box_hi : ndarray (3,)
+        The box drawn, in level-0 index space.
+    substituted : bool
+        An ancestor's array is drawn for the box (the cut's own brick is not resident).
+    """
+
+    cut_key: tuple[int, int, int, int]
+    key: Hashable
+    level: int
+    data: np.ndarray
+    first: tuple[int, int, int]
+    box_lo: np.ndarray
+    box_hi: np.ndarray
+    substituted: bool = False
+
+
+@dataclass(frozen=True)
+class LevelGeometry:
+    """Placement of one level: ``level index = level-0 index * scale + offset``; voxel ``v`` of
+    the level is at ``origin + v * spacing`` in the world."""
+
+    shape: np.ndarray
+    origin: np.ndarray
+    spacing: np.ndarray
+    scale: np.ndarray
+    offset: np.ndarray
+
+    def from_level0(self, index: np.ndarray) -> np.ndarray:
+        """Level-0 index coordinates to this level's."""
+        return np.asarray(index, dtype=np.float64) * self.scale + self.offset
+
+
+def screen_rect(camera: Camera, lo: np.ndarray, hi: np.ndarray) -> tuple[int, int, int, int] | None:
+    """Pixel rectangle ``(col0, row0, width, height)`` of ``camera``'s image that the world box
+    ``[lo, hi]`` can project to (one pixel of margin), or ``None`` if it projects outside."""
+    basis = camera.pixel_basis()
+    eye, fwd, right, up = basis[0:3], basis[3:6], basis[6:9], basis[9:12]
+    half_w, half_h, ortho = basis[12], basis[13], basis[14] != 0.0
+    col0, row0, full_w, full_h = basis[16:20]
+    corners = np.array([[(lo, hi)[(b >> a) & 1][a] for a in range(3)] for b in range(8)]) - eye
+    sx, sy = corners @ right, corners @ up
+    if not ortho:
+        depth = corners @ fwd
+        if np.all(depth <= 0):
+            return None
+        if np.any(depth <= 1e-9 * (np.abs(sx) + np.abs(sy) + 1.0)):
+            return 0, 0, camera.width, camera.height  # the box reaches the eye plane
+        sx, sy = sx / depth, sy / depth
+    cols = (sx / half_w + 1.0) * 0.5 * full_w - 0.5 - col0
+    rows = (1.0 - sy / half_h) * 0.5 * full_h - 0.5 - row0
+    c0 = max(int(math.floor(cols.min())) - 1, 0)
+    c1 = min(int(math.ceil(cols.max())) + 2, camera.width)
+    r0 = max(int(math.floor(rows.min())) - 1, 0)
+    r1 = min(int(math.ceil(rows.max())) + 2, camera.height)
+    if c0 >= c1 or r0 >= r1:
+        return None
+    return c0, r0, c1 - c0, r1 - r0
+
+
+class CutRenderer:
+    """Traces the pieces of a cut with one model, front to back per ray.
+
+    Parameters
+    ----------
+    model : a model of :data:`splinecast.models.MODELS`
+        Prepared once (from any level: only its kind, options and tables are used); pieces'
+        arrays become its kernel grids.
+    tree : BrickOctree
+        The levels' geometry and the bricks' nesting (for the front-to-back order).
+    seams : optional
+        Seam treatment with ``plan(pieces, renderer)`` and ``closure``
+        (:class:`.seams.Seams`); ``None`` draws every brick as it is.
+    """
+
+    def __init__(self, model: Any, tree: Any, seams: Any = None) -> None:
+        self.model = model
+        self.tree = tree
+        self.seams = seams
+        #: Border layers of the model's prepared array: cell ``c`` reads voxels ``c - pad ..``.
+        self.pad = (int(model.prepared.shape[0]) - int(model.volume.shape[0])) // 2
+        lo, _ = model.domain()
+        #: The model renders this far (voxels) beyond the outer voxel centres (type-6: 1/2).
+        self.margin = -float(lo[0])
+        n0 = np.asarray(tree.n0, dtype=np.float64)
+        self.domain0 = (np.full(3, -self.margin), n0 - 1.0 + self.margin)
+        self.levels = {int(level): self._geometry(int(level)) for level in tree.levels}
+        self._grids: dict[Hashable, Grid] = {}
+        self._prepared: dict[Hashable, tuple[np.ndarray, np.ndarray]] = {}
+        self.stats: dict[str, Any] = {}
+
+    def _geometry(self, level: int) -> LevelGeometry:
+        lv = self.tree.volume.level(level)
+        scale, offset = self.tree.level_map(level)
+        return LevelGeometry(np.asarray(lv.shape, dtype=np.int64),
+                             np.asarray(lv.origin, dtype=np.float64),
+                             np.asarray(lv.spacing, dtype=np.float64),
+                             np.asarray(scale, dtype=np.float64),
+                             np.asarray(offset, dtype=np.float64))
+
+    # ------------------------------------------------------------------ arrays and grids
+    def prepared(self, piece: Piece) -> tuple[np.ndarray, np.ndarray]:
+        """The array the model's kernels read for a piece, and the level index of its first
+        element (the brick's voxels; the type-6 prefilter applied when the model has it)."""
+        cached = self._prepared.get(piece.key)
+        if cached is not None:
+            return cached
+        first = np.asarray(piece.first, dtype=np.int64)
+        data = piece.data
+        if getattr(self.model, "prefilter", False) and hasattr(self.model, "tet_masks"):
+            data, first = _type6_prefilter(data, first, self.levels[piece.level].shape)
+        self._prepared[piece.key] = (data, first)
+        return data, first
+
+    def grid(self, level: int, array: np.ndarray, first: np.ndarray) -> Grid:
+        """The model's grid over ``array`` (values of ``level`` from index ``first`` on)."""
+        g = self.levels[level]
+        lo, hi = g.from_level0(self.domain0[0]), g.from_level0(self.domain0[1])
+        cells = g.shape + 2 * self.pad - int(self.model.support)
+        return make_grid(self.model, array, offset=np.asarray(first) + self.pad,
+                         level_origin=g.origin, level_spacing=g.spacing, domain=(lo, hi),
+                         level_cells=cells)
+
+    def _piece_grid(self, piece: Piece, changes: dict) -> tuple[Grid, bool]:
+        """The grid to trace for a piece: cached, or built from the array changed at a seam."""
+        change = changes.get(piece.key)
+        if change is None:
+            grid = self._grids.get(piece.key)
+            if grid is None:
+                array, first = self.prepared(piece)
+                grid = self._grids[piece.key] = self.grid(piece.level, array, first)
+            return grid, False
+        array, first = self.prepared(piece)
+        return self.grid(piece.level, change.apply(array), first), True
+
+    def evaluate(self, piece: Piece, points: np.ndarray, changes: dict | None = None) -> np.ndarray:
+        """The reconstruction a piece draws (with its seam ``changes``, if any) at level-0 index
+        points (n, 3)."""
+        array, first = self.prepared(piece)
+        change = (changes or {}).get(piece.key)
+        if change is not None:
+            array = change.apply(array)
+        grid = self.grid(piece.level, array, first)
+        local = (self.levels[piece.level].from_level0(points) + self.model.shift
+                 - grid.geom[7:10])
+        out = np.empty(len(local))
+        sample_grid(grid.kernel, np.ascontiguousarray(local), out)
+        return out
+
+    def forget(self, keep: Iterable[Hashable]) -> None:
+        """Drop the grids and arrays of bricks not in ``keep`` (the cache may evict them)."""
+        keep = set(keep)
+        for store in (self._grids, self._prepared):
+            for key in [k for k in store if k not in keep]:
+                del store[key]
+
+    # ------------------------------------------------------------------ rendering
+    def box(self, piece: Piece) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The level-0 box a piece draws, and which of its upper faces are the domain's (closed
+        to rays lying in them).
+
+        The cut's box moved by ``-shift`` level-0 voxels, so that boxes of level 0 end on cell
+        boundaries also for the models whose cells are centred on voxels (even B-splines,
+        type-6): a ray then meets the same cells, cut at the same places, as in the whole
+        volume (DVR's segments end at every cell boundary). Moving every box alike keeps them a
+        partition. At the volume's border the box reaches the model's domain.
+        """
+        lo = np.asarray(piece.box_lo, dtype=np.float64)
+        hi = np.asarray(piece.box_hi, dtype=np.float64)
+        d_lo, d_hi = self.domain0
+        shift = float(self.model.shift)
+        first, last = lo <= 0.0, hi >= d_hi - self.margin
+        lo = np.where(first, d_lo, lo - shift)
+        hi = np.where(last, d_hi, hi - shift)
+        return lo, hi, last
+
+    def render(self, pieces: Sequence[Piece], setup: Any, camera: Camera,
+               planes: np.ndarray = NO_PLANES) -> tuple[tuple, tuple]:
+        """Trace an image through the pieces of a cut; returns ``(outputs, counters)``."""
+        state = new_state(setup, camera)
+        stats = counters(camera.height, camera.width)
+        self.trace(pieces, setup, camera, state, stats, planes)
+        return finish_state(setup, state, camera), stats
+
+    def trace(self, pieces: Sequence[Piece], setup: Any, camera: Camera, state: tuple,
+              stats: tuple, planes: np.ndarray = NO_PLANES) -> None:
+        """Carry the per-pixel ``state`` of ``setup`` through the pieces, front to back.
+
+        ``state`` and ``stats`` are full-image arrays (:func:`~splinecast.render.segment.
+        new_state`, :func:`~splinecast.render.segment.counters`), updated in place; a renderer
+        that splits a cut (a distributed worker) traces its share into its own state and
+        merges the states with the mode's ``combine`` in depth order.
+        """
+        start = time.perf_counter()
+        planes = np.ascontiguousarray(planes, dtype=np.float64).reshape(-1, 4)
+        changes = self.seams.plan(pieces, self) if self.seams is not None else {}
+        plan_s = time.perf_counter() - start
+        closure = self.seams.closure(setup, camera) if self.seams is not None else None
+        keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
+        order = front_to_back(keys, camera, self.tree)
+        g0 = self.levels[int(self.tree.levels[0])]
+        traced = rebuilt = 0
+        for n in order:
+            piece = pieces[int(n)]
+            lo, hi, closed = self.box(piece)
+            world_lo = g0.origin + lo * g0.spacing
+            world_hi = g0.origin + hi * g0.spacing
+            rect = screen_rect(camera, np.minimum(world_lo, world_hi),
+                               np.maximum(world_lo, world_hi))
+            if rect is None:
+                continue
+            tile = camera if rect == (0, 0, camera.width, camera.height) else camera.tile(*rect)
+            t_range = np.empty((tile.height, tile.width, 2))
+            if box_ranges(tile.pixel_basis(), g0.origin, g0.spacing, lo, hi, closed, planes,
+                          t_range) == 0:
+                continue
+            grid, changed = self._piece_grid(piece, changes)
+            rebuilt += changed
+            traced += 1
+            local = _gather(state, rect, tile is camera)
+            local_stats = counters(tile.height, tile.width)
+            if closure is not None:
+                closure.enter(piece, grid, tile, t_range, local, rect)
+            trace_segment(grid, setup, tile, local, local_stats, planes, t_range)
+            if closure is not None:
+                closure.leave(piece, grid, tile, t_range, local, rect)
+            if tile is not camera:
+                _scatter(state, local, rect)
+            for total, part in zip(stats, local_stats, strict=True):
+                c0, r0, w, h = rect
+                total[r0:r0 + h, c0:c0 + w] += part
+        self.stats = {"pieces": len(pieces), "pieces_traced": traced,
+                      "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
+                      "seam_plan_ms": plan_s * 1e3}
+        if closure is not None:
+            self.stats["seam_closure_hits"] = closure.hits
+
+
+def _gather(state: tuple, rect: tuple[int, int, int, int], whole: bool) -> tuple:
+    if whole:
+        return state
+    c0, r0, w, h = rect
+    return tuple(np.ascontiguousarray(a[r0:r0 + h, c0:c0 + w]) for a in state)
+
+
+def _scatter(state: tuple, local: tuple, rect: tuple[int, int, int, int]) -> None:
+    c0, r0, w, h = rect
+    for full, part in zip(state, local, strict=True):
+        full[r0:r0 + h, c0:c0 + w] = part
+
+
+def _type6_prefilter(data: np.ndarray, first: np.ndarray,
+                     shape: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The type-6 Laplacian prefilter (:func:`splinecast.models.type6.laplacian_prefilter`) of a
+    brick, with the whole level's border rule: beyond the level's ends the prefiltered values
+    repeat the outer voxel's (re-clamped, not prefiltered ghosts). One ghost layer is used up."""
+    f = data.astype(np.float64)
+    core = f[1:-1, 1:-1, 1:-1]
+    lap = (f[2:, 1:-1, 1:-1] + f[:-2, 1:-1, 1:-1] + f[1:-1, 2:, 1:-1] + f[1:-1, :-2, 1:-1]
+           + f[1:-1, 1:-1, 2:] + f[1:-1, 1:-1, :-2] - 6.0 * core)
+    out = core - lap / 8.0
+    first = first + 1
+    index = [np.clip(first[a] + np.arange(out.shape[a]), 0, shape[a] - 1) - first[a]
+             for a in range(3)]
+    return np.ascontiguousarray(out[np.ix_(*index)]), first

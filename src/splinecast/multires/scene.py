@@ -1,0 +1,258 @@
+"""A scene for volumes larger than memory: a multiscale OME-Zarr image rendered cut by cut.
+
+``sc.Scene(sc.read("big.zarr"), model=..., budget="2GiB")`` returns a :class:`MultiscaleScene`
+(``splinecast/__init__.py`` registers it with :func:`splinecast.scene.register_scene_type`). Per
+frame it
+
+1. asks its :class:`~.stream.BrickStream` for the cut of the camera (level of detail ``lod``,
+   bricks that cannot contribute to the mode left out, at most ``load_budget`` bricks read while
+   the frame waits; a brick not yet resident is drawn from its finest resident ancestor);
+2. turns the cut into :class:`~.draw.Piece` s and fixes the seams between levels (:mod:`.seams`);
+3. traces the pieces front to back per ray (:class:`~.draw.CutRenderer`) in the mode of
+   :meth:`~splinecast.Scene.render`, with the same options and the same :class:`Frame`.
+
+``frame.stats`` adds the stream's counts (``complete``, ``substituted``, ``resident``,
+``loaded_this_frame``, ``cut_bricks``, ``cut_levels``, ...) and the renderer's (``pieces``,
+``pieces_traced``, ``pieces_changed_at_seams``, ``seam_closure_hits``). Rendering the same view
+again converges to the complete cut.
+
+Memory: the brick cache holds at most ``budget`` bytes. Models whose kernels need another dtype
+than the store's (the type-6 splines read float32 or float64) hold a converted copy of every
+drawn brick; their cache gets the share of the budget that leaves room for the copies.
+
+Not available for multiscale volumes: ``prefilter=True`` for the B-spline models (the
+interpolating coefficients come from a recursive filter over the whole volume, which a brick
+cannot reproduce). The type-6 Laplacian prefilter is local and works.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ..camera import Camera
+from ..defaults import auto_iso
+from ..errors import ParameterError
+from ..io.omezarr import MultiscaleVolume
+from ..models import MODELS
+from ..render.dvr import DVRSettings
+from ..render.effects import SurfaceEffects
+from ..render.frame import Frame
+from ..render.iso import Iso
+from ..render.multi_iso import MultiIso
+from ..render.shading import Shading
+from ..scene import check_iso, finish_frame, prepare_render
+from ..transfer import TransferFunction
+from ..volume import Volume
+from .budget import parse_bytes
+from .draw import CutRenderer, Piece
+from .relevance import ValueFilter
+from .seams import Seams
+from .stream import BrickStream, FrameBricks
+
+__all__ = ["MultiscaleScene", "pieces_of", "BORDER_RULES"]
+
+#: Most rounds of ``load_budget`` bricks a ``complete=True`` frame waits for (a cut that keeps
+#: changing, in a store whose ranges are learnt while reading, ends there).
+_MAX_ROUNDS = 10_000
+
+#: Ghost filling at a level's ends per model: the border rule each model applies to a whole
+#: volume (the B-splines mirror the coefficients, the others repeat the outer voxel).
+BORDER_RULES = {"trilinear": "edge", "bspline1": "reflect", "bspline2": "reflect",
+                "bspline3": "reflect", "qss": "edge", "s31": "edge"}
+
+
+def pieces_of(frame: FrameBricks) -> list[Piece]:
+    """The pieces of a frame of a :class:`~.stream.BrickStream`: each brick of the cut with the
+    array drawn for it (its own or its finest resident ancestor's)."""
+    cut = frame.cut
+    out = []
+    for item in frame.items:
+        brick = item.brick
+        out.append(Piece(cut.key(item.n), brick.key, int(brick.key[0]), brick.data,
+                         tuple(int(v) for v in brick.first),  # type: ignore[arg-type]
+                         cut.box_lo[item.n], cut.box_hi[item.n], item.substituted))
+    return out
+
+
+class MultiscaleScene:
+    """A multiscale volume, a reconstruction model, a brick cache and the renderer of its cuts.
+
+    Parameters
+    ----------
+    volume : MultiscaleVolume
+        From :func:`splinecast.read` of an OME-Zarr image (nothing is read but its coarsest
+        level, which stays resident).
+    model : str
+        Any of :data:`splinecast.models.MODELS`.
+    budget : int or str
+        Hard byte budget of the brick cache (``"2GiB"``).
+    lod : float
+        Refine a brick while one of its voxels covers more than ``lod`` pixels.
+    load_budget : int
+        Bricks a frame waits for at most (M); the loader thread goes on reading in the
+        background, and later frames draw what it read.
+    seams : bool
+        Make bricks of different levels meet without cracks (:mod:`.seams`; default). ``False``
+        draws every brick as it is (to see the cracks).
+    brick : int, optional
+        Cells per brick (default: the pyramid's).
+    **options
+        Model options (``root_finder``, ``prefilter`` for the type-6 splines, ...).
+
+    Raises
+    ------
+    ParameterError
+        Bad model, options or budget (a budget below the coarsest level), or ``prefilter=True``
+        for a B-spline model.
+    ReadError
+        The coarsest level cannot be read.
+    """
+
+    def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "2GiB",
+                 lod: float = 1.0, load_budget: int = 64, *, seams: bool = True,
+                 brick: int | None = None, **options: Any) -> None:
+        if not isinstance(volume, MultiscaleVolume):
+            raise ParameterError(f"volume must be a MultiscaleVolume, got {type(volume).__name__}")
+        if model not in MODELS:
+            raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+        if model.startswith("bspline") and options.get("prefilter"):
+            raise ParameterError(
+                f"prefilter=True is not available for model {model} on a multiscale volume: the "
+                "interpolating B-spline coefficients depend on the whole volume, a brick cannot "
+                "reproduce them (render the voxels as coefficients, the default, or use s31)")
+        start = time.perf_counter()
+        self.volume = volume
+        coarse = volume.level(-1)
+        #: The coarsest level in memory: the automatic isovalue, window and transfer function
+        #: come from it; isovalues are checked against the whole volume's range.
+        self.preview = Volume(coarse.read((0, 0, 0), coarse.shape), spacing=coarse.spacing,
+                              origin=coarse.origin, metadata=dict(volume.metadata))
+        self.preview._value_range = volume.value_range
+        self.model = MODELS[model](self.preview, **options)
+        self.budget = parse_bytes(budget, "budget")
+        self.stream = BrickStream(volume, self._cache_budget(), lod=lod,
+                                  loads_per_frame=load_budget, border=BORDER_RULES[model],
+                                  brick=brick)
+        self.renderer = CutRenderer(self.model, self.stream.octree,
+                                    Seams(self.model) if seams else None)
+        self.prepare_ms = (time.perf_counter() - start) * 1e3
+        self._table_cache: dict = {}
+
+    def _cache_budget(self) -> int:
+        """The cache's share of the budget: all of it, unless the model's grids copy the bricks
+        into another dtype (type-6), which then takes its share."""
+        copy = self.model.prepared.dtype.itemsize if hasattr(self.model, "tet_masks") else 0
+        if copy and self.model.prepared.dtype == self.volume.dtype:
+            copy = 0
+        item = self.volume.dtype.itemsize
+        return int(self.budget * item / (item + copy))
+
+    @property
+    def lod(self) -> float:
+        """The default level-of-detail threshold (pixels per voxel)."""
+        return self.stream.lod
+
+    def _check_iso(self, iso: Any) -> float:
+        return check_iso(self.volume, auto_iso(self.preview) if iso is None else iso)
+
+    def _filter(self, setup: Any) -> ValueFilter | None:
+        """Which bricks can show something in this mode (None: all, for MIP/minIP)."""
+        # Type-6 coefficients are affine combinations with weights up to 9/8 in absolute sum;
+        # the Laplacian prefilter reaches up to 6/8 of the range beyond it.
+        widen = 0.0
+        if hasattr(self.model, "tet_masks"):
+            widen = 1.0 if getattr(self.model, "prefilter", False) else 1.0 / 16.0
+        if isinstance(setup, Iso):
+            return ValueFilter.iso(setup.params.iso, widen)
+        if isinstance(setup, MultiIso):
+            return ValueFilter.iso(setup.isos, widen)
+        if hasattr(setup, "tf"):
+            return ValueFilter.transfer(setup.tf, widen)
+        return None
+
+    def render(
+        self,
+        camera: Camera,
+        mode: str = "iso",
+        iso: float | None = None,
+        method: str = "exact",
+        step: float = 0.25,
+        shading: Shading | None = None,
+        inside: str | None = None,
+        *,
+        clip: Any = None,
+        crop: Any = None,
+        colors: Any = None,
+        opacity: Any = None,
+        effects: SurfaceEffects | None = None,
+        window: Any = None,
+        colormap: Any = "gray",
+        tf: TransferFunction | None = None,
+        dvr: DVRSettings | None = None,
+        lod: float | None = None,
+        wait: bool = True,
+        timeout: float | None = None,
+        complete: bool = False,
+    ) -> Frame:
+        """Render one image of the current cut (see :meth:`splinecast.Scene.render` for the
+        mode options).
+
+        Parameters
+        ----------
+        lod : float, optional
+            Level of detail of this frame (default: the scene's).
+        wait : bool
+            Wait for up to ``load_budget`` bricks of the cut (default); ``False`` draws what is
+            resident at once.
+        timeout : float, optional
+            Longest wait in seconds (per ``load_budget`` bricks).
+        complete : bool
+            Wait until every brick of the cut is resident or known to be unreadable (a still
+            image: the command line); default: draw after ``load_budget`` bricks.
+
+        Returns
+        -------
+        Frame
+            ``stats["complete"]`` is ``False`` while bricks of the cut are drawn from coarser
+            ancestors; render the same view again to refine.
+        """
+        request = prepare_render(
+            self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
+            crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
+            colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
+            check_iso=self._check_iso, model=self.model.name)
+        start = time.perf_counter()
+        value_filter = self._filter(request.setup)
+        bricks = self.stream.frame(camera, value_filter, lod=lod, wait=wait, timeout=timeout)
+        rounds = 1
+        while complete and bricks.stats["requested"] and rounds < _MAX_ROUNDS:
+            bricks = self.stream.frame(camera, value_filter, lod=lod, timeout=timeout)
+            rounds += 1
+        pieces = pieces_of(bricks)
+        request.stats["cut_ms"] = (time.perf_counter() - start) * 1e3
+        start = time.perf_counter()
+        out, counters = self.renderer.render(pieces, request.setup, camera, request.planes)
+        self.renderer.forget(p.key for p in pieces)
+        stats = request.stats
+        stats.update(self.renderer.stats)
+        stats.update(bricks.stats)
+        stats["lod"] = self.lod if lod is None else lod
+        return finish_frame(request, out, counters, camera, start)
+
+    def close(self) -> None:
+        """Stop the loader thread (the scene cannot render afterwards)."""
+        self.stream.close()
+
+    def __enter__(self) -> MultiscaleScene:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        levels = np.asarray(self.stream.octree.levels).tolist()
+        return (f"MultiscaleScene({self.volume.name!r}, model={self.model.name!r}, "
+                f"budget={self.budget}, lod={self.lod}, levels={levels})")

@@ -1,0 +1,420 @@
+"""Rendering a multiresolution cut: every model in every mode, level boundaries, faults.
+
+References, independent of the code under test:
+
+- the in-memory :class:`splinecast.Scene` render of the finest level (a cut whose bricks are all
+  on level 0 must give the same image: depths to 1e-9, MIP to 1e-12, DVR within 1e-6);
+- the analytic sphere and torus (signed distance fields): with a small budget the cut mixes
+  levels, and every ray whose line passes through the solid's core must hit the surface (no
+  hole at a level boundary) within the coarsest drawn level's reconstruction error of it;
+- the reconstructions themselves on the faces between levels (nested models: equal);
+- a damaged copy of a store (a warning naming the chunk, a coarser level drawn, nothing
+  written).
+"""
+
+from __future__ import annotations
+
+import shutil
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from reference import smooth_noise
+
+pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
+pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
+
+import splinecast as sc  # noqa: E402
+from splinecast.io.synthetic import sphere_sdf, torus_sdf  # noqa: E402
+from splinecast.multires.cache import BrickUnavailableWarning  # noqa: E402
+from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+
+MODELS = ["trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31"]
+MODES = ["iso", "multi", "mip", "minip", "dvr"]
+B = 8
+
+
+@pytest.fixture(scope="module")
+def noise(tmp_path_factory) -> tuple[sc.Volume, Path]:
+    """Smooth noise (float64, sizes that are not powers of two) and its pyramid of 8^3 bricks."""
+    vol = sc.Volume(smooth_noise((27, 23, 21), seed=3, sigma=2.0))
+    path = tmp_path_factory.mktemp("noise") / "noise.zarr"
+    sc.build_pyramid(vol, path, brick=B, shard=16, progress=False)
+    return vol, path
+
+
+def _cameras(vol: sc.Volume) -> list[sc.Camera]:
+    """A perspective camera and an orthographic one whose rays lie in brick face planes."""
+    persp = sc.Camera((45.0, -24.0, 33.0), (13.0, 11.0, 10.0), size=(26, 22))
+    c = 8.0  # a brick face: rays along z at x = 8 and y = 8 lie in face planes
+    ortho = sc.Camera((c, c, 60.0), (c, c, 0.0), up=(0.0, 1.0, 0.0), ortho=True,
+                      ortho_height=22.0, size=(22, 22))
+    return [persp, ortho]
+
+
+def _options(mode: str, vol: sc.Volume) -> dict:
+    if mode == "iso":
+        return {"mode": "iso", "iso": 0.3}
+    if mode == "multi":
+        return {"mode": "iso", "iso": [-0.4, 0.3], "opacity": [0.4, 0.6]}
+    if mode in ("mip", "minip"):
+        return {"mode": mode, "window": vol.value_range}
+    tf = sc.TransferFunction([(-0.8, 0.0), (-0.2, 0.4), (0.2, 0.0), (0.7, 0.6)],
+                             domain=(-3.0, 3.0))
+    return {"mode": "dvr", "tf": tf, "dvr": sc.DVRSettings(step=0.4)}
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_scene_of_a_multiscale_volume_is_the_multires_scene(noise, model):
+    vol, path = noise
+    with sc.Scene(sc.read(path), model=model, budget="64MiB") as scene:
+        assert isinstance(scene, MultiscaleScene)
+        assert scene.model.name == model
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("mode", MODES)
+def test_whole_finest_level_in_budget_equals_the_in_memory_render(noise, model, mode):
+    """lod so fine that every brick is refined to level 0, a budget that holds them all."""
+    vol, path = noise
+    reference = sc.Scene(vol, model=model)
+    options = _options(mode, vol)
+    with sc.Scene(sc.read(path), model=model, budget="64MiB", lod=1e-6) as scene:
+        for cam in _cameras(vol):
+            whole = reference.render(cam, **options)
+            frame = scene.render(cam, **options)
+            what = f"{model} {mode} {'ortho' if cam.ortho else 'perspective'}"
+            assert frame.stats["complete"], what
+            assert frame.stats["cut_levels"] == {0: frame.stats["cut_bricks"]}, what
+            _assert_same(mode, whole, frame, what)
+
+
+def _assert_same(mode: str, whole: sc.Frame, frame: sc.Frame, what: str) -> None:
+    if mode in ("mip", "minip"):
+        np.testing.assert_array_equal(np.isnan(whole.value), np.isnan(frame.value), err_msg=what)
+        # Exact up to rounding: a ray entering a brick mid-cell parametrizes the cell's
+        # polynomial from another point (as tests/test_bricks.py allows).
+        np.testing.assert_allclose(frame.value, whole.value, rtol=1e-12, atol=1e-12,
+                                   err_msg=what)
+        return
+    if mode == "dvr":
+        np.testing.assert_allclose(frame.rgba, whole.rgba, atol=1e-6, err_msg=what)
+        return
+    hit = np.isfinite(whole.depth)
+    np.testing.assert_array_equal(hit, np.isfinite(frame.depth), err_msg=what)
+    assert hit.sum() > 20, what
+    np.testing.assert_allclose(frame.depth[hit], whole.depth[hit], rtol=0, atol=1e-9,
+                               err_msg=what)
+    np.testing.assert_allclose(frame.rgba, whole.rgba, atol=1e-6, err_msg=what)
+
+
+# --------------------------------------------------------------------------- level boundaries
+SHAPES = {"sphere": (sphere_sdf, 0.15), "torus": (torus_sdf, 0.08)}  # sdf, core depth (world)
+
+
+@pytest.fixture(scope="module")
+def shapes(tmp_path_factory) -> dict[str, tuple[sc.Volume, Path]]:
+    """The demo sphere and torus distance fields (48^3, float64) as pyramids of 8^3 bricks."""
+    out = {}
+    for name in SHAPES:
+        demo = sc.demo(name, size=48)
+        vol = sc.Volume(demo.data.astype(np.float64), spacing=demo.spacing, origin=demo.origin,
+                        metadata=demo.metadata)
+        path = tmp_path_factory.mktemp(name) / f"{name}.zarr"
+        sc.build_pyramid(vol, path, brick=B, shard=16, progress=False)
+        out[name] = (vol, path)
+    return out
+
+
+def _checkerboard_cut(mv, model: str):
+    """A cut that puts levels 0, 1 and 2 side by side in every direction: level-2 bricks with an
+    odd index sum stay whole, the others split into level-1 bricks, of which those with an even
+    index sum split into level-0 bricks. Brick arrays come from the levels read whole and padded
+    by numpy with the model's border rule (independent of the cache)."""
+    from splinecast.multires.draw import CutRenderer, Piece
+    from splinecast.multires.octree import GHOST, BrickOctree
+    from splinecast.multires.scene import BORDER_RULES
+
+    tree = BrickOctree(mv)
+    padded = {}
+    for level in (0, 1, 2):
+        lv = mv.level(level)
+        padded[level] = np.pad(lv.read((0, 0, 0), lv.shape), GHOST, mode=BORDER_RULES[model])
+
+    def piece(level, index):
+        first, stop = (a[0] for a in tree.window(level, np.array([index])))
+        lo, hi = (a[0] for a in tree.box(level, np.array([index])))
+        window = tuple(slice(int(f) + GHOST, int(s) + GHOST) for f, s in zip(first, stop,
+                                                                               strict=True))
+        key = (level, *map(int, index))
+        return Piece(key, key, level, np.ascontiguousarray(padded[level][window]),
+                     tuple(int(v) for v in first), lo, hi)
+
+    pieces = []
+    for i2 in np.indices(tree.counts[2]).reshape(3, -1).T:
+        if i2.sum() % 2:
+            pieces.append(piece(2, i2))
+            continue
+        for i1 in tree.children(2, i2[None]):
+            if i1.sum() % 2:
+                pieces.append(piece(1, i1))
+                continue
+            pieces.extend(piece(0, i0) for i0 in tree.children(1, i1[None]))
+    coarse = mv.level(-1)
+    prepared = sc.MODELS[model](sc.Volume(coarse.read((0, 0, 0), coarse.shape)))
+    return pieces, tree, prepared, CutRenderer
+
+
+def _level_errors(mv, model: str, sdf, spacing: float) -> dict[int, float]:
+    """Largest |reconstruction - exact distance| of each level on a shell around the surface
+    (world units), from the models' own point evaluators (not the ray kernels)."""
+    from evaluators import model_evaluator
+
+    rng = np.random.default_rng(0)
+    world = rng.uniform(-0.95, 0.95, (60000, 3))
+    world = world[np.abs(sdf(*world.T)) < 3 * spacing]
+    errors = {}
+    for level in (0, 1, 2):
+        lv = mv.level(level)
+        vol = sc.Volume(lv.read((0, 0, 0), lv.shape), spacing=lv.spacing, origin=lv.origin)
+        ev = model_evaluator(model, vol, sc.Scene(vol, model=model))
+        index = (world - np.asarray(lv.origin)) / np.asarray(lv.spacing)
+        errors[level] = float(np.abs(ev.value(index) - sdf(*world.T)).max())
+    return errors
+
+
+def _core_rays(cam: sc.Camera, sdf, depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rays whose line passes at least ``depth`` inside the solid, and where along each ray the
+    solid is deepest (dense sampling of the exact distance)."""
+    origins, directions = cam.rays()
+    reach = np.linalg.norm(cam.position)
+    ts = np.linspace(reach - 1.8, reach + 1.8, 1200)
+    points = origins[..., None, :] + directions[..., None, :] * ts[:, None]
+    values = sdf(points[..., 0], points[..., 1], points[..., 2])
+    return values.min(axis=-1) < -depth, ts[values.argmin(axis=-1)]
+
+
+def _holes(renderer, pieces, cam, sdf, depth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Core rays that miss the surface or hit it behind the solid's core (through a hole), the
+    exact distance at every hit, and the core mask."""
+    from splinecast.render.iso import Iso
+
+    out, _ = renderer.render(pieces, Iso(0.0, inside="low"), cam)
+    t_hit, position = out[1], out[2]
+    core, t_core = _core_rays(cam, sdf, depth)
+    hit = np.isfinite(t_hit)
+    bad = core & (~hit | (t_hit > t_core))
+    return bad, np.abs(sdf(*position[hit].T)), core
+
+
+def _orbit(vol, count: int = 4) -> list[sc.Camera]:
+    views = [(20, -30), (110, 15), (215, 50), (290, -10)][:count]
+    return [sc.Camera.orbit(vol, azimuth=a, elevation=e, size=(56, 56), zoom=2.0)
+            for a, e in views]
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("shape", SHAPES)
+def test_no_holes_where_levels_meet(shapes, model, shape):
+    """Levels 0, 1, 2 side by side (faces, edges, corners): every ray through the solid's core
+    hits the surface in front of the core, within the drawn levels' reconstruction error."""
+    from splinecast.multires.seams import NESTED_DEGREE, Seams
+
+    vol, path = shapes[shape]
+    sdf, depth = SHAPES[shape]
+    mv = sc.read(path)
+    pieces, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
+    assert {p.level for p in pieces} == {0, 1, 2}
+    renderer = CutRenderer(prepared, tree, Seams(prepared))
+    tolerance = max(_level_errors(mv, model, sdf, vol.spacing[0]).values()) * 1.05 + 1e-9
+    for cam in _orbit(vol):
+        bad, error, core = _holes(renderer, pieces, cam, sdf, depth)
+        what = f"{model} {shape} azimuth {cam.position.round(2)}"
+        assert core.sum() > 300, what
+        assert bad.sum() == 0, f"{what}: {bad.sum()} rays through the core miss the surface"
+        assert error.max() <= tolerance, f"{what}: hit {error.max():.4g} > {tolerance:.4g} off"
+        assert renderer.stats["pieces_changed_at_seams"] > 0
+        if model in NESTED_DEGREE:  # the restriction alone closes the seams
+            assert renderer.stats["seam_closure_hits"] == 0, what
+
+
+def test_without_seam_treatment_the_same_cut_has_holes(shapes):
+    """The check above can fail: drawn as they are, the bricks leave holes."""
+    from splinecast.multires.seams import Seams
+
+    vol, path = shapes["torus"]
+    sdf, depth = SHAPES["torus"]
+    pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), "trilinear")
+    plain = CutRenderer(prepared, tree, None)
+    fixed = CutRenderer(prepared, tree, Seams(prepared))
+    holes = sum(_holes(plain, pieces, cam, sdf, depth)[0].sum() for cam in _orbit(vol))
+    assert holes > 10
+    assert sum(_holes(fixed, pieces, cam, sdf, depth)[0].sum() for cam in _orbit(vol)) == 0
+
+
+def _shared_boundary_points(a, b, rng, count: int = 40) -> np.ndarray | None:
+    """Random level-0 points on the common boundary of two touching boxes (or None)."""
+    lo = np.maximum(a.box_lo, b.box_lo)
+    hi = np.minimum(a.box_hi, b.box_hi)
+    if np.any(lo > hi):
+        return None
+    return lo + rng.random((count, 3)) * (hi - lo)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_reconstructions_agree_on_faces_between_levels(shapes, model):
+    """Nested models (trilinear, bspline1, bspline3): after the restriction the finer and the
+    coarser brick reconstruct the same values on every face, edge and corner they share. The
+    others: the gap shrinks well below the untreated one."""
+    from splinecast.multires.seams import NESTED_DEGREE, Seams
+
+    vol, path = shapes["torus"]
+    pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), model)
+    renderer = CutRenderer(prepared, tree)
+    changes = Seams(prepared).plan(pieces, renderer)
+    rng = np.random.default_rng(1)
+    gap_before, gap_after, pairs = 0.0, 0.0, 0
+    for a in pieces:
+        for b in pieces:
+            if b.level <= a.level:
+                continue
+            points = _shared_boundary_points(a, b, rng)
+            if points is None:
+                continue
+            pairs += 1
+            coarse = renderer.evaluate(b, points, changes)
+            gap_after = max(gap_after, np.abs(renderer.evaluate(a, points, changes) - coarse).max())
+            gap_before = max(gap_before, np.abs(renderer.evaluate(a, points) -
+                                                renderer.evaluate(b, points)).max())
+    assert pairs > 50
+    assert gap_before > 1e-3
+    if model in NESTED_DEGREE:
+        assert gap_after < 1e-12, f"{model}: {gap_after:.3g}"
+    else:
+        assert gap_after < gap_before / 3, f"{model}: {gap_after:.3g} vs {gap_before:.3g}"
+
+
+# --------------------------------------------------------------------------- the brick stream
+def _torus_camera(vol) -> sc.Camera:
+    return sc.Camera.orbit(vol, azimuth=35, elevation=40, size=(56, 48), zoom=2.0)
+
+
+def test_frames_converge_without_holes_while_bricks_arrive(shapes):
+    """A small load budget: the first frames draw ancestors for missing bricks (levels mixed by
+    substitution), have no holes, and the view converges to the complete cut."""
+    vol, path = shapes["torus"]
+    sdf, depth = SHAPES["torus"]
+    cam = _torus_camera(vol)
+    core, t_core = _core_rays(cam, sdf, depth)
+    with sc.Scene(sc.read(path), budget="64MiB", lod=1.5, load_budget=4) as scene:
+        first = scene.render(cam, iso=0.0)
+        assert not first.stats["complete"] and first.stats["substituted"] > 0
+        assert first.stats["pieces_changed_at_seams"] > 0  # ancestors meet finer bricks
+        frames = [first]
+        for _ in range(200):
+            frames.append(scene.render(cam, iso=0.0))
+            if frames[-1].stats["complete"]:
+                break
+        assert frames[-1].stats["complete"]
+        for frame in frames:
+            hit = np.isfinite(frame.depth)
+            bad = core & (~hit | (frame.depth > t_core))
+            assert bad.sum() == 0, frame.stats
+        final = scene.render(cam, iso=0.0)
+        np.testing.assert_array_equal(final.depth, frames[-1].depth)  # converged: it stays
+
+
+def _snapshot(root: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
+            for p in root.rglob("*") if p.is_file()}
+
+
+def test_corrupt_chunk_while_rendering_draws_a_coarser_level_and_names_the_chunk(shapes,
+                                                                                 tmp_path):
+    vol, path = shapes["sphere"]
+    sdf, depth = SHAPES["sphere"]
+    copy = tmp_path / "damaged.zarr"
+    shutil.copytree(path, copy)
+    # Level 0, the shard of voxels x 0..15, y and z 16..31: the sphere's side facing -x.
+    shard = copy / "0" / "c" / "1" / "1" / "0"
+    raw = bytearray(shard.read_bytes())
+    raw[100:400] = bytes(300)
+    shard.write_bytes(bytes(raw))
+    before = _snapshot(copy)
+    cam = sc.Camera((-2.6, 0.35, 0.3), (0.0, 0.0, 0.0), size=(48, 48), fov=30)
+    core, t_core = _core_rays(cam, sdf, depth)
+    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5) as scene:
+        with pytest.warns(BrickUnavailableWarning, match=r"0/c/1/1/0"):
+            frame = scene.render(cam, iso=0.0, complete=True, timeout=10)
+        stats = frame.stats
+        assert stats["unavailable"] > 0 and not stats["complete"] and stats["substituted"] > 0
+        assert stats["cut_levels"] == {0: stats["cut_bricks"]}  # the cut wants level 0 ...
+        hit = np.isfinite(frame.depth)
+        assert not (core & (~hit | (frame.depth > t_core))).any()  # ... and has no hole
+        again = scene.render(cam, iso=0.0)  # a known fault is not read again
+        np.testing.assert_array_equal(again.depth, frame.depth)
+    assert _snapshot(copy) == before  # nothing was written into the store
+
+
+def test_store_deleted_while_rendering(shapes, tmp_path):
+    vol, path = shapes["sphere"]
+    copy = tmp_path / "gone.zarr"
+    shutil.copytree(path, copy)
+    cam = sc.Camera((-2.6, 0.35, 0.3), (0.0, 0.0, 0.0), size=(40, 40), fov=30)
+    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5) as scene:
+        scene.render(cam, iso=0.0, wait=False)  # the coarsest level only
+        shutil.rmtree(copy)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            frame = scene.render(cam, iso=0.0, complete=True, timeout=10)
+        assert any(issubclass(w.category, BrickUnavailableWarning) and "gone" in str(w.message)
+                   for w in caught)
+        assert np.isfinite(frame.depth).sum() > 100  # drawn from what is resident
+
+
+def test_bad_options_are_refused_with_one_line(noise):
+    vol, path = noise
+    mv = sc.read(path)
+    with pytest.raises(sc.ParameterError, match="prefilter=True is not available"):
+        sc.Scene(mv, model="bspline3", prefilter=True)
+    with pytest.raises(sc.ParameterError, match="budget"):
+        sc.Scene(mv, budget="a lot")
+    with sc.Scene(mv, budget="64MiB") as scene:
+        with pytest.raises(sc.ParameterError, match="iso=9 is outside the data range"):
+            scene.render(_cameras(vol)[0], iso=9.0)
+        with pytest.raises(sc.ParameterError, match="lod"):
+            scene.render(_cameras(vol)[0], iso=0.3, lod=-1)
+
+
+def test_type6_prefilter_in_bricks_equals_the_whole_volume(noise):
+    """The Laplacian prefilter is local: per brick, with the level's border re-clamped, it gives
+    the in-memory s31 render exactly."""
+    vol, path = noise
+    reference = sc.Scene(vol, model="s31", prefilter=True)
+    with sc.Scene(sc.read(path), model="s31", prefilter=True, budget="64MiB", lod=1e-6) as scene:
+        for cam in _cameras(vol):
+            _assert_same("iso", reference.render(cam, iso=0.3),
+                         scene.render(cam, iso=0.3, complete=True), "s31 prefilter")
+
+
+def test_cli_renders_a_pyramid(shapes, tmp_path, capsys):
+    from splinecast.cli import main
+
+    vol, path = shapes["sphere"]
+    out = tmp_path / "sphere.png"
+    assert main([ "render", str(path), "--budget", "64MiB", "--lod", "2", "--size", "48x40",
+                 "-o", str(out)]) == 0
+    assert out.is_file()
+    assert "complete" in capsys.readouterr().err
+    for argv, message in (
+        (["--budget", "lots"], "--budget must be a size"),
+        (["--lod", "0"], "--lod must be a positive number"),
+        (["--smooth", "3"], "--smooth does not apply"),
+    ):
+        assert main(["render", str(path), *argv, "-o", str(tmp_path / "x.png")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "x.png").exists()
+    assert main(["render", "demo:sphere?size=16", "--lod", "2", "-o", str(out)]) == 2
+    assert "--lod applies to multiscale" in capsys.readouterr().err
