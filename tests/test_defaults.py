@@ -16,7 +16,7 @@ from PIL import Image
 
 import splinecast as sc
 from splinecast.cli import main
-from splinecast.defaults import (
+from splinecast.render.defaults import (
     DVR_MAX_OPACITY,
     WINDOW_PERCENTILES,
     content_box,

@@ -13,12 +13,12 @@ Coordinate convention: see :mod:`splinecast.volume`.
 """
 
 from .camera import Camera
-from .defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .errors import DataError, ParameterError, ReadError, SplinecastError
 from .io import demo, read, write
 from .models import MODELS
 from .models.smoothing import smooth
 from .preintegration import preintegrate
+from .render.defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .render.dvr import DVRSettings
 from .render.effects import SurfaceEffects
 from .render.frame import Frame

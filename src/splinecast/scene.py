@@ -18,10 +18,10 @@ import numpy as np
 from .accel.active_cells import ActiveCells
 from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
-from .defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .errors import ParameterError
 from .models import MODELS
 from .render.clipping import make_planes
+from .render.defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .render.dvr import Dvr, DVRSettings
 from .render.effects import SurfaceEffects, apply_effects
 from .render.frame import Frame
@@ -333,8 +333,8 @@ def prepare_render(
     """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
     type: in memory, multiresolution).
 
-    ``volume`` supplies the automatic choices (:mod:`splinecast.defaults`), the metadata and the
-    value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
+    ``volume`` supplies the automatic choices (:mod:`splinecast.render.defaults`), the metadata
+    and the value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
     """
     if not isinstance(camera, Camera):
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")

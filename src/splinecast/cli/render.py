@@ -149,7 +149,7 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
     what was chosen automatically (printed once everything is known to be valid).
 
     ``vol`` is only asked for its value range, metadata and the automatic choices of
-    :mod:`splinecast.defaults` (a distributed scene's ``VolumeInfo`` carries those).
+    :mod:`splinecast.render.defaults` (a distributed scene's ``VolumeInfo`` carries those).
     """
     kwargs: dict = {"mode": args.mode}
     notes: list[str] = []

@@ -13,11 +13,11 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..defaults import auto_iso, auto_transfer_function, auto_window
 from ..errors import ParameterError
 from ..io import read
 from ..models import MODELS
 from ..models.smoothing import smooth as smooth_volume
+from ..render.defaults import auto_iso, auto_transfer_function, auto_window
 from ..scene import Scene
 from ..volume import GridGeometry, Volume
 
@@ -104,7 +104,7 @@ class VolumeInfo(GridGeometry):
 
     @classmethod
     def of(cls, volume: Volume) -> VolumeInfo:
-        """The header of ``volume``, with the automatic choices of :mod:`splinecast.defaults`
+        """The header of ``volume``, with the automatic choices of :mod:`splinecast.render.defaults`
         (computed from the data, which the header does not hold) in its metadata."""
         metadata = dict(volume.metadata)
         metadata["default_iso"] = auto_iso(volume)

@@ -33,10 +33,10 @@ from typing import Any
 import numpy as np
 
 from ..camera import Camera
-from ..defaults import auto_iso
 from ..errors import ParameterError
 from ..io.omezarr import MultiscaleVolume
 from ..models import MODELS
+from ..render.defaults import auto_iso
 from ..render.dvr import DVRSettings
 from ..render.effects import SurfaceEffects
 from ..render.frame import Frame

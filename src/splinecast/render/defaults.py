@@ -48,9 +48,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError
-from .transfer import TransferFunction
-from .volume import Volume
+from ..errors import ParameterError
+from ..transfer import TransferFunction
+from ..volume import Volume
 
 __all__ = [
     "SAMPLE_VOXELS",
