@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from . import limits
 from .accel.minmax import MinMaxHierarchy
 from .camera import Camera
 from .errors import ParameterError
@@ -234,6 +235,7 @@ class Scene:
             )
         if method == "sampled" and not (math.isfinite(step) and step > 0):
             raise ParameterError(f"step must be a positive number of voxels, got {step}")
+        limits.check_render(self.volume, camera, mode=mode, method=method, step=step, dvr=dvr)
         inside = inside or self.volume.metadata.get("inside", "high")
         if inside not in ("high", "low"):
             raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")

@@ -8,6 +8,8 @@ import numpy as np
 
 import splinecast as sc
 
+from ._common import add_input_options
+
 __all__ = ["add_parser", "run"]
 
 _PERCENTILES = (0.5, 1, 5, 25, 50, 75, 95, 99, 99.5)
@@ -18,11 +20,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     info = sub.add_parser("info", help="describe a volume file: shape, dtype, spacing, values")
     info.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
+    add_input_options(info)
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the description of ``args.file``."""
-    vol = sc.read(args.file)
+    vol = sc.read(args.file, allow_external=args.allow_external_data or None)
     data = vol.data
     sample = data
     note = ""
@@ -40,7 +43,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"origin:    {', '.join(f'{s:g}' for s in vol.origin)}")
     print(f"extent:    {', '.join(f'{s:g}' for s in vol.extent)}")
     print(f"range:     {lo:g} .. {hi:g}")
-    print(f"NaN:       {vol.count_nan()}")
+    nan, pos, neg = vol.nonfinite_counts()
+    print(f"NaN:       {nan}")
+    if pos or neg:
+        print(f"infinite:  {pos} +inf, {neg} -inf")
     print("percentiles" + note + ":")
     for p, v in zip(_PERCENTILES, pct, strict=True):
         print(f"  {p:>5g}%  {v:g}")

@@ -8,8 +8,9 @@ import time
 from pathlib import Path
 
 import splinecast as sc
+from splinecast import limits
 
-from ._common import check_output, log, numbers
+from ._common import add_input_options, check_output, finite, log, numbers
 
 __all__ = ["add_parser", "run"]
 
@@ -29,23 +30,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--prefilter", action="store_true",
                         help="B-spline models: interpolate the voxels instead of smoothing them")
     render.add_argument("--size", default="512x512", help="image WIDTHxHEIGHT (default 512x512)")
-    render.add_argument("--azimuth", type=float, default=30.0,
+    render.add_argument("--azimuth", type=finite, default=30.0,
                         help="degrees around z (default 30)")
-    render.add_argument("--elevation", type=float, default=20.0,
+    render.add_argument("--elevation", type=finite, default=20.0,
                         help="degrees above xy (default 20)")
-    render.add_argument("--distance", type=float, help="camera distance from the volume centre")
-    render.add_argument("--fov", type=float, default=30.0, help="vertical field of view, degrees")
-    render.add_argument("--zoom", type=float, default=1.0, help="magnification (default 1)")
+    render.add_argument("--distance", type=finite, help="camera distance from the volume centre")
+    render.add_argument("--fov", type=finite, default=30.0, help="vertical field of view, degrees")
+    render.add_argument("--zoom", type=finite, default=1.0, help="magnification (default 1)")
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
     render.add_argument("--method", default="exact", choices=("exact", "sampled"),
                         help="exact analytic roots (default) or fixed-step sampling")
-    render.add_argument("--step", type=float, default=0.25,
+    render.add_argument("--step", type=finite, default=0.25,
                         help="sampling step in voxels for --method sampled (default 0.25)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default from the data)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     _add_mode_options(render)
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
+    add_input_options(render)
 
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
@@ -61,7 +63,7 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="clip plane keeping nx*x+ny*y+nz*z+d >= 0 (repeatable)")
     render.add_argument("--crop", metavar="X0,X1,Y0,Y1,Z0,Z1", help="world-space box to keep")
     render.add_argument("--texture", choices=("noise", "checker"), help="solid texture")
-    render.add_argument("--texture-scale", type=float, default=0.1,
+    render.add_argument("--texture-scale", type=finite, default=0.1,
                         help="checker cube / noise feature size in world units (default 0.1)")
     render.add_argument("--shading", default="phong", choices=("phong", "cel"),
                         help="smooth Blinn-Phong (default) or 4-band cel shading")
@@ -74,7 +76,7 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                              "2^j x step")
     render.add_argument("--adaptive", action="store_true",
                         help="DVR opacity-adaptive step (up to 8 x --step; uses a 3D table)")
-    render.add_argument("--termination", type=float,
+    render.add_argument("--termination", type=finite,
                         help="DVR early ray termination opacity, e.g. 0.99")
 
 
@@ -119,22 +121,47 @@ def _mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> dict:
     return kwargs
 
 
+def _check_options(args: argparse.Namespace) -> tuple[int, int]:
+    """Ranges of the numeric options (argparse has made them finite), before any reading;
+    returns the image size."""
+    if len(args.size) > 32:
+        shown = limits.shorten(args.size)
+        raise sc.ParameterError(f"--size must look like WIDTHxHEIGHT, got {shown}")
+    width, height = sc.camera.parse_size(args.size)
+    limits.check_image(width, height, "--size")
+    if not 0 < args.fov < 180:
+        raise sc.ParameterError(f"--fov must be between 0 and 180 degrees, got {args.fov:g}")
+    limits.check_finite_number(args.zoom, "--zoom", lo=1e-6, hi=1e6)
+    if args.distance is not None:
+        limits.check_finite_number(args.distance, "--distance", lo=0, lo_open=True)
+    if args.method == "sampled" or args.mode == "dvr":
+        limits.check_finite_number(args.step, "--step (voxels)", lo=limits.MIN_STEP)
+    if args.iterations is not None:
+        limits.check_count(args.iterations, "--iterations", hi=limits.MAX_ROOT_ITERATIONS)
+    limits.check_finite_number(args.texture_scale, "--texture-scale", lo=0, lo_open=True)
+    if args.termination is not None:
+        limits.check_finite_number(args.termination, "--termination", lo=0, hi=1, lo_open=True)
+    return width, height
+
+
 def run(args: argparse.Namespace) -> int:
     """Render ``args.file`` to ``args.output``."""
     # Validate every option and output path before any work, so a mistake writes nothing.
     check_output(args.output, ".png", "-o")
     if args.depth:
         check_output(args.depth, ".npy", "--depth")
-    if args.method == "sampled" and not args.step > 0:
-        raise sc.ParameterError(f"--step must be positive, got {args.step}")
-    width, height = sc.camera.parse_size(args.size)
+    width, height = _check_options(args)
 
     start = time.perf_counter()
-    vol = sc.read(args.file)
+    vol = sc.read(args.file, allow_external=args.allow_external_data or None)
     read_s = time.perf_counter() - start
+    if args.method == "sampled" or args.mode == "dvr":
+        limits.check_step(args.step, "--step", vol.shape)
     if args.model not in sc.MODELS:
         valid = ", ".join(sc.MODELS)
-        raise sc.ParameterError(f"--model must be one of {valid}, got {args.model!r}")
+        raise sc.ParameterError(
+            f"--model must be one of {valid}, got {limits.shorten(args.model)}"
+        )
     options = {}
     accepted = inspect.signature(sc.MODELS[args.model]).parameters
     for name, flag in (("root_finder", "--root-finder"), ("iterations", "--iterations"),
@@ -153,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
     # Progress starts only once every input is known to be valid, so a mistake is one line.
     log(args, f"read {vol.name}: {vol.shape} {vol.dtype} in {read_s:.2f} s")
     if args.smooth:
+        limits.check_memory(limits.nbytes(vol.shape, 8) * 2, "smoothing the volume",
+                            "--smooth")
         vol = sc.smooth(vol, args.smooth)
         log(args, f"smoothed with a {args.smooth}^3 Gaussian")
     start = time.perf_counter()

@@ -8,6 +8,7 @@ import zlib
 from collections.abc import Callable
 from pathlib import Path
 
+from .. import limits
 from ..errors import ParameterError, ReadError
 from ..volume import SUPPORTED_DTYPES, Volume
 from .sidecar import find_sidecar
@@ -39,6 +40,8 @@ _NIFTI1_MAGIC = (b"n+1\0", b"ni1\0")
 _NIFTI2_MAGIC = (b"n+2\0", b"ni2\0")
 #: Enough bytes for every signature below (the NIfTI-1 magic sits at 344..348).
 _HEAD_BYTES = 352
+#: Formats whose header may name other files: their readers take ``allow_external``.
+_NAMES_FILES = {"metaimage", "nrrd", "sidecar", "dicom", "nifti"}
 
 
 def sniff(path: Path) -> str | None:
@@ -119,7 +122,7 @@ def _reader(kind: str) -> Callable[[Path], Volume]:
     return read_sidecar
 
 
-def read(path: str | os.PathLike[str]) -> Volume:
+def read(path: str | os.PathLike[str], *, allow_external: bool | None = None) -> Volume:
     """Read a volume from a file, a DICOM folder or a ``demo:`` name.
 
     Parameters
@@ -130,6 +133,10 @@ def read(path: str | os.PathLike[str]) -> Volume:
         a DICOM series, or ``"demo:<name>?size=N&..."`` for a synthetic volume (see
         :func:`splinecast.io.demo`). The format is recognised by the file's signature when it has
         one, by its extension otherwise.
+    allow_external : bool, optional
+        Let a header (MetaImage ``ElementDataFile``, NRRD ``data file``, a sidecar's
+        ``data_file``, a NIfTI ``.img``, a DICOM folder's symbolic links) name files outside its
+        own folder. Default: no, unless ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``.
 
     Returns
     -------
@@ -141,8 +148,10 @@ def read(path: str | os.PathLike[str]) -> Volume:
     Raises
     ------
     ReadError
-        Missing file, unknown format, bad header, truncated data, unsupported content, or a
-        missing optional library (with the command that installs it).
+        Missing file, unknown format, bad header, truncated data, unsupported content, a size
+        beyond the limits or the memory available (see :mod:`splinecast.limits`), a data file
+        outside the header's folder, or a missing optional library (with the command that
+        installs it).
     ParameterError
         A bad ``demo:`` name or parameter.
 
@@ -155,13 +164,19 @@ def read(path: str | os.PathLike[str]) -> Volume:
         from .synthetic import demo_from_uri
 
         return demo_from_uri(path)
-    path = Path(os.fspath(path))
-    if not path.exists():
+    path = limits.check_path_text(path, "file", ReadError)
+    try:
+        is_dir = path.is_dir()
+        exists = is_dir or path.exists()
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if not exists:
         raise ReadError(f"{path}: no such file or folder")
-    if path.is_dir():
+    if is_dir:
         from .dicom import read_dicom_series
 
-        return read_dicom_series(path)
+        return read_dicom_series(path, allow_external=allow_external)
+    limits.check_regular_file(path, str(path))  # a device or pipe would block or never end
     by_content = sniff(path)
     by_extension = _extension_format(path)
     if by_content is not None:
@@ -180,6 +195,8 @@ def read(path: str | os.PathLike[str]) -> Volume:
         kind = by_extension
     else:
         raise ReadError(_unknown_message(path))
+    if kind in _NAMES_FILES:
+        return _reader(kind)(path, allow_external=allow_external)  # type: ignore[call-arg]
     return _reader(kind)(path)
 
 
