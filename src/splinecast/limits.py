@@ -236,8 +236,14 @@ def check_finite_number(
         raise error(f"{name} must be a number, got {shorten(value)}")
     below = number <= lo if lo_open else number < lo
     if not math.isfinite(number) or below or number > hi:
-        left = "(" if lo_open else "["
-        raise error(f"{name} must be a finite number in {left}{lo:g}, {hi:g}], got {number:g}")
+        low = f"{'>' if lo_open else '>='} {lo:g}"
+        if math.isinf(hi):
+            wanted = f"a finite number {low}" if math.isfinite(lo) else "a finite number"
+        elif math.isinf(lo):
+            wanted = f"a finite number <= {hi:g}"
+        else:
+            wanted = f"a finite number {low} and <= {hi:g}"
+        raise error(f"{name} must be {wanted}, got {number:g}")
     return number
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import bz2
 import gzip
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
@@ -45,8 +46,12 @@ _NRRD_TYPES = {
     "double": "f8",
 }
 #: Encodings read here, by every name the format allows.
-_COMPRESSED = {"gzip": gzip.GzipFile, "gz": gzip.GzipFile, "bzip2": bz2.BZ2File,
-               "bz2": bz2.BZ2File}
+_COMPRESSED: dict[str, Callable[[IO[bytes]], IO[bytes]]] = {
+    "gzip": lambda raw: gzip.GzipFile(fileobj=raw, mode="rb"),
+    "gz": lambda raw: gzip.GzipFile(fileobj=raw, mode="rb"),
+    "bzip2": lambda raw: bz2.BZ2File(raw, mode="rb"),
+    "bz2": lambda raw: bz2.BZ2File(raw, mode="rb"),
+}
 _TEXT = ("text", "txt", "ascii")
 #: A header longer than this is not a NRRD header.
 _MAX_HEADER_BYTES = 1 << 20
@@ -176,7 +181,7 @@ def _read_compressed(data_path: Path, offset: int, byte_skip: int, opener: Any,
     with raw:
         with third_party(str(data_path), "corrupt compressed data"):
             raw.seek(offset)
-            stream: IO[bytes] = opener(fileobj=raw, mode="rb")
+            stream = opener(raw)
             _discard(stream, byte_skip, str(data_path))
         buffer = limits.read_exact(stream, expected, str(data_path), "compressed data")
     data = buffer.view(dtype).reshape(shape, order="F")
