@@ -161,11 +161,11 @@ def check_count(
     value: Any,
     name: str,
     *,
-    lo: int = 1,
+    lo: int | None = 1,
     hi: int | None = None,
     error: type[SplinecastError] = ParameterError,
 ) -> int:
-    """An integer in ``[lo, hi]`` (a float is accepted only when integral).
+    """An integer in ``[lo, hi]`` (``None``: unbounded; a float is accepted only when integral).
 
     Examples
     --------
@@ -173,11 +173,13 @@ def check_count(
     3
     """
     number = _as_integer(value)
-    upper = f" and at most {hi}" if hi is not None else ""
+    bounds = [f">= {lo}" if lo is not None else "", f"at most {hi}" if hi is not None else ""]
+    wanted = "an integer" + "".join(f" {b}" if i == 0 else f" and {b}"
+                                    for i, b in enumerate(b for b in bounds if b))
     if number is None:
-        raise error(f"{name} must be an integer >= {lo}{upper}, got {shorten(value)}")
-    if number < lo or (hi is not None and number > hi):
-        raise error(f"{name} must be an integer >= {lo}{upper}, got {number}")
+        raise error(f"{name} must be {wanted}, got {shorten(value)}")
+    if (lo is not None and number < lo) or (hi is not None and number > hi):
+        raise error(f"{name} must be {wanted}, got {number}")
     return number
 
 

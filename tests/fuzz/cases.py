@@ -236,6 +236,18 @@ DEMO_URIS = [
 ]
 
 
+def _joined(args: list[str]) -> list[str]:
+    """``["--fov", "-1"]`` -> ``["--fov=-1"]`` for option values that start with a dash."""
+    out: list[str] = []
+    for arg in args:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and arg.startswith("-") \
+                and not arg.startswith("--"):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def build_case(number: int, run_seed: int, seeds: dict[str, Seed], root: Path) -> Case:
     """Build case ``number``: its folder under ``root/cases`` and its command."""
     rng = random.Random(f"{run_seed}:{number}")
@@ -256,9 +268,10 @@ def build_case(number: int, run_seed: int, seeds: dict[str, Seed], root: Path) -
         import numpy as np
 
         np.save(folder / source, (np.indices((6, 5, 4)).sum(axis=0) / 12).astype(np.float32))
-        base = ["render", source, "-o", "out.png", "--size", SMALL, "--quiet"]
+        base = ["render", source, "-o", "out.png", "--size", SMALL, "--quiet", "--iso", "0.5"]
         scenario = rng.choice(SCENARIOS)
-        extra = scenario(rng, folder)
+        # "--opt=value", so that a value starting with "-" reaches the option, not argparse.
+        extra = _joined(scenario(rng, folder))
         # A later option wins in argparse, so the fuzzed value overrides the base's default.
         argv = base + extra
         if scenario is _iso or scenario is _geometry or scenario is _sampled:

@@ -54,8 +54,8 @@ OUTCOMES = GOOD + BAD
 _UNHANDLED_STATUS = 70
 _MEMORY_STATUS = 71
 _COMPILE_STATUS = 72
-#: Voxel types whose kernels the warm-up compiles for every render mode (float32 also for every
-#: model): the types of the seeds.
+#: Voxel types whose kernels the warm-up compiles for every render mode, read-only and writable
+#: (float32 also for every model): the types the seeds read as.
 WARM_DTYPES = ("float32", "uint16", "int16")
 
 
@@ -97,10 +97,14 @@ def warm_up(seed_mains: list[tuple[Path, str]], models: Iterable[str]) -> None:
     with _quiet_directory() as out:
         tf = out / "tf.json"
         sc.TransferFunction([[0, 0], [1, 0.5]], (0, 1)).save(tf)
+        # Kernels are compiled per voxel type and per read-only flag: a memory-mapped file
+        # (.npy) is read-only, a decoded one (.npz) is not.
         sources = ["demo:sphere?size=10"]
-        for dtype in WARM_DTYPES[1:]:
-            np.save(out / f"{dtype}.npy", (np.indices((6, 5, 4)).sum(axis=0) % 2).astype(dtype))
-            sources.append(str(out / f"{dtype}.npy"))
+        for dtype in WARM_DTYPES:
+            data = (np.indices((6, 5, 4)).sum(axis=0) % 2).astype(dtype)
+            np.save(out / f"{dtype}.npy", data)
+            np.savez(out / f"{dtype}.npz", data=data)
+            sources += [str(out / f"{dtype}.npy"), str(out / f"{dtype}.npz")]
         for source in sources:
             render = ["render", source, "--size", "8x8", "--quiet", "-o", str(out / "w.png")]
             argv_list += [render + ["--iso", "0.5"], render + ["--mode", "mip"],
@@ -327,9 +331,11 @@ class Runner:
             return result("clean-error", lines[0])
         if any(not line.startswith("splinecast: warning: ") for line in lines):
             return result("noise", err)
-        if case.argv[0] == "render" and not (case.folder / case.argv[case.argv.index("-o") + 1]
-                                             if "-o" in case.argv else case.folder).exists():
-            return result("unhandled", "status 0 without the output file")
+        if case.argv[0] == "render":
+            # argparse keeps the last -o given.
+            output = case.argv[len(case.argv) - 1 - case.argv[::-1].index("-o") + 1]
+            if not (case.folder / output).is_file():
+                return result("unhandled", f"status 0 without the output file {output}")
         return result("accepted")
 
 

@@ -42,7 +42,7 @@ def _cases(args: argparse.Namespace, seeds: dict, root: Path):  # noqa: ANN202 -
 
 
 def report(results: list[Result], seconds: float, args: argparse.Namespace,
-           warm_seconds: float) -> dict:
+           warm_seconds: float, formats: list[str]) -> dict:
     """Outcome counts per target, rate, and the bad cases."""
     table: dict[str, Counter] = defaultdict(Counter)
     for r in results:
@@ -59,11 +59,13 @@ def report(results: list[Result], seconds: float, args: argparse.Namespace,
         "max_bytes": args.max_bytes,
         "compile": args.compile,
         "seed": args.seed,
+        "formats": formats,
         "machine": f"{platform.machine()} {os.cpu_count()} cores, {platform.python_version()}",
         "totals": {k: totals.get(k, 0) for k in OUTCOMES},
         "per_target": {t: {k: c.get(k, 0) for k in OUTCOMES} for t, c in sorted(table.items())},
         "slowest": sorted(((r.seconds, r.summary) for r in results), reverse=True)[:5],
         "bad": bad[:200],
+        "skipped": [r.summary for r in results if r.outcome == "skipped-compile"][:50],
     }
 
 
@@ -103,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--markdown", help="write the table here")
     parser.add_argument("--only", type=int, help="rebuild and rerun this case, and keep it")
     parser.add_argument("--keep", action="store_true", help="keep every case folder")
+    parser.add_argument("--show", action="store_true", help="print every case's outcome")
     args = parser.parse_args(argv)
 
     root = Path(args.root or tempfile.mkdtemp(prefix="splinecast-fuzz-")).resolve()
@@ -131,6 +134,8 @@ def main(argv: list[str] | None = None) -> int:
     keep = args.keep or args.only is not None
     for n, result in enumerate(runner.run(_cases(args, seeds, root), keep=keep), 1):
         results.append(result)
+        if args.show and result.outcome not in BAD:
+            print(f"fuzz: {result.outcome}: {result.summary}\n    {result.detail[-300:]}")
         if result.outcome in BAD or args.only is not None:
             print(f"fuzz: {result.outcome}: {result.summary}\n    {result.detail[-600:]}",
                   flush=True)
@@ -138,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
             rate = n / (time.monotonic() - start)
             print(f"fuzz: {n} cases, {rate:.1f}/s", flush=True)
     seconds = time.monotonic() - start
-    summary = report(results, seconds, args, warm_seconds)
+    summary = report(results, seconds, args, warm_seconds, sorted(seeds))
     table = markdown(summary)
     print(table)
     if args.json:

@@ -229,8 +229,16 @@ def _sidecar(folder: Path) -> str:
     return "v.json"
 
 
-def _vtk_legacy(folder: Path) -> str:
-    """A legacy VTK STRUCTURED_POINTS file (binary, big-endian as the format demands)."""
+def _vtk(folder: Path) -> str:
+    """VTK image data: through splinecast's own writer when it has one (``.vti``), else a
+    hand-written legacy STRUCTURED_POINTS file (binary, big-endian as the format demands)."""
+    import splinecast as sc
+
+    try:
+        sc.write(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.vti")
+        return "v.vti"
+    except sc.SplinecastError:
+        pass
     header = "\n".join([
         "# vtk DataFile Version 3.0", "splinecast fuzz seed", "BINARY", "DATASET STRUCTURED_POINTS",
         "DIMENSIONS " + " ".join(map(str, SHAPE)), "ORIGIN " + " ".join(map(str, ORIGIN)),
@@ -269,7 +277,7 @@ MAKERS: dict[str, tuple[Callable[[Path], str], str | None]] = {
     "tiff": (_tiff, "tifffile"),
     "sidecar": (_sidecar, None),
     # Readers still to come: these join as soon as their module exists.
-    "vtk": (_vtk_legacy, "splinecast.io.vtkimage"),
+    "vtk": (_vtk, "splinecast.io.vtkimage"),
     "ome-zarr": (_ome_zarr, "splinecast.io.omezarr"),
 }
 

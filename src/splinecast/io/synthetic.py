@@ -317,4 +317,4 @@ def _parse_number(value: str, key: str, uri: str) -> int | float:
 
 
 def _as_int(value: Any, name: str) -> int:
-    return limits.check_count(value, name, lo=-(2**63))
+    return limits.check_count(value, name, lo=None)
