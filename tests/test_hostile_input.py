@@ -622,3 +622,46 @@ def test_real_dicom_warnings_are_captured(tmp_path, capsys):
     code, _, err = cli(["info", str(folder)], capsys)
     assert code == 2
     one_error_line(err, "PixelSpacing")
+
+
+def _ome_tiff(folder: Path, other: str) -> Path:
+    """An OME-TIFF whose OME-XML says half of its planes are in the file ``other``."""
+    tifffile = pytest.importorskip("tifffile")
+    xml = (
+        '<?xml version="1.0" encoding="UTF-8"?>'
+        '<OME xmlns="http://www.openmicroscopy.org/Schemas/OME/2016-06" UUID="urn:uuid:1">'
+        '<Image ID="Image:0"><Pixels ID="Pixels:0" DimensionOrder="XYZCT" Type="uint16" '
+        'SizeX="6" SizeY="5" SizeZ="8" SizeC="1" SizeT="1">'
+        '<Channel ID="Channel:0:0" SamplesPerPixel="1"/>'
+        '<TiffData FirstZ="0" IFD="0" PlaneCount="4"><UUID FileName="v.ome.tif">urn:uuid:1'
+        '</UUID></TiffData>'
+        f'<TiffData FirstZ="4" IFD="0" PlaneCount="4"><UUID FileName="{other}">urn:uuid:2'
+        '</UUID></TiffData></Pixels></Image></OME>'
+    )
+    path = folder / "v.ome.tif"
+    tifffile.imwrite(path, np.ascontiguousarray(RAW.transpose(2, 1, 0)), description=xml,
+                     metadata=None, photometric="minisblack")
+    return path
+
+
+def test_ome_tiff_cannot_name_files_outside_its_folder(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    (tmp_path / "data").mkdir()
+    secret = tmp_path / "secret.ome.tif"
+    tifffile.imwrite(secret, np.ascontiguousarray(RAW.transpose(2, 1, 0)) + 1000,
+                     photometric="minisblack")
+    path = _ome_tiff(tmp_path / "data", "../secret.ome.tif")
+    with pytest.raises(ReadError, match="OME-XML FileName '../secret.ome.tif' lies outside"):
+        sc.read(path)
+    vol = sc.read(path, allow_external=True)  # allowed: the other file's planes are read
+    assert vol.shape == (6, 5, 8)
+    np.testing.assert_array_equal(vol.data[:, :, 4:], RAW + 1000)
+
+
+def test_ome_tiff_with_its_other_file_beside_it(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    tifffile.imwrite(tmp_path / "w.ome.tif", np.ascontiguousarray(RAW.transpose(2, 1, 0)) + 7,
+                     photometric="minisblack")
+    vol = sc.read(_ome_tiff(tmp_path, "w.ome.tif"))
+    np.testing.assert_array_equal(vol.data[:, :, :4], RAW)
+    np.testing.assert_array_equal(vol.data[:, :, 4:], RAW + 7)

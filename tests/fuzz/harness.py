@@ -33,6 +33,7 @@ the two good ones, ``accepted`` and ``clean-error``.
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import io
 import os
 import resource
@@ -41,7 +42,7 @@ import signal
 import sys
 import time
 import traceback
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -180,15 +181,20 @@ class Runner:
         What a child does when numba starts compiling (see the module notes).
     compile_timeout : float
         Seconds a compilation may take with ``compile="allow"``.
+    entry : callable, optional
+        What a child runs with the case's arguments (default ``splinecast.cli.main``; the
+        harness's own tests pass misbehaving functions to check every verdict).
     """
 
     def __init__(self, root: Path, workers: int = 2, timeout: float = 60.0,
                  max_bytes: int = 256 << 20, compile: str = "skip",
-                 compile_timeout: float = 900.0) -> None:
+                 compile_timeout: float = 900.0,
+                 entry: Callable[[list[str]], int] | None = None) -> None:
         if compile not in ("skip", "allow"):
             raise ValueError(f"compile must be 'skip' or 'allow', got {compile!r}")
         self.compile = compile
         self.compile_timeout = compile_timeout
+        self.entry = entry
         self.root = root
         self.workers = max(1, workers)
         self.timeout = timeout
@@ -263,13 +269,17 @@ class Runner:
             os.dup2(err, 2)
             sys.stdout = open(1, "w", closefd=False, buffering=1)  # noqa: SIM115
             sys.stderr = open(2, "w", closefd=False, buffering=1)  # noqa: SIM115
+            faulthandler.enable(file=sys.stderr)  # a crash's Python stack goes to the case log
             os.environ["SPLINECAST_MAX_BYTES"] = str(self.max_bytes)
             os.environ.pop("SPLINECAST_ALLOW_EXTERNAL_DATA", None)
             resource.setrlimit(resource.RLIMIT_AS, (self.address_space, self.address_space))
             resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
             _watch_compilation(self.logs / f"{case.number}.compile", self.compile)
             sys.addaudithook(_audit(case, opened))
-            from splinecast.cli import main
+            if self.entry is None:
+                from splinecast.cli import main
+            else:
+                main = self.entry
 
             try:
                 code = main(list(case.argv))

@@ -511,6 +511,32 @@ def tiff_description(folder: Path, seed: Seed, rng: random.Random, root: Path) -
     return f"ImageJ {key}={value[:20]} resolution={resolution}"
 
 
+def tiff_ome(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """An OME-TIFF whose OME-XML puts planes in another file (a hostile name)."""
+    import numpy as np
+    import tifffile
+
+    from .seeds import ramp
+
+    other = _token(rng, PATH_TOKENS, root).replace('"', "").replace("<", "").replace("&", "")
+    size_z = rng.choice([8, 4, 1000000, 0])
+    xml = (
+        '<?xml version="1.0" encoding="UTF-8"?>'
+        '<OME xmlns="http://www.openmicroscopy.org/Schemas/OME/2016-06" UUID="urn:uuid:1">'
+        '<Image ID="Image:0"><Pixels ID="Pixels:0" DimensionOrder="XYZCT" Type="uint16" '
+        f'SizeX="6" SizeY="5" SizeZ="{size_z}" SizeC="1" SizeT="1">'
+        '<Channel ID="Channel:0:0" SamplesPerPixel="1"/>'
+        f'<TiffData FirstZ="0" IFD="0" PlaneCount="4"><UUID FileName="{seed.main}">urn:uuid:1'
+        '</UUID></TiffData>'
+        f'<TiffData FirstZ="4" IFD="0" PlaneCount="4"><UUID FileName="{other}">urn:uuid:2'
+        '</UUID></TiffData></Pixels></Image></OME>'
+    )
+    stack = np.ascontiguousarray(ramp().transpose(2, 1, 0))
+    tifffile.imwrite(folder / seed.main, stack, description=xml, metadata=None,
+                     photometric="minisblack")
+    return f"OME FileName {other[:40]!r} SizeZ={size_z}"
+
+
 def file_layout(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
     """Data files removed, emptied, swapped for folders or symbolic links out of the folder."""
     # Never the main file: the user names it, so following it anywhere is their choice.
@@ -552,7 +578,7 @@ STRUCTURED: dict[str, list[Mutation]] = {
     "nifti-gz": [nifti_fields, compressed_stream],
     "nifti-pair": [nifti_fields],
     "dicom": [dicom_tags, dicom_tags, dicom_tags],
-    "tiff": [tiff_description],
+    "tiff": [tiff_description, tiff_ome],
     "sidecar": [json_fields, json_fields],
     "vtk": [text_header, text_header],
     "ome-zarr": [],

@@ -41,7 +41,7 @@ _NIFTI2_MAGIC = (b"n+2\0", b"ni2\0")
 #: Enough bytes for every signature below (the NIfTI-1 magic sits at 344..348).
 _HEAD_BYTES = 352
 #: Formats whose header may name other files: their readers take ``allow_external``.
-_NAMES_FILES = {"metaimage", "nrrd", "sidecar", "dicom", "nifti"}
+_NAMES_FILES = {"metaimage", "nrrd", "sidecar", "dicom", "nifti", "tiff"}
 
 
 def sniff(path: Path) -> str | None:
@@ -135,8 +135,9 @@ def read(path: str | os.PathLike[str], *, allow_external: bool | None = None) ->
         one, by its extension otherwise.
     allow_external : bool, optional
         Let a header (MetaImage ``ElementDataFile``, NRRD ``data file``, a sidecar's
-        ``data_file``, a NIfTI ``.img``, a DICOM folder's symbolic links) name files outside its
-        own folder. Default: no, unless ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``.
+        ``data_file``, a NIfTI ``.img``, an OME-TIFF's other files, a DICOM folder's symbolic
+        links) name files outside its own folder. Default: no, unless
+        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``.
 
     Returns
     -------

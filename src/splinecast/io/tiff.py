@@ -5,10 +5,15 @@ taken from ImageJ metadata when present (``spacing`` for z, the XResolution/YRes
 pixels per unit, for x and y); plain TIFF resolution tags are ignored because most writers fill
 them with a meaningless 72 dpi, so other files get spacing 1. Uncompressed contiguous files are
 memory-mapped.
+
+A multi-file OME-TIFF names its other files in its OME-XML (``UUID FileName``); tifffile would
+open them wherever they are, so the names are checked first like any header's data file (in the
+file's folder or below, unless external files are allowed).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +27,7 @@ from ._common import check_dtype, check_in_memory, finish_volume, fmt_shape, req
 __all__ = ["read_tiff"]
 
 
-def read_tiff(path: Path) -> Volume:
+def read_tiff(path: Path, *, allow_external: bool | None = None) -> Volume:
     """Read the first image series of a TIFF file as a 3D volume.
 
     The series' shape and type are checked against the limits and the memory available before
@@ -30,7 +35,11 @@ def read_tiff(path: Path) -> Volume:
     """
     tifffile = require("tifffile", path)
     label = str(path)
-    with third_party(label, "not a readable TIFF"), tifffile.TiffFile(path) as tif:
+    with third_party(label, "not a readable TIFF"):
+        with tifffile.TiffFile(path, _multifile=False) as tif:
+            multifile = _other_files_allowed(tif.ome_metadata, path, allow_external)
+    with third_party(label, "not a readable TIFF"), \
+            tifffile.TiffFile(path, _multifile=multifile) as tif:
         series = tif.series[0]
         axes = str(series.axes)
         shape = tuple(int(n) for n in series.shape)
@@ -74,6 +83,17 @@ def read_tiff(path: Path) -> Volume:
         if imagej.get("unit"):
             metadata["units"] = str(imagej["unit"])[:200]
     return finish_volume(data, spacing, 0.0, path, metadata=metadata)
+
+
+def _other_files_allowed(ome: str | None, path: Path, allow_external: bool | None) -> bool:
+    """Whether tifffile may open the other files of a multi-file OME-TIFF (raises a ReadError
+    naming the first one outside the folder)."""
+    if not ome:
+        return False
+    names = re.findall(r"""FileName\s*=\s*["']([^"']*)["']""", ome)
+    for name in names:
+        limits.check_data_file(path, name, "OME-XML FileName", allow_external=allow_external)
+    return bool(names)
 
 
 def _resolution(page: Any, tag_name: str) -> float | None:
