@@ -277,7 +277,8 @@ def build_case(number: int, run_seed: int, seeds: dict[str, Seed], root: Path) -
         if scenario is _iso or scenario is _geometry or scenario is _sampled:
             argv = ["render", "demo:sphere?size=10", "-o", "out.png", "--size", SMALL,
                     "--quiet"] + extra
-        outputs = ["out.png", *[a for a in extra if a.endswith((".png", ".npy"))]]
+        outputs = ["out.png", *[a.split("=", 1)[-1] for a in extra
+                                if a.lower().endswith((".png", ".npy"))]]
         return Case(number, target, argv, [scenario.__name__.strip("_")], folder, outputs,
                     sentinel_region)
     seed = seeds[target]

@@ -35,10 +35,14 @@ def _cases(args: argparse.Namespace, seeds: dict, root: Path):  # noqa: ANN202 -
     numbers = [args.only] if args.only is not None else range(args.start, args.start + args.cases)
     for number in numbers:
         try:
-            yield build_case(number, args.seed, seeds, root)
+            with warnings.catch_warnings():  # the mutations' own use of pydicom and friends
+                warnings.simplefilter("ignore")
+                case = build_case(number, args.seed, seeds, root)
         except Exception as exc:  # a bug of the harness: reported, never hidden
             yield Result(number, "?", "harness-error", 0.0, 0.0, f"#{number}",
                          f"{type(exc).__name__}: {exc}")
+        else:
+            yield case
 
 
 def report(results: list[Result], seconds: float, args: argparse.Namespace,
