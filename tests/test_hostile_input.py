@@ -665,3 +665,20 @@ def test_ome_tiff_with_its_other_file_beside_it(tmp_path):
     vol = sc.read(_ome_tiff(tmp_path, "w.ome.tif"))
     np.testing.assert_array_equal(vol.data[:, :, :4], RAW)
     np.testing.assert_array_equal(vol.data[:, :, 4:], RAW + 7)
+
+
+@pytest.mark.parametrize("layout", ["C", "F", "view"])
+def test_value_range_and_counts_scan_in_slabs(monkeypatch, layout):
+    import splinecast.volume as volume_module
+
+    monkeypatch.setattr(volume_module, "_SCAN_VOXELS", 7)  # many slabs, ragged last one
+    rng = np.random.default_rng(3)
+    data = rng.normal(size=(9, 7, 5)).astype(np.float64)
+    data[rng.random(data.shape) < 0.05] = np.nan
+    data[0, 0, 0], data[8, 6, 4], data[4, 3, 2] = np.inf, -np.inf, np.inf
+    data = {"C": data, "F": np.asfortranarray(data), "view": data[::-1, ::2, :]}[layout]
+    vol = sc.Volume(data)
+    finite = data[np.isfinite(data)]
+    assert vol.value_range == (float(finite.min()), float(finite.max()))
+    assert vol.nonfinite_counts() == (int(np.isnan(data).sum()), int((data == np.inf).sum()),
+                                      int((data == -np.inf).sum()))

@@ -24,9 +24,9 @@ Memory
     ``512MiB``), whichever is smallest.
 Work
     Sampling steps are at least :data:`MIN_STEP` voxels and give at most
-    :data:`MAX_SAMPLES_PER_RAY` samples along the volume's diagonal; root finders get at most
-    :data:`MAX_ROOT_ITERATIONS` iterations; images have at most :data:`MAX_IMAGE_SIDE` pixels
-    per side.
+    :data:`MAX_SAMPLES_PER_RAY` samples along the volume's diagonal; the command line's
+    ``--iterations`` of a root finder is at most :data:`MAX_ROOT_ITERATIONS`; images have at
+    most :data:`MAX_IMAGE_SIDE` pixels per side.
 Paths
     A path has no NUL byte and at most :data:`MAX_PATH_BYTES` bytes; a data file named by a
     header must lie, with symbolic links resolved, in the header's folder or below, unless the

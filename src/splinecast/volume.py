@@ -203,7 +203,9 @@ class Volume:
         lo, hi = np.inf, -np.inf
         nan = pos = neg = 0
         for start in range(0, data.shape[axis], width):
-            slab = np.take(data, np.arange(start, min(start + width, data.shape[axis])), axis)
+            index = [slice(None)] * data.ndim
+            index[axis] = slice(start, start + width)
+            slab = data[tuple(index)]  # a view: contiguous along the slowest axis
             finite = np.isfinite(slab)
             if not finite.all():
                 nan += int(np.count_nonzero(np.isnan(slab)))

@@ -236,7 +236,7 @@ def write(volume: Volume, path: str | os.PathLike[str]) -> None:
         failure while writing. Nothing is left behind on failure: every file is written to a
         temporary beside its target and renamed into place only when complete.
     """
-    path = Path(os.fspath(path))
+    path = limits.check_path_text(path, "output")
     suffix = path.suffix.lower()
     if suffix not in _WRITERS:
         raise ParameterError(
