@@ -275,7 +275,7 @@ class Runner:
             resource.setrlimit(resource.RLIMIT_AS, (self.address_space, self.address_space))
             resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
             _watch_compilation(self.logs / f"{case.number}.compile", self.compile)
-            sys.addaudithook(_audit(case, opened))
+            sys.addaudithook(_audit(case, opened, self.logs))
             if self.entry is None:
                 from splinecast.cli import main
             else:
@@ -370,9 +370,11 @@ def _watch_compilation(marks: Path, mode: str) -> None:  # pragma: no cover - in
     event.register("numba:compile", Watch())
 
 
-def _audit(case: Case, opened: list[str]):  # noqa: ANN202 - an audit hook
-    """An audit hook recording opens of forbidden paths (resolved, symlinks followed)."""
+def _audit(case: Case, opened: list[str], logs: Path):  # noqa: ANN202 - an audit hook
+    """An audit hook recording opens of forbidden paths (resolved, symlinks followed) other than
+    the case folder and the harness's own log folder."""
     folder = os.path.realpath(case.folder)
+    own = os.path.realpath(logs) + os.sep
     roots = [p for p in case.forbidden if os.path.isdir(p)]
     files = {os.path.realpath(p) for p in case.forbidden if not os.path.isdir(p)}
     busy = [False]
@@ -386,7 +388,7 @@ def _audit(case: Case, opened: list[str]):  # noqa: ANN202 - an audit hook
         busy[0] = True
         try:
             real = os.path.realpath(os.fsdecode(path))
-            inside = real == folder or real.startswith(folder + os.sep)
+            inside = real == folder or real.startswith((folder + os.sep, own))
             forbidden = real in files or any(
                 real == root or real.startswith(root.rstrip(os.sep) + os.sep) for root in roots)
             if forbidden and not inside:
