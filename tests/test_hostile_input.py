@@ -132,6 +132,24 @@ def test_unknown_npz_compression_is_a_read_error(tmp_path):
         sc.read(path)
 
 
+@pytest.mark.parametrize("method", [zipfile.ZIP_DEFLATED, zipfile.ZIP_BZIP2, zipfile.ZIP_LZMA])
+def test_corrupt_npz_streams_are_a_read_error(tmp_path, method):
+    path = tmp_path / "v.npz"
+    from io import BytesIO
+
+    buf = BytesIO()
+    np.save(buf, RAW.astype(np.float32) * 1.5)
+    with zipfile.ZipFile(path, "w", compression=method) as zf:
+        zf.writestr("data.npy", buf.getvalue())
+    data = bytearray(path.read_bytes())
+    start = data.find(b"data.npy") + len("data.npy") + 20  # inside the compressed bytes
+    for i in range(start, start + 16):
+        data[i] ^= 0x5A
+    path.write_bytes(bytes(data))
+    with pytest.raises(ReadError, match=r"v\.npz"):
+        sc.read(path)
+
+
 @pytest.mark.parametrize(("header", "what"), [
     ("{'descr': '<u2', 'fortran_order': False, 'shape': (6, 5, 4", "header"),
     ("{'descr': '<u2', 'fortran_order': False, 'shape': (-6, 5, 4), }", "shape"),
