@@ -588,15 +588,20 @@ STRUCTURED: dict[str, list[Mutation]] = {
 def mutate(folder: Path, seed: Seed, rng: random.Random, root: Path) -> list[str]:
     """Apply one to three mutations; structure-aware ones more often than blind ones."""
     done = []
+    chosen = []
     for _ in range(rng.choice([1, 1, 1, 2, 3])):
         structured = STRUCTURED.get(seed.fmt, [])
         roll = rng.random()
         if structured and roll < 0.6:
-            mutation = rng.choice(structured)
+            chosen.append(rng.choice(structured))
         elif roll < 0.9:
-            mutation = byte_level
-        else:
-            mutation = file_layout
+            chosen.append(byte_level)
+        elif file_layout not in chosen:
+            chosen.append(file_layout)
+    # The layout change goes last: the others read files, and a FIFO it may leave would block
+    # them (the harness itself must never open one).
+    chosen.sort(key=lambda m: m is file_layout)
+    for mutation in chosen:
         try:
             done.append(mutation(folder, seed, rng, root))
         except Exception as exc:  # an earlier mutation broke the structure this one parses
