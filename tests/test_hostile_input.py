@@ -700,3 +700,20 @@ def test_value_range_and_counts_scan_in_slabs(monkeypatch, layout):
     assert vol.value_range == (float(finite.min()), float(finite.max()))
     assert vol.nonfinite_counts() == (int(np.isnan(data).sum()), int((data == np.inf).sum()),
                                       int((data == -np.inf).sum()))
+
+
+def test_names_from_a_header_cannot_break_the_error_line(tmp_path, capsys):
+    header = mhd(tmp_path, ElementDataFile="\x1b[31mred\x1esplit\u2028.raw")
+    code, _, err = cli(["info", str(header)], capsys)
+    assert code == 2
+    line = one_error_line(err, "data file not found")
+    assert "\x1b" not in line and "\\x1b[31mred\\x1esplit\\u2028.raw" in line
+
+
+def test_dicom_huge_integral_intercept_gives_float_data(tmp_path):
+    folder = _dicom_series(tmp_path / "s", _raw_tag("RescaleIntercept", "DS", b"1e300"))
+    vol = sc.read(folder)  # float32: 1e300 overflows to +inf, which only rendering refuses
+    assert vol.dtype == np.float32
+    assert vol.nonfinite_counts() == (0, SHAPE[0] * SHAPE[1], 0)
+    with pytest.raises(DataError, match=r"30 \+inf"):
+        sc.Scene(vol)

@@ -85,6 +85,7 @@ __all__ = [
     "memory_limit",
     "nbytes",
     "parse_bytes",
+    "printable",
     "read_exact",
     "read_limited",
     "shorten",
@@ -133,6 +134,17 @@ def shorten(value: Any, limit: int = 60) -> str:
     except Exception:  # a third-party object whose repr fails is still worth naming
         text = f"<{type(value).__name__}>"
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def printable(text: str) -> str:
+    """``text`` with every unprintable character escaped (``\\x1b``, ``\\n``, ``\\u2028``).
+
+    Names taken from a hostile header may hold line breaks or terminal escape sequences; a message
+    printed with this stays one harmless line.
+    """
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def fmt_bytes(n: int | float) -> str:

@@ -17,6 +17,7 @@ import argparse
 import sys
 
 import splinecast as sc
+from splinecast.limits import printable
 
 from . import info, render
 from ._common import Parser, captured_output
@@ -50,12 +51,13 @@ def main(argv: list[str] | None = None) -> int:
             code = COMMANDS[args.command].run(args)
         except sc.SplinecastError as exc:
             code = 2
-            print(f"splinecast: error: {exc}", file=args.stderr)
+            # printable(): names from a hostile file must not break the line or drive a terminal
+            print(f"splinecast: error: {printable(str(exc))}", file=args.stderr)
         except KeyboardInterrupt:
             return 130
     lines = captured.ours() if code == 0 and not getattr(args, "quiet", False) else []
     if verbose:
         lines = captured.everything()
     for line in lines:
-        print(line, file=args.stderr)
+        print(printable(line), file=args.stderr)
     return code

@@ -315,7 +315,8 @@ def _stack(slices: list[tuple[Path, Any]], label: str) -> np.ndarray:
     check_dtype(kind, f"{label}: slice {first_file.name}")
     if all(sl == 1.0 and i == 0.0 for sl, i in rescale):
         dtype = kind  # stored values as they are
-    elif kind.kind in "iub" and all(sl == 1.0 and i == int(i) for sl, i in rescale):
+    elif kind.kind in "iub" and all(sl == 1.0 and i == int(i) and abs(i) < 2**31
+                                    for sl, i in rescale):
         dtype = np.dtype(np.int32)  # integral shift: narrowed to int16 below when it fits
     else:
         dtype = np.dtype(np.float32)
