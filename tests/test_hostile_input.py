@@ -717,3 +717,11 @@ def test_dicom_huge_integral_intercept_gives_float_data(tmp_path):
     assert vol.nonfinite_counts() == (0, SHAPE[0] * SHAPE[1], 0)
     with pytest.raises(DataError, match=r"30 \+inf"):
         sc.Scene(vol)
+
+
+def test_output_path_with_a_trailing_slash_is_refused(tmp_path, capsys):
+    code, _, err = cli(["render", "demo:sphere?size=10", "--iso", "0", "-o",
+                        str(tmp_path / "o.png"), "--depth", str(tmp_path / "d.npy") + "/"], capsys)
+    assert code == 2
+    one_error_line(err, "--depth", "names a folder")
+    assert list(tmp_path.iterdir()) == []

@@ -151,6 +151,8 @@ def captured_output() -> Iterator[Captured]:
 def check_output(path: str, suffix: str, option: str) -> None:
     """Refuse an output path with the wrong suffix, a missing folder, or that is a folder."""
     p = limits.check_path_text(path, option)
+    if path.endswith(("/", "\\")):  # pathlib would drop the slash and write a file anyway
+        raise sc.ParameterError(f"{option} {limits.shorten(path)}: names a folder, not a file")
     if p.suffix.lower() != suffix:
         raise sc.ParameterError(f"{option} {limits.shorten(path)}: must end in {suffix}")
     if not p.parent.exists():
