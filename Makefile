@@ -8,7 +8,7 @@ BENCH_STAMP := $(VENV)/.bench-stamp
 BROWSER_STAMP := $(VENV)/.browser-stamp
 DEMO_PNG ?= splinecast-demo.png
 
-.PHONY: demo test bench lint clean clean-cache bench-deps compare compare-quick docs
+.PHONY: demo test bench lint clean clean-cache bench-deps compare compare-quick docs fuzz
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -63,6 +63,14 @@ compare-quick: bench-deps
 docs: $(STAMP)
 	$(PY) -m sphinx -b html -q docs docs/_build/html
 	@echo "docs: $(CURDIR)/docs/_build/html/index.html"
+
+# Long fuzzing run (issue 17): hostile files of every format and render options at their edges,
+# each in a forked child under memory, address-space and time caps; new kernels may compile.
+# The short run (300 cases) is part of `make test` (tests/fuzz/test_short_run.py).
+FUZZ_CASES ?= 20000
+fuzz: $(STAMP)
+	cd tests && $(abspath $(PY)) -m fuzz.run --cases $(FUZZ_CASES) --compile allow \
+		--json ../benchmarks/results/fuzz.json --markdown ../benchmarks/results/fuzz.md
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks

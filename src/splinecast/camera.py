@@ -229,8 +229,10 @@ class Camera:
         """
         if not (math.isfinite(azimuth) and math.isfinite(elevation)):
             raise ParameterError("azimuth and elevation must be finite numbers")
-        if not zoom > 0:
-            raise ParameterError(f"zoom must be positive, got {zoom}")
+        if not (math.isfinite(zoom) and zoom > 0):
+            raise ParameterError(f"zoom must be a positive finite number, got {zoom}")
+        if not 0.0 < fov < 180.0:  # checked before tan(fov) below, not only in __init__
+            raise ParameterError(f"fov must be between 0 and 180 degrees, got {fov}")
         box = _fit_box(fit, volume)
         lo, hi = box if box is not None else volume.bounds
         center = 0.5 * (lo + hi)

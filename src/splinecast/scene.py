@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from . import limits
 from .accel.active_cells import ActiveCells
 from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
@@ -342,6 +343,7 @@ def prepare_render(
         raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     if method not in METHODS:
         raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    limits.check_render(volume, camera, mode=mode, method=method, step=step, dvr=dvr)
     inside = inside or volume.metadata.get("inside", "high")
     if inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from . import limits
 from .errors import ParameterError, ReadError
 
 __all__ = ["COLORMAPS", "TransferFunction", "colormap_table", "apply_colormap"]
@@ -77,10 +78,12 @@ _ALPHA_CAP = 1.0 - 1e-6
 def _control_points(points: Any, width: int, name: str) -> np.ndarray:
     try:
         arr = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ParameterError(f"{name} must be a list of {width}-number points") from None
     if arr.ndim != 2 or arr.shape[1] != width or arr.shape[0] < 1:
-        raise ParameterError(f"{name} must be a list of {width}-number points, got {points!r}")
+        raise ParameterError(
+            f"{name} must be a list of {width}-number points, got {limits.shorten(points)}"
+        )
     if not np.all(np.isfinite(arr)):
         raise ParameterError(f"{name} must hold finite numbers")
     if np.any(np.diff(arr[:, 0]) < 0):
@@ -92,7 +95,7 @@ def _colormap_points(colormap: Any) -> np.ndarray:
     if isinstance(colormap, str):
         if colormap not in COLORMAPS:
             raise ParameterError(
-                f"colormap must be one of {', '.join(COLORMAPS)}, got {colormap!r}"
+                f"colormap must be one of {', '.join(COLORMAPS)}, got {limits.shorten(colormap)}"
             )
         return np.asarray(COLORMAPS[colormap], dtype=np.float64)
     pts = _control_points(colormap, 4, "colormap")
@@ -156,8 +159,10 @@ class TransferFunction:
             raise ParameterError("opacity values must be in [0, 1]")
         try:
             lo, hi = (float(v) for v in domain)
-        except (TypeError, ValueError):
-            raise ParameterError(f"domain must be two numbers (lo, hi), got {domain!r}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise ParameterError(
+                f"domain must be two numbers (lo, hi), got {limits.shorten(domain)}"
+            ) from None
         if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
             raise ParameterError(f"domain must be two finite numbers with lo < hi, got {domain}")
         self.opacity_points = pts
@@ -253,17 +258,17 @@ class TransferFunction:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> TransferFunction:
-        """Read a transfer function written by :meth:`save` (or by hand in the same format)."""
-        try:
-            spec = json.loads(Path(path).read_text())
-        except FileNotFoundError:
-            raise ReadError(f"{path}: no such transfer-function file") from None
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ReadError(f"{path}: not a JSON transfer function ({exc})") from None
+        """Read a transfer function written by :meth:`save` (or by hand in the same format).
+
+        The file is read with the bounds of :func:`splinecast.limits.load_json` (size, nesting,
+        finite numbers), so any file, even ``/dev/zero``, gives at worst a one-line ReadError.
+        """
+        label = str(limits.check_path_text(path, "transfer function", ReadError))
+        spec = limits.load_json(Path(label), label)
         try:
             return cls.from_dict(spec)
         except ParameterError as exc:
-            raise ReadError(f"{path}: {exc}") from None
+            raise ReadError(f"{label}: {exc}") from None
 
     def __repr__(self) -> str:
         cmap = self.colormap if isinstance(self.colormap, str) else "custom"

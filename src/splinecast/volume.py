@@ -11,6 +11,17 @@ so index space and world space differ by a per-axis scale and an offset only (no
 of formats that store a rotation resample nothing and warn instead). The continuous reconstruction
 covers the box spanned by the voxel centres, from ``origin`` to ``origin + (shape - 1) * spacing``.
 Readers convert their format to this convention; nothing else in the package transposes axes.
+
+Non-finite values (the policy)
+------------------------------
+A volume may hold NaN, +inf and -inf voxels: it can be read, described (``splinecast info``
+counts them) and written. Nothing renders them: every model and every mode (iso, multi-iso, mip,
+minip, dvr) refuses such a volume with a :class:`~splinecast.errors.DataError` that gives the
+counts, before any compiled code runs, because no reconstruction can interpolate them. Replace
+them first (for example ``numpy.nan_to_num``). :attr:`Volume.value_range` is the range of the
+finite values.
+
+Spacing and origin are validated by :mod:`splinecast.limits` (finite, normal, within a sane range).
 """
 
 from __future__ import annotations
@@ -22,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from .errors import DataError, ParameterError
+from .limits import check_origin, check_spacing
 
 __all__ = ["Volume", "GridGeometry", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported",
            "OrientationWarning"]
@@ -121,11 +133,8 @@ def _vtk_arrays(attributes: Any) -> dict[str, Any]:
     return arrays
 
 
-def _as_triple(value: Any, name: str) -> tuple[float, float, float]:
-    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,))
-    if not np.all(np.isfinite(arr)):
-        raise ParameterError(f"{name} must be three finite numbers, got {value!r}")
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
+#: Voxels scanned per step of the value-range scan (bounds its temporary memory).
+_SCAN_VOXELS = 1 << 24
 
 
 class GridGeometry:
@@ -213,12 +222,11 @@ class Volume(GridGeometry):
             data = data.astype(data.dtype.newbyteorder("="))
         data = exact_supported(data, metadata.get("name", "data") if metadata else "data")
         self.data: np.ndarray = data
-        self.spacing: tuple[float, float, float] = _as_triple(spacing, "spacing")
-        if min(self.spacing) <= 0:
-            raise ParameterError(f"spacing must be positive, got {self.spacing}")
-        self.origin: tuple[float, float, float] = _as_triple(origin, "origin")
+        self.spacing: tuple[float, float, float] = check_spacing(spacing, "spacing")
+        self.origin: tuple[float, float, float] = check_origin(origin, self.spacing, "origin")
         self.metadata: dict[str, Any] = dict(metadata or {})
         self._value_range: tuple[float, float] | None = None
+        self._nonfinite: tuple[int, int, int] | None = None
 
     @classmethod
     def from_vtk(cls, image: Any, array: str | None = None,
@@ -342,25 +350,70 @@ class Volume(GridGeometry):
     # ------------------------------------------------------------------ values
     @property
     def value_range(self) -> tuple[float, float]:
-        """``(min, max)`` of the finite voxel values (computed once, on first use)."""
+        """``(min, max)`` of the finite voxel values (computed once, on first use).
+
+        Raises
+        ------
+        DataError
+            If the data holds no finite value at all.
+        """
         if self._value_range is None:
-            data = self.data
-            if data.dtype.kind == "f":
-                finite = np.isfinite(data)
-                if not finite.any():
-                    raise DataError(f"{self.name}: the data contains no finite value")
-                lo = float(np.min(data, where=finite, initial=np.inf))
-                hi = float(np.max(data, where=finite, initial=-np.inf))
-            else:
-                lo, hi = float(data.min()), float(data.max())
-            self._value_range = (lo, hi)
+            self._scan()
+        assert self._value_range is not None
         return self._value_range
+
+    def nonfinite_counts(self) -> tuple[int, int, int]:
+        """Numbers of NaN, +inf and -inf voxels (all 0 for integer data)."""
+        if self._nonfinite is None:
+            self._scan()
+        assert self._nonfinite is not None
+        return self._nonfinite
 
     def count_nan(self) -> int:
         """Number of NaN voxels (always 0 for integer data)."""
-        if self.data.dtype.kind != "f":
-            return 0
-        return int(np.count_nonzero(np.isnan(self.data)))
+        return self.nonfinite_counts()[0]
+
+    def require_finite(self) -> None:
+        """Raise :class:`DataError` if any voxel is NaN or infinite (see the module's policy)."""
+        nan, pos, neg = self.nonfinite_counts()
+        if nan or pos or neg:
+            raise DataError(
+                f"{self.name}: the data contains {nan} NaN, {pos} +inf and {neg} -inf values; "
+                "replace them (for example with numpy.nan_to_num) before rendering"
+            )
+
+    def _scan(self) -> None:
+        """One pass over the data, in slabs along its slowest axis (bounded temporary memory),
+        for the finite value range and the non-finite counts."""
+        data = self.data
+        if data.dtype.kind != "f":
+            if data.size:
+                self._value_range = (float(data.min()), float(data.max()))
+            self._nonfinite = (0, 0, 0)
+            if not data.size:
+                raise DataError(f"{self.name}: the volume holds no voxel")
+            return
+        axis = int(np.argmax(np.abs(data.strides)))
+        per_slab = max(1, data.size // max(1, data.shape[axis]))
+        width = max(1, _SCAN_VOXELS // per_slab)
+        lo, hi = np.inf, -np.inf
+        nan = pos = neg = 0
+        for start in range(0, data.shape[axis], width):
+            index = [slice(None)] * data.ndim
+            index[axis] = slice(start, start + width)
+            slab = data[tuple(index)]  # a view: contiguous along the slowest axis
+            finite = np.isfinite(slab)
+            if not finite.all():
+                nan += int(np.count_nonzero(np.isnan(slab)))
+                pos += int(np.count_nonzero(slab == np.inf))
+                neg += int(np.count_nonzero(slab == -np.inf))
+            if finite.any():
+                lo = min(lo, float(np.min(slab, where=finite, initial=np.inf)))
+                hi = max(hi, float(np.max(slab, where=finite, initial=-np.inf)))
+        self._nonfinite = (nan, pos, neg)
+        if lo > hi:
+            raise DataError(f"{self.name}: the data contains no finite value")
+        self._value_range = (lo, hi)
 
     def __repr__(self) -> str:
         return (

@@ -4,6 +4,11 @@ One module per subcommand; each has ``add_parser(subparsers)`` and ``run(args) -
 listed once in :data:`COMMANDS`. User mistakes print one line (``splinecast: error: ...``) naming
 the file or option and exit with status 2. Progress and timings go to stderr (``--quiet``
 silences them); the path of a written file goes to stdout.
+
+Warnings and log lines of the libraries the readers use (pydicom, nibabel, tifffile, numpy) are
+captured while a command runs (:func:`splinecast.cli._common.captured_output`): they never come
+before the one-line error. ``--verbose`` prints them after it (or after a successful run);
+splinecast's own warnings (flipped axes, uneven slices) are printed after a successful run.
 """
 
 from __future__ import annotations
@@ -12,9 +17,10 @@ import argparse
 import sys
 
 import splinecast as sc
+from splinecast.limits import printable
 
 from . import info, movie, pyramid, render, view
-from ._common import Parser
+from ._common import Parser, captured_output
 
 __all__ = ["main", "COMMANDS"]
 
@@ -41,10 +47,20 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     parser = _build_parser()
     args = parser.parse_args(argv)
-    try:
-        return COMMANDS[args.command].run(args)
-    except sc.SplinecastError as exc:
-        print(f"splinecast: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
+    args.stderr = sys.stderr  # progress goes here, past the capture of library output
+    verbose = getattr(args, "verbose", False)
+    with captured_output() as captured:
+        try:
+            code = COMMANDS[args.command].run(args)
+        except sc.SplinecastError as exc:
+            code = 2
+            # printable(): names from a hostile file must not break the line or drive a terminal
+            print(f"splinecast: error: {printable(str(exc))}", file=args.stderr)
+        except KeyboardInterrupt:
+            return 130
+    lines = captured.ours() if code == 0 and not getattr(args, "quiet", False) else []
+    if verbose:
+        lines = captured.everything()
+    for line in lines:
+        print(printable(line), file=args.stderr)
+    return code

@@ -1,16 +1,34 @@
 """What every subcommand of the command line shares: the parser class, option parsing helpers,
-progress output and output-path checks."""
+the capture of library output, progress output and output-path checks."""
 
 from __future__ import annotations
 
 import argparse
+import io
+import logging
+import math
 import sys
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn
 
 import splinecast as sc
+from splinecast import limits
 
-__all__ = ["Parser", "numbers", "log", "check_output"]
+__all__ = [
+    "Captured",
+    "Parser",
+    "add_input_options",
+    "captured_output",
+    "check_output",
+    "finite",
+    "log",
+    "numbers",
+]
+
+_PACKAGE_DIR = str(Path(sc.__file__).resolve().parent)
 
 
 class Parser(argparse.ArgumentParser):
@@ -20,30 +38,123 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"splinecast: error: {message} (see --help)\n")
 
 
+def finite(text: str) -> float:
+    """argparse type of every numeric option: a finite number (no nan, inf or 1e999)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {limits.shorten(text)}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {limits.shorten(text)}")
+    return value
+
+
+def add_input_options(parser: argparse.ArgumentParser) -> None:
+    """Options every subcommand that reads a volume shares."""
+    parser.add_argument("--allow-external-data", action="store_true",
+                        help="let a header name data files outside its own folder "
+                             f"(default: refused; or set {limits.ENV_ALLOW_EXTERNAL}=1)")
+    parser.add_argument("--verbose", action="store_true",
+                        help="also print the warnings and log lines of the file-format "
+                             "libraries (captured otherwise)")
+
+
 def numbers(text: str | None, option: str, count: int | None = None) -> list[float] | None:
-    """Comma-separated numbers of ``option`` (``count`` of them when given)."""
+    """Comma-separated finite numbers of ``option`` (``count`` of them when given)."""
     if text is None:
         return None
+    shown = limits.shorten(text)
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
-        raise sc.ParameterError(f"{option} must be comma-separated numbers, got {text!r}") from None
+        raise sc.ParameterError(f"{option} must be comma-separated numbers, got {shown}") from None
+    if not all(math.isfinite(v) for v in values):
+        raise sc.ParameterError(f"{option} must be finite numbers, got {shown}")
     if count is not None and len(values) != count:
-        raise sc.ParameterError(f"{option} needs {count} numbers, got {text!r}")
+        raise sc.ParameterError(f"{option} needs {count} numbers, got {shown}")
     return values
 
 
 def log(args: argparse.Namespace, message: str) -> None:
-    """Progress line on stderr unless ``--quiet``."""
+    """Progress line on stderr unless ``--quiet`` (the real stderr, past any capture)."""
     if not getattr(args, "quiet", False):
-        print(message, file=sys.stderr, flush=True)
+        print(message, file=getattr(args, "stderr", sys.stderr), flush=True)
+
+
+class Captured:
+    """Warnings and stderr output collected while a command ran."""
+
+    def __init__(self) -> None:
+        self.warnings: list[warnings.WarningMessage] = []
+        self.stream = io.StringIO()
+
+    @staticmethod
+    def _line(w: warnings.WarningMessage) -> str:
+        return f"splinecast: warning: {w.message}"
+
+    def _is_ours(self, w: warnings.WarningMessage) -> bool:
+        inside = str(Path(w.filename).resolve()).startswith(_PACKAGE_DIR)
+        return inside and issubclass(w.category, UserWarning)
+
+    def ours(self) -> list[str]:
+        """splinecast's own warnings (about the data), one line each."""
+        return [self._line(w) for w in self.warnings if self._is_ours(w)]
+
+    def everything(self) -> list[str]:
+        """Every warning and every line the libraries printed or logged (``--verbose``)."""
+        lines = [self._line(w) if self._is_ours(w)
+                 else f"  {w.category.__name__} ({Path(w.filename).name}): {w.message}"
+                 for w in self.warnings]
+        lines += [f"  {line}" for line in self.stream.getvalue().splitlines() if line.strip()]
+        return lines
+
+
+@contextmanager
+def captured_output() -> Iterator[Captured]:
+    """Collect warnings, log records and whatever is written to ``sys.stderr`` in the block.
+
+    Libraries print warnings, log lines (nibabel's own stderr handler, pydicom's loggers) and
+    sometimes plain text; none of it may come before splinecast's one-line error. Handlers
+    created inside the block bind to the captured stream; a handler on the root logger catches
+    the records of loggers without their own.
+    """
+    captured = Captured()
+    handler = logging.StreamHandler(captured.stream)
+    handler.setFormatter(logging.Formatter("%(name)s %(levelname)s: %(message)s"))
+    root = logging.getLogger()
+    saved_stderr = sys.stderr
+    # Handlers made before the block (a library imported earlier) hold the old stream: redirect
+    # them too, and put them back afterwards.
+    redirected = [
+        h for logger in [root, *logging.Logger.manager.loggerDict.values()]
+        if isinstance(logger, logging.Logger)
+        for h in logger.handlers
+        if type(h) is logging.StreamHandler and h.stream in (saved_stderr, sys.__stderr__)
+    ]
+    old_streams = [h.setStream(captured.stream) for h in redirected]
+    sys.stderr = captured.stream
+    root.addHandler(handler)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("default")
+            try:
+                yield captured
+            finally:
+                captured.warnings = list(caught)
+    finally:
+        root.removeHandler(handler)
+        for h, stream in zip(redirected, old_streams, strict=True):
+            h.setStream(stream)
+        sys.stderr = saved_stderr
 
 
 def check_output(path: str, suffix: str, option: str) -> None:
     """Refuse an output path with the wrong suffix, a missing folder, or that is a folder."""
-    p = Path(path)
+    p = limits.check_path_text(path, option)
+    if path.endswith(("/", "\\")):  # pathlib would drop the slash and write a file anyway
+        raise sc.ParameterError(f"{option} {limits.shorten(path)}: names a folder, not a file")
     if p.suffix.lower() != suffix:
-        raise sc.ParameterError(f"{option} {path}: must end in {suffix}")
+        raise sc.ParameterError(f"{option} {limits.shorten(path)}: must end in {suffix}")
     if not p.parent.exists():
         raise sc.ParameterError(f"{option} {path}: the folder {p.parent} does not exist")
     if p.is_dir():

@@ -9,6 +9,8 @@ import numpy as np
 
 import splinecast as sc
 
+from ._common import add_input_options
+
 __all__ = ["add_parser", "run"]
 
 _PERCENTILES = (0.5, 1, 5, 25, 50, 75, 95, 99, 99.5)
@@ -20,11 +22,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     info = sub.add_parser("info", help="describe a volume file: shape, dtype, spacing, values")
     info.add_argument("file", help="volume file, DICOM folder, Zarr folder or demo:NAME?size=N")
     info.add_argument("--array", help="data array of a VTK file holding several")
+    add_input_options(info)
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the description of ``args.file``."""
-    vol = sc.read(args.file, array=args.array)
+    vol = sc.read(args.file, array=args.array, allow_external=args.allow_external_data or None)
     if not isinstance(vol, sc.Volume):
         return _multiscale(vol)
     data = vol.data
@@ -44,7 +47,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"origin:    {', '.join(f'{s:g}' for s in vol.origin)}")
     print(f"extent:    {', '.join(f'{s:g}' for s in vol.extent)}")
     print(f"range:     {lo:g} .. {hi:g}")
-    print(f"NaN:       {vol.count_nan()}")
+    nan, pos, neg = vol.nonfinite_counts()
+    print(f"NaN:       {nan}")
+    if pos or neg:
+        print(f"infinite:  {pos} +inf, {neg} -inf")
     print("percentiles" + note + ":")
     for p, v in zip(_PERCENTILES, pct, strict=True):
         print(f"  {p:>5g}%  {v:g}")

@@ -10,9 +10,10 @@ import time
 from pathlib import Path
 
 import splinecast as sc
+from splinecast import limits
 
 from ..multires.budget import parse_bytes
-from ._common import check_output, log, numbers
+from ._common import add_input_options, check_output, finite, log, numbers
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
            "mode_kwargs", "orbit_options"]
@@ -49,9 +50,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--iso", help="isovalue(s) in data units, comma-separated for several "
                         "translucent surfaces (default: the demo's, else Otsu's threshold of "
                         "the histogram; printed)")
-    render.add_argument("--azimuth", type=float, default=30.0,
+    render.add_argument("--azimuth", type=finite, default=30.0,
                         help="degrees around z (default 30)")
-    render.add_argument("--elevation", type=float, default=20.0,
+    render.add_argument("--elevation", type=finite, default=20.0,
                         help="degrees above xy (default 20)")
     render.add_argument("--fit", default="content", choices=("content", "box"),
                         help="frame what the isovalue or transfer function shows (default) or "
@@ -59,10 +60,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_render_options(render)
     render.add_argument("--budget", help="multiscale (OME-Zarr) volumes: RAM for bricks, e.g. "
                         "512MiB or 2GiB (default 2GiB)")
-    render.add_argument("--lod", type=float, help="multiscale volumes: refine while a voxel "
+    render.add_argument("--lod", type=finite, help="multiscale volumes: refine while a voxel "
                         "covers more than this many pixels (default 1)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
+    add_input_options(render)
     _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
 
 
@@ -78,13 +80,13 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--prefilter", action="store_true",
                         help="B-spline models: interpolate the voxels instead of smoothing them")
     render.add_argument("--size", default="512x512", help="image WIDTHxHEIGHT (default 512x512)")
-    render.add_argument("--distance", type=float, help="camera distance from the volume centre")
-    render.add_argument("--fov", type=float, default=30.0, help="vertical field of view, degrees")
-    render.add_argument("--zoom", type=float, default=1.0, help="magnification (default 1)")
+    render.add_argument("--distance", type=finite, help="camera distance from the volume centre")
+    render.add_argument("--fov", type=finite, default=30.0, help="vertical field of view, degrees")
+    render.add_argument("--zoom", type=finite, default=1.0, help="magnification (default 1)")
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
     render.add_argument("--method", default="exact", choices=("exact", "sampled"),
                         help="exact analytic roots (default) or fixed-step sampling")
-    render.add_argument("--step", type=float, default=0.25,
+    render.add_argument("--step", type=finite, default=0.25,
                         help="sampling step in voxels for --method sampled (default 0.25)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default from the data)")
@@ -104,7 +106,7 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="clip plane keeping nx*x+ny*y+nz*z+d >= 0 (repeatable)")
     render.add_argument("--crop", metavar="X0,X1,Y0,Y1,Z0,Z1", help="world-space box to keep")
     render.add_argument("--texture", choices=("noise", "checker"), help="solid texture")
-    render.add_argument("--texture-scale", type=float, default=0.1,
+    render.add_argument("--texture-scale", type=finite, default=0.1,
                         help="checker cube / noise feature size in world units (default 0.1)")
     render.add_argument("--shading", default="phong", choices=("phong", "cel"),
                         help="smooth Blinn-Phong (default) or 4-band cel shading")
@@ -117,7 +119,7 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                              "2^j x step")
     render.add_argument("--adaptive", action="store_true",
                         help="DVR opacity-adaptive step (up to 8 x --step; uses a 3D table)")
-    render.add_argument("--termination", type=float,
+    render.add_argument("--termination", type=finite,
                         help="DVR early ray termination opacity, e.g. 0.99")
 
 
@@ -216,12 +218,28 @@ def _fit(args: argparse.Namespace, vol: sc.Volume, kwargs: dict) -> object:
 
 
 def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
-    """Validate the options :func:`add_render_options` added that need no volume; returns the
-    image ``(width, height)``."""
-    if args.method == "sampled" and not args.step > 0:
-        raise sc.ParameterError(f"--step must be positive, got {args.step}")
+    """Validate the options :func:`add_render_options` added that need no volume (ranges of the
+    numeric options, which argparse has made finite, against :mod:`splinecast.limits`; options
+    the mode would ignore); returns the image ``(width, height)``."""
+    if len(args.size) > 32:
+        shown = limits.shorten(args.size)
+        raise sc.ParameterError(f"--size must look like WIDTHxHEIGHT, got {shown}")
+    width, height = sc.camera.parse_size(args.size)
+    limits.check_image(width, height, "--size")
+    if not 0 < args.fov < 180:
+        raise sc.ParameterError(f"--fov must be between 0 and 180 degrees, got {args.fov:g}")
+    limits.check_finite_number(args.zoom, "--zoom", lo=1e-6, hi=1e6)
+    if args.distance is not None:
+        limits.check_finite_number(args.distance, "--distance", lo=0, lo_open=True)
+    if args.method == "sampled" or args.mode == "dvr":
+        limits.check_finite_number(args.step, "--step (voxels)", lo=limits.MIN_STEP)
+    if args.iterations is not None:
+        limits.check_count(args.iterations, "--iterations", hi=limits.MAX_ROOT_ITERATIONS)
+    limits.check_finite_number(args.texture_scale, "--texture-scale", lo=0, lo_open=True)
+    if args.termination is not None:
+        limits.check_finite_number(args.termination, "--termination", lo=0, hi=1, lo_open=True)
     _refuse_ignored_options(args)
-    return sc.camera.parse_size(args.size)
+    return width, height
 
 
 def model_options(args: argparse.Namespace) -> dict:
@@ -229,7 +247,9 @@ def model_options(args: argparse.Namespace) -> dict:
     refusing those the model does not take."""
     if args.model not in sc.MODELS:
         valid = ", ".join(sc.MODELS)
-        raise sc.ParameterError(f"--model must be one of {valid}, got {args.model!r}")
+        raise sc.ParameterError(
+            f"--model must be one of {valid}, got {limits.shorten(args.model)}"
+        )
     options = {}
     accepted = inspect.signature(sc.MODELS[args.model]).parameters
     for name, flag in (("root_finder", "--root-finder"), ("iterations", "--iterations"),
@@ -275,10 +295,12 @@ def run(args: argparse.Namespace) -> int:
     width, height = check_render_args(args)
 
     start = time.perf_counter()
-    vol = sc.read(args.file, array=args.array)
+    vol = sc.read(args.file, array=args.array, allow_external=args.allow_external_data or None)
     read_s = time.perf_counter() - start
     multiscale = not isinstance(vol, sc.Volume)
     _refuse_multiscale_options(args, multiscale)
+    if args.method == "sampled" or args.mode == "dvr":
+        limits.check_step(args.step, "--step", vol.shape)
     with contextlib.ExitStack() as stack:
         options = model_options(args)
         scene = None
@@ -299,6 +321,8 @@ def run(args: argparse.Namespace) -> int:
         for note in notes:
             log(args, note)
         if args.smooth:
+            limits.check_memory(limits.nbytes(vol.shape, 8) * 2, "smoothing the volume",
+                                "--smooth")
             vol = sc.smooth(vol, args.smooth)
             log(args, f"smoothed with a {args.smooth}^3 Gaussian")
         start = time.perf_counter()

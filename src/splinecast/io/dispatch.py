@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .. import limits
 from ..errors import ParameterError, ReadError
 from ..volume import SUPPORTED_DTYPES, Volume
 from .sidecar import find_sidecar
@@ -46,6 +47,8 @@ _NIFTI1_MAGIC = (b"n+1\0", b"ni1\0")
 _NIFTI2_MAGIC = (b"n+2\0", b"ni2\0")
 #: Enough bytes for every signature below (the NIfTI-1 magic sits at 344..348).
 _HEAD_BYTES = 352
+#: Formats whose header may name other files: their readers take ``allow_external``.
+_NAMES_FILES = {"metaimage", "nrrd", "sidecar", "dicom", "nifti", "tiff"}
 
 
 def sniff(path: Path) -> str | None:
@@ -134,7 +137,12 @@ def _reader(kind: str) -> Callable[[Path], Volume]:
     return read_sidecar
 
 
-def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume | MultiscaleVolume:
+def read(
+    path: str | os.PathLike[str],
+    *,
+    array: str | None = None,
+    allow_external: bool | None = None,
+) -> Volume | MultiscaleVolume:
     """Read a volume from a file, a DICOM folder, a Zarr folder or a ``demo:`` name.
 
     Parameters
@@ -150,6 +158,11 @@ def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume | 
     array : str, optional
         The point-data array to read from a VTK file that holds several (the error message of a
         read without it lists their names). Other formats hold one array and refuse it.
+    allow_external : bool, optional
+        Let a header (MetaImage ``ElementDataFile``, NRRD ``data file``, a sidecar's
+        ``data_file``, a NIfTI ``.img``, an OME-TIFF's other files, a DICOM folder's symbolic
+        links) name files outside its own folder. Default: no, unless
+        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``.
 
     Returns
     -------
@@ -163,8 +176,10 @@ def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume | 
     Raises
     ------
     ReadError
-        Missing file, unknown format, bad header, truncated data, unsupported content, or a
-        missing optional library (with the command that installs it).
+        Missing file, unknown format, bad header, truncated data, unsupported content, a size
+        beyond the limits or the memory available (see :mod:`splinecast.limits`), a data file
+        outside the header's folder, or a missing optional library (with the command that
+        installs it).
     ParameterError
         A bad ``demo:`` name or parameter.
 
@@ -181,10 +196,15 @@ def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume | 
         from .synthetic import demo_from_uri
 
         return demo_from_uri(path)
-    path = Path(os.fspath(path))
-    if not path.exists():
+    path = limits.check_path_text(path, "file", ReadError)
+    try:
+        is_dir = path.is_dir()
+        exists = is_dir or path.exists()
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if not exists:
         raise ReadError(f"{path}: no such file or folder")
-    if path.is_dir():
+    if is_dir:
         if array is not None:
             raise ParameterError(f"array={array!r} applies to VTK files, not to the folder {path}")
         from .omezarr import is_zarr, open_zarr
@@ -193,7 +213,8 @@ def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume | 
             return open_zarr(path)
         from .dicom import read_dicom_series
 
-        return read_dicom_series(path)
+        return read_dicom_series(path, allow_external=allow_external)
+    limits.check_regular_file(path, str(path))  # a device or pipe would block or never end
     by_content = sniff(path)
     by_extension = _extension_format(path)
     if by_content is not None:
@@ -216,6 +237,8 @@ def read(path: str | os.PathLike[str], *, array: str | None = None) -> Volume | 
         return _reader(kind)(path, array)  # type: ignore[call-arg]
     if array is not None:
         raise ParameterError(f"array={array!r} applies to VTK files (.vti, .vtk), not to {path}")
+    if kind in _NAMES_FILES:
+        return _reader(kind)(path, allow_external=allow_external)  # type: ignore[call-arg]
     return _reader(kind)(path)
 
 
@@ -255,7 +278,7 @@ def write(volume: Volume, path: str | os.PathLike[str]) -> None:
         failure while writing. Nothing is left behind on failure: every file is written to a
         temporary beside its target and renamed into place only when complete.
     """
-    path = Path(os.fspath(path))
+    path = limits.check_path_text(path, "output")
     suffix = path.suffix.lower()
     if suffix not in _WRITERS:
         raise ParameterError(

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import limits
 from .._atomic import atomic_outputs
 from ..errors import ParameterError, ReadError
 from ..volume import Volume
@@ -37,6 +38,7 @@ _MET_NAMES = {dtype: name for name, dtype in MET_TYPES.items()}
 
 #: A header longer than this is not a header (protects against reading a huge binary file).
 _MAX_HEADER_LINES = 200
+_MAX_LINE_BYTES = 1 << 16
 
 
 def _parse_header(path: Path) -> tuple[dict[str, str], int]:
@@ -45,9 +47,11 @@ def _parse_header(path: Path) -> tuple[dict[str, str], int]:
     try:
         with open(path, "rb") as fh:
             for number in range(1, _MAX_HEADER_LINES + 1):
-                raw = fh.readline()
+                raw = fh.readline(_MAX_LINE_BYTES + 1)
                 if not raw:
                     break
+                if len(raw) > _MAX_LINE_BYTES:
+                    raise ReadError(f"{path}: not a MetaImage header (line {number} is too long)")
                 try:
                     line = raw.decode("utf-8").strip()
                 except UnicodeDecodeError:
@@ -76,7 +80,7 @@ def _numbers(fields: dict[str, str], key: str, path: Path, count: int = 3) -> li
     except ValueError:
         values = []
     if len(values) != count:
-        raise ReadError(f"{path}: {key} must be {count} numbers, got {fields[key]!r}")
+        raise ReadError(f"{path}: {key} must be {count} numbers, got {limits.shorten(fields[key])}")
     return values
 
 
@@ -88,33 +92,37 @@ def _flag(fields: dict[str, str], key: str, default: bool, path: Path) -> bool:
         return True
     if value in ("false", "0", "no"):
         return False
-    raise ReadError(f"{path}: {key} must be True or False, got {fields[key]!r}")
+    raise ReadError(f"{path}: {key} must be True or False, got {limits.shorten(fields[key])}")
 
 
-def read_metaimage(path: Path) -> Volume:
+def read_metaimage(path: Path, *, allow_external: bool | None = None) -> Volume:
     """Read a MetaImage ``.mhd``/``.mha`` file; the voxels are memory-mapped.
 
-    ``TransformMatrix`` is not applied: a non-identity matrix only triggers a warning.
+    ``TransformMatrix`` is not applied: a non-identity matrix only triggers a warning. The data
+    file must lie in the header's folder or below unless ``allow_external`` (see
+    :func:`splinecast.limits.check_data_file`).
     """
     fields, header_end = _parse_header(path)
     if fields.get("objecttype", "Image").lower() != "image":
-        raise ReadError(f"{path}: ObjectType is {fields['objecttype']}, expected Image")
+        shown = limits.shorten(fields["objecttype"])
+        raise ReadError(f"{path}: ObjectType is {shown}, expected Image")
     ndims = fields.get("ndims")
     if ndims != "3":
-        raise ReadError(f"{path}: NDims must be 3, got {ndims}")
+        raise ReadError(f"{path}: NDims must be 3, got {limits.shorten(ndims)}")
     dims = _numbers(fields, "dimsize", path)
     if dims is None:
         raise ReadError(f"{path}: DimSize is missing")
-    if any(d != int(d) or d < 1 for d in dims):
-        raise ReadError(f"{path}: DimSize must be positive integers, got {fields['dimsize']!r}")
-    shape = (int(dims[0]), int(dims[1]), int(dims[2]))
+    shape = limits.check_shape(dims, f"{path}: DimSize", error=ReadError)
     element = fields.get("elementtype", "").upper()
     if element not in MET_TYPES:
         valid = ", ".join(MET_TYPES)
-        raise ReadError(f"{path}: ElementType {element or '(missing)'} not supported ({valid})")
+        shown = limits.shorten(element) if element else "(missing)"
+        raise ReadError(f"{path}: ElementType {shown} not supported ({valid})")
     channels = fields.get("elementnumberofchannels", "1")
     if channels != "1":
-        raise ReadError(f"{path}: ElementNumberOfChannels is {channels}; only 1 is supported")
+        raise ReadError(
+            f"{path}: ElementNumberOfChannels is {limits.shorten(channels)}; only 1 is supported"
+        )
     if _flag(fields, "compresseddata", False, path):
         raise ReadError(f"{path}: CompressedData = True is not supported; save uncompressed")
     if not _flag(fields, "binarydata", True, path):
@@ -141,17 +149,22 @@ def read_metaimage(path: Path) -> Volume:
     try:
         header_size = int(fields.get("headersize", "0"))
     except ValueError:
-        raise ReadError(
-            f"{path}: HeaderSize must be an integer, got {fields['headersize']!r}"
-        ) from None
+        header_size = None
+    if header_size is None or header_size < -1:
+        shown = limits.shorten(fields["headersize"])
+        raise ReadError(f"{path}: HeaderSize must be an integer >= -1, got {shown}")
     datafile = fields["elementdatafile"]
     if datafile.upper() == "LOCAL":
         data_path = path
         offset = -1 if header_size == -1 else header_end + header_size
     elif datafile.upper().startswith("LIST") or "%" in datafile:
-        raise ReadError(f"{path}: ElementDataFile {datafile!r} (file per slice) is not supported")
+        raise ReadError(
+            f"{path}: ElementDataFile {limits.shorten(datafile)} (file per slice) is not supported"
+        )
     else:
-        data_path = path.parent / datafile
+        data_path = limits.check_data_file(
+            path, datafile, "ElementDataFile", allow_external=allow_external
+        )
         offset = header_size
     data = map_raw(data_path, shape, dtype, offset=offset, order="F", header=path.name)
     return finish_volume(

@@ -1,22 +1,30 @@
-"""NRRD: ``.nrrd`` (header and data in one file) and ``.nhdr`` (detached header), via pynrrd.
+"""NRRD: ``.nrrd`` (header and data in one file) and ``.nhdr`` (detached header).
 
-Raw-encoded data, attached or detached, is memory-mapped after a size check; compressed or text
-encodings are decoded by pynrrd into memory. The geometry comes from ``space directions`` (the
-length of each axis vector is the spacing) or ``spacings``, and ``space origin``. The coordinates
-are kept in the file's own space (e.g. LPS); its name is stored in ``metadata["space"]``.
+pynrrd parses the header (read here up to :data:`_MAX_HEADER_BYTES`); the data is read here so that
+every size is checked first: raw-encoded data, attached or detached, is memory-mapped after a size
+check; gzip and bzip2 data is decompressed exactly as far as the header's byte count (never
+further) after a memory check; text data is read with a bounded size. A detached data file must
+lie in the header's folder or below (see :func:`splinecast.limits.check_data_file`). The geometry
+comes from ``space directions`` (the length of each axis vector is the spacing) or ``spacings``,
+and ``space origin``. The coordinates are kept in the file's own space (e.g. LPS); its name is
+stored in ``metadata["space"]``.
 """
 
 from __future__ import annotations
 
+import bz2
+import gzip
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
+from .. import limits
 from .._atomic import atomic_outputs
 from ..errors import ParameterError, ReadError
 from ..volume import Volume
-from ._common import finish_volume, fmt_shape, native, one_line, require
+from ._common import check_in_memory, finish_volume, fmt_shape, native, require, third_party
 from .orientation import align_to_world
 from .rawfile import map_raw
 
@@ -37,9 +45,24 @@ _NRRD_TYPES = {
     "float": "f4",
     "double": "f8",
 }
+#: Encodings read here, by every name the format allows.
+_COMPRESSED: dict[str, Callable[[IO[bytes]], IO[bytes]]] = {
+    "gzip": lambda raw: gzip.GzipFile(fileobj=raw, mode="rb"),
+    "gz": lambda raw: gzip.GzipFile(fileobj=raw, mode="rb"),
+    "bzip2": lambda raw: bz2.BZ2File(raw, mode="rb"),
+    "bz2": lambda raw: bz2.BZ2File(raw, mode="rb"),
+}
+_TEXT = ("text", "txt", "ascii")
+#: A header longer than this is not a NRRD header.
+_MAX_HEADER_BYTES = 1 << 20
+#: Most characters a text-encoded value may take, with its separator (bounds a text read).
+_MAX_TEXT_CHARS = 64
+#: Largest "line skip" (lines) and decompressed "byte skip" (bytes) accepted.
+_MAX_LINE_SKIP = 1 << 16
+_MAX_BYTE_SKIP = 1 << 30
 
 
-def read_nrrd(path: Path) -> Volume:
+def read_nrrd(path: Path, *, allow_external: bool | None = None) -> Volume:
     """Read a ``.nrrd`` or ``.nhdr`` file (3 dimensions, one value per voxel).
 
     Oblique ``space directions`` are snapped to the axes with a warning (the rotation is ignored);
@@ -47,76 +70,159 @@ def read_nrrd(path: Path) -> Volume:
     """
     nrrd = require("nrrd", path)
     label = str(path)
-    try:
-        with open(path, "rb") as fh:
-            header = nrrd.read_header(fh)
-            header_end = fh.tell()
-    except FileNotFoundError:
-        raise ReadError(f"{label}: no such file") from None
-    except OSError as exc:
-        raise ReadError(f"{label}: cannot read: {exc.strerror}") from None
-    except (nrrd.NRRDError, ValueError, StopIteration, UnicodeDecodeError) as exc:
-        raise ReadError(f"{label}: bad NRRD header ({one_line(exc)})") from None
+    lines, header_end = _header_lines(path)
+    with third_party(label, "bad NRRD header"):
+        header = nrrd.read_header(lines)
 
-    sizes = [int(n) for n in np.atleast_1d(header.get("sizes", []))]
+    with third_party(label, "bad NRRD sizes"):
+        sizes = list(np.atleast_1d(header.get("sizes", [])).tolist())
     if header.get("dimension") != 3 or len(sizes) != 3:
-        raise ReadError(
-            f"{label}: only 3D NRRD volumes are supported, this one has sizes {sizes or '(none)'}"
-        )
+        shown = limits.shorten(sizes) if sizes else "(none)"
+        raise ReadError(f"{label}: only 3D NRRD volumes are supported, this one has sizes {shown}")
+    shape = limits.check_shape(sizes, f"{label}: sizes", error=ReadError)
     type_name = str(header.get("type", "")).lower()
     if type_name not in _NRRD_TYPES:
-        raise ReadError(f"{label}: NRRD type {type_name or '(missing)'!r} is not supported")
+        shown = limits.shorten(type_name) if type_name else "(missing)"
+        raise ReadError(f"{label}: NRRD type {shown} is not supported")
     dtype = np.dtype(_NRRD_TYPES[type_name])
     if dtype.itemsize > 1:
         endian = header.get("endian", "little")
         if endian not in ("little", "big"):
-            raise ReadError(f"{label}: endian must be little or big, got {endian!r}")
+            raise ReadError(f"{label}: endian must be little or big, got {limits.shorten(endian)}")
         dtype = dtype.newbyteorder("<" if endian == "little" else ">")
     encoding = str(header.get("encoding", "")).lower()
 
+    data_path, offset = _data_location(path, header, header_end, allow_external)
+    line_skip = limits.check_count(header.get("line skip", header.get("lineskip", 0)),
+                                   f"{label}: line skip", lo=0, hi=_MAX_LINE_SKIP, error=ReadError)
+    byte_skip = limits.check_count(header.get("byte skip", header.get("byteskip", 0)),
+                                   f"{label}: byte skip", lo=-1, hi=_MAX_BYTE_SKIP,
+                                   error=ReadError)
+    if line_skip:
+        offset = _skip_lines(data_path, offset, line_skip)
     if encoding == "raw":
-        data = _map_raw_nrrd(path, header, header_end, tuple(sizes), dtype)
+        offset = -1 if byte_skip == -1 else offset + byte_skip
+        data = map_raw(data_path, shape, dtype, offset=offset, order="F", header=path.name)
+    elif encoding in _COMPRESSED:
+        if byte_skip == -1:
+            raise ReadError(f"{label}: byte skip -1 is not allowed with {encoding} data")
+        data = _read_compressed(data_path, offset, byte_skip, _COMPRESSED[encoding], shape,
+                                dtype, label)
+    elif encoding in _TEXT:
+        data = _read_text(data_path, offset, shape, dtype, label)
     else:
-        try:
-            data, _ = nrrd.read(str(path), index_order="F")
-        except (nrrd.NRRDError, OSError, ValueError, EOFError) as exc:
-            raise ReadError(f"{label}: cannot read the NRRD data ({one_line(exc)})") from None
-        data = native(data)
+        shown = limits.shorten(encoding) if encoding else "(missing)"
+        raise ReadError(f"{label}: NRRD encoding {shown} is not supported "
+                        "(use raw, gzip, bzip2 or text)")
 
-    matrix, origin = _geometry(header, label)
+    with third_party(label, "bad NRRD geometry"):
+        matrix, origin = _geometry(header, label)
     data, spacing, origin = align_to_world(data, matrix, origin, label)
     metadata: dict[str, Any] = {"format": "nrrd", "encoding": encoding}
     if "space" in header:
-        metadata["space"] = header["space"]
+        metadata["space"] = str(header["space"])[:200]
     return finish_volume(data, spacing, origin, path, metadata=metadata)
 
 
-def _map_raw_nrrd(
-    path: Path, header: dict[str, Any], header_end: int, shape: tuple[int, ...], dtype: np.dtype
-) -> np.ndarray:
+def _header_lines(path: Path) -> tuple[list[bytes], int]:
+    """The header's lines (up to the blank line that ends it) and the offset just after it."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_MAX_HEADER_BYTES + 1)
+    except OSError as exc:
+        raise ReadError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    lines = head.splitlines(keepends=True)
+    end = 0
+    for number, line in enumerate(lines):
+        if number and not line.rstrip():
+            return lines[:number], end + len(line)
+        end += len(line)
+    if len(head) > _MAX_HEADER_BYTES:
+        raise ReadError(f"{path}: NRRD header longer than {_MAX_HEADER_BYTES} bytes")
+    return lines, len(head)  # a detached header: it ends with the file
+
+
+def _data_location(path: Path, header: dict[str, Any], header_end: int,
+                   allow_external: bool | None) -> tuple[Path, int]:
+    """The file holding the voxels and where they start (before line and byte skips)."""
     data_file = header.get("data file", header.get("datafile"))
     if data_file is None:
-        data_path, offset = path, header_end
-    else:
-        data_file = str(data_file)
-        if data_file.upper().startswith("LIST") or " " in data_file.strip():
-            raise ReadError(f"{path}: multi-file NRRD data ({data_file!r}) is not supported")
-        data_path, offset = path.parent / data_file, 0
-    line_skip = int(header.get("line skip", header.get("lineskip", 0)))
-    byte_skip = int(header.get("byte skip", header.get("byteskip", 0)))
-    if line_skip < 0 or byte_skip < -1:
-        raise ReadError(f"{path}: line skip must be >= 0 and byte skip >= -1")
-    if line_skip:
-        try:
-            with open(data_path, "rb") as fh:
-                fh.seek(offset)
-                for _ in range(line_skip):
-                    fh.readline()
-                offset = fh.tell()
-        except OSError as exc:
-            raise ReadError(f"{data_path}: cannot read: {exc.strerror}") from None
-    offset = -1 if byte_skip == -1 else offset + byte_skip
-    return map_raw(data_path, shape, dtype, offset=offset, order="F", header=path.name)
+        return path, header_end
+    data_file = str(data_file)
+    if data_file.upper().startswith("LIST") or " " in data_file.strip():
+        raise ReadError(
+            f"{path}: multi-file NRRD data ({limits.shorten(data_file)}) is not supported"
+        )
+    return limits.check_data_file(path, data_file, "data file",
+                                  allow_external=allow_external), 0
+
+
+def _skip_lines(data_path: Path, offset: int, count: int) -> int:
+    """Offset after ``count`` lines from ``offset`` (each at most one header's length)."""
+    with third_party(str(data_path), "cannot skip lines"):
+        limits.check_regular_file(data_path, str(data_path))
+        with open(data_path, "rb") as fh:
+            fh.seek(offset)
+            for _ in range(count):
+                if len(fh.readline(_MAX_HEADER_BYTES + 1)) > _MAX_HEADER_BYTES:
+                    raise ReadError(f"{data_path}: a skipped line is longer than "
+                                    f"{_MAX_HEADER_BYTES} bytes")
+            return fh.tell()
+
+
+def _read_compressed(data_path: Path, offset: int, byte_skip: int, opener: Any,
+                     shape: tuple[int, ...], dtype: np.dtype, label: str) -> np.ndarray:
+    """Decompress exactly the header's byte count (after ``byte_skip`` bytes), no further."""
+    expected = limits.nbytes(shape, dtype.itemsize)
+    check_in_memory(shape, dtype, label, copies=2 if not dtype.isnative else 1)
+    limits.check_regular_file(data_path, str(data_path))
+    with third_party(str(data_path), "cannot open the compressed data"):
+        raw = open(data_path, "rb")
+    with raw:
+        with third_party(str(data_path), "corrupt compressed data"):
+            raw.seek(offset)
+            stream = opener(raw)
+            _discard(stream, byte_skip, str(data_path))
+        buffer = limits.read_exact(stream, expected, str(data_path), "compressed data")
+    data = buffer.view(dtype).reshape(shape, order="F")
+    return native(data, label)
+
+
+def _discard(stream: IO[bytes], count: int, name: str) -> None:
+    while count > 0:
+        chunk = stream.read(min(count, 1 << 20))
+        if not chunk:
+            raise ReadError(f"{name}: the compressed data ends within its byte skip")
+        count -= len(chunk)
+
+
+def _read_text(data_path: Path, offset: int, shape: tuple[int, ...], dtype: np.dtype,
+               label: str) -> np.ndarray:
+    """Whitespace-separated numbers, bounded by :data:`_MAX_TEXT_CHARS` per value."""
+    count = limits.nbytes(shape, 1)
+    # The tokens briefly live as Python strings and as float64: budget that, not just the result.
+    check_in_memory(shape, np.float64, label, copies=8)
+    size = limits.check_regular_file(data_path, str(data_path)).st_size
+    budget = count * _MAX_TEXT_CHARS + 4096
+    if size - offset > budget:
+        raise ReadError(f"{data_path}: {size - offset} bytes of text for {count} values; "
+                        "longer than the header allows")
+    with third_party(str(data_path), "cannot read the text data"):
+        with open(data_path, "rb") as fh:
+            fh.seek(offset)
+            tokens = fh.read(budget).split()
+    if len(tokens) != count:
+        raise ReadError(f"{data_path}: expected {count} values for {fmt_shape(shape)}, "
+                        f"found {len(tokens)}")
+    with third_party(str(data_path), "text data holds a value that is not a number"):
+        values = np.array(tokens, dtype=np.float64)
+    del tokens
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        if not (np.all(values == np.round(values)) and values.min() >= info.min
+                and values.max() <= info.max):
+            raise ReadError(f"{data_path}: text values do not fit the {dtype.name} type")
+    return values.astype(dtype.newbyteorder("=")).reshape(shape, order="F")
 
 
 def _geometry(header: dict[str, Any], label: str) -> tuple[np.ndarray, np.ndarray]:

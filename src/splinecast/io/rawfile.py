@@ -14,8 +14,9 @@ from typing import BinaryIO
 
 import numpy as np
 
+from .. import limits
 from ..errors import ReadError
-from ._common import check_dtype, fmt_shape, native
+from ._common import check_dtype, fmt_shape, native, third_party
 
 __all__ = ["map_raw", "write_raw"]
 
@@ -56,19 +57,17 @@ def map_raw(
         big-endian data.
     """
     path = Path(path)
-    dtype = check_dtype(np.dtype(dtype), str(path))
-    if len(shape) != 3 or min(shape) < 1:
-        raise ReadError(f"{path}: the header gives an impossible size {fmt_shape(shape)}")
+    dtype = check_dtype(dtype, str(path))
+    shape = limits.check_shape(shape, f"{header or path}: the size", error=ReadError)
     if order not in ("F", "C"):
         raise ReadError(f"{path}: voxel order must be 'F' (x fastest) or 'C', got {order!r}")
-    expected = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
-    try:
-        size = path.stat().st_size
-    except FileNotFoundError:
+    offset = limits.check_count(offset, f"{header or path}: the header size", lo=-1,
+                                error=ReadError)
+    expected = limits.nbytes(shape, dtype.itemsize)
+    if not path.exists():
         named = f" (named in {header})" if header else ""
-        raise ReadError(f"{path}: data file not found{named}") from None
-    except OSError as exc:
-        raise ReadError(f"{path}: cannot read the data file: {exc.strerror}") from None
+        raise ReadError(f"{path}: data file not found{named}")
+    size = limits.check_regular_file(path, str(path)).st_size
     if offset == -1:
         offset = size - expected
         if offset < 0:
@@ -89,11 +88,9 @@ def map_raw(
         raise ReadError(
             f"{path}: {wanted}, file has {size} (longer than {where}; wrong size or type?)"
         )
-    try:
+    with third_party(str(path), "cannot memory-map the data"):
         data = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=shape, order=order)
-    except (OSError, ValueError) as exc:
-        raise ReadError(f"{path}: cannot memory-map the data: {exc}") from None
-    return native(data)
+    return native(data, str(path))
 
 
 def write_raw(fh: BinaryIO, data: np.ndarray) -> None:

@@ -9,8 +9,10 @@ The sidecar is the simplest way to hand splinecast a block of voxels from any pr
 ``shape`` and ``dtype`` (a numpy name) are required. ``order`` is ``"F"`` (x varies fastest, the
 default, as in MetaImage and NRRD) or ``"C"`` (z fastest). ``header_bytes`` bytes are skipped at
 the start of the data file (``-1``: the voxels are the last bytes of the file). An optional
-``data_file`` names the data file relative to the sidecar; otherwise it is the sidecar's name
-without ``.json`` (``foo.raw.json``) or with ``.raw`` instead (``foo.json``).
+``data_file`` names the data file relative to the sidecar (in its folder or below, unless external
+files are allowed); otherwise it is the sidecar's name without ``.json`` (``foo.raw.json``) or
+with ``.raw`` instead (``foo.json``). The sidecar itself is read with the bounds of
+:func:`splinecast.limits.load_json`.
 """
 
 from __future__ import annotations
@@ -19,12 +21,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from .. import limits
 from .._atomic import atomic_outputs
 from ..errors import ParameterError, ReadError
 from ..volume import Volume
-from ._common import finish_volume
+from ._common import check_dtype, finish_volume
 from .rawfile import map_raw, write_raw
 
 __all__ = ["find_sidecar", "read_sidecar", "write_sidecar"]
@@ -39,14 +40,16 @@ def find_sidecar(data_path: Path) -> Path | None:
     return None
 
 
-def _data_file_of(sidecar: Path, fields: dict[str, Any]) -> Path:
+def _data_file_of(sidecar: Path, fields: dict[str, Any], allow_external: bool | None) -> Path:
     if "data_file" in fields:
-        return sidecar.parent / str(fields["data_file"])
+        return limits.check_data_file(
+            sidecar, fields["data_file"], "'data_file'", allow_external=allow_external
+        )
     stem = sidecar.name[: -len(".json")]
     return sidecar.parent / (stem if Path(stem).suffix else stem + ".raw")
 
 
-def read_sidecar(path: Path) -> Volume:
+def read_sidecar(path: Path, *, allow_external: bool | None = None) -> Volume:
     """Read raw voxels described by a JSON sidecar; ``path`` is either the data or the sidecar.
 
     The voxels are memory-mapped (copied only when big-endian).
@@ -59,45 +62,37 @@ def read_sidecar(path: Path) -> Volume:
         if found is None:
             raise ReadError(f"{path}: no JSON sidecar ({path.name}.json or {path.stem}.json) found")
         sidecar, data_path = found, path
-    try:
-        fields = json.loads(sidecar.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ReadError(f"{sidecar}: no such file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ReadError(f"{sidecar}: not a readable JSON sidecar ({exc})") from None
+    fields = limits.load_json(sidecar, str(sidecar))
     if not isinstance(fields, dict):
         raise ReadError(f"{sidecar}: the sidecar must be a JSON object")
     if data_path is None:
-        data_path = _data_file_of(sidecar, fields)
+        data_path = _data_file_of(sidecar, fields, allow_external)
 
     for key in ("shape", "dtype"):
         if key not in fields:
             raise ReadError(f"{sidecar}: required key '{key}' is missing")
     shape = fields["shape"]
-    if (
-        not isinstance(shape, list)
-        or len(shape) != 3
-        or not all(isinstance(n, int) and n >= 1 for n in shape)
-    ):
+    if not isinstance(shape, list) or not all(isinstance(n, int) for n in shape):
         raise ReadError(f"{sidecar}: 'shape' must be three positive integers [nx, ny, nz]")
-    try:
-        dtype = np.dtype(str(fields["dtype"]))
-    except TypeError:
-        raise ReadError(f"{sidecar}: 'dtype' {fields['dtype']!r} is not a numpy type") from None
+    shape = limits.check_shape(shape, f"{sidecar}: 'shape'", error=ReadError)
+    if not isinstance(fields["dtype"], str):
+        raise ReadError(f"{sidecar}: 'dtype' must be a numpy type name such as \"uint16\"")
+    dtype = check_dtype(fields["dtype"], f"{sidecar}: 'dtype'")
     byte_order = fields.get("byte_order", "little")
     if byte_order not in ("little", "big"):
-        raise ReadError(f"{sidecar}: 'byte_order' must be 'little' or 'big', got {byte_order!r}")
+        raise ReadError(f"{sidecar}: 'byte_order' must be 'little' or 'big', "
+                        f"got {limits.shorten(byte_order)}")
     dtype = dtype.newbyteorder("<" if byte_order == "little" else ">")
     order = fields.get("order", "F")
     if order not in ("F", "C"):
-        raise ReadError(f"{sidecar}: 'order' must be 'F' (x fastest) or 'C', got {order!r}")
-    offset = fields.get("header_bytes", 0)
-    if not isinstance(offset, int) or offset < -1:
-        raise ReadError(f"{sidecar}: 'header_bytes' must be an integer >= -1, got {offset!r}")
+        raise ReadError(f"{sidecar}: 'order' must be 'F' (x fastest) or 'C', "
+                        f"got {limits.shorten(order)}")
+    offset = limits.check_count(fields.get("header_bytes", 0), f"{sidecar}: 'header_bytes'",
+                                lo=-1, error=ReadError)
     spacing = _triple(fields, "spacing", 1.0, sidecar)
     origin = _triple(fields, "origin", 0.0, sidecar)
 
-    data = map_raw(data_path, tuple(shape), dtype, offset=offset, order=order, header=sidecar.name)
+    data = map_raw(data_path, shape, dtype, offset=offset, order=order, header=sidecar.name)
     return finish_volume(
         data, spacing, origin, path,
         metadata={"format": "raw+json", "data_file": str(data_path), "sidecar": str(sidecar)},
@@ -107,13 +102,19 @@ def read_sidecar(path: Path) -> Volume:
 def _triple(fields: dict[str, Any], key: str, default: float, sidecar: Path) -> list[float]:
     value = fields.get(key, default)
     if isinstance(value, int | float) and not isinstance(value, bool):
-        return [float(value)] * 3
-    if isinstance(value, list) and len(value) == 3:
         try:
-            return [float(v) for v in value]
-        except (TypeError, ValueError):
+            return [float(value)] * 3
+        except OverflowError:  # an integer beyond float range
             pass
-    raise ReadError(f"{sidecar}: '{key}' must be a number or a list of 3 numbers, got {value!r}")
+    if isinstance(value, list) and len(value) == 3:
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+            try:
+                return [float(v) for v in value]
+            except OverflowError:  # an integer beyond float range
+                pass
+    raise ReadError(
+        f"{sidecar}: '{key}' must be a number or a list of 3 numbers, got {limits.shorten(value)}"
+    )
 
 
 def write_sidecar(volume: Volume, path: Path) -> None:

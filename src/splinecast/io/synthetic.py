@@ -33,6 +33,7 @@ from urllib.parse import parse_qsl
 
 import numpy as np
 
+from .. import limits
 from ..errors import ParameterError
 from ..volume import Volume
 
@@ -251,16 +252,25 @@ def demo(name: str, size: int = 64, **params: Any) -> Volume:
     ((32, 32, 32), 'low')
     """
     if name not in DEMOS:
-        raise ParameterError(f"unknown demo volume {name!r} (valid: {', '.join(DEMOS)})")
+        raise ParameterError(
+            f"unknown demo volume {limits.shorten(name)} (valid: {', '.join(DEMOS)})"
+        )
     generator, (lo, hi), iso, inside, defaults = DEMOS[name]
     size = _as_int(size, "size")
     if size < 2:
         raise ParameterError(f"size must be at least 2 samples per axis, got {size}")
+    size = limits.check_count(size, f"demo {name!r}: size", lo=2, hi=limits.MAX_AXIS)
     unknown = sorted(set(params) - set(defaults))
     if unknown:
         valid = ", ".join(["size", *defaults])
-        raise ParameterError(f"demo {name!r} has no parameter {unknown[0]!r} (valid: {valid})")
+        shown = limits.shorten(unknown[0])
+        raise ParameterError(f"demo {name!r} has no parameter {shown} (valid: {valid})")
     extra = {key: _as_int(params.get(key, default), key) for key, default in defaults.items()}
+    if "seed" in extra:  # numpy's generators take seeds in [0, 2**128)
+        limits.check_count(extra["seed"], f"demo {name!r}: seed", lo=0, hi=2**64 - 1)
+    # float32 result; the generators' temporaries are planes, small beside it.
+    limits.check_memory(limits.nbytes((size, size, size), 4),
+                        f"a {size}x{size}x{size} float32 volume", f"demo {name!r}: size")
     data = generator(size, **extra)
     label = f"demo:{name}?size={size}"
     # Only non-default extras are named, so the plain name stays "demo:<name>?size=N".
@@ -300,12 +310,11 @@ def _parse_number(value: str, key: str, uri: str) -> int | float:
             return kind(value)
         except ValueError:
             pass
-    raise ParameterError(f"{uri}: parameter {key} must be a number, got {value!r}")
+    raise ParameterError(
+        f"{limits.shorten(uri)}: parameter {limits.shorten(key)} must be a number, "
+        f"got {limits.shorten(value)}"
+    )
 
 
 def _as_int(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise ParameterError(f"{name} must be an integer, got {value!r}")
-    if not np.isfinite(value) or value != int(value):
-        raise ParameterError(f"{name} must be an integer, got {value!r}")
-    return int(value)
+    return limits.check_count(value, name, lo=None)

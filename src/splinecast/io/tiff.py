@@ -5,61 +5,95 @@ taken from ImageJ metadata when present (``spacing`` for z, the XResolution/YRes
 pixels per unit, for x and y); plain TIFF resolution tags are ignored because most writers fill
 them with a meaningless 72 dpi, so other files get spacing 1. Uncompressed contiguous files are
 memory-mapped.
+
+A multi-file OME-TIFF names its other files in its OME-XML (``UUID FileName``); tifffile would
+open them wherever they are, so the names are checked first like any header's data file (in the
+file's folder or below, unless external files are allowed).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .. import limits
 from ..errors import ReadError
 from ..volume import Volume
-from ._common import finish_volume, fmt_shape, one_line, require
+from ._common import check_dtype, check_in_memory, finish_volume, fmt_shape, require, third_party
 
 __all__ = ["read_tiff"]
 
 
-def read_tiff(path: Path) -> Volume:
-    """Read the first image series of a TIFF file as a 3D volume."""
+def read_tiff(path: Path, *, allow_external: bool | None = None) -> Volume:
+    """Read the first image series of a TIFF file as a 3D volume.
+
+    The series' shape and type are checked against the limits and the memory available before
+    any pixel is decoded.
+    """
     tifffile = require("tifffile", path)
     label = str(path)
-    try:
-        with tifffile.TiffFile(path) as tif:
-            series = tif.series[0]
-            axes = str(series.axes)
-            shape = tuple(int(n) for n in series.shape)
-            imagej = tif.imagej_metadata or {}
-            page = tif.pages[0]
-            xres = _resolution(page, "XResolution")
-            yres = _resolution(page, "YResolution")
-            data = _memmap(tifffile, path)
-            if data is None or data.shape != shape:
-                data = series.asarray()
-    except FileNotFoundError:
-        raise ReadError(f"{label}: no such file") from None
-    except Exception as exc:  # tifffile raises TiffFileError, ValueError, struct.error, ...
-        raise ReadError(f"{label}: not a readable TIFF ({one_line(exc)})") from None
+    with third_party(label, "not a readable TIFF"):
+        with tifffile.TiffFile(path, _multifile=False) as tif:
+            multifile = _other_files_allowed(tif.ome_metadata, path, allow_external)
+    with third_party(label, "not a readable TIFF"), \
+            tifffile.TiffFile(path, _multifile=multifile) as tif:
+        series = tif.series[0]
+        axes = str(series.axes)
+        shape = tuple(int(n) for n in series.shape)
+        dtype = series.dtype
+        imagej = tif.imagej_metadata or {}
+        page = tif.pages[0]
+        xres = _resolution(page, "XResolution")
+        yres = _resolution(page, "YResolution")
+        for channel_axis in ("S", "C"):
+            if channel_axis in axes and shape[axes.index(channel_axis)] > 1:
+                raise ReadError(f"{label}: colour/multi-channel TIFF (axes {axes}) is not "
+                                "supported")
+        keep = [a for a, n in enumerate(shape) if n > 1 or axes[a] in "YX"]
+        if len(keep) < 3:
+            raise ReadError(f"{label}: a single 2D image ({fmt_shape(shape)}), expected a stack")
+        if len(keep) > 3 or axes[keep[-2]] != "Y" or axes[keep[-1]] != "X":
+            raise ReadError(f"{label}: a {len(keep)}D image (axes {axes}), expected a (z, y, x) "
+                            "stack")
+        limits.check_shape([shape[a] for a in keep], f"{label}: the image size", error=ReadError)
+        if dtype is None:
+            raise ReadError(f"{label}: the pages differ in pixel type")
+        dtype = check_dtype(dtype, label)
+        data = _memmap(tifffile, path)
+        if data is None or data.shape != shape:
+            check_in_memory(shape, dtype, label)
+            data = series.asarray()
+    if data.shape != shape:
+        raise ReadError(f"{label}: decoded {fmt_shape(data.shape)} pixels, the tags give "
+                        f"{fmt_shape(shape)}")
 
-    for channel_axis in ("S", "C"):
-        if channel_axis in axes and shape[axes.index(channel_axis)] > 1:
-            raise ReadError(f"{label}: colour/multi-channel TIFF (axes {axes}) is not supported")
-    keep = [a for a, n in enumerate(shape) if n > 1 or axes[a] in "YX"]
-    if len(keep) < 3:
-        raise ReadError(f"{label}: a single 2D image ({fmt_shape(shape)}), expected a stack")
-    if len(keep) > 3 or axes[keep[-2]] != "Y" or axes[keep[-1]] != "X":
-        raise ReadError(f"{label}: a {len(keep)}D image (axes {axes}), expected a (z, y, x) stack")
     index = tuple(slice(None) if a in keep else 0 for a in range(len(shape)))
     data = data[index].transpose(2, 1, 0)
 
     spacing = [1.0, 1.0, 1.0]
     metadata: dict[str, Any] = {"format": "tiff", "axes": axes}
     if imagej:
-        spacing = [xres or 1.0, yres or 1.0, float(imagej.get("spacing", 1.0) or 1.0)]
+        z = imagej.get("spacing", 1.0) or 1.0
+        z = limits.check_finite_number(z, f"{label}: ImageJ spacing", lo=0, lo_open=True,
+                                       error=ReadError)
+        spacing = [xres or 1.0, yres or 1.0, z]
         if imagej.get("unit"):
-            metadata["units"] = str(imagej["unit"])
+            metadata["units"] = str(imagej["unit"])[:200]
     return finish_volume(data, spacing, 0.0, path, metadata=metadata)
+
+
+def _other_files_allowed(ome: str | None, path: Path, allow_external: bool | None) -> bool:
+    """Whether tifffile may open the other files of a multi-file OME-TIFF (raises a ReadError
+    naming the first one outside the folder)."""
+    if not ome:
+        return False
+    names = re.findall(r"""FileName\s*=\s*["']([^"']*)["']""", ome)
+    for name in names:
+        limits.check_data_file(path, name, "OME-XML FileName", allow_external=allow_external)
+    return bool(names)
 
 
 def _resolution(page: Any, tag_name: str) -> float | None:
@@ -68,14 +102,17 @@ def _resolution(page: Any, tag_name: str) -> float | None:
     if tag is None:
         return None
     value = tag.value
-    num, den = (value if isinstance(value, tuple) else (value, 1))[:2]
-    if not num or not den:
-        return None
-    return float(den) / float(num)
+    try:
+        num, den = (value if isinstance(value, tuple) else (value, 1))[:2]
+        if not num or not den:
+            return None
+        return float(den) / float(num)
+    except (TypeError, ValueError, OverflowError, ZeroDivisionError):
+        return None  # a malformed tag: ignored like a missing one
 
 
 def _memmap(tifffile: Any, path: Path) -> np.ndarray | None:
     try:
         return tifffile.memmap(path, mode="r")
-    except (ValueError, OSError):
-        return None  # compressed, tiled or scattered pages: read into memory instead
+    except Exception:  # compressed, tiled, scattered or damaged pages: decode instead
+        return None

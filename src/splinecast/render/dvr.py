@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 from numba import prange
 
+from .. import limits
 from .._jit import jit
 from ..errors import ParameterError
 from ..models.pieces import gradient
@@ -118,13 +119,21 @@ class DVRSettings:
     leap: bool = True
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.step) and self.step > 0):
-            raise ParameterError(f"step must be a positive number of voxels, got {self.step}")
+        # Bounds on work and memory (splinecast.limits): the smallest step, finite weights, and
+        # a table that fits in memory. The step against a volume's size is checked at render.
+        limits.check_finite_number(self.step, "step (voxels)", lo=limits.MIN_STEP)
+        for name in ("ambient", "diffuse", "exponent"):
+            limits.check_finite_number(getattr(self, name), name, lo=0)
+        limits.check_count(self.table_size, "table_size", lo=2, hi=4096)
         if self.preintegration not in PREINTEGRATION:
             raise ParameterError(f"preintegration must be one of {', '.join(PREINTEGRATION)}, "
                                  f"got {self.preintegration!r}")
-        if self.adaptive and not (math.isfinite(self.h_max) and self.h_max >= self.step):
-            raise ParameterError(f"h_max must be >= step ({self.step}), got {self.h_max}")
+        if self.adaptive:
+            limits.check_finite_number(self.h_max, f"h_max (>= step {self.step:g})",
+                                       lo=self.step)
+        if self.termination is not None:
+            limits.check_finite_number(self.termination, "termination", lo=0, hi=1,
+                                       lo_open=True)
         if not self.exponent > 0:
             raise ParameterError(f"exponent must be positive, got {self.exponent}")
         if self.termination is not None and not 0 < self.termination <= 1:
@@ -132,8 +141,12 @@ class DVRSettings:
         if self.table_layout not in TABLE_LAYOUTS:
             raise ParameterError(f"table_layout must be one of {', '.join(TABLE_LAYOUTS)}, "
                                  f"got {self.table_layout!r}")
-        if not 2 <= int(self.table_size) <= 4096:
-            raise ParameterError(f"table_size must be 2..4096, got {self.table_size}")
+        if self.preintegration == "3d":
+            n = int(self.table_size)
+            # float32 RGBA entries, and as much again for the build's temporaries.
+            limits.check_memory(limits.nbytes((self.table_steps, n, n, 4), 4) * 2,
+                                f"a {self.table_steps}x{n}x{n} pre-integration table",
+                                "DVRSettings (h_max / step, table_size)")
 
     @property
     def table_steps(self) -> int:

@@ -1,0 +1,613 @@
+"""Mutations of a seed folder: byte-level ones that know nothing, structure-aware ones that know
+the format (text header fields, JSON keys, the ``.npy`` header, NIfTI header fields, DICOM tags,
+compressed streams, TIFF descriptions, file names and symbolic links).
+
+Every mutation takes the case folder (a copy of a seed), the seed and a ``random.Random`` and
+changes the files in place; it returns a short description for the report, so that any case can
+be understood (and rebuilt: cases are deterministic in their number and the run's seed).
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import json
+import os
+import random
+import re
+import struct
+import zipfile
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+from .seeds import DATA_BYTES, SHAPE, Seed
+
+#: Names a hostile header may give its data file (relative to the case folder, which is
+#: ``root/cases/<n>``); :data:`SENTINEL` is filled in with the absolute sentinel path.
+SENTINEL = "@SENTINEL@"
+PATH_TOKENS = [
+    "../../SENTINEL.raw", SENTINEL, "/etc/passwd", "../" * 12 + "etc/passwd", "/dev/zero",
+    "/proc/self/mem", "../other/v.raw", "sub/../../../SENTINEL.raw", "./v.raw", "..", ".", "/",
+    "", "v.raw\0.png", "a" * 300, "a/" * 2100 + "v.raw", "nonexistent.raw", "LOCAL", "LIST",
+    "v%03d.raw 1 3 1", "  v.raw  ", "\u00e9\u00e8.raw", "C:\\Windows\\win.ini", "~/v.raw",
+]
+NUMBER_TOKENS = [
+    "0", "-0", "1", "-1", "2", "1.5", "1e-320", "4.9e-324", "1e-45", "-1e-320", "nan", "NaN",
+    "inf", "-inf", "Infinity", "1e30", "1e308", "1e400", "2147483647", "2147483648",
+    "4294967296", "65535", "9223372036854775807", "9223372036854775808",
+    "-9223372036854775808", "1180591620717411303424", "0x10", "1_000", "", "abc", "\0", " ",
+    "1" * 5000, "1e-300", "3.0000000001", "+5", "٣",
+]
+TUPLE_TOKENS = [
+    "6 5 4", "4 5 6", "2000 2000 2000", "1 1 1000000000", "65535 65535 65535", "0 5 4",
+    "-6 5 4", "6 5", "6 5 4 1", "6 5 4 2", "1 1 1", "1e30 1 1", "inf 1 1", "nan 5 4",
+    "1e-320 1 1", "1 1e-320 1", "6.5 5 4", "2e9 2e9 2e9", "1180591620717411303424 1 1",
+    "1e-320 1e-320 1e-320", "1e12 1e12 1e12", "1e15 0 0", "1e300 1e300 1e300",
+]
+TYPE_TOKENS = [
+    "MET_UCHAR", "MET_CHAR", "MET_SHORT", "MET_USHORT", "MET_INT", "MET_UINT", "MET_FLOAT",
+    "MET_DOUBLE", "MET_LONG", "MET_ULONG_LONG", "MET_FLOAT_ARRAY", "MET_STRING", "MET_OTHER",
+    "uchar", "signed char", "short", "unsigned short", "int", "uint", "float", "double",
+    "int64", "uint64", "block", "float16", "complex", "bool", "uint8", "u2", "<f4", ">i2",
+    "|O", "object", "S10", "V8", "U3", "(2,)f4", "f4,f4", "[('a','<f4')]", "M8[s]", "c16",
+    "float128", "int4", "((((((((", "'", "", "\0",
+]
+ENCODING_TOKENS = ["raw", "gzip", "gz", "bzip2", "bz2", "text", "txt", "ascii", "hex", "zrl",
+                   "lzma", "xz", "zstd", "GZIP", "", "raw gzip"]
+INTERESTING_INTS = [0, 1, -1, 2, 3, 0x7F, 0x80, 0xFF, 0x7FFF, 0x8000, 0xFFFF, 0x7FFFFFFF,
+                    0x80000000, 0xFFFFFFFF, 2**63 - 1, 2**63, 2**64 - 1, 6, 5, 4, 1000, 65536,
+                    2000, 10**9]
+INTERESTING_FLOATS = [0.0, -0.0, 1.0, -1.0, float("nan"), float("inf"), float("-inf"),
+                      1e-320, 5e-324, 1e-45, 1e-38, 1e38, 3.4e38, 1e308, 1e30, 1e-30, 0.5]
+
+
+# --------------------------------------------------------------------------- helpers
+def _files(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.rglob("*") if p.is_file() and not p.is_symlink())
+
+
+def _main_file(folder: Path, seed: Seed) -> Path:
+    main = folder / seed.main
+    if main.is_file():
+        return main
+    files = _files(folder)
+    if not files:  # an earlier mutation left no regular file: start one
+        main.parent.mkdir(parents=True, exist_ok=True)
+        main.write_bytes(b"")
+        return main
+    return files[0]
+
+
+def _split_text_header(data: bytes, fmt: str) -> tuple[bytes, bytes]:
+    """(header, rest) of a file whose header is text: MetaImage, NRRD, VTK legacy."""
+    if fmt in ("mha", "mhd"):
+        match = re.search(rb"ElementDataFile[^\n]*\n", data)
+        end = match.end() if match else len(data)
+        return data[:end], data[end:]
+    if fmt.startswith(("nrrd", "nhdr")):
+        end = data.find(b"\n\n")
+        return (data, b"") if end < 0 else (data[: end + 1], data[end + 1:])
+    if fmt == "vtk":
+        match = re.search(rb"LOOKUP_TABLE[^\n]*\n", data)
+        end = match.end() if match else len(data)
+        return data[:end], data[end:]
+    return data, b""
+
+
+def _token(rng: random.Random, tokens: list[str], root: Path) -> str:
+    token = rng.choice(tokens)
+    return token.replace(SENTINEL, str(root / "SENTINEL.raw"))
+
+
+def _value_for(key: str, old: str, rng: random.Random, root: Path) -> str:
+    """A hostile value for a header field, chosen by what the field holds."""
+    low = key.lower()
+    if any(word in low for word in ("file", "datafile")):
+        return _token(rng, PATH_TOKENS, root)
+    if "type" in low or low == "descr":
+        return _token(rng, TYPE_TOKENS, root)
+    if "encoding" in low:
+        return _token(rng, ENCODING_TOKENS, root)
+    numbers = old.replace("(", " ").replace(")", " ").replace(",", " ").split()
+    if len(numbers) > 1 and rng.random() < 0.5:  # one component of a tuple at its edge
+        numbers[rng.randrange(len(numbers))] = _token(rng, NUMBER_TOKENS, root)
+        return " ".join(numbers)
+    pool = rng.choice([NUMBER_TOKENS, TUPLE_TOKENS, NUMBER_TOKENS + PATH_TOKENS])
+    return _token(rng, pool, root)
+
+
+def mutate_text_lines(text: str, sep: str, rng: random.Random, root: Path) -> tuple[str, str]:
+    """Change, delete, duplicate, reorder or add ``key<sep>value`` lines of a text header."""
+    lines = text.split("\n")
+    sep = sep if sep.strip() else " "  # VTK legacy: "KEYWORD value ..."
+    mark = sep.strip() or " "
+    fields = [n for n, line in enumerate(lines) if mark in line.strip()]
+    op = rng.choice(["value"] * 6 + ["delete", "duplicate", "swap", "insert", "key", "case"])
+    if not fields:
+        op = "insert"
+    n = rng.choice(fields) if fields else 0
+    if op == "value":
+        key, _, old = lines[n].partition(mark)
+        new = _value_for(key, old, rng, root)
+        lines[n] = f"{key.rstrip()}{sep}{new}"
+        return "\n".join(lines), f"{key.strip()} = {new[:40]!r}"
+    if op == "delete":
+        gone = lines.pop(n)
+        return "\n".join(lines), f"delete {gone[:30]!r}"
+    if op == "duplicate":
+        key, _, old = lines[n].partition(mark)
+        lines.insert(n + 1, f"{key.rstrip()}{sep}{_value_for(key, old, rng, root)}")
+        return "\n".join(lines), f"duplicate {key.strip()!r}"
+    if op == "swap" and len(fields) > 1:
+        a, b = rng.sample(fields, 2)
+        lines[a], lines[b] = lines[b], lines[a]
+        return "\n".join(lines), "swap two lines"
+    if op == "key":
+        key, _, old = lines[n].partition(mark)
+        lines[n] = f"{key.strip()}{rng.choice(['', 'x', '!', ' ', '='])}{sep}{old.strip()}"
+        return "\n".join(lines), f"mangle key {key.strip()!r}"
+    if op == "case":
+        lines[n] = lines[n].swapcase()
+        return "\n".join(lines), "swap case"
+    key = rng.choice(["DimSize", "ElementSpacing", "HeaderSize", "ElementDataFile", "Offset",
+                      "sizes", "spacings", "data file", "byte skip", "line skip", "encoding",
+                      "type", "space directions", "ElementNumberOfChannels", "NDims",
+                      "dimension", "CompressedData", "endian"])
+    value = _value_for(key, "", rng, root)
+    lines.insert(rng.randrange(1, max(2, len(lines))), f"{key}{sep}{value}")
+    return "\n".join(lines), f"insert {key!r}"
+
+
+# --------------------------------------------------------------------------- byte level
+def byte_level(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """Format-blind changes to one file: bit flips, interesting numbers, cuts, insertions."""
+    files = _files(folder)
+    target = _main_file(folder, seed) if rng.random() < 0.6 else rng.choice(files)
+    data = bytearray(target.read_bytes())
+    op = rng.choice(["flip", "flip", "byte", "int", "int", "float", "truncate", "extend",
+                     "delete", "insert", "duplicate", "zero"])
+    where = rng.randrange(max(1, len(data)))
+    if op == "flip" and data:
+        for _ in range(rng.randint(1, 8)):
+            i = rng.randrange(len(data))
+            data[i] ^= 1 << rng.randrange(8)
+    elif op == "byte" and data:
+        data[where] = rng.choice([0, 0xFF, 0x7F, 0x80, 0x20, 0x0A, 0x30, 0x39])
+    elif op == "int":
+        width, fmt = rng.choice([(2, "h"), (2, "H"), (4, "i"), (4, "I"), (8, "q"), (8, "Q")])
+        value = rng.choice(INTERESTING_INTS)
+        limit = 2 ** (8 * width)
+        value = value % limit
+        if fmt.islower() and value >= limit // 2:
+            value -= limit
+        packed = struct.pack(rng.choice("<>") + fmt, value)
+        data[where:where + width] = packed
+    elif op == "float":
+        width, fmt = rng.choice([(4, "f"), (8, "d")])
+        value = rng.choice(INTERESTING_FLOATS)
+        try:
+            packed = struct.pack(rng.choice("<>") + fmt, value)
+        except OverflowError:
+            packed = struct.pack("<" + fmt, float("inf"))
+        data[where:where + width] = packed
+    elif op == "truncate":
+        del data[where:]
+    elif op == "extend":
+        data += rng.choice([b"\0", b"\xff", b"A", b"\n"]) * rng.choice([1, 7, 512, 70000])
+    elif op == "delete":
+        del data[where:where + rng.randint(1, 64)]
+    elif op == "insert":
+        data[where:where] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 64)))
+    elif op == "duplicate":
+        data[where:where] = data[where:where + rng.randint(1, 256)]
+    else:
+        data[where:where + rng.randint(1, 512)] = b"\0" * rng.randint(1, 512)
+    target.write_bytes(bytes(data))
+    return f"bytes {op} @{where} of {target.name}"
+
+
+# --------------------------------------------------------------------------- structure aware
+def text_header(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """MetaImage / NRRD / VTK header fields."""
+    header_file = _main_file(folder, seed)
+    data = header_file.read_bytes()
+    head, rest = _split_text_header(data, seed.fmt)
+    sep = " = " if seed.fmt in ("mha", "mhd") else (": " if seed.fmt != "vtk" else " ")
+    text, what = mutate_text_lines(head.decode("latin-1"), sep, rng, root)
+    header_file.write_bytes(text.encode("latin-1", "replace") + rest)
+    return what
+
+
+def json_fields(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """The JSON sidecar: hostile values for its keys, nesting, huge numbers."""
+    sidecar = folder / seed.main
+    try:
+        fields = json.loads(sidecar.read_text())
+        if not isinstance(fields, dict):
+            raise ValueError("not an object")
+    except (ValueError, OSError, RecursionError):  # an earlier mutation broke it already
+        return byte_level(folder, seed, rng, root)
+    key = rng.choice([*fields, "data_file", "shape", "dtype", "extra"])
+    choice = rng.randrange(12)
+    if choice == 0:
+        deep = "[" * 5000 + "]" * 5000
+        text = sidecar.read_text().replace(json.dumps(fields.get(key, 0)), deep, 1)
+        sidecar.write_text(text)
+        return f"{key}: nested 5000 deep"
+    if choice == 1:
+        text = json.dumps(fields).replace("0.5", "1" * 5000, 1)
+        sidecar.write_text(text)
+        return "a 5000-digit number"
+    if choice == 2:
+        sidecar.write_text(json.dumps(fields)[: rng.randrange(1, 40)])
+        return "truncated JSON"
+    if choice == 3:
+        sidecar.write_text(json.dumps(fields) + rng.choice(["NaN", "]", "{}", "\0"]))
+        return "trailing junk"
+    values = [0, -1, 1, 2**70, -(2**63), 1e30, 1e-320, float("nan"), float("inf"), None, True,
+              "uint16", "abc", "\0", [], [6, 5], [6, 5, 4, 1], [6, 5, 4.0], [6.5, 5, 4],
+              [2000, 2000, 2000], [0, 5, 4], [1e-320, 1, 1], [[1, 2, 3]], {"a": 1},
+              [2**70, 1, 1], ["6", "5", "4"], "../../SENTINEL.raw", str(root / "SENTINEL.raw"),
+              "/etc/passwd", "/dev/zero", "big", "C", "x" * 10000, [float("inf"), 1, 1],
+              "|O", "<c16", "(2,)<u2", "f4,f4", "S1000000000", "V16"]
+    value = rng.choice(values)
+    fields[key] = value
+    sidecar.write_text(json.dumps(fields))  # NaN/Infinity come out as bare tokens: allowed too
+    return f"{key} = {json.dumps(value)[:40]}"
+
+
+def npy_header(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """The dict text of an ``.npy`` header (in an .npy file or an .npz member)."""
+    shapes = ["(6, 5, 4)", "(-6, 5, 4)", "(1180591620717411303424, 1, 1)", "(2000, 2000, 2000)",
+              "(0, 5, 4)", "(6, 5)", "(6, 5, 4, 1)", "(120,)", "()", "(6, 5, 4", "[6, 5, 4]",
+              "(6.0, 5, 4)", "('6', 5, 4)", "(2**70, 1, 1)", "(9223372036854775807, 2, 1)",
+              "((((((((((((((((((((((((((((((((", "None"]
+    descrs = ["'<u2'", "'>u2'", "'|O'", "'<c16'", "'<i8'", "'<f2'", "'S10'", "'<U3'",
+              "[('a', '<f4')]", "'(2,)<f4'", "'|b1'", "'<M8[s]'", "'bogus'", "3", "'<f8'"]
+    orders = ["False", "True", "0", "1", "'yes'", "None"]
+    parts = {"descr": "'<u2'", "fortran_order": "True", "shape": "(6, 5, 4)"}
+    key = rng.choice(list(parts))
+    parts[key] = rng.choice({"descr": descrs, "fortran_order": orders, "shape": shapes}[key])
+    change = (key, parts[key])
+    header = "{" + ", ".join(f"'{k}': {v}" for k, v in parts.items()) + ", }"
+    if rng.random() < 0.2:
+        header = header[: rng.randrange(len(header))]  # unbalanced
+    body = header.encode("latin-1", "replace")
+    pad = (-(10 + len(body) + 1)) % 64
+    npy = b"\x93NUMPY\x01\x00" + struct.pack("<H", len(body) + pad + 1) + body + b" " * pad + b"\n"
+    npy += bytes(DATA_BYTES)
+    what = f"npy header {change[0]} = {change[1][:30]}"
+    target = folder / seed.main
+    if seed.fmt == "npy":
+        target.write_bytes(npy)
+        return what
+    return _replace_npz_member(target, "data.npy", npy, rng) + f"; {what}"
+
+
+def _replace_npz_member(path: Path, name: str, payload: bytes, rng: random.Random) -> str:
+    with zipfile.ZipFile(path) as old:
+        members = {info.filename: old.read(info) for info in old.infolist()}
+    members[name] = payload
+    method = rng.choice([zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED])
+    with zipfile.ZipFile(path, "w", compression=method) as new:
+        for member, content in members.items():
+            new.writestr(member, content)
+    return f"npz member {name}"
+
+
+def npz_structure(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """Zip-level changes: members removed, added, renamed, not .npy, bombs."""
+    path = folder / seed.main
+    with zipfile.ZipFile(path) as old:
+        members = {info.filename: old.read(info) for info in old.infolist()}
+    op = rng.choice(["drop", "rename", "extra", "notnpy", "geometry", "bomb", "empty"])
+    if op == "drop" and members:
+        members.pop(rng.choice(list(members)))
+    elif op == "rename" and "data.npy" in members:
+        members[rng.choice(["x.npy", "data", "data.npy/", "../data.npy", "volume.npy"])] = \
+            members.pop("data.npy")
+    elif op == "extra":
+        members[rng.choice(["other.npy", "volume.npy", "data.npy"])] = members.get(
+            "data.npy", b"")
+    elif op == "notnpy":
+        members["data.npy"] = rng.choice([b"", b"hello", b"PK\x03\x04", b"\x93NUMPY"])
+    elif op == "geometry":
+        import numpy as np
+
+        value = rng.choice([np.array([1e-320, 1, 1]), np.array([np.nan] * 3), np.zeros(7),
+                            np.array(["a", "b", "c"]), np.array([[1.0, 2.0, 3.0]] * 3),
+                            np.array(2**70, dtype=object)])
+        from io import BytesIO
+
+        buf = BytesIO()
+        np.save(buf, value, allow_pickle=True)
+        members[rng.choice(["spacing.npy", "origin.npy"])] = buf.getvalue()
+    elif op == "bomb":
+        header = b"{'descr': '<u2', 'fortran_order': True, 'shape': (6, 5, 4), }"
+        pad = (-(10 + len(header) + 1)) % 64
+        npy = b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header) + pad + 1) + header \
+            + b" " * pad + b"\n" + bytes(DATA_BYTES) + bytes(rng.choice([1, 10**6, 5 * 10**7]))
+        members["data.npy"] = npy
+    else:
+        members = {}
+    method = rng.choice([zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED])
+    with zipfile.ZipFile(path, "w", compression=method) as new:
+        for member, content in members.items():
+            new.writestr(member, content)
+    return f"npz {op}"
+
+
+def compressed_stream(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """Bombs, truncation, corruption and the wrong compressor in compressed data."""
+    if seed.fmt == "nhdr-bzip2":
+        path, head, body = folder / "v.raw.bz2", b"", (folder / "v.raw.bz2").read_bytes()
+        codec = "bz2"
+    elif seed.fmt == "nifti-gz":
+        path, head, body = folder / seed.main, b"", (folder / seed.main).read_bytes()
+        codec = "gzip"
+    else:  # attached gzip NRRD
+        path = folder / seed.main
+        head, body = _split_text_header(path.read_bytes(), seed.fmt)
+        codec = "gzip"
+    compress = (lambda b: gzip.compress(b, mtime=0)) if codec == "gzip" else bz2.compress
+    op = rng.choice(["bomb", "bomb", "truncate", "corrupt", "wrong", "concat", "empty", "raw",
+                     "short"])
+    if op == "bomb":
+        size = rng.choice([10**6, 10**7, 6 * 10**7])
+        plain = gzip.decompress(body) if codec == "gzip" and seed.fmt == "nifti-gz" else b""
+        body = compress(plain + bytes(size))
+    elif op == "truncate":
+        body = body[: rng.randrange(max(1, len(body)))]
+    elif op == "corrupt" and body:
+        data = bytearray(body)
+        for _ in range(rng.randint(1, 6)):
+            i = rng.randrange(len(data))
+            data[i] ^= 1 << rng.randrange(8)
+        body = bytes(data)
+    elif op == "wrong":
+        plain = bytes(DATA_BYTES)
+        body = bz2.compress(plain) if codec == "gzip" else gzip.compress(plain)
+    elif op == "concat":
+        body = body + body
+    elif op == "empty":
+        body = b""
+    elif op == "raw":
+        body = zlib.compress(bytes(DATA_BYTES))  # a zlib stream without the gzip wrapper
+    else:
+        body = compress(bytes(DATA_BYTES - 2))
+    path.write_bytes(head + body)
+    return f"{codec} stream {op}"
+
+
+#: (offset, struct format) of NIfTI-1 header fields worth breaking.
+NIFTI_FIELDS = {
+    "sizeof_hdr": (0, "i"), "dim0": (40, "h"), "dim1": (42, "h"), "dim2": (44, "h"),
+    "dim3": (46, "h"), "dim4": (48, "h"), "dim5": (50, "h"), "intent_code": (68, "h"),
+    "datatype": (70, "h"), "bitpix": (72, "h"), "pixdim0": (76, "f"), "pixdim1": (80, "f"),
+    "pixdim2": (84, "f"), "pixdim3": (88, "f"), "vox_offset": (108, "f"),
+    "scl_slope": (112, "f"), "scl_inter": (116, "f"), "xyzt_units": (123, "B"),
+    "qform_code": (252, "h"), "sform_code": (254, "h"), "quatern_b": (256, "f"),
+    "quatern_c": (260, "f"), "quatern_d": (264, "f"), "qoffset_x": (268, "f"),
+    "srow_x0": (280, "f"), "srow_x3": (292, "f"), "srow_y1": (300, "f"), "srow_z2": (320, "f"),
+    "magic": (344, "4s"),
+}
+
+
+def nifti_fields(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """A NIfTI-1 header field set to an edge value (inside the gzip stream for .nii.gz)."""
+    path = folder / seed.main
+    raw = path.read_bytes()
+    packed = seed.fmt == "nifti-gz"
+    data = bytearray(gzip.decompress(raw) if packed else raw)
+    name = rng.choice(list(NIFTI_FIELDS))
+    offset, fmt = NIFTI_FIELDS[name]
+    if fmt == "4s":
+        value = rng.choice([b"n+1\0", b"ni1\0", b"n+2\0", b"\0\0\0\0", b"abcd"])
+    elif fmt == "f":
+        value = rng.choice(INTERESTING_FLOATS + [1e10, 2.0, 352.0, 351.0, 1e9])
+    elif fmt == "B":
+        value = rng.choice([0, 1, 2, 3, 8, 16, 24, 7, 255, 0x0A, 0x3F])
+    else:
+        bound = 2 ** (8 * struct.calcsize(fmt) - 1)
+        value = rng.choice([v for v in INTERESTING_INTS + [-1, -32768, 16, 64, 128, 255, 1536,
+                                                           2304, 512, 1024, 7, 8, 4, 32767]
+                            if -bound <= v < bound])
+    data[offset:offset + struct.calcsize(fmt)] = struct.pack("<" + fmt, value)
+    path.write_bytes(gzip.compress(bytes(data), mtime=0) if packed else bytes(data))
+    return f"nifti {name} = {value!r}"
+
+
+DICOM_CHANGES: list[tuple[str, str, list[object]]] = [
+    ("Rows", "US", [0, 1, 65535, None]),
+    ("Columns", "US", [0, 1, 65535, None]),
+    ("PixelSpacing", "DS", ["abc", "1", "0\\0", "1e-320\\1", "nan\\1", "inf\\inf", "-1\\1",
+                            "1\\1\\1", None, "1e400\\1"]),
+    ("ImagePositionPatient", "DS", ["0\\0", "abc\\0\\0", "nan\\0\\0", "inf\\0\\0", None,
+                                    "1e300\\0\\0", "0\\0\\0\\0"]),
+    ("ImageOrientationPatient", "DS", ["0\\0\\0\\0\\0\\0", "1\\0\\0\\1\\0\\0", "1\\0\\0",
+                                       "nan\\0\\0\\0\\1\\0", None, "a\\b\\c\\d\\e\\f"]),
+    ("SliceThickness", "DS", ["abc", "0", "-1", "1e-320", "nan", "inf", None, "1\\2"]),
+    ("SpacingBetweenSlices", "DS", ["abc", "0", "nan", "1e-320", "1\\2"]),
+    ("RescaleSlope", "DS", ["abc", "0", "inf", "nan", "1e38", "-1e38", "1\\2", None, "1e-320"]),
+    ("RescaleIntercept", "DS", ["abc", "inf", "nan", "1e300", "0.5", "-1e10", "1\\2", None]),
+    ("NumberOfFrames", "IS", ["2", "0", "abc", "-1", "99999999"]),
+    ("SamplesPerPixel", "US", [3, 0, 2]),
+    ("BitsAllocated", "US", [0, 1, 7, 8, 12, 32, 64, 65535]),
+    ("BitsStored", "US", [0, 1, 17, 64]),
+    ("HighBit", "US", [0, 63, 15, 65535]),
+    ("PixelRepresentation", "US", [1, 2, 65535]),
+    ("PhotometricInterpretation", "CS", ["RGB", "PALETTE COLOR", "YBR_FULL", "", "MONOCHROME1"]),
+    ("SeriesInstanceUID", "UI", ["1.2.3", "", None]),
+    ("PixelData", "OW", [b"", b"\0\0", b"\0" * 10**6]),
+    ("Modality", "CS", ["\0" * 5000]),
+]
+
+
+def dicom_tags(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """One slice's tag set to a hostile value (or deleted), or its VR bytes replaced."""
+    import pydicom
+    from pydicom import config
+
+    files = [p for p in _files(folder) if p.name.startswith("IM")]
+    target = rng.choice(files)
+    if rng.random() < 0.2:  # an unknown or wrong VR, patched in the bytes
+        data = bytearray(target.read_bytes())
+        tags = [m.start() for m in re.finditer(rb"(DS|US|IS|CS|UI)", bytes(data[132:]))]
+        if tags:
+            where = 132 + rng.choice(tags)
+            vr = rng.choice([b"ZZ", b"SQ", b"OB", b"UN", b"\0\0", b"US", b"FD", b"AT"])
+            data[where:where + 2] = vr
+            target.write_bytes(bytes(data))
+            return f"dicom VR -> {vr!r} in {target.name}"
+    keyword, vr, values = rng.choice(DICOM_CHANGES)
+    value = rng.choice(values)
+    saved = (config.settings.reading_validation_mode, config.settings.writing_validation_mode)
+    config.settings.reading_validation_mode = config.IGNORE
+    config.settings.writing_validation_mode = config.IGNORE
+    try:
+        ds = pydicom.dcmread(target)
+        if value is None:
+            if keyword in ds:
+                del ds[keyword]
+        else:
+            tag = pydicom.tag.Tag(pydicom.datadict.tag_for_keyword(keyword))
+            if isinstance(value, int):
+                ds.add_new(tag, vr, value)
+            else:  # written as raw bytes, so values pydicom would refuse to build go in as-is
+                raw = value if isinstance(value, bytes) else value.encode("latin-1")
+                if len(raw) % 2:
+                    raw += b" "
+                ds._dict[tag] = pydicom.dataelem.RawDataElement(tag, vr, len(raw), raw, 0,
+                                                                False, True)
+        ds.save_as(target)
+    finally:
+        config.settings.reading_validation_mode, config.settings.writing_validation_mode = saved
+    return f"dicom {keyword} = {value!r:.30} in {target.name}"
+
+
+def tiff_description(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """A rewritten TIFF with a hostile ImageJ description (spacing, unit, images, axes)."""
+    import numpy as np
+    import tifffile
+
+    from .seeds import SPACING, ramp
+
+    stack = np.ascontiguousarray(ramp().transpose(2, 1, 0))
+    key = rng.choice(["spacing", "unit", "images", "slices", "channels", "frames", "hyperstack",
+                      "loop", "min", "max", "finterval"])
+    value = rng.choice(["abc", "nan", "inf", "-1", "0", "1e-320", "1e400", "", "1" * 5000,
+                        "2", "1000000", "\\u0000", "true", "[1,2]"])
+    lines = ["ImageJ=1.11a", "images=4", "slices=4", "unit=um", f"spacing={SPACING[2]}",
+             "axes=ZYX"]
+    lines = [line for line in lines if not line.startswith(key + "=")] + [f"{key}={value}"]
+    if rng.random() < 0.3:
+        rng.shuffle(lines)
+    description = "\n".join(lines) + "\n"
+    resolution = rng.choice([(2.0, 1 / SPACING[1]), (0.0, 1.0), (1e-320, 1.0),
+                             ((1, 0), (1, 0)), ((2**32 - 1, 1), (1, 2**32 - 1))])
+    tifffile.imwrite(folder / seed.main, stack, description=description, metadata=None,
+                     resolution=resolution, photometric="minisblack")
+    return f"ImageJ {key}={value[:20]} resolution={resolution}"
+
+
+def tiff_ome(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """An OME-TIFF whose OME-XML puts planes in another file (a hostile name)."""
+    import numpy as np
+    import tifffile
+
+    from .seeds import ramp
+
+    other = _token(rng, PATH_TOKENS, root).replace('"', "").replace("<", "").replace("&", "")
+    size_z = rng.choice([8, 4, 1000000, 0])
+    xml = (
+        '<?xml version="1.0" encoding="UTF-8"?>'
+        '<OME xmlns="http://www.openmicroscopy.org/Schemas/OME/2016-06" UUID="urn:uuid:1">'
+        '<Image ID="Image:0"><Pixels ID="Pixels:0" DimensionOrder="XYZCT" Type="uint16" '
+        f'SizeX="6" SizeY="5" SizeZ="{size_z}" SizeC="1" SizeT="1">'
+        '<Channel ID="Channel:0:0" SamplesPerPixel="1"/>'
+        f'<TiffData FirstZ="0" IFD="0" PlaneCount="4"><UUID FileName="{seed.main}">urn:uuid:1'
+        '</UUID></TiffData>'
+        f'<TiffData FirstZ="4" IFD="0" PlaneCount="4"><UUID FileName="{other}">urn:uuid:2'
+        '</UUID></TiffData></Pixels></Image></OME>'
+    )
+    stack = np.ascontiguousarray(ramp().transpose(2, 1, 0))
+    tifffile.imwrite(folder / seed.main, stack, description=xml, metadata=None,
+                     photometric="minisblack")
+    return f"OME FileName {other[:40]!r} SizeZ={size_z}"
+
+
+def file_layout(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """Data files removed, emptied, swapped for folders or symbolic links out of the folder."""
+    # Never the main file: the user names it, so following it anywhere is their choice.
+    files = [p for p in _files(folder) if p != folder / seed.main]
+    if not files:
+        return byte_level(folder, seed, rng, root)
+    target = rng.choice(files)
+    op = rng.choice(["symlink", "symlink", "remove", "empty", "folder", "fifo"])
+    target.unlink()
+    if op == "symlink":
+        dest = rng.choice([root / "SENTINEL.raw", Path("/etc/passwd"), Path("/dev/zero"),
+                           Path("../../SENTINEL.raw")])
+        target.symlink_to(dest)
+        return f"{target.name} -> symlink to {dest}"
+    if op == "empty":
+        target.write_bytes(b"")
+    elif op == "folder":
+        target.mkdir()
+    elif op == "fifo":  # opening it for reading would block: a reader must refuse it first
+        os.mkfifo(target)
+    return f"{target.name}: {op}"
+
+
+Mutation = Callable[[Path, Seed, random.Random, Path], str]
+
+#: Structure-aware mutations per format (byte-level and file-layout ones apply to every format).
+STRUCTURED: dict[str, list[Mutation]] = {
+    "npy": [npy_header],
+    "npz": [npy_header, npz_structure],
+    "npz-deflate": [npy_header, npz_structure],
+    "mhd": [text_header, text_header],
+    "mha": [text_header, text_header],
+    "nhdr": [text_header, text_header],
+    "nhdr-bzip2": [text_header, compressed_stream],
+    "nrrd-raw": [text_header, text_header],
+    "nrrd-gzip": [text_header, compressed_stream],
+    "nrrd-text": [text_header, text_header],
+    "nifti": [nifti_fields, nifti_fields],
+    "nifti-gz": [nifti_fields, compressed_stream],
+    "nifti-pair": [nifti_fields],
+    "dicom": [dicom_tags, dicom_tags, dicom_tags],
+    "tiff": [tiff_description, tiff_ome],
+    "sidecar": [json_fields, json_fields],
+    "vtk": [text_header, text_header],
+    "ome-zarr": [],
+}
+
+
+def mutate(folder: Path, seed: Seed, rng: random.Random, root: Path) -> list[str]:
+    """Apply one to three mutations; structure-aware ones more often than blind ones."""
+    done = []
+    chosen = []
+    for _ in range(rng.choice([1, 1, 1, 2, 3])):
+        structured = STRUCTURED.get(seed.fmt, [])
+        roll = rng.random()
+        if structured and roll < 0.6:
+            chosen.append(rng.choice(structured))
+        elif roll < 0.9:
+            chosen.append(byte_level)
+        elif file_layout not in chosen:
+            chosen.append(file_layout)
+    # The layout change goes last: the others read files, and a FIFO it may leave would block
+    # them (the harness itself must never open one).
+    chosen.sort(key=lambda m: m is file_layout)
+    for mutation in chosen:
+        try:
+            done.append(mutation(folder, seed, rng, root))
+        except Exception as exc:  # an earlier mutation broke the structure this one parses
+            done.append(f"({mutation.__name__} impossible: {type(exc).__name__}) "
+                        + byte_level(folder, seed, rng, root))
+    return done
+
+
+__all__ = ["mutate", "STRUCTURED", "PATH_TOKENS", "SHAPE"]

@@ -1,0 +1,317 @@
+"""Small valid files of every format splinecast reads: the starting points of the mutations.
+
+Every seed is one folder holding the files of one volume (header and data) and names its main
+file (the path given to ``splinecast``). The volume is tiny (6 x 5 x 4) so that a mutation lands
+in a header field often, and every seed of a format with detached data has a raw data file of
+exactly :data:`DATA_BYTES` bytes, as has the sentinel file outside every case folder: a header
+that were allowed to name the sentinel would be read successfully, so the harness sees it.
+
+Formats whose reader does not exist yet (VTK image data, OME-Zarr: issues 16 and 10) are skipped
+until :func:`available` finds their reader module; their makers are registered in
+:data:`MAKERS` like every other format, so they join the fuzzing as soon as the reader lands.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import importlib.util
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+SHAPE = (6, 5, 4)
+#: Bytes of the seeds' uint16 raw data, and of the sentinel.
+DATA_BYTES = int(np.prod(SHAPE)) * 2
+SPACING = (0.5, 0.75, 2.0)
+ORIGIN = (-1.0, 2.0, 3.5)
+
+
+@dataclass(frozen=True)
+class Seed:
+    """One valid volume in its own folder."""
+
+    fmt: str
+    folder: Path
+    main: str  # the path given to splinecast, relative to the folder ("." for a DICOM folder)
+    value_range: tuple[float, float]
+
+    @property
+    def files(self) -> list[Path]:
+        return sorted(p for p in self.folder.rglob("*") if p.is_file() or p.is_symlink())
+
+
+def ramp(dtype: type | np.dtype = np.uint16) -> np.ndarray:
+    """Values that differ along every axis (0 .. 119)."""
+    i, j, k = np.indices(SHAPE)
+    return ((i + 10 * j + 100 * k) % 120).astype(dtype)
+
+
+# --------------------------------------------------------------------------- makers
+def _npy(folder: Path) -> str:
+    np.save(folder / "v.npy", ramp())
+    return "v.npy"
+
+
+def _npz(folder: Path) -> str:
+    np.savez(folder / "v.npz", data=ramp(), spacing=np.array(SPACING), origin=np.array(ORIGIN))
+    return "v.npz"
+
+
+def _npz_deflate(folder: Path) -> str:
+    np.savez_compressed(folder / "v.npz", data=ramp(np.float32), spacing=np.array(SPACING))
+    return "v.npz"
+
+
+def _mhd_text(data_file: str, element: str = "MET_USHORT") -> str:
+    return "\n".join([
+        "ObjectType = Image", "NDims = 3", "BinaryData = True", "BinaryDataByteOrderMSB = False",
+        "CompressedData = False", "TransformMatrix = 1 0 0 0 1 0 0 0 1",
+        "Offset = " + " ".join(map(str, ORIGIN)), "ElementSpacing = " + " ".join(map(str, SPACING)),
+        "DimSize = " + " ".join(map(str, SHAPE)), f"ElementType = {element}",
+        f"ElementDataFile = {data_file}", "",
+    ])
+
+
+def _raw_bytes() -> bytes:
+    return ramp().astype("<u2").tobytes(order="F")
+
+
+def _mhd(folder: Path) -> str:
+    (folder / "v.raw").write_bytes(_raw_bytes())
+    (folder / "v.mhd").write_text(_mhd_text("v.raw"))
+    return "v.mhd"
+
+
+def _mha(folder: Path) -> str:
+    (folder / "v.mha").write_bytes(_mhd_text("LOCAL").encode() + _raw_bytes())
+    return "v.mha"
+
+
+def _nrrd_header(encoding: str, data_file: str | None = None) -> str:
+    lines = [
+        "NRRD0004", "type: unsigned short", "dimension: 3", "space: left-posterior-superior",
+        "sizes: " + " ".join(map(str, SHAPE)),
+        "space directions: " + " ".join(
+            "(" + ",".join(str(SPACING[a] if b == a else 0.0) for b in range(3)) + ")"
+            for a in range(3)
+        ),
+        "kinds: domain domain domain", "endian: little", f"encoding: {encoding}",
+        "space origin: (" + ",".join(map(str, ORIGIN)) + ")",
+    ]
+    if data_file is not None:
+        lines.append(f"data file: {data_file}")
+    return "\n".join(lines) + "\n"
+
+
+def _nhdr(folder: Path) -> str:
+    (folder / "v.raw").write_bytes(_raw_bytes())
+    (folder / "v.nhdr").write_text(_nrrd_header("raw", "v.raw"))
+    return "v.nhdr"
+
+
+def _nhdr_bzip2(folder: Path) -> str:
+    (folder / "v.raw.bz2").write_bytes(bz2.compress(_raw_bytes()))
+    (folder / "v.nhdr").write_text(_nrrd_header("bzip2", "v.raw.bz2"))
+    return "v.nhdr"
+
+
+def _nrrd_raw(folder: Path) -> str:
+    (folder / "v.nrrd").write_bytes(_nrrd_header("raw").encode() + b"\n" + _raw_bytes())
+    return "v.nrrd"
+
+
+def _nrrd_gzip(folder: Path) -> str:
+    body = gzip.compress(_raw_bytes(), mtime=0)
+    (folder / "v.nrrd").write_bytes(_nrrd_header("gzip").encode() + b"\n" + body)
+    return "v.nrrd"
+
+
+def _nrrd_text(folder: Path) -> str:
+    body = " ".join(str(int(v)) for v in ramp().ravel(order="F")).encode()
+    (folder / "v.nrrd").write_bytes(_nrrd_header("text").encode() + b"\n" + body + b"\n")
+    return "v.nrrd"
+
+
+def _nifti_image(dtype: type = np.float32):
+    import nibabel as nib
+
+    affine = np.diag([*SPACING, 1.0])
+    affine[:3, 3] = ORIGIN
+    img = nib.Nifti1Image(ramp(dtype), affine)
+    img.header.set_xyzt_units("mm", "sec")
+    img.header["scl_slope"] = 2.0
+    img.header["scl_inter"] = 1.0
+    return img, nib
+
+
+def _nifti(folder: Path) -> str:
+    img, nib = _nifti_image()
+    nib.save(img, folder / "v.nii")
+    return "v.nii"
+
+
+def _nifti_gz(folder: Path) -> str:
+    img, nib = _nifti_image(np.int16)
+    nib.save(img, folder / "v.nii.gz")
+    return "v.nii.gz"
+
+
+def _nifti_pair(folder: Path) -> str:
+    img, nib = _nifti_image(np.uint16)
+    nib.save(nib.Nifti1Pair(img.dataobj, img.affine, img.header), folder / "v.hdr")
+    return "v.hdr"
+
+
+def dicom_slice(data2d: np.ndarray, position: tuple[float, float, float], series_uid: str,
+                number: int):
+    """One CT slice of a series (explicit VR little endian), pixel rows = y."""
+    from pydicom.dataset import Dataset, FileMetaDataset
+    from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
+
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = CTImageStorage
+    meta.MediaStorageSOPInstanceUID = generate_uid(entropy_srcs=[series_uid, str(number)])
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds = Dataset()
+    ds.file_meta = meta
+    ds.SOPClassUID = CTImageStorage
+    ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
+    ds.SeriesInstanceUID = series_uid
+    ds.Modality = "CT"
+    ds.Rows, ds.Columns = data2d.shape[1], data2d.shape[0]
+    ds.SamplesPerPixel = 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    ds.BitsAllocated = ds.BitsStored = 16
+    ds.HighBit = 15
+    ds.PixelRepresentation = 0
+    ds.PixelSpacing = [SPACING[1], SPACING[0]]
+    ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
+    ds.ImagePositionPatient = list(position)
+    ds.SliceThickness = SPACING[2]
+    ds.RescaleSlope = 1
+    ds.RescaleIntercept = -20
+    ds.InstanceNumber = number
+    ds.PixelData = np.ascontiguousarray(data2d.T).astype("<u2").tobytes()
+    return ds
+
+
+def _dicom(folder: Path) -> str:
+    uid = "1.2.826.0.1.3680043.8.498.1"
+    data = ramp()
+    for k in range(SHAPE[2]):
+        position = (ORIGIN[0], ORIGIN[1], ORIGIN[2] + k * SPACING[2])
+        dicom_slice(data[:, :, k], position, uid, k).save_as(
+            folder / f"IM{k:04d}", enforce_file_format=True)
+    return "."
+
+
+def _tiff(folder: Path) -> str:
+    import tifffile
+
+    stack = np.ascontiguousarray(ramp().transpose(2, 1, 0))  # (z, y, x)
+    tifffile.imwrite(folder / "v.tif", stack, imagej=True,
+                     resolution=(1 / SPACING[0], 1 / SPACING[1]),
+                     metadata={"spacing": SPACING[2], "unit": "um", "axes": "ZYX"})
+    return "v.tif"
+
+
+def _sidecar(folder: Path) -> str:
+    (folder / "v.raw").write_bytes(_raw_bytes())
+    (folder / "v.json").write_text(json.dumps({
+        "shape": list(SHAPE), "dtype": "uint16", "spacing": list(SPACING),
+        "origin": list(ORIGIN), "byte_order": "little", "order": "F", "header_bytes": 0,
+        "data_file": "v.raw",
+    }))
+    return "v.json"
+
+
+def _vtk(folder: Path) -> str:
+    """VTK image data: through splinecast's own writer when it has one (``.vti``), else a
+    hand-written legacy STRUCTURED_POINTS file (binary, big-endian as the format demands)."""
+    import splinecast as sc
+
+    try:
+        sc.write(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.vti")
+        return "v.vti"
+    except sc.SplinecastError:
+        pass
+    header = "\n".join([
+        "# vtk DataFile Version 3.0", "splinecast fuzz seed", "BINARY", "DATASET STRUCTURED_POINTS",
+        "DIMENSIONS " + " ".join(map(str, SHAPE)), "ORIGIN " + " ".join(map(str, ORIGIN)),
+        "SPACING " + " ".join(map(str, SPACING)), f"POINT_DATA {int(np.prod(SHAPE))}",
+        "SCALARS values unsigned_short 1", "LOOKUP_TABLE default", "",
+    ])
+    body = ramp().astype(">u2").tobytes(order="F")
+    (folder / "v.vtk").write_bytes(header.encode() + body + b"\n")
+    return "v.vtk"
+
+
+def _ome_zarr(folder: Path) -> str:
+    """Through splinecast's own writer, once there is one (issue 10)."""
+    import splinecast as sc
+
+    sc.write(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.ome.zarr")
+    return "v.ome.zarr"
+
+
+#: format -> (maker, module that must exist for the format to be fuzzed).
+MAKERS: dict[str, tuple[Callable[[Path], str], str | None]] = {
+    "npy": (_npy, None),
+    "npz": (_npz, None),
+    "npz-deflate": (_npz_deflate, None),
+    "mhd": (_mhd, None),
+    "mha": (_mha, None),
+    "nhdr": (_nhdr, None),
+    "nhdr-bzip2": (_nhdr_bzip2, None),
+    "nrrd-raw": (_nrrd_raw, None),
+    "nrrd-gzip": (_nrrd_gzip, None),
+    "nrrd-text": (_nrrd_text, None),
+    "nifti": (_nifti, "nibabel"),
+    "nifti-gz": (_nifti_gz, "nibabel"),
+    "nifti-pair": (_nifti_pair, "nibabel"),
+    "dicom": (_dicom, "pydicom"),
+    "tiff": (_tiff, "tifffile"),
+    "sidecar": (_sidecar, None),
+    # Readers still to come: these join as soon as their module exists.
+    "vtk": (_vtk, "splinecast.io.vtkimage"),
+    "ome-zarr": (_ome_zarr, "splinecast.io.omezarr"),
+}
+
+
+def available(fmt: str) -> bool:
+    """Whether the reader (and the library the seed maker needs) of ``fmt`` is installed."""
+    module = MAKERS[fmt][1]
+    if module is None:
+        return True
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:  # a missing parent package
+        return False
+
+
+def make_seeds(root: Path, formats: list[str] | None = None) -> dict[str, Seed]:
+    """Write one seed folder per available format under ``root``; returns them by format."""
+    seeds = {}
+    for fmt, (maker, _) in MAKERS.items():
+        if (formats and fmt not in formats) or not available(fmt):
+            continue
+        folder = root / fmt
+        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            main = maker(folder)
+        except Exception as exc:  # e.g. no writer for the format yet: skip it, loudly
+            print(f"fuzz: no seed for {fmt}: {exc}")
+            continue
+        import splinecast as sc
+
+        try:  # the seed must be valid: its value range gives the cases' isovalues
+            value_range = sc.read(folder / main).value_range
+        except sc.SplinecastError as exc:
+            print(f"fuzz: the {fmt} seed is not readable ({exc}); format skipped")
+            continue
+        seeds[fmt] = Seed(fmt, folder, main, value_range)
+    return seeds
