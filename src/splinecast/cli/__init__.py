@@ -50,6 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     args.stderr = sys.stderr  # progress goes here, past the capture of library output
     verbose = getattr(args, "verbose", False)
     with captured_output() as captured:
+        args.captured = captured  # a long-running command releases it (the viewer's server)
         try:
             code = COMMANDS[args.command].run(args)
         except sc.SplinecastError as exc:

@@ -9,10 +9,10 @@ import logging
 import math
 import sys
 import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
-from typing import NoReturn
+from typing import NoReturn, TextIO
 
 import splinecast as sc
 from splinecast import limits
@@ -26,6 +26,7 @@ __all__ = [
     "finite",
     "log",
     "numbers",
+    "uncaptured",
 ]
 
 _PACKAGE_DIR = str(Path(sc.__file__).resolve().parent)
@@ -87,6 +88,8 @@ class Captured:
     def __init__(self) -> None:
         self.warnings: list[warnings.WarningMessage] = []
         self.stream = io.StringIO()
+        self._undo: Callable[[], None] | None = None
+        self._redo: Callable[[], None] | None = None
 
     @staticmethod
     def _line(w: warnings.WarningMessage) -> str:
@@ -107,6 +110,28 @@ class Captured:
                  for w in self.warnings]
         lines += [f"  {line}" for line in self.stream.getvalue().splitlines() if line.strip()]
         return lines
+
+    @contextmanager
+    def released(self) -> Iterator[None]:
+        """Stop capturing inside the block: a command that runs until interrupted (the viewer's
+        server) shows its warnings and log lines as they come, once its input was read."""
+        if self._undo is None or self._redo is None:
+            yield
+            return
+        self._undo()
+        try:
+            with warnings.catch_warnings():
+                warnings.showwarning = _show_warning
+                yield
+        finally:
+            self._redo()
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: TextIO | None = None, line: str | None = None) -> None:
+    """Print a warning the default way, on the stderr of the moment (not a captured one)."""
+    text = warnings.formatwarning(message, category, filename, lineno, line)
+    (file or sys.stderr).write(text)
 
 
 @contextmanager
@@ -134,6 +159,20 @@ def captured_output() -> Iterator[Captured]:
     old_streams = [h.setStream(captured.stream) for h in redirected]
     sys.stderr = captured.stream
     root.addHandler(handler)
+
+    def undo() -> None:
+        root.removeHandler(handler)
+        for h, stream in zip(redirected, old_streams, strict=True):
+            h.setStream(stream)
+        sys.stderr = saved_stderr
+
+    def redo() -> None:
+        for h in redirected:
+            h.setStream(captured.stream)
+        sys.stderr = captured.stream
+        root.addHandler(handler)
+
+    captured._undo, captured._redo = undo, redo
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("default")
@@ -142,10 +181,15 @@ def captured_output() -> Iterator[Captured]:
             finally:
                 captured.warnings = list(caught)
     finally:
-        root.removeHandler(handler)
-        for h, stream in zip(redirected, old_streams, strict=True):
-            h.setStream(stream)
-        sys.stderr = saved_stderr
+        captured._undo = captured._redo = None
+        undo()
+
+
+def uncaptured(args: argparse.Namespace) -> AbstractContextManager[None]:
+    """The block runs outside the capture of :func:`main <splinecast.cli.main>` (a no-op when
+    the command was not started by it): see :meth:`Captured.released`."""
+    captured = getattr(args, "captured", None)
+    return captured.released() if captured is not None else nullcontext()
 
 
 def check_output(path: str, suffix: str, option: str) -> None:

@@ -26,7 +26,7 @@ from splinecast.distributed import (
     render_locally,
 )
 
-from ._common import log, numbers
+from ._common import finite, log, numbers
 from ._progress import Progress
 from .render import (
     add_render_options,
@@ -61,8 +61,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     movie.add_argument("--iso", metavar="V0[:V1]",
                        help="isovalue in data units, fixed, a V0:V1 sweep, or comma-separated "
                             "for several translucent surfaces (default: the demo's)")
-    movie.add_argument("--fps", type=float, default=24.0, help="frames per second (default 24)")
-    movie.add_argument("--quality", type=float, default=8.0,
+    movie.add_argument("--fps", type=finite, default=24.0, help="frames per second (default 24)")
+    movie.add_argument("--quality", type=finite, default=8.0,
                        help="MP4 quality from 1 to 10 (default 8)")
     where = movie.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, metavar="N",
@@ -185,7 +185,9 @@ def run(args: argparse.Namespace) -> int:
             images = dscene.render_many(shots, image_only=True)
         # An interrupted loop cancels the frames in flight while the client is still open.
         stack.callback(images.close)
-        progress = Progress(args.frames, "frames", enabled=not args.quiet)
+        # On the real stderr, past the capture of library output (splinecast.cli.main).
+        progress = Progress(args.frames, "frames", enabled=not args.quiet,
+                            stream=getattr(args, "stderr", None))
         with writer:
             for image in images:
                 writer.write(image)

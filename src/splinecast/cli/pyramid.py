@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import sys
 import time
 
 from ._common import log
@@ -42,9 +44,12 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not args.overwrite:
         raise sc.ParameterError(f"-o {args.output}: already exists (use --overwrite)")
     start = time.perf_counter()
-    mv = build_pyramid(args.source, out, brick=args.brick, levels=args.levels,
-                       overwrite=args.overwrite, unit=args.unit, workers=args.workers,
-                       progress=not args.quiet)
+    # The per-level progress goes to the real stderr, past the capture of library output
+    # (splinecast.cli.main); warnings and log records stay captured.
+    with contextlib.redirect_stderr(getattr(args, "stderr", sys.stderr)):
+        mv = build_pyramid(args.source, out, brick=args.brick, levels=args.levels,
+                           overwrite=args.overwrite, unit=args.unit, workers=args.workers,
+                           progress=not args.quiet)
     log(args, f"wrote {len(mv.levels)} levels in {time.perf_counter() - start:.1f} s")
     print(out)
     return 0

@@ -14,7 +14,7 @@ import webbrowser
 
 import splinecast as sc
 
-from ._common import log, numbers
+from ._common import add_input_options, log, numbers, uncaptured
 
 __all__ = ["add_parser", "run"]
 
@@ -22,7 +22,7 @@ __all__ = ["add_parser", "run"]
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     view = sub.add_parser("view", help="explore a volume interactively in the web browser")
-    view.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
+    view.add_argument("file", help="volume file, DICOM folder, Zarr folder or demo:NAME?size=N")
     view.add_argument("--model", default="trilinear",
                       help=f"initial reconstruction ({', '.join(sc.MODELS)}; default trilinear)")
     view.add_argument("--mode", default="iso", choices=sc.scene.MODES,
@@ -37,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--no-browser", action="store_true",
                       help="do not open a web browser; just print the URL")
     view.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_input_options(view)
 
 
 async def _serve(server: object, args: argparse.Namespace, read: str) -> None:
@@ -69,12 +70,13 @@ def run(args: argparse.Namespace) -> int:
         raise sc.ParameterError(f"--model must be one of {', '.join(sc.MODELS)}, "
                                 f"got {args.model!r}")
     start = time.perf_counter()
-    vol = sc.read(args.file)
+    vol = sc.read(args.file, allow_external=args.allow_external_data or None)
     isos = numbers(args.iso, "--iso")
     iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
     server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,
                           port=args.port)
     read = f"read {vol.name}: {vol.shape} {vol.dtype} in {time.perf_counter() - start:.2f} s"
-    asyncio.run(_serve(server, args, read))
+    with uncaptured(args):  # serving: warnings and log lines as they come, not at the end
+        asyncio.run(_serve(server, args, read))
     log(args, "stopped")
     return 0
