@@ -349,19 +349,35 @@ def check_render(
 
 
 # --------------------------------------------------------------------------- memory
-def parse_bytes(text: str, name: str = ENV_MAX_BYTES) -> int:
-    """``"512MiB"``, ``"2G"``, ``"1e9"`` or ``"1000000"`` -> a positive byte count."""
-    match = re.fullmatch(r"\s*([0-9.eE+]+)\s*([a-zA-Z]*)\s*", text)
-    unit = match.group(2).lower() if match else ""
-    try:
-        number = float(match.group(1)) if match else math.nan
-    except ValueError:
-        number = math.nan
-    if unit not in _UNITS or not math.isfinite(number) or number <= 0:
+def parse_bytes(value: Any, name: str = ENV_MAX_BYTES) -> int:
+    """A positive byte count from an int or a string such as ``"512MiB"``, ``"1.5GB"``, ``"1e9"``.
+
+    Binary prefixes (KiB, MiB, ...) are powers of 1024; SI ones (kB, MB, ...) and bare letters
+    powers of 1000, as in ``dask.utils.parse_bytes``. The one parser of sizes: the memory cap
+    ``SPLINECAST_MAX_BYTES`` and the brick budgets of :mod:`splinecast.multires` use it.
+
+    Examples
+    --------
+    >>> parse_bytes("2GiB"), parse_bytes("1.5 MB"), parse_bytes(4096)
+    (2147483648, 1500000, 4096)
+    """
+    if isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool | np.bool_
+    ):
+        number, unit = float(value), ""
+    else:
+        match = re.fullmatch(r"\s*([0-9.eE+]+)\s*([a-zA-Z]*)\s*", str(value))
+        unit = match.group(2).lower() if match else ""
+        try:
+            number = float(match.group(1)) if match else math.nan
+        except ValueError:
+            number = math.nan
+    size = number * _UNITS[unit] if unit in _UNITS else math.nan
+    if not (math.isfinite(size) and size >= 1):
         raise ParameterError(
-            f"{name} must be a positive byte count such as 512MiB or 2GB, got {shorten(text)}"
+            f"{name} must be a size such as 2GiB, 512MiB or 1.5GB, got {shorten(value)}"
         )
-    return max(1, int(number * _UNITS[unit]))
+    return int(size)
 
 
 def _meminfo_available() -> int | None:

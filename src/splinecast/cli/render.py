@@ -12,7 +12,6 @@ from pathlib import Path
 import splinecast as sc
 from splinecast import limits
 
-from ..multires.budget import parse_bytes
 from ._common import add_input_options, check_output, finite, log, numbers
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
@@ -276,7 +275,7 @@ def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool) -> No
             raise sc.ParameterError(f"--smooth does not apply to the multiscale volume "
                                     f"{args.file} (it would read every voxel)")
         if args.budget is not None:
-            parse_bytes(args.budget, "--budget")
+            limits.parse_bytes(args.budget, "--budget")
         if args.lod is not None and not (math.isfinite(args.lod) and args.lod > 0):
             raise sc.ParameterError(f"--lod must be a positive number of pixels, got {args.lod}")
         return
