@@ -117,7 +117,7 @@ def test_resized_camera_keeps_the_view(vol):
     ({"mode": "dvr", "tf": {"domain": [1, 0], "opacity": [[0.5, 1]]}}, "lo < hi"),
     ({"mode": "dvr", "tf": {"domain": [0, 1], "opacity": [[0.6, 1], [0.5, 1]]}},
      "increasing order"),
-    ({"mode": "dvr", "dvr": {"step": -1}}, "step must be a positive number"),
+    ({"mode": "dvr", "dvr": {"step": -1}}, "step (voxels) must be a finite number >= 0.001"),
     ({"mode": "dvr", "dvr": {"preintegration": "4d"}}, "preintegration must be one of"),
     ({"lighting": {"ambient": -1}}, "ambient must be >= 0"),
     ({"clip": [[0, 0, 0, 1]]}, "non-zero normal"),

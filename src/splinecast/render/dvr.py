@@ -136,8 +136,6 @@ class DVRSettings:
                                        lo_open=True)
         if not self.exponent > 0:
             raise ParameterError(f"exponent must be positive, got {self.exponent}")
-        if self.termination is not None and not 0 < self.termination <= 1:
-            raise ParameterError(f"termination must be in (0, 1], got {self.termination}")
         if self.table_layout not in TABLE_LAYOUTS:
             raise ParameterError(f"table_layout must be one of {', '.join(TABLE_LAYOUTS)}, "
                                  f"got {self.table_layout!r}")

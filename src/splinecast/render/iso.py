@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numba import prange
 
+from .. import limits
 from .._jit import jit
 from ..errors import ParameterError
 from ..models.pieces import gradient, value_gradient_at
@@ -248,8 +249,8 @@ class Iso:
                  inside: str = "high", shading: Shading | None = None) -> None:
         if method not in METHODS:
             raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-        if method == "sampled" and not (math.isfinite(step) and step > 0):
-            raise ParameterError(f"step must be a positive number of voxels, got {step}")
+        if method == "sampled":  # against the volume's size too: limits.check_render
+            limits.check_finite_number(step, "step", lo=limits.MIN_STEP)
         self.method = method
         self.shading = shading or Shading()
         self.params = IsoMode(float(iso), METHODS[method], float(step), inside == "high",

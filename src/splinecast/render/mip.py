@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numba import prange
 
+from .. import limits
 from .._jit import jit
 from ..accel.traversal import walk_begin, walk_step
 from ..errors import ParameterError
@@ -218,8 +219,8 @@ class Mip:
                  value_range: tuple[float, float] = (0.0, 1.0)) -> None:
         if method not in _METHODS:
             raise ParameterError(f"method must be one of {', '.join(_METHODS)}, got {method!r}")
-        if method == "sampled" and not (math.isfinite(step) and step > 0):
-            raise ParameterError(f"step must be a positive number of voxels, got {step}")
+        if method == "sampled":  # against the volume's size too: limits.check_render
+            limits.check_finite_number(step, "step", lo=limits.MIN_STEP)
         self.name = kind
         self.method = method
         self.window = check_window(window, value_range)
