@@ -11,6 +11,7 @@ from pathlib import Path
 
 import splinecast as sc
 from splinecast import limits
+from splinecast.render.defaults import WINDOW_PERCENTILES
 
 from ._common import add_input_options, check_output, finite, log, numbers
 
@@ -168,7 +169,7 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
             kwargs["window"] = sc.auto_window(vol)
             notes.append("window {:g}..{:g} (automatic: {:g}th-{:g}th percentiles of the "
                 "non-background values; set --window LO,HI)".format(
-                    *kwargs["window"], *sc.defaults.WINDOW_PERCENTILES))
+                    *kwargs["window"], *WINDOW_PERCENTILES))
         kwargs["method"] = args.method
         kwargs["step"] = args.step
         return kwargs, notes
