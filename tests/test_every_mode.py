@@ -106,7 +106,7 @@ def test_three_nested_translucent_s31_surfaces_blend_in_depth_order():
     spline and finite-difference normals."""
     vol = sc.demo("sphere", size=20)  # |p| - 0.6; the inside is where values are low
     scene = sc.Scene(vol, model="s31")
-    cam = sc.Camera.orbit(vol, azimuth=20, elevation=15, size=(12, 10))
+    cam = sc.Camera.orbit(vol, azimuth=20, elevation=15, size=(16, 12), zoom=2.0)
     isos = [-0.3, -0.1, 0.1]
     colors = np.array([(1.0, 0.2, 0.1), (0.1, 0.9, 0.2), (0.2, 0.3, 1.0)])
     opacity = [0.5, 0.4, 0.6]

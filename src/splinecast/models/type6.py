@@ -707,12 +707,16 @@ class Type6Model:
         return self.static_nbytes
 
     def evaluate(self, points: np.ndarray) -> np.ndarray:
-        """Spline values at index-space points, shape (m, 3) (clamped into the domain)."""
-        return evaluate_points(self, points)[0]
+        """Spline values at index-space points, shape (..., 3) -> (...) (clamped into the
+        domain)."""
+        lead = np.shape(points)[:-1]
+        return evaluate_points(self, points)[0].reshape(lead)
 
     def gradient(self, points: np.ndarray) -> np.ndarray:
-        """Index-space gradient at index-space points (divide by spacing for world units)."""
-        return evaluate_points(self, points)[1]
+        """Index-space gradient at index-space points, shape (..., 3) -> (..., 3) (divide by
+        spacing for world units)."""
+        lead = np.shape(points)[:-1]
+        return evaluate_points(self, points)[1].reshape(*lead, 3)
 
     def cube_coefficients(self, i: int, j: int, k: int) -> np.ndarray:
         """All distinct coefficients of cube ``(i, j, k)`` (float64, in the tables' point order)."""
