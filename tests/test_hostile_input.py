@@ -20,9 +20,8 @@ import numpy as np
 import pytest
 
 import splinecast as sc
-from splinecast import limits
 from splinecast.cli import main
-from splinecast.errors import DataError, ParameterError, ReadError
+from splinecast.errors import DataError, ParameterError, ReadError, limits
 
 SHAPE = (6, 5, 4)
 RAW = (np.arange(np.prod(SHAPE)) % 97).astype("<u2").reshape(SHAPE, order="F")

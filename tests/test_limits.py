@@ -1,4 +1,5 @@
-"""The validation layer itself (splinecast.limits): each check against hand-computed values."""
+"""The validation layer itself (splinecast.errors.limits): each check against hand-computed
+values."""
 
 from __future__ import annotations
 
@@ -13,8 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from splinecast import limits
-from splinecast.errors import ParameterError, ReadError
+from splinecast.errors import ParameterError, ReadError, limits
 
 
 @pytest.mark.parametrize("value", [0, -1, 1.5, float("nan"), float("inf"), True, "3", None,

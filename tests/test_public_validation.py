@@ -72,7 +72,8 @@ def test_volume_refuses_spacing_that_is_not_positive(spacing):
 @pytest.mark.parametrize("name", ["spacing", "origin"])
 @pytest.mark.parametrize("value", [math.nan, math.inf, (1.0, -math.inf, 1.0), None])
 def test_volume_refuses_non_finite_spacing_and_origin(name, value):
-    # splinecast.limits: a spacing must also lie in SPACING_RANGE, so its message gives the range.
+    # splinecast.errors.limits: a spacing must also lie in SPACING_RANGE, so its message gives
+    # the range.
     wanted = "three numbers between" if name == "spacing" else "three finite numbers"
     with pytest.raises(sc.ParameterError, match=f"{name} must be {wanted}"):
         sc.Volume(np.zeros((2, 2, 2)), **{name: value})

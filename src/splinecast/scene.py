@@ -15,11 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from . import limits
 from .accel.active_cells import ActiveCells
 from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
-from .errors import ParameterError
+from .errors import ParameterError, limits
 from .models import MODELS
 from .render.clipping import make_planes
 from .render.defaults import auto_iso, auto_transfer_function, auto_window, content_box

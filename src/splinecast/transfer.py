@@ -33,8 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from . import limits
-from .errors import ParameterError, ReadError
+from .errors import ParameterError, ReadError, limits
 
 __all__ = ["COLORMAPS", "TransferFunction", "colormap_table", "apply_colormap"]
 
@@ -260,8 +259,9 @@ class TransferFunction:
     def load(cls, path: str | os.PathLike) -> TransferFunction:
         """Read a transfer function written by :meth:`save` (or by hand in the same format).
 
-        The file is read with the bounds of :func:`splinecast.limits.load_json` (size, nesting,
-        finite numbers), so any file, even ``/dev/zero``, gives at worst a one-line ReadError.
+        The file is read with the bounds of :func:`splinecast.errors.limits.load_json` (size,
+        nesting, finite numbers), so any file, even ``/dev/zero``, gives at worst a one-line
+        ReadError.
         """
         label = str(limits.check_path_text(path, "transfer function", ReadError))
         spec = limits.load_json(Path(label), label)

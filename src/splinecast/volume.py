@@ -21,7 +21,8 @@ counts, before any compiled code runs, because no reconstruction can interpolate
 them first (for example ``numpy.nan_to_num``). :attr:`Volume.value_range` is the range of the
 finite values.
 
-Spacing and origin are validated by :mod:`splinecast.limits` (finite, normal, within a sane range).
+Spacing and origin are validated by :mod:`splinecast.errors.limits` (finite, normal, within a
+sane range).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from .errors import DataError, ParameterError
-from .limits import check_origin, check_spacing
+from .errors.limits import check_origin, check_spacing
 
 __all__ = ["Volume", "GridGeometry", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported",
            "OrientationWarning"]

@@ -17,7 +17,7 @@ import argparse
 import sys
 
 import splinecast as sc
-from splinecast.limits import printable
+from splinecast.errors.limits import printable
 
 from . import info, movie, pyramid, render, view
 from ._common import Parser, captured_output

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import NoReturn, TextIO
 
 import splinecast as sc
-from splinecast import limits
+from splinecast.errors import limits
 
 __all__ = [
     "Captured",

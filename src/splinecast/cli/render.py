@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import splinecast as sc
-from splinecast import limits
+from splinecast.errors import limits
 from splinecast.render.defaults import WINDOW_PERCENTILES
 
 from ._common import add_input_options, check_output, finite, log, numbers
@@ -219,8 +219,8 @@ def _fit(args: argparse.Namespace, vol: sc.Volume, kwargs: dict) -> object:
 
 def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
     """Validate the options :func:`add_render_options` added that need no volume (ranges of the
-    numeric options, which argparse has made finite, against :mod:`splinecast.limits`; options
-    the mode would ignore); returns the image ``(width, height)``."""
+    numeric options, which argparse has made finite, against :mod:`splinecast.errors.limits`;
+    options the mode would ignore); returns the image ``(width, height)``."""
     if len(args.size) > 32:
         shown = limits.shorten(args.size)
         raise sc.ParameterError(f"--size must look like WIDTHxHEIGHT, got {shown}")

@@ -1,5 +1,6 @@
 """Helpers shared by the readers: optional imports, third-party failures, label formatting, memory
-checks and the final Volume checks (the limits themselves live in :mod:`splinecast.limits`)."""
+checks and the final Volume checks (the limits themselves live in
+:mod:`splinecast.errors.limits`)."""
 
 from __future__ import annotations
 
@@ -13,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import limits
-from ..errors import DataError, ReadError, SplinecastError
+from ..errors import DataError, ReadError, SplinecastError, limits
 from ..volume import CONVERTED_DTYPES, SUPPORTED_DTYPES, Volume, exact_supported
 
 __all__ = [
@@ -98,7 +98,8 @@ def fmt_shape(shape: Any) -> str:
 
 def check_in_memory(shape: Any, dtype: Any, label: str, copies: int = 1) -> None:
     """Refuse to load a ``shape`` array of ``dtype`` (``copies`` times) that would not fit the
-    memory limit of :func:`splinecast.limits.check_memory`; ``shape`` must be validated first."""
+    memory limit of :func:`splinecast.errors.limits.check_memory`; ``shape`` must be validated
+    first."""
     dtype = np.dtype(dtype)
     size = limits.nbytes(shape, dtype.itemsize) * copies
     limits.check_memory(size, f"a {fmt_shape(shape)} {dtype.name} array", label, ReadError)

@@ -9,8 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import limits
-from ..errors import ParameterError, ReadError
+from ..errors import ParameterError, ReadError, limits
 from ..volume import SUPPORTED_DTYPES, Volume
 from .sidecar import find_sidecar
 
@@ -177,7 +176,7 @@ def read(
     ------
     ReadError
         Missing file, unknown format, bad header, truncated data, unsupported content, a size
-        beyond the limits or the memory available (see :mod:`splinecast.limits`), a data file
+        beyond the limits or the memory available (see :mod:`splinecast.errors.limits`), a data file
         outside the header's folder, or a missing optional library (with the command that
         installs it).
     ParameterError

@@ -13,9 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import limits
 from .._atomic import atomic_outputs
-from ..errors import ParameterError, ReadError
+from ..errors import ParameterError, ReadError, limits
 from ..volume import Volume
 from ._common import finish_volume
 from .rawfile import map_raw, write_raw
@@ -100,7 +99,7 @@ def read_metaimage(path: Path, *, allow_external: bool | None = None) -> Volume:
 
     ``TransformMatrix`` is not applied: a non-identity matrix only triggers a warning. The data
     file must lie in the header's folder or below unless ``allow_external`` (see
-    :func:`splinecast.limits.check_data_file`).
+    :func:`splinecast.errors.limits.check_data_file`).
     """
     fields, header_end = _parse_header(path)
     if fields.get("objecttype", "Image").lower() != "image":

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import limits
-from ..errors import ReadError
+from ..errors import ReadError, limits
 from ..volume import Volume
 from ._common import check_dtype, check_in_memory, finish_volume, fmt_shape, require, third_party
 from .orientation import align_to_world

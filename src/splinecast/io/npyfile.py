@@ -14,9 +14,8 @@ from typing import IO
 
 import numpy as np
 
-from .. import limits
 from .._atomic import atomic_outputs
-from ..errors import ReadError
+from ..errors import ReadError, limits
 from ..volume import Volume
 from ._common import check_dtype, check_in_memory, finish_volume, fmt_shape, third_party
 

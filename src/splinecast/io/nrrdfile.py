@@ -4,7 +4,8 @@ pynrrd parses the header (read here up to :data:`_MAX_HEADER_BYTES`); the data i
 every size is checked first: raw-encoded data, attached or detached, is memory-mapped after a size
 check; gzip and bzip2 data is decompressed exactly as far as the header's byte count (never
 further) after a memory check; text data is read with a bounded size. A detached data file must
-lie in the header's folder or below (see :func:`splinecast.limits.check_data_file`). The geometry
+lie in the header's folder or below (see :func:`splinecast.errors.limits.check_data_file`).
+The geometry
 comes from ``space directions`` (the length of each axis vector is the spacing) or ``spacings``,
 and ``space origin``. The coordinates are kept in the file's own space (e.g. LPS); its name is
 stored in ``metadata["space"]``.
@@ -20,9 +21,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from .. import limits
 from .._atomic import atomic_outputs
-from ..errors import ParameterError, ReadError
+from ..errors import ParameterError, ReadError, limits
 from ..volume import Volume
 from ._common import check_in_memory, finish_volume, fmt_shape, native, require, third_party
 from .orientation import align_to_world

@@ -14,8 +14,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from .. import limits
-from ..errors import ReadError
+from ..errors import ReadError, limits
 from ._common import check_dtype, fmt_shape, native, third_party
 
 __all__ = ["map_raw", "write_raw"]

@@ -12,7 +12,7 @@ the start of the data file (``-1``: the voxels are the last bytes of the file). 
 ``data_file`` names the data file relative to the sidecar (in its folder or below, unless external
 files are allowed); otherwise it is the sidecar's name without ``.json`` (``foo.raw.json``) or
 with ``.raw`` instead (``foo.json``). The sidecar itself is read with the bounds of
-:func:`splinecast.limits.load_json`.
+:func:`splinecast.errors.limits.load_json`.
 """
 
 from __future__ import annotations
@@ -21,9 +21,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from .. import limits
 from .._atomic import atomic_outputs
-from ..errors import ParameterError, ReadError
+from ..errors import ParameterError, ReadError, limits
 from ..volume import Volume
 from ._common import check_dtype, finish_volume
 from .rawfile import map_raw, write_raw

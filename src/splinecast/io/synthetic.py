@@ -33,8 +33,7 @@ from urllib.parse import parse_qsl
 
 import numpy as np
 
-from .. import limits
-from ..errors import ParameterError
+from ..errors import ParameterError, limits
 from ..volume import Volume
 
 __all__ = [

@@ -19,8 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import limits
-from ..errors import ReadError
+from ..errors import ReadError, limits
 from ..volume import Volume
 from ._common import check_dtype, check_in_memory, finish_volume, fmt_shape, require, third_party
 

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from .. import limits
+from ..errors import limits
 
 __all__ = ["parse_bytes", "format_bytes"]
 
 
 def parse_bytes(value: Any, name: str = "budget") -> int:
     """A positive byte count from an int or a string such as ``"2GiB"``
-    (:func:`splinecast.limits.parse_bytes`, the one parser of sizes).
+    (:func:`splinecast.errors.limits.parse_bytes`, the one parser of sizes).
 
     Raises
     ------

@@ -46,9 +46,8 @@ from typing import Any
 import numpy as np
 from numba import prange
 
-from .. import limits
 from .._jit import jit
-from ..errors import ParameterError
+from ..errors import ParameterError, limits
 from ..models.pieces import gradient
 from ..preintegration import PreintegrationTable, preint_lookup, preintegrate
 from ..roots.pieces import poly_value
@@ -119,8 +118,9 @@ class DVRSettings:
     leap: bool = True
 
     def __post_init__(self) -> None:
-        # Bounds on work and memory (splinecast.limits): the smallest step, finite weights, and
-        # a table that fits in memory. The step against a volume's size is checked at render.
+        # Bounds on work and memory (splinecast.errors.limits): the smallest step, finite
+        # weights, and a table that fits in memory. The step against a volume's size is checked
+        # at render.
         limits.check_finite_number(self.step, "step (voxels)", lo=limits.MIN_STEP)
         for name in ("ambient", "diffuse", "exponent"):
             limits.check_finite_number(getattr(self, name), name, lo=0)

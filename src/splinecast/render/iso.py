@@ -22,9 +22,8 @@ from typing import Any
 import numpy as np
 from numba import prange
 
-from .. import limits
 from .._jit import jit
-from ..errors import ParameterError
+from ..errors import ParameterError, limits
 from ..models.pieces import gradient, value_gradient_at
 from ..roots.pieces import poly_first_root, poly_value
 from .frame import Frame

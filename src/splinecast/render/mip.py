@@ -30,10 +30,9 @@ from typing import Any
 import numpy as np
 from numba import prange
 
-from .. import limits
 from .._jit import jit
 from ..accel.traversal import walk_begin, walk_step
-from ..errors import ParameterError
+from ..errors import ParameterError, limits
 from ..roots.pieces import poly_max, poly_value
 from ..transfer import apply_colormap, colormap_table
 from .frame import Frame

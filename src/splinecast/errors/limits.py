@@ -51,7 +51,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from .errors import ParameterError, ReadError, SplinecastError
+from . import ParameterError, ReadError, SplinecastError
 
 __all__ = [
     "ENV_ALLOW_EXTERNAL",
