@@ -42,13 +42,18 @@ def test_default_state_is_plain_json_and_renders_the_demo_isovalue(vol, defaults
     assert request.model == "trilinear"
 
 
-def test_default_isovalue_without_metadata_is_the_middle_of_the_range():
+def test_defaults_without_metadata_are_those_of_splinecast_render():
+    """The viewer opens on what ``splinecast render FILE`` shows: the automatic isovalue,
+    window and transfer function of :mod:`splinecast.render.defaults`."""
     data = np.arange(27, dtype=np.uint8).reshape(3, 3, 3) * 4
-    state = default_state(sc.Volume(data))
-    assert state["iso"] == pytest.approx(52.0)  # (0 + 104) / 2
-    # The default transfer function lives on the data range and is a valid TransferFunction.
+    vol = sc.Volume(data)
+    state = default_state(vol)
+    assert state["iso"] == sc.auto_iso(vol)
+    assert 0.0 < state["iso"] < 104.0
+    assert state["window"] == list(sc.auto_window(vol))
     tf = sc.TransferFunction.from_dict(state["tf"])
-    assert tf.domain == (0.0, 104.0)
+    assert tf.to_dict() == sc.auto_transfer_function(vol).to_dict()
+    assert 0.0 <= tf.domain[0] < tf.domain[1] <= 104.0  # within the data range
 
 
 def test_camera_equals_camera_orbit(vol, defaults):

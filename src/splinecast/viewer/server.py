@@ -75,7 +75,8 @@ class ViewerServer:
     mode : str
         Initial render mode.
     iso : float or list of float, optional
-        Initial isovalue(s) (default: ``metadata["default_iso"]`` or the middle of the range).
+        Initial isovalue(s) (default: the automatic isovalue of
+        :func:`splinecast.auto_iso`, as ``splinecast render``).
     host : str
         Address to bind; anything but a loopback address must be asked for explicitly and is
         logged as a warning (the token is then the only protection).

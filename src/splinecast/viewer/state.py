@@ -39,6 +39,7 @@ from ..camera import Camera, parse_size
 from ..errors import ParameterError
 from ..models import MODELS
 from ..render.clipping import make_planes
+from ..render.defaults import auto_iso, auto_transfer_function, auto_window
 from ..render.dvr import DVRSettings
 from ..render.shading import Shading
 from ..scene import MODES, check_iso
@@ -96,32 +97,14 @@ class RenderRequest:
 
 
 def default_iso(volume: Volume) -> float:
-    """The volume's ``metadata["default_iso"]``, or the middle of its data range."""
-    iso = volume.metadata.get("default_iso")
-    if iso is not None:
-        return float(iso)
-    lo, hi = volume.value_range
-    return 0.5 * (lo + hi)
+    """The isovalue ``splinecast render`` shows when none is given (:func:`auto_iso`)."""
+    return float(auto_iso(volume))
 
 
-def _default_tf(volume: Volume, iso: float) -> dict[str, Any]:
-    """A ramp from just below the default isovalue to the top of the range (``bone`` colours).
-
-    A volume may bring its own as ``metadata["default_tf"]`` (the dictionary form of
-    :meth:`TransferFunction.to_dict`).
-    """
-    given = volume.metadata.get("default_tf")
-    if given is not None:
-        return TransferFunction.from_dict(given).to_dict()
-    lo, hi = volume.value_range
-    if not hi > lo:
-        hi = lo + 1.0
-    start = max(lo, iso - 0.1 * (hi - lo))
-    iso = min(max(iso, start), hi)
-    points = [(start, 0.0), (iso, 0.05), (hi, 0.6)]
-    if start == iso:
-        points = [(iso, 0.0), (hi, 0.6)]
-    return TransferFunction(points, (lo, hi), "bone").to_dict()
+def _default_tf(volume: Volume) -> dict[str, Any]:
+    """The transfer function ``splinecast render --mode dvr`` uses when none is given
+    (:func:`auto_transfer_function`; a volume may bring its own as ``metadata["default_tf"]``)."""
+    return auto_transfer_function(volume).to_dict()
 
 
 def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
@@ -147,7 +130,6 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
     if iso is None:
         iso = default_iso(volume)
     isos = [check_iso(volume, v) for v in (iso if isinstance(iso, list | tuple) else [iso])]
-    lo, hi = volume.value_range
     shading = Shading()
     return {
         "model": model,
@@ -157,9 +139,9 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "size": [1024, 768],
         "iso": isos[0] if len(isos) == 1 else isos,
         "opacity": None,
-        "window": [lo, hi if hi > lo else lo + 1.0],
+        "window": [float(v) for v in auto_window(volume)],
         "colormap": "gray",
-        "tf": _default_tf(volume, isos[0]),
+        "tf": _default_tf(volume),
         # Early ray termination at 99% opacity (what interactive volume renderers do): frames
         # several times faster, at most 1% darker per channel than compositing to the end.
         "dvr": {"step": 0.5, "shade": False, "preintegration": "2d", "termination": 0.99},
