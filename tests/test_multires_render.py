@@ -310,13 +310,14 @@ def test_frames_converge_without_holes_while_bricks_arrive(shapes):
     with sc.Scene(sc.read(path), budget="64MiB", lod=1.5, load_budget=4) as scene:
         first = scene.render(cam, iso=0.0)
         assert not first.stats["complete"] and first.stats["substituted"] > 0
-        assert first.stats["pieces_changed_at_seams"] > 0  # ancestors meet finer bricks
         frames = [first]
         for _ in range(200):
             frames.append(scene.render(cam, iso=0.0))
             if frames[-1].stats["complete"]:
                 break
         assert frames[-1].stats["complete"]
+        # Some frame met ancestors beside finer bricks (which frame depends on the loader).
+        assert any(f.stats["pieces_changed_at_seams"] > 0 for f in frames)
         for frame in frames:
             hit = np.isfinite(frame.depth)
             bad = core & (~hit | (frame.depth > t_core))
