@@ -100,7 +100,7 @@ def _pixel_ray(basis, geom, row, col, width, height):
             (wx - geom[0]) / sx, (wy - geom[1]) / sy, (wz - geom[2]) / sz)
 
 
-@jit()
+@jit(inline="always")
 def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store, final,
                  scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
     """Trace one pixel's ray; returns (cells visited, cells tested, blocks skipped)."""
