@@ -113,13 +113,24 @@ def _cases(quick: bool) -> list[dict]:
     return cases
 
 
+def _revision(folder: str | None) -> str | None:
+    """The git commit of a source folder, if it is in a git checkout."""
+    if not folder:
+        return None
+    done = subprocess.run(["git", "-C", folder, "rev-parse", "--short", "HEAD"],
+                          capture_output=True, text=True)
+    return done.stdout.strip() or None
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline", help="src folder of the baseline build")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--json", default=str(HERE / "results" / "kernels.json"))
+    ap.add_argument("--json", help="output path (default results/kernels[_quick].json)")
     args = ap.parse_args()
+    if args.json is None:
+        args.json = str(HERE / "results" / ("kernels_quick.json" if args.quick else "kernels.json"))
     repeats = 3 if args.quick else args.repeats
     new = Worker(None)
     old = Worker(args.baseline) if args.baseline else None
@@ -130,7 +141,8 @@ def main() -> None:
         # Interleave: the builds take turns, so both see the same machine.
         a = new.ask(req)
         b = old.ask(req) if old else {"error": "no baseline"}
-        row = {"volume": "ML 256^3" if case["volume"] == "ml" else "MRI", "model": case["model"],
+        label = f"ML {case['size']}^3" if case["volume"] == "ml" else "MRI"
+        row = {"volume": label, "model": case["model"],
                "mode": case["mode"], "new_ms": statistics.median(a["ms"]) if "ms" in a else None,
                "new_error": a.get("error"),
                "base_ms": statistics.median(b["ms"]) if "ms" in b else None,
@@ -142,11 +154,15 @@ def main() -> None:
     new.close()
     if old:
         old.close()
-    out = {"machine": describe(), "quick": args.quick, "repeats": repeats, "rows": rows}
+    out = {"machine": describe(), "quick": args.quick, "repeats": repeats,
+           "baseline": _revision(args.baseline), "build": _revision(str(HERE.parent)),
+           "rows": rows}
     path = Path(args.json)
     path.write_text(json.dumps(out, indent=1))
     lines = [f"# Frame times, this build vs baseline ({'quick' if args.quick else 'full'})", "",
              f"Machine: {out['machine']}", "",
+             f"This build: {out['build']}; baseline: {out['baseline']}. Median of {repeats} "
+             "renders after a warm-up render, the builds taking turns.", "",
              "| volume | model | mode | new ms | baseline ms | new / baseline |",
              "|---|---|---|---|---|---|"]
     for r in rows:
