@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	@$(VENV)/bin/splinecast render 'demo:marschner-lobb?size=128' --iso 0.5 --size 768x768 \
-		--azimuth 30 --elevation 25 --zoom 1.2 --quiet -o $(DEMO_PNG)
+		--azimuth 30 --elevation 25 --quiet -o $(DEMO_PNG)
 
 test: $(STAMP) $(BENCH_STAMP) $(BROWSER_STAMP)
 	$(PY) -m pytest
