@@ -5,15 +5,86 @@ which removes a branch from every division in the hot loops; the kernels handle 
 explicitly. ``cache=True`` stores compiled code on disk so only the first run compiles.
 ``nogil=True`` releases the GIL while compiled code runs, so a server (the browser viewer) can
 render in a worker thread while its event loop keeps answering.
+
+Several processes often compile the same kernels at once: the workers of a Dask ``LocalCluster``,
+two viewers, the test suite run in parallel. Numba's on-disk index of a function is then not safe:
+two processes that save at the same moment can pick the same data-file name, and the index can end
+up naming the other process's code for a signature, which would be loaded and called with the
+wrong types. Every splinecast function therefore saves through :class:`_LockedIndexFile`, which
+holds an exclusive lock on the index while it saves and writes the data file before the index
+entry that names it. Loading needs no lock: both files are replaced atomically by numba.
 """
 
 from __future__ import annotations
 
-from functools import partial
+import contextlib
+import os
+from collections.abc import Callable, Iterator
+from typing import Any
 
 from numba import njit
 
+try:  # POSIX; elsewhere saving keeps numba's own (unlocked) behaviour
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+
+try:
+    from numba.core.caching import IndexDataCacheFile
+except ImportError:  # pragma: no cover - a numba without this class: keep its behaviour
+    IndexDataCacheFile = None  # type: ignore[assignment,misc]
+
 __all__ = ["jit"]
 
-#: Decorator for every compiled function in splinecast (accepts njit keyword arguments).
-jit = partial(njit, cache=True, nogil=True, error_model="numpy")
+_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@contextlib.contextmanager
+def _locked(path: str) -> Iterator[None]:
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing releases the lock
+
+
+if IndexDataCacheFile is not None and fcntl is not None:
+
+    class _LockedIndexFile(IndexDataCacheFile):
+        """Numba's index-and-data cache file, saved under a lock, data before index."""
+
+        def save(self, key: Any, data: Any) -> None:
+            with _locked(self._index_path + ".lock"):
+                overloads = self._load_index()
+                name = overloads.get(key)
+                if name is None:
+                    taken = set(overloads.values())
+                    number = 1
+                    while self._data_name(number) in taken:
+                        number += 1
+                    name = self._data_name(number)
+                self._save_data(name, data)
+                overloads[key] = name
+                self._save_index(overloads)
+else:  # pragma: no cover
+    _LockedIndexFile = None  # type: ignore[assignment,misc]
+
+
+def _lock_cache(dispatcher: Any) -> Any:
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if _LockedIndexFile is not None and type(cache_file) is IndexDataCacheFile:
+        # Same state, safer ``save``: the subclass adds no attributes.
+        cache_file.__class__ = _LockedIndexFile
+    return dispatcher
+
+
+def jit(function: Callable | None = None, **options: Any) -> Any:
+    """Decorator for every compiled function in splinecast (accepts ``njit`` keyword arguments).
+
+    Used bare (``@jit``) or with options (``@jit(parallel=True)``), like ``numba.njit``.
+    """
+    settings = {**_OPTIONS, **options}
+    if function is None:
+        return lambda f: _lock_cache(njit(**settings)(f))
+    return _lock_cache(njit(**settings)(function))

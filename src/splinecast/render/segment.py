@@ -60,16 +60,37 @@ class Grid:
     band_rows: int = 1
     tile: int = 0
 
+    def __post_init__(self) -> None:
+        self.kernel = read_only_kernel(self.kernel)
+
     def with_kernel(self, kernel: tuple) -> Grid:
         """The same grid with another kernel tuple of the same cells (e.g. iso-classified)."""
         return Grid(kernel, self.hierarchy, self.geom, self.n_cells, self.band_rows, self.tile)
+
+
+def _read_only(value: Any) -> Any:
+    if isinstance(value, np.ndarray) and value.flags.writeable:
+        value = value.view()
+        value.flags.writeable = False
+    return value
+
+
+def read_only_kernel(kernel: tuple) -> tuple:
+    """``kernel`` with every array replaced by a read-only view of it (no copy).
+
+    Numba compiles a separate specialization for a read-only array (a memory-mapped file) and a
+    writable one (an array in memory) of the same type. Kernels never write their grid, so
+    handing them read-only views always makes one compiled kernel serve both, which halves the
+    compilation a session (and the test suite) pays for mixing files and arrays.
+    """
+    return type(kernel)(*(_read_only(field) for field in kernel))
 
 
 def _hierarchy(model: Any, array: np.ndarray, n_cells: tuple[int, int, int]) -> Any:
     if getattr(model, "cube_bounded", False):
         lo, hi = model.cube_bounds_of(array)
         return CubeBoundHierarchy(*block_ranges(lo, hi), n_cells)
-    return MinMaxHierarchy(array, n_cells, model.support)
+    return MinMaxHierarchy(_read_only(array), n_cells, model.support)
 
 
 def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 0),
