@@ -31,7 +31,7 @@ bench: $(STAMP)
 # `bench` extra from PyPI (~10 s of wheels); if either fails the VTK tests skip with the reason.
 # The stamp is written only when both succeed, so a failure is retried by the next `make test`
 # instead of being remembered (a remembered failure would make those tests skip forever).
-$(BENCH_STAMP): pyproject.toml scripts/install_bench.sh $(STAMP)
+$(BENCH_STAMP): pyproject.toml scripts/install_bench.sh scripts/apt_install.sh $(STAMP)
 	@ok=1; \
 	bash scripts/install_bench.sh || ok=0; \
 	$(PY) -m pip install --quiet -e '.[all,test,bench]' || ok=0; \
@@ -42,7 +42,7 @@ $(BENCH_STAMP): pyproject.toml scripts/install_bench.sh $(STAMP)
 # Headless Chromium for the viewer's browser tests (issue 13), optional for `make test`: Debian's
 # chromium via apt (scripts/install_browser.sh); if it cannot be installed those tests skip with
 # the reason. As for the bench stamp, only success is remembered: a failure is retried next time.
-$(BROWSER_STAMP): scripts/install_browser.sh $(STAMP)
+$(BROWSER_STAMP): scripts/install_browser.sh scripts/apt_install.sh $(STAMP)
 	@if bash scripts/install_browser.sh; then touch $(BROWSER_STAMP); else \
 		echo "chromium not installed: the browser tests will skip with the reason;" \
 			"the next 'make test' tries again"; fi

@@ -24,43 +24,10 @@ optional=0
 
 packages=(libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libxrender1 libxt6 libx11-6)
 
-fail() {
-    echo "install_bench.sh: $*" >&2
-    if (( optional )); then
-        echo "install_bench.sh: continuing without them; VTK comparison tests will skip" >&2
-        exit 0
-    fi
-    exit 1
-}
-
-if ! command -v dpkg-query >/dev/null 2>&1 || ! command -v apt-get >/dev/null 2>&1; then
-    fail "not a Debian-based system; install OSMesa or EGL (Mesa) libraries by hand"
-fi
-
-missing=()
-for p in "${packages[@]}"; do
-    # Installed already -> nothing to do; this keeps repeated `make test` runs offline and fast.
-    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-        missing+=("$p")
-    fi
-done
-if (( ${#missing[@]} == 0 )); then
-    echo "install_bench.sh: system libraries for offscreen VTK already installed"
-    exit 0
-fi
-
-sudo=()
-if (( EUID != 0 )); then
-    if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then
-        sudo=(sudo -n)
-    else
-        fail "need root (or passwordless sudo) to install: ${missing[*]}"
-    fi
-fi
-
-echo "install_bench.sh: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-"${sudo[@]}" apt-get update -qq || fail "apt-get update failed"
-"${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" \
-    || fail "apt-get install ${missing[*]} failed"
-echo "install_bench.sh: done"
+script=install_bench.sh
+skip_note="VTK comparison tests will skip"
+elsewhere="install OSMesa or EGL (Mesa) libraries by hand"
+already="system libraries for offscreen VTK already installed"
+# shellcheck source=apt_install.sh
+source "$(dirname "${BASH_SOURCE[0]}")/apt_install.sh"
+apt_install

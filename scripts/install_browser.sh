@@ -19,43 +19,10 @@ optional=0
 
 packages=(chromium fonts-dejavu-core)
 
-fail() {
-    echo "install_browser.sh: $*" >&2
-    if (( optional )); then
-        echo "install_browser.sh: continuing without it; browser tests of the viewer will skip" >&2
-        exit 0
-    fi
-    exit 1
-}
-
-if ! command -v dpkg-query >/dev/null 2>&1 || ! command -v apt-get >/dev/null 2>&1; then
-    fail "not a Debian-based system; install Chromium by hand"
-fi
-
-missing=()
-for p in "${packages[@]}"; do
-    # Installed already -> nothing to do; this keeps repeated `make test` runs offline and fast.
-    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-        missing+=("$p")
-    fi
-done
-if (( ${#missing[@]} == 0 )); then
-    echo "install_browser.sh: chromium already installed"
-    exit 0
-fi
-
-sudo=()
-if (( EUID != 0 )); then
-    if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then
-        sudo=(sudo -n)
-    else
-        fail "need root (or passwordless sudo) to install: ${missing[*]}"
-    fi
-fi
-
-echo "install_browser.sh: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-"${sudo[@]}" apt-get update -qq || fail "apt-get update failed"
-"${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" \
-    || fail "apt-get install ${missing[*]} failed"
-echo "install_browser.sh: done"
+script=install_browser.sh
+skip_note="browser tests of the viewer will skip"
+elsewhere="install Chromium by hand"
+already="chromium already installed"
+# shellcheck source=apt_install.sh
+source "$(dirname "${BASH_SOURCE[0]}")/apt_install.sh"
+apt_install
