@@ -31,7 +31,10 @@ Choices
   window and colormap at full opacity (every brick is visible).
 * **N** is the cut's share of the byte budget divided by the bytes of a full brick (border bricks
   are smaller, so the cut's bytes stay within the share); at least the coarsest level's bricks.
-  **M** is the scene's ``load_budget``, the same number of bricks the cache waits for per frame.
+  **M** is the scene's ``load_budget``, the same number of bricks the cache waits for per frame,
+  but at least 8 (a split of an octree node needs up to 8 bricks: with less, a cut could never
+  refine). A brick counts against M only if the cache does not hold it: before each update the
+  updater's residency is the cache's (prefetched bricks are free), not the previous cut.
 * **Prefetch** (what the loader reads when idle): the visible children of the cut's bricks of
   highest split priority, i.e. the next splits of the split queue S in order (the head of the
   extended cut S+ of section 4).
@@ -45,7 +48,7 @@ Choices
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -173,8 +176,8 @@ def octree_histograms(octree: BrickOctree, quantizer: Quantizer,
     """
     source = levels[0] if levels is not None else _read_level(octree, 0)
     q = quantizer
-    empty = BrickHistograms(np.zeros(1, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint32),
-                            q)
+    empty = BrickHistograms(np.zeros(2, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint32),
+                            q)  # one node without entries (the virtual root)
     leaves = int(np.prod(octree.counts[0]))
     parts = [BrickHistograms(np.zeros(leaves + 1, np.int64), empty.keys, empty.counts, q)]
     for p in range(1, octree.n_levels):
@@ -262,6 +265,7 @@ class ErrorCut:
                                    for p in range(octree.n_levels)))
         roots = np.flatnonzero(self.tree.parent == (self.virtual if self.virtual >= 0 else -2))
         self.roots = roots if self.virtual >= 0 else np.array([self.tree.root], np.int64)
+        self._node_of = {tuple(int(v) for v in key): n for n, key in enumerate(self.keys)}
         self.metric: CutMetric | None = None
         self.updater: _RenderUpdater | None = None
         self.last: CutUpdate | None = None
@@ -288,7 +292,8 @@ class ErrorCut:
         return max(int(budget_bytes) // self.brick_bytes, len(self.roots), 1)
 
     def _prepare(self, camera: Camera, tf: TransferFunction, value_filter: ValueFilter | None,
-                 interest: Any, budget: int, load_budget: int | None) -> None:
+                 interest: Any, budget: int, load_budget: int | None,
+                 resident: Iterable[Key] | None) -> None:
         interest = self.interest if interest is None else _check_interest(interest)
         signature = _signature(tf, value_filter)
         if self.metric is None:
@@ -306,7 +311,11 @@ class ErrorCut:
             start = self.roots[self.metric.visible[self.roots]]
             self.updater = _RenderUpdater(self.metric, budget, load_budget, start, self.virtual)
         self.updater.budget = int(budget)
-        self.updater.load_budget = load_budget
+        self.updater.load_budget = None if load_budget is None else max(int(load_budget), 8)
+        if resident is not None:
+            held = [self._node_of.get(key, -1) for key in resident]
+            self.updater.resident[:] = False
+            self.updater.resident[[n for n in held if n >= 0]] = True
 
     def _set_visible(self, value_filter: ValueFilter | None) -> None:
         """Visibility from the renderer's value filter (hierarchical: ranges are)."""
@@ -318,7 +327,8 @@ class ErrorCut:
             self.metric.visible[:] = value_filter.contributes(tree.value_min, tree.value_max)
 
     def update(self, camera: Camera, tf: TransferFunction, value_filter: ValueFilter | None,
-               budget: int, load_budget: int | None = None, interest: Any = None) -> CutUpdate:
+               budget: int, load_budget: int | None = None, interest: Any = None,
+               resident: Iterable[Key] | None = None) -> CutUpdate:
         """One frame of the updater: the node ids of the new cut in ``CutUpdate.cut``.
 
         Parameters
@@ -335,8 +345,10 @@ class ErrorCut:
             M, bricks entering the cut this frame.
         interest : 3 floats, optional
             Point of interest of this frame (default: the one given at construction).
+        resident : iterable of keys, optional
+            The bricks the cache holds (they cost no load); default: the previous cut.
         """
-        self._prepare(camera, tf, value_filter, interest, budget, load_budget)
+        self._prepare(camera, tf, value_filter, interest, budget, load_budget, resident)
         assert self.updater is not None
         update = self.updater.update()
         if self.virtual >= 0 and self.updater.in_cut[self.virtual]:
@@ -354,14 +366,17 @@ class ErrorCut:
         return cut_error(self.tree, errors, cut, self.metric.visible)
 
     def selector(self, camera: Camera, tf: TransferFunction, value_filter: ValueFilter | None,
-                 load_budget: int | None, interest: Any = None
+                 load_budget: int | None, interest: Any = None,
+                 resident_keys: Callable[[], Iterable[Key]] | None = None
                  ) -> Callable[[int, Callable[[Key], bool], int], Cut]:
         """A :data:`~.stream.Selector` for one frame (what :meth:`BrickStream.frame
-        <.stream.BrickStream.frame>` calls with its byte budget)."""
+        <.stream.BrickStream.frame>` calls with its byte budget); ``resident_keys()`` lists the
+        cache's bricks (:meth:`.cache.BrickCache.resident_keys`)."""
 
         def select(budget_bytes: int, resident: Callable[[Key], bool], prefetch: int) -> Cut:
+            held = None if resident_keys is None else resident_keys()
             update = self.update(camera, tf, value_filter, self.budget_bricks(budget_bytes),
-                                 load_budget, interest)
+                                 load_budget, interest, held)
             return self.to_cut(update.cut, value_filter, resident, prefetch,
                                limited=update.stop == "brick budget")
 

@@ -276,8 +276,9 @@ class MultiscaleScene:
             tf = mip_transfer(setup.window, setup.colormap)
         else:
             return None
-        return self.error_cut.selector(camera, tf, value_filter, self.stream.cache.loads_per_frame,
-                                       interest)
+        cache = self.stream.cache
+        return self.error_cut.selector(camera, tf, value_filter, cache.loads_per_frame, interest,
+                                       cache.resident_keys)
 
     def _frame(self, camera: Camera, value_filter: ValueFilter | None, lod: float | None,
                wait: bool, timeout: float | None, selector: Any) -> FrameBricks:
