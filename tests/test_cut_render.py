@@ -270,3 +270,20 @@ def test_bad_cut_values_are_refused_with_one_line(noise):
     with sc.Scene(mv, budget="64MiB", cut="error") as scene:
         with pytest.raises(sc.ParameterError, match="interest"):
             scene.render(_camera(vol), interest=(1, 2), **DVR)
+
+
+def test_cli_renders_a_pyramid_with_the_error_cut(noise, tmp_path, capsys):
+    from splinecast.cli import main
+
+    vol, path = noise
+    out = tmp_path / "noise.png"
+    assert main(["render", str(path), "--mode", "dvr", "--cut", "error", "--budget", "64MiB",
+                 "--size", "32x24", "-o", str(out)]) == 0
+    assert out.is_file()
+    assert "cut (error, E(cut) " in capsys.readouterr().err
+    for argv, message in ((["--cut", "errors"], "--cut must be lod or error, got 'errors'"),):
+        assert main(["render", str(path), *argv, "-o", str(tmp_path / "x.png")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert main(["render", "demo:sphere?size=16", "--cut", "error", "-o", str(out)]) == 2
+    assert "--cut applies to multiscale" in capsys.readouterr().err
