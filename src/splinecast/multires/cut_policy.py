@@ -35,6 +35,11 @@ Choices
   but at least 8 (a split of an octree node needs up to 8 bricks: with less, a cut could never
   refine). A brick counts against M only if the cache does not hold it: before each update the
   updater's residency is the cache's (prefetched bricks are free), not the previous cut.
+* **Fill**: a split that does not fit N or M is set aside and the next one tried
+  (``CutUpdater(fill=True)``), so a small budget is used up by smaller splits (borders,
+  transparent children) instead of being left unused behind a full octree split; the cut settles
+  close to the greedy cut with ``fill=True``, which Table 2 of ``benchmarks/results/cut.md``
+  finds within 0.1% of the optimum.
 * **Prefetch** (what the loader reads when idle): the visible children of the cut's bricks of
   highest split priority, i.e. the next splits of the split queue S in order (the head of the
   extended cut S+ of section 4).
@@ -208,9 +213,9 @@ class _RenderUpdater(CutUpdater):
     """The rendering cut's updater; the virtual root above several coarsest bricks stays split."""
 
     def __init__(self, metric: CutMetric, budget: int, load_budget: int | None, cut: Any,
-                 virtual: int):
+                 virtual: int, fill: bool):
         self.virtual = virtual
-        super().__init__(metric, budget, load_budget, cut=cut)
+        super().__init__(metric, budget, load_budget, cut=cut, fill=fill)
 
     def can_collapse(self, parent: int) -> bool:
         return parent != self.virtual
@@ -230,6 +235,9 @@ class ErrorCut:
     interest : 3 floats, optional
         Default point of interest (world coordinates) of eqs. (5)-(6); without one the importance
         is the eye term alone.
+    fill : bool
+        Set aside a split that does not fit N or M and go on (default; see
+        :mod:`.cut_update`), or end the frame there (the paper's rule).
     levels : list of ndarray, optional
         The levels in memory (default: read from the store once, here).
 
@@ -248,10 +256,12 @@ class ErrorCut:
     """
 
     def __init__(self, octree: BrickOctree, *, bins: int = DEFAULT_BINS, improved: bool = True,
-                 interest: Any = None, levels: list[np.ndarray] | None = None) -> None:
+                 interest: Any = None, fill: bool = True,
+                 levels: list[np.ndarray] | None = None) -> None:
         start = time.perf_counter()
         self.octree = octree
         self.improved = bool(improved)
+        self.fill = bool(fill)
         self.interest = _check_interest(interest)
         volume = octree.volume
         self.quantizer = Quantizer.for_data(volume.dtype, volume.value_range, bins)
@@ -309,7 +319,8 @@ class ErrorCut:
             self.metric.set_view(interest=interest, eye=camera.position)
         if self.updater is None:
             start = self.roots[self.metric.visible[self.roots]]
-            self.updater = _RenderUpdater(self.metric, budget, load_budget, start, self.virtual)
+            self.updater = _RenderUpdater(self.metric, budget, load_budget, start, self.virtual,
+                                          self.fill)
         self.updater.budget = int(budget)
         self.updater.load_budget = None if load_budget is None else max(int(load_budget), 8)
         if resident is not None:
