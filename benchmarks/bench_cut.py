@@ -24,6 +24,17 @@ source lives in a temporary memory-mapped file; the real store comes from issue 
 
 Run ``python benchmarks/bench_cut.py [--quick] [--json PATH] [--volumes mri,512,1024]``; results
 go to ``benchmarks/results/cut[_quick].json`` and ``.md``. The machine is described in the output.
+
+**Images** (the paper's Fig. 9), ``python benchmarks/bench_cut.py --images [--quick]``: the MRI
+and a synthetic volume are written as OME-Zarr pyramids (16^3 bricks) and rendered in DVR by the
+multiresolution renderer with the error-metric cut (``cut="error"``, improved priority, importance
+from the eye) and with the screen-space level-of-detail cut (``cut="lod"``, ``lod=0.5``: as fine
+as the budget allows, largest voxels on screen refined first) under the *same* byte budget (a
+share of the finest level's bricks), against the in-memory render of the full-resolution volume.
+Per pixel: the CIELUV distance (ΔE*uv, the paper's measure) and CIEDE2000 (scikit-image
+``rgb2lab`` / ``deltaE_ciede2000``); mean and 95th percentile over the pixels the full-resolution
+image covers (alpha > 1%). Results go to ``cut_images[_quick].json``/``.md`` and a PNG of the
+images and ΔE maps.
 """
 
 from __future__ import annotations
@@ -261,8 +272,9 @@ def compare(tree, metrics, n_big, start, n_small, m_small, with_update_optimum) 
     # Table 3: the same start cut for the three algorithms.
     one = {}
     within = {}
-    for label, imp in (("naive", False), ("improved", True)):
-        upd = CutUpdater(metrics[imp], n_small, m_small, cut=start)
+    for label, imp, fill in (("naive", False, False), ("improved", True, False),
+                             ("improved_fill", True, True)):
+        upd = CutUpdater(metrics[imp], n_small, m_small, cut=start, fill=fill)
         begin = np.sort(np.fromiter(upd.cut, np.int64, len(upd.cut)))
         one["input"] = cut_error(tree, error, begin, visible)
         frame = upd.update()
@@ -307,8 +319,10 @@ def aggregate(result: dict) -> dict:
         ups = [r["update"] for r in rows if r["update"]["optimal"] is not None
                and r["update"]["input"] - r["update"]["optimal"] > 1e-9 * r["update"]["input"]]
         if ups:
+            kinds = ("naive", "improved") + (("improved_fill",) if all(
+                "improved_fill" in u for u in ups) else ())
             red = {k: [(u["input"] - u[k]) / (u["input"] - u["optimal"]) * 100 for u in ups]
-                   for k in ("naive", "improved")}
+                   for k in kinds}
             e["update"] = {
                 "input": statistics.fmean(u["input"] for u in ups),
                 "naive": statistics.fmean(u["naive"] for u in ups),
@@ -316,6 +330,8 @@ def aggregate(result: dict) -> dict:
                 "optimal": statistics.fmean(u["optimal"] for u in ups),
                 "naive_pct_of_optimal": statistics.fmean(red["naive"]),
                 "improved_pct_of_optimal": statistics.fmean(red["improved"]),
+                "improved_fill_pct_of_optimal": (statistics.fmean(red["improved_fill"])
+                                                 if "improved_fill" in red else None),
                 "frames": len(ups), "sampled": len(rows),
                 "optimum_check_failures": sum(not u.get("optimum_check", True) for u in ups),
                 "dp_ms": statistics.median(u["dp_ms"] for u in ups)}
@@ -417,10 +433,14 @@ def markdown(results: dict) -> str:
               "From the cut the improved updater had when the phase began, one naive and one "
               "improved update against the download-aware optimum (frames where the optimum "
               "reduces the error; trees up to "
-              f"{UPDATE_OPTIMUM_NODES} nodes).", "",
+              f"{UPDATE_OPTIMUM_NODES} nodes). *fill %*: the improved update with "
+              "`fill=True` (a split that does not fit N or M is set aside for the frame and the "
+              "next one tried, instead of ending the frame: with M = 8 or 16 against the 8 "
+              "downloads of a full octree split, the paper's rule can make one split per frame "
+              "at most, and none paired with a collapse when M = 8).", "",
               "| volume | brick | N, M | phase | input E | naive | improved | optimal | naive % | "
-              "improved % | frames (of sampled) | DP ms |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "improved % | improved, fill % | frames (of sampled) | DP ms |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for v in results["volumes"]:
         for brick, t in v["trees"].items():
             r = t["run"]
@@ -428,12 +448,14 @@ def markdown(results: dict) -> str:
                 u = e.get("update")
                 if not u:
                     continue
+                fill_pct = ("-" if u.get("improved_fill_pct_of_optimal") is None
+                            else f"{u['improved_fill_pct_of_optimal']:.1f}%")
                 lines.append(
                     f"| {v['name']} | {brick}^3 | {r['N_small']}, {r['M_small']} | "
                     f"{phase.upper()} | {u['input']:.4f} | {u['naive']:.4f} | "
                     f"{u['improved']:.4f} | {u['optimal']:.4f} | "
                     f"{u['naive_pct_of_optimal']:.1f}% | {u['improved_pct_of_optimal']:.1f}% | "
-                    f"{u['frames']} ({u['sampled']}) | {u['dp_ms']:.0f} |")
+                    f"{fill_pct} | {u['frames']} ({u['sampled']}) | {u['dp_ms']:.0f} |")
     lines += ["", "## Update and distortion times", "",
               "Greedy update per frame (re-prioritisation of S and C plus split-and-collapse), "
               "separately for the frames that move the interest point (PI) and those that edit "
@@ -520,6 +542,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--volumes", default=None, help="comma list of mri, 512, 1024")
     parser.add_argument("--frames", type=int, default=None, help="frames per phase")
     parser.add_argument("--sample", type=int, default=None, help="Table 2/3 every n-th frame")
+    parser.add_argument("--images", action="store_true",
+                        help="only the image comparison (Fig. 9): error cut vs LOD cut")
     parser.add_argument("--replot", type=Path, default=None,
                         help="only redraw the plot from an existing JSON result")
     args = parser.parse_args(argv)
@@ -527,6 +551,8 @@ def main(argv: list[str] | None = None) -> int:
         results = json.loads(args.replot.read_text())
         print(plot(results, args.replot.with_name(args.replot.stem + "_frames.png")))
         return 0
+    if args.images:
+        return images_main(args, argv)
     names = (args.volumes.split(",") if args.volumes else
              (["mri", "512"] if args.quick else ["mri", "512", "1024"]))
     if "mri" in names and not MRI.exists():
@@ -561,6 +587,188 @@ def main(argv: list[str] | None = None) -> int:
     png = json_path.with_name(json_path.stem + "_frames.png")
     if plot(results, png):
         md += f"\n![E(cut) over the optimum and update times]({png.name})\n"
+    json_path.with_suffix(".md").write_text(md)
+    print(md)
+    return 0
+
+
+# ------------------------------------------------------------------ Fig. 9: image comparison
+#: Shares of the finest level's bricks that the cut's byte budget holds.
+IMAGE_SHARES = (0.05, 0.15)
+
+
+def delta_e(reference: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel ΔE*uv (CIELUV distance) and CIEDE2000 between two sRGB images (..., 3)."""
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    from splinecast.multires.colour import srgb_to_luv
+
+    a = np.clip(reference, 0.0, 1.0)
+    b = np.clip(image, 0.0, 1.0)
+    luv = np.linalg.norm(srgb_to_luv(a) - srgb_to_luv(b), axis=-1)
+    return luv, deltaE_ciede2000(rgb2lab(a), rgb2lab(b))
+
+
+def _stats(values: np.ndarray) -> dict:
+    return {"mean": float(values.mean()), "p95": float(np.percentile(values, 95)),
+            "max": float(values.max())}
+
+
+def image_volume(name: str, quick: bool, tmp: Path) -> tuple[sc.Volume, sc.TransferFunction]:
+    if name == "mri":
+        vol = sc.read(MRI)
+        return vol, sc.TransferFunction.load(MRI_TF)
+    n = int(name)
+    data = synthetic(n, np.empty((n, n, n), np.uint8))
+    return sc.Volume(data), SYNTH_TF
+
+
+def compare_images(name: str, quick: bool, tmp: Path, png: Path | None) -> dict:
+    """Full resolution, error cut and LOD cut at each budget share; ΔE statistics."""
+    vol, tf = image_volume(name, quick, tmp)
+    path = tmp / f"{name}.zarr"
+    t0 = time.perf_counter()
+    sc.build_pyramid(vol, path, brick=16, progress=False)
+    build_s = time.perf_counter() - t0
+    size = (256, 256) if quick else (512, 512)
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size)
+    dvr = sc.DVRSettings(step=0.5)
+    reference = sc.Scene(vol).render(cam, mode="dvr", tf=tf, dvr=dvr)  # compile
+    t0 = time.perf_counter()
+    reference = sc.Scene(vol).render(cam, mode="dvr", tf=tf, dvr=dvr)
+    full_s = time.perf_counter() - t0
+    covered = reference.rgba[..., 3] > 0.01
+    mv = sc.read(path)
+    from splinecast.multires.octree import BrickOctree
+
+    octree = BrickOctree(mv)
+    finest = int(np.prod(octree.counts[0]))
+    out = {"name": name, "shape": list(vol.shape), "size": list(size), "pyramid_s": build_s,
+           "full_render_s": full_s, "finest_bricks": finest, "covered_pixels": int(covered.sum()),
+           "budgets": []}
+    panels = []
+    for share in IMAGE_SHARES:
+        row = {"share": share}
+        # N full bricks (what ErrorCut.budget_bricks counts) in the cut's share of the budget.
+        brick_bytes = int(max(octree.brick_bytes(level, np.zeros((1, 3), np.int64)).max()
+                              for level in octree.levels))
+        budget = int(max(1, round(share * finest)) * brick_bytes / 0.8)
+        row["budget_bytes"] = budget
+        for policy in ("error", "lod"):
+            t0 = time.perf_counter()
+            with sc.Scene(mv, budget=budget, cut=policy, lod=0.5) as scene:
+                open_s = time.perf_counter() - t0
+                if scene.error_cut is not None:
+                    row["histogram_build_ms"] = scene.error_cut.build_ms
+                t0 = time.perf_counter()
+                frame = scene.render(cam, mode="dvr", tf=tf, dvr=dvr, complete=True)
+                render_s = time.perf_counter() - t0
+            luv, de2000 = delta_e(reference.rgba[..., :3], frame.rgba[..., :3])
+            st = frame.stats
+            row[policy] = {"open_s": open_s, "render_complete_s": render_s,
+                           "cut_bricks": st["cut_bricks"], "cut_bytes": st["cut_bytes"],
+                           "cut_levels": {str(k): v for k, v in st["cut_levels"].items()},
+                           "complete": st["complete"],
+                           "delta_e_uv": _stats(luv[covered]),
+                           "delta_e_2000": _stats(de2000[covered])}
+            if "cut_error" in st:
+                row[policy]["cut_error"] = st["cut_error"]
+            panels.append((share, policy, frame.rgba[..., :3], luv, float(luv[covered].mean())))
+        out["budgets"].append(row)
+        print(f"[{name}] share {share}: error ΔE*uv {row['error']['delta_e_uv']['mean']:.2f}, "
+              f"lod {row['lod']['delta_e_uv']['mean']:.2f}", file=sys.stderr, flush=True)
+    if png is not None:
+        _image_figure(name, reference.rgba[..., :3], panels, png)
+        out["figure"] = png.name
+    return out
+
+
+def _image_figure(name: str, reference: np.ndarray, panels: list, png: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shares = sorted({p[0] for p in panels})
+    top = max(float(np.percentile(p[3], 99.5)) for p in panels) or 1.0
+    fig, axes = plt.subplots(len(shares), 5, figsize=(15, 3.2 * len(shares)), squeeze=False)
+    for r, share in enumerate(shares):
+        row = {p[1]: p for p in panels if p[0] == share}
+        images = [(reference, "full resolution"),
+                  (row["error"][2], f"error cut, {share:.0%} of finest bricks"),
+                  (row["lod"][2], f"LOD cut, {share:.0%}"),
+                  (row["error"][3], f"ΔE*uv error cut (mean {row['error'][4]:.2f})"),
+                  (row["lod"][3], f"ΔE*uv LOD cut (mean {row['lod'][4]:.2f})")]
+        for c, (img, title) in enumerate(images):
+            ax = axes[r, c]
+            if img.ndim == 3:
+                ax.imshow(np.clip(img, 0, 1))
+            else:
+                shown = ax.imshow(img, cmap="magma", vmin=0, vmax=top)
+                if c == 4:
+                    fig.colorbar(shown, ax=ax, fraction=0.046)
+            ax.set_title(title, fontsize=9)
+            ax.axis("off")
+    fig.suptitle(f"{name}: DVR at the same memory budget (ΔE*uv per pixel, CIELUV; means over "
+                 "the pixels the full-resolution image covers)")
+    fig.tight_layout()
+    fig.savefig(png, dpi=80)
+    plt.close(fig)
+
+
+def images_markdown(results: dict) -> str:
+    m = results["machine"]
+    lines = ["# Images at the same memory budget: error-metric cut vs level-of-detail cut "
+             "(reference 002, Fig. 9)", "",
+             f"Machine: {m['cpu']}, {m['cores']} logical cores (shared with other jobs: times "
+             f"are noisy). Command: `{results['command']}`.", "",
+             "DVR (trilinear, step 0.5 voxel) of the multiresolution renderer, 16^3 bricks, "
+             "the cut's budget a share of the finest level's bricks (full bricks with ghosts; "
+             "the cache's budget is 1/0.8 of it), against the in-memory full-resolution image. "
+             "ΔE over the pixels the full-resolution image covers (alpha > 1%). Error cut: "
+             "improved priority (P = ER), importance from the eye, no point of interest. "
+             "LOD cut: lod = 0.5 pixel, refined largest-on-screen first while the budget "
+             "allows.", "",
+             "| volume | image | share | budget MiB | cut | bricks | levels | ΔE*uv mean | "
+             "ΔE*uv p95 | ΔE2000 mean | ΔE2000 p95 | complete render s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for v in results["volumes"]:
+        for row in v["budgets"]:
+            for policy in ("error", "lod"):
+                r = row[policy]
+                levels = ", ".join(f"{k}: {n}" for k, n in sorted(r["cut_levels"].items()))
+                lines.append(
+                    f"| {v['name']} {tuple(v['shape'])} | {v['size'][0]}x{v['size'][1]} | "
+                    f"{row['share']:.0%} | {row['budget_bytes'] / 2**20:.1f} | {policy} | "
+                    f"{r['cut_bricks']} | {levels} | {r['delta_e_uv']['mean']:.2f} | "
+                    f"{r['delta_e_uv']['p95']:.2f} | {r['delta_e_2000']['mean']:.2f} | "
+                    f"{r['delta_e_2000']['p95']:.2f} | {r['render_complete_s']:.1f} |")
+    lines.append("")
+    for v in results["volumes"]:
+        if "figure" in v:
+            lines += [f"![{v['name']}: images and ΔE maps]({v['figure']})", ""]
+    lines.append("Histogram build when the scene opens (reads every level once): " + ", ".join(
+        f"{v['name']} {v['budgets'][0]['histogram_build_ms'] / 1e3:.1f} s"
+        for v in results["volumes"]) + ".")
+    return "\n".join(lines) + "\n"
+
+
+def images_main(args: argparse.Namespace, argv: list[str] | None) -> int:
+    names = (args.volumes.split(",") if args.volumes else ["mri", "128" if args.quick else "256"])
+    if "mri" in names and not MRI.exists():
+        print(f"skipping the MRI: {MRI} not found", file=sys.stderr)
+        names.remove("mri")
+    stem = "cut_images_quick" if args.quick else "cut_images"
+    json_path = args.json or HERE / "results" / f"{stem}.json"
+    json_path.parent.mkdir(parents=True, exist_ok=True)
+    results = {"machine": describe(), "command": "python benchmarks/bench_cut.py "
+               + " ".join(argv if argv is not None else sys.argv[1:]), "volumes": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in names:
+            png = json_path.with_name(f"{stem}_{name}.png")
+            results["volumes"].append(compare_images(name, args.quick, Path(tmp), png))
+    json_path.write_text(json.dumps(results, indent=1, default=float) + "\n")
+    md = images_markdown(results)
     json_path.with_suffix(".md").write_text(md)
     print(md)
     return 0

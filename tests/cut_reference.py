@@ -131,18 +131,23 @@ def is_valid_cut(parent: list[int], visible: np.ndarray, cut) -> bool:
 
 
 def voxel_distortion(source: np.ndarray, coarse: np.ndarray, level: int, lo, hi,
-                     bin_of, luv_of_bins) -> float:
+                     bin_of, luv_of_bins, index_map=None) -> float:
     """Eq. (1)-(2) for one brick: per source voxel, the distance between the classified colours
     of its (quantized) value and of the (quantized) trilinear value of ``coarse`` at its centre.
 
     The coarse position of source index ``i`` is ``(i + 1/2) / 2^level - 1/2`` (the centroid
-    convention of a mean pyramid), clamped to the grid (``mode="nearest"``).
+    convention of a mean pyramid), or ``a i + c`` when ``index_map = (a, c)`` is given (per
+    axis), clamped to the grid (``mode="nearest"``).
     """
     axes = [np.arange(lo[a], hi[a], dtype=np.float64) for a in range(3)]
     grids = np.meshgrid(*axes, indexing="ij")
     f = 2.0 ** level
-    coords = [np.clip((g + 0.5) / f - 0.5, 0, n - 1) for g, n in zip(grids, coarse.shape,
-                                                                      strict=True)]
+    if index_map is None:
+        a_map, c_map = np.full(3, 1.0 / f), np.full(3, 0.5 / f - 0.5)
+    else:
+        a_map, c_map = (np.broadcast_to(np.asarray(x, np.float64), (3,)) for x in index_map)
+    coords = [np.clip(g * a_map[ax] + c_map[ax], 0, n - 1)
+              for ax, (g, n) in enumerate(zip(grids, coarse.shape, strict=True))]
     approx = ndimage.map_coordinates(coarse.astype(np.float64), coords, order=1, mode="nearest")
     src = source[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
     a = luv_of_bins[bin_of(src)]

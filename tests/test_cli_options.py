@@ -218,10 +218,11 @@ def test_every_render_option_has_a_case():
     options = {s for a in render._actions for s in a.option_strings if s.startswith("--")}
     # Output options and --help are checked by the other tests of this module and test_cli.py;
     # --array picks a point-data array of VTK files (tests/test_vtkimage.py); --budget and --lod
-    # of multiscale volumes are tested in tests/test_multires_render.py; --allow-external-data
-    # and --verbose (input handling, not rendering) in tests/test_hostile_input.py.
+    # of multiscale volumes are tested in tests/test_multires_render.py, --cut in
+    # tests/test_cut_render.py; --allow-external-data and --verbose (input handling, not
+    # rendering) in tests/test_hostile_input.py.
     covered = {"--output", "--depth", "--quiet", "--help", "--mode", "--array", "--budget",
-               "--lod", "--allow-external-data", "--verbose"}
+               "--lod", "--cut", "--allow-external-data", "--verbose"}
     used = {a.split("=")[0] for c in CASES for a in c.cli if a.startswith("--")}
     assert options - covered - used == set()
 

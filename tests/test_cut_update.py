@@ -252,3 +252,40 @@ def test_frames_on_a_pyramid_with_moving_interest_and_tf_edits():
             assert len(frame.cut) <= budget and frame.downloads.size <= load
     frame = _run_until_stable(updater, parent, metric.visible, budget, load)
     np.testing.assert_array_equal(frame.cut, greedy_cut(metric, budget))
+
+
+# ----------------------------------------------------------------------------------- fill
+def test_fill_sets_a_large_split_aside_and_takes_a_smaller_one():
+    """Root with A (8 children) and B (2 children), N = 4: the paper's rule stops at A (it needs
+    7 more bricks); with ``fill`` A is set aside and B, which fits, is split."""
+    parent = [-1, 0, 0] + [1] * 8 + [2] * 2
+    tree = BrickTree.from_parents(parent)
+    error = np.zeros(tree.size)
+    error[0], error[1], error[2] = 100.0, 50.0, 10.0  # ER(A) = 50/8 > ER(B) = 10/2 > 0
+    paper = CutUpdater(ArrayMetric(tree, error), budget=4).update()
+    assert sorted(paper.cut.tolist()) == [1, 2] and paper.stop == "brick budget"
+    filled = CutUpdater(ArrayMetric(tree, error), budget=4, fill=True).update()
+    assert sorted(filled.cut.tolist()) == [1, 11, 12] and filled.stop == "brick budget"
+    # Under a load budget too: A's 8 downloads exceed M = 3, B's 2 do not.
+    loads = CutUpdater(ArrayMetric(tree, error), budget=20, load_budget=3, cut=[1, 2],
+                       fill=True).update()
+    assert sorted(loads.cut.tolist()) == [1, 11, 12] and loads.stop == "load budget"
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_fill_frames_respect_the_budgets_and_settle_no_worse_than_the_paper_rule(seed):
+    """Every frame valid within N and M; the settled cut is never worse than the paper rule's
+    fixed point (the greedy cut) and never better than the optimum."""
+    from splinecast.multires.cut_select import optimal_cut
+
+    rng, parent, tree, visible = _case(300 + seed)
+    error = block_monotone_errors(rng, parent)
+    metric = ArrayMetric(tree, error, visible)
+    budget = int(rng.integers(2, 60))
+    load = int(rng.integers(8, 20))  # at least the most children, so every split can happen
+    for m in (None, load):
+        updater = CutUpdater(metric, budget=budget, load_budget=m, fill=True)
+        frame = _run_until_stable(updater, parent, visible, budget, m)
+        total = error[frame.cut].sum()
+        assert total <= error[greedy_cut(metric, budget)].sum() * (1 + 1e-12) + 1e-12
+        assert total >= optimal_cut(tree, error, visible, budget)[1] * (1 - 1e-12) - 1e-12

@@ -62,6 +62,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "512MiB or 2GiB (default 2GiB)")
     render.add_argument("--lod", type=finite, help="multiscale volumes: refine while a voxel "
                         "covers more than this many pixels (default 1)")
+    render.add_argument("--cut", help="multiscale volumes: which bricks to draw, 'lod' (screen-"
+                        "space level of detail, default) or 'error' (transfer-function distortion "
+                        "times importance under the budget, reference 002; dvr and mip)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
     add_input_options(render)
@@ -270,7 +273,8 @@ def orbit_options(args: argparse.Namespace) -> dict:
 
 
 def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool) -> None:
-    """``--budget``/``--lod`` only for multiscale volumes; ``--smooth`` only for the others."""
+    """``--budget``/``--lod``/``--cut`` only for multiscale volumes; ``--smooth`` only for the
+    others."""
     if multiscale:
         if args.smooth:
             raise sc.ParameterError(f"--smooth does not apply to the multiscale volume "
@@ -279,8 +283,10 @@ def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool) -> No
             limits.parse_bytes(args.budget, "--budget")
         if args.lod is not None and not (math.isfinite(args.lod) and args.lod > 0):
             raise sc.ParameterError(f"--lod must be a positive number of pixels, got {args.lod}")
+        if args.cut is not None and args.cut not in ("lod", "error"):
+            raise sc.ParameterError(f"--cut must be lod or error, got {args.cut!r}")
         return
-    for flag, value in (("--budget", args.budget), ("--lod", args.lod)):
+    for flag, value in (("--budget", args.budget), ("--lod", args.lod), ("--cut", args.cut)):
         if value is not None:
             raise sc.ParameterError(f"{flag} applies to multiscale (OME-Zarr) volumes only; "
                                     f"{args.file} is read into memory whole")
@@ -307,7 +313,7 @@ def run(args: argparse.Namespace) -> int:
         if multiscale:  # nothing but the coarsest level is read here; the loader stops at the end
             scene = stack.enter_context(sc.Scene(
                 vol, model=args.model, budget=args.budget or "2GiB",
-                lod=1.0 if args.lod is None else args.lod, **options))
+                lod=1.0 if args.lod is None else args.lod, cut=args.cut or "lod", **options))
         info = scene.preview if multiscale else vol
         kwargs, notes = mode_kwargs(args, info)
         camera = sc.Camera.orbit(vol, azimuth=args.azimuth, elevation=args.elevation,
@@ -341,8 +347,11 @@ def run(args: argparse.Namespace) -> int:
         if multiscale:
             levels = ", ".join(f"{n} of level {lv}" for lv, n in sorted(st["cut_levels"].items()))
             state = "complete" if st["complete"] else "incomplete"
-            log(args, f"cut: {st['cut_bricks']} bricks ({levels}), {st['loaded']} read, "
-                      f"{st['unavailable']} unreadable, {state}")
+            policy = st.get("cut_policy", "lod")
+            if "cut_error" in st:
+                policy += f", E(cut) {st['cut_error']:.4g}"
+            log(args, f"cut ({policy}): {st['cut_bricks']} bricks ({levels}), {st['loaded']} "
+                      f"read, {st['unavailable']} unreadable, {state}")
         frame.save(args.output)
         if args.depth:
             frame.save_depth(args.depth)

@@ -381,6 +381,11 @@ class BrickCache:
     def is_resident(self, key: Key) -> bool:
         return tuple(key) in self._bricks
 
+    def resident_keys(self) -> list[Key]:
+        """Keys of the bricks resident now (a snapshot)."""
+        with self._cond:
+            return list(self._bricks)
+
     def is_unavailable(self, key: Key) -> bool:
         return tuple(key) in self._failed
 

@@ -63,6 +63,8 @@ __all__ = [
     "approximate",
     "brick_histogram",
     "pyramid_histograms",
+    "box_histograms",
+    "stack_histograms",
     "coarsen_histograms",
     "leaf_value_ranges",
 ]
@@ -444,6 +446,63 @@ def pyramid_histograms(levels: list[np.ndarray], brick: int, quantizer: Quantize
     nnz, keys, counts = _compact(parts, _key_dtype(bins), _count_dtype(source.size))
     offsets = np.concatenate([[0], np.cumsum(nnz)]).astype(np.int64)
     return BrickHistograms(offsets, keys, counts, quantizer)
+
+
+def box_histograms(source: np.ndarray, coarse: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   a: Any, c: Any, quantizer: Quantizer) -> BrickHistograms:
+    """Histograms of bricks given by their source boxes, all approximated by one level.
+
+    Parameters
+    ----------
+    source : numpy.ndarray
+        The source (level 0), indexed by ``lo``/``hi``.
+    coarse : numpy.ndarray
+        The whole approximating level.
+    lo, hi : numpy.ndarray
+        (n, 3) source voxel ranges ``[lo, hi)`` of the bricks (any tiling: a pyramid store's
+        bricks, which need not be :func:`~.cut_tree.regular_brick_tree`'s).
+    a, c : 3 floats
+        Source index to level index, ``u = a i + c`` (edge-clamped trilinear reconstruction).
+    quantizer : Quantizer
+
+    Returns
+    -------
+    BrickHistograms
+        One entry range per brick, in the order of ``lo``.
+    """
+    lo = np.ascontiguousarray(lo, np.int64).reshape(-1, 3)
+    hi = np.ascontiguousarray(hi, np.int64).reshape(-1, 3)
+    a = np.ascontiguousarray(np.broadcast_to(np.asarray(a, np.float64), (3,)))
+    c = np.ascontiguousarray(np.broadcast_to(np.asarray(c, np.float64), (3,)))
+    bins = quantizer.bins
+    sizes = np.minimum(np.prod(np.maximum(hi - lo, 0), axis=1), bins * bins)
+    coarse = np.ascontiguousarray(coarse)
+    nthreads = numba.get_num_threads()
+
+    def run(start, stop, out_at, keys, counts, nnz):
+        _brick_batch(source, coarse, lo[start:stop], hi[start:stop], a, c, quantizer.lo,
+                     quantizer.scale, bins, out_at, keys, counts, nnz, nthreads)
+
+    parts = _run_batched(sizes, run) if len(lo) else []
+    nnz, keys, counts = (_compact(parts, _key_dtype(bins), _count_dtype(source.size)) if parts
+                         else (np.zeros(0, np.int64), np.zeros(0, _key_dtype(bins)),
+                               np.zeros(0, _count_dtype(source.size))))
+    offsets = np.concatenate([[0], np.cumsum(nnz)]).astype(np.int64)
+    return BrickHistograms(offsets, keys, counts, quantizer)
+
+
+def stack_histograms(parts: list[BrickHistograms]) -> BrickHistograms:
+    """The nodes of several :class:`BrickHistograms` (same quantizer) one after the other."""
+    if not parts:
+        raise ParameterError("stack_histograms needs at least one part")
+    q = parts[0].quantizer
+    if any(p.quantizer != q for p in parts):
+        raise ParameterError("stack_histograms needs one quantizer for all parts")
+    keys = np.concatenate([p.keys for p in parts])
+    counts = np.concatenate([p.counts for p in parts])
+    rows = np.concatenate([np.diff(p.offsets) for p in parts])
+    offsets = np.concatenate([[0], np.cumsum(rows)]).astype(np.int64)
+    return BrickHistograms(offsets, keys, counts, q)
 
 
 def _count_dtype(voxels: int) -> type:

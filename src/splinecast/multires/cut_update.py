@@ -13,6 +13,15 @@ Each frame starts from the previous cut instead of the root (section 3.5):
   reduces the error), (2) splitting ``S0`` would exceed M, (3) splitting ``S0`` would exceed N and
   the next collapsible parent does not rank below ``S0``, or collapsing it would exceed M (we
   count the split it makes room for too, so a frame never pays a collapse for a split M forbids).
+* **Fill** (``fill=True``, not in the paper): instead of ending the frame at the first split that
+  does not fit N (no collapse ranks below it) or M, that node is set aside for the frame and the
+  next one is tried, at most ``skip_limit`` (default M) set-asides per frame, so the frame stays
+  O(M log M). The frame uses the budgets a large split leaves unused: splits of nodes with fewer
+  visible children (borders, transparent children), which matter when N and M are small against
+  the 7 bricks and 8 downloads of a full octree split (with M = 8 the paper's rule cannot even
+  pair a collapse with a split). The fixed point is then close to the greedy cut with
+  ``fill=True`` (:func:`~.cut_select.greedy_cut`), which Table 2 of ``benchmarks/results/cut.md``
+  finds within 0.1% of the optimum where the paper's rule is up to 6.6% off.
 * Downloads count the bricks of the new cut that were not resident (not in the previous frame's
   cut): a split downloads its non-resident children, a collapse its parent if not resident, and a
   brick downloaded earlier this frame and removed again is not downloaded.
@@ -102,10 +111,16 @@ class SplitCollapse:
         Bricks that may become resident per call (None: unlimited).
     count_ancestors : bool
         See ``budget``.
+    fill : bool
+        Set aside a split that does not fit instead of ending the frame (see the module
+        docstring); False is the paper's rule.
+    skip_limit : int, optional
+        Most set-asides per frame with ``fill`` (default: M, or 64 without a load budget).
     """
 
     def __init__(self, metric: Any, cut: Any, budget: int, load_budget: int | None,
-                 count_ancestors: bool = False):
+                 count_ancestors: bool = False, fill: bool = False,
+                 skip_limit: int | None = None):
         if budget < 1:
             raise ParameterError(f"the budget must be at least 1 brick, got {budget}")
         if load_budget is not None and load_budget < 0:
@@ -115,6 +130,8 @@ class SplitCollapse:
         self.budget = int(budget)
         self.load_budget = load_budget
         self.count_ancestors = count_ancestors
+        self.fill = bool(fill)
+        self.skip_limit = skip_limit
         k = self.tree.size
         self.in_cut = np.zeros(k, bool)
         cut = np.unique(np.asarray(cut, np.int64))
@@ -285,26 +302,55 @@ class SplitCollapse:
         skipped_s: list[tuple[tuple[float, int], int]] = []
         skipped_c: list[tuple[tuple[float, int], int]] = []
         stop = STOP_REASONS[3]
+        limit = self.skip_limit if self.skip_limit is not None else (
+            self.load_budget if self.load_budget is not None else 64)
+        set_aside = 0
+        collapsed_now: set[int] = set()  # fill: not split again in the frame that collapsed it
+
+        def aside(reason: str) -> bool:
+            """With ``fill``, set S0 aside and go on (True); else the frame stops."""
+            nonlocal set_aside, stop
+            stop = reason
+            if not self.fill or set_aside >= limit:
+                return False
+            skipped_s.append(self.split_queue.pop())
+            set_aside += 1
+            return True
+
         while True:
             head = self.split_queue.peek()
             if head is None:
-                stop = STOP_REASONS[3]
+                if not set_aside:  # with set-asides, the budget that set them aside stopped it
+                    stop = STOP_REASONS[3]
                 break
             s_key, s0 = head
             if not -s_key[0] > 0.0:
                 stop = STOP_REASONS[0]
                 break
-            if allow_split is not None and not allow_split(s0):
+            if (allow_split is not None and not allow_split(s0)) or s0 in collapsed_now:
                 skipped_s.append(self.split_queue.pop())
                 continue
             kids = self.visible_children(s0)
             if not self._fits_loads(self._split_loads(kids)):
-                stop = STOP_REASONS[1]
+                if aside(STOP_REASONS[1]):
+                    continue
                 break
+            if self.count + self._split_units(kids) > self.budget and self.fill:
+                plan = self._plan_collapses(s_key, s0, kids)
+                if plan is None:
+                    if aside(STOP_REASONS[2]):
+                        continue
+                    break
+                for c0 in plan:
+                    self.collapse(c0)
+                    collapsed_now.add(c0)
+                    collapses += 1
+                continue  # S0 fits now
             if self.count + self._split_units(kids) > self.budget:
                 c_head = self.collapse_queue.peek()
                 if c_head is None:
-                    stop = STOP_REASONS[2]
+                    if aside(STOP_REASONS[2]):
+                        continue
                     break
                 c_key, c0 = c_head
                 if not self.can_collapse(c0):
@@ -315,7 +361,8 @@ class SplitCollapse:
                 loads = self._collapse_loads(c0) + self._split_loads(kids)
                 if (c_key >= (-s_key[0], -s_key[1]) or c0 == int(self.tree.parent[s0])
                         or not self._fits_loads(loads)):
-                    stop = STOP_REASONS[2]
+                    if aside(STOP_REASONS[2]):
+                        continue
                     break
                 self.collapse(c0)
                 collapses += 1
@@ -323,12 +370,43 @@ class SplitCollapse:
             self.split(s0)
             splits += 1
         for key, node in skipped_s:
-            if self.in_cut[node]:
+            if self.in_cut[node] and node not in self.split_queue:
                 self.split_queue.push(node, key)
         for key, node in skipped_c:
             if not self.in_cut[node] and self._collapsible(node):
                 self.collapse_queue.push(node, key)
         return stop, splits, collapses
+
+    def _plan_collapses(self, s_key: tuple[float, int], s0: int,
+                        kids: np.ndarray) -> list[int] | None:
+        """With ``fill``: the collapsible parents, lowest first and ranking below S0, that make
+        room for splitting S0 within N and M together, or None (then none is collapsed: a
+        collapse that enables no split would only raise the error)."""
+        need = self.count + self._split_units(kids) - self.budget
+        loads = self._split_loads(kids)
+        parent = int(self.tree.parent[s0])
+        popped: list[tuple[tuple[float, int], int]] = []
+        plan: list[int] = []
+        freed = 0
+        while freed < need:
+            head = self.collapse_queue.pop()
+            if head is None:
+                break
+            popped.append(head)
+            key, c0 = head
+            if key >= (-s_key[0], -s_key[1]):
+                break
+            units = self._split_units(self.visible_children(c0))
+            if c0 == parent or units <= 0 or not self.can_collapse(c0):
+                continue
+            plan.append(c0)
+            freed += units
+            loads += self._collapse_loads(c0)
+        for key, c0 in popped:
+            self.collapse_queue.push(c0, key)
+        if freed < need or not self._fits_loads(loads):
+            return None
+        return plan
 
     # ------------------------------------------------------------------- transfer functions
     def repair(self) -> bool:
@@ -417,6 +495,9 @@ class CutUpdater(SplitCollapse):
         ``M``: bricks downloaded per frame (None: unlimited).
     cut : array of node ids, optional
         Starting cut (default: the root, which is also what a first frame shows).
+    fill : bool
+        Set aside splits that do not fit and go on (see the module docstring; default: the
+        paper's rule, stop there).
 
     Examples
     --------
@@ -427,11 +508,11 @@ class CutUpdater(SplitCollapse):
     """
 
     def __init__(self, metric: Any, budget: int, load_budget: int | None = None,
-                 cut: Any = None):
+                 cut: Any = None, fill: bool = False):
         tree = metric.tree
         if cut is None:
             cut = [tree.root] if metric.visible[tree.root] else []
-        super().__init__(metric, cut, budget, load_budget, count_ancestors=False)
+        super().__init__(metric, cut, budget, load_budget, count_ancestors=False, fill=fill)
 
     def update(self, in_ram: np.ndarray | None = None) -> CutUpdate:
         """Update the cut for the next frame.

@@ -37,7 +37,7 @@ from ..errors import ParameterError
 from .octree import BrickOctree
 from .relevance import ValueFilter
 
-__all__ = ["Cut", "select_cut", "projected_voxels", "view_planes"]
+__all__ = ["Cut", "select_cut", "cut_of_keys", "projected_voxels", "view_planes"]
 
 Key = tuple[int, int, int, int]
 
@@ -261,18 +261,34 @@ def _alive(levels: list[_Level], n: int) -> np.ndarray:
     return above[levels[n].parent] if len(levels[n].parent) else np.zeros(0, dtype=bool)
 
 
-def _assemble(octree: BrickOctree, levels: list[_Level], value_filter: ValueFilter,
-              resident: Callable[[Key], bool], prefetch: int, lod: float,
-              limited: bool) -> Cut:
-    keys, prio = [], []
-    alive = [_alive(levels, n) for n in range(len(levels))]
-    for n, lv in enumerate(levels):
-        take = alive[n] & ~lv.split & lv.own
-        idx = lv.index[take]
-        keys.append(np.column_stack([np.full(len(idx), lv.level), idx]))
-        prio.append(lv.priority[take])
-    key_arr = np.concatenate(keys).astype(np.int64) if keys else np.zeros((0, 4), np.int64)
-    priority = np.concatenate(prio) if prio else np.zeros(0)
+def cut_of_keys(octree: BrickOctree, key_arr: np.ndarray, priority: np.ndarray,
+                value_filter: ValueFilter | None = None,
+                resident: Callable[[Key], bool] | None = None, limited: bool = False) -> Cut:
+    """The :class:`Cut` of given bricks: boxes, bytes, what to keep and what to read.
+
+    Shared by every cut policy (the level of detail here, the error metric of
+    :mod:`.cut_policy`). ``Cut.requests`` lists the bricks and their non-resident contributing
+    ancestors, coarse levels first and, within a level, highest ``priority`` first;
+    ``Cut.prefetch`` is left empty for the policy to fill.
+
+    Parameters
+    ----------
+    octree : BrickOctree
+    key_arr : ndarray (n, 4) int64
+        ``(level, i, j, k)`` of each brick; their boxes must not overlap.
+    priority : ndarray (n,)
+        The policy's priority of each brick (request order within a level).
+    value_filter : ValueFilter, optional
+        Which ancestors are worth reading for a substitution (default: all).
+    resident : callable, optional
+        ``resident(key)``: what the cache holds.
+    limited : bool
+        The budget stopped refinement (reported as ``Cut.limited``).
+    """
+    value_filter = value_filter or ValueFilter()
+    resident = resident or (lambda key: False)
+    key_arr = np.asarray(key_arr, np.int64).reshape(-1, 4)
+    priority = np.asarray(priority, np.float64).reshape(-1)
     box_lo, box_hi = np.zeros((len(key_arr), 3)), np.zeros((len(key_arr), 3))
     level_lo, level_hi = np.zeros((len(key_arr), 3)), np.zeros((len(key_arr), 3))
     nbytes = 0
@@ -301,6 +317,23 @@ def _assemble(octree: BrickOctree, levels: list[_Level], value_filter: ValueFilt
             if k == key or value_filter.contributes(own[0], own[1]):
                 want[k] = max(want.get(k, 0.0), float(cut.priority[n]))
     cut.requests = sorted(want, key=lambda k: (-k[0], -want[k]))
+    return cut
+
+
+def _assemble(octree: BrickOctree, levels: list[_Level], value_filter: ValueFilter,
+              resident: Callable[[Key], bool], prefetch: int, lod: float,
+              limited: bool) -> Cut:
+    keys, prio = [], []
+    alive = [_alive(levels, n) for n in range(len(levels))]
+    for n, lv in enumerate(levels):
+        take = alive[n] & ~lv.split & lv.own
+        idx = lv.index[take]
+        keys.append(np.column_stack([np.full(len(idx), lv.level), idx]))
+        prio.append(lv.priority[take])
+    key_arr = np.concatenate(keys).astype(np.int64) if keys else np.zeros((0, 4), np.int64)
+    priority = np.concatenate(prio) if prio else np.zeros(0)
+    cut = cut_of_keys(octree, key_arr, priority, value_filter, resident, limited)
+    want = set(cut.requests)
 
     # Prefetch: children of the cut's bricks nearest to being refined.
     order = np.argsort(-cut.priority, kind="stable")

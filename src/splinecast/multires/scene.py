@@ -4,9 +4,14 @@
 (``splinecast/__init__.py`` registers it with :func:`splinecast.scene.register_scene_type`). Per
 frame it
 
-1. asks its :class:`~.stream.BrickStream` for the cut of the camera (level of detail ``lod``,
-   bricks that cannot contribute to the mode left out, at most ``load_budget`` bricks read while
-   the frame waits; a brick not yet resident is drawn from its finest resident ancestor);
+1. asks its :class:`~.stream.BrickStream` for the cut of the camera (bricks that cannot
+   contribute to the mode left out, at most ``load_budget`` bricks read while the frame waits; a
+   brick not yet resident is drawn from its finest resident ancestor). The cut policy ``cut``:
+   ``"lod"`` (default) refines while a voxel covers more than ``lod`` pixels; ``"error"`` keeps
+   the cut of reference 002 (transfer-function distortion times importance from the eye and an
+   optional point of ``interest``, split-and-collapse under the brick budget and ``load_budget``,
+   updated from the previous frame's cut; :mod:`.cut_policy`) in DVR and MIP/minIP, and the
+   level-of-detail cut in the isosurface modes;
 2. turns the cut into :class:`~.draw.Piece` s and fixes the seams between levels (:mod:`.seams`);
 3. traces the pieces front to back per ray (:class:`~.draw.CutRenderer`) in the mode of
    :meth:`~splinecast.Scene.render`, with the same options and the same :class:`Frame`.
@@ -47,6 +52,7 @@ from ..scene import check_iso, finish_frame, prepare_render
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .budget import parse_bytes
+from .cut_policy import ErrorCut, check_cut, mip_transfer
 from .draw import CutRenderer, Piece
 from .relevance import ValueFilter
 from .seams import Seams
@@ -94,6 +100,12 @@ class MultiscaleScene:
     load_budget : int
         Bricks a frame waits for at most (M); the loader thread goes on reading in the
         background, and later frames draw what it read.
+    cut : {"lod", "error"}
+        Cut policy (see above). ``"error"`` reads every level once when the scene opens to build
+        the brick histograms of the distortion metric (``prepare_ms`` includes it).
+    interest : 3 floats, optional
+        Point of interest (world coordinates) of the ``"error"`` cut; without one its importance
+        is the distance to the eye alone. :meth:`render` can move it per frame.
     seams : bool
         Make bricks of different levels meet without cracks (:mod:`.seams`; default). ``False``
         draws every brick as it is (to see the cracks).
@@ -112,8 +124,9 @@ class MultiscaleScene:
     """
 
     def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "2GiB",
-                 lod: float = 1.0, load_budget: int = 64, *, seams: bool = True,
-                 brick: int | None = None, **options: Any) -> None:
+                 lod: float = 1.0, load_budget: int = 64, *, cut: str = "lod",
+                 interest: Any = None, seams: bool = True, brick: int | None = None,
+                 **options: Any) -> None:
         if not isinstance(volume, MultiscaleVolume):
             raise ParameterError(f"volume must be a MultiscaleVolume, got {type(volume).__name__}")
         if model not in MODELS:
@@ -123,6 +136,7 @@ class MultiscaleScene:
                 f"prefilter=True is not available for model {model} on a multiscale volume: the "
                 "interpolating B-spline coefficients depend on the whole volume, a brick cannot "
                 "reproduce them (render the voxels as coefficients, the default, or use s31)")
+        self.cut = check_cut(cut)
         start = time.perf_counter()
         self.volume = volume
         coarse = volume.level(-1)
@@ -136,6 +150,9 @@ class MultiscaleScene:
         self.stream = BrickStream(volume, self._cache_budget(), lod=lod,
                                   loads_per_frame=load_budget, border=BORDER_RULES[model],
                                   brick=brick)
+        #: The error-metric cut (``cut="error"``), None for the level-of-detail cut.
+        self.error_cut = (ErrorCut(self.stream.octree, interest=interest) if self.cut == "error"
+                          else None)
         self.renderer = CutRenderer(self.model, self.stream.octree,
                                     Seams(self.model) if seams else None)
         self.prepare_ms = (time.perf_counter() - start) * 1e3
@@ -193,6 +210,7 @@ class MultiscaleScene:
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
         lod: float | None = None,
+        interest: Any = None,
         wait: bool = True,
         timeout: float | None = None,
         complete: bool = False,
@@ -203,7 +221,10 @@ class MultiscaleScene:
         Parameters
         ----------
         lod : float, optional
-            Level of detail of this frame (default: the scene's).
+            Level of detail of this frame (default: the scene's; ``cut="lod"`` and the
+            isosurface modes).
+        interest : 3 floats, optional
+            Point of interest of this frame (``cut="error"``; default: the scene's).
         wait : bool
             Wait for up to ``load_budget`` bricks of the cut (default); ``False`` draws what is
             resident at once.
@@ -226,10 +247,12 @@ class MultiscaleScene:
             check_iso=self._check_iso, model=self.model.name)
         start = time.perf_counter()
         value_filter = self._filter(request.setup)
-        bricks = self.stream.frame(camera, value_filter, lod=lod, wait=wait, timeout=timeout)
+        selector = self._selector(request.setup, camera, value_filter, interest)
+        bricks = self._frame(camera, value_filter, lod, wait, timeout, selector)
         rounds = 1
-        while complete and bricks.stats["requested"] and rounds < _MAX_ROUNDS:
-            bricks = self.stream.frame(camera, value_filter, lod=lod, timeout=timeout)
+        while complete and rounds < _MAX_ROUNDS and (
+                bricks.stats["requested"] or not bricks.stats.get("cut_final", True)):
+            bricks = self._frame(camera, value_filter, lod, True, timeout, selector)
             rounds += 1
         pieces = pieces_of(bricks)
         request.stats["cut_ms"] = (time.perf_counter() - start) * 1e3
@@ -241,6 +264,32 @@ class MultiscaleScene:
         stats.update(bricks.stats)
         stats["lod"] = self.lod if lod is None else lod
         return finish_frame(request, out, counters, camera, start)
+
+    def _selector(self, setup: Any, camera: Camera, value_filter: ValueFilter | None,
+                  interest: Any) -> Any:
+        """The error cut's selector for DVR and MIP/minIP, else None (level of detail)."""
+        if self.error_cut is None:
+            return None
+        if hasattr(setup, "tf"):
+            tf = setup.tf
+        elif hasattr(setup, "window") and hasattr(setup, "colormap"):
+            tf = mip_transfer(setup.window, setup.colormap)
+        else:
+            return None
+        cache = self.stream.cache
+        return self.error_cut.selector(camera, tf, value_filter, cache.loads_per_frame, interest,
+                                       cache.resident_keys)
+
+    def _frame(self, camera: Camera, value_filter: ValueFilter | None, lod: float | None,
+               wait: bool, timeout: float | None, selector: Any) -> FrameBricks:
+        bricks = self.stream.frame(camera, value_filter, lod=lod, wait=wait, timeout=timeout,
+                                   selector=selector)
+        if selector is not None:
+            assert self.error_cut is not None
+            bricks.stats.update(self.error_cut.stats())
+        else:
+            bricks.stats["cut_policy"] = "lod"
+        return bricks
 
     def close(self) -> None:
         """Stop the loader thread (the scene cannot render afterwards)."""
@@ -255,4 +304,4 @@ class MultiscaleScene:
     def __repr__(self) -> str:
         levels = np.asarray(self.stream.octree.levels).tolist()
         return (f"MultiscaleScene({self.volume.name!r}, model={self.model.name!r}, "
-                f"budget={self.budget}, lod={self.lod}, levels={levels})")
+                f"budget={self.budget}, cut={self.cut!r}, lod={self.lod}, levels={levels})")

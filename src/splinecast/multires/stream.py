@@ -3,7 +3,9 @@
 :class:`BrickStream` is what a renderer of a multiscale volume holds (one per scene): an octree, a
 cache with its loader thread, and the per-frame sequence
 
-1. :func:`.lod.select_cut` for the camera, the ``lod`` threshold and the cut's share of the budget;
+1. the cut for the camera and the cut's share of the budget: :func:`.lod.select_cut` (screen-space
+   level of detail ``lod``), or the ``selector`` a caller passes (the error-metric cut of
+   :mod:`.cut_policy`): every policy shares the cache, its loader and the substitution below;
 2. :meth:`.cache.BrickCache.request_cut` (the loader starts reading, coarse levels first);
 3. :meth:`.cache.BrickCache.wait` for at most ``loads_per_frame`` bricks;
 4. :meth:`.cache.BrickCache.resolve`: every brick of the cut, or its finest resident ancestor.
@@ -15,6 +17,7 @@ back per ray) and reports ``FrameBricks.stats`` in ``frame.stats``.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,11 +25,15 @@ from ..camera import Camera
 from ..errors import ParameterError
 from ..io.omezarr import MultiscaleVolume
 from .cache import BrickCache, DrawItem
-from .lod import Cut, select_cut
+from .lod import Cut, Key, select_cut
 from .octree import BrickOctree
 from .relevance import ValueFilter
 
-__all__ = ["BrickStream", "FrameBricks"]
+__all__ = ["BrickStream", "FrameBricks", "Selector"]
+
+#: A cut policy: ``selector(budget_bytes, resident, prefetch) -> Cut`` (``resident(key)`` tells
+#: what the cache holds, ``prefetch`` how many bricks the cut may list to read when idle).
+Selector = Callable[[int, Callable[[Key], bool], int], Cut]
 
 
 @dataclass
@@ -81,14 +88,22 @@ class BrickStream:
 
     def frame(self, camera: Camera, value_filter: ValueFilter | None = None, *,
               lod: float | None = None, wait: bool = True,
-              timeout: float | None = None) -> FrameBricks:
-        """Choose, load (within the frame's budget) and resolve the bricks for ``camera``."""
+              timeout: float | None = None, selector: Selector | None = None) -> FrameBricks:
+        """Choose, load (within the frame's budget) and resolve the bricks for ``camera``.
+
+        ``selector`` replaces the level-of-detail cut by another policy (see :data:`Selector`);
+        ``lod`` and ``value_filter`` then do not choose the cut (the filter still decides which
+        ancestors are worth reading for substitution, through the selector's own use of it).
+        """
         t0 = time.perf_counter()
         self.cache.update_ranges()
         budget = max(int(self.cache.budget * self.cut_fraction), self.cache.pinned_bytes)
-        cut = select_cut(self.octree, camera, self.lod if lod is None else lod, budget=budget,
-                         value_filter=value_filter, resident=self.cache.is_resident,
-                         prefetch=self.prefetch)
+        if selector is not None:
+            cut = selector(budget, self.cache.is_resident, self.prefetch)
+        else:
+            cut = select_cut(self.octree, camera, self.lod if lod is None else lod,
+                             budget=budget, value_filter=value_filter,
+                             resident=self.cache.is_resident, prefetch=self.prefetch)
         t1 = time.perf_counter()
         self.cache.begin_frame()
         self.cache.request_cut(cut)
