@@ -339,6 +339,13 @@ def render_share(share: Share, camera: Camera, options: dict[str, Any], header: 
         return part
 
 
+def forget_shares(shares: list[Share]) -> int:
+    """Drop this process's bricks of ``shares``; how many shares it held."""
+    with _cache_lock:
+        gone = [s for s in shares if _loaded.pop(s, None) is not None]
+        return len(gone)
+
+
 def _union(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, ...]:
     c0, r0 = min(a[0], b[0]), min(a[1], b[1])
     c1, r1 = max(a[0] + a[2], b[0] + b[2]), max(a[1] + a[3], b[1] + b[3])
@@ -614,16 +621,7 @@ class SortLastScene:
 
     def close(self) -> None:
         """Let every worker drop its shares (memory is freed; rendering reads them again)."""
-        shares = set(self.shares)
-
-        def drop() -> int:
-            with _cache_lock:
-                gone = [s for s in _loaded if s in shares]
-                for s in gone:
-                    del _loaded[s]
-                return len(gone)
-
-        self.client.run(drop)
+        self.client.run(forget_shares, list(self.shares))
 
     def __enter__(self) -> SortLastScene:
         return self
