@@ -118,6 +118,9 @@ def main() -> None:
     parser.add_argument("--sort-last-size", type=int, default=None,
                         help="voxels per axis of the sort-last pyramid (default 512; quick 129)")
     parser.add_argument("--sort-last-level", type=int, default=0)
+    parser.add_argument("--sort-last-image", type=int, default=None,
+                        help="image side of the sort-last renders (default 1024; quick 256)")
+    parser.add_argument("--sort-last-repeats", type=int, default=3)
     parser.add_argument("--pyramid-dir", default="/tmp/splinecast-bench-pyramids")
     args = parser.parse_args()
     if args.part in ("all", "sort-first"):
@@ -282,8 +285,9 @@ def sort_last(args: argparse.Namespace) -> None:
     from splinecast.distributed import DistributedScene
 
     size = args.sort_last_size or (129 if args.quick else 512)
-    image = (256, 256) if args.quick else (1024, 1024)
-    repeats = 3
+    side = args.sort_last_image or (256 if args.quick else 1024)
+    image = (side, side)
+    repeats = args.sort_last_repeats
     level = args.sort_last_level
     load_before = os.getloadavg()
     path = _pyramid(size, Path(args.pyramid_dir))
@@ -304,8 +308,9 @@ def sort_last(args: argparse.Namespace) -> None:
         open_s = time.perf_counter() - start
         for mode in SORT_LAST_MODES:
             options = _sort_last_options(mode)
-            scene.render(camera, **options)  # warm-up: kernels loaded on the workers
-            local.render(camera, **options)
+            small = sc.Camera.orbit(level_volume, azimuth=40, elevation=25, size=(32, 32))
+            scene.render(small, **options)  # warm-up: kernels loaded on the workers
+            local.render(small, **options)
             runs: dict[str, list[float]] = {k: [] for k in (
                 "sort_last_s", "local_2threads_s", "share_trace_max_s", "share_trace_sum_s",
                 "merge_tasks_s", "finish_s", "moved_bytes")}
@@ -359,7 +364,10 @@ def sort_last(args: argparse.Namespace) -> None:
         "load_average_after": os.getloadavg(),
         "command": "python benchmarks/bench_distributed.py --part sort-last"
                    + (" --quick" if args.quick else "")
-                   + (f" --sort-last-size {size}" if args.sort_last_size else ""),
+                   + (f" --sort-last-size {size}" if args.sort_last_size else "")
+                   + (f" --sort-last-level {level}" if level else "")
+                   + (f" --sort-last-image {side}" if args.sort_last_image else "")
+                   + (f" --sort-last-repeats {repeats}" if repeats != 3 else ""),
         "pyramid": str(path), "size": size, "level": level,
         "level_shape": list(level_volume.shape), "image": image, "repeats": repeats,
         "open_s": open_s, "loads": loads, "shares": shares, "modes": rows,

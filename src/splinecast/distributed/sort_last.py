@@ -35,9 +35,11 @@ Equality
     render of the same bricks, front to back (``MultiscaleScene``'s cut renderer) and equals the
     in-memory ``Scene.render`` of the level as closely as that renderer does (rays restricted to
     bricks: depths to about 1e-12). DVR's "over" regroups the sums: colours within rounding
-    (1e-12); early ray termination (``DVRSettings(termination=...)``) is applied per share, and
-    the half-opacity depth of a ray whose front partial image stays below 1/2 is the back
-    share's own (see :func:`splinecast.render.dvr.combine_dvr`).
+    (1e-12) with a fixed step. Early ray termination (``DVRSettings(termination=...)``) and the
+    opacity-adaptive step depend on the opacity in front of a segment, which a share does not
+    know: they act per share, and the image differs from the single-process one by up to what
+    they leave out. The half-opacity depth of a ray whose front partial image stays below 1/2
+    is the back share's own (see :func:`splinecast.render.dvr.combine_dvr`).
 
 Defaults: the automatic isovalue, MIP window and transfer function come from the pyramid's
 coarsest level, read by the client (as :class:`~splinecast.multires.scene.MultiscaleScene` does);
