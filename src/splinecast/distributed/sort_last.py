@@ -581,8 +581,8 @@ class SortLastScene:
         thing sent to the client. ``frame.stats`` adds ``strategy``, ``shares``,
         ``composite_levels``, ``share_trace_ms_max`` / ``_sum`` (time in the shares' traces),
         ``composite_ms`` (time in the merges), ``partial_bytes`` (bytes of the partial images
-        the merges consumed: what moves between workers at most), ``frame_bytes`` (what the
-        client received) and ``wall_ms``.
+        the merges and the final task consumed: what moves between workers at most),
+        ``frame_bytes`` (what the client received) and ``wall_ms``.
         """
         from dask.base import tokenize
 
