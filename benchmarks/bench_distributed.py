@@ -21,7 +21,8 @@ From these it projects 1..64 workers (table in the results): a movie costs
 tiles ``t_frame / W + 4 W * t_task + bytes_frame / B`` (about four tiles per worker, every byte
 reaches the client), and a sort-last frame ``t_frame / W + log2(W) * (t_over + bytes_image / B)``.
 
-Sort-last part (``--part sort-last``; results in ``distributed_sort_last[_quick].*``): a
+Sort-last part (``--part sort-last``; results in ``distributed_sort_last_quick.*`` or
+``distributed_sort_last_SIZE_levelL_Npx.*``): a
 pyramid of the Marschner-Lobb signal (``--sort-last-size`` voxels per axis, float32, bricks of 32;
 built once into ``--pyramid-dir``) rendered at one level by ``SortLastScene`` on 2
 single-threaded workers, per mode (iso, MIP, DVR): wall time against the in-memory render of the
@@ -35,7 +36,7 @@ the shares get smaller).
 
 Run ``python benchmarks/bench_distributed.py [--quick] [--part all|sort-first|sort-last]``;
 results go to ``benchmarks/results/distributed[_quick].json`` and ``.md`` (sort-first) and
-``distributed_sort_last[_quick].*`` (sort-last).
+``distributed_sort_last_*`` (sort-last).
 """
 
 from __future__ import annotations
@@ -121,6 +122,8 @@ def main() -> None:
     parser.add_argument("--sort-last-image", type=int, default=None,
                         help="image side of the sort-last renders (default 1024; quick 256)")
     parser.add_argument("--sort-last-repeats", type=int, default=3)
+    parser.add_argument("--sort-last-modes", default="iso,mip,dvr",
+                        help="comma-separated modes of the sort-last part")
     parser.add_argument("--pyramid-dir", default="/tmp/splinecast-bench-pyramids")
     args = parser.parse_args()
     if args.part in ("all", "sort-first"):
@@ -288,6 +291,9 @@ def sort_last(args: argparse.Namespace) -> None:
     side = args.sort_last_image or (256 if args.quick else 1024)
     image = (side, side)
     repeats = args.sort_last_repeats
+    modes = [m for m in args.sort_last_modes.split(",") if m]
+    if not set(modes) <= set(SORT_LAST_MODES):
+        raise SystemExit(f"--sort-last-modes: choose from {', '.join(SORT_LAST_MODES)}")
     level = args.sort_last_level
     load_before = os.getloadavg()
     path = _pyramid(size, Path(args.pyramid_dir))
@@ -295,9 +301,9 @@ def sort_last(args: argparse.Namespace) -> None:
     level_volume = store.level(level).to_volume()
     camera = sc.Camera.orbit(level_volume, azimuth=40, elevation=25, size=image)
     local = sc.Scene(level_volume)
-    for mode in SORT_LAST_MODES:  # compile / load the kernels before the workers start
+    for mode in modes:  # compile / load the kernels before the workers start
         local.render(sc.Camera.orbit(level_volume, size=(16, 16)), **_sort_last_options(mode))
-    merges = {mode: merge_step(level_volume, camera, mode, repeats) for mode in SORT_LAST_MODES}
+    merges = {mode: merge_step(level_volume, camera, mode, repeats) for mode in modes}
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                            dashboard_address=":0", silence_logs=40)
     client = Client(cluster)
@@ -306,7 +312,7 @@ def sort_last(args: argparse.Namespace) -> None:
         start = time.perf_counter()
         scene = DistributedScene(path, client, strategy="sort-last", level=level)
         open_s = time.perf_counter() - start
-        for mode in SORT_LAST_MODES:
+        for mode in modes:
             options = _sort_last_options(mode)
             small = sc.Camera.orbit(level_volume, azimuth=40, elevation=25, size=(32, 32))
             scene.render(small, **options)  # warm-up: kernels loaded on the workers
@@ -367,14 +373,17 @@ def sort_last(args: argparse.Namespace) -> None:
                    + (f" --sort-last-size {size}" if args.sort_last_size else "")
                    + (f" --sort-last-level {level}" if level else "")
                    + (f" --sort-last-image {side}" if args.sort_last_image else "")
-                   + (f" --sort-last-repeats {repeats}" if repeats != 3 else ""),
+                   + (f" --sort-last-repeats {repeats}" if repeats != 3 else "")
+                   + (f" --sort-last-modes {args.sort_last_modes}"
+                      if modes != list(SORT_LAST_MODES) else ""),
         "pyramid": str(path), "size": size, "level": level,
         "level_shape": list(level_volume.shape), "image": image, "repeats": repeats,
         "open_s": open_s, "loads": loads, "shares": shares, "modes": rows,
         "model": {"task_overhead_s": t_task, "transfer_bytes_per_s": rate},
         "projection": projection,
     }
-    stem = "distributed_sort_last_quick" if args.quick else "distributed_sort_last"
+    stem = ("distributed_sort_last_quick" if args.quick else
+            f"distributed_sort_last_{size}_level{level}_{side}px")
     out = HERE / "results"
     out.mkdir(exist_ok=True)
     (out / f"{stem}.json").write_text(json.dumps(result, indent=1, default=str))
