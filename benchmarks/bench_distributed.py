@@ -482,7 +482,8 @@ def markdown(r: dict) -> str:
         f" ms ({mw}x{mh}).",
         "",
         "Projection to larger clusters (single-threaded workers, model in the module "
-        "docstring; sort-last is not built yet, its row is what the model predicts):",
+        "docstring; the sort-last column uses a numpy 'over' as the merge, the sort-last "
+        "results files `distributed_sort_last_*.md` project from measured merges):",
         "",
         "| workers | movie s | movie frames/s | movie speed-up | tiled frame s | tiled "
         "speed-up | sort-last frame s | sort-last speed-up |",
