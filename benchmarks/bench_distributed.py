@@ -384,6 +384,8 @@ def sort_last(args: argparse.Namespace) -> None:
     }
     stem = ("distributed_sort_last_quick" if args.quick else
             f"distributed_sort_last_{size}_level{level}_{side}px")
+    if modes != list(SORT_LAST_MODES):
+        stem += "_" + "-".join(modes)
     out = HERE / "results"
     out.mkdir(exist_ok=True)
     (out / f"{stem}.json").write_text(json.dumps(result, indent=1, default=str))
