@@ -19,11 +19,24 @@ change in the machine's load hits all three alike:
 From these it projects 1..64 workers (table in the results): a movie costs
 ``F * t_frame / W + F * (t_task + bytes_frame / B)`` (the client handles every frame), a frame by
 tiles ``t_frame / W + 4 W * t_task + bytes_frame / B`` (about four tiles per worker, every byte
-reaches the client), and a sort-last frame (not built yet: it needs the pyramid store and the
-kernels' segment entry point) ``t_frame / W + log2(W) * (t_over + bytes_image / B)``.
+reaches the client), and a sort-last frame ``t_frame / W + log2(W) * (t_over + bytes_image / B)``.
 
-Run ``python benchmarks/bench_distributed.py [--quick]``; results go to
-``benchmarks/results/distributed[_quick].json`` and ``.md``.
+Sort-last part (``--part sort-last``; results in ``distributed_sort_last_quick.*`` or
+``distributed_sort_last_SIZE_levelL_Npx.*``): a
+pyramid of the Marschner-Lobb signal (``--sort-last-size`` voxels per axis, float32, bricks of 32;
+built once into ``--pyramid-dir``) rendered at one level by ``SortLastScene`` on 2
+single-threaded workers, per mode (iso, MIP, DVR): wall time against the in-memory render of the
+same level on 2 local threads, time in the shares' traces, in the merges (``combine`` tasks) and
+in the final task, bytes of the partial images merged, bytes actually moved between the workers
+(their Dask transfer logs) and bytes sent to the client; plus one merge of two full-image states
+timed in this process. The 64-worker table for sort-last uses these measured numbers:
+``t_trace / W + log2(W) * (t_task + t_merge + bytes_partial / B) + t_finish + bytes_frame / B``
+(full-image partial images at every level: an upper bound, since a share's image shrinks as
+the shares get smaller).
+
+Run ``python benchmarks/bench_distributed.py [--quick] [--part all|sort-first|sort-last]``;
+results go to ``benchmarks/results/distributed[_quick].json`` and ``.md`` (sort-first) and
+``distributed_sort_last_*`` (sort-last).
 """
 
 from __future__ import annotations
@@ -102,7 +115,24 @@ def over_step(width: int, height: int, repeats: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, a few repeats")
+    parser.add_argument("--part", choices=("all", "sort-first", "sort-last"), default="all")
+    parser.add_argument("--sort-last-size", type=int, default=None,
+                        help="voxels per axis of the sort-last pyramid (default 512; quick 129)")
+    parser.add_argument("--sort-last-level", type=int, default=0)
+    parser.add_argument("--sort-last-image", type=int, default=None,
+                        help="image side of the sort-last renders (default 1024; quick 256)")
+    parser.add_argument("--sort-last-repeats", type=int, default=3)
+    parser.add_argument("--sort-last-modes", default="iso,mip,dvr",
+                        help="comma-separated modes of the sort-last part")
+    parser.add_argument("--pyramid-dir", default="/tmp/splinecast-bench-pyramids")
     args = parser.parse_args()
+    if args.part in ("all", "sort-first"):
+        sort_first(args)
+    if args.part in ("all", "sort-last"):
+        sort_last(args)
+
+
+def sort_first(args: argparse.Namespace) -> None:
     from distributed import Client, LocalCluster
 
     if args.quick:
@@ -206,6 +236,219 @@ def main() -> None:
     print(markdown(result))
 
 
+# --------------------------------------------------------------------------- sort-last
+SORT_LAST_MODES = ("iso", "mip", "dvr")
+
+
+def _moved_between_workers(dask_worker) -> int:
+    """Bytes this worker received from other workers so far (its Dask transfer log)."""
+    return int(sum(entry.get("total", 0) for entry in dask_worker.transfer_incoming_log))
+
+
+def _pyramid(size: int, folder: Path) -> Path:
+    """The Marschner-Lobb pyramid of ``size``^3 float32 voxels (built once)."""
+    path = folder / f"marschner-lobb-{size}.zarr"
+    if not path.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        start = time.perf_counter()
+        volume = sc.demo("marschner-lobb", size=size)
+        sc.build_pyramid(volume, path, brick=32, progress=True)
+        print(f"built {path} in {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    return path
+
+
+def _sort_last_options(mode: str) -> dict:
+    tf = sc.TransferFunction([(0.3, 0.0), (0.5, 0.3), (0.8, 0.6)], domain=(0.0, 1.0))
+    return {"iso": {"iso": 0.5}, "mip": {"mode": "mip", "window": (0.0, 1.0)},
+            "dvr": {"mode": "dvr", "tf": tf, "dvr": sc.DVRSettings(step=0.5)}}[mode]
+
+
+def merge_step(level_volume: sc.Volume, camera: sc.Camera, mode: str, repeats: int) -> dict:
+    """One merge of two full-image partial states of ``mode``, in this process (1 thread)."""
+    from splinecast.distributed.sort_last import prepare_request
+    from splinecast.distributed.source import VolumeInfo
+    from splinecast.render.segment import combine_states, new_state
+
+    setup = prepare_request(VolumeInfo.of(level_volume), camera, _sort_last_options(mode)).setup
+    front, back = new_state(setup, camera), new_state(setup, camera)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        combine_states(setup, front, back)
+        t = statistics.median(timed(lambda: combine_states(setup, front, back))
+                              for _ in range(repeats))
+    finally:
+        numba.set_num_threads(threads)
+    return {"merge_s": t, "state_bytes": int(sum(a.nbytes for a in front))}
+
+
+def sort_last(args: argparse.Namespace) -> None:
+    from distributed import Client, LocalCluster
+
+    from splinecast.distributed import DistributedScene
+
+    size = args.sort_last_size or (129 if args.quick else 512)
+    side = args.sort_last_image or (256 if args.quick else 1024)
+    image = (side, side)
+    repeats = args.sort_last_repeats
+    modes = [m for m in args.sort_last_modes.split(",") if m]
+    if not set(modes) <= set(SORT_LAST_MODES):
+        raise SystemExit(f"--sort-last-modes: choose from {', '.join(SORT_LAST_MODES)}")
+    level = args.sort_last_level
+    load_before = os.getloadavg()
+    path = _pyramid(size, Path(args.pyramid_dir))
+    store = sc.read(path)
+    level_volume = store.level(level).to_volume()
+    camera = sc.Camera.orbit(level_volume, azimuth=40, elevation=25, size=image)
+    local = sc.Scene(level_volume)
+    for mode in modes:  # compile / load the kernels before the workers start
+        local.render(sc.Camera.orbit(level_volume, size=(16, 16)), **_sort_last_options(mode))
+    merges = {mode: merge_step(level_volume, camera, mode, repeats) for mode in modes}
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                           dashboard_address=":0", silence_logs=40)
+    client = Client(cluster)
+    rows = {}
+    try:
+        start = time.perf_counter()
+        scene = DistributedScene(path, client, strategy="sort-last", level=level)
+        open_s = time.perf_counter() - start
+        for mode in modes:
+            options = _sort_last_options(mode)
+            small = sc.Camera.orbit(level_volume, azimuth=40, elevation=25, size=(32, 32))
+            scene.render(small, **options)  # warm-up: kernels loaded on the workers
+            local.render(small, **options)
+            runs: dict[str, list[float]] = {k: [] for k in (
+                "sort_last_s", "local_2threads_s", "share_trace_max_s", "share_trace_sum_s",
+                "merge_tasks_s", "finish_s", "moved_bytes")}
+            for _ in range(repeats):
+                before = sum(client.run(_moved_between_workers).values())
+                frame = None
+
+                def render(options=options):
+                    nonlocal frame
+                    frame = scene.render(camera, **options)
+
+                runs["sort_last_s"].append(timed(render))
+                runs["moved_bytes"].append(sum(client.run(_moved_between_workers).values())
+                                           - before)
+                st = frame.stats
+                runs["share_trace_max_s"].append(st["share_trace_ms_max"] / 1e3)
+                runs["share_trace_sum_s"].append(st["share_trace_ms_sum"] / 1e3)
+                runs["merge_tasks_s"].append(st["composite_ms"] / 1e3)
+                runs["finish_s"].append(st["finish_ms"] / 1e3)
+                runs["local_2threads_s"].append(timed(lambda options=options: local.render(
+                    camera, **options)))
+            rows[mode] = {"runs": runs,
+                          "median": {k: statistics.median(v) for k, v in runs.items()},
+                          "partial_bytes": frame.stats["partial_bytes"],
+                          "frame_bytes": frame.stats["frame_bytes"],
+                          "merge_in_process_s": merges[mode]["merge_s"],
+                          "full_state_bytes": merges[mode]["state_bytes"]}
+        t_task = task_overhead(client, 200)
+        rate = transfer_rate(client)
+        loads = scene.load_stats
+        shares = [{"lo": s.lo, "hi": s.hi, "bricks": s.n_bricks} for s in scene.shares]
+    finally:
+        client.close()
+        cluster.close()
+    projection = []
+    for w in WORKER_COUNTS:
+        row = {"workers": w}
+        for mode, r in rows.items():
+            m = r["median"]
+            merge = t_task + r["merge_in_process_s"] + r["full_state_bytes"] / rate
+            t = (m["share_trace_sum_s"] / w + math.log2(w) * merge + m["finish_s"]
+                 + r["frame_bytes"] / rate)
+            row[f"{mode}_s"] = t
+            row[f"{mode}_speedup"] = (m["share_trace_sum_s"] + m["finish_s"]
+                                      + r["frame_bytes"] / rate) / t
+            row[f"{mode}_merge_levels_s"] = math.log2(w) * merge
+            row[f"{mode}_moved_bytes_max"] = (w - 1) * r["full_state_bytes"]
+        projection.append(row)
+    result = {
+        "machine": describe(), "load_average_before": load_before,
+        "load_average_after": os.getloadavg(),
+        "command": "python benchmarks/bench_distributed.py --part sort-last"
+                   + (" --quick" if args.quick else "")
+                   + (f" --sort-last-size {size}" if args.sort_last_size else "")
+                   + (f" --sort-last-level {level}" if level else "")
+                   + (f" --sort-last-image {side}" if args.sort_last_image else "")
+                   + (f" --sort-last-repeats {repeats}" if repeats != 3 else "")
+                   + (f" --sort-last-modes {args.sort_last_modes}"
+                      if modes != list(SORT_LAST_MODES) else ""),
+        "pyramid": str(path), "size": size, "level": level,
+        "level_shape": list(level_volume.shape), "image": image, "repeats": repeats,
+        "open_s": open_s, "loads": loads, "shares": shares, "modes": rows,
+        "model": {"task_overhead_s": t_task, "transfer_bytes_per_s": rate},
+        "projection": projection,
+    }
+    stem = ("distributed_sort_last_quick" if args.quick else
+            f"distributed_sort_last_{size}_level{level}_{side}px")
+    if modes != list(SORT_LAST_MODES):
+        stem += "_" + "-".join(modes)
+    out = HERE / "results"
+    out.mkdir(exist_ok=True)
+    (out / f"{stem}.json").write_text(json.dumps(result, indent=1, default=str))
+    (out / f"{stem}.md").write_text(markdown_sort_last(result))
+    print(markdown_sort_last(result))
+
+
+def markdown_sort_last(r: dict) -> str:
+    m = r["machine"]
+    w, h = r["image"]
+    mib = 2 ** 20
+    bytes_read = sum(x["bytes_read"] for x in r["loads"])
+    lines = [
+        "# Distributed benchmark: sort-last on Dask (issue 14)",
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} cores, numba {m['versions']['numba']}, load "
+        f"average {r['load_average_before'][0]:.1f} before / {r['load_average_after'][0]:.1f} "
+        f"after (a shared machine: other jobs ran meanwhile, timings are noisy). Command: "
+        f"`{r['command']}`. Pyramid of Marschner-Lobb {r['size']}^3 float32 (bricks of 32), "
+        f"level {r['level']} ({'x'.join(map(str, r['level_shape']))}), trilinear, image {w}x{h}. "
+        f"LocalCluster of 2 single-threaded worker processes, {len(r['shares'])} shares "
+        f"({', '.join(str(s['bricks']) for s in r['shares'])} bricks); opening the scene (each "
+        f"worker reads its bricks, {bytes_read / mib:.0f} MiB with ghosts in all) took "
+        f"{r['open_s']:.1f} s. Medians of {r['repeats']} runs after warm-up.",
+        "",
+        "| mode | sort-last 2 workers s | local 2 threads s | shares' traces max / sum s | "
+        "merge tasks s | final task s | one merge in process s | partial images in merges + "
+        "final task MiB | moved between workers MiB | sent to client MiB |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for mode, row in r["modes"].items():
+        md = row["median"]
+        lines.append(
+            f"| {mode} | {md['sort_last_s']:.2f} | {md['local_2threads_s']:.2f} | "
+            f"{md['share_trace_max_s']:.2f} / {md['share_trace_sum_s']:.2f} | "
+            f"{md['merge_tasks_s']:.3f} | {md['finish_s']:.3f} | "
+            f"{row['merge_in_process_s']:.3f} | {row['partial_bytes'] / mib:.1f} | "
+            f"{md['moved_bytes'] / mib:.1f} | {row['frame_bytes'] / mib:.1f} |")
+    mo = r["model"]
+    lines += [
+        "",
+        f"Per-task overhead {mo['task_overhead_s'] * 1e3:.1f} ms (200 empty tasks), worker -> "
+        f"client transfer {mo['transfer_bytes_per_s'] / mib:.0f} MiB/s. A full-image partial "
+        f"state is " + ", ".join(f"{mode} {row['full_state_bytes'] / mib:.1f} MiB"
+                                   for mode, row in r["modes"].items()) + ".",
+        "",
+        "Projection to W single-threaded workers (model in the module docstring: traces split "
+        "W ways, log2 W merge levels of task overhead + one measured merge + one full-image "
+        "partial state moved, then the final task and the frame to the client; 'moved' is the "
+        "most the merges move in all, (W - 1) full-image states):",
+        "",
+        "| workers | " + " | ".join(f"{m_} frame s | {m_} speed-up | {m_} merge levels s | "
+                                    f"{m_} moved MiB" for m_ in r["modes"]) + " |",
+        "|---|" + "---|---|---|---|" * len(r["modes"]),
+    ]
+    for p in r["projection"]:
+        lines.append(f"| {p['workers']} | " + " | ".join(
+            f"{p[f'{m_}_s']:.3f} | {p[f'{m_}_speedup']:.1f}x | {p[f'{m_}_merge_levels_s']:.3f} | "
+            f"{p[f'{m_}_moved_bytes_max'] / mib:.0f}" for m_ in r["modes"]) + " |")
+    lines.append("")
+    return "\n".join(lines)
+
+
 def markdown(r: dict) -> str:
     m, med, mo = r["machine"], r["median_s"], r["model"]
     (mw, mh), (fw, fh) = r["movie_size"], r["frame_size"]
@@ -241,7 +484,8 @@ def markdown(r: dict) -> str:
         f" ms ({mw}x{mh}).",
         "",
         "Projection to larger clusters (single-threaded workers, model in the module "
-        "docstring; sort-last is not built yet, its row is what the model predicts):",
+        "docstring; the sort-last column uses a numpy 'over' as the merge, the sort-last "
+        "results files `distributed_sort_last_*.md` project from measured merges):",
         "",
         "| workers | movie s | movie frames/s | movie speed-up | tiled frame s | tiled "
         "speed-up | sort-last frame s | sort-last speed-up |",

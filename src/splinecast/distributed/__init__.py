@@ -13,24 +13,37 @@ per frame. Movies (:mod:`.movie`) write such batches to MP4, GIF or a folder of 
 - :mod:`.scene`: :class:`DistributedScene`;
 - :mod:`.movie`: movie files written frame by frame, all or nothing.
 
-Sort-last rendering (bricks of an OME-Zarr pyramid spread over the workers, partial images
-composited in visibility order) will live beside them in ``sort_last.py``.
+Sort-last scale-out: the data is split, the image is not. ``DistributedScene(store, client,
+model, strategy="sort-last", level=k)`` (:mod:`.sort_last`, :class:`SortLastScene`) assigns the
+bricks of level ``k`` of an OME-Zarr pyramid to the workers by a k-d split (each worker reads
+only its own bricks' chunks and keeps them); each worker traces its bricks into a partial image
+(the mode's unfinished per-pixel state), and the partial images are merged pairwise up the k-d
+tree in visibility order by tasks on the workers, so the client receives only the final frame.
+
+- :mod:`.sort_last`: :class:`SortLastScene`, the k-d split (:func:`split_bricks`), the shares
+  (:class:`Share`) and the worker tasks that trace, combine and finish partial images.
 
 Importing this package does not import Dask; creating a :class:`DistributedScene` does.
 """
 
 from .movie import MovieWriter
-from .scene import DistributedScene
+from .scene import STRATEGIES, DistributedScene
 from .shots import Shot, as_shots, orbit_path, ramp, render_locally
+from .sort_last import KdNode, Partial, Share, SortLastScene, split_bricks
 from .source import SceneSource, VolumeInfo
 from .tiles import FrameCanvas, Tile, auto_tile_size, merge_stats, tile_grid
 
 __all__ = [
     "DistributedScene",
     "FrameCanvas",
+    "KdNode",
     "MovieWriter",
+    "Partial",
+    "STRATEGIES",
     "SceneSource",
+    "Share",
     "Shot",
+    "SortLastScene",
     "Tile",
     "VolumeInfo",
     "as_shots",
@@ -39,5 +52,6 @@ __all__ = [
     "orbit_path",
     "ramp",
     "render_locally",
+    "split_bricks",
     "tile_grid",
 ]

@@ -5,6 +5,10 @@ frame as it completes; a batch of frames (a camera path, a sweep) is one task pe
 volume is never shipped through the task graph: every worker opens the :class:`SceneSource`
 itself, once, and keeps the prepared scene (:mod:`.worker`).
 
+Sort-last: ``DistributedScene(store, client, model, strategy="sort-last", level=k)`` returns a
+:class:`~.sort_last.SortLastScene` instead (bricks of one pyramid level per worker, partial images
+composited on the workers), with the same ``render``.
+
 Dask is imported only when a DistributedScene is created, so ``import splinecast`` (and the local
 movie path) never needs it.
 """
@@ -31,7 +35,11 @@ from .tiles import FrameCanvas, Tile, auto_tile_size, tile_grid
 if TYPE_CHECKING:
     from distributed import Client, Future
 
-__all__ = ["DistributedScene"]
+__all__ = ["DistributedScene", "STRATEGIES"]
+
+#: How a :class:`DistributedScene` divides the work: the image (tiles and frames) or the data
+#: (bricks of one level of an OME-Zarr pyramid, :mod:`.sort_last`).
+STRATEGIES = ("sort-first", "sort-last")
 
 _RENDER_SIGNATURE = inspect.signature(Scene.render)
 
@@ -60,8 +68,16 @@ class DistributedScene:
         The cluster to use; by default the current client (``distributed.get_client()``).
     model : str
         Reconstruction model (see :data:`splinecast.MODELS`).
+    strategy : {"sort-first", "sort-last"}
+        ``"sort-first"`` (default): every worker opens the whole volume, the image is split.
+        ``"sort-last"``: ``source`` is an OME-Zarr store, the bricks of one pyramid level
+        (``level=k``, default 0) are split among the workers, each reading only its own, and
+        their partial images are composited on the workers; returns a
+        :class:`~splinecast.distributed.sort_last.SortLastScene` (its ``render`` takes the
+        same arguments and returns the same :class:`Frame`; ``level``, ``parts`` and
+        ``brick`` are its options).
     smooth : int, optional
-        Gaussian pre-smoothing kernel size (3 or 5), applied on the workers.
+        Gaussian pre-smoothing kernel size (3 or 5), applied on the workers (sort-first).
     **options
         Model options, as for :class:`~splinecast.Scene`.
 
@@ -89,8 +105,25 @@ class DistributedScene:
     >>> for frame in scene.render_many(cams, iso=80): ...        # doctest: +SKIP
     """
 
+    def __new__(cls, source: Any = None, client: Any = None, model: str = "trilinear", *,
+                strategy: str = "sort-first", **kwargs: Any) -> Any:
+        # strategy="sort-last" returns a SortLastScene (bricks per worker), as Scene returns a
+        # MultiscaleScene for a multiscale volume.
+        if strategy not in STRATEGIES:
+            raise ParameterError(f"strategy must be one of {', '.join(STRATEGIES)}, "
+                                 f"got {strategy!r}")
+        if cls is DistributedScene and strategy == "sort-last":
+            from .sort_last import SortLastScene
+
+            return SortLastScene(source, client, model, **kwargs)
+        if "level" in kwargs:
+            raise ParameterError("level applies to strategy='sort-last' only (sort-first "
+                                 "renders the whole volume the source names)")
+        return super().__new__(cls)
+
     def __init__(self, source: str | os.PathLike | SceneSource, client: Client | None = None,
-                 model: str = "trilinear", *, smooth: int | None = None, **options: Any) -> None:
+                 model: str = "trilinear", *, strategy: str = "sort-first",
+                 smooth: int | None = None, **options: Any) -> None:
         from distributed import Client, get_client
 
         if not isinstance(source, SceneSource):

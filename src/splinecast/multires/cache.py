@@ -37,7 +37,7 @@ from .budget import format_bytes, parse_bytes
 from .lod import Cut
 from .octree import BrickOctree
 
-__all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS"]
+__all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS", "read_bricks"]
 
 Key = tuple[int, int, int, int]
 #: Ghost filling beyond a level's ends, as the models pad a whole volume: ``"edge"`` repeats the
@@ -89,6 +89,48 @@ class DrawItem:
     n: int
     brick: Brick
     substituted: bool
+
+
+def read_bricks(volume: MultiscaleVolume, octree: BrickOctree, keys: list[Key],
+                border: str = "edge") -> list[Brick]:
+    """Read bricks ``keys`` of one level with one store read (the union of their windows).
+
+    Each brick's array holds its window of the level (:meth:`BrickOctree.window`: its voxels
+    and the ghost layers), the voxels beyond the level's ends filled by the ``border`` rule
+    (``"edge"`` or ``"reflect"``). The store chunks read are those the union window overlaps.
+
+    Raises
+    ------
+    ReadError
+        A chunk cannot be read (:meth:`splinecast.io.omezarr.Level.read`).
+    """
+    level_index = keys[0][0]
+    level = volume.level(level_index)
+    index = np.array([k[1:] for k in keys], dtype=np.int64)
+    first, stop = octree.window(level_index, index)
+    shape = np.array(level.shape)
+    have_lo = np.clip(first.min(axis=0), 0, shape - 1)
+    have_hi = np.clip(stop.max(axis=0), have_lo + 1, shape)
+    block = level.read(have_lo, have_hi)
+    scale, offset = octree.level_map(level_index)
+    out = []
+    for n, key in enumerate(keys):
+        lo = np.clip(first[n], 0, shape - 1)
+        hi = np.clip(stop[n], lo + 1, shape)
+        part = block[tuple(slice(a, b) for a, b in zip(lo - have_lo, hi - have_lo, strict=True))]
+        pads = [(int(a), int(b)) for a, b in zip(lo - first[n], stop[n] - hi, strict=True)]
+        data = np.pad(part, pads, mode=border) if any(a or b for a, b in pads) else (
+            np.ascontiguousarray(part))
+        origin = np.asarray(level.origin) + first[n] * np.asarray(level.spacing)
+        out.append(Brick(
+            key=key, data=np.ascontiguousarray(data),
+            first=tuple(int(v) for v in first[n]),  # type: ignore[arg-type]
+            origin=tuple(float(v) for v in origin),  # type: ignore[arg-type]
+            spacing=tuple(float(v) for v in level.spacing),  # type: ignore[arg-type]
+            offset=tuple(float(v) for v in (first[n] - offset) / scale),  # type: ignore
+            scale=tuple(float(v) for v in 1.0 / scale),  # type: ignore[arg-type]
+        ))
+    return out
 
 
 class BrickCache:
@@ -192,35 +234,10 @@ class BrickCache:
 
     def _read(self, keys: list[Key]) -> list[Brick]:
         """Read bricks of one level with one store read (their union window); no lock held."""
-        level_index = keys[0][0]
-        level = self.volume.level(level_index)
-        index = np.array([k[1:] for k in keys], dtype=np.int64)
-        first, stop = self.octree.window(level_index, index)
-        shape = np.array(level.shape)
-        have_lo = np.clip(first.min(axis=0), 0, shape - 1)
-        have_hi = np.clip(stop.max(axis=0), have_lo + 1, shape)
-        block = level.read(have_lo, have_hi)
-        scale, offset = self.octree.level_map(level_index)
-        out = []
-        for n, key in enumerate(keys):
-            lo = np.clip(first[n], 0, shape - 1)
-            hi = np.clip(stop[n], lo + 1, shape)
-            part = block[tuple(slice(a, b) for a, b in zip(lo - have_lo, hi - have_lo,
-                                                            strict=True))]
-            pads = [(int(a), int(b)) for a, b in zip(lo - first[n], stop[n] - hi, strict=True)]
-            data = np.pad(part, pads, mode=self.border) if any(a or b for a, b in pads) else (
-                np.ascontiguousarray(part))
-            origin = np.asarray(level.origin) + first[n] * np.asarray(level.spacing)
-            out.append(Brick(
-                key=key, data=np.ascontiguousarray(data),
-                first=tuple(int(v) for v in first[n]),  # type: ignore[arg-type]
-                origin=tuple(float(v) for v in origin),  # type: ignore[arg-type]
-                spacing=tuple(float(v) for v in level.spacing),  # type: ignore[arg-type]
-                offset=tuple(float(v) for v in (first[n] - offset) / scale),  # type: ignore
-                scale=tuple(float(v) for v in 1.0 / scale),  # type: ignore[arg-type]
-            ))
-            self._note_range(key, data)
-        return out
+        bricks = read_bricks(self.volume, self.octree, keys, self.border)
+        for brick in bricks:
+            self._note_range(brick.key, brick.data)
+        return bricks
 
     def _note_range(self, key: Key, data: np.ndarray) -> None:
         """Queue the range of a brick read from a store without tables (applied by the caller's

@@ -1,0 +1,259 @@
+"""Sort-last rendering on a Dask LocalCluster (2 worker processes, 1 thread each).
+
+References, independent of the code under test:
+
+- the in-memory ``Scene.render`` of the rendered level (``sc.read(store).level(k).to_volume()``,
+  one grid, no bricks, no compositing): depths and MIP values to 1e-9, colours to 1e-6 (the
+  tolerance of ``tests/test_multires_render.py``: a ray restricted to a brick parametrizes a
+  cell's polynomial from another point);
+- the single-process multiresolution render of the same bricks (``MultiscaleScene`` with a
+  level-0 cut: the state carried through the bricks front to back in one process): iso and MIP
+  identical bit for bit, DVR within 1e-12;
+- the chunk files each worker process asked its Zarr store for (a counting wrapper installed in
+  the workers), against the brick boxes the chunks cover;
+- the scheduler's task stream: which tasks ran, and that only the last one's result is fetched.
+
+One cluster serves the whole module.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import splinecast as sc
+from splinecast.distributed import DistributedScene, SceneSource, SortLastScene, VolumeInfo
+from splinecast.distributed.sort_last import (
+    Share,
+    combine_partials,
+    finish_partial,
+    render_share,
+    split_bricks,
+)
+from splinecast.errors import ParameterError
+
+distributed = pytest.importorskip("distributed", reason="needs the distributed extra (Dask)")
+pytest.importorskip("zarr", reason="needs the multires extra (zarr)")
+
+B = 8  # cells per brick and chunk (one chunk per shard file: a file name names a chunk)
+TF = sc.TransferFunction([(0.3, 0.0), (0.5, 0.6), (0.8, 0.9)], domain=(0.0, 1.0))
+MODE_OPTIONS = {
+    "iso": {"iso": 0.5},
+    "mip": {"mode": "mip", "window": (0.0, 1.0)},
+    "dvr": {"mode": "dvr", "tf": TF, "dvr": sc.DVRSettings(step=0.5)},
+}
+CASES = [(model, mode) for model in ("trilinear", "s31") for mode in MODE_OPTIONS]
+
+
+def _camera(vol, azimuth: float = 35, elevation: float = 25, **kw) -> sc.Camera:
+    return sc.Camera.orbit(vol, azimuth=azimuth, elevation=elevation, size=(48, 40), **kw)
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory) -> Path:
+    """Marschner-Lobb 33^3 (float32) as a pyramid of 8^3 bricks: levels 33^3 (4x4x4 bricks),
+    17^3 (2x2x2), 9^3 (1 brick)."""
+    path = tmp_path_factory.mktemp("sortlast") / "ml.zarr"
+    sc.build_pyramid(sc.demo("marschner-lobb", size=33), path, brick=B, shard=B, progress=False)
+    return path
+
+
+@pytest.fixture(scope="module")
+def levels(store) -> dict[int, sc.Volume]:
+    volume = sc.read(store)
+    return {k: volume.level(k).to_volume() for k in (0, 1)}
+
+
+def _count_chunk_reads() -> None:
+    """Installed in each worker: record every key its Zarr LocalStores are asked for."""
+    from zarr.storage import LocalStore
+
+    if getattr(LocalStore, "_sortlast_keys", None) is not None:
+        return
+    keys: list[str] = []
+    original = LocalStore.get
+
+    async def get(self, key, *args, **kwargs):
+        keys.append(key)
+        return await original(self, key, *args, **kwargs)
+
+    LocalStore.get = get
+    LocalStore._sortlast_keys = keys
+
+
+def _chunk_keys() -> list[str]:
+    from zarr.storage import LocalStore
+
+    return list(LocalStore._sortlast_keys)
+
+
+def _warm_up(store: Path, volume: sc.Volume) -> None:
+    """Compile every kernel the workers use, in this process, before the cluster starts: the
+    workers then load them from Numba's on-disk cache instead of compiling them two at a time.
+    The sort-last tasks run here as plain functions (no Dask) on the two halves of level 0."""
+    header = VolumeInfo.of(volume)
+    cam = sc.Camera.orbit(volume, size=(8, 8))
+    tree = split_bricks((4, 4, 4), 2)
+    for model, mode in CASES:
+        sc.Scene(volume, model=model).render(cam, **MODE_OPTIONS[mode])
+        source = SceneSource(store, model)
+        token = f"warm-up {model} {mode}"
+        low, high = (render_share(Share(source, 0, B, leaf.part, leaf.lo, leaf.hi), cam,
+                                  MODE_OPTIONS[mode], header, token) for leaf in tree.leaves())
+        both = combine_partials(low, high, cam, MODE_OPTIONS[mode], header, token)
+        finish_partial(both, cam, MODE_OPTIONS[mode], header, token)
+
+
+@pytest.fixture(scope="module")
+def client(store, levels):
+    _warm_up(store, levels[0])
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0", silence_logs=40)
+    with cluster, distributed.Client(cluster) as client:
+        client.run(_count_chunk_reads)
+        yield client
+
+
+@pytest.fixture(scope="module")
+def scenes(client, store):
+    """Sort-last scenes per (model, level), made once (the workers keep their bricks)."""
+    return {(model, level): DistributedScene(store, client, model=model, strategy="sort-last",
+                                             level=level)
+            for model in ("trilinear", "s31") for level in (0, 1)}
+
+
+def _assert_close_to_whole(mode: str, got: sc.Frame, want: sc.Frame) -> None:
+    if mode == "mip":
+        np.testing.assert_allclose(got.value, want.value, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(got.rgba, want.rgba, rtol=0, atol=1e-6)
+        return
+    if mode == "dvr":
+        np.testing.assert_allclose(got.rgba, want.rgba, rtol=0, atol=1e-6)
+        return
+    hit = np.isfinite(want.depth)
+    assert 50 < hit.sum() < hit.size  # hits and misses
+    np.testing.assert_array_equal(np.isfinite(got.depth), hit)
+    np.testing.assert_allclose(got.depth[hit], want.depth[hit], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.rgba, want.rgba, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize(("model", "mode"), CASES)
+def test_sort_last_equals_the_in_memory_render_of_the_level(scenes, levels, model, mode):
+    for level in (0, 1):
+        scene = scenes[model, level]
+        assert isinstance(scene, SortLastScene)
+        assert scene.volume.shape == levels[level].shape
+        for cam in (_camera(levels[level]), _camera(levels[level], azimuth=215, elevation=-40)):
+            want = sc.Scene(levels[level], model=model).render(cam, **MODE_OPTIONS[mode])
+            got = scenes[model, level].render(cam, **MODE_OPTIONS[mode])
+            _assert_close_to_whole(mode, got, want)
+            assert got.stats["shares"] == 2 and got.stats["composite_levels"] == 1
+
+
+@pytest.mark.parametrize(("model", "mode"), CASES)
+def test_sort_last_equals_the_single_process_brick_render(scenes, store, levels, model, mode):
+    """Level 0 bricks traced front to back in one process: the same image, bit for bit for
+    the modes whose merge picks one state (iso, MIP)."""
+    cams = [_camera(levels[0]), _camera(levels[0], azimuth=120, elevation=60),
+            sc.Camera.orbit(levels[0], azimuth=90, elevation=0, ortho=True, size=(48, 40))]
+    with sc.Scene(sc.read(store), model=model, budget="64MiB", lod=1e-6) as local:
+        for cam in cams:
+            want = local.render(cam, complete=True, **MODE_OPTIONS[mode])
+            assert want.stats["complete"]
+            assert want.stats["cut_levels"] == {0: want.stats["cut_bricks"]}
+            got = scenes[model, 0].render(cam, **MODE_OPTIONS[mode])
+            if mode == "dvr":
+                np.testing.assert_allclose(got.rgba, want.rgba, rtol=0, atol=1e-12)
+                continue
+            np.testing.assert_array_equal(got.rgba, want.rgba)
+            np.testing.assert_array_equal(got.depth, want.depth)
+            if mode == "mip":
+                np.testing.assert_array_equal(got.value, want.value)
+            else:
+                np.testing.assert_array_equal(got.normal, want.normal)
+
+
+def test_each_worker_reads_only_its_own_chunks(client, store):
+    """A fresh scene of level 0 (33^3 voxels in 5x5x5 chunks of 8^3; bricks of 16 cells, so
+    that no worker has read them yet): each worker asks its store for the chunk files of its
+    own bricks' voxels and of the chunks their ghost voxels (2 on each side, the widest model
+    support) reach into, and for no chunk of another level."""
+    before = {w: len(keys) for w, keys in client.run(_chunk_keys).items()}
+    scene = DistributedScene(store, client, model="trilinear", strategy="sort-last", level=0,
+                             brick=16, parts=2)
+    read = {w: {k for k in keys[before[w]:] if "/c/" in k}
+            for w, keys in client.run(_chunk_keys).items()}
+    assert set(read) == set(scene.workers)
+    n, chunk, ghost, everything = 33, B, 2, 5 ** 3
+
+    def chunks_of(first: np.ndarray, last: np.ndarray) -> set[tuple[int, ...]]:
+        """Chunks holding voxels first..last (inclusive, clipped to the level)."""
+        a = np.clip(first, 0, n - 1) // chunk
+        b = np.clip(last, 0, n - 1) // chunk
+        return {tuple(int(v) for v in a + d) for d in np.ndindex(*(b - a + 1))}
+
+    for part, address in enumerate(scene.workers):
+        chunks = set()
+        for key in read[address]:
+            level, _, z, y, x = key.split("/")
+            assert level == "0", key  # only the rendered level's chunks
+            chunks.add((int(x), int(y), int(z)))
+        share = scene.shares[part]
+        cells_lo, cells_hi = np.asarray(share.lo) * 16, np.asarray(share.hi) * 16
+        own = chunks_of(cells_lo, cells_hi)
+        shell = chunks_of(cells_lo - ghost, cells_hi + ghost)
+        assert own <= chunks <= shell, (part, sorted(chunks))
+        assert len(chunks) < everything
+    assert scene.shares[0].n_bricks + scene.shares[1].n_bricks == 8
+    scene.close()
+
+
+def test_partial_images_are_composited_on_the_workers(client, scenes, levels):
+    cam = _camera(levels[0])
+    with distributed.get_task_stream(client) as stream:
+        frame = scenes["trilinear", 0].render(cam, iso=0.5)
+    names = sorted(t["key"].split("-")[0] if isinstance(t["key"], str) else t["key"][0]
+                   for t in stream.data)
+    assert names.count("render_share") == 2
+    assert names.count("combine_partials") == 1
+    assert names.count("finish_partial") == 1
+    assert {t["worker"] for t in stream.data} <= set(client.nthreads())
+    # The client receives the finished frame only: its bytes, not the partial images'.
+    st = frame.stats
+    assert st["frame_bytes"] == sum(a.nbytes for a in (frame.rgba, frame.depth, frame.position,
+                                                        frame.normal, frame.face))
+    assert st["partial_bytes"] > 0 and st["composite_ms"] >= 0
+
+
+def test_the_k_d_split_is_a_partition_into_boxes():
+    for counts, parts in [((4, 4, 4), 2), ((5, 3, 2), 7), ((33, 1, 2), 64), ((2, 2, 2), 8)]:
+        tree = split_bricks(counts, parts)
+        owner = np.full(counts, -1)
+        for leaf in tree.leaves():
+            box = tuple(slice(a, b) for a, b in zip(leaf.lo, leaf.hi, strict=True))
+            assert (owner[box] == -1).all() and owner[box].size > 0
+            owner[box] = leaf.part
+        assert (owner >= 0).all() and len(tree.leaves()) == parts
+        assert tree.depth() == int(np.ceil(np.log2(parts)))
+    with pytest.raises(ParameterError, match="parts"):
+        split_bricks((2, 2, 1), 5)
+
+
+def test_bad_input_is_one_line_naming_the_parameter(client, store, tmp_path):
+    with pytest.raises(ParameterError, match="^level must be an integer from 0 to 2") as info:
+        DistributedScene(store, client, strategy="sort-last", level=3)
+    assert "\n" not in str(info.value)
+    with pytest.raises(ParameterError, match="^source must be an OME-Zarr store"):
+        (tmp_path / "s.nrrd").write_bytes(b"NRRD0004\n")
+        DistributedScene(tmp_path / "s.nrrd", client, strategy="sort-last")
+    with pytest.raises(ParameterError, match="^source must be the path of an OME-Zarr"):
+        DistributedScene("demo:sphere?size=8", client, strategy="sort-last")
+    with pytest.raises(ParameterError, match="^strategy must be one of"):
+        DistributedScene(store, client, strategy="sort-middle")
+    with pytest.raises(ParameterError, match="^level applies to strategy='sort-last'"):
+        DistributedScene("demo:sphere?size=8", client, level=1)
+    with pytest.raises(ParameterError, match="^iso=7 is outside the data range"):
+        scene = DistributedScene(store, client, strategy="sort-last", level=2)
+        scene.render(_camera(scene.volume), iso=7.0)
