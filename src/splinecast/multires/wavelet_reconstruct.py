@@ -383,6 +383,10 @@ class ChunkReconstructor:
         stats.milliseconds = (time.perf_counter() - start) * 1e3
         return stats
 
+    def signature(self, level: int, index: tuple[int, int, int]) -> int:
+        """Hash of the current content of a chunk's brick (equal signatures, equal bricks)."""
+        return int(self._sig[level][tuple(index)])
+
     def brick(self, level: int, index: tuple[int, int, int], octants: int = 0xFF) -> Brick:
         """The current brick of chunk ``index`` on ``level`` (after :meth:`update`)."""
         slot = self._slot[level][index]
