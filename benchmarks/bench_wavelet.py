@@ -8,7 +8,8 @@
    frame) and after a 2° orbit step with the cache of the previous frame (bricks reused / made).
 3. Store and rendering: the decomposition written to a Zarr store
    (``sc.build_pyramid(..., kind="wavelet")``: time and peak traced memory), then
-   ``Scene(store, lod=ε)`` frames at the benchmark's image size for several ε: the first frame
+   ``Scene(store, lod=ε)`` frames at the render size for several ε (in pixels of a 1024x768
+   image whatever the render size, so the rows match the LOD table's): the first frame
    (selection, reconstruction of every brick, grids) and the median steady frame (bricks and
    grids reused) in ms, the share of chunks reconstructed and refined, and the image MSE (RGB in
    [0, 1]) against the full-resolution render of the in-memory ``bspline<d>`` model, whose
@@ -153,7 +154,7 @@ def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
         build_peak = peak_mib(build)
         store = sc.read(path)
         cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size, zoom=2.5)
-        pixel = math.radians(cam.fov) / cam.size[1]
+        pixel = math.radians(cam.fov) / 768  # ε in pixels of a 1024x768 image, as in bench_lod
         ref = sc.Scene(source, model=f"bspline{degree}")
         full = ref.render(cam, iso=iso)
         full_ms = median_ms(lambda: ref.render(cam, iso=iso), repeats)
@@ -267,7 +268,7 @@ def main() -> None:
     if args.quick:
         cases = [("chmutov", 64, 0.0, 3, np.float64), ("noise", 96, 0.5, 3, np.float32)]
         render_cases = {("chmutov", 64, 3)}
-        multiples = (0, 50, 100, 200, 400)
+        multiples = (0, 50, 100, 200, 400, 800)
     else:
         cases = [("chmutov", 128, 0.0, d, np.float64) for d in (1, 2, 3)]
         cases.append(("noise", 512, 0.5, 3, np.float32))
