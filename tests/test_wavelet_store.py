@@ -104,6 +104,9 @@ def test_cli_pyramid_wavelet_and_mistakes(tmp_path, capsys):
     out = tmp_path / "w.zarr"
     assert main(["pyramid", str(src), "-o", str(out), "--wavelet", "3", "--quiet"]) == 0
     assert isinstance(sc.read(out), WaveletVolume)
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 0
+    assert "degree 3 (model bspline3)" in capsys.readouterr().out
     assert main(["pyramid", str(src), "-o", str(tmp_path / "b.zarr"), "--wavelet", "4"]) == 2
     assert "--wavelet" in capsys.readouterr().err
     with pytest.raises(sc.ParameterError, match="kind"):
