@@ -6,7 +6,14 @@
    close orbit view at 1024x768: selection ms, share of chunks, bricks drawn per level,
    reconstruction ms from scratch (every brick of the frame computed, as the thesis does per
    frame) and after a 2° orbit step with the cache of the previous frame (bricks reused / made).
-   Render ms and image MSE join once the bricks are rendered through the segment entry point.
+3. Store and rendering: the decomposition written to a Zarr store
+   (``sc.build_pyramid(..., kind="wavelet")``: time and peak traced memory), then
+   ``Scene(store, lod=ε)`` frames at the render size for several ε (in pixels of a 1024x768
+   image whatever the render size, so the rows match the LOD table's): the first frame
+   (selection, reconstruction of every brick, grids) and the median steady frame (bricks and
+   grids reused) in ms, the share of chunks reconstructed and refined, and the image MSE (RGB in
+   [0, 1]) against the full-resolution render of the in-memory ``bspline<d>`` model, whose
+   time is the baseline of the ratio column.
 
 Run ``python benchmarks/bench_wavelet.py [--quick]``; results go to
 ``benchmarks/results/wavelet[_quick].json`` and ``.md``. Medians after warm-up.
@@ -124,6 +131,67 @@ def bench_lod(vol, pyramid, iso: float, size, repeats: int) -> list[dict]:
     return rows
 
 
+RENDER_MULTIPLES = (0, 25, 50, 100, 200, 400)
+
+
+def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
+                       multiples: tuple[int, ...]) -> dict:
+    """Store build (time, peak memory) and frames of ``Scene(store, lod=ε)`` against the
+    full-resolution in-memory render."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "w.zarr"
+        source = sc.Volume(vol.data.astype(dtype), spacing=vol.spacing, origin=vol.origin)
+
+        def build(n=[0]):  # noqa: B006 - a fresh store per run
+            n[0] += 1
+            return sc.build_pyramid(source, Path(tmp) / f"w{n[0]}.zarr", kind="wavelet",
+                                    degree=degree, dtype=dtype, progress=False)
+
+        start = time.perf_counter()
+        sc.build_pyramid(source, path, kind="wavelet", degree=degree, dtype=dtype,
+                         progress=False)
+        build_ms = (time.perf_counter() - start) * 1e3
+        build_peak = peak_mib(build)
+        store = sc.read(path)
+        cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size, zoom=2.5)
+        pixel = math.radians(cam.fov) / 768  # ε in pixels of a 1024x768 image, as in bench_lod
+        ref = sc.Scene(source, model=f"bspline{degree}")
+        full = ref.render(cam, iso=iso)
+        full_ms = median_ms(lambda: ref.render(cam, iso=iso), repeats)
+        rows = []
+        for multiple in multiples:
+            scene = sc.Scene(store, lod=multiple * pixel)
+            start = time.perf_counter()
+            first = scene.render(cam, iso=iso)
+            first_ms = (time.perf_counter() - start) * 1e3
+            frames = []
+
+            def steady(scene=scene, frames=frames):
+                frames.append(scene.render(cam, iso=iso))
+
+            steady_ms = median_ms(steady, repeats)
+            frame = frames[-1]
+            mse = float(np.mean((frame.rgba[..., :3].astype(np.float64)
+                                 - full.rgba[..., :3].astype(np.float64)) ** 2))
+            hits = np.isfinite(full.depth)
+            st = first.stats
+            rows.append({
+                "epsilon_pixels": multiple, "epsilon": multiple * pixel,
+                "chunks_percent": 100.0 * st["chunk_share"],
+                "active_percent": 100.0 * st["active_chunks"] / store.layout.chunk_total(),
+                "pieces": st["pieces"],
+                "first_frame_ms": first_ms, "first_reconstruct_ms": st["reconstruct_ms"],
+                "select_ms": frame.stats["select_ms"],
+                "steady_frame_ms": steady_ms, "steady_trace_ms": frame.stats["trace_ms"],
+                "ratio_to_full_resolution": full_ms / steady_ms,
+                "mse_rgb": mse,
+                "hit_mismatch_percent": 100.0 * float(np.mean(hits != np.isfinite(frame.depth))),
+                "details_read": st["details_read"],
+            })
+        return {"store_build_ms": build_ms, "store_build_peak_mib": build_peak,
+                "full_resolution_ms": full_ms, "size": list(size), "render": rows}
+
+
 def markdown(results: dict) -> str:
     m = results["machine"]
     lines = [
@@ -155,6 +223,28 @@ def markdown(results: dict) -> str:
                 f"{r['reconstruct_cold_ms']:.1f} | {r['reconstruct_after_step_ms']:.1f} "
                 f"({r['after_step_computed']} / {r['after_step_reused']}) |")
         lines.append("")
+        st = v.get("store")
+        if st:
+            w, h = st["size"]
+            lines += [
+                f"Zarr store (`build_pyramid(kind=\"wavelet\")`): {st['store_build_ms']:.0f} ms, "
+                f"peak {st['store_build_peak_mib']:.0f} MiB. Rendering {w}x{h}, iso "
+                f"{v['iso']}: full-resolution in-memory `bspline{v['degree']}` "
+                f"{st['full_resolution_ms']:.0f} ms per frame.",
+                "",
+                "| ε (pixels) | chunks % | refined % | pieces | first frame ms (reconstruct) "
+                "| steady frame ms (trace) | full-res time / frame time | MSE (RGB) "
+                "| hit mismatch % |",
+                "|---|---|---|---|---|---|---|---|---|",
+            ]
+            for r in st["render"]:
+                lines.append(
+                    f"| {r['epsilon_pixels']} | {r['chunks_percent']:.1f} | "
+                    f"{r['active_percent']:.1f} | {r['pieces']} | {r['first_frame_ms']:.0f} "
+                    f"({r['first_reconstruct_ms']:.0f}) | {r['steady_frame_ms']:.0f} "
+                    f"({r['steady_trace_ms']:.0f}) | {r['ratio_to_full_resolution']:.2f} | "
+                    f"{r['mse_rgb']:.2e} | {r['hit_mismatch_percent']:.2f} |")
+            lines.append("")
     lines += [
         "Thesis (GTX 285, Dragon 128^3, tri-cubic): reconstruction 7.23 / 8.72 / 9.25 / 6.11 / "
         "6.92 / 3.58 ms at 100 / 73 / 40 / 12 / 6 / 1.6 % of 4681 chunks.",
@@ -167,14 +257,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, few repeats")
     parser.add_argument("--out", default=str(HERE / "results"), help="output folder")
+    parser.add_argument("--render-size", default=None,
+                        help="image size of the store rendering part (default 1024x768, "
+                             "256x192 with --quick)")
     args = parser.parse_args()
     size = (1024, 768)
+    render_size = sc.camera.parse_size(args.render_size or ("256x192" if args.quick
+                                                            else "1024x768"))
     repeats = 2 if args.quick else 5
     if args.quick:
         cases = [("chmutov", 64, 0.0, 3, np.float64), ("noise", 96, 0.5, 3, np.float32)]
+        render_cases = {("chmutov", 64, 3)}
+        multiples = (0, 50, 100, 200, 400, 800)
     else:
         cases = [("chmutov", 128, 0.0, d, np.float64) for d in (1, 2, 3)]
         cases.append(("noise", 512, 0.5, 3, np.float32))
+        render_cases = {("chmutov", 128, 1), ("chmutov", 128, 3)}
+        multiples = RENDER_MULTIPLES
     # Warm-up: compile every kernel once outside the timings.
     warm = sc.demo("chmutov", size=12)
     for dtype in {np.dtype(c[4]) for c in cases}:
@@ -199,6 +298,9 @@ def main() -> None:
             "decomposition": bench_decomposition(vol, degree, dtype, 1 if args.quick else 3),
             "lod": bench_lod(vol, pyramid, iso, size, repeats),
         }
+        if (label, n, degree) in render_cases:
+            entry["store"] = bench_store_render(vol, degree, dtype, iso, render_size, repeats,
+                                                multiples)
         results["volumes"].append(entry)
         print(f"{label} {n}^3 degree {degree}: done", flush=True)
     out = Path(args.out)

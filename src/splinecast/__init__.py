@@ -15,6 +15,7 @@ Coordinate convention: see :mod:`splinecast.volume`.
 from .camera import Camera
 from .errors import DataError, ParameterError, ReadError, SplinecastError
 from .io import demo, read, write
+from .io.store_kinds import register_store_kind as _register_store_kind
 from .models import MODELS
 from .models.smoothing import smooth
 from .preintegration import preintegrate
@@ -35,6 +36,8 @@ _LAZY = {
     "build_pyramid": ("splinecast.multires.pyramid", "build_pyramid"),
     "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
     "MultiscaleScene": ("splinecast.multires.scene", "MultiscaleScene"),
+    "WaveletVolume": ("splinecast.multires.wavelet_store", "WaveletVolume"),
+    "WaveletScene": ("splinecast.multires.wavelet_scene", "WaveletScene"),
     "multires": ("splinecast.multires", None),
     "view": ("splinecast.viewer", "view"),
 }
@@ -48,6 +51,24 @@ def _multiscale_scene(volume, *args, **kwargs):
 
 
 register_scene_type("splinecast.io.omezarr.MultiscaleVolume", _multiscale_scene)
+
+
+def _wavelet_scene(volume, *args, **kwargs):
+    """``Scene(WaveletVolume, ...)``: the spline-wavelet renderer (loaded on first use)."""
+    from .multires.wavelet_scene import WaveletScene
+
+    return WaveletScene(volume, *args, **kwargs)
+
+
+def _open_wavelet_store(path, root, attributes):
+    """``read("x.zarr")`` of a spline-wavelet store: a lazy ``WaveletVolume``."""
+    from .multires.wavelet_store import open_wavelet_store
+
+    return open_wavelet_store(path, root, attributes)
+
+
+register_scene_type("splinecast.multires.wavelet_store.WaveletVolume", _wavelet_scene)
+_register_store_kind("wavelet", _open_wavelet_store)
 
 
 def __getattr__(name: str):
@@ -76,6 +97,8 @@ __all__ = [
     "SurfaceEffects",
     "TransferFunction",
     "Volume",
+    "WaveletScene",
+    "WaveletVolume",
     "auto_iso",
     "auto_transfer_function",
     "auto_window",

@@ -4,6 +4,7 @@ of a multiscale (Zarr) volume."""
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import numpy as np
 
@@ -29,6 +30,8 @@ def run(args: argparse.Namespace) -> int:
     """Print the description of ``args.file``."""
     vol = sc.read(args.file, array=args.array, allow_external=args.allow_external_data or None)
     if not isinstance(vol, sc.Volume):
+        if isinstance(vol, sc.WaveletVolume):
+            return _wavelet(vol)
         return _multiscale(vol)
     data = vol.data
     sample = data
@@ -84,4 +87,18 @@ def _multiscale(mv) -> int:
         spacing = ", ".join(f"{s:g}" for s in lv.spacing)
         chunks = "x".join(str(n) for n in lv.chunks)
         print(f"  {lv.index:>5}  {shape:<20} {spacing:<24} {chunks:<12} {format_bytes(lv.nbytes)}")
+    return 0
+
+
+def _wavelet(wv: Any) -> int:
+    """Describe a spline-wavelet store (metadata only)."""
+    lay = wv.layout
+    lo, hi = wv.value_range
+    print(f"format:    {wv.metadata.get('format')}")
+    print(f"shape:     {' x '.join(str(n) for n in wv.shape)} (x, y, z)")
+    print(f"spacing:   {', '.join(f'{s:g}' for s in wv.spacing)}")
+    print(f"origin:    {', '.join(f'{s:g}' for s in wv.origin)}")
+    print(f"range:     {lo:g} .. {hi:g}")
+    print(f"wavelet:   degree {lay.degree} (model bspline{lay.degree}), {lay.levels} levels, "
+          f"chunks of {lay.chunk}^3 nodes ({lay.chunk_total()} in all), {wv.dtype} coefficients")
     return 0

@@ -27,6 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "coarsest fits in one brick)")
     cmd.add_argument("--unit", help="length unit of the spacing (default: from the header)")
     cmd.add_argument("--workers", type=int, help="threads (default: up to 4)")
+    cmd.add_argument("--wavelet", type=int, metavar="DEGREE",
+                     help="write a spline-wavelet pyramid for B-spline degree 1, 2 or 3 instead "
+                          "(rendered with model bspline<DEGREE>; --brick does not apply)")
     cmd.add_argument("--overwrite", action="store_true", help="replace an existing store")
     cmd.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
@@ -46,6 +49,17 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     # The per-level progress goes to the real stderr, past the capture of library output
     # (splinecast.cli.main); warnings and log records stay captured.
+    if args.wavelet is not None:
+        if args.wavelet not in (1, 2, 3):
+            raise sc.ParameterError(f"--wavelet must be a B-spline degree 1, 2 or 3, got "
+                                    f"{args.wavelet}")
+        with contextlib.redirect_stderr(getattr(args, "stderr", sys.stderr)):
+            wv = build_pyramid(args.source, out, levels=args.levels, overwrite=args.overwrite,
+                               progress=not args.quiet, kind="wavelet", degree=args.wavelet)
+        log(args, f"wrote a degree-{wv.degree} wavelet pyramid of {wv.layout.levels} levels in "
+                  f"{time.perf_counter() - start:.1f} s")
+        print(out)
+        return 0
     with contextlib.redirect_stderr(getattr(args, "stderr", sys.stderr)):
         mv = build_pyramid(args.source, out, brick=args.brick, levels=args.levels,
                            overwrite=args.overwrite, unit=args.unit, workers=args.workers,

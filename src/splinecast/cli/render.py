@@ -61,7 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--budget", help="multiscale (OME-Zarr) volumes: RAM for bricks, e.g. "
                         "512MiB or 2GiB (default 2GiB)")
     render.add_argument("--lod", type=finite, help="multiscale volumes: refine while a voxel "
-                        "covers more than this many pixels (default 1)")
+                        "covers more than this many pixels (default 1); wavelet stores: the "
+                        "angle ε in radians below which cells are not refined (0: full "
+                        "resolution; default one pixel's angle)")
     render.add_argument("--cut", help="multiscale volumes: which bricks to draw, 'lod' (screen-"
                         "space level of detail, default) or 'error' (transfer-function distortion "
                         "times importance under the budget, reference 002; dvr and mip)")
@@ -75,7 +77,8 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
     """The options every rendering subcommand shares: model, camera (but the angles), method
     and modes. ``--iso``, ``--azimuth`` and ``--elevation`` are the caller's (a movie sweeps
     them)."""
-    render.add_argument("--model", default="trilinear", help="reconstruction (default trilinear)")
+    render.add_argument("--model", help="reconstruction (default trilinear; bspline<d> for a "
+                        "degree-d wavelet store, the only model it renders)")
     render.add_argument("--root-finder", choices=("bernstein", "rfbs", "sturm", "newton"),
                         help="first-root solver of spline models (default: the model's)")
     render.add_argument("--iterations", type=int,
@@ -247,7 +250,9 @@ def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
 
 def model_options(args: argparse.Namespace) -> dict:
     """The model's keyword arguments from ``--root-finder``, ``--iterations``, ``--prefilter``,
-    refusing those the model does not take."""
+    refusing those the model does not take (no ``--model``: trilinear)."""
+    if args.model is None:
+        args.model = "trilinear"
     if args.model not in sc.MODELS:
         valid = ", ".join(sc.MODELS)
         raise sc.ParameterError(
@@ -272,9 +277,19 @@ def orbit_options(args: argparse.Namespace) -> dict:
             "ortho": args.ortho, "zoom": args.zoom}
 
 
-def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool) -> None:
-    """``--budget``/``--lod``/``--cut`` only for multiscale volumes; ``--smooth`` only for the
+def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool,
+                               wavelet: bool = False) -> None:
+    """``--budget``/``--lod``/``--cut`` only for multiscale volumes (``--budget`` and ``--cut``
+    not for wavelet stores, whose ``--lod`` is an angle >= 0); ``--smooth`` only for the
     others."""
+    if wavelet:
+        for flag, value in (("--smooth", args.smooth), ("--budget", args.budget),
+                            ("--cut", args.cut)):
+            if value:
+                raise sc.ParameterError(f"{flag} does not apply to the wavelet store {args.file}")
+        if args.lod is not None and not (math.isfinite(args.lod) and args.lod >= 0):
+            raise sc.ParameterError(f"--lod must be an angle >= 0 in radians, got {args.lod}")
+        return
     if multiscale:
         if args.smooth:
             raise sc.ParameterError(f"--smooth does not apply to the multiscale volume "
@@ -304,13 +319,18 @@ def run(args: argparse.Namespace) -> int:
     vol = sc.read(args.file, array=args.array, allow_external=args.allow_external_data or None)
     read_s = time.perf_counter() - start
     multiscale = not isinstance(vol, sc.Volume)
-    _refuse_multiscale_options(args, multiscale)
+    wavelet = multiscale and isinstance(vol, sc.WaveletVolume)
+    if args.model is None and wavelet:
+        args.model = f"bspline{vol.degree}"
+    _refuse_multiscale_options(args, multiscale, wavelet)
     if args.method == "sampled" or args.mode == "dvr":
         limits.check_step(args.step, "--step", vol.shape)
     with contextlib.ExitStack() as stack:
         options = model_options(args)
         scene = None
-        if multiscale:  # nothing but the coarsest level is read here; the loader stops at the end
+        if wavelet:  # nothing but the coarsest level is read here
+            scene = sc.Scene(vol, model=args.model, lod=args.lod, **options)
+        elif multiscale:  # nothing but the coarsest level is read here; the loader stops at the end
             scene = stack.enter_context(sc.Scene(
                 vol, model=args.model, budget=args.budget or "2GiB",
                 lod=1.0 if args.lod is None else args.lod, cut=args.cut or "lod", **options))
@@ -319,7 +339,10 @@ def run(args: argparse.Namespace) -> int:
         camera = sc.Camera.orbit(vol, azimuth=args.azimuth, elevation=args.elevation,
                                  fit=_fit(args, info, kwargs), **orbit_options(args))
         # Progress starts only once every input is known to be valid, so a mistake is one line.
-        if multiscale:
+        if wavelet:
+            log(args, f"opened {vol.name}: degree-{vol.degree} wavelet store, "
+                      f"{vol.layout.levels} levels, {vol.shape} in {read_s:.2f} s")
+        elif multiscale:
             log(args, f"opened {vol.name}: {len(vol.levels)} levels, {vol.shape} {vol.dtype} in "
                       f"{read_s:.2f} s (coarsest level read)")
         else:
@@ -336,7 +359,8 @@ def run(args: argparse.Namespace) -> int:
             scene = sc.Scene(vol, model=args.model, **options)
             log(args, f"prepared {args.model} model in {time.perf_counter() - start:.2f} s")
         start = time.perf_counter()
-        extra = {"complete": True} if multiscale else {}  # a still image: the whole cut, read
+        # A still image: the whole cut, read.
+        extra = {"complete": True} if multiscale and not wavelet else {}
         frame = scene.render(camera, inside=args.inside, **extra, **kwargs)
         st = frame.stats
         what = f"at iso {st['iso']}" if "iso" in st else st["mode"]
@@ -344,7 +368,10 @@ def run(args: argparse.Namespace) -> int:
                    f"{time.perf_counter() - start:.2f} s (trace {st['trace_ms']:.0f} ms, "
                    f"{st['hits']} hits, {st['mean_cells_visited']:.1f} cells/ray; "
                    "the first run includes compilation)")
-        if multiscale:
+        if wavelet:
+            log(args, f"chunks: {st['chunks']} ({100 * st['chunk_share']:.1f}% of all, "
+                      f"ε = {st['lod']:.3g} rad), reconstructed in {st['reconstruct_ms']:.0f} ms")
+        elif multiscale:
             levels = ", ".join(f"{n} of level {lv}" for lv, n in sorted(st["cut_levels"].items()))
             state = "complete" if st["complete"] else "incomplete"
             policy = st.get("cut_policy", "lod")

@@ -36,6 +36,7 @@ from ..errors import ParameterError, ReadError
 from ..volume import GridGeometry, Volume
 from ._common import check_dtype, fmt_shape, one_line, require
 from .ngff import parse_image, spatial_order
+from .store_kinds import store_opener
 
 __all__ = [
     "ATTRIBUTE",
@@ -52,7 +53,6 @@ ATTRIBUTE = "splinecast"
 #: Subgroup holding splinecast's per-brick tables: ``splinecast/<table>/<level>``.
 TABLES_GROUP = "splinecast"
 _MARKERS = ("zarr.json", ".zgroup", ".zarray", ".zattrs")
-
 
 def is_zarr(path: Path) -> bool:
     """``True`` for a folder that holds a Zarr group or array (v2 or v3)."""
@@ -383,7 +383,7 @@ def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
 
 def open_zarr(
     path: str | os.PathLike[str], *, channel: int | None = None, timepoint: int | None = None
-) -> MultiscaleVolume:
+) -> Any:
     """Open an OME-Zarr image or a plain Zarr array lazily (metadata only).
 
     Parameters
@@ -397,6 +397,8 @@ def open_zarr(
     Returns
     -------
     MultiscaleVolume
+        Or, for a splinecast store of another kind (a spline-wavelet pyramid), the object its
+        registered opener returns (:func:`.store_kinds.register_store_kind`).
 
     Raises
     ------
@@ -423,6 +425,14 @@ def open_zarr(
             warnings.warn(f"{label}: holds {len(series)} images; reading the first (0/)",
                           stacklevel=2)
         return open_zarr(path / "0", channel=channel, timepoint=timepoint)
+    ours = attrs.get(ATTRIBUTE, {}) if isinstance(attrs.get(ATTRIBUTE), dict) else {}
+    kind = ours.get("kind")
+    if kind is not None:
+        opener = store_opener(kind)
+        if opener is None:
+            raise ReadError(f"{label}: a splinecast store of kind {kind!r}, which this version "
+                            "cannot read")
+        return opener(path, node, ours)
     image = parse_image(attrs, label)
     if image is None:
         arrays = sorted(node.array_keys())
@@ -432,7 +442,6 @@ def open_zarr(
     if image.spatial != (n_lead, n_lead + 1, n_lead + 2) or n_lead != len(image.axis_names) - 3:
         raise ReadError(f"{label}: the spatial axes must come last ({image.axis_names})")
     order = spatial_order(image.axis_names[n_lead:])
-    ours = attrs.get(ATTRIBUTE, {}) if isinstance(attrs.get(ATTRIBUTE), dict) else {}
     complete = bool(ours.get("complete_chunks", False))
     levels = []
     for index, dataset in enumerate(image.datasets):

@@ -36,12 +36,14 @@ Tracing
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Hashable, Iterable, Sequence
+from collections.abc import Hashable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 
 from ..camera import Camera
@@ -50,7 +52,28 @@ from ..render.segment import Grid, counters, finish_state, make_grid, new_state,
 from .order import front_to_back
 from .probe import box_ranges, sample_grid
 
-__all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect"]
+__all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect", "SERIAL_PIXELS",
+           "SERIAL_CELLS"]
+
+#: Tiles of fewer pixels are traced on one thread, and grids of bricks of fewer cells built on
+#: one: waking the thread pool costs more than such work (tens of milliseconds per call on a busy
+#: machine), and a cut of small bricks (spline-wavelet chunks of 8^3 nodes) has thousands.
+SERIAL_PIXELS = 4096
+SERIAL_CELLS = 32**3
+
+
+@contextlib.contextmanager
+def _threads(serial: bool) -> Iterator[None]:
+    """Run the body's compiled parallel calls on one thread when ``serial``."""
+    if not serial:
+        yield
+        return
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +97,10 @@ class Piece:
         The box drawn, in level-0 index space.
     substituted : bool
         An ancestor's array is drawn for the box (the cut's own brick is not resident).
+    placed : bool
+        ``box_lo``/``box_hi`` are already the box to trace, on the model's cell boundaries and
+        inside its domain (spline-wavelet chunk regions): :meth:`CutRenderer.box` neither moves
+        nor extends them.
     """
 
     cut_key: tuple[int, int, int, int]
@@ -84,6 +111,7 @@ class Piece:
     box_lo: np.ndarray
     box_hi: np.ndarray
     substituted: bool = False
+    placed: bool = False
 
 
 @dataclass(frozen=True)
@@ -156,6 +184,11 @@ class CutRenderer:
         n0 = np.asarray(tree.n0, dtype=np.float64)
         self.domain0 = (np.full(3, -self.margin), n0 - 1.0 + self.margin)
         self.levels = {int(level): self._geometry(int(level)) for level in tree.levels}
+        g0 = self.levels[int(tree.levels[0])]
+        #: World placement of the level-0 index space the boxes are given in (the finest
+        #: level's own index space unless its map has an offset, as spline-wavelet levels do).
+        self.origin0 = g0.origin + g0.offset * g0.spacing
+        self.spacing0 = g0.scale * g0.spacing
         self._grids: dict[Hashable, Grid] = {}
         self._prepared: dict[Hashable, tuple[np.ndarray, np.ndarray]] = {}
         self.stats: dict[str, Any] = {}
@@ -239,6 +272,8 @@ class CutRenderer:
         lo = np.asarray(piece.box_lo, dtype=np.float64)
         hi = np.asarray(piece.box_hi, dtype=np.float64)
         d_lo, d_hi = self.domain0
+        if piece.placed:
+            return lo, hi, hi >= d_hi
         shift = float(self.model.shift)
         first, last = lo <= 0.0, hi >= d_hi - self.margin
         lo = np.where(first, d_lo, lo - shift)
@@ -269,30 +304,32 @@ class CutRenderer:
         closure = self.seams.closure(setup, camera) if self.seams is not None else None
         keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
         order = front_to_back(keys, camera, self.tree)
-        g0 = self.levels[int(self.tree.levels[0])]
+        origin0, spacing0 = self.origin0, self.spacing0
         traced = rebuilt = 0
         for n in order:
             piece = pieces[int(n)]
             lo, hi, closed = self.box(piece)
-            world_lo = g0.origin + lo * g0.spacing
-            world_hi = g0.origin + hi * g0.spacing
+            world_lo = origin0 + lo * spacing0
+            world_hi = origin0 + hi * spacing0
             rect = screen_rect(camera, np.minimum(world_lo, world_hi),
                                np.maximum(world_lo, world_hi))
             if rect is None:
                 continue
             tile = camera if rect == (0, 0, camera.width, camera.height) else camera.tile(*rect)
             t_range = np.empty((tile.height, tile.width, 2))
-            if box_ranges(tile.pixel_basis(), g0.origin, g0.spacing, lo, hi, closed, planes,
+            if box_ranges(tile.pixel_basis(), origin0, spacing0, lo, hi, closed, planes,
                           t_range) == 0:
                 continue
-            grid, changed = self._piece_grid(piece, changes)
+            with _threads(piece.data.size < SERIAL_CELLS):
+                grid, changed = self._piece_grid(piece, changes)
             rebuilt += changed
             traced += 1
             local = _gather(state, rect, tile is camera)
             local_stats = counters(tile.height, tile.width)
             if closure is not None:
                 closure.enter(piece, grid, tile, t_range, local, rect)
-            trace_segment(grid, setup, tile, local, local_stats, planes, t_range)
+            with _threads(tile.width * tile.height < SERIAL_PIXELS):
+                trace_segment(grid, setup, tile, local, local_stats, planes, t_range)
             if closure is not None:
                 closure.leave(piece, grid, tile, t_range, local, rect)
             if tile is not camera:

@@ -255,8 +255,17 @@ def build_pyramid(
     shard: int | None = None,
     workers: int | None = None,
     progress: bool = True,
-) -> MultiscaleVolume:
+    kind: str = "plain",
+    degree: int = 3,
+    chunk: int = 8,
+    dtype: Any = None,
+) -> Any:
     """Write ``source`` as an OME-Zarr 0.5 brick pyramid at ``path``.
+
+    ``kind="wavelet"`` writes a spline-wavelet pyramid instead
+    (:func:`.wavelet_store.build_wavelet_pyramid`, with ``degree``, ``levels``, ``chunk``,
+    ``dtype``, ``overwrite``, ``name`` and ``progress``) and returns its
+    :class:`~.wavelet_store.WaveletVolume`.
 
     Parameters
     ----------
@@ -284,10 +293,15 @@ def build_pyramid(
         Threads (default: up to 4, at most the cores). Peak memory grows with it.
     progress : bool
         Print per-level progress on stderr.
+    kind : str
+        ``"plain"`` (the binomial brick pyramid above) or ``"wavelet"``.
+    degree, chunk, dtype
+        Spline-wavelet pyramids only: B-spline degree 1..3, chunk edge in nodes, coefficient
+        type (float32 or float64).
 
     Returns
     -------
-    MultiscaleVolume
+    MultiscaleVolume or WaveletVolume
         The written store, opened lazily.
 
     Raises
@@ -297,6 +311,13 @@ def build_pyramid(
         folder, or an unsupported source. Nothing is left at ``path`` on any failure: the store is
         written under a temporary name beside it and renamed when complete.
     """
+    if kind == "wavelet":
+        from .wavelet_store import build_wavelet_pyramid
+
+        return build_wavelet_pyramid(source, path, degree, levels, chunk, dtype, overwrite,
+                                     name=name, progress=progress)
+    if kind != "plain":
+        raise ParameterError(f"kind must be 'plain' or 'wavelet', got {kind!r}")
     zarr = require("zarr", path, action="writing", error=ParameterError)
     from zarr.codecs import ZstdCodec
 

@@ -26,6 +26,7 @@ Reuse across frames
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numba
@@ -36,7 +37,7 @@ from .._jit import jit
 from ..errors import ParameterError
 from .wavelet_filters import spline_wavelet
 from .wavelet_layout import DETAIL_BANDS, WaveletLayout, reflect_index, reflect_indices
-from .wavelet_lod import Selection
+from .wavelet_lod import Selection, _dilate
 from .wavelet_transform import WaveletPyramid
 
 __all__ = ["Brick", "ChunkReconstructor", "ReconstructionStats"]
@@ -245,6 +246,8 @@ class ReconstructionStats:
     milliseconds: float = 0.0
     #: Per level 0..J-1: chunks whose details entered a computed brick this update.
     detail_owners: list[np.ndarray] = field(default_factory=list)
+    #: Store chunks of details the ``loader`` read this update (0 for in-memory pyramids).
+    details_read: int = 0
 
 
 class ChunkReconstructor:
@@ -254,10 +257,18 @@ class ChunkReconstructor:
     ----------
     pyramid : WaveletPyramid
         Its detail arrays must be numpy arrays or memory maps (read by the compiled kernel).
+    loader : callable, optional
+        ``loader(level, owners) -> int``: called before the bricks of level ``level - 1`` are
+        computed, with the bool table ``owners`` (shape ``layout.chunks(level - 1)``) of the
+        active chunks whose level-``level`` details those bricks read; it makes them resident
+        in ``pyramid.details`` and returns how many store chunks it read
+        (:meth:`.wavelet_store.WaveletVolume.load_details`). ``None``: all are resident.
     """
 
-    def __init__(self, pyramid: WaveletPyramid) -> None:
+    def __init__(self, pyramid: WaveletPyramid,
+                 loader: Callable[[int, np.ndarray], int] | None = None) -> None:
         self.pyramid = pyramid
+        self.loader = loader
         self.layout: WaveletLayout = pyramid.layout
         lay = self.layout
         w = spline_wavelet(lay.degree)
@@ -336,6 +347,8 @@ class ChunkReconstructor:
             todo = need & ~current
             used = np.zeros(lay.chunks(j), dtype=bool)
             if todo.any():
+                if self.loader is not None:
+                    stats.details_read += int(self.loader(j + 1, active & _dilate(todo)))
                 children = np.argwhere(todo).astype(np.int64)
                 out_slot = self._slots_for(j, todo)
                 # argwhere and boolean indexing both run in C order, so they line up.
@@ -369,6 +382,10 @@ class ChunkReconstructor:
             stats.detail_owners.insert(0, used)
         stats.milliseconds = (time.perf_counter() - start) * 1e3
         return stats
+
+    def signature(self, level: int, index: tuple[int, int, int]) -> int:
+        """Hash of the current content of a chunk's brick (equal signatures, equal bricks)."""
+        return int(self._sig[level][tuple(index)])
 
     def brick(self, level: int, index: tuple[int, int, int], octants: int = 0xFF) -> Brick:
         """The current brick of chunk ``index`` on ``level`` (after :meth:`update`)."""

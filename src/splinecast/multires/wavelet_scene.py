@@ -1,0 +1,306 @@
+"""A scene of a spline-wavelet store: view-dependent chunks rendered exactly (reference 000, §4).
+
+``sc.Scene(sc.read("x.zarr"), lod=ε)`` of a store written with ``kind="wavelet"`` returns a
+:class:`WaveletScene` (registered in ``splinecast/__init__.py``). Per frame it
+
+1. selects the chunks for the camera (:func:`.wavelet_lod.select`: refine while a level's cell
+   looks larger than ``ε`` radians from the eye and the isovalue lies in the chunk's range);
+2. reconstructs the selected chunks' B-spline coefficient bricks (:class:`.wavelet_reconstruct.
+   ChunkReconstructor`, reusing unchanged bricks across frames; the details of a chunk are read
+   from the store the first time it is refined);
+3. draws every region the selection shows from its brick with the ``bspline<degree>`` model
+   through the cut renderer (:class:`.draw.CutRenderer`, the segment entry point, front to back
+   per ray), in any mode of :meth:`splinecast.Scene.render`.
+
+Coefficients, not samples
+    A brick *is* a padded B-spline coefficient array (:mod:`.wavelet_layout`), exactly what the
+    model's prepared array is for its default smoothing reconstruction (voxels as coefficients),
+    so it goes to the kernels as is: nothing is prefiltered, and ``prefilter=True`` is refused.
+    Hence the model must be the store's ``bspline<degree>``. With ``ε = 0`` every chunk is
+    refined and the image is the in-memory ``bspline<degree>`` render of the source voxels.
+
+Seams
+    None need fixing: where levels meet, both bricks evaluate the selection's one global spline
+    (:mod:`.wavelet_lod`), continuous (C^(d-1)) by construction.
+
+``frame.stats`` adds ``lod`` (ε), ``chunks`` (reconstructed), ``chunk_share`` (over all chunks
+of all levels), ``active_chunks`` (refined), ``select_ms``, ``reconstruct_ms``,
+``bricks_computed``, ``bricks_reused``, ``detail_owners`` (chunks whose details entered a brick
+this frame), ``details_read`` (store chunks read this frame) and the renderer's ``pieces``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import ParameterError
+from ..models import MODELS
+from ..render.defaults import auto_iso
+from ..render.dvr import DVRSettings
+from ..render.effects import SurfaceEffects
+from ..render.frame import Frame
+from ..render.iso import Iso
+from ..render.multi_iso import MultiIso
+from ..render.shading import Shading
+from ..scene import check_iso, finish_frame, prepare_render
+from ..transfer import TransferFunction
+from ..volume import Volume
+from .draw import CutRenderer, Piece
+from .wavelet_layout import WaveletLayout
+from .wavelet_lod import Selection, select
+from .wavelet_reconstruct import ChunkReconstructor
+from .wavelet_store import WaveletVolume
+
+__all__ = ["WaveletScene", "WaveletTree", "wavelet_pieces"]
+
+
+@dataclass(frozen=True)
+class _LevelPlacement:
+    shape: tuple[int, int, int]
+    origin: tuple[float, float, float]
+    spacing: tuple[float, float, float]
+
+
+class _Placement:
+    """Level-0 geometry for the front-to-back order (origin at the chunk grid's corner, the
+    layout's ``region_start``) and each level's placement for the renderer."""
+
+    def __init__(self, volume: WaveletVolume) -> None:
+        lay = volume.layout
+        self.spacing = np.asarray(volume.spacing, dtype=np.float64)
+        base = np.asarray(volume.origin, dtype=np.float64)
+        self.origin = base + lay.region_start * self.spacing
+        self._levels = [
+            _LevelPlacement(lay.length(j), tuple(base + lay.node_origin(j) * self.spacing),
+                            tuple(2.0**j * self.spacing))
+            for j in range(lay.levels + 1)
+        ]
+
+    def level(self, index: int) -> _LevelPlacement:
+        return self._levels[index]
+
+
+class WaveletTree:
+    """The chunk octree of a wavelet layout, in the shape :class:`.draw.CutRenderer` and
+    :func:`.order.front_to_back` read (``levels``, ``brick``, ``factors``, ``counts``, ``n0``,
+    ``volume``, ``level_map``)."""
+
+    def __init__(self, volume: WaveletVolume) -> None:
+        lay = volume.layout
+        self.layout = lay
+        self.levels = list(range(lay.levels + 1))
+        self.brick = lay.chunk
+        self.factors = np.array([[2**j] * 3 for j in self.levels], dtype=np.int64)
+        self.counts = np.array([lay.chunks(j) for j in self.levels], dtype=np.int64)
+        self.n0 = np.asarray(lay.shape, dtype=np.int64)
+        self.volume = _Placement(volume)
+
+    def level_map(self, level: int) -> tuple[np.ndarray, np.ndarray]:
+        """``level index = level-0 index * scale + offset`` (node ``m`` at voxel
+        ``o_j + 2^j m``)."""
+        scale = 2.0**-level
+        return np.full(3, scale), np.full(3, -self.layout.node_origin(level) * scale)
+
+
+def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """A chunk's region clipped to the voxel box (level-0 voxel index space)."""
+    lo, hi = zip(*[lay.region(level, a, int(idx[a])) for a in range(3)], strict=True)
+    return np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+
+
+def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor) -> list[Piece]:
+    """The pieces of a selection: each drawn brick over its region, or over the octants of it
+    whose finer chunk is not reconstructed (one piece per octant, named by that child chunk so
+    the front-to-back order sees leaves of one octree). Call ``reconstructor.update`` first."""
+    lay = selection.layout
+    out = []
+    for level, idx, mask in selection.drawn():
+        brick = reconstructor.brick(level, idx, mask)
+        key = ("wavelet", level, idx, reconstructor.signature(level, idx))
+        first = tuple(int(v) for v in lay.brick_first_node(np.asarray(idx)))
+        boxes = []
+        if level == 0:
+            boxes.append(((0, *idx), _region(lay, 0, idx)))
+        else:
+            kids = [tuple(2 * idx[a] + ((o >> (2 - a)) & 1) for a in range(3)) for o in range(8)]
+            counts = lay.chunks(level - 1)
+            exist = sum(1 << o for o, kid in enumerate(kids)
+                        if all(kid[a] < counts[a] for a in range(3)))
+            if mask == exist:
+                boxes.append(((level, *idx), _region(lay, level, idx)))
+            else:
+                boxes += [((level - 1, *kids[o]), _region(lay, level - 1, kids[o]))
+                          for o in range(8) if mask >> o & 1]
+        for cut_key, (lo, hi) in boxes:
+            if np.all(hi > lo):
+                out.append(Piece(cut_key, key, level, brick.coeffs, first, lo, hi,  # type: ignore[arg-type]
+                                 placed=True))
+    return out
+
+
+class WaveletScene:
+    """A spline-wavelet store, the matching B-spline model, a chunk reconstructor and the
+    renderer of its selections.
+
+    Parameters
+    ----------
+    volume : WaveletVolume
+        From :func:`splinecast.read` of a store written with ``kind="wavelet"``.
+    model : str, optional
+        Must be ``"bspline<degree>"`` of the store (the default).
+    lod : float, optional
+        ε in radians: refine while a level's cell looks larger than ε from the eye (0: render
+        the full resolution). Default: the angle of one pixel of each frame's camera.
+    **options
+        Model options (``root_finder``, ``iterations``); ``prefilter=True`` is refused (the
+        bricks are coefficients already).
+
+    Raises
+    ------
+    ParameterError
+        Another model, a bad ``lod`` or bad options.
+    """
+
+    def __init__(self, volume: WaveletVolume, model: str | None = None, lod: float | None = None,
+                 **options: Any) -> None:
+        if not isinstance(volume, WaveletVolume):
+            raise ParameterError(f"volume must be a WaveletVolume, got {type(volume).__name__}")
+        expected = f"bspline{volume.degree}"
+        if model is None:
+            model = expected
+        if model != expected:
+            raise ParameterError(
+                f"model must be {expected} for the degree-{volume.degree} wavelet store "
+                f"{volume.name} (its bricks are that spline's coefficients), got {model!r}")
+        if options.get("prefilter"):
+            raise ParameterError(
+                f"prefilter=True does not apply to the wavelet store {volume.name}: its bricks "
+                "are B-spline coefficients already")
+        options.pop("prefilter", None)
+        self._check_lod(lod)
+        start = time.perf_counter()
+        self.volume = volume
+        lay = volume.layout
+        top = lay.levels
+        place = WaveletTree(volume)
+        coarse = place.volume.level(top)
+        #: The coarsest level's coefficients as a volume: the automatic isovalue, window and
+        #: transfer function come from it; isovalues are checked against the voxels' range.
+        self.preview = Volume(np.ascontiguousarray(volume.pyramid.coarse[top]),
+                              spacing=coarse.spacing, origin=coarse.origin,
+                              metadata=dict(volume.metadata))
+        self.preview._value_range = volume.value_range
+        self.model = MODELS[model](self.preview, **options)
+        self.lod = lod
+        self.reconstructor = ChunkReconstructor(volume.pyramid, loader=volume.load_details)
+        self.renderer = CutRenderer(self.model, place, None)
+        self.selection: Selection | None = None
+        self.prepare_ms = (time.perf_counter() - start) * 1e3
+        self._table_cache: dict = {}
+
+    @staticmethod
+    def _check_lod(lod: Any) -> None:
+        if lod is None:
+            return
+        try:
+            value = float(lod)
+        except (TypeError, ValueError):
+            raise ParameterError(f"lod must be a number of radians >= 0, got {lod!r}") from None
+        if not (math.isfinite(value) and value >= 0):
+            raise ParameterError(f"lod must be a number of radians >= 0, got {lod!r}")
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space corners of the volume."""
+        return self.volume.bounds
+
+    def epsilon(self, camera: Camera, lod: float | None = None) -> float:
+        """The ε of a frame: ``lod``, else the scene's, else the angle of one of ``camera``'s
+        pixels (its vertical field of view over its height)."""
+        for value in (lod, self.lod):
+            if value is not None:
+                self._check_lod(value)
+                return float(value)
+        return math.radians(camera.fov) / max(camera.height, 1)
+
+    def _check_iso(self, iso: Any) -> float:
+        return check_iso(self.volume, auto_iso(self.preview) if iso is None else iso)
+
+    def render(
+        self,
+        camera: Camera,
+        mode: str = "iso",
+        iso: float | None = None,
+        method: str = "exact",
+        step: float = 0.25,
+        shading: Shading | None = None,
+        inside: str | None = None,
+        *,
+        clip: Any = None,
+        crop: Any = None,
+        colors: Any = None,
+        opacity: Any = None,
+        effects: SurfaceEffects | None = None,
+        window: Any = None,
+        colormap: Any = "gray",
+        tf: TransferFunction | None = None,
+        dvr: DVRSettings | None = None,
+        lod: float | None = None,
+    ) -> Frame:
+        """Render one image (see :meth:`splinecast.Scene.render` for the mode options).
+
+        Parameters
+        ----------
+        lod : float, optional
+            ε of this frame (default: the scene's, else one pixel's angle).
+
+        Returns
+        -------
+        Frame
+        """
+        request = prepare_render(
+            self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
+            crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
+            colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
+            check_iso=self._check_iso, model=self.model.name)
+        eps = self.epsilon(camera, lod)
+        setup = request.setup
+        isos: Any = None
+        if isinstance(setup, Iso):
+            isos = setup.params.iso
+        elif isinstance(setup, MultiIso):
+            isos = list(setup.isos)
+        start = time.perf_counter()
+        vol = self.volume
+        selection = select(vol.layout, vol.ranges, camera.position, eps, isos, vol.spacing,
+                           vol.origin)
+        select_ms = (time.perf_counter() - start) * 1e3
+        rstats = self.reconstructor.update(selection)
+        pieces = wavelet_pieces(selection, self.reconstructor)
+        self.selection = selection
+        start = time.perf_counter()
+        out, counters = self.renderer.render(pieces, setup, camera, request.planes)
+        self.renderer.forget(p.key for p in pieces)
+        stats = request.stats
+        stats.update(self.renderer.stats)
+        stats.update({
+            "lod": eps, "chunks": selection.chunk_count, "chunk_share": selection.share,
+            "active_chunks": int(sum(a.sum() for a in selection.active)),
+            "select_ms": select_ms, "reconstruct_ms": rstats.milliseconds,
+            "bricks_computed": int(sum(rstats.computed)),
+            "bricks_reused": int(sum(rstats.reused)),
+            "detail_owners": int(sum(u.sum() for u in rstats.detail_owners)),
+            "details_read": rstats.details_read,
+        })
+        return finish_frame(request, out, counters, camera, start)
+
+    def __repr__(self) -> str:
+        return (f"WaveletScene({self.volume.name!r}, model={self.model.name!r}, "
+                f"lod={self.lod}, levels={self.volume.layout.levels})")

@@ -1,0 +1,418 @@
+"""Spline-wavelet pyramids in a Zarr store: written streamed, read lazily (reference 000, §4).
+
+``sc.build_pyramid(src, "x.zarr", kind="wavelet", degree=3)`` (``splinecast pyramid SRC -o
+x.zarr --wavelet 3``) runs :func:`.wavelet_transform.decompose` block by block with a
+:class:`ZarrSink`, so the coarse levels and detail subbands go straight to the store and peak
+memory is a few blocks, whatever the volume's size. ``sc.read("x.zarr")`` then returns a
+:class:`WaveletVolume`, whose details are read from the store only when the reconstructor needs
+them (:meth:`WaveletVolume.load_details`).
+
+Layout of the store (a Zarr v3 group)
+    ``wavelet/coarse/<j>``, j = 1..J
+        Level-``j`` B-spline coefficients over the level's whole window
+        (:attr:`.WaveletLayout.length`), indexed ``[i, j, k]`` along x, y, z (splinecast's
+        order; these are spline coefficients on a padded window, not image samples, so they
+        are not declared as NGFF ``multiscales`` datasets and other viewers ignore them).
+    ``wavelet/detail/<j>/<band>``
+        The seven detail subbands (``LLH`` .. ``HHH``, letters per axis x, y, z) that with
+        ``coarse/<j>`` reconstruct level ``j - 1``; shapes :meth:`.WaveletLayout.band_shape`.
+    ``wavelet/hull/<j>``, j = 0..J
+        Per chunk of level ``j`` (shape ``layout.chunks(j) + (2,)``, float64): ``[min, max]``
+        of the level's coefficients acting on the chunk's region, a conservative bound of the
+        pure level-``j`` spline there (:mod:`.wavelet_ranges`). The view-dependent selection's
+        ranges are derived from them when the store is opened.
+
+    All arrays are zstd-compressed with a checksum, in chunks of :data:`STORE_CHUNK` nodes per
+    axis, every chunk written. The root attribute ``"splinecast"`` says ``kind: "wavelet"``,
+    the degree, levels, chunk edge ``k``, the volume's shape, spacing and origin, the
+    coefficient dtype, the value range of the voxels, the wavelet and the boundary rules
+    (:mod:`.wavelet_layout`: the voxels mirrored about the first and last voxel as the
+    ``bspline`` models do, then whole-sample symmetric coarse / half-sample symmetric detail
+    sequences for odd degree, half-sample symmetric / antisymmetric for even degree).
+
+Lazy details
+    The details of level ``j`` are held in numpy arrays of their full shape created with
+    ``numpy.zeros`` (untouched pages cost no memory on Linux and macOS) and filled one store
+    chunk at a time, the first time a chunk of owners whose details are active needs them. A
+    frame therefore reads only the details of the chunks it refines; ``details_read`` counts
+    the store chunks read so far (per subband, all seven together).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._atomic import atomic_directory
+from ..errors import ParameterError, ReadError
+from ..io._common import fmt_shape, one_line, require
+from ..io.omezarr import ATTRIBUTE
+from ..volume import SUPPORTED_DTYPES, GridGeometry
+from .wavelet_filters import spline_wavelet
+from .wavelet_layout import DETAIL_BANDS, WaveletLayout
+from .wavelet_transform import WaveletPyramid, decompose
+
+__all__ = ["KIND", "STORE_CHUNK", "ZarrSink", "WaveletVolume", "build_wavelet_pyramid",
+           "open_wavelet_store"]
+
+#: The ``kind`` of a spline-wavelet store in the root attribute ``"splinecast"``.
+KIND = "wavelet"
+#: Group holding the coefficient arrays.
+GROUP = "wavelet"
+#: Nodes per axis of one store chunk (a multiple of the default decomposition block's half).
+STORE_CHUNK = 32
+#: Coarse nodes per axis of one decomposition block (a multiple of STORE_CHUNK: aligned writes).
+BLOCK = 64
+
+_BOUNDARY = {
+    "voxels": "mirrored about the first and last voxel (a[-m] = a[m]), as the bspline models",
+    "odd degree": "coarse sequences whole-sample symmetric, details half-sample symmetric",
+    "even degree": "coarse sequences half-sample symmetric, details half-sample antisymmetric",
+}
+
+
+class ZarrSink:
+    """The :class:`~.wavelet_transform.Sink` of a Zarr group: one array per name under
+    ``wavelet/`` (chunks of :data:`STORE_CHUNK` nodes, zstd with a checksum)."""
+
+    def __init__(self, group: Any) -> None:
+        self.group = group
+
+    def create(self, name: str, shape: tuple[int, ...], dtype: np.dtype) -> Any:
+        from zarr.codecs import ZstdCodec
+
+        chunks = tuple(max(1, min(STORE_CHUNK, int(n))) for n in shape)
+        return self.group.create_array(
+            f"{GROUP}/{name}", shape=tuple(int(n) for n in shape), dtype=np.dtype(dtype),
+            chunks=chunks, compressors=ZstdCodec(level=3, checksum=True), fill_value=0,
+            config={"write_empty_chunks": True})
+
+
+class _SourceArray:
+    """A :mod:`.pyramid` source as a sliceable array (``array[a:b, c:d, e:f]``)."""
+
+    def __init__(self, source: Any) -> None:
+        self.source = source
+        self.shape = tuple(int(n) for n in source.shape)
+        self.dtype = source.dtype
+
+    def __getitem__(self, box: tuple[slice, slice, slice]) -> np.ndarray:
+        lo = np.array([s.start for s in box], dtype=np.int64)
+        hi = np.array([s.stop for s in box], dtype=np.int64)
+        return self.source.read(lo, hi)
+
+
+def _coefficient_dtype(voxels: np.dtype, dtype: Any) -> np.dtype:
+    if dtype is None:
+        return np.dtype(np.float64 if voxels == np.float64 else np.float32)
+    out = np.dtype(dtype)
+    if out not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise ParameterError(f"dtype must be float32 or float64, got {dtype!r}")
+    return out
+
+
+def build_wavelet_pyramid(
+    source: Any,
+    path: str | os.PathLike[str],
+    degree: int = 3,
+    levels: int | None = None,
+    chunk: int = 8,
+    dtype: Any = None,
+    overwrite: bool = False,
+    *,
+    name: str | None = None,
+    block: int = BLOCK,
+    progress: bool = False,
+) -> WaveletVolume:
+    """Write the spline-wavelet decomposition of ``source`` to a Zarr store at ``path``.
+
+    Parameters
+    ----------
+    source : path, Volume, MultiscaleVolume, zarr.Array or numpy array
+        As for :func:`splinecast.build_pyramid`; its voxels are the level-0 B-spline
+        coefficients (the ``bspline`` models' default, no prefilter).
+    path : path
+        The store to create (a folder, conventionally ``name.zarr``).
+    degree : int
+        B-spline degree 1, 2 or 3 (rendered with model ``bspline<degree>``).
+    levels : int, optional
+        Decomposition steps J (default: the fewest whose coarsest chunk spans the volume).
+    chunk : int
+        Chunk edge k in nodes (even, at least 4; the thesis' 8).
+    dtype : float32 or float64, optional
+        Coefficient storage type (default: float64 for float64 voxels, else float32).
+    overwrite : bool
+        Replace an existing store.
+    name : str, optional
+        The image's name in the metadata (default: the store's file name).
+    block : int
+        Coarse nodes per axis of one decomposition block: peak memory is about
+        ``60 (2 block + 8)^3`` bytes.
+    progress : bool
+        Print one line per level on stderr.
+
+    Returns
+    -------
+    WaveletVolume
+        The written store, opened lazily.
+
+    Raises
+    ------
+    ParameterError
+        Bad ``degree``, ``levels``, ``chunk``, ``dtype`` or source, or an existing store without
+        ``overwrite``. Nothing is left at ``path`` on failure.
+    """
+    zarr = require("zarr", path, action="writing", error=ParameterError)
+    from .pyramid import _open_source
+
+    path = Path(os.fspath(path))
+    if isinstance(degree, bool) or degree not in (1, 2, 3):
+        raise ParameterError(f"degree must be 1, 2 or 3, got {degree!r}")
+    if levels is not None and (isinstance(levels, bool) or int(levels) != levels or levels < 1):
+        raise ParameterError(f"levels must be a positive integer, got {levels!r}")
+    if path.exists() and not overwrite:
+        raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
+    src = _open_source(source)
+    if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
+        raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
+                             f"shape {src.shape}")
+    if min(src.shape) < 2:
+        raise ParameterError(f"{src.label}: a wavelet pyramid needs at least 2 voxels per axis, "
+                             f"got {fmt_shape(src.shape)}")
+    if src.dask is not None:
+        src.read = lambda lo, hi, d=src.dask: np.asarray(
+            d[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]].compute())
+    coeff_dtype = _coefficient_dtype(src.dtype, dtype)
+    start = time.perf_counter()
+    with atomic_directory(path, overwrite=overwrite) as temp:
+        root = zarr.open_group(os.fspath(temp), mode="w")
+        pyramid = decompose(_SourceArray(src), degree, levels, chunk, coeff_dtype,
+                            ZarrSink(root), block=block)
+        lay = pyramid.layout
+        for j in range(lay.levels + 1):
+            table = np.stack([pyramid.hull_lo[j], pyramid.hull_hi[j]], axis=-1)
+            arr = root.create_array(f"{GROUP}/hull/{j}", shape=table.shape, dtype=np.float64,
+                                    chunks=table.shape, fill_value=0)
+            arr[...] = table
+        value_range = [float(pyramid.hull_lo[0].min()), float(pyramid.hull_hi[0].max())]
+        keep = {k: src.metadata[k] for k in ("inside", "default_iso", "modality", "units")
+                if k in src.metadata and isinstance(src.metadata[k], (str, int, float))}
+        wavelet = spline_wavelet(lay.degree)
+        root.attrs[ATTRIBUTE] = {
+            "version": 1, "kind": KIND, "name": name or path.name,
+            "degree": lay.degree, "levels": lay.levels, "chunk": lay.chunk,
+            "shape": list(lay.shape), "window": list(lay.window),
+            "spacing": [float(s) for s in src.spacing], "origin": [float(o) for o in src.origin],
+            "dtype": coeff_dtype.name, "value_range": value_range,
+            "wavelet": getattr(wavelet, "name", f"CDF spline wavelet of degree {lay.degree}"),
+            "boundary": _BOUNDARY, "model": f"bspline{lay.degree}",
+            "source": str(src.metadata.get("source", src.label)), "source_metadata": keep,
+            "decompose_seconds": time.perf_counter() - start,
+        }
+    if progress:
+        import sys
+
+        print(f"{path.name}: wavelet degree {degree}, {lay.levels} levels in "
+              f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
+    return open_wavelet_store(path)
+
+
+@dataclass(eq=False)
+class WaveletVolume(GridGeometry):
+    """A spline-wavelet pyramid in a Zarr store, opened lazily (see the module docstring).
+
+    Geometry (``shape``, ``spacing``, ``origin``, ``bounds``) is the source volume's, so
+    cameras frame it like a :class:`~splinecast.Volume`; ``Scene(wv, lod=ε)`` renders it with
+    model ``bspline<degree>`` (:class:`.wavelet_scene.WaveletScene`).
+
+    Attributes
+    ----------
+    path : Path
+    layout : WaveletLayout
+    dtype : numpy dtype
+        Of the stored coefficients.
+    metadata : dict
+        ``name``, ``source``, ``format`` and what the build kept of the source's metadata.
+    attributes : dict
+        The root attribute ``"splinecast"`` (kind, degree, boundary rules, ...).
+    hull_lo, hull_hi : list of arrays
+        Per level 0..J, per chunk: the stored conservative value bounds.
+    details_read : int
+        Store chunks of details read so far (all seven subbands of one chunk count once).
+    """
+
+    path: Path
+    layout: WaveletLayout
+    dtype: np.dtype
+    spacing: tuple[float, float, float]
+    origin: tuple[float, float, float]
+    metadata: dict[str, Any]
+    attributes: dict[str, Any]
+    root: Any
+    hull_lo: list[np.ndarray]
+    hull_hi: list[np.ndarray]
+    details_read: int = 0
+    _loaded: dict[int, np.ndarray] = field(default_factory=dict)
+    _details: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:  # type: ignore[override]
+        return self.layout.shape
+
+    @property
+    def degree(self) -> int:
+        """B-spline degree (the matching model is ``bspline<degree>``)."""
+        return self.layout.degree
+
+    @property
+    def name(self) -> str:
+        return str(self.metadata.get("name", self.path.name))
+
+    @property
+    def value_range(self) -> tuple[float, float]:
+        """``(min, max)`` of the source's voxels (stored by the build)."""
+        lo, hi = self.attributes["value_range"]
+        return float(lo), float(hi)
+
+    @cached_property
+    def ranges(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Selection ranges per chunk of levels 0..J-1 (:func:`.selection_ranges`)."""
+        from .wavelet_ranges import selection_ranges
+
+        return selection_ranges(self.layout, self.hull_lo, self.hull_hi)
+
+    def _array(self, name: str) -> Any:
+        try:
+            return self.root[f"{GROUP}/{name}"]
+        except KeyError:
+            raise ReadError(f"{self.path}: array {GROUP}/{name} is missing") from None
+
+    def _read(self, name: str, box: tuple[slice, ...] = (Ellipsis,)) -> np.ndarray:
+        try:
+            return np.asarray(self._array(name)[box])
+        except ReadError:
+            raise
+        except Exception as exc:
+            raise ReadError(f"{self.path}: {GROUP}/{name} cannot be read: "
+                            f"{one_line(exc)}") from None
+
+    def coarse(self, level: int) -> np.ndarray:
+        """Level ``level``'s coefficients (1..J), read whole."""
+        if not 1 <= level <= self.layout.levels:
+            raise ParameterError(f"level must be in 1..{self.layout.levels}, got {level!r}")
+        return self._read(f"coarse/{level}")
+
+    # ---------------------------------------------------------------- lazy details
+    def _band_arrays(self, level: int) -> dict[str, np.ndarray]:
+        bands = self._details.get(level)
+        if bands is None:
+            lay = self.layout
+            bands = {b: np.zeros(lay.band_shape(level, b), dtype=self.dtype)
+                     for b in DETAIL_BANDS}
+            self._details[level] = bands
+            blocks = tuple(-(-n // STORE_CHUNK) for n in lay.length(level))
+            self._loaded[level] = np.zeros(blocks, dtype=bool)
+        return bands
+
+    def _owner_blocks(self, level: int, axis: int) -> np.ndarray:
+        """``M[o, b]``: owner ``o`` (a chunk of level ``level - 1``) has details in store chunk
+        ``b``."""
+        lay = self.layout
+        n_nodes = lay.length(level)[axis]
+        owners = lay.owner(level - 1, axis, np.arange(n_nodes))
+        m = np.zeros((lay.chunks(level - 1)[axis], -(-n_nodes // STORE_CHUNK)), dtype=bool)
+        m[owners, np.arange(n_nodes) // STORE_CHUNK] = True
+        return m
+
+    def load_details(self, level: int, owners: np.ndarray) -> int:
+        """Make the details that chunks ``owners`` (bool, ``layout.chunks(level - 1)``) own
+        resident in :meth:`pyramid`'s arrays; returns the number of store chunks read."""
+        self._band_arrays(level)
+        loaded = self._loaded[level]
+        need = np.asarray(owners, dtype=np.int64)
+        for axis in range(3):
+            m = self._owner_blocks(level, axis).astype(np.int64)
+            need = np.moveaxis(np.tensordot(np.moveaxis(need, axis, -1), m, axes=1), -1, axis)
+        todo = (need > 0) & ~loaded
+        bands = self._details[level]
+        for b in np.argwhere(todo):
+            lo = b * STORE_CHUNK
+            for name, arr in bands.items():
+                box = tuple(slice(int(lo[a]), min(int(lo[a]) + STORE_CHUNK, arr.shape[a]))
+                            for a in range(3))
+                if all(s.start < s.stop for s in box):
+                    arr[box] = self._read(f"detail/{level}/{name}", box)
+            loaded[tuple(b)] = True
+        count = int(todo.sum())
+        self.details_read += count
+        return count
+
+    @cached_property
+    def pyramid(self) -> WaveletPyramid:
+        """A :class:`~.wavelet_transform.WaveletPyramid` view for the reconstructor: the
+        coarsest level read, details in lazily filled arrays (:meth:`load_details`)."""
+        lay = self.layout
+        coarse = {lay.levels: self.coarse(lay.levels)}
+        details = {j: self._band_arrays(j) for j in range(1, lay.levels + 1)}
+        return WaveletPyramid(lay, coarse, details, self.hull_lo, self.hull_hi, self.dtype)
+
+    def load(self) -> WaveletPyramid:
+        """Everything read into memory: an in-memory :class:`~.wavelet_transform.
+        WaveletPyramid` (every coarse level and detail subband)."""
+        lay = self.layout
+        coarse = {j: self.coarse(j) for j in range(1, lay.levels + 1)}
+        details = {j: {b: self._read(f"detail/{j}/{b}") for b in DETAIL_BANDS}
+                   for j in range(1, lay.levels + 1)}
+        return WaveletPyramid(lay, coarse, details, list(self.hull_lo), list(self.hull_hi),
+                              self.dtype)
+
+    def __repr__(self) -> str:
+        lay = self.layout
+        return (f"WaveletVolume(name={self.name!r}, shape={fmt_shape(lay.shape)}, "
+                f"degree={lay.degree}, levels={lay.levels}, chunk={lay.chunk}, "
+                f"dtype={self.dtype})")
+
+
+def open_wavelet_store(path: str | os.PathLike[str], root: Any = None,
+                       attributes: dict[str, Any] | None = None) -> WaveletVolume:
+    """Open a store written by :func:`build_wavelet_pyramid` (metadata and hull tables only).
+
+    Raises
+    ------
+    ReadError
+        Not such a store, or its metadata or tables are damaged.
+    """
+    path = Path(os.fspath(path))
+    if root is None:
+        from ..io.omezarr import open_store
+
+        root = open_store(path)
+    if attributes is None:
+        attributes = dict(root.attrs.get(ATTRIBUTE, {}))
+    if attributes.get("kind") != KIND:
+        raise ReadError(f"{path}: not a splinecast wavelet store")
+    try:
+        layout = WaveletLayout(tuple(int(n) for n in attributes["shape"]),
+                               int(attributes["degree"]), int(attributes["levels"]),
+                               int(attributes["chunk"]))
+        dtype = np.dtype(attributes["dtype"])
+        spacing = tuple(float(s) for s in attributes["spacing"])
+        origin = tuple(float(o) for o in attributes["origin"])
+        hulls = [np.asarray(root[f"{GROUP}/hull/{j}"][...]) for j in range(layout.levels + 1)]
+    except (KeyError, TypeError, ValueError, ParameterError) as exc:
+        raise ReadError(f"{path}: damaged wavelet store metadata ({one_line(exc)})") from None
+    for j, table in enumerate(hulls):
+        if table.shape != layout.chunks(j) + (2,):
+            raise ReadError(f"{path}: {GROUP}/hull/{j} has shape {table.shape}, expected "
+                            f"{layout.chunks(j) + (2,)}")
+    metadata: dict[str, Any] = {"name": attributes.get("name", path.name),
+                                "source": str(path.absolute()), "format": "splinecast wavelet"}
+    metadata.update(attributes.get("source_metadata", {}))
+    return WaveletVolume(path, layout, dtype, spacing, origin, metadata, attributes, root,  # type: ignore[arg-type]
+                         [t[..., 0] for t in hulls], [t[..., 1] for t in hulls])

@@ -1,0 +1,154 @@
+"""Rendering spline-wavelet stores: ``Scene(store, lod=ε)``.
+
+References: the in-memory ``bspline<d>`` model render of the source voxels (a second code path:
+one grid, no wavelets, no bricks) and an analytic sphere (which pixels must hit, where detail may
+be needed).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import splinecast as sc
+from splinecast.cli import main
+
+pytest.importorskip("zarr")
+
+N = 32
+CENTRE = np.array([15.3, 16.1, 14.7])
+RADIUS = 9.0
+SIZE = (64, 48)
+
+
+def _sphere(dtype, n=N, centre=CENTRE, radius=RADIUS):
+    """Signed distance to a sphere, in voxels (negative inside)."""
+    grid = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64)] * 3, indexing="ij"), -1)
+    return (np.linalg.norm(grid - centre, axis=-1) - radius).astype(dtype)
+
+
+@pytest.fixture(scope="module", params=(1, 2, 3))
+def case(request, tmp_path_factory):
+    degree = request.param
+    dtype = np.float64 if degree != 2 else np.float32
+    vol = sc.Volume(_sphere(dtype), metadata={"inside": "low"})
+    path = tmp_path_factory.mktemp("w") / f"s{degree}.zarr"
+    sc.build_pyramid(vol, path, kind="wavelet", degree=degree, chunk=4, progress=False)
+    return degree, vol, sc.read(path)
+
+
+def _camera(vol):
+    return sc.Camera.orbit(vol, azimuth=35, elevation=25, size=SIZE, fit="box", zoom=2.5)
+
+
+def test_epsilon_zero_renders_the_in_memory_bspline_model_in_every_mode(case):
+    degree, vol, store = case
+    camera = _camera(vol)
+    ref = sc.Scene(vol, model=f"bspline{degree}")
+    scene = sc.Scene(store, lod=0.0)
+    assert scene.model.name == f"bspline{degree}"
+    exact = vol.dtype == np.float64  # float32 stores hold rounded coefficients
+    depth_tol = 1e-9 if exact else 1e-4
+    a, b = ref.render(camera, iso=0.0), scene.render(camera, iso=0.0)
+    hit = np.isfinite(a.depth)
+    assert hit.sum() > 300
+    np.testing.assert_array_equal(hit, np.isfinite(b.depth))
+    assert np.abs(a.depth[hit] - b.depth[hit]).max() < depth_tol  # spacing 1: voxels
+    np.testing.assert_allclose(a.normal[hit], b.normal[hit], atol=1e-6 if exact else 1e-3)
+    isos = [-3.0, 1.5]
+    a = ref.render(camera, iso=isos, opacity=[0.5, 0.7])
+    b = scene.render(camera, iso=isos, opacity=[0.5, 0.7])
+    np.testing.assert_allclose(a.rgba, b.rgba, atol=1e-6 if exact else 2e-3)
+    lo, hi = vol.value_range
+    for mode in ("mip", "minip"):
+        a = ref.render(camera, mode=mode, window=(lo, hi))
+        b = scene.render(camera, mode=mode, window=(lo, hi))
+        np.testing.assert_allclose(a.value, b.value, atol=1e-9 if exact else 1e-4)
+        assert b.stats["chunk_share"] == 1.0  # no isovalue: ε = 0 refines everything
+    tf = sc.TransferFunction([(-4.0, 0.0), (-1.0, 0.6), (2.0, 0.0)], domain=(lo, hi))
+    a = ref.render(camera, mode="dvr", tf=tf)
+    b = scene.render(camera, mode="dvr", tf=tf)
+    np.testing.assert_allclose(a.rgba, b.rgba, atol=1e-4 if exact else 3e-3)
+
+
+def test_isosurface_of_a_closed_distance_field_has_no_holes_at_any_epsilon(case):
+    degree, vol, store = case
+    camera = _camera(vol)
+    scene = sc.Scene(store)
+    full = scene.render(camera, iso=0.0, lod=0.0)
+    hit = np.isfinite(full.depth)
+    # Rays that pass well inside the sphere (analytic): they must hit at every ε.
+    eye = np.asarray(camera.position)
+    direction = full.position[hit] - eye
+    direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+    miss = np.linalg.norm(np.cross(CENTRE - eye, direction), axis=-1)
+    inner = np.zeros_like(hit)
+    inner[hit] = miss < RADIUS - 2.5
+    assert inner.sum() > 200
+    shares = []
+    for eps in (0.005, 0.02, 0.05, 0.1, 0.3, 1.0):
+        frame = scene.render(camera, iso=0.0, lod=eps)
+        assert np.all(np.isfinite(frame.depth[inner])), f"holes at ε={eps}"
+        shares.append(frame.stats["chunk_share"])
+    assert shares == sorted(shares, reverse=True) and shares[-1] < shares[0]
+
+
+def test_detail_outside_the_isovalue_range_is_never_reconstructed(case, tmp_path):
+    degree, vol, _ = case
+    # A small sphere in a larger box, so that many chunks lie far from the surface.
+    n, centre, radius = 40, np.array([19.3, 20.1, 18.7]), 6.0
+    small = sc.Volume(_sphere(vol.dtype, n, centre, radius))
+    sc.build_pyramid(small, tmp_path / "s.zarr", kind="wavelet", degree=degree, chunk=4,
+                     progress=False)
+    store = sc.read(tmp_path / "s.zarr")
+    scene = sc.Scene(store, lod=0.0)
+    camera = sc.Camera.orbit(small, azimuth=35, elevation=25, size=(32, 24), fit="box")
+    frame = scene.render(camera, iso=0.0)
+    lay = store.layout
+    assert sum(scene.reconstructor.update(scene.selection).computed) == 0  # all reused
+    level0 = lay.chunks(0)
+    assert 0 < frame.stats["detail_owners"] < sum(int(np.prod(lay.chunks(j)))
+                                                  for j in range(lay.levels))
+    # Which level-0 chunks may own details that entered a brick: only those whose 3x3x3
+    # neighbourhood or its parents' regions (two chunks beyond the chunk), widened by the
+    # level-1 support (4 voxels) and 6 voxels of slack, come near the surface (analytic).
+    owners0 = scene.reconstructor.update(_fresh_selection(scene)).detail_owners[0]
+    reach = 2 * lay.chunk + 10
+    excluded = 0
+    for idx in np.ndindex(*level0):
+        lo = np.array([lay.region(0, a, idx[a])[0] for a in range(3)])
+        hi = np.array([lay.region(0, a, idx[a])[1] for a in range(3)])
+        d_min = np.linalg.norm(np.clip(centre, lo, hi) - centre)
+        corners = np.array([[(lo, hi)[(b >> a) & 1][a] for a in range(3)] for b in range(8)])
+        d_max = np.linalg.norm(corners - centre, axis=1).max()
+        if not d_min - reach <= radius <= d_max + reach:
+            excluded += 1
+            assert not owners0[idx], idx
+    assert excluded > 30  # the check is not empty
+    assert owners0.sum() < np.prod(level0) - excluded
+
+
+def _fresh_selection(scene):
+    """The last frame's selection, with every brick forgotten (so all are computed again)."""
+    scene.reconstructor.clear()
+    return scene.selection
+
+
+def test_user_mistakes_name_the_parameter(case, tmp_path, capsys):
+    degree, vol, store = case
+    other = "trilinear" if degree != 1 else "bspline3"
+    with pytest.raises(sc.ParameterError, match="model"):
+        sc.Scene(store, model=other)
+    with pytest.raises(sc.ParameterError, match="prefilter"):
+        sc.Scene(store, prefilter=True)
+    with pytest.raises(sc.ParameterError, match="lod"):
+        sc.Scene(store, lod=-1.0)
+    if degree != 3:
+        return
+    out = tmp_path / "w.png"
+    argv = ["render", str(store.path), "--iso", "0", "--size", "32x24", "--quiet"]
+    assert main([*argv, "--lod", "0.05", "-o", str(out)]) == 0 and out.is_file()
+    assert main([*argv, "--model", "trilinear", "-o", str(out)]) == 2
+    assert "model" in capsys.readouterr().err
+    assert main([*argv, "--budget", "1GiB", "-o", str(out)]) == 2
+    assert "--budget" in capsys.readouterr().err
