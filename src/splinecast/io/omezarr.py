@@ -682,7 +682,11 @@ def _child(node: Any, key: str, label: str) -> Any:
         refused = _refused(exc)
         if refused is not None:
             raise refused from None
-        raise ReadError(f"{label}/{key}: not a readable Zarr array ({one_line(exc)})") from None
+        folder = Path(label) / key
+        meta = next((folder / m for m in ("zarr.json", ".zarray") if (folder / m).exists()),
+                    folder)
+        raise ReadError(f"{label}: level {key!r} ({meta}) is not a readable Zarr array "
+                        f"({one_line(exc)})") from None
 
 
 def _our_attributes(value: Any, where: str) -> dict[str, Any]:
