@@ -504,13 +504,21 @@ class MultiscaleVolume(GridGeometry):
         index along x, y, z first), or ``None`` if the store has none."""
         if name not in self.attributes.get("tables", {}) or self.root is None:
             return None
+        where = f"{self.path}: table {name}/{level}"
         try:
-            return np.asarray(self.root[f"{TABLES_GROUP}/{name}/{level}"][...])
+            array = self.root[f"{TABLES_GROUP}/{name}/{level}"]
+            if not hasattr(array, "dtype") or np.dtype(array.dtype).kind not in "fiub":
+                raise ReadError(f"{where} does not hold numbers")
+            limits.check_memory(limits.nbytes(array.shape, np.dtype(array.dtype).itemsize),
+                                "the table", where, ReadError)
+            return np.asarray(array[...])
         except KeyError:
             return None
+        except ReadError:
+            raise
         except Exception as exc:
-            raise ReadError(f"{self.path}: table {name}/{level} cannot be read: "
-                            f"{one_line(exc)}") from None
+            refused = _refused(exc)
+            raise (refused or ReadError(f"{where} cannot be read: {one_line(exc)}")) from None
 
     def __repr__(self) -> str:
         shapes = ", ".join(fmt_shape(lv.shape) for lv in self.levels)
