@@ -23,6 +23,7 @@ readers ignore them, as NGFF allows.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import stat
@@ -628,6 +629,28 @@ def open_zarr(
     path = Path(os.fspath(path))
     if not path.exists():
         raise ReadError(f"{path}: no such file or folder")
+    with _zarr_calls(str(path)):
+        return _open_zarr(path, channel, timepoint, allow_external)
+
+
+@contextlib.contextmanager
+def _zarr_calls(label: str) -> Any:
+    """zarr-python reads metadata lazily (listing members, opening arrays): whatever it raises
+    on a damaged store becomes one ReadError; the guarded store's own refusal passes through."""
+    try:
+        yield
+    except ReadError:
+        raise
+    except ParameterError:
+        raise
+    except Exception as exc:  # zarr and numcodecs raise ValueError, TypeError, KeyError, ...
+        refused = _refused(exc)
+        raise (refused or ReadError(f"{label}: not a readable Zarr store "
+                                    f"({one_line(exc)})")) from None
+
+
+def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
+               allow_external: bool | None) -> MultiscaleVolume:
     node = open_store(path, allow_external=allow_external)
     zarr = _zarr(path)
     label = str(path)
