@@ -557,3 +557,29 @@ def test_scene_source_carries_the_permission_to_workers(outside_header):
         import pickle
 
         assert pickle.loads(pickle.dumps(source)).allow_external is True
+
+
+def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
+    """A coarse level translated 50 voxels away would make bricks read outside its voxels."""
+    import zarr
+
+    from splinecast.multires.octree import BrickOctree
+
+    path = tmp_path / "v.zarr"
+    root = zarr.open_group(str(path), mode="w", zarr_format=2)
+    data = np.ascontiguousarray(ramp().transpose(2, 1, 0))
+    for level, block in enumerate((data, data[::2, ::2, ::2])):
+        arr = root.create_array(str(level), shape=block.shape, dtype=block.dtype,
+                                chunks=(4, 4, 4))
+        arr[...] = block
+    root.attrs["multiscales"] = [{
+        "version": "0.4", "axes": [{"name": a, "type": "space"} for a in "zyx"],
+        "datasets": [
+            {"path": "0", "coordinateTransformations": [
+                {"type": "scale", "scale": [2.0, 0.75, 0.5]}]},
+            {"path": "1", "coordinateTransformations": [
+                {"type": "scale", "scale": [4.0, 1.5, 1.0]},
+                {"type": "translation", "translation": [0.0, 0.0, 50.0]}]}]}]
+    tree = BrickOctree(sc.read(path), brick=4)
+    assert tree.levels == [0]
+    assert any("level 1 skipped: its voxels do not cover level 0" in n for n in tree.notes)
