@@ -583,3 +583,11 @@ def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
     tree = BrickOctree(sc.read(path), brick=4)
     assert tree.levels == [0]
     assert any("level 1 skipped: its voxels do not cover level 0" in n for n in tree.notes)
+
+
+def test_whole_extent_counts_even_when_the_piece_is_small(vti, capsys, monkeypatch):
+    """VTK allocates the output for the whole extent: a huge WholeExtent around the original
+    small piece must be refused before VTK aborts on std::bad_alloc (fuzz #15210)."""
+    monkeypatch.setenv(limits.ENV_MAX_BYTES, "64MiB")
+    patch(vti, b'WholeExtent="0 5 0 4 0 3"', b'WholeExtent="0 65535 0 65535 0 65535"')
+    refused(["info", str(vti)], capsys, vti.parent, str(vti), "the data arrays needs 512.0 TiB")

@@ -143,8 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     stopped = []
 
     def stop(signum: int, frame: object) -> None:  # SIGTERM: report what ran so far
-        stopped.append(signum)
-        raise KeyboardInterrupt
+        stopped.append(signum)  # checked after each result (raising here could hit a fork)
 
     previous = signal.signal(signal.SIGTERM, stop)
 
@@ -171,6 +170,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"fuzz: {n} cases, {rate:.1f}/s", flush=True)
             if args.report_every and n % args.report_every == 0:
                 write(partial=True)  # a run stopped early still leaves its numbers
+            if stopped:
+                print(f"fuzz: stopped after {len(results)} cases", file=sys.stderr, flush=True)
+                break
     except KeyboardInterrupt:
         print(f"fuzz: stopped after {len(results)} cases", file=sys.stderr, flush=True)
     finally:

@@ -213,6 +213,7 @@ def _check_vti_header(path: Path, label: str) -> bytes:
     body = raw[:appended_at] if appended_at >= 0 else raw
 
     whole: tuple[int, ...] | None = None
+    whole_counts = {"PointData": 0, "CellData": 0}
     counts = {"PointData": 0, "CellData": 0}
     section = None
     total = 0
@@ -221,6 +222,9 @@ def _check_vti_header(path: Path, label: str) -> bytes:
         closing, element, attrs = tag.group(1), tag.group(2).decode(), _attributes(tag.group(3))
         if element == "ImageData" and not closing:
             whole = _extent(attrs.get("WholeExtent"), "WholeExtent", label)
+            whole_dims = [whole[2 * a + 1] - whole[2 * a] + 1 for a in range(3)]
+            whole_counts = {"PointData": math.prod(whole_dims),
+                            "CellData": math.prod(max(d - 1, 1) for d in whole_dims)}
             spacing = limits.check_spacing(
                 [_float(v) for v in _numbers(attrs.get("Spacing", "1 1 1"), 3, "Spacing", label)],
                 f"{label}: Spacing", ReadError)
@@ -254,10 +258,13 @@ def _check_vti_header(path: Path, label: str) -> bytes:
                     _integer(attrs.get("NumberOfTuples", "1")),
                     f"{label}: array {limits.shorten(name)}: NumberOfTuples", lo=0,
                     hi=2**48, error=ReadError)
+                allocated = tuples
             else:
                 tuples = counts[section]
+                # VTK allocates the output's arrays for the whole extent, whatever the pieces.
+                allocated = max(tuples, whole_counts[section])
             expected = tuples * components * _XML_TYPES[kind]
-            total += expected
+            total += allocated * components * _XML_TYPES[kind]
             limits.check_memory(total, "the data arrays", label, ReadError)
             fmt = attrs.get("format")
             if fmt not in ("ascii", "binary", "appended"):
