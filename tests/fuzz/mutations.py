@@ -88,7 +88,7 @@ def _split_text_header(data: bytes, fmt: str) -> tuple[bytes, bytes]:
     if fmt.startswith(("nrrd", "nhdr")):
         end = data.find(b"\n\n")
         return (data, b"") if end < 0 else (data[: end + 1], data[end + 1:])
-    if fmt == "vtk":
+    if fmt == "vtk-legacy":
         match = re.search(rb"LOOKUP_TABLE[^\n]*\n", data)
         end = match.end() if match else len(data)
         return data[:end], data[end:]
@@ -213,7 +213,7 @@ def text_header(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str
     header_file = _main_file(folder, seed)
     data = header_file.read_bytes()
     head, rest = _split_text_header(data, seed.fmt)
-    sep = " = " if seed.fmt in ("mha", "mhd") else (": " if seed.fmt != "vtk" else " ")
+    sep = " = " if seed.fmt in ("mha", "mhd") else (": " if seed.fmt != "vtk-legacy" else " ")
     text, what = mutate_text_lines(head.decode("latin-1"), sep, rng, root)
     header_file.write_bytes(text.encode("latin-1", "replace") + rest)
     return what
@@ -560,6 +560,249 @@ def file_layout(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str
     return f"{target.name}: {op}"
 
 
+# --------------------------------------------------------------------------- Zarr stores
+#: Hostile JSON values for any field of a Zarr or OME-Zarr metadata file.
+JSON_VALUES: list[object] = [
+    0, -1, 1, 2**70, -(2**63), 2**64, 1e30, 1e-320, None, True, "abc", "\0", [], {}, [6, 5],
+    [6, 5, 4, 1], [6.5, 5, 4], [2000, 2000, 2000], [0, 5, 4], [-6, 5, 4], [2**70, 1, 1],
+    [1e-320, 1, 1], [1e300, 1, 1], [1, 1, 1], [100000, 100000, 100000], [1048577, 1, 1],
+    ["6", "5", "4"], [[1, 2, 3]], {"a": 1}, "../../SENTINEL.raw", "/etc/passwd", "/dev/zero",
+    "x" * 10000, "|O", "<c16", "float128", "bogus", "uint16", "<u2", "int64", "bool",
+    "complex64", "string", "S10", "V8", "r16", ".", "/", "..", "../other", "0", "1",
+]
+#: Field names worth aiming at (Zarr v2 and v3 array and group metadata, NGFF, splinecast's).
+JSON_KEYS = [
+    "shape", "chunks", "chunk_shape", "data_type", "dtype", "fill_value", "order", "filters",
+    "compressor", "codecs", "name", "configuration", "zarr_format", "node_type", "separator",
+    "dimension_separator", "dimension_names", "chunk_key_encoding", "chunk_grid", "level",
+    "typesize", "cname", "clevel", "blocksize", "endian", "index_codecs", "index_location",
+    "multiscales", "datasets", "path", "axes", "type", "unit", "scale", "translation",
+    "coordinateTransformations", "version", "ome", "splinecast", "brick", "ghost", "value_range",
+    "tables", "complete_chunks", "source_metadata", "attributes", "id", "checksum",
+]
+
+
+def _json_paths(value: object, prefix: tuple = ()) -> list[tuple]:
+    """Every path (keys and indices) into parsed JSON, parents before children."""
+    paths = [prefix]
+    if isinstance(value, dict):
+        for key, child in value.items():
+            paths += _json_paths(child, (*prefix, key))
+    elif isinstance(value, list):
+        for index, child in enumerate(value[:8]):
+            paths += _json_paths(child, (*prefix, index))
+    return paths
+
+
+def _metadata_files(folder: Path) -> list[Path]:
+    names = ("zarr.json", ".zarray", ".zattrs", ".zgroup")
+    return [p for p in _files(folder) if p.name in names]
+
+
+def zarr_metadata(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """A Zarr metadata file (``zarr.json``, ``.zarray``, ``.zattrs``, ``.zgroup``): a field set
+    to a hostile value or deleted, or the JSON itself broken (truncated, junk, NaN, deep,
+    5000-digit numbers, not UTF-8)."""
+    files = _metadata_files(folder)
+    if not files:
+        return byte_level(folder, seed, rng, root)
+    # The root and level-0 metadata matter most: they are read on every open.
+    target = rng.choice(files[:3] + files) if rng.random() < 0.5 else rng.choice(files)
+    text = target.read_text(errors="replace")
+    name = target.relative_to(folder)
+    try:
+        doc = json.loads(text)
+    except ValueError:
+        return byte_level(folder, seed, rng, root)
+    op = rng.choice(["field"] * 8 + ["delete", "delete", "aimed", "aimed", "aimed", "syntax",
+                                      "deep", "digits", "nan"])
+    if op == "syntax":
+        cut = rng.choice([text[: rng.randrange(1, max(2, len(text)))], text + "}",
+                          text.replace("{", "[", 1), "\xff\xfe" + text, "", "null", "[]", "7"])
+        target.write_bytes(cut.encode("utf-8", "surrogateescape") if not cut.startswith("\xff")
+                           else b"\xff\xfe" + text.encode())
+        return f"{name}: broken JSON"
+    if op == "deep":
+        target.write_text(text.replace("[", "[" * 3000, 1).replace("]", "]" * 3000, 1))
+        return f"{name}: nested 3000 deep"
+    if op == "digits":
+        target.write_text(re.sub(r"\b\d+\b", "9" * 5000, text, count=1))
+        return f"{name}: a 5000-digit number"
+    if op == "nan":
+        target.write_text(re.sub(r"-?\b\d+(\.\d+)?\b", rng.choice(["NaN", "Infinity", "1e999"]),
+                                 text, count=1))
+        return f"{name}: a non-finite number"
+    paths = [p for p in _json_paths(doc) if p]
+    if op == "aimed":
+        aimed = [p for p in paths if isinstance(p[-1], str) and p[-1] in JSON_KEYS]
+        paths = aimed or paths
+    if not paths:
+        return byte_level(folder, seed, rng, root)
+    path = rng.choice(paths)
+    parent = doc
+    for key in path[:-1]:
+        parent = parent[key]
+    if op == "delete":
+        del parent[path[-1]]
+        what = f"delete {'/'.join(map(str, path))[:60]}"
+    else:
+        value = rng.choice(JSON_VALUES)
+        if isinstance(value, str):
+            value = value.replace("@SENTINEL@", str(root / "SENTINEL.raw"))
+        parent[path[-1]] = value
+        what = f"{'/'.join(map(str, path))[:60]} = {json.dumps(value)[:40]}"
+    target.write_text(json.dumps(doc))
+    return f"{name}: {what}"
+
+
+def zarr_chunks(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """A chunk (or shard) file: truncated, emptied, replaced by another chunk, by a compression
+    bomb (a zstd frame declaring huge content), by zeros, or a shard index pointing anywhere."""
+    chunks = [p for p in _files(folder) if p not in _metadata_files(folder)]
+    if not chunks:
+        return byte_level(folder, seed, rng, root)
+    target = rng.choice(chunks)
+    data = target.read_bytes()
+    op = rng.choice(["truncate", "empty", "swap", "zstd-bomb", "zstd-bomb", "zeros", "index",
+                     "index", "junk", "huge"])
+    if op == "truncate":
+        data = data[: rng.randrange(max(1, len(data)))]
+    elif op == "empty":
+        data = b""
+    elif op == "swap":
+        data = rng.choice(chunks).read_bytes()
+    elif op == "zstd-bomb":  # frame header: magic, single segment, 8-byte content size
+        size = rng.choice([2**40, 2**62, 10**9, 6 * 10**7, 2**31])
+        frame = b"\x28\xb5\x2f\xfd\xe0" + struct.pack("<Q", size) + b"\x01\x00\x00"
+        data = frame if rng.random() < 0.5 else frame + data[len(frame):]
+    elif op == "zeros":
+        data = bytes(len(data))
+    elif op == "index":  # the last 16 * n + 4 bytes of a shard are its index (+ crc32c)
+        if len(data) >= 20:
+            at = len(data) - 4 - 16 * rng.randint(1, max(1, (len(data) - 4) // 16 // 4))
+            value = rng.choice(INTERESTING_INTS)
+            data = data[:at] + struct.pack("<Q", value % 2**64) + data[at + 8:]
+    elif op == "junk":
+        data = bytes(rng.randrange(256) for _ in range(rng.choice([1, 16, 4096])))
+    else:
+        data = data + bytes(rng.choice([10**6, 5 * 10**7]))
+    target.write_bytes(data)
+    return f"chunk {target.relative_to(folder)}: {op}"
+
+
+# --------------------------------------------------------------------------- VTK XML
+VTI_ATTRIBUTES: dict[str, list[str]] = {
+    "WholeExtent": ["0 5 0 4 0 3", "0 -1 0 4 0 3", "0 1999 0 1999 0 1999", "0 1e30 0 4 0 3",
+                    "0 9223372036854775807 0 0 0 0", "5 0 0 4 0 3", "0 5 0 4", "a b c d e f",
+                    "0 5 0 4 0 3 0", "-2147483648 2147483647 0 0 0 0", "0 65535 0 65535 0 65535",
+                    "0 0 0 0 0 0", "1 6 1 5 1 4"],
+    "Extent": ["0 5 0 4 0 3", "0 6 0 4 0 3", "0 -1 0 4 0 3", "0 1999 0 1999 0 1999", "1 6 1 5 1 4",
+               "0 5 0 4", "0 5 0 4 0 300"],
+    "Spacing": TUPLE_TOKENS, "Origin": TUPLE_TOKENS,
+    "Direction": ["1 0 0 0 1 0 0 0 1", "0 0 0 0 0 0 0 0 0", "nan 0 0 0 1 0 0 0 1", "1 0 0",
+                  "0 1 0 1 0 0 0 0 1", "1e308 0 0 0 1 0 0 0 1"],
+    "type": ["Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Float32",
+             "Float64", "String", "Bit", "IdType", "bogus", "", "ImageData", "PolyData",
+             "StructuredGrid", "UnstructuredGrid"],
+    "NumberOfComponents": ["0", "1", "2", "3", "4", "9", "-1", "65536", "2147483647",
+                           "4294967296", "abc", "1e30"],
+    "NumberOfTuples": ["0", "1", "120", "-1", "4294967296", "1e30"],
+    "format": ["ascii", "binary", "appended", "bogus", ""],
+    "encoding": ["raw", "base64", "bogus", ""],
+    "header_type": ["UInt32", "UInt64", "UInt8", "Int64", "", "Float32"],
+    "compressor": ["vtkZLibDataCompressor", "vtkLZ4DataCompressor", "vtkLZMADataCompressor",
+                   "vtkBogusCompressor", ""],
+    "byte_order": ["LittleEndian", "BigEndian", "Middle", ""],
+    "offset": ["0", "1", "-1", "100000", "9223372036854775807", "18446744073709551616", "abc"],
+    "version": ["0.1", "1.0", "2.2", "99.0", "abc"],
+    "Name": ["values", "", "x" * 5000, "\x1b[31m"],
+    "Scalars": ["values", "bogus", ""],
+    "RangeMin": ["nan", "-1e308", "abc"], "RangeMax": ["inf", "1e308", "abc"],
+}
+
+
+def vti_attributes(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """An XML attribute of a ``.vti`` (VTKFile, ImageData, Piece, DataArray, AppendedData) set to
+    a hostile value, removed, or an element duplicated or removed."""
+    path = folder / seed.main
+    data = path.read_bytes()
+    appended = data.find(b"<AppendedData")
+    head_end = appended if appended >= 0 else len(data)
+    head = data[:head_end]
+    found = [(m.start(1), m.end(1), m.group(0).split(b"=")[0].decode())
+             for m in re.finditer(rb'\b(?:\w+)="([^"]*)"', head)]
+    if appended >= 0:
+        tag_end = data.find(b">", appended)
+        found += [(m.start(1) + appended, m.end(1) + appended,
+                   m.group(0).split(b"=")[0].decode())
+                  for m in re.finditer(rb'\b(?:\w+)="([^"]*)"', data[appended:tag_end])]
+    op = rng.choice(["value"] * 8 + ["remove", "element"])
+    if op == "element":
+        elements = [m for m in re.finditer(rb"<(PointData|CellData|DataArray|Piece)[^>]*>", head)]
+        if elements:
+            m = rng.choice(elements)
+            if rng.random() < 0.5:
+                data = data[:m.start()] + m.group(0) + data[m.start():]  # duplicated opening tag
+                path.write_bytes(data)
+                return f"duplicate <{m.group(1).decode()}>"
+            data = data[:m.start()] + data[m.end():]
+            path.write_bytes(data)
+            return f"remove <{m.group(1).decode()}>"
+    aimed = [f for f in found if f[2] in VTI_ATTRIBUTES]
+    if not aimed:
+        return byte_level(folder, seed, rng, root)
+    start, end, name = rng.choice(aimed)
+    if op == "remove":
+        # Remove ' name="value"' entirely.
+        at = data.rfind(b" ", 0, start)
+        data = data[:at] + data[end + 1:]
+        path.write_bytes(data)
+        return f"remove {name}"
+    value = rng.choice(VTI_ATTRIBUTES[name])
+    if name in ("Spacing", "Origin"):
+        value = value if " " in value else f"{value} 1 1"
+    data = data[:start] + value.encode("latin-1", "replace") + data[end:]
+    path.write_bytes(data)
+    return f"{name}={value[:40]!r}"
+
+
+def vti_sizes(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """The binary size header of a ``.vti`` array (appended raw, or base64 inline): the byte
+    count, or a compressed array's block count, block size, last block size, block sizes."""
+    import base64
+
+    path = folder / seed.main
+    data = path.read_bytes()
+    head = data[: data.find(b">", max(0, data.find(b"<VTKFile")))]
+    width = 8 if b'header_type="UInt64"' in head else 4
+    fmt = "<Q" if width == 8 else "<I"
+    words = rng.choice([1, 1, 2, 3, 4])
+    value = rng.choice(INTERESTING_INTS + [119, 120, 121, 239, 240, 241, 32768, 2**31, 2**32 - 240])
+    packed = struct.pack(fmt, value % 2 ** (8 * width))
+    raw_at = data.find(b"_", data.find(b"<AppendedData"))
+    if data.find(b"<AppendedData") >= 0 and b'encoding="raw"' in data and raw_at >= 0:
+        at = raw_at + 1 + width * (words - 1)
+        data = data[:at] + packed + data[at + width:]
+        path.write_bytes(data)
+        return f"appended raw header word {words} = {value}"
+    match = re.search(rb'format="binary"[^>]*>\s*([A-Za-z0-9+/=]+)', data) or re.search(
+        rb'<AppendedData[^>]*>\s*_([A-Za-z0-9+/=]+)', data)
+    if not match:
+        return byte_level(folder, seed, rng, root)
+    text = match.group(1)
+    chunk = (width * 4 + 2) // 3 * 4
+    try:
+        header = bytearray(base64.b64decode(text[:chunk] + b"=" * (-len(text[:chunk]) % 4)))
+    except ValueError:
+        return byte_level(folder, seed, rng, root)
+    at = width * (words - 1)
+    header[at:at + width] = packed
+    new = base64.b64encode(bytes(header))[:chunk]
+    data = data[:match.start(1)] + new + text[len(new):] + data[match.end(1):]
+    path.write_bytes(data)
+    return f"base64 header word {words} = {value}"
+
+
 Mutation = Callable[[Path, Seed, random.Random, Path], str]
 
 #: Structure-aware mutations per format (byte-level and file-layout ones apply to every format).
@@ -580,8 +823,12 @@ STRUCTURED: dict[str, list[Mutation]] = {
     "dicom": [dicom_tags, dicom_tags, dicom_tags],
     "tiff": [tiff_description, tiff_ome],
     "sidecar": [json_fields, json_fields],
-    "vtk": [text_header, text_header],
-    "ome-zarr": [],
+    "vti": [vti_attributes, vti_attributes, vti_sizes],
+    "vti-base64": [vti_attributes, vti_attributes, vti_sizes],
+    "vti-raw": [vti_attributes, vti_sizes, vti_sizes],
+    "vtk-legacy": [text_header, text_header],
+    "ome-zarr": [zarr_metadata, zarr_metadata, zarr_metadata, zarr_chunks],
+    "zarr-v2": [zarr_metadata, zarr_metadata, zarr_chunks],
 }
 
 

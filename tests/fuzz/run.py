@@ -19,6 +19,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import shutil  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -110,6 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", type=int, help="rebuild and rerun this case, and keep it")
     parser.add_argument("--keep", action="store_true", help="keep every case folder")
     parser.add_argument("--show", action="store_true", help="print every case's outcome")
+    parser.add_argument("--report-every", type=int, default=500,
+                        help="rewrite --json/--markdown every N cases (0: only at the end); "
+                             "SIGTERM stops the run and writes what ran")
     args = parser.parse_args(argv)
 
     root = Path(args.root or tempfile.mkdtemp(prefix="splinecast-fuzz-")).resolve()
@@ -136,24 +140,45 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     start = time.monotonic()
     keep = args.keep or args.only is not None
-    for n, result in enumerate(runner.run(_cases(args, seeds, root), keep=keep), 1):
-        results.append(result)
-        if args.show and result.outcome not in BAD:
-            print(f"fuzz: {result.outcome}: {result.summary}\n    {result.detail[-300:]}")
-        if result.outcome in BAD or args.only is not None:
-            print(f"fuzz: {result.outcome}: {result.summary}\n    {result.detail[-600:]}",
-                  flush=True)
-        if n % 1000 == 0:
-            rate = n / (time.monotonic() - start)
-            print(f"fuzz: {n} cases, {rate:.1f}/s", flush=True)
-    seconds = time.monotonic() - start
-    summary = report(results, seconds, args, warm_seconds, sorted(seeds))
-    table = markdown(summary)
-    print(table)
-    if args.json:
-        Path(args.json).write_text(json.dumps(summary, indent=1) + "\n")
-    if args.markdown:
-        Path(args.markdown).write_text(table)
+    stopped = []
+
+    def stop(signum: int, frame: object) -> None:  # SIGTERM: report what ran so far
+        stopped.append(signum)  # checked after each result (raising here could hit a fork)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+
+    def write(partial: bool) -> dict:
+        summary = report(results, time.monotonic() - start, args, warm_seconds, sorted(seeds))
+        summary["partial"] = partial
+        table = markdown(summary)
+        if args.json:
+            Path(args.json).write_text(json.dumps(summary, indent=1) + "\n")
+        if args.markdown:
+            Path(args.markdown).write_text(table)
+        return summary
+
+    try:
+        for n, result in enumerate(runner.run(_cases(args, seeds, root), keep=keep), 1):
+            results.append(result)
+            if args.show and result.outcome not in BAD:
+                print(f"fuzz: {result.outcome}: {result.summary}\n    {result.detail[-300:]}")
+            if result.outcome in BAD or args.only is not None:
+                print(f"fuzz: {result.outcome}: {result.summary}\n    {result.detail[-600:]}",
+                      flush=True)
+            if n % 1000 == 0:
+                rate = n / (time.monotonic() - start)
+                print(f"fuzz: {n} cases, {rate:.1f}/s", flush=True)
+            if args.report_every and n % args.report_every == 0:
+                write(partial=True)  # a run stopped early still leaves its numbers
+            if stopped:
+                print(f"fuzz: stopped after {len(results)} cases", file=sys.stderr, flush=True)
+                break
+    except KeyboardInterrupt:
+        print(f"fuzz: stopped after {len(results)} cases", file=sys.stderr, flush=True)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    summary = write(partial=bool(stopped) or len(results) < args.cases)
+    print(markdown(summary))
     failed = sum(summary["totals"][k] for k in BAD)
     if not failed and not keep and args.root is None:
         shutil.rmtree(root, ignore_errors=True)

@@ -6,9 +6,9 @@ in a header field often, and every seed of a format with detached data has a raw
 exactly :data:`DATA_BYTES` bytes, as has the sentinel file outside every case folder: a header
 that were allowed to name the sentinel would be read successfully, so the harness sees it.
 
-Formats whose reader does not exist yet (VTK image data, OME-Zarr: issues 16 and 10) are skipped
-until :func:`available` finds their reader module; their makers are registered in
-:data:`MAKERS` like every other format, so they join the fuzzing as soon as the reader lands.
+Formats whose library is not installed (vtk, zarr, nibabel, ...) are skipped (:func:`available`).
+An OME-Zarr store is a folder: its seed's main path is that folder, and the case builder copies
+it whole.
 """
 
 from __future__ import annotations
@@ -229,16 +229,55 @@ def _sidecar(folder: Path) -> str:
     return "v.json"
 
 
-def _vtk(folder: Path) -> str:
-    """VTK image data: through splinecast's own writer when it has one (``.vti``), else a
-    hand-written legacy STRUCTURED_POINTS file (binary, big-endian as the format demands)."""
+def _vti_writer(folder: Path, mode: str, header: str, compressed: bool) -> str:
+    """A ``.vti`` written by VTK itself in one of its encodings."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+
+    image = vtkImageData()
+    image.SetDimensions(*SHAPE)
+    image.SetSpacing(*SPACING)
+    image.SetOrigin(*ORIGIN)
+    values = numpy_to_vtk(np.ascontiguousarray(ramp().transpose(2, 1, 0)).ravel(), deep=True)
+    values.SetName("values")
+    image.GetPointData().SetScalars(values)
+    writer = vtkXMLImageDataWriter()
+    writer.SetInputData(image)
+    {"binary": writer.SetDataModeToBinary, "ascii": writer.SetDataModeToAscii,
+     "appended": writer.SetDataModeToAppended}[mode]()
+    writer.SetEncodeAppendedData(mode == "appended-base64")
+    if compressed:
+        writer.SetCompressorTypeToZLib()
+    else:
+        writer.SetCompressorTypeToNone()
+    (writer.SetHeaderTypeToUInt64 if header == "UInt64" else writer.SetHeaderTypeToUInt32)()
+    writer.SetFileName(str(folder / "v.vti"))
+    if not writer.Write():
+        raise RuntimeError("VTK could not write the seed")
+    return "v.vti"
+
+
+def _vti(folder: Path) -> str:
+    """splinecast's own writer: appended raw binary, zlib, 64-bit headers."""
     import splinecast as sc
 
-    try:
-        sc.write(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.vti")
-        return "v.vti"
-    except sc.SplinecastError:
-        pass
+    sc.write(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.vti")
+    return "v.vti"
+
+
+def _vti_base64(folder: Path) -> str:
+    """Inline base64 binary, uncompressed, 32-bit headers."""
+    return _vti_writer(folder, "binary", "UInt32", compressed=False)
+
+
+def _vti_raw(folder: Path) -> str:
+    """Appended raw binary, uncompressed, 32-bit headers."""
+    return _vti_writer(folder, "appended", "UInt32", compressed=False)
+
+
+def _vtk_legacy(folder: Path) -> str:
+    """A hand-written legacy STRUCTURED_POINTS file (binary, big-endian as the format demands)."""
     header = "\n".join([
         "# vtk DataFile Version 3.0", "splinecast fuzz seed", "BINARY", "DATASET STRUCTURED_POINTS",
         "DIMENSIONS " + " ".join(map(str, SHAPE)), "ORIGIN " + " ".join(map(str, ORIGIN)),
@@ -251,11 +290,40 @@ def _vtk(folder: Path) -> str:
 
 
 def _ome_zarr(folder: Path) -> str:
-    """Through splinecast's own writer, once there is one (issue 10)."""
+    """An OME-Zarr 0.5 pyramid (Zarr v3, sharded, zstd) with splinecast's per-brick tables,
+    written by splinecast's own builder: two levels of 4-voxel bricks."""
     import splinecast as sc
+    from splinecast.multires.pyramid import build_pyramid
 
-    sc.write(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.ome.zarr")
+    build_pyramid(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.ome.zarr",
+                  brick=4, workers=1, progress=False)
     return "v.ome.zarr"
+
+
+def _zarr_v2(folder: Path) -> str:
+    """An OME-Zarr 0.4 image in Zarr v2 (``.zgroup``, ``.zattrs``, ``.zarray``; blosc and
+    zlib chunks of 4 voxels a side) written by zarr-python directly, as other tools do."""
+    import zarr
+
+    root = zarr.open_group(str(folder / "v.zarr"), mode="w", zarr_format=2)
+    data = np.ascontiguousarray(ramp().transpose(2, 1, 0))  # NGFF z, y, x
+    from numcodecs import Blosc, Zlib
+
+    datasets = []
+    for level, (block, compressor) in enumerate(((data, Blosc()), (data[::2, ::2, ::2], Zlib()))):
+        arr = root.create_array(str(level), shape=block.shape, dtype=block.dtype,
+                                chunks=(4, 4, 4), compressors=compressor)
+        arr[...] = block
+        factor = 2 ** level
+        datasets.append({"path": str(level), "coordinateTransformations": [
+            {"type": "scale", "scale": [SPACING[2] * factor, SPACING[1] * factor,
+                                        SPACING[0] * factor]},
+            {"type": "translation", "translation": [ORIGIN[2], ORIGIN[1], ORIGIN[0]]}]})
+    root.attrs["multiscales"] = [{
+        "version": "0.4", "name": "v",
+        "axes": [{"name": a, "type": "space", "unit": "micrometer"} for a in "zyx"],
+        "datasets": datasets}]
+    return "v.zarr"
 
 
 #: format -> (maker, module that must exist for the format to be fuzzed).
@@ -276,9 +344,12 @@ MAKERS: dict[str, tuple[Callable[[Path], str], str | None]] = {
     "dicom": (_dicom, "pydicom"),
     "tiff": (_tiff, "tifffile"),
     "sidecar": (_sidecar, None),
-    # Readers still to come: these join as soon as their module exists.
-    "vtk": (_vtk, "splinecast.io.vtkimage"),
-    "ome-zarr": (_ome_zarr, "splinecast.io.omezarr"),
+    "vti": (_vti, "vtkmodules"),
+    "vti-base64": (_vti_base64, "vtkmodules"),
+    "vti-raw": (_vti_raw, "vtkmodules"),
+    "vtk-legacy": (_vtk_legacy, "vtkmodules"),
+    "ome-zarr": (_ome_zarr, "zarr"),
+    "zarr-v2": (_zarr_v2, "zarr"),
 }
 
 

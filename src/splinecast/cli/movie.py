@@ -26,7 +26,7 @@ from splinecast.distributed import (
     render_locally,
 )
 
-from ._common import finite, log, numbers
+from ._common import add_input_options, finite, log, numbers
 from ._progress import Progress
 from .render import (
     add_render_options,
@@ -72,6 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             "workers must be able to open FILE")
     add_render_options(movie)
     movie.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_input_options(movie)
 
 
 def _range(text: str | None, option: str) -> float | tuple[float, float] | None:
@@ -154,7 +155,8 @@ def run(args: argparse.Namespace) -> int:
     writer = MovieWriter(args.output, (width, height), args.frames, fps=args.fps,
                          quality=args.quality)
     options = model_options(args)
-    source = SceneSource(args.file, args.model, options, args.smooth)
+    source = SceneSource(args.file, args.model, options, args.smooth,
+                         allow_external=args.allow_external_data or None)
 
     start = time.perf_counter()
     with contextlib.ExitStack() as stack:

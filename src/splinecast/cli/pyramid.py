@@ -7,7 +7,7 @@ import contextlib
 import sys
 import time
 
-from ._common import log
+from ._common import add_input_options, log
 
 __all__ = ["add_parser", "run"]
 
@@ -32,6 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                           "(rendered with model bspline<DEGREE>; --brick does not apply)")
     cmd.add_argument("--overwrite", action="store_true", help="replace an existing store")
     cmd.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_input_options(cmd)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     with contextlib.redirect_stderr(getattr(args, "stderr", sys.stderr)):
         mv = build_pyramid(args.source, out, brick=args.brick, levels=args.levels,
                            overwrite=args.overwrite, unit=args.unit, workers=args.workers,
-                           progress=not args.quiet)
+                           progress=not args.quiet,
+                           allow_external=args.allow_external_data or None)
     log(args, f"wrote {len(mv.levels)} levels in {time.perf_counter() - start:.1f} s")
     print(out)
     return 0

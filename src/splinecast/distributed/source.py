@@ -41,15 +41,20 @@ class SceneSource:
         hashable since the source is the key of the workers' scene cache.
     smooth : int, optional
         Gaussian pre-smoothing kernel size (3 or 5), applied on the workers after reading.
+    allow_external : bool, optional
+        Let the file's header name data files outside its folder (see :func:`splinecast.read`);
+        travels to the workers with the source.
     """
 
     location: str
     model: str = "trilinear"
     options: tuple[tuple[str, Any], ...] = field(default=())
     smooth: int | None = None
+    allow_external: bool | None = None
 
     def __init__(self, location: str | os.PathLike, model: str = "trilinear",
-                 options: dict[str, Any] | None = None, smooth: int | None = None) -> None:
+                 options: dict[str, Any] | None = None, smooth: int | None = None,
+                 allow_external: bool | None = None) -> None:
         text = os.fspath(location)
         if not isinstance(text, str) or not text:
             raise ParameterError(f"source must be a path or a demo: spec, got {location!r}")
@@ -71,11 +76,13 @@ class SceneSource:
         object.__setattr__(self, "model", model)
         object.__setattr__(self, "options", items)
         object.__setattr__(self, "smooth", None if smooth is None else int(smooth))
+        object.__setattr__(self, "allow_external",
+                           None if allow_external is None else bool(allow_external))
 
     def read(self) -> Volume:
         """Read (and pre-smooth) the volume; raises :class:`~splinecast.ReadError` naming the
         location when it cannot."""
-        volume = read(self.location)
+        volume = read(self.location, allow_external=self.allow_external)
         return smooth_volume(volume, self.smooth) if self.smooth else volume
 
     def open(self) -> Scene:

@@ -35,7 +35,9 @@ Paths
 Compressed data and small files
     Decompression stops at the byte count the header promises (:func:`read_exact`); JSON files
     (sidecars, transfer functions) are read up to :data:`MAX_JSON_BYTES` and
-    :data:`MAX_JSON_DEPTH` levels of nesting (:func:`load_json`).
+    :data:`MAX_JSON_DEPTH` levels of nesting (:func:`load_json`), and so is every Zarr metadata
+    file; a small file is opened without blocking and refused unless it is a regular file
+    (:func:`open_regular`), so a FIFO, device or folder in its place cannot hang a reader.
 """
 
 from __future__ import annotations
@@ -58,9 +60,11 @@ __all__ = [
     "ENV_MAX_BYTES",
     "FRAME_BYTES_PER_PIXEL",
     "MAX_AXIS",
+    "MAX_CHUNKS_PER_READ",
     "MAX_IMAGE_SIDE",
     "MAX_JSON_BYTES",
     "MAX_JSON_DEPTH",
+    "MAX_JSON_INT_DIGITS",
     "MAX_ORIGIN_VOXELS",
     "MAX_PATH_BYTES",
     "MAX_ROOT_ITERATIONS",
@@ -70,6 +74,7 @@ __all__ = [
     "allow_external_default",
     "check_count",
     "check_data_file",
+    "check_inside",
     "check_memory",
     "check_origin",
     "check_path_text",
@@ -84,6 +89,8 @@ __all__ = [
     "load_json",
     "memory_limit",
     "nbytes",
+    "open_regular",
+    "parse_json",
     "parse_bytes",
     "printable",
     "read_exact",
@@ -119,6 +126,10 @@ FRAME_BYTES_PER_PIXEL = 96
 #: Largest JSON file read (sidecars, transfer functions) and its deepest nesting.
 MAX_JSON_BYTES = 1 << 20
 MAX_JSON_DEPTH = 32
+#: Most chunk files one read of a Zarr level may touch (a store of tiny chunks would take hours).
+MAX_CHUNKS_PER_READ = 1 << 18
+#: Longest integer (in digits) a JSON file may hold (2**64 has 20).
+MAX_JSON_INT_DIGITS = 40
 
 _UNITS = {"": 1, "b": 1, "k": 10**3, "kb": 10**3, "m": 10**6, "mb": 10**6, "g": 10**9,
           "gb": 10**9, "t": 10**12, "tb": 10**12, "kib": 1 << 10, "mib": 1 << 20,
@@ -575,18 +586,47 @@ def check_data_file(
 
 
 # --------------------------------------------------------------------------- bounded reading
-def read_limited(path: Path, max_bytes: int, name: str) -> bytes:
-    """The whole content of a small file, refusing one longer than ``max_bytes``.
+def open_regular(path: Path, name: str, *, streams: bool = False) -> int:
+    """A file descriptor of ``path`` opened for reading, refusing anything but a regular file.
 
-    Reads at most ``max_bytes + 1`` bytes, so ``/dev/zero`` or a huge file costs nothing.
+    The file is opened without blocking, so a FIFO (which would wait for a writer forever), a
+    device or a folder is refused before a byte is read; the descriptor is the caller's to close.
+    With ``streams``, a pipe or character device is accepted (``--tf <(...)``): opened without
+    blocking it cannot hang (a pipe without a writer reads as empty), and the caller bounds the
+    read.
     """
     try:
-        with open(path, "rb") as fh:
-            data = fh.read(max_bytes + 1)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
         raise ReadError(f"{name}: no such file") from None
     except IsADirectoryError:
-        raise ReadError(f"{name}: is a folder") from None
+        raise ReadError(f"{name}: is a folder, not a file") from None
+    except OSError as exc:
+        raise ReadError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+    except OSError as exc:
+        os.close(fd)
+        raise ReadError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    if not (stat.S_ISREG(mode) or (streams and (stat.S_ISFIFO(mode) or stat.S_ISCHR(mode)))):
+        os.close(fd)
+        kind = "a folder" if stat.S_ISDIR(mode) else "a pipe" if stat.S_ISFIFO(mode) else \
+            "a device or socket"
+        raise ReadError(f"{name}: is {kind}, not a regular file")
+    os.set_blocking(fd, True)
+    return fd
+
+
+def read_limited(path: Path, max_bytes: int, name: str) -> bytes:
+    """The whole content of a small regular file, refusing one longer than ``max_bytes``.
+
+    Reads at most ``max_bytes + 1`` bytes, so a huge file or ``/dev/zero`` costs nothing; a
+    folder or socket is refused, and a pipe is opened without blocking (:func:`open_regular`).
+    """
+    fd = open_regular(path, name, streams=True)
+    try:
+        with os.fdopen(fd, "rb") as fh:
+            data = fh.read(max_bytes + 1)
     except OSError as exc:
         raise ReadError(f"{name}: cannot read: {exc.strerror or exc}") from None
     if len(data) > max_bytes:
@@ -609,13 +649,13 @@ def _depth(value: Any) -> int:
     return deepest
 
 
-def load_json(path: Path, name: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
-    """Parse a small JSON file with bounded size and nesting; any failure is a ReadError.
+def parse_json(raw: bytes, name: str) -> Any:
+    """Parse JSON bytes with bounded nesting; any failure is a :class:`ReadError` naming ``name``.
 
-    Non-finite numbers (``NaN``, ``Infinity``, ``1e999``) are refused as well: no field of a
-    splinecast JSON file can use them.
+    Non-finite numbers (``NaN``, ``Infinity``, ``1e999``) and integers of more than
+    :data:`MAX_JSON_INT_DIGITS` digits are refused as well: no field of a file splinecast reads
+    can use them.
     """
-    raw = read_limited(path, max_bytes, name)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -630,8 +670,14 @@ def load_json(path: Path, name: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
             raise ValueError(f"number {shorten(token, 24)} is out of range")
         return number
 
+    def bounded_int(token: str) -> int:
+        if len(token.lstrip("-")) > MAX_JSON_INT_DIGITS:
+            raise ValueError(f"integer {shorten(token, 24)} is out of range")
+        return int(token)
+
     try:
-        value = json.loads(text, parse_constant=no_constant, parse_float=finite_float)
+        value = json.loads(text, parse_constant=no_constant, parse_float=finite_float,
+                           parse_int=bounded_int)
     except RecursionError:
         raise ReadError(f"{name}: JSON nested too deeply") from None
     except ValueError as exc:  # JSONDecodeError, over-long integers, NaN/Infinity
@@ -640,6 +686,31 @@ def load_json(path: Path, name: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
     if _depth(value) > MAX_JSON_DEPTH:
         raise ReadError(f"{name}: JSON nested more than {MAX_JSON_DEPTH} levels deep")
     return value
+
+
+def load_json(path: Path, name: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
+    """Parse a small JSON file with bounded size and nesting (:func:`parse_json`); any failure
+    is a ReadError."""
+    return parse_json(read_limited(path, max_bytes, name), name)
+
+
+def check_inside(path: Path, root: Path, label: str, *, allow_external: bool | None = None,
+                 root_name: str = "the store's folder") -> Path:
+    """``path`` with symbolic links resolved, refused unless it lies in ``root`` or below (or
+    the caller allows external files, see :func:`check_data_file`)."""
+    if allow_external is None:
+        allow_external = allow_external_default()
+    try:
+        target = path.resolve()
+        base = root.resolve()
+    except (OSError, RuntimeError) as exc:  # symlink loop
+        raise ReadError(f"{label} cannot be resolved ({exc})") from None
+    if not allow_external and target != base and base not in target.parents:
+        raise ReadError(
+            f"{label} lies outside {root_name} (it leads to {shorten(str(target), 80)}); pass "
+            f"--allow-external-data (or set {ENV_ALLOW_EXTERNAL}=1) if that is intended"
+        )
+    return target
 
 
 def read_exact(stream: IO[bytes], size: int, name: str, what: str = "data") -> np.ndarray:

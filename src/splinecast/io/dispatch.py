@@ -209,7 +209,7 @@ def read(
         from .omezarr import is_zarr, open_zarr
 
         if is_zarr(path) or path.suffix.lower() == ".zarr":
-            return open_zarr(path)
+            return open_zarr(path, allow_external=allow_external)
         from .dicom import read_dicom_series
 
         return read_dicom_series(path, allow_external=allow_external)

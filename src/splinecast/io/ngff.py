@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ReadError
+from ..errors.limits import shorten
 
 __all__ = [
     "NGFF_VERSION",
@@ -172,7 +173,10 @@ def _transform(entries: Any, ndim: int, where: str) -> tuple[np.ndarray, np.ndar
             raise ReadError(f"{where}: unsupported coordinate transformation {kind!r}")
         if "path" in entry and kind not in entry:
             raise ReadError(f"{where}: {kind} stored in a separate array is not supported")
-        values = np.asarray(entry.get(kind), dtype=np.float64)
+        try:
+            values = np.asarray(entry.get(kind), dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            values = np.full(0, np.nan)
         if values.shape != (ndim,) or not np.all(np.isfinite(values)):
             raise ReadError(f"{where}: {kind} must be {ndim} finite numbers, got {entry.get(kind)}")
         if kind == "scale":
@@ -192,7 +196,7 @@ def parse_image(attributes: dict[str, Any], label: str) -> NgffImage | None:
     """
     ome = attributes.get("ome")
     if isinstance(ome, dict) and "multiscales" in ome:  # 0.5: namespaced under "ome"
-        version = str(ome.get("version", "0.5"))
+        version = shorten(ome.get("version", "0.5"), 24).strip("'")
         multiscales = ome["multiscales"]
     elif "multiscales" in attributes:  # 0.4 and older: top level, version inside
         multiscales = attributes["multiscales"]
@@ -209,15 +213,21 @@ def parse_image(attributes: dict[str, Any], label: str) -> NgffImage | None:
     if not isinstance(axes, list) or not 2 <= len(axes) <= 5:
         raise ReadError(f"{label}: 'axes' must list 2 to 5 axes")
     names, types, units = [], [], []
-    for axis in axes:
+    for n, axis in enumerate(axes):
         if isinstance(axis, str):  # 0.3 lists bare names
             axis = {"name": axis}
-        names.append(str(axis.get("name")))
-        kind = axis.get("type")
-        if kind is None and names[-1].lower() in "xyz":
+        fields = (axis.get("name"), axis.get("type"), axis.get("unit")) \
+            if isinstance(axis, dict) else (None, None, None)
+        if not isinstance(fields[0], str) or not all(isinstance(v, str | None)
+                                                     for v in fields[1:]):
+            raise ReadError(f"{label}: axis {n} must have a text 'name' (and text 'type' and "
+                            f"'unit'), got {shorten(axis)}")
+        names.append(fields[0])
+        kind = fields[1]
+        if kind is None and names[-1].lower() in ("x", "y", "z"):
             kind = "space"
         types.append(kind)
-        units.append(axis.get("unit"))
+        units.append(fields[2])
     if len(set(names)) != len(names):
         raise ReadError(f"{label}: axis names must be unique, got {names}")
     spatial = tuple(i for i, t in enumerate(types) if t == "space")
@@ -247,6 +257,7 @@ def parse_image(attributes: dict[str, Any], label: str) -> NgffImage | None:
             )
         )
     name = ms.get("name")
+    downsampling = ms.get("type")
     return NgffImage(
         version=version,
         name=str(name) if name is not None else None,
@@ -255,5 +266,5 @@ def parse_image(attributes: dict[str, Any], label: str) -> NgffImage | None:
         units=tuple(units),
         spatial=spatial,
         datasets=tuple(datasets),
-        downsampling=ms.get("type"),
+        downsampling=downsampling if isinstance(downsampling, str) else None,
     )

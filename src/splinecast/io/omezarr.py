@@ -23,8 +23,11 @@ readers ignore them, as NGFF allows.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import stat
+import struct
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError, ReadError
+from ..errors import ParameterError, ReadError, limits
 from ..volume import GridGeometry, Volume
 from ._common import check_dtype, fmt_shape, one_line, require
 from .ngff import parse_image, spatial_order
@@ -53,6 +56,37 @@ ATTRIBUTE = "splinecast"
 #: Subgroup holding splinecast's per-brick tables: ``splinecast/<table>/<level>``.
 TABLES_GROUP = "splinecast"
 _MARKERS = ("zarr.json", ".zgroup", ".zarray", ".zattrs")
+#: Metadata files of Zarr v2 and v3 (and consolidated metadata): small JSON, validated first.
+_METADATA = frozenset((*_MARKERS, ".zmetadata"))
+#: First bytes of a zstd frame and of a blosc chunk header (version 2).
+_ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+
+
+def _zstd_content_size(data: bytes) -> int | None:
+    """The decompressed size a zstd frame header declares, ``None`` if it declares none."""
+    if len(data) < 5:
+        return None
+    descriptor = data[4]
+    fcs_flag, single = descriptor >> 6, (descriptor >> 5) & 1
+    window = 0 if single else 1
+    did = (0, 1, 2, 4)[descriptor & 3]
+    width = (1 if single else 0, 2, 4, 8)[fcs_flag]
+    at = 5 + window + did
+    if width == 0 or len(data) < at + width:
+        return None
+    size = int.from_bytes(data[at:at + width], "little")
+    return size + 256 if width == 2 else size
+
+
+def _declared_size(data: bytes) -> int | None:
+    """Bytes a compressed chunk says it decompresses to (zstd frame, blosc header), if known."""
+    if data.startswith(_ZSTD_MAGIC):
+        return _zstd_content_size(data)
+    if len(data) >= 16 and data[0] in (1, 2) and data[3] in (1, 2, 4, 8, 16):  # blosc
+        nbytes, blocksize, cbytes = struct.unpack("<III", data[4:16])
+        if cbytes == len(data):
+            return max(nbytes, blocksize)
+    return None
 
 def is_zarr(path: Path) -> bool:
     """``True`` for a folder that holds a Zarr group or array (v2 or v3)."""
@@ -63,15 +97,134 @@ def _zarr(path: Path) -> Any:
     return require("zarr", path, action="reading")
 
 
-def open_store(path: str | os.PathLike[str], mode: str = "r") -> Any:
-    """Open a local Zarr hierarchy (group or array) with zarr-python; read-only by default."""
-    zarr = _zarr(Path(path))
+def _guarded_store_class() -> type:
+    """``LocalStore`` whose every read goes through :mod:`splinecast.errors.limits` first."""
+    from zarr.abc.store import OffsetByteRequest, RangeByteRequest, SuffixByteRequest
     from zarr.storage import LocalStore
 
-    store = LocalStore(os.fspath(path), read_only=(mode == "r"))
+    class GuardedStore(LocalStore):
+        """A read-only local store that refuses, with one :class:`ReadError` naming the file:
+
+        - a folder, pipe, device or socket in place of a metadata or chunk file (never opened,
+          so a FIFO cannot block),
+        - a file that leads (through symbolic links or ``..`` in a key) outside the store's
+          folder, unless external data is allowed,
+        - metadata that is not small, valid JSON with finite numbers and bounded nesting,
+        - a chunk (or byte range) larger than the memory guard allows, and a compressed chunk
+          whose header declares more bytes than the guard allows.
+        """
+
+        allow_external: bool | None = None
+
+        def _read(self, key: str, prototype: Any, byte_range: Any) -> Any:
+            path = self.root / key
+            label = str(path)
+            try:
+                info = os.stat(path)
+            except (FileNotFoundError, NotADirectoryError):
+                return None  # missing: zarr decides (fill value, or "no such array")
+            except OSError as exc:
+                raise ReadError(f"{label}: cannot read: {exc.strerror or exc}") from None
+            if not stat.S_ISREG(info.st_mode):
+                kind = "a folder" if stat.S_ISDIR(info.st_mode) else "a pipe" \
+                    if stat.S_ISFIFO(info.st_mode) else "a device or socket"
+                raise ReadError(f"{label}: is {kind}, not a regular file")
+            limits.check_inside(path, self.root, label, allow_external=self.allow_external)
+            name = key.rsplit("/", 1)[-1]
+            if name in _METADATA:
+                if byte_range is not None:
+                    raise ReadError(f"{label}: partial read of a metadata file")
+                raw = limits.read_limited(path, limits.MAX_JSON_BYTES, label)
+                limits.parse_json(raw, label)
+                return prototype.buffer.from_bytes(raw)
+            size = info.st_size
+            if isinstance(byte_range, RangeByteRequest):
+                start, stop = byte_range.start, byte_range.end
+            elif isinstance(byte_range, OffsetByteRequest):
+                start, stop = byte_range.offset, size
+            elif isinstance(byte_range, SuffixByteRequest):
+                start, stop = max(0, size - byte_range.suffix), size
+            else:
+                start, stop = 0, size
+            if not 0 <= start <= stop <= size:
+                raise ReadError(f"{label}: bytes {start}..{stop} requested, the file has {size} "
+                                "(a corrupt shard index?)")
+            limits.check_memory(stop - start, "a chunk", label, ReadError)
+            fd = limits.open_regular(path, label)
+            with os.fdopen(fd, "rb") as fh:
+                fh.seek(start)
+                data = fh.read(stop - start)
+            declared = _declared_size(data)
+            if declared is not None:
+                limits.check_memory(declared, f"a chunk declaring {declared} bytes once "
+                                    "decompressed", label, ReadError)
+            return prototype.buffer.from_bytes(data)
+
+        def get_sync(self, key: str, *, prototype: Any = None, byte_range: Any = None) -> Any:
+            from zarr.core.buffer.core import default_buffer_prototype
+
+            self._ensure_open_sync()
+            return self._read(key, prototype or default_buffer_prototype(), byte_range)
+
+        async def get(self, key: str, prototype: Any = None, byte_range: Any = None) -> Any:
+            import asyncio
+
+            from zarr.core.buffer.core import default_buffer_prototype
+
+            if not self._is_open:
+                await self._open()
+            return await asyncio.to_thread(self._read, key,
+                                           prototype or default_buffer_prototype(), byte_range)
+
+        async def get_partial_values(self, prototype: Any, key_ranges: Any) -> list[Any]:
+            return [await self.get(key, prototype, byte_range) for key, byte_range in key_ranges]
+
+    return GuardedStore
+
+
+_GUARDED: list[type] = []
+
+
+def _refused(exc: BaseException) -> ReadError | None:
+    """The :class:`ReadError` of the guarded store inside an exception zarr may have wrapped."""
+    seen = 0
+    while exc is not None and seen < 8:
+        if isinstance(exc, ReadError):
+            return exc
+        if isinstance(exc, BaseExceptionGroup):
+            for inner in exc.exceptions:
+                found = _refused(inner)
+                if found is not None:
+                    return found
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return None
+
+
+def open_store(path: str | os.PathLike[str], mode: str = "r",
+               allow_external: bool | None = None) -> Any:
+    """Open a local Zarr hierarchy (group or array) with zarr-python; read-only by default.
+
+    Read-only stores go through the guarded store: metadata files are validated as JSON (size,
+    nesting, finite numbers), no file outside the store's folder is followed (unless
+    ``allow_external``), and a pipe, device or folder in place of a file is refused.
+    """
+    zarr = _zarr(Path(path))
+    if mode == "r":
+        if not _GUARDED:
+            _GUARDED.append(_guarded_store_class())
+        store = _GUARDED[0](os.fspath(path), read_only=True)
+        store.allow_external = allow_external
+    else:
+        from zarr.storage import LocalStore
+
+        store = LocalStore(os.fspath(path), read_only=False)
     try:
         return zarr.open(store=store, mode=mode)
     except Exception as exc:  # zarr raises several kinds for unreadable metadata
+        refused = _refused(exc)
+        if refused is not None:
+            raise refused from None
         raise ReadError(f"{path}: not a readable Zarr group or array ({one_line(exc)})") from None
 
 
@@ -126,11 +279,15 @@ class Level:
         """
         lo = np.clip(np.asarray(lo, dtype=np.int64), 0, self.shape)
         hi = np.clip(np.asarray(hi, dtype=np.int64), lo, self.shape)
+        box = tuple(int(v) for v in hi - lo)
+        limits.check_memory(2 * limits.nbytes(box, self.dtype.itemsize),
+                            f"reading {fmt_shape(box)} {self.dtype} voxels", self.label, ReadError)
         self._check_files(lo, hi)
         try:
             block = np.asarray(self.array[self._selection(lo, hi)])
         except Exception as exc:  # decoding, I/O and metadata errors all mean "unavailable"
-            raise self._diagnose(lo, hi, exc) from None
+            refused = _refused(exc)
+            raise (refused or self._diagnose(lo, hi, exc)) from None
         # The array's spatial axes in x, y, z order, then one copy into C order for the kernels.
         return np.ascontiguousarray(np.transpose(block, self.order))
 
@@ -161,18 +318,53 @@ class Level:
                     yield (int(i), int(j), int(k))
 
     def _check_files(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """In a store whose every chunk was written, a missing file is damage, not fill value."""
+        """Every file the box needs, before zarr opens any: a regular file (not a pipe, device
+        or folder) no larger than its chunk can be once encoded; in a store whose every chunk
+        was written, a missing file is damage, not fill value. A box needing more than
+        :data:`~splinecast.errors.limits.MAX_CHUNKS_PER_READ` files is refused."""
         if self.folder is None:
             return
         if not self.folder.is_dir():
             raise ReadError(f"{self.label}: level folder {self.folder} is gone")
-        if not self.complete:
-            return
         grid = self._grid()
+        first = lo // grid
+        last = (np.maximum(hi, lo + 1) - 1) // grid
+        count = math.prod(int(n) for n in last - first + 1)
+        if count > limits.MAX_CHUNKS_PER_READ:
+            raise ReadError(
+                f"{self.label}: reading voxels {lo.tolist()}..{hi.tolist()} needs {count} chunk "
+                f"files of {fmt_shape(grid)} voxels, more than {limits.MAX_CHUNKS_PER_READ}; "
+                "the store's chunks are too small"
+            )
+        bound = self._max_file_bytes()
         for unit in self._units(lo, hi, grid):
             path = self._file_of(unit)
-            if path is not None and not path.is_file():
-                raise ReadError(f"{self.label}: chunk file {path} is missing")
+            if path is None:
+                continue
+            try:
+                info = os.stat(path)
+            except (FileNotFoundError, NotADirectoryError):
+                if self.complete:
+                    raise ReadError(f"{self.label}: chunk file {path} is missing") from None
+                continue
+            except OSError as exc:
+                raise ReadError(f"{self.label}: chunk file {path} cannot be read: "
+                                f"{exc.strerror or exc}") from None
+            if not stat.S_ISREG(info.st_mode):
+                raise ReadError(f"{self.label}: chunk file {path} is not a regular file")
+            if info.st_size > bound:
+                raise ReadError(
+                    f"{self.label}: chunk file {path} holds {info.st_size} bytes, more than a "
+                    f"chunk of {fmt_shape(grid)} {self.dtype} voxels can take encoded ({bound})"
+                )
+
+    def _max_file_bytes(self) -> int:
+        """Largest size a file of this level can have: its voxels, twice (incompressible data
+        grows a little in every codec), plus the shard index and headers."""
+        outer = self.array.shards or self.array.chunks
+        inner = self.array.chunks
+        units = math.prod(-(-int(o) // int(i)) for o, i in zip(outer, inner, strict=False))
+        return 2 * limits.nbytes(outer, self.dtype.itemsize) + 64 * units + (1 << 16)
 
     def _diagnose(self, lo: np.ndarray, hi: np.ndarray, exc: Exception) -> ReadError:
         """Find the first chunk of the box that cannot be read and name it."""
@@ -313,13 +505,21 @@ class MultiscaleVolume(GridGeometry):
         index along x, y, z first), or ``None`` if the store has none."""
         if name not in self.attributes.get("tables", {}) or self.root is None:
             return None
+        where = f"{self.path}: table {name}/{level}"
         try:
-            return np.asarray(self.root[f"{TABLES_GROUP}/{name}/{level}"][...])
+            array = self.root[f"{TABLES_GROUP}/{name}/{level}"]
+            if not hasattr(array, "dtype") or np.dtype(array.dtype).kind not in "fiub":
+                raise ReadError(f"{where} does not hold numbers")
+            limits.check_memory(limits.nbytes(array.shape, np.dtype(array.dtype).itemsize),
+                                "the table", where, ReadError)
+            return np.asarray(array[...])
         except KeyError:
             return None
+        except ReadError:
+            raise
         except Exception as exc:
-            raise ReadError(f"{self.path}: table {name}/{level} cannot be read: "
-                            f"{one_line(exc)}") from None
+            refused = _refused(exc)
+            raise (refused or ReadError(f"{where} cannot be read: {one_line(exc)}")) from None
 
     def __repr__(self) -> str:
         shapes = ", ".join(fmt_shape(lv.shape) for lv in self.levels)
@@ -359,17 +559,35 @@ def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
     if ndim != len(select) + 3:
         raise ReadError(f"{label}: level {path!r} has {ndim} dimensions, the axes list "
                         f"{len(select) + 3}")
-    check_dtype(np.dtype(array.dtype), f"{label}: level {path!r}")
+    where = f"{label}: level {path!r}"
+    try:
+        dtype = np.dtype(array.dtype)
+    except Exception:  # a zarr data type numpy has no name for
+        raise ReadError(f"{where}: unsupported data type {limits.shorten(array.dtype)}") from None
+    check_dtype(dtype, where)
     spatial_shape = array.shape[len(select):]
     spatial_scale = scale[len(select):]
     spatial_translation = translation[len(select):]
+    shape = limits.check_shape([spatial_shape[a] for a in order], f"{where}: shape",
+                               error=ReadError)
+    spacing = limits.check_spacing([spatial_scale[a] for a in order], f"{where}: scale",
+                                   ReadError)
+    origin = limits.check_origin([spatial_translation[a] for a in order], spacing,
+                                 f"{where}: translation", ReadError)
+    outer = tuple(array.shards or array.chunks)
+    for what, grid in (("chunk", tuple(array.chunks)), ("shard", outer)):
+        limits.check_shape(grid, f"{where}: {what} shape", ndim=len(array.shape),
+                           error=ReadError)
+    limits.check_memory(limits.nbytes(outer, dtype.itemsize),
+                        f"one {fmt_shape(outer)} {'shard' if array.shards else 'chunk'}", where,
+                        ReadError)
     level = Level(
         index=index,
         path=path,
         array=array,
-        shape=tuple(int(spatial_shape[a]) for a in order),  # type: ignore[arg-type]
-        spacing=tuple(float(spatial_scale[a]) for a in order),  # type: ignore[arg-type]
-        origin=tuple(float(spatial_translation[a]) for a in order),  # type: ignore[arg-type]
+        shape=shape,  # type: ignore[arg-type]
+        spacing=spacing,
+        origin=origin,
         label=f"{label}/{path}",
         select=select,
         order=order,
@@ -382,7 +600,8 @@ def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
 
 
 def open_zarr(
-    path: str | os.PathLike[str], *, channel: int | None = None, timepoint: int | None = None
+    path: str | os.PathLike[str], *, channel: int | None = None, timepoint: int | None = None,
+    allow_external: bool | None = None,
 ) -> Any:
     """Open an OME-Zarr image or a plain Zarr array lazily (metadata only).
 
@@ -393,6 +612,9 @@ def open_zarr(
         Zarr array's folder.
     channel, timepoint : int, optional
         Which entry of a channel or time axis longer than 1 to read.
+    allow_external : bool, optional
+        Follow symbolic links to files outside the store's folder (default: refused, unless
+        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``).
 
     Returns
     -------
@@ -409,7 +631,29 @@ def open_zarr(
     path = Path(os.fspath(path))
     if not path.exists():
         raise ReadError(f"{path}: no such file or folder")
-    node = open_store(path)
+    with _zarr_calls(str(path)):
+        return _open_zarr(path, channel, timepoint, allow_external)
+
+
+@contextlib.contextmanager
+def _zarr_calls(label: str) -> Any:
+    """zarr-python reads metadata lazily (listing members, opening arrays): whatever it raises
+    on a damaged store becomes one ReadError; the guarded store's own refusal passes through."""
+    try:
+        yield
+    except ReadError:
+        raise
+    except ParameterError:
+        raise
+    except Exception as exc:  # zarr and numcodecs raise ValueError, TypeError, KeyError, ...
+        refused = _refused(exc)
+        raise (refused or ReadError(f"{label}: not a readable Zarr store "
+                                    f"({one_line(exc)})")) from None
+
+
+def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
+               allow_external: bool | None) -> MultiscaleVolume:
+    node = open_store(path, allow_external=allow_external)
     zarr = _zarr(path)
     label = str(path)
     attrs = _attrs(node)
@@ -424,8 +668,9 @@ def open_zarr(
         if len(series) > 1:
             warnings.warn(f"{label}: holds {len(series)} images; reading the first (0/)",
                           stacklevel=2)
-        return open_zarr(path / "0", channel=channel, timepoint=timepoint)
-    ours = attrs.get(ATTRIBUTE, {}) if isinstance(attrs.get(ATTRIBUTE), dict) else {}
+        return open_zarr(path / "0", channel=channel, timepoint=timepoint,
+                         allow_external=allow_external)
+    ours = _our_attributes(attrs.get(ATTRIBUTE), f"{label}: attribute {ATTRIBUTE!r}")
     kind = ours.get("kind")
     if kind is not None:
         opener = store_opener(kind)
@@ -445,12 +690,7 @@ def open_zarr(
     complete = bool(ours.get("complete_chunks", False))
     levels = []
     for index, dataset in enumerate(image.datasets):
-        try:
-            array = node[dataset.path]
-        except KeyError:
-            raise ReadError(
-                f"{label}: level {dataset.path!r} listed in the metadata is missing"
-            ) from None
+        array = _child(node, dataset.path, label)
         if not isinstance(array, zarr.Array):
             raise ReadError(f"{label}: level {dataset.path!r} is not an array")
         select = _leading_selection(tuple(array.shape), image.axis_names, n_lead, channel,
@@ -470,6 +710,50 @@ def open_zarr(
     metadata.update(ours.get("source_metadata", {}))
     return MultiscaleVolume(path=path, levels=levels, metadata=metadata, attributes=ours,
                             root=node)
+
+
+def _child(node: Any, key: str, label: str) -> Any:
+    """``node[key]``: zarr's errors on unreadable metadata become one ReadError naming it."""
+    try:
+        return node[key]
+    except KeyError:
+        raise ReadError(f"{label}: level {key!r} listed in the metadata is missing") from None
+    except Exception as exc:  # zarr raises ValueError, TypeError, ... for malformed metadata
+        refused = _refused(exc)
+        if refused is not None:
+            raise refused from None
+        folder = Path(label) / key
+        meta = next((folder / m for m in ("zarr.json", ".zarray") if (folder / m).exists()),
+                    folder)
+        raise ReadError(f"{label}: level {key!r} ({meta}) is not a readable Zarr array "
+                        f"({one_line(exc)})") from None
+
+
+def _our_attributes(value: Any, where: str) -> dict[str, Any]:
+    """splinecast's own root attribute, checked field by field (it drives the renderer)."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ReadError(f"{where} must be an object, got {limits.shorten(value)}")
+    ours = dict(value)
+    for key in ("brick", "ghost", "shard"):
+        if ours.get(key) is not None:
+            ours[key] = limits.check_count(ours[key], f"{where}: {key}", lo=0,
+                                           hi=limits.MAX_AXIS, error=ReadError)
+    if ours.get("value_range") is not None:
+        pair = ours["value_range"]
+        if not isinstance(pair, list | tuple) or len(pair) != 2:
+            raise ReadError(f"{where}: value_range must be two numbers, got "
+                            f"{limits.shorten(pair)}")
+        lo, hi = (limits.check_finite_number(v, f"{where}: value_range", error=ReadError)
+                  for v in pair)
+        if lo > hi:
+            raise ReadError(f"{where}: value_range must be (min, max), got {[lo, hi]}")
+        ours["value_range"] = [lo, hi]
+    for key in ("tables", "source_metadata"):
+        if key in ours and not isinstance(ours[key], dict):
+            raise ReadError(f"{where}: {key} must be an object, got {limits.shorten(ours[key])}")
+    return ours
 
 
 def _plain_array(path: Path, array: Any, label: str) -> MultiscaleVolume:

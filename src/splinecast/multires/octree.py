@@ -105,11 +105,20 @@ class BrickOctree:
                 self.notes.append(f"level {level.index} skipped: scale {ratio.tolist()} x level 0 "
                                   "is not 1 or 2 times the previous level's per axis")
                 continue
+            # level-L index = level-0 index * scale + offset
+            scale = spacing0 / np.asarray(level.spacing)
+            offset = (origin0 - np.asarray(level.origin)) / np.asarray(level.spacing)
+            last = (self.n0 - 1) * scale + offset
+            if np.any(offset < -1) or np.any(last > np.asarray(level.shape)):
+                # Bricks of this level would read windows outside its voxels.
+                self.notes.append(f"level {level.index} skipped: its voxels do not cover level 0 "
+                                  f"(translation {np.asarray(level.origin).tolist()}, shape "
+                                  f"{list(level.shape)})")
+                continue
             levels.append(level.index)
             factors.append(factor)
-            # level-L index = level-0 index * scale + offset
-            scales.append(spacing0 / np.asarray(level.spacing))
-            offsets.append((origin0 - np.asarray(level.origin)) / np.asarray(level.spacing))
+            scales.append(scale)
+            offsets.append(offset)
         self.levels = levels
         self.factors = np.array(factors)
         self._scale = np.array(scales)

@@ -120,12 +120,12 @@ def _from_level(level: Level, label: str, **kw: Any) -> _Source:
     return _Source(level.shape, level.dtype, level.read, label, **kw)
 
 
-def _open_source(source: Any) -> _Source:
+def _open_source(source: Any, allow_external: bool | None = None) -> _Source:
     """Wrap any accepted source; nothing is read here."""
     if isinstance(source, (str, os.PathLike)):
         from ..io import read
 
-        source = read(source)
+        source = read(source, allow_external=allow_external)
     if isinstance(source, MultiscaleVolume):
         level = source.levels[0]
         return _from_level(level, str(source.path), spacing=source.spacing,
@@ -255,6 +255,7 @@ def build_pyramid(
     shard: int | None = None,
     workers: int | None = None,
     progress: bool = True,
+    allow_external: bool | None = None,
     kind: str = "plain",
     degree: int = 3,
     chunk: int = 8,
@@ -293,6 +294,9 @@ def build_pyramid(
         Threads (default: up to 4, at most the cores). Peak memory grows with it.
     progress : bool
         Print per-level progress on stderr.
+    allow_external : bool, optional
+        When ``source`` is a path: let its header name data files outside its folder (see
+        :func:`splinecast.read`; default: refused unless ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``).
     kind : str
         ``"plain"`` (the binomial brick pyramid above) or ``"wavelet"``.
     degree, chunk, dtype
@@ -315,7 +319,8 @@ def build_pyramid(
         from .wavelet_store import build_wavelet_pyramid
 
         return build_wavelet_pyramid(source, path, degree, levels, chunk, dtype, overwrite,
-                                     name=name, progress=progress)
+                                     name=name, progress=progress,
+                                     allow_external=allow_external)
     if kind != "plain":
         raise ParameterError(f"kind must be 'plain' or 'wavelet', got {kind!r}")
     zarr = require("zarr", path, action="writing", error=ParameterError)
@@ -330,7 +335,7 @@ def build_pyramid(
         raise ParameterError(f"levels must be a positive integer, got {levels!r}")
     if path.exists() and not overwrite:
         raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
-    src = _open_source(source)
+    src = _open_source(source, allow_external)
     if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
         raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
                              f"shape {src.shape}")

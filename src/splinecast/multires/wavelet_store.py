@@ -129,6 +129,7 @@ def build_wavelet_pyramid(
     name: str | None = None,
     block: int = BLOCK,
     progress: bool = False,
+    allow_external: bool | None = None,
 ) -> WaveletVolume:
     """Write the spline-wavelet decomposition of ``source`` to a Zarr store at ``path``.
 
@@ -156,6 +157,9 @@ def build_wavelet_pyramid(
         ``60 (2 block + 8)^3`` bytes.
     progress : bool
         Print one line per level on stderr.
+    allow_external : bool, optional
+        When ``source`` is a path: let its header name data files outside its folder (as in
+        :func:`splinecast.build_pyramid`).
 
     Returns
     -------
@@ -178,7 +182,7 @@ def build_wavelet_pyramid(
         raise ParameterError(f"levels must be a positive integer, got {levels!r}")
     if path.exists() and not overwrite:
         raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
-    src = _open_source(source)
+    src = _open_source(source, allow_external)
     if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
         raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
                              f"shape {src.shape}")
