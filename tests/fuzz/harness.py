@@ -98,8 +98,9 @@ def warm_up(seed_mains: list[tuple[Path, str]], models: Iterable[str]) -> None:
     with _quiet_directory() as out:
         tf = out / "tf.json"
         sc.TransferFunction([[0, 0], [1, 0.5]], (0, 1)).save(tf)
-        # Kernels are compiled per voxel type and per read-only flag: a memory-mapped file
-        # (.npy) is read-only, a decoded one (.npz) is not.
+        # Kernels are compiled per voxel type. A memory-mapped file (.npy) and a decoded one
+        # (.npz) share them (grids are handed over as read-only views); both are still read
+        # here so the readers' own compiled helpers are loaded in the parent too.
         sources = ["demo:sphere?size=10"]
         for dtype in WARM_DTYPES:
             data = (np.indices((6, 5, 4)).sum(axis=0) % 2).astype(dtype)
