@@ -176,8 +176,12 @@ def test_ctrl_c_leaves_no_partial_movie(tmp_path, name):
     target = tmp_path / name
     cmd = [sys.executable, "-m", "splinecast.cli", "movie", SRC, "--frames", "5000",
            "--size", "32x32", "-o", str(target)]
+    # As from a terminal: Ctrl-C's default action. The test runner's worker process may ignore
+    # SIGINT (pytest-xdist does), and an ignored signal stays ignored across exec, which would
+    # keep Python from installing its KeyboardInterrupt handler in the child.
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         for line in proc.stderr:  # the first progress line: frames are being written
             if line.startswith("frames ["):
