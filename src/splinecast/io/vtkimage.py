@@ -514,7 +514,8 @@ def read_legacy_vtk(path: Path, array: str | None = None) -> Volume:
     kind = _DATASET.search(head)
     if kind is None or kind.group(1).upper() != b"STRUCTURED_POINTS":
         found = kind.group(1).decode(errors="replace") if kind else "no DATASET"
-        raise ReadError(f"{path}: legacy VTK {limits.printable(limits.shorten(found, 40))}, "
+        found = found if len(found) <= 40 else found[:37] + "..."
+        raise ReadError(f"{path}: legacy VTK {limits.printable(found)}, "
                         "not STRUCTURED_POINTS (image data)")
     _check_legacy_header(path, str(path))
     reader = legacy.vtkStructuredPointsReader()
