@@ -380,6 +380,8 @@ def test_vti_encodings_still_read(tmp_path):
     (b'NumberOfComponents="1"', b'NumberOfComponents="2147483647"',
      ["NumberOfComponents must be an integer >= 1 and at most 1024"]),
     (b'type="UInt16"', b'type="Bogus"', ["unknown data type 'Bogus'"]),
+    # VTK's binary string decoder crashed the process on such an array (fuzz case #3761).
+    (b'type="UInt16"', b'type="String"', ["'v'", "String arrays are read only as ascii field"]),
     (b'format="appended"', b'format="hex"', ["unknown format 'hex'"]),
     (b'header_type="UInt32"', b'header_type="UInt8"', ["unknown header_type 'UInt8'"]),
     (b'byte_order="LittleEndian"', b'byte_order="Middle"', ["unknown byte_order"]),

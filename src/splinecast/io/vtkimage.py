@@ -271,6 +271,12 @@ def _check_vti_header(path: Path, label: str) -> bytes:
                 raise ReadError(f"{label}: array {limits.shorten(name)}: unknown format "
                                 f"{limits.shorten(fmt)}")
             if kind == "String":
+                # Image data is numeric; a string array is at most metadata. VTK's binary string
+                # decoder trusts its input (a damaged one crashes the process), so only ASCII
+                # string arrays of the field data are passed on.
+                if section in ("PointData", "CellData") or fmt != "ascii":
+                    raise ReadError(f"{label}: array {limits.shorten(name)}: String arrays are "
+                                    "read only as ascii field data")
                 continue  # sizes of strings are not known in advance; the memory bound holds
             if fmt == "appended":
                 offset = limits.check_count(
