@@ -243,6 +243,21 @@ class _Progress:
 
 
 # --------------------------------------------------------------------------- build
+def open_pyramid_source(source: Any, path: Path, levels: int | None, overwrite: bool,
+                        allow_external: bool | None) -> _Source:
+    """The checks every pyramid builder makes before reading anything (``levels``, an existing
+    ``path``), then ``source`` opened lazily and its voxel type and rank checked."""
+    if levels is not None and (isinstance(levels, bool) or int(levels) != levels or levels < 1):
+        raise ParameterError(f"levels must be a positive integer, got {levels!r}")
+    if path.exists() and not overwrite:
+        raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
+    src = _open_source(source, allow_external)
+    if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
+        raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
+                             f"shape {src.shape}")
+    return src
+
+
 def build_pyramid(
     source: Any,
     path: str | os.PathLike[str],
@@ -331,14 +346,7 @@ def build_pyramid(
     if not integer or not 4 <= brick <= 1024:
         raise ParameterError(f"brick must be an integer from 4 to 1024, got {brick!r}")
     brick = int(brick)
-    if levels is not None and (isinstance(levels, bool) or int(levels) != levels or levels < 1):
-        raise ParameterError(f"levels must be a positive integer, got {levels!r}")
-    if path.exists() and not overwrite:
-        raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
-    src = _open_source(source, allow_external)
-    if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
-        raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
-                             f"shape {src.shape}")
+    src = open_pyramid_source(source, path, levels, overwrite, allow_external)
     if min(src.shape) < 1:
         raise ParameterError(f"{src.label}: the volume is empty ({fmt_shape(src.shape)})")
     unit_name = ngff_unit(unit if unit is not None else src.metadata.get("units"))

@@ -53,7 +53,7 @@ from .._atomic import atomic_directory
 from ..errors import ParameterError, ReadError
 from ..io._common import fmt_shape, one_line, require
 from ..io.omezarr import ATTRIBUTE
-from ..volume import SUPPORTED_DTYPES, GridGeometry
+from ..volume import GridGeometry
 from .wavelet_filters import spline_wavelet
 from .wavelet_layout import DETAIL_BANDS, WaveletLayout
 from .wavelet_transform import WaveletPyramid, decompose
@@ -173,19 +173,12 @@ def build_wavelet_pyramid(
         ``overwrite``. Nothing is left at ``path`` on failure.
     """
     zarr = require("zarr", path, action="writing", error=ParameterError)
-    from .pyramid import _open_source
+    from .pyramid import open_pyramid_source
 
     path = Path(os.fspath(path))
     if isinstance(degree, bool) or degree not in (1, 2, 3):
         raise ParameterError(f"degree must be 1, 2 or 3, got {degree!r}")
-    if levels is not None and (isinstance(levels, bool) or int(levels) != levels or levels < 1):
-        raise ParameterError(f"levels must be a positive integer, got {levels!r}")
-    if path.exists() and not overwrite:
-        raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
-    src = _open_source(source, allow_external)
-    if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
-        raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
-                             f"shape {src.shape}")
+    src = open_pyramid_source(source, path, levels, overwrite, allow_external)
     if min(src.shape) < 2:
         raise ParameterError(f"{src.label}: a wavelet pyramid needs at least 2 voxels per axis, "
                              f"got {fmt_shape(src.shape)}")
