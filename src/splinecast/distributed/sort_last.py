@@ -38,8 +38,19 @@ Equality
     (1e-12) with a fixed step. Early ray termination (``DVRSettings(termination=...)``) and the
     opacity-adaptive step depend on the opacity in front of a segment, which a share does not
     know: they act per share, and the image differs from the single-process one by up to what
-    they leave out. The half-opacity depth of a ray whose front partial image stays below 1/2
-    is the back share's own (see :func:`splinecast.render.dvr.combine_dvr`).
+    they leave out.
+
+DVR depth
+    A DVR frame's depth is where the ray's opacity first reaches 1/2. A share that starts from
+    zero opacity places that point where *its own* opacity reaches 1/2, which is right only where
+    nothing lies in front of it. So a DVR render adds a second, small round of tasks: the
+    opacity in front of every share (top down through the k-d tree: a front child sees its
+    parent's, a back child that over the front child's partial image, :func:`opacity_behind`),
+    then each share traces again only the pixels where the opacity passes 1/2 inside it, starting
+    from the opacity in front (:func:`refine_dvr_depth`), and the final task puts those depths
+    in. The depth is then the single-process render's wherever the colours are (a fixed step, no
+    early termination); the extra tracing is limited to the pixels whose crossing lies behind
+    another share.
 
 Defaults: the automatic isovalue, MIP window and transfer function come from the pyramid's
 coarsest level, read by the client (as :class:`~splinecast.multires.scene.MultiscaleScene` does);
@@ -70,6 +81,7 @@ from ..multires.cache import read_bricks
 from ..multires.draw import CutRenderer, Piece, screen_rect
 from ..multires.octree import DEFAULT_BRICK, BrickOctree
 from ..multires.scene import BORDER_RULES
+from ..render.dvr import Dvr
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
 from ..scene import Scene, check_iso, finish_frame, prepare_render
@@ -399,9 +411,65 @@ def combine_partials(front: Partial, back: Partial, camera: Camera, options: dic
         return Partial(rect, state, counts, stats)  # type: ignore[arg-type]
 
 
+def opacity_behind(prefix: np.ndarray | None, front: Partial,
+                   camera: Camera) -> np.ndarray | None:
+    """Worker task (DVR): the opacity per pixel in front of a back child, ``prefix`` (the
+    opacity in front of the parent; ``None``: nothing) over the front child's opacity, with the
+    formula of the DVR combine."""
+    if front.rect is None:
+        return prefix
+    alpha = np.zeros((camera.height, camera.width)) if prefix is None else prefix.copy()
+    c0, r0, w, h = front.rect
+    window = alpha[r0:r0 + h, c0:c0 + w]
+    window += (1.0 - window) * front.state[0][..., 3]
+    return alpha
+
+
+#: What a DVR pixel's opacity is set to so that the trace leaves it alone: every threshold of
+#: early termination is at most 2 (``DVRSettings(termination=None)`` uses 2).
+_SKIP_OPACITY = 2.0
+
+
+def refine_dvr_depth(share: Share, camera: Camera, options: dict[str, Any], header: VolumeInfo,
+                     token: str, prefix: np.ndarray | None,
+                     own: Partial) -> tuple[tuple[int, int, int, int], np.ndarray] | None:
+    """Worker task (DVR): the half-opacity depth of the pixels whose opacity passes 1/2 inside
+    this share but had some opacity in front of it.
+
+    Those pixels are traced again through the share's bricks, starting from the opacity in
+    front (``prefix``), so the sample where the running opacity reaches 1/2 is found as the
+    single-process ray finds it. Returns the bounding rectangle of those pixels and their depths
+    (``inf`` elsewhere in it), or ``None`` when the share has none.
+    """
+    if prefix is None or own.rect is None:
+        return None  # nothing in front of this share: its own depth is the ray's
+    c0, r0, w, h = own.rect
+    front = prefix[r0:r0 + h, c0:c0 + w]
+    alpha = own.state[0][..., 3]
+    cross = (front > 0.0) & (front < 0.5) & (front + (1.0 - front) * alpha >= 0.5)
+    if not cross.any():
+        return None
+    rows, cols = np.nonzero(cross)
+    a0, a1, b0, b1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    rect = (int(c0 + b0), int(r0 + a0), int(b1 - b0), int(a1 - a0))
+    cross = cross[a0:a1, b0:b1]
+    with worker._lock, _cache_lock:
+        worker._use_worker_threads()
+        loaded = _share(share)
+        request = _request(token, header, camera, options)
+        tile = camera.tile(*rect)
+        state = new_state(request.setup, tile)
+        state[0][..., 3] = np.where(cross, front[a0:a1, b0:b1], _SKIP_OPACITY)
+        counts = counters(tile.height, tile.width)
+        loaded.renderer.trace(loaded.pieces, request.setup, tile, state, counts, request.planes)
+    return rect, np.where(cross, state[1], np.inf)
+
+
 def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], header: VolumeInfo,
-                   token: str) -> Frame:
-    """Worker task: the :class:`Frame` of the root's partial image (shading, colours)."""
+                   token: str, *depths: tuple[tuple[int, int, int, int], np.ndarray] | None
+                   ) -> Frame:
+    """Worker task: the :class:`Frame` of the root's partial image (shading, colours), with the
+    DVR depths of :func:`refine_dvr_depth` put in."""
     with worker._lock, _cache_lock:
         worker._use_worker_threads()
         start = time.perf_counter()
@@ -412,6 +480,16 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
                            new_state(setup, camera), counters(camera.height, camera.width),
                            part.stats)
         state, counts = _widen(part, (0, 0, camera.width, camera.height), setup, camera)
+        refined = 0
+        for item in depths:
+            if item is None:
+                continue
+            (c0, r0, w, h), depth = item
+            window = state[1][r0:r0 + h, c0:c0 + w]
+            found = np.isfinite(depth)
+            # A crossing the second trace missed by rounding keeps the share's own depth.
+            window[found] = depth[found]
+            refined += int(found.sum())
         out = finish_state(setup, state, camera)
         # Fresh stats: the cached request is shared by renders of the same options.
         request = dataclasses.replace(request, stats=dict(request.stats))
@@ -425,6 +503,8 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
             "partial_bytes": int(part.stats["moved"] + part.nbytes),
             "pieces_traced": int(part.stats.get("pieces_traced", 0)),
         })
+        if isinstance(setup, Dvr):
+            frame.stats["depth_refined_pixels"] = refined
         frame.stats["finish_ms"] = (time.perf_counter() - start) * 1e3
         return frame
 
@@ -588,16 +668,26 @@ class SortLastScene:
 
         start = time.perf_counter()
         options = _render_options(camera, args, kwargs)
-        prepare_request(self.volume, camera, options)  # a user error fails here, on the client
+        # A user error fails here, on the client.
+        request = prepare_request(self.volume, camera, options)
         token = tokenize(camera.pixel_basis().tolist(), camera.width, camera.height, options)
         leaves = {s.part: self._submit(render_share, s, camera, options, self.volume, token,
                                        part=s.part) for s in self.shares}
-        root = self._reduce(self.tree, leaves, camera, options, token)
-        future = self._submit(finish_partial, root, camera, options, self.volume, token)
+        nodes: dict[int, Future] = {}
+        root = self._reduce(self.tree, leaves, camera, options, token, nodes)
+        depths: list[Future] = []
+        if isinstance(request.setup, Dvr):
+            prefixes: dict[int, Any] = {}
+            self._opacity_in_front(self.tree, None, nodes, camera, prefixes)
+            depths = [self._submit(refine_dvr_depth, s, camera, options, self.volume, token,
+                                   prefixes[s.part], leaves[s.part], part=s.part)
+                      for s in self.shares if prefixes[s.part] is not None]
+        future = self._submit(finish_partial, root, camera, options, self.volume, token,
+                              *depths)
         try:
             frame = future.result()
         except SplinecastError as exc:
-            self.client.cancel([future, root, *leaves.values()])
+            self.client.cancel([future, root, *leaves.values(), *nodes.values(), *depths])
             raise exc.with_traceback(None) from None
         frame.stats.update(shares=len(self.shares), composite_levels=self.tree.depth(),
                            frame_bytes=int(sum(getattr(frame, n).nbytes for n in _FIELDS
@@ -606,13 +696,30 @@ class SortLastScene:
         return frame
 
     def _reduce(self, node: KdNode, leaves: dict[int, Future], camera: Camera,
-                options: dict[str, Any], token: str) -> Future:
+                options: dict[str, Any], token: str, nodes: dict[int, Future]) -> Future:
+        """The merge tasks below ``node``; ``nodes`` gets every node's partial image (by id)."""
         if node.leaf:
-            return leaves[node.part]
-        low = self._reduce(node.low, leaves, camera, options, token)  # type: ignore[arg-type]
-        high = self._reduce(node.high, leaves, camera, options, token)  # type: ignore[arg-type]
+            nodes[id(node)] = leaves[node.part]
+            return nodes[id(node)]
+        low = self._reduce(node.low, leaves, camera, options, token, nodes)  # type: ignore[arg-type]
+        high = self._reduce(node.high, leaves, camera, options, token, nodes)  # type: ignore[arg-type]
         front, back = (low, high) if self._low_in_front(node, camera) else (high, low)
-        return self._submit(combine_partials, front, back, camera, options, self.volume, token)
+        nodes[id(node)] = self._submit(combine_partials, front, back, camera, options,
+                                       self.volume, token)
+        return nodes[id(node)]
+
+    def _opacity_in_front(self, node: KdNode, prefix: Future | None, nodes: dict[int, Future],
+                          camera: Camera, out: dict[int, Any]) -> None:
+        """Tasks of the opacity in front of every share (DVR depth), top down: ``out[part]``
+        is a future of a full-image opacity, or ``None`` for the share nothing is in front of."""
+        if node.leaf:
+            out[node.part] = prefix
+            return
+        low_first = self._low_in_front(node, camera)
+        front, back = (node.low, node.high) if low_first else (node.high, node.low)
+        self._opacity_in_front(front, prefix, nodes, camera, out)  # type: ignore[arg-type]
+        behind = self._submit(opacity_behind, prefix, nodes[id(front)], camera)
+        self._opacity_in_front(back, behind, nodes, camera, out)  # type: ignore[arg-type]
 
     def _low_in_front(self, node: KdNode, camera: Camera) -> bool:
         """Whether the bricks below ``node``'s split plane come first along the camera's rays."""

@@ -191,13 +191,30 @@ register(MultiIsoMode,
 
 @jit(parallel=True)
 def combine_multi_iso(front: tuple, back: tuple, out: tuple) -> None:
-    """``out`` = ``front`` over ``back``: composited colour, the front's first crossing if any."""
+    """``out`` = ``front`` over ``back``: composited colour, the front's first crossing if any.
+
+    A front that reached :data:`OPAQUE` hides the back entirely, as the single-pass ray stops
+    there. A back segment that crosses that opacity only after the front's remaining
+    transparency is applied cannot stop where the single pass would (it did not know the front's
+    opacity), so such a pixel may differ from the single-pass one by less than ``1 - OPAQUE``.
+    """
     fa, ff, fn, fface, fl, flast = front
     ba, bf, bn, bface, bl, blast = back
     oa, of, on, oface, ol, olast = out
     height, width = ff.shape
     for row in prange(height):
         for col in range(width):
+            if fa[row, col, 3] >= OPAQUE:
+                for c in range(4):
+                    oa[row, col, c] = fa[row, col, c]
+                of[row, col] = ff[row, col]
+                oface[row, col] = fface[row, col]
+                for c in range(3):
+                    on[row, col, c] = fn[row, col, c]
+                ol[row, col] = fl[row, col]
+                olast[row, col, 0] = flast[row, col, 0]
+                olast[row, col, 1] = flast[row, col, 1]
+                continue
             rest = 1.0 - fa[row, col, 3]
             for c in range(4):
                 oa[row, col, c] = fa[row, col, c] + rest * ba[row, col, c]
