@@ -319,7 +319,7 @@ def sort_last(args: argparse.Namespace) -> None:
             local.render(small, **options)
             runs: dict[str, list[float]] = {k: [] for k in (
                 "sort_last_s", "local_2threads_s", "share_trace_max_s", "share_trace_sum_s",
-                "merge_tasks_s", "finish_s", "moved_bytes")}
+                "merge_tasks_s", "finish_s", "moved_bytes", "dvr_depth_refine_s")}
             for _ in range(repeats):
                 before = sum(client.run(_moved_between_workers).values())
                 frame = None
@@ -336,6 +336,7 @@ def sort_last(args: argparse.Namespace) -> None:
                 runs["share_trace_sum_s"].append(st["share_trace_ms_sum"] / 1e3)
                 runs["merge_tasks_s"].append(st["composite_ms"] / 1e3)
                 runs["finish_s"].append(st["finish_ms"] / 1e3)
+                runs["dvr_depth_refine_s"].append(st.get("depth_refine_ms", 0.0) / 1e3)
                 runs["local_2threads_s"].append(timed(lambda options=options: local.render(
                     camera, **options)))
             rows[mode] = {"runs": runs,
@@ -425,6 +426,11 @@ def markdown_sort_last(r: dict) -> str:
             f"{row['merge_in_process_s']:.3f} | {row['partial_bytes'] / mib:.1f} | "
             f"{md['moved_bytes'] / mib:.1f} | {row['frame_bytes'] / mib:.1f} |")
     mo = r["model"]
+    dvr = r["modes"].get("dvr", {}).get("median", {})
+    if "dvr_depth_refine_s" in dvr:
+        lines += ["", f"DVR depth: the shares' second trace of the pixels whose opacity passes "
+                  f"1/2 behind another share took {dvr['dvr_depth_refine_s']:.2f} s in all "
+                  f"(included in the sort-last time)."]
     lines += [
         "",
         f"Per-task overhead {mo['task_overhead_s'] * 1e3:.1f} ms (200 empty tasks), worker -> "

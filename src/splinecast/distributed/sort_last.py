@@ -432,14 +432,15 @@ _SKIP_OPACITY = 2.0
 
 def refine_dvr_depth(share: Share, camera: Camera, options: dict[str, Any], header: VolumeInfo,
                      token: str, prefix: np.ndarray | None,
-                     own: Partial) -> tuple[tuple[int, int, int, int], np.ndarray] | None:
+                     own: Partial) -> tuple[tuple[int, int, int, int], np.ndarray, float] | None:
     """Worker task (DVR): the half-opacity depth of the pixels whose opacity passes 1/2 inside
     this share but had some opacity in front of it.
 
     Those pixels are traced again through the share's bricks, starting from the opacity in
     front (``prefix``), so the sample where the running opacity reaches 1/2 is found as the
-    single-process ray finds it. Returns the bounding rectangle of those pixels and their depths
-    (``inf`` elsewhere in it), or ``None`` when the share has none.
+    single-process ray finds it. Returns the bounding rectangle of those pixels, their depths
+    (``inf`` elsewhere in it) and the time the second trace took (ms), or ``None`` when the share
+    has none.
     """
     if prefix is None or own.rect is None:
         return None  # nothing in front of this share: its own depth is the ray's
@@ -455,6 +456,7 @@ def refine_dvr_depth(share: Share, camera: Camera, options: dict[str, Any], head
     cross = cross[a0:a1, b0:b1]
     with worker._lock, _cache_lock:
         worker._use_worker_threads()
+        start = time.perf_counter()
         loaded = _share(share)
         request = _request(token, header, camera, options)
         tile = camera.tile(*rect)
@@ -462,11 +464,12 @@ def refine_dvr_depth(share: Share, camera: Camera, options: dict[str, Any], head
         state[0][..., 3] = np.where(cross, front[a0:a1, b0:b1], _SKIP_OPACITY)
         counts = counters(tile.height, tile.width)
         loaded.renderer.trace(loaded.pieces, request.setup, tile, state, counts, request.planes)
-    return rect, np.where(cross, state[1], np.inf)
+        ms = (time.perf_counter() - start) * 1e3
+    return rect, np.where(cross, state[1], np.inf), ms
 
 
 def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], header: VolumeInfo,
-                   token: str, *depths: tuple[tuple[int, int, int, int], np.ndarray] | None
+                   token: str, *depths: tuple[tuple[int, int, int, int], np.ndarray, float] | None
                    ) -> Frame:
     """Worker task: the :class:`Frame` of the root's partial image (shading, colours), with the
     DVR depths of :func:`refine_dvr_depth` put in."""
@@ -480,11 +483,12 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
                            new_state(setup, camera), counters(camera.height, camera.width),
                            part.stats)
         state, counts = _widen(part, (0, 0, camera.width, camera.height), setup, camera)
-        refined = 0
+        refined, refine_ms = 0, 0.0
         for item in depths:
             if item is None:
                 continue
-            (c0, r0, w, h), depth = item
+            (c0, r0, w, h), depth, ms = item
+            refine_ms += ms
             window = state[1][r0:r0 + h, c0:c0 + w]
             found = np.isfinite(depth)
             # A crossing the second trace missed by rounding keeps the share's own depth.
@@ -505,6 +509,7 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
         })
         if isinstance(setup, Dvr):
             frame.stats["depth_refined_pixels"] = refined
+            frame.stats["depth_refine_ms"] = refine_ms
         frame.stats["finish_ms"] = (time.perf_counter() - start) * 1e3
         return frame
 
