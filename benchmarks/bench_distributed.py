@@ -122,6 +122,8 @@ def main() -> None:
     parser.add_argument("--sort-last-image", type=int, default=None,
                         help="image side of the sort-last renders (default 1024; quick 256)")
     parser.add_argument("--sort-last-repeats", type=int, default=3)
+    parser.add_argument("--sort-first-repeats", type=int, default=None,
+                        help="interleaved runs of the sort-first part (default 5; quick 3)")
     parser.add_argument("--sort-last-modes", default="iso,mip,dvr",
                         help="comma-separated modes of the sort-last part")
     parser.add_argument("--pyramid-dir", default="/tmp/splinecast-bench-pyramids")
@@ -141,6 +143,7 @@ def sort_first(args: argparse.Namespace) -> None:
     else:
         source, iso, frames, movie_size, big, repeats = (
             "demo:marschner-lobb?size=128", 0.5, 120, (512, 512), (2048, 2048), 5)
+    repeats = args.sort_first_repeats or repeats
     load_before = os.getloadavg()
     volume = sc.read(source)
     scene = sc.Scene(volume)
@@ -212,7 +215,8 @@ def sort_first(args: argparse.Namespace) -> None:
         "machine": describe(),
         "load_average_before": load_before,
         "load_average_after": os.getloadavg(),
-        "command": "python benchmarks/bench_distributed.py" + (" --quick" if args.quick else ""),
+        "command": "python benchmarks/bench_distributed.py" + (" --quick" if args.quick else "")
+                   + (f" --sort-first-repeats {repeats}" if args.sort_first_repeats else ""),
         "source": source, "iso": iso, "frames": frames, "movie_size": movie_size,
         "frame_size": big, "repeats": repeats, "tiles_on_2_workers": tiles_2w,
         "runs_s": runs, "median_s": med,
