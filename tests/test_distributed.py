@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import os
 import signal
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from dask_faults import hold_worker
 from PIL import Image
 
 import splinecast as sc
@@ -215,15 +215,7 @@ def test_a_worker_killed_during_a_batch_is_survived(client, scenes, volume):
     pids = client.run(os.getpid)
     victim, survivor = sorted(pids)
 
-    def hold(name):
-        distributed.Event(name).wait()
-
-    release = distributed.Event("release-survivor", client=client)
-    blocker = client.submit(hold, "release-survivor", workers=[survivor], pure=False)
-    deadline = time.monotonic() + 60
-    while not client.processing(workers=[survivor])[survivor]:
-        assert time.monotonic() < deadline, "the survivor never started the holding task"
-        time.sleep(0.01)
+    release, blocker = hold_worker(client, survivor, "release-survivor")
     frames = []
     for frame in scenes["s31"].render_many(path, iso=0.5):
         if not frames:

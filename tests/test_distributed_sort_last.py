@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dask_faults import hold_worker
 
 import splinecast as sc
 from splinecast.distributed import DistributedScene, SceneSource, SortLastScene, VolumeInfo
@@ -302,15 +303,8 @@ def test_a_worker_killed_during_a_render_is_survived(client, store, levels):
     victim = scene.workers[0]
     survivor = scene.workers[1]
 
-    def hold(name):
-        distributed.Event(name).wait()
-
-    release = distributed.Event("release-sort-last-survivor", client=client)
-    blocker = client.submit(hold, "release-sort-last-survivor", workers=[survivor], pure=False)
+    release, blocker = hold_worker(client, survivor, "release-sort-last-survivor")
     deadline = time.monotonic() + 60
-    while not client.processing(workers=[survivor])[survivor]:
-        assert time.monotonic() < deadline, "the survivor never started the holding task"
-        time.sleep(0.01)
     result: dict[str, object] = {}
 
     def render() -> None:
