@@ -82,7 +82,7 @@ def test_lazy_details_give_the_in_memory_bricks_and_read_only_what_is_active(tmp
     eye = np.array([-3.0, -3.0, -3.0])
     selection = select(lay, wv.ranges, eye, 0.9)
     assert 0 < sum(a.sum() for a in selection.active) < sum(a.size for a in selection.active)
-    lazy = ChunkReconstructor(wv.pyramid, loader=wv.load_details)
+    lazy = ChunkReconstructor(wv.pyramid, loader=wv.read_detail_block)
     stats = lazy.update(selection)
     ref = ChunkReconstructor(memory)
     ref.update(selection)

@@ -26,7 +26,8 @@ Seams
 ``frame.stats`` adds ``lod`` (ε), ``chunks`` (reconstructed), ``chunk_share`` (over all chunks
 of all levels), ``active_chunks`` (refined), ``select_ms``, ``reconstruct_ms``,
 ``bricks_computed``, ``bricks_reused``, ``detail_owners`` (chunks whose details entered a brick
-this frame), ``details_read`` (store chunks read this frame) and the renderer's ``pieces``.
+this frame), ``details_read`` (detail blocks read this frame), ``resident_bytes`` (bricks and
+details cached after the frame, under ``budget``) and the renderer's ``pieces``.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from ..render.shading import Shading
 from ..scene import check_iso, finish_frame, prepare_render
 from ..transfer import TransferFunction
 from ..volume import Volume
+from .budget import parse_bytes
 from .draw import CutRenderer, Piece
 from .wavelet_layout import WaveletLayout
 from .wavelet_lod import Selection, select
@@ -158,6 +160,10 @@ class WaveletScene:
     lod : float, optional
         ε in radians: refine while a level's cell looks larger than ε from the eye (0: render
         the full resolution). Default: the angle of one pixel of each frame's camera.
+    budget : int, str or None
+        Bytes the reconstructed bricks and the details read from the store may hold together
+        (``"512MiB"``; ``None``: unbounded). Least recently used ones not in the current
+        selection are dropped to stay under it; a selection that needs more still renders.
     **options
         Model options (``root_finder``, ``iterations``); ``prefilter=True`` is refused (the
         bricks are coefficients already).
@@ -169,7 +175,7 @@ class WaveletScene:
     """
 
     def __init__(self, volume: WaveletVolume, model: str | None = None, lod: float | None = None,
-                 **options: Any) -> None:
+                 budget: Any = "2GiB", **options: Any) -> None:
         if not isinstance(volume, WaveletVolume):
             raise ParameterError(f"volume must be a WaveletVolume, got {type(volume).__name__}")
         expected = f"bspline{volume.degree}"
@@ -185,6 +191,7 @@ class WaveletScene:
                 "are B-spline coefficients already")
         options.pop("prefilter", None)
         self._check_lod(lod)
+        self.budget = None if budget is None else parse_bytes(budget, "budget")
         start = time.perf_counter()
         self.volume = volume
         lay = volume.layout
@@ -199,7 +206,8 @@ class WaveletScene:
         self.preview._value_range = volume.value_range
         self.model = MODELS[model](self.preview, **options)
         self.lod = lod
-        self.reconstructor = ChunkReconstructor(volume.pyramid, loader=volume.load_details)
+        self.reconstructor = ChunkReconstructor(volume.pyramid, loader=volume.read_detail_block,
+                                                budget=self.budget, label=str(volume.path))
         self.renderer = CutRenderer(self.model, place, None)
         self.selection: Selection | None = None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
@@ -297,7 +305,7 @@ class WaveletScene:
             "bricks_computed": int(sum(rstats.computed)),
             "bricks_reused": int(sum(rstats.reused)),
             "detail_owners": int(sum(u.sum() for u in rstats.detail_owners)),
-            "details_read": rstats.details_read,
+            "details_read": rstats.details_read, "resident_bytes": rstats.resident_bytes,
         })
         return finish_frame(request, out, counters, camera, start)
 

@@ -31,11 +31,12 @@ Layout of the store (a Zarr v3 group)
     sequences for odd degree, half-sample symmetric / antisymmetric for even degree).
 
 Lazy details
-    The details of level ``j`` are held in numpy arrays of their full shape created with
-    ``numpy.zeros`` (untouched pages cost no memory on Linux and macOS) and filled one store
-    chunk at a time, the first time a chunk of owners whose details are active needs them. A
-    frame therefore reads only the details of the chunks it refines; ``details_read`` counts
-    the store chunks read so far (per subband, all seven together).
+    The reconstructor (:class:`.wavelet_reconstruct.ChunkReconstructor`) asks for the details
+    one block of :data:`STORE_CHUNK` nodes per axis at a time (:meth:`WaveletVolume.
+    read_detail_block`: one store chunk of each of the seven subbands), the first time a chunk
+    whose details are active needs them, and keeps them within its byte budget (least recently
+    used blocks go first). A frame therefore reads only the details of the chunks it refines;
+    ``details_read`` counts the blocks read so far.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ from ..io.omezarr import ATTRIBUTE
 from ..volume import GridGeometry
 from .wavelet_filters import spline_wavelet
 from .wavelet_layout import DETAIL_BANDS, WaveletLayout
+from .wavelet_reconstruct import DETAIL_BLOCK
 from .wavelet_transform import WaveletPyramid, decompose
 
 __all__ = ["KIND", "STORE_CHUNK", "ZarrSink", "WaveletVolume", "build_wavelet_pyramid",
@@ -65,8 +67,9 @@ __all__ = ["KIND", "STORE_CHUNK", "ZarrSink", "WaveletVolume", "build_wavelet_py
 KIND = "wavelet"
 #: Group holding the coefficient arrays.
 GROUP = "wavelet"
-#: Nodes per axis of one store chunk (a multiple of the default decomposition block's half).
-STORE_CHUNK = 32
+#: Nodes per axis of one store chunk (a multiple of the default decomposition block's half), the
+#: reconstructor's detail block: one block, one chunk of each subband.
+STORE_CHUNK = DETAIL_BLOCK
 #: Most levels a store may declare (2^20 voxels per axis need at most 18 with k >= 4).
 MAX_LEVELS = 24
 #: Largest chunk edge a store may declare (a brick is (k + d)^3 coefficients).
@@ -260,8 +263,6 @@ class WaveletVolume(GridGeometry):
     hull_hi: list[np.ndarray]
     details_read: int = 0
     _levels: dict[str, Any] = field(default_factory=dict)
-    _loaded: dict[int, np.ndarray] = field(default_factory=dict)
-    _details: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
 
     @property
     def shape(self) -> tuple[int, int, int]:  # type: ignore[override]
@@ -319,61 +320,24 @@ class WaveletVolume(GridGeometry):
         return self._read(f"coarse/{level}")
 
     # ---------------------------------------------------------------- lazy details
-    def _band_arrays(self, level: int) -> dict[str, np.ndarray]:
-        bands = self._details.get(level)
-        if bands is None:
-            lay = self.layout
-            total = sum(limits.nbytes(lay.band_shape(level, b), self.dtype.itemsize)
-                        for b in DETAIL_BANDS)
-            limits.check_memory(total, f"the level-{level} details", str(self.path), ReadError)
-            bands = {b: np.zeros(lay.band_shape(level, b), dtype=self.dtype)
-                     for b in DETAIL_BANDS}
-            self._details[level] = bands
-            blocks = tuple(-(-n // STORE_CHUNK) for n in lay.length(level))
-            self._loaded[level] = np.zeros(blocks, dtype=bool)
-        return bands
-
-    def _owner_blocks(self, level: int, axis: int) -> np.ndarray:
-        """``M[o, b]``: owner ``o`` (a chunk of level ``level - 1``) has details in store chunk
-        ``b``."""
-        lay = self.layout
-        n_nodes = lay.length(level)[axis]
-        owners = lay.owner(level - 1, axis, np.arange(n_nodes))
-        m = np.zeros((lay.chunks(level - 1)[axis], -(-n_nodes // STORE_CHUNK)), dtype=bool)
-        m[owners, np.arange(n_nodes) // STORE_CHUNK] = True
-        return m
-
-    def load_details(self, level: int, owners: np.ndarray) -> int:
-        """Make the details that chunks ``owners`` (bool, ``layout.chunks(level - 1)``) own
-        resident in :meth:`pyramid`'s arrays; returns the number of store chunks read."""
-        self._band_arrays(level)
-        loaded = self._loaded[level]
-        need = np.asarray(owners, dtype=np.int64)
-        for axis in range(3):
-            m = self._owner_blocks(level, axis).astype(np.int64)
-            need = np.moveaxis(np.tensordot(np.moveaxis(need, axis, -1), m, axes=1), -1, axis)
-        todo = (need > 0) & ~loaded
-        bands = self._details[level]
-        for b in np.argwhere(todo):
-            lo = b * STORE_CHUNK
-            for name, arr in bands.items():
-                box = tuple(slice(int(lo[a]), min(int(lo[a]) + STORE_CHUNK, arr.shape[a]))
-                            for a in range(3))
-                if all(s.start < s.stop for s in box):
-                    arr[box] = self._read(f"detail/{level}/{name}", box)
-            loaded[tuple(b)] = True
-        count = int(todo.sum())
-        self.details_read += count
-        return count
+    def read_detail_block(self, level: int, block: tuple[int, int, int]) -> list[np.ndarray]:
+        """The seven level-``level`` detail subbands (in ``DETAIL_BANDS`` order) over nodes
+        ``STORE_CHUNK * block`` onwards, at most :data:`STORE_CHUNK` per axis (one store chunk
+        of each subband): the reconstructor's loader. Counts in ``details_read``."""
+        lo = [STORE_CHUNK * int(b) for b in block]
+        box = tuple(slice(a, a + STORE_CHUNK) for a in lo)
+        out = [self._read(f"detail/{level}/{band}", box) for band in DETAIL_BANDS]
+        self.details_read += 1
+        return out
 
     @cached_property
     def pyramid(self) -> WaveletPyramid:
         """A :class:`~.wavelet_transform.WaveletPyramid` view for the reconstructor: the
-        coarsest level read, details in lazily filled arrays (:meth:`load_details`)."""
+        coarsest level read, no details (they come block by block through
+        :meth:`read_detail_block`)."""
         lay = self.layout
         coarse = {lay.levels: self.coarse(lay.levels)}
-        details = {j: self._band_arrays(j) for j in range(1, lay.levels + 1)}
-        return WaveletPyramid(lay, coarse, details, self.hull_lo, self.hull_hi, self.dtype)
+        return WaveletPyramid(lay, coarse, {}, self.hull_lo, self.hull_hi, self.dtype)
 
     def load(self) -> WaveletPyramid:
         """Everything read into memory: an in-memory :class:`~.wavelet_transform.
