@@ -26,7 +26,6 @@ from splinecast.distributed import (
     ramp,
     render_locally,
 )
-
 from splinecast.io.omezarr import is_zarr
 
 from ._common import add_input_options, finite, log, numbers
