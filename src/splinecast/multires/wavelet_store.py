@@ -325,8 +325,16 @@ class WaveletVolume(GridGeometry):
         ``STORE_CHUNK * block`` onwards, at most :data:`STORE_CHUNK` per axis (one store chunk
         of each subband): the reconstructor's loader. Counts in ``details_read``."""
         lo = [STORE_CHUNK * int(b) for b in block]
-        box = tuple(slice(a, a + STORE_CHUNK) for a in lo)
-        out = [self._read(f"detail/{level}/{band}", box) for band in DETAIL_BANDS]
+        out = []
+        for band in DETAIL_BANDS:
+            # A block past a shorter subband's end (detail sequences may be a node shorter than
+            # the coarse ones) holds none of its nodes: nothing to read.
+            shape = self.layout.band_shape(level, band)
+            box = tuple(slice(a, min(a + STORE_CHUNK, n)) for a, n in zip(lo, shape, strict=True))
+            if any(s.start >= s.stop for s in box):
+                out.append(np.zeros((0, 0, 0), dtype=self.dtype))
+            else:
+                out.append(self._read(f"detail/{level}/{band}", box))
         self.details_read += 1
         return out
 
