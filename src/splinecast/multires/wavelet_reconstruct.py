@@ -498,6 +498,13 @@ class ChunkReconstructor:
         """Hash of the current content of a chunk's brick (equal signatures, equal bricks)."""
         return int(self._sig[level][tuple(index)])
 
+    def coefficients(self, level: int, index: tuple[int, int, int]) -> np.ndarray:
+        """The current brick array of chunk ``index`` on ``level`` (:attr:`Brick.coeffs`)."""
+        slot = self._slot[level][index]
+        if slot < 0:
+            raise KeyError(f"chunk {index} of level {level} is not reconstructed")
+        return self._bricks.array[slot]
+
     def brick(self, level: int, index: tuple[int, int, int], octants: int = 0xFF) -> Brick:
         """The current brick of chunk ``index`` on ``level`` (after :meth:`update`)."""
         slot = self._slot[level][index]

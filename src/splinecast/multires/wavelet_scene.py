@@ -111,10 +111,19 @@ class WaveletTree:
         return np.full(3, scale), np.full(3, -self.layout.node_origin(level) * scale)
 
 
-def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
-    """A chunk's region clipped to the voxel box (level-0 voxel index space)."""
-    lo, hi = zip(*[lay.region(level, a, int(idx[a])) for a in range(3)], strict=True)
-    return np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[list[float], list[float]]:
+    """A chunk's region clipped to the voxel box (level-0 voxel index space): the arithmetic of
+    :meth:`.WaveletLayout.region` on Python floats (numpy per scalar cost most of a frame's
+    piece list)."""
+    width = lay.chunk * 2.0**level
+    start = lay.region_start
+    lo, hi = [], []
+    for a in range(3):
+        top = float(lay.shape[a] - 1)
+        first = start + width * int(idx[a])
+        lo.append(min(max(first, 0.0), top))
+        hi.append(min(max(first + width, 0.0), top))
+    return lo, hi
 
 
 def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor) -> list[Piece]:
@@ -123,27 +132,28 @@ def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor) -> l
     the front-to-back order sees leaves of one octree). Call ``reconstructor.update`` first."""
     lay = selection.layout
     out = []
+    counts = [lay.chunks(j) for j in range(lay.levels + 1)]
     for level, idx, mask in selection.drawn():
-        brick = reconstructor.brick(level, idx, mask)
+        coeffs = reconstructor.coefficients(level, idx)
         key = ("wavelet", level, idx, reconstructor.signature(level, idx))
-        first = tuple(int(v) for v in lay.brick_first_node(np.asarray(idx)))
+        first = tuple(lay.chunk * int(i) - lay.pad for i in idx)
         boxes = []
         if level == 0:
             boxes.append(((0, *idx), _region(lay, 0, idx)))
         else:
             kids = [tuple(2 * idx[a] + ((o >> (2 - a)) & 1) for a in range(3)) for o in range(8)]
-            counts = lay.chunks(level - 1)
+            below = counts[level - 1]
             exist = sum(1 << o for o, kid in enumerate(kids)
-                        if all(kid[a] < counts[a] for a in range(3)))
+                        if all(kid[a] < below[a] for a in range(3)))
             if mask == exist:
                 boxes.append(((level, *idx), _region(lay, level, idx)))
             else:
                 boxes += [((level - 1, *kids[o]), _region(lay, level - 1, kids[o]))
                           for o in range(8) if mask >> o & 1]
         for cut_key, (lo, hi) in boxes:
-            if np.all(hi > lo):
-                out.append(Piece(cut_key, key, level, brick.coeffs, first, lo, hi,  # type: ignore[arg-type]
-                                 placed=True))
+            if hi[0] > lo[0] and hi[1] > lo[1] and hi[2] > lo[2]:
+                out.append(Piece(cut_key, key, level, coeffs, first, np.array(lo),  # type: ignore[arg-type]
+                                 np.array(hi), placed=True))
     return out
 
 
