@@ -82,7 +82,7 @@ def test_lazy_details_give_the_in_memory_bricks_and_read_only_what_is_active(tmp
     eye = np.array([-3.0, -3.0, -3.0])
     selection = select(lay, wv.ranges, eye, 0.9)
     assert 0 < sum(a.sum() for a in selection.active) < sum(a.size for a in selection.active)
-    lazy = ChunkReconstructor(wv.pyramid, loader=wv.load_details)
+    lazy = ChunkReconstructor(wv.pyramid, loader=wv.read_detail_block)
     stats = lazy.update(selection)
     ref = ChunkReconstructor(memory)
     ref.update(selection)
@@ -128,3 +128,19 @@ def test_damaged_store_is_a_read_error(tmp_path):
     meta.write_text(json.dumps(attrs))
     with pytest.raises(sc.ReadError, match="w.zarr"):
         sc.read(tmp_path / "w.zarr")
+
+
+def test_lazy_details_where_a_subband_ends_at_a_block_boundary(tmp_path):
+    """65 voxels, degree 3: level 1 has 33 coarse nodes (two 32-node blocks) but 32 detail nodes
+    (one): the second block holds coarse-length subbands only."""
+    data = _data(np.float32, (65, 12, 10))
+    wv = build_wavelet_pyramid(data, tmp_path / "w.zarr", degree=3, chunk=4)
+    assert wv.layout.length(1)[0] == 33 and wv.layout.detail_length(1)[0] == 32
+    selection = select(wv.layout, wv.ranges, np.zeros(3), 0.0)
+    lazy = ChunkReconstructor(wv.pyramid, loader=wv.read_detail_block)
+    lazy.update(selection)
+    ref = ChunkReconstructor(decompose(data, 3, chunk=4, dtype=np.float32))
+    ref.update(selection)
+    for j, idx, mask in selection.drawn():
+        np.testing.assert_array_equal(lazy.brick(j, idx, mask).coeffs,
+                                      ref.brick(j, idx, mask).coeffs)

@@ -92,12 +92,24 @@ def warm_up(seed_mains: list[tuple[Path, str]], models: Iterable[str]) -> None:
     import splinecast as sc
     from splinecast.cli import main
 
+    from .seeds import WAVELET_MAIN
+
     argv_list: list[list[str]] = []
     for folder, main_name in seed_mains:
         argv_list.append(["info", str(folder / main_name)])
     with _quiet_directory() as out:
         tf = out / "tf.json"
         sc.TransferFunction([[0, 0], [1, 0.5]], (0, 1)).save(tf)
+        for folder, main_name in seed_mains:
+            if main_name != WAVELET_MAIN:
+                continue
+            # A wavelet store renders through the cut renderer and its reconstruction kernels,
+            # which no in-memory volume compiles: every mode of the cases, once.
+            render = ["render", str(folder / main_name), "--size", "8x8", "--quiet", "-o",
+                      str(out / "w.png")]
+            argv_list += [render + ["--iso", "60"], render + ["--mode", "mip"],
+                          render + ["--mode", "minip"], render + ["--mode", "dvr", "--tf", str(tf)],
+                          render + ["--iso", "60", "--depth", str(out / "d.npy")]]
         # Kernels are compiled per voxel type. A memory-mapped file (.npy) and a decoded one
         # (.npz) share them (grids are handed over as read-only views); both are still read
         # here so the readers' own compiled helpers are loaded in the parent too.

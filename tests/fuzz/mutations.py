@@ -579,6 +579,7 @@ JSON_KEYS = [
     "multiscales", "datasets", "path", "axes", "type", "unit", "scale", "translation",
     "coordinateTransformations", "version", "ome", "splinecast", "brick", "ghost", "value_range",
     "tables", "complete_chunks", "source_metadata", "attributes", "id", "checksum",
+    "kind", "degree", "levels", "chunk", "window", "spacing", "origin", "model", "wavelet",
 ]
 
 
@@ -829,6 +830,7 @@ STRUCTURED: dict[str, list[Mutation]] = {
     "vtk-legacy": [text_header, text_header],
     "ome-zarr": [zarr_metadata, zarr_metadata, zarr_metadata, zarr_chunks],
     "zarr-v2": [zarr_metadata, zarr_metadata, zarr_chunks],
+    "wavelet": [zarr_metadata, zarr_metadata, zarr_metadata, zarr_chunks],
 }
 
 

@@ -326,6 +326,22 @@ def _zarr_v2(folder: Path) -> str:
     return "v.zarr"
 
 
+def _wavelet(folder: Path) -> str:
+    """A degree-3 spline-wavelet store (Zarr v3, zstd with checksums, root attribute
+    ``splinecast`` of kind ``wavelet``) written by splinecast's builder: two levels of 4-node
+    chunks, so coarse, detail and hull arrays all exist."""
+    import splinecast as sc
+    from splinecast.multires.wavelet_store import build_wavelet_pyramid
+
+    build_wavelet_pyramid(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN),
+                          folder / WAVELET_MAIN, degree=3, levels=2, chunk=4)
+    return WAVELET_MAIN
+
+
+#: The main path of the wavelet seed (the warm-up renders stores of this name in every mode).
+WAVELET_MAIN = "v.wavelet.zarr"
+
+
 #: format -> (maker, module that must exist for the format to be fuzzed).
 MAKERS: dict[str, tuple[Callable[[Path], str], str | None]] = {
     "npy": (_npy, None),
@@ -350,6 +366,7 @@ MAKERS: dict[str, tuple[Callable[[Path], str], str | None]] = {
     "vtk-legacy": (_vtk_legacy, "vtkmodules"),
     "ome-zarr": (_ome_zarr, "zarr"),
     "zarr-v2": (_zarr_v2, "zarr"),
+    "wavelet": (_wavelet, "zarr"),
 }
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,6 +26,7 @@ from splinecast.distributed import (
     ramp,
     render_locally,
 )
+from splinecast.io.omezarr import is_zarr
 
 from ._common import add_input_options, finite, log, numbers
 from ._progress import Progress
@@ -71,6 +73,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="render on the Dask cluster at ADDRESS (tcp://host:8786); its "
                             "workers must be able to open FILE")
     add_render_options(movie)
+    movie.add_argument("--lod", type=finite,
+                       help="spline-wavelet stores: the angle ε in radians below which cells are "
+                            "not refined (0: full resolution; default one pixel's angle); the "
+                            "coarse bricks are reused from frame to frame")
     movie.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_input_options(movie)
 
@@ -141,6 +147,27 @@ def _dask_client(args: argparse.Namespace) -> Iterator[Any]:
         yield client
 
 
+def _wavelet_store(args: argparse.Namespace) -> Any:
+    """The spline-wavelet store ``args.file`` names (opened lazily: metadata only), else
+    ``None``; ``--lod`` applies to such stores only, which render in this process with their
+    own model (``bspline<degree>``) and no ``--smooth``."""
+    path = Path(args.file)
+    if not args.file.startswith("demo:") and path.is_dir() and is_zarr(path):
+        volume = sc.read(path, allow_external=args.allow_external_data or None)
+        if isinstance(volume, sc.WaveletVolume):
+            for flag, value in (("--smooth", args.smooth), ("--workers", args.workers),
+                                ("--scheduler", args.scheduler)):
+                if value:
+                    raise sc.ParameterError(f"{flag} does not apply to the wavelet store "
+                                            f"{args.file}")
+            if args.model is None:
+                args.model = f"bspline{volume.degree}"
+            return volume
+    if args.lod is not None:
+        raise sc.ParameterError(f"--lod applies to spline-wavelet stores only, not {args.file}")
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     """Render the movie ``args.output``."""
     # Validate every option and the output before any work, so a mistake writes nothing.
@@ -152,15 +179,22 @@ def run(args: argparse.Namespace) -> int:
     iso_sweep = _iso_sweep(args)
     _range(args.azimuth, "--azimuth")
     _range(args.elevation, "--elevation")
+    if args.lod is not None and not (math.isfinite(args.lod) and args.lod >= 0):
+        raise sc.ParameterError(f"--lod must be an angle >= 0 in radians, got {args.lod}")
     writer = MovieWriter(args.output, (width, height), args.frames, fps=args.fps,
                          quality=args.quality)
+    wavelet = _wavelet_store(args)
     options = model_options(args)
     source = SceneSource(args.file, args.model, options, args.smooth,
                          allow_external=args.allow_external_data or None)
 
     start = time.perf_counter()
     with contextlib.ExitStack() as stack:
-        if args.workers is None and args.scheduler is None:
+        if wavelet is not None:
+            scene = sc.Scene(wavelet, model=args.model, lod=args.lod, **options)
+            volume = wavelet
+            where = "in this process"
+        elif args.workers is None and args.scheduler is None:
             scene = sc.Scene(source.read(), model=args.model, **options)
             volume = scene.volume
             where = "in this process"
@@ -171,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
             dscene = DistributedScene(source, client)
             volume = dscene.volume
             where = f"on {len(client.nthreads())} Dask workers"
-        kwargs, notes = mode_kwargs(args, volume)
+        kwargs, notes = mode_kwargs(args, scene.preview if wavelet is not None else volume)
         for note in notes:
             log(args, note)
         kwargs["inside"] = args.inside
@@ -181,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
         shots = _shots(args, volume, kwargs, iso_sweep)
         log(args, f"{volume.name}: {volume.shape} prepared ({args.model}) in "
                   f"{time.perf_counter() - start:.2f} s {where}")
-        if args.workers is None and args.scheduler is None:
+        if wavelet is not None or (args.workers is None and args.scheduler is None):
             images = render_locally(scene, shots, image_only=True)
         else:
             images = dscene.render_many(shots, image_only=True)

@@ -49,6 +49,7 @@ __all__ = [
     "is_zarr",
     "open_zarr",
     "open_store",
+    "guarded_array",
 ]
 
 #: Root attribute holding splinecast's description of a pyramid it built (brick size, tables, ...).
@@ -597,6 +598,34 @@ def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
     if min(level.shape) < 1:
         raise ReadError(f"{level.label}: the level is empty (shape {fmt_shape(level.shape)})")
     return level
+
+
+def guarded_array(node: Any, key: str, label: str, folder: Path) -> Level:
+    """Array ``key`` of an opened splinecast store (not an image) as a checked :class:`Level`.
+
+    For stores whose arrays are indexed ``[x, y, z]`` as stored and every chunk was written
+    (splinecast's spline-wavelet pyramids): the array's metadata goes through the same checks
+    as an image level (data type, shape and chunk shape within the limits, one chunk within the
+    memory guard), and :meth:`Level.read` checks every chunk file before zarr opens it (a
+    missing file is damage, not fill value).
+
+    Raises
+    ------
+    ReadError
+        Naming ``label/key``: missing, not an array, unreadable or out-of-limits metadata.
+    """
+    zarr = _zarr(folder)
+    with _zarr_calls(f"{label}/{key}"):
+        try:
+            array = node[key]
+        except KeyError:
+            raise ReadError(f"{label}: array {key} is missing") from None
+        if not isinstance(array, zarr.Array):
+            raise ReadError(f"{label}/{key}: is not a Zarr array")
+        if len(array.shape) != 3:
+            raise ReadError(f"{label}/{key}: has {len(array.shape)} dimensions, expected 3")
+        return _level(0, key, array, (1.0,) * 3, (0.0,) * 3, (), (0, 1, 2), label,
+                      folder / key, True)
 
 
 def open_zarr(

@@ -26,7 +26,8 @@ Seams
 ``frame.stats`` adds ``lod`` (ε), ``chunks`` (reconstructed), ``chunk_share`` (over all chunks
 of all levels), ``active_chunks`` (refined), ``select_ms``, ``reconstruct_ms``,
 ``bricks_computed``, ``bricks_reused``, ``detail_owners`` (chunks whose details entered a brick
-this frame), ``details_read`` (store chunks read this frame) and the renderer's ``pieces``.
+this frame), ``details_read`` (detail blocks read this frame), ``resident_bytes`` (bricks and
+details cached after the frame, under ``budget``) and the renderer's ``pieces``.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from ..render.shading import Shading
 from ..scene import check_iso, finish_frame, prepare_render
 from ..transfer import TransferFunction
 from ..volume import Volume
+from .budget import parse_bytes
 from .draw import CutRenderer, Piece
 from .wavelet_layout import WaveletLayout
 from .wavelet_lod import Selection, select
@@ -109,10 +111,19 @@ class WaveletTree:
         return np.full(3, scale), np.full(3, -self.layout.node_origin(level) * scale)
 
 
-def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
-    """A chunk's region clipped to the voxel box (level-0 voxel index space)."""
-    lo, hi = zip(*[lay.region(level, a, int(idx[a])) for a in range(3)], strict=True)
-    return np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[list[float], list[float]]:
+    """A chunk's region clipped to the voxel box (level-0 voxel index space): the arithmetic of
+    :meth:`.WaveletLayout.region` on Python floats (numpy per scalar cost most of a frame's
+    piece list)."""
+    width = lay.chunk * 2.0**level
+    start = lay.region_start
+    lo, hi = [], []
+    for a in range(3):
+        top = float(lay.shape[a] - 1)
+        first = start + width * int(idx[a])
+        lo.append(min(max(first, 0.0), top))
+        hi.append(min(max(first + width, 0.0), top))
+    return lo, hi
 
 
 def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor) -> list[Piece]:
@@ -121,27 +132,28 @@ def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor) -> l
     the front-to-back order sees leaves of one octree). Call ``reconstructor.update`` first."""
     lay = selection.layout
     out = []
+    counts = [lay.chunks(j) for j in range(lay.levels + 1)]
     for level, idx, mask in selection.drawn():
-        brick = reconstructor.brick(level, idx, mask)
+        coeffs = reconstructor.coefficients(level, idx)
         key = ("wavelet", level, idx, reconstructor.signature(level, idx))
-        first = tuple(int(v) for v in lay.brick_first_node(np.asarray(idx)))
+        first = tuple(lay.chunk * int(i) - lay.pad for i in idx)
         boxes = []
         if level == 0:
             boxes.append(((0, *idx), _region(lay, 0, idx)))
         else:
             kids = [tuple(2 * idx[a] + ((o >> (2 - a)) & 1) for a in range(3)) for o in range(8)]
-            counts = lay.chunks(level - 1)
+            below = counts[level - 1]
             exist = sum(1 << o for o, kid in enumerate(kids)
-                        if all(kid[a] < counts[a] for a in range(3)))
+                        if all(kid[a] < below[a] for a in range(3)))
             if mask == exist:
                 boxes.append(((level, *idx), _region(lay, level, idx)))
             else:
                 boxes += [((level - 1, *kids[o]), _region(lay, level - 1, kids[o]))
                           for o in range(8) if mask >> o & 1]
         for cut_key, (lo, hi) in boxes:
-            if np.all(hi > lo):
-                out.append(Piece(cut_key, key, level, brick.coeffs, first, lo, hi,  # type: ignore[arg-type]
-                                 placed=True))
+            if hi[0] > lo[0] and hi[1] > lo[1] and hi[2] > lo[2]:
+                out.append(Piece(cut_key, key, level, coeffs, first, np.array(lo),  # type: ignore[arg-type]
+                                 np.array(hi), placed=True))
     return out
 
 
@@ -158,6 +170,10 @@ class WaveletScene:
     lod : float, optional
         ε in radians: refine while a level's cell looks larger than ε from the eye (0: render
         the full resolution). Default: the angle of one pixel of each frame's camera.
+    budget : int, str or None
+        Bytes the reconstructed bricks and the details read from the store may hold together
+        (``"512MiB"``; ``None``: unbounded). Least recently used ones not in the current
+        selection are dropped to stay under it; a selection that needs more still renders.
     **options
         Model options (``root_finder``, ``iterations``); ``prefilter=True`` is refused (the
         bricks are coefficients already).
@@ -169,7 +185,7 @@ class WaveletScene:
     """
 
     def __init__(self, volume: WaveletVolume, model: str | None = None, lod: float | None = None,
-                 **options: Any) -> None:
+                 budget: Any = "2GiB", **options: Any) -> None:
         if not isinstance(volume, WaveletVolume):
             raise ParameterError(f"volume must be a WaveletVolume, got {type(volume).__name__}")
         expected = f"bspline{volume.degree}"
@@ -185,6 +201,7 @@ class WaveletScene:
                 "are B-spline coefficients already")
         options.pop("prefilter", None)
         self._check_lod(lod)
+        self.budget = None if budget is None else parse_bytes(budget, "budget")
         start = time.perf_counter()
         self.volume = volume
         lay = volume.layout
@@ -199,7 +216,8 @@ class WaveletScene:
         self.preview._value_range = volume.value_range
         self.model = MODELS[model](self.preview, **options)
         self.lod = lod
-        self.reconstructor = ChunkReconstructor(volume.pyramid, loader=volume.load_details)
+        self.reconstructor = ChunkReconstructor(volume.pyramid, loader=volume.read_detail_block,
+                                                budget=self.budget, label=str(volume.path))
         self.renderer = CutRenderer(self.model, place, None)
         self.selection: Selection | None = None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
@@ -297,7 +315,7 @@ class WaveletScene:
             "bricks_computed": int(sum(rstats.computed)),
             "bricks_reused": int(sum(rstats.reused)),
             "detail_owners": int(sum(u.sum() for u in rstats.detail_owners)),
-            "details_read": rstats.details_read,
+            "details_read": rstats.details_read, "resident_bytes": rstats.resident_bytes,
         })
         return finish_frame(request, out, counters, camera, start)
 

@@ -31,11 +31,12 @@ Layout of the store (a Zarr v3 group)
     sequences for odd degree, half-sample symmetric / antisymmetric for even degree).
 
 Lazy details
-    The details of level ``j`` are held in numpy arrays of their full shape created with
-    ``numpy.zeros`` (untouched pages cost no memory on Linux and macOS) and filled one store
-    chunk at a time, the first time a chunk of owners whose details are active needs them. A
-    frame therefore reads only the details of the chunks it refines; ``details_read`` counts
-    the store chunks read so far (per subband, all seven together).
+    The reconstructor (:class:`.wavelet_reconstruct.ChunkReconstructor`) asks for the details
+    one block of :data:`STORE_CHUNK` nodes per axis at a time (:meth:`WaveletVolume.
+    read_detail_block`: one store chunk of each of the seven subbands), the first time a chunk
+    whose details are active needs them, and keeps them within its byte budget (least recently
+    used blocks go first). A frame therefore reads only the details of the chunks it refines;
+    ``details_read`` counts the blocks read so far.
 """
 
 from __future__ import annotations
@@ -50,12 +51,13 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_directory
-from ..errors import ParameterError, ReadError
+from ..errors import ParameterError, ReadError, limits
 from ..io._common import fmt_shape, one_line, require
 from ..io.omezarr import ATTRIBUTE
 from ..volume import GridGeometry
 from .wavelet_filters import spline_wavelet
 from .wavelet_layout import DETAIL_BANDS, WaveletLayout
+from .wavelet_reconstruct import DETAIL_BLOCK
 from .wavelet_transform import WaveletPyramid, decompose
 
 __all__ = ["KIND", "STORE_CHUNK", "ZarrSink", "WaveletVolume", "build_wavelet_pyramid",
@@ -65,8 +67,13 @@ __all__ = ["KIND", "STORE_CHUNK", "ZarrSink", "WaveletVolume", "build_wavelet_py
 KIND = "wavelet"
 #: Group holding the coefficient arrays.
 GROUP = "wavelet"
-#: Nodes per axis of one store chunk (a multiple of the default decomposition block's half).
-STORE_CHUNK = 32
+#: Nodes per axis of one store chunk (a multiple of the default decomposition block's half), the
+#: reconstructor's detail block: one block, one chunk of each subband.
+STORE_CHUNK = DETAIL_BLOCK
+#: Most levels a store may declare (2^20 voxels per axis need at most 18 with k >= 4).
+MAX_LEVELS = 24
+#: Largest chunk edge a store may declare (a brick is (k + d)^3 coefficients).
+MAX_CHUNK = 256
 #: Coarse nodes per axis of one decomposition block (a multiple of STORE_CHUNK: aligned writes).
 BLOCK = 64
 
@@ -255,8 +262,7 @@ class WaveletVolume(GridGeometry):
     hull_lo: list[np.ndarray]
     hull_hi: list[np.ndarray]
     details_read: int = 0
-    _loaded: dict[int, np.ndarray] = field(default_factory=dict)
-    _details: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
+    _levels: dict[str, Any] = field(default_factory=dict)
 
     @property
     def shape(self) -> tuple[int, int, int]:  # type: ignore[override]
@@ -285,19 +291,27 @@ class WaveletVolume(GridGeometry):
         return selection_ranges(self.layout, self.hull_lo, self.hull_hi)
 
     def _array(self, name: str) -> Any:
-        try:
-            return self.root[f"{GROUP}/{name}"]
-        except KeyError:
-            raise ReadError(f"{self.path}: array {GROUP}/{name} is missing") from None
+        """The checked :class:`~splinecast.io.omezarr.Level` of array ``wavelet/<name>``."""
+        level = self._levels.get(name)
+        if level is None:
+            level = _checked_array(self.root, self.path, name, self._expected_shape(name),
+                                   self.dtype)
+            self._levels[name] = level
+        return level
 
-    def _read(self, name: str, box: tuple[slice, ...] = (Ellipsis,)) -> np.ndarray:
-        try:
-            return np.asarray(self._array(name)[box])
-        except ReadError:
-            raise
-        except Exception as exc:
-            raise ReadError(f"{self.path}: {GROUP}/{name} cannot be read: "
-                            f"{one_line(exc)}") from None
+    def _expected_shape(self, name: str) -> tuple[int, ...]:
+        parts = name.split("/")
+        if parts[0] == "coarse":
+            return self.layout.length(int(parts[1]))
+        return self.layout.band_shape(int(parts[1]), parts[2])
+
+    def _read(self, name: str, box: tuple[slice, ...] | None = None) -> np.ndarray:
+        """Coefficients ``box`` (whole array by default) of ``wavelet/<name>``: every chunk file
+        checked before it is opened, the box's bytes checked against the memory guard."""
+        level = self._array(name)
+        if box is None:
+            return level.read((0, 0, 0), level.shape)
+        return level.read([s.start for s in box], [s.stop for s in box])
 
     def coarse(self, level: int) -> np.ndarray:
         """Level ``level``'s coefficients (1..J), read whole."""
@@ -306,58 +320,32 @@ class WaveletVolume(GridGeometry):
         return self._read(f"coarse/{level}")
 
     # ---------------------------------------------------------------- lazy details
-    def _band_arrays(self, level: int) -> dict[str, np.ndarray]:
-        bands = self._details.get(level)
-        if bands is None:
-            lay = self.layout
-            bands = {b: np.zeros(lay.band_shape(level, b), dtype=self.dtype)
-                     for b in DETAIL_BANDS}
-            self._details[level] = bands
-            blocks = tuple(-(-n // STORE_CHUNK) for n in lay.length(level))
-            self._loaded[level] = np.zeros(blocks, dtype=bool)
-        return bands
-
-    def _owner_blocks(self, level: int, axis: int) -> np.ndarray:
-        """``M[o, b]``: owner ``o`` (a chunk of level ``level - 1``) has details in store chunk
-        ``b``."""
-        lay = self.layout
-        n_nodes = lay.length(level)[axis]
-        owners = lay.owner(level - 1, axis, np.arange(n_nodes))
-        m = np.zeros((lay.chunks(level - 1)[axis], -(-n_nodes // STORE_CHUNK)), dtype=bool)
-        m[owners, np.arange(n_nodes) // STORE_CHUNK] = True
-        return m
-
-    def load_details(self, level: int, owners: np.ndarray) -> int:
-        """Make the details that chunks ``owners`` (bool, ``layout.chunks(level - 1)``) own
-        resident in :meth:`pyramid`'s arrays; returns the number of store chunks read."""
-        self._band_arrays(level)
-        loaded = self._loaded[level]
-        need = np.asarray(owners, dtype=np.int64)
-        for axis in range(3):
-            m = self._owner_blocks(level, axis).astype(np.int64)
-            need = np.moveaxis(np.tensordot(np.moveaxis(need, axis, -1), m, axes=1), -1, axis)
-        todo = (need > 0) & ~loaded
-        bands = self._details[level]
-        for b in np.argwhere(todo):
-            lo = b * STORE_CHUNK
-            for name, arr in bands.items():
-                box = tuple(slice(int(lo[a]), min(int(lo[a]) + STORE_CHUNK, arr.shape[a]))
-                            for a in range(3))
-                if all(s.start < s.stop for s in box):
-                    arr[box] = self._read(f"detail/{level}/{name}", box)
-            loaded[tuple(b)] = True
-        count = int(todo.sum())
-        self.details_read += count
-        return count
+    def read_detail_block(self, level: int, block: tuple[int, int, int]) -> list[np.ndarray]:
+        """The seven level-``level`` detail subbands (in ``DETAIL_BANDS`` order) over nodes
+        ``STORE_CHUNK * block`` onwards, at most :data:`STORE_CHUNK` per axis (one store chunk
+        of each subband): the reconstructor's loader. Counts in ``details_read``."""
+        lo = [STORE_CHUNK * int(b) for b in block]
+        out = []
+        for band in DETAIL_BANDS:
+            # A block past a shorter subband's end (detail sequences may be a node shorter than
+            # the coarse ones) holds none of its nodes: nothing to read.
+            shape = self.layout.band_shape(level, band)
+            box = tuple(slice(a, min(a + STORE_CHUNK, n)) for a, n in zip(lo, shape, strict=True))
+            if any(s.start >= s.stop for s in box):
+                out.append(np.zeros((0, 0, 0), dtype=self.dtype))
+            else:
+                out.append(self._read(f"detail/{level}/{band}", box))
+        self.details_read += 1
+        return out
 
     @cached_property
     def pyramid(self) -> WaveletPyramid:
         """A :class:`~.wavelet_transform.WaveletPyramid` view for the reconstructor: the
-        coarsest level read, details in lazily filled arrays (:meth:`load_details`)."""
+        coarsest level read, no details (they come block by block through
+        :meth:`read_detail_block`)."""
         lay = self.layout
         coarse = {lay.levels: self.coarse(lay.levels)}
-        details = {j: self._band_arrays(j) for j in range(1, lay.levels + 1)}
-        return WaveletPyramid(lay, coarse, details, self.hull_lo, self.hull_hi, self.dtype)
+        return WaveletPyramid(lay, coarse, {}, self.hull_lo, self.hull_hi, self.dtype)
 
     def load(self) -> WaveletPyramid:
         """Everything read into memory: an in-memory :class:`~.wavelet_transform.
@@ -376,14 +364,109 @@ class WaveletVolume(GridGeometry):
                 f"dtype={self.dtype})")
 
 
+def _checked_array(root: Any, path: Path, name: str, shape: tuple[int, ...],
+                   dtype: np.dtype) -> Any:
+    """Array ``wavelet/<name>`` through the guarded store's checks, with the shape and data
+    type the layout and the metadata promise."""
+    from ..io.omezarr import guarded_array
+
+    level = guarded_array(root, f"{GROUP}/{name}", str(path), path)
+    if level.shape != tuple(shape):
+        raise ReadError(f"{path}: {GROUP}/{name} has shape {fmt_shape(level.shape)}, the "
+                        f"metadata imply {fmt_shape(shape)}")
+    if level.dtype != dtype:
+        raise ReadError(f"{path}: {GROUP}/{name} holds {level.dtype}, the metadata say {dtype}")
+    return level
+
+
+def _layout(attributes: dict[str, Any], path: Path) -> tuple[WaveletLayout, np.dtype,
+                                                            tuple[float, ...], tuple[float, ...]]:
+    """The layout, coefficient type, spacing and origin the root attribute describes, every
+    field checked against :mod:`splinecast.errors.limits` before anything is sized by it."""
+    where = f"{path}: attribute {ATTRIBUTE!r}"
+    missing = [k for k in ("shape", "degree", "levels", "chunk", "dtype", "spacing", "origin",
+                           "value_range") if k not in attributes]
+    if missing:
+        raise ReadError(f"{where} lacks {', '.join(missing)}")
+    shape = limits.check_shape(attributes["shape"], f"{where}: shape", error=ReadError)
+    if min(shape) < 2:
+        raise ReadError(f"{where}: shape must have at least 2 voxels per axis, got "
+                        f"{fmt_shape(shape)}")
+    degree = limits.check_count(attributes["degree"], f"{where}: degree", lo=1, hi=3,
+                                error=ReadError)
+    levels = limits.check_count(attributes["levels"], f"{where}: levels", lo=1, hi=MAX_LEVELS,
+                                error=ReadError)
+    chunk = limits.check_count(attributes["chunk"], f"{where}: chunk", lo=4, hi=MAX_CHUNK,
+                               error=ReadError)
+    if chunk % 2:
+        raise ReadError(f"{where}: chunk must be even, got {chunk}")
+    model = attributes.get("model", f"bspline{degree}")
+    if model != f"bspline{degree}":
+        raise ReadError(f"{where}: model {limits.shorten(model)} does not match degree {degree}")
+    name = attributes["dtype"]
+    if name not in ("float32", "float64"):
+        raise ReadError(f"{where}: dtype must be float32 or float64, got {limits.shorten(name)}")
+    spacing = limits.check_spacing(attributes["spacing"], f"{where}: spacing", ReadError)
+    origin = limits.check_origin(attributes["origin"], spacing, f"{where}: origin", ReadError)
+    layout = WaveletLayout(shape, degree, levels, chunk)  # type: ignore[arg-type]
+    limits.check_shape(layout.window, f"{where}: the padded window of {levels} levels",
+                       error=ReadError)
+    return layout, np.dtype(name), spacing, origin
+
+
+def _hull(root: Any, path: Path, layout: WaveletLayout, level: int) -> np.ndarray:
+    """The stored ``[min, max]`` table of ``level``: float64 of shape ``chunks + (2,)``, every
+    chunk file present, finite with ``min <= max``."""
+    from ..io.omezarr import _refused
+
+    zarr = require("zarr", path, action="reading")
+    key = f"{GROUP}/hull/{level}"
+    expected = layout.chunks(level) + (2,)
+    where = f"{path}/{key}"
+    try:
+        array = root[key]
+        if not isinstance(array, zarr.Array):
+            raise ReadError(f"{where}: is not a Zarr array")
+        if tuple(array.shape) != expected or np.dtype(array.dtype) != np.float64:
+            raise ReadError(f"{where}: holds {fmt_shape(array.shape)} {array.dtype}, expected "
+                            f"{fmt_shape(expected)} float64")
+        grid = limits.check_shape(array.chunks, f"{where}: chunk shape", ndim=4,
+                                  error=ReadError)
+        limits.check_memory(limits.nbytes(expected, 8), "the table", where, ReadError)
+        counts = [-(-n // c) for n, c in zip(expected, grid, strict=True)]
+        if int(np.prod(counts)) > limits.MAX_CHUNKS_PER_READ:
+            raise ReadError(f"{where}: chunks of {fmt_shape(grid)} are too small")
+        for unit in np.ndindex(*counts):
+            file = path / key / array.metadata.encode_chunk_key(unit)
+            if not file.is_file():
+                raise ReadError(f"{where}: chunk file {file} is missing")
+        table = np.asarray(array[...], dtype=np.float64)
+    except KeyError:
+        raise ReadError(f"{path}: array {key} is missing") from None
+    except ReadError:
+        raise
+    except Exception as exc:  # zarr and the codecs raise many kinds for damaged data
+        refused = _refused(exc)
+        raise (refused or ReadError(f"{where}: cannot be read ({one_line(exc)})")) from None
+    if not np.all(np.isfinite(table)) or np.any(table[..., 0] > table[..., 1]):
+        raise ReadError(f"{where}: value bounds must be finite with min <= max")
+    return table
+
+
 def open_wavelet_store(path: str | os.PathLike[str], root: Any = None,
                        attributes: dict[str, Any] | None = None) -> WaveletVolume:
     """Open a store written by :func:`build_wavelet_pyramid` (metadata and hull tables only).
 
+    The store is read through the guarded store of :mod:`splinecast.io.omezarr` (metadata small
+    valid JSON, only regular files inside the store, chunks bounded before decompression); every
+    field of the root attribute is checked against :mod:`splinecast.errors.limits`, and every
+    array's shape and type against the layout it implies, before anything is allocated.
+
     Raises
     ------
     ReadError
-        Not such a store, or its metadata or tables are damaged.
+        One line naming the store: not such a store, or its metadata, tables or arrays are
+        damaged or inconsistent.
     """
     path = Path(os.fspath(path))
     if root is None:
@@ -391,25 +474,31 @@ def open_wavelet_store(path: str | os.PathLike[str], root: Any = None,
 
         root = open_store(path)
     if attributes is None:
-        attributes = dict(root.attrs.get(ATTRIBUTE, {}))
-    if attributes.get("kind") != KIND:
+        from ..io.omezarr import _our_attributes
+
+        try:
+            attributes = _our_attributes(dict(root.attrs).get(ATTRIBUTE),
+                                         f"{path}: attribute {ATTRIBUTE!r}")
+        except AttributeError:
+            attributes = {}
+    if not isinstance(attributes, dict) or attributes.get("kind") != KIND:
         raise ReadError(f"{path}: not a splinecast wavelet store")
     try:
-        layout = WaveletLayout(tuple(int(n) for n in attributes["shape"]),
-                               int(attributes["degree"]), int(attributes["levels"]),
-                               int(attributes["chunk"]))
-        dtype = np.dtype(attributes["dtype"])
-        spacing = tuple(float(s) for s in attributes["spacing"])
-        origin = tuple(float(o) for o in attributes["origin"])
-        hulls = [np.asarray(root[f"{GROUP}/hull/{j}"][...]) for j in range(layout.levels + 1)]
-    except (KeyError, TypeError, ValueError, ParameterError) as exc:
+        layout, dtype, spacing, origin = _layout(attributes, path)
+    except ParameterError as exc:  # the layout's own consistency checks
         raise ReadError(f"{path}: damaged wavelet store metadata ({one_line(exc)})") from None
-    for j, table in enumerate(hulls):
-        if table.shape != layout.chunks(j) + (2,):
-            raise ReadError(f"{path}: {GROUP}/hull/{j} has shape {table.shape}, expected "
-                            f"{layout.chunks(j) + (2,)}")
+    hulls = [_hull(root, path, layout, j) for j in range(layout.levels + 1)]
     metadata: dict[str, Any] = {"name": attributes.get("name", path.name),
                                 "source": str(path.absolute()), "format": "splinecast wavelet"}
-    metadata.update(attributes.get("source_metadata", {}))
-    return WaveletVolume(path, layout, dtype, spacing, origin, metadata, attributes, root,  # type: ignore[arg-type]
-                         [t[..., 0] for t in hulls], [t[..., 1] for t in hulls])
+    source_metadata = attributes.get("source_metadata", {})
+    if isinstance(source_metadata, dict):
+        metadata.update(source_metadata)
+    wv = WaveletVolume(path, layout, dtype, spacing, origin, metadata,  # type: ignore[arg-type]
+                       attributes, root, [t[..., 0] for t in hulls], [t[..., 1] for t in hulls])
+    # Every array's metadata now, so a store whose arrays contradict the layout (or miss) is
+    # refused on opening rather than in the middle of a frame.
+    for j in range(1, layout.levels + 1):
+        wv._array(f"coarse/{j}")
+        for band in DETAIL_BANDS:
+            wv._array(f"detail/{j}/{band}")
+    return wv

@@ -1,0 +1,76 @@
+"""Per-brick Python overhead of a wavelet frame: the piece list and a steady frame.
+
+``wavelet_pieces`` turns a selection into the cut renderer's pieces (one per drawn brick or
+octant). It runs every frame, so its cost per piece adds to the renderer's own per-piece cost.
+This measures, on a Chmutov 64^3 degree-3 store (k = 8) from one orbit view, for ε = 0 (every
+chunk, 512 pieces) and a small ε: the median time of the piece list (per piece) and the median
+steady frame (bricks reused; 64x48 pixels, so the trace is small next to the overhead).
+
+Run ``python benchmarks/bench_wavelet_pieces.py --label NAME --json OUT.json`` once per code
+version (the results file keeps every label's rows side by side).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import splinecast as sc
+from splinecast.multires.wavelet_lod import select
+from splinecast.multires.wavelet_scene import wavelet_pieces
+from splinecast.multires.wavelet_store import build_wavelet_pyramid
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import describe  # noqa: E402
+
+
+def _median_ms(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--label", required=True)
+    parser.add_argument("--json", required=True)
+    parser.add_argument("--repeats", type=int, default=15)
+    args = parser.parse_args()
+    folder = Path(tempfile.mkdtemp())
+    build_wavelet_pyramid(sc.demo("chmutov", size=64), folder / "w.zarr", degree=3, chunk=8,
+                          dtype=np.float32)
+    store = sc.read(folder / "w.zarr")
+    camera = sc.Camera.orbit(store, azimuth=30, size=(64, 48))
+    rows = []
+    for eps in (0.0, 0.02):
+        scene = sc.Scene(store, lod=eps)
+        scene.render(camera, iso=0.0)  # compile, reconstruct, read
+        selection = select(store.layout, store.ranges, camera.position, eps, 0.0, store.spacing,
+                           store.origin)
+        pieces = len(wavelet_pieces(selection, scene.reconstructor))
+        pieces_ms = _median_ms(lambda s=selection, r=scene.reconstructor: wavelet_pieces(s, r),
+                               args.repeats)
+        frame_ms = _median_ms(lambda s=scene: s.render(camera, iso=0.0), max(3, args.repeats // 3))
+        rows.append({"label": args.label, "lod": eps, "pieces": pieces,
+                     "pieces_ms": round(pieces_ms, 2),
+                     "us_per_piece": round(pieces_ms / pieces * 1e3, 1),
+                     "steady_frame_ms": round(frame_ms, 1)})
+        print(rows[-1], flush=True)
+    out = Path(args.json)
+    old = json.loads(out.read_text()) if out.exists() else {"machine": describe(), "rows": []}
+    old["rows"] = [r for r in old["rows"] if r["label"] != args.label] + rows
+    out.write_text(json.dumps(old, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
