@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import splinecast as sc
 from splinecast.cli import main
@@ -150,5 +151,11 @@ def test_user_mistakes_name_the_parameter(case, tmp_path, capsys):
     assert main([*argv, "--lod", "0.05", "-o", str(out)]) == 0 and out.is_file()
     assert main([*argv, "--model", "trilinear", "-o", str(out)]) == 2
     assert "model" in capsys.readouterr().err
-    assert main([*argv, "--budget", "1GiB", "-o", str(out)]) == 2
+    # A budget bounds the bricks and details kept between frames; the pixels stay the same.
+    small = tmp_path / "small.png"
+    assert main([*argv, "--lod", "0.05", "--budget", "64KiB", "-o", str(small)]) == 0
+    np.testing.assert_array_equal(np.asarray(Image.open(small)), np.asarray(Image.open(out)))
+    assert main([*argv, "--budget", "lots", "-o", str(out)]) == 2
     assert "--budget" in capsys.readouterr().err
+    assert main([*argv, "--cut", "error", "-o", str(out)]) == 2
+    assert "--cut" in capsys.readouterr().err

@@ -58,8 +58,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         help="frame what the isovalue or transfer function shows (default) or "
                              "the whole grid")
     add_render_options(render)
-    render.add_argument("--budget", help="multiscale (OME-Zarr) volumes: RAM for bricks, e.g. "
-                        "512MiB or 2GiB (default 2GiB)")
+    render.add_argument("--budget", help="multiscale (OME-Zarr) volumes and wavelet stores: RAM "
+                        "for bricks (and wavelet details), e.g. 512MiB or 2GiB (default 2GiB)")
     render.add_argument("--lod", type=finite, help="multiscale volumes: refine while a voxel "
                         "covers more than this many pixels (default 1); wavelet stores: the "
                         "angle ε in radians below which cells are not refined (0: full "
@@ -279,14 +279,14 @@ def orbit_options(args: argparse.Namespace) -> dict:
 
 def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool,
                                wavelet: bool = False) -> None:
-    """``--budget``/``--lod``/``--cut`` only for multiscale volumes (``--budget`` and ``--cut``
-    not for wavelet stores, whose ``--lod`` is an angle >= 0); ``--smooth`` only for the
-    others."""
+    """``--budget``/``--lod``/``--cut`` only for multiscale volumes (``--cut`` not for wavelet
+    stores, whose ``--lod`` is an angle >= 0); ``--smooth`` only for the others."""
     if wavelet:
-        for flag, value in (("--smooth", args.smooth), ("--budget", args.budget),
-                            ("--cut", args.cut)):
+        for flag, value in (("--smooth", args.smooth), ("--cut", args.cut)):
             if value:
                 raise sc.ParameterError(f"{flag} does not apply to the wavelet store {args.file}")
+        if args.budget is not None:
+            limits.parse_bytes(args.budget, "--budget")
         if args.lod is not None and not (math.isfinite(args.lod) and args.lod >= 0):
             raise sc.ParameterError(f"--lod must be an angle >= 0 in radians, got {args.lod}")
         return
@@ -329,7 +329,8 @@ def run(args: argparse.Namespace) -> int:
         options = model_options(args)
         scene = None
         if wavelet:  # nothing but the coarsest level is read here
-            scene = sc.Scene(vol, model=args.model, lod=args.lod, **options)
+            scene = sc.Scene(vol, model=args.model, lod=args.lod, budget=args.budget or "2GiB",
+                             **options)
         elif multiscale:  # nothing but the coarsest level is read here; the loader stops at the end
             scene = stack.enter_context(sc.Scene(
                 vol, model=args.model, budget=args.budget or "2GiB",
