@@ -142,7 +142,9 @@ def test_pyramid_hello_reads_only_the_coarsest_level(pyramid, monkeypatch):
     assert set(read_levels) == {len(mv.levels) - 1}
 
 
-def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid, slow_loader):
+@pytest.mark.parametrize("interactive", [False, True], ids=["click", "after-a-drag"])
+def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid, slow_loader,
+                                                                          interactive):
     # The reference first (it also compiles the kernels, so the viewer's frames are quick).
     with MultiscaleScene(sc.read(pyramid), lod=LOD) as ref_scene:
         iso = default_state(ref_scene.preview)["iso"]
@@ -153,7 +155,8 @@ def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid,
     async def check():
         async with serving(sc.read(pyramid), lod=LOD) as server, \
                 ViewerClient(server.url) as client:
-            ident = await client.render({"size": list(SIZE)})
+            # After a drag the full frame follows by itself once input rests.
+            ident = await client.render({"size": list(SIZE)}, interactive=interactive)
             return await frames_until_complete(client, ident)
 
     frames = run(check())

@@ -147,7 +147,7 @@ class Session:
         if message["interactive"]:
             job = _Job("interactive", ident, request)
             loop = asyncio.get_running_loop()
-            self._settle = loop.call_later(self.settle_s, self._submit_view,
+            self._settle = loop.call_later(self.settle_s, self._settled_now,
                                            _Job("final", ident, request))
         else:
             job = _Job("final", ident, request)
@@ -195,6 +195,11 @@ class Session:
         if self._settle is not None:
             self._settle.cancel()
             self._settle = None
+
+    def _settled_now(self, job: _Job) -> None:
+        """The settle timer fired: no drag in progress any more; render the full frame."""
+        self._settle = None
+        self._submit_view(job)
 
     def _submit_view(self, job: _Job) -> None:
         self._view = job
