@@ -191,7 +191,8 @@ class ViewerServer:
 
     def refresh_all(self) -> None:
         """Ask every client's session to re-render its last full frame (from any thread): the
-        hook for data that gets more detailed over time (bricks of a pyramid arriving)."""
+        hook for data that gets more detailed over time. A pyramid needs no call: the server
+        watches its loader (:meth:`_watch_bricks`) and refreshes incomplete frames itself."""
         if self._loop is not None:
             for session in list(self._sessions):
                 self._loop.call_soon_threadsafe(session.refresh)
