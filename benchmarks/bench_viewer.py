@@ -19,12 +19,13 @@ Scenes: Marschner-Lobb 256^3 (trilinear and s31 isosurfaces) and the MNI152 MRI 
 512x384, shorter drags (what to run on a busy machine).
 
 Pyramid case (``--only pyramid`` runs just this one): Marschner-Lobb (256^3; ``--quick``
-128^3) written as an OME-Zarr pyramid of 32^3 bricks and served by ``splinecast view x.zarr``
-(lod 1). Each repetition starts a fresh server (cold brick cache; Numba's disk cache warmed by a
-first, unmeasured server) and asks for the default view at full size: latency from the request
+128^3) written as an OME-Zarr pyramid of 32^3 bricks and served by ``splinecast view x.zarr
+--lod 3``. Each repetition starts a fresh server (cold brick cache; Numba's disk cache warmed by
+a first, unmeasured server) and asks for the default view at full size: latency from the request
 to the first frame (any pass), to the first full-resolution frame, and to the full frame whose
 cut is complete (the header's ``bricks.complete``; refreshes while bricks land come between),
-with the number of frames received. Baseline in the same run: ``MultiscaleScene.render(...,
+with the number of frames received; then the same for the view zoomed 3x, which needs finer
+bricks. Baseline in the same run: ``MultiscaleScene.render(...,
 complete=True)`` of the same view in this process on a fresh scene (cold cache, warm JIT).
 Results: ``benchmarks/results/viewer_pyramid[_quick].json`` and ``.md``.
 
@@ -244,28 +245,42 @@ def browser_once(spec: dict, size: tuple[int, int], drag_s: float, releases: int
 
 
 # ------------------------------------------------------------------------------ pyramid
+ZOOM = 3.0  # the second view of a run: closer, so its cut needs bricks not read yet
+#: Pixels per voxel before a brick is refined: the default view then stops at level 1, the
+#: zoomed one needs level 0.
+PYRAMID_LOD = 3.0
+
+
 async def pyramid_view(url: str, size: tuple[int, int]) -> dict:
-    """One cold view of a pyramid: latencies to the first, first full and complete frames."""
+    """A fresh server: the default view (cold bricks, first frames of the process), then a
+    zoomed view (warm process, new bricks) on the same connection."""
     async with ViewerClient(url) as client:
-        ident = await client.render({"size": list(size)})
-        sent = client.sent_at(ident)
-        first = first_full = first_progress = None
-        frames = 0
-        while True:
-            got = await client.receive(timeout=600)
-            if isinstance(got, dict) or got.header["id"] != ident:
-                continue
-            frames += 1
-            ms = (got.received - sent) * 1e3
-            first = ms if first is None else first
-            if got.header["final"]:
-                bricks = got.header["bricks"]
-                if first_full is None:
-                    first_full, first_progress = ms, bricks["progress"]
-                if bricks["complete"]:
-                    return {"first_ms": first, "first_full_ms": first_full, "complete_ms": ms,
-                            "frames": frames, "cut": bricks["cut"],
-                            "first_full_progress": first_progress}
+        first = await one_view(client, {"size": list(size)})
+        zoomed = await one_view(client, {"size": list(size), "camera": {"zoom": ZOOM}})
+    return {**first, "zoomed": zoomed}
+
+
+async def one_view(client: ViewerClient, state: dict) -> dict:
+    """Latencies of one request to its first, first full and complete frames."""
+    ident = await client.render(state)
+    sent = client.sent_at(ident)
+    first = first_full = first_progress = None
+    frames = 0
+    while True:
+        got = await client.receive(timeout=600)
+        if isinstance(got, dict) or got.header["id"] != ident:
+            continue
+        frames += 1
+        ms = (got.received - sent) * 1e3
+        first = ms if first is None else first
+        if got.header["final"]:
+            bricks = got.header["bricks"]
+            if first_full is None:
+                first_full, first_progress = ms, bricks["progress"]
+            if bricks["complete"]:
+                return {"first_ms": first, "first_full_ms": first_full, "complete_ms": ms,
+                        "frames": frames, "cut": bricks["cut"],
+                        "first_full_progress": first_progress}
 
 
 def pyramid_case(quick: bool, size: tuple[int, int], repeats: int) -> dict:
@@ -273,16 +288,17 @@ def pyramid_case(quick: bool, size: tuple[int, int], repeats: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"ml{n}.zarr"
         sc.build_pyramid(sc.demo("marschner-lobb", size=n), path, brick=32, progress=False)
-        spec = {"source": str(path), "model": "trilinear", "mode": "iso", "extra": []}
+        spec = {"source": str(path), "model": "trilinear", "mode": "iso",
+                "extra": ["--lod", str(PYRAMID_LOD)]}
         # Direct baseline: a fresh scene per repetition (cold brick cache), JIT warmed first.
         mv = sc.read(path)
         cam = sc.Camera.orbit(mv, azimuth=30, elevation=20, size=size)
-        with sc.Scene(mv) as scene:
+        with sc.Scene(mv, lod=PYRAMID_LOD) as scene:
             iso = float(sc.auto_iso(scene.preview))
             scene.render(cam, iso=iso, complete=True)
         direct = []
         for _ in range(repeats):
-            with sc.Scene(sc.read(path)) as scene:
+            with sc.Scene(sc.read(path), lod=PYRAMID_LOD) as scene:
                 start = time.perf_counter()
                 scene.render(cam, iso=iso, complete=True)
                 direct.append((time.perf_counter() - start) * 1e3)
@@ -305,6 +321,12 @@ def pyramid_case(quick: bool, size: tuple[int, int], repeats: int) -> dict:
             "first_full_ms": percentiles([r["first_full_ms"] for r in runs]),
             "complete_ms": percentiles([r["complete_ms"] for r in runs]),
             "frames": [r["frames"] for r in runs], "cut": runs[0]["cut"],
+            "zoomed": {key: percentiles([r["zoomed"][key] for r in runs])
+                       for key in ("first_ms", "first_full_ms", "complete_ms")},
+            "zoomed_frames": [r["zoomed"]["frames"] for r in runs],
+            "zoomed_cut": runs[0]["zoomed"]["cut"],
+            "zoomed_first_full_progress": [round(r["zoomed"]["first_full_progress"], 3)
+                                           for r in runs],
             "direct_complete_ms": statistics.median(direct), "direct_samples_ms": direct}
 
 
@@ -317,11 +339,15 @@ def write_pyramid_markdown(result: dict, path: Path) -> None:
         f"Machine: {m['cpu']}, {m['cores']} logical cores. Command: `{result['command']}`. "
         f"{result['note']}",
         "",
-        f"{row['name']}: {row['levels']} levels of {row['brick']}^3 bricks, image {w}x{h}, "
+        f"{row['name']}: {row['levels']} levels of {row['brick']}^3 bricks, `--lod "
+        f"{PYRAMID_LOD:g}`, image {w}x{h}, "
         f"the default view's cut has {row['cut']} bricks. Each run starts a fresh "
-        "`splinecast view x.zarr` (cold brick cache, Numba's disk cache warm) and requests the "
-        "default view: latency to the first frame (a coarse one), to the first full frame, and "
-        "to the full frame with the complete cut (`bricks.complete`). Direct: "
+        "`splinecast view x.zarr` (cold brick cache, Numba's disk cache warm: the process's "
+        "first frames include loading the compiled kernels) and requests the default view: "
+        "latency to the first frame (a coarse one), to the first full frame, and to the full "
+        "frame with the complete cut (`bricks.complete`). Then, on the same connection, the "
+        f"view zoomed {ZOOM:g}x (a cut of {row['zoomed_cut']} bricks, most not read yet; its "
+        "first frames are drawn from resident ancestors). Direct: "
         "`MultiscaleScene.render(complete=True)` of the same view on a fresh scene in one "
         f"process (median of {len(row['direct_samples_ms'])}).",
         "",
@@ -330,11 +356,14 @@ def write_pyramid_markdown(result: dict, path: Path) -> None:
     ]
     for key, label in (("first_ms", "first frame"), ("first_full_ms", "first full frame"),
                        ("complete_ms", "complete frame")):
-        p = row[key]
-        lines.append(f"| {label} | {p['p50']:.0f} | {p['p95']:.0f} | {p['n']} |")
+        for view, values in (("default view", row), (f"zoomed {ZOOM:g}x", row["zoomed"])):
+            p = values[key]
+            lines.append(f"| {view}: {label} | {p['p50']:.0f} | {p['p95']:.0f} | {p['n']} |")
     progress = [round(r["first_full_progress"], 2) for r in row["runs"]]
     lines += ["", f"Frames received per run (coarse, full, refreshes): {row['frames']}; share "
-              f"of the cut resident in the first full frame: {progress}. "
+              f"of the cut resident in the first full frame: {progress}. Zoomed view: frames "
+              f"{row['zoomed_frames']}, share resident in its first full frame "
+              f"{row['zoomed_first_full_progress']}. "
               f"Direct complete render: {row['direct_complete_ms']:.0f} ms; complete frame / "
               f"direct = {row['complete_ms']['p50'] / row['direct_complete_ms']:.2f}."]
     path.write_text("\n".join(lines) + "\n")
