@@ -257,6 +257,7 @@ async def pyramid_view(url: str, size: tuple[int, int]) -> dict:
     async with ViewerClient(url) as client:
         first = await one_view(client, {"size": list(size)})
         zoomed = await one_view(client, {"size": list(size), "camera": {"zoom": ZOOM}})
+    zoomed["new_bricks"] = zoomed["loaded"] - first["loaded"]
     return {**first, "zoomed": zoomed}
 
 
@@ -279,7 +280,7 @@ async def one_view(client: ViewerClient, state: dict) -> dict:
                 first_full, first_progress = ms, bricks["progress"]
             if bricks["complete"]:
                 return {"first_ms": first, "first_full_ms": first_full, "complete_ms": ms,
-                        "frames": frames, "cut": bricks["cut"],
+                        "frames": frames, "cut": bricks["cut"], "loaded": bricks["loaded"],
                         "first_full_progress": first_progress}
 
 
@@ -325,6 +326,7 @@ def pyramid_case(quick: bool, size: tuple[int, int], repeats: int) -> dict:
                        for key in ("first_ms", "first_full_ms", "complete_ms")},
             "zoomed_frames": [r["zoomed"]["frames"] for r in runs],
             "zoomed_cut": runs[0]["zoomed"]["cut"],
+            "zoomed_new_bricks": [r["zoomed"]["new_bricks"] for r in runs],
             "zoomed_first_full_progress": [round(r["zoomed"]["first_full_progress"], 3)
                                            for r in runs],
             "direct_complete_ms": statistics.median(direct), "direct_samples_ms": direct}
@@ -346,8 +348,10 @@ def write_pyramid_markdown(result: dict, path: Path) -> None:
         "first frames include loading the compiled kernels) and requests the default view: "
         "latency to the first frame (a coarse one), to the first full frame, and to the full "
         "frame with the complete cut (`bricks.complete`). Then, on the same connection, the "
-        f"view zoomed {ZOOM:g}x (a cut of {row['zoomed_cut']} bricks, most not read yet; its "
-        "first frames are drawn from resident ancestors). Direct: "
+        f"view zoomed {ZOOM:g}x (a cut of {row['zoomed_cut']} bricks, of which "
+        f"{row['zoomed_new_bricks']} per run were read while it was shown (prefetch included); "
+        "until they land, frames draw "
+        "their resident ancestors). Direct: "
         "`MultiscaleScene.render(complete=True)` of the same view on a fresh scene in one "
         f"process (median of {len(row['direct_samples_ms'])}).",
         "",
