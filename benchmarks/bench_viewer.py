@@ -18,8 +18,19 @@ Scenes: Marschner-Lobb 256^3 (trilinear and s31 isosurfaces) and the MNI152 MRI 
 ../shared/data in DVR (``examples/tf-mri.json``), at 1024x768. ``--quick``: Marschner-Lobb 64^3,
 512x384, shorter drags (what to run on a busy machine).
 
-Run ``python benchmarks/bench_viewer.py [--quick] [--no-browser]``; results go to
-``benchmarks/results/viewer[_quick].json`` and ``.md``.
+Pyramid case (``--only pyramid`` runs just this one): Marschner-Lobb (256^3; ``--quick``
+128^3) written as an OME-Zarr pyramid of 32^3 bricks and served by ``splinecast view x.zarr
+--lod 3``. Each repetition starts a fresh server (cold brick cache; Numba's disk cache warmed by
+a first, unmeasured server) and asks for the default view at full size: latency from the request
+to the first frame (any pass), to the first full-resolution frame, and to the full frame whose
+cut is complete (the header's ``bricks.complete``; refreshes while bricks land come between),
+with the number of frames received; then the same for the view zoomed 3x, which needs finer
+bricks. Baseline in the same run: ``MultiscaleScene.render(...,
+complete=True)`` of the same view in this process on a fresh scene (cold cache, warm JIT).
+Results: ``benchmarks/results/viewer_pyramid[_quick].json`` and ``.md``.
+
+Run ``python benchmarks/bench_viewer.py [--quick] [--no-browser] [--only pyramid|volumes]``;
+results go to ``benchmarks/results/viewer[_quick].json`` and ``.md``.
 """
 
 from __future__ import annotations
@@ -105,7 +116,8 @@ class Server:
 
     def __init__(self, spec: dict) -> None:
         cmd = [sys.executable, "-m", "splinecast.cli", "view", spec["source"], "--model",
-               spec["model"], "--mode", spec["mode"], "--no-browser", "--quiet"]
+               spec["model"], "--mode", spec["mode"], "--no-browser", "--quiet",
+               *spec.get("extra", [])]
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
         self.url = self.proc.stdout.readline().strip()
@@ -232,6 +244,135 @@ def browser_once(spec: dict, size: tuple[int, int], drag_s: float, releases: int
             "release_ms": percentiles(release_ms)}
 
 
+# ------------------------------------------------------------------------------ pyramid
+ZOOM = 3.0  # the second view of a run: closer, so its cut needs bricks not read yet
+#: Pixels per voxel before a brick is refined: the default view then stops at level 1, the
+#: zoomed one needs level 0.
+PYRAMID_LOD = 3.0
+
+
+async def pyramid_view(url: str, size: tuple[int, int]) -> dict:
+    """A fresh server: the default view (cold bricks, first frames of the process), then a
+    zoomed view (warm process, new bricks) on the same connection."""
+    async with ViewerClient(url) as client:
+        first = await one_view(client, {"size": list(size)})
+        zoomed = await one_view(client, {"size": list(size), "camera": {"zoom": ZOOM}})
+    zoomed["new_bricks"] = zoomed["loaded"] - first["loaded"]
+    return {**first, "zoomed": zoomed}
+
+
+async def one_view(client: ViewerClient, state: dict) -> dict:
+    """Latencies of one request to its first, first full and complete frames."""
+    ident = await client.render(state)
+    sent = client.sent_at(ident)
+    first = first_full = first_progress = None
+    frames = 0
+    while True:
+        got = await client.receive(timeout=600)
+        if isinstance(got, dict) or got.header["id"] != ident:
+            continue
+        frames += 1
+        ms = (got.received - sent) * 1e3
+        first = ms if first is None else first
+        if got.header["final"]:
+            bricks = got.header["bricks"]
+            if first_full is None:
+                first_full, first_progress = ms, bricks["progress"]
+            if bricks["complete"]:
+                return {"first_ms": first, "first_full_ms": first_full, "complete_ms": ms,
+                        "frames": frames, "cut": bricks["cut"], "loaded": bricks["loaded"],
+                        "first_full_progress": first_progress}
+
+
+def pyramid_case(quick: bool, size: tuple[int, int], repeats: int) -> dict:
+    n = 128 if quick else 256
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"ml{n}.zarr"
+        sc.build_pyramid(sc.demo("marschner-lobb", size=n), path, brick=32, progress=False)
+        spec = {"source": str(path), "model": "trilinear", "mode": "iso",
+                "extra": ["--lod", str(PYRAMID_LOD)]}
+        # Direct baseline: a fresh scene per repetition (cold brick cache), JIT warmed first.
+        mv = sc.read(path)
+        cam = sc.Camera.orbit(mv, azimuth=30, elevation=20, size=size)
+        with sc.Scene(mv, lod=PYRAMID_LOD) as scene:
+            iso = float(sc.auto_iso(scene.preview))
+            scene.render(cam, iso=iso, complete=True)
+        direct = []
+        for _ in range(repeats):
+            with sc.Scene(sc.read(path), lod=PYRAMID_LOD) as scene:
+                start = time.perf_counter()
+                scene.render(cam, iso=iso, complete=True)
+                direct.append((time.perf_counter() - start) * 1e3)
+        warm = Server(spec)  # fills Numba's disk cache for the server processes
+        try:
+            asyncio.run(pyramid_view(warm.url, size))
+        finally:
+            warm.stop()
+        runs = []
+        for _ in range(repeats):
+            server = Server(spec)
+            try:
+                runs.append(asyncio.run(pyramid_view(server.url, size)))
+            finally:
+                server.stop()
+            print(json.dumps(runs[-1]), file=sys.stderr, flush=True)
+    return {"name": f"ml{n}-pyramid-trilinear-iso", "levels": len(mv.levels), "brick": 32,
+            "size": list(size), "runs": runs,
+            "first_ms": percentiles([r["first_ms"] for r in runs]),
+            "first_full_ms": percentiles([r["first_full_ms"] for r in runs]),
+            "complete_ms": percentiles([r["complete_ms"] for r in runs]),
+            "frames": [r["frames"] for r in runs], "cut": runs[0]["cut"],
+            "zoomed": {key: percentiles([r["zoomed"][key] for r in runs])
+                       for key in ("first_ms", "first_full_ms", "complete_ms")},
+            "zoomed_frames": [r["zoomed"]["frames"] for r in runs],
+            "zoomed_cut": runs[0]["zoomed"]["cut"],
+            "zoomed_new_bricks": [r["zoomed"]["new_bricks"] for r in runs],
+            "zoomed_first_full_progress": [round(r["zoomed"]["first_full_progress"], 3)
+                                           for r in runs],
+            "direct_complete_ms": statistics.median(direct), "direct_samples_ms": direct}
+
+
+def write_pyramid_markdown(result: dict, path: Path) -> None:
+    m, row = result["machine"], result["pyramid"]
+    w, h = row["size"]
+    lines = [
+        "# Viewer benchmark: an OME-Zarr pyramid",
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} logical cores. Command: `{result['command']}`. "
+        f"{result['note']}",
+        "",
+        f"{row['name']}: {row['levels']} levels of {row['brick']}^3 bricks, `--lod "
+        f"{PYRAMID_LOD:g}`, image {w}x{h}, "
+        f"the default view's cut has {row['cut']} bricks. Each run starts a fresh "
+        "`splinecast view x.zarr` (cold brick cache, Numba's disk cache warm: the process's "
+        "first frames include loading the compiled kernels) and requests the default view: "
+        "latency to the first frame (a coarse one), to the first full frame, and to the full "
+        "frame with the complete cut (`bricks.complete`). Then, on the same connection, the "
+        f"view zoomed {ZOOM:g}x (a cut of {row['zoomed_cut']} bricks, of which "
+        f"{row['zoomed_new_bricks']} per run were read while it was shown (prefetch included); "
+        "until they land, frames draw "
+        "their resident ancestors). Direct: "
+        "`MultiscaleScene.render(complete=True)` of the same view on a fresh scene in one "
+        f"process (median of {len(row['direct_samples_ms'])}).",
+        "",
+        "| | p50 ms | p95 ms | runs |",
+        "|---|---|---|---|",
+    ]
+    for key, label in (("first_ms", "first frame"), ("first_full_ms", "first full frame"),
+                       ("complete_ms", "complete frame")):
+        for view, values in (("default view", row), (f"zoomed {ZOOM:g}x", row["zoomed"])):
+            p = values[key]
+            lines.append(f"| {view}: {label} | {p['p50']:.0f} | {p['p95']:.0f} | {p['n']} |")
+    progress = [round(r["first_full_progress"], 2) for r in row["runs"]]
+    lines += ["", f"Frames received per run (coarse, full, refreshes): {row['frames']}; share "
+              f"of the cut resident in the first full frame: {progress}. Zoomed view: frames "
+              f"{row['zoomed_frames']}, share resident in its first full frame "
+              f"{row['zoomed_first_full_progress']}. "
+              f"Direct complete render: {row['direct_complete_ms']:.0f} ms; complete frame / "
+              f"direct = {row['complete_ms']['p50'] / row['direct_complete_ms']:.2f}."]
+    path.write_text("\n".join(lines) + "\n")
+
+
 def write_markdown(result: dict, path: Path) -> None:
     m = result["machine"]
     w, h = result["size"]
@@ -282,11 +423,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small volume and image, short")
     parser.add_argument("--no-browser", action="store_true", help="skip the Chromium run")
+    parser.add_argument("--only", choices=("volumes", "pyramid"),
+                        help="run only the in-memory volumes or only the pyramid case")
     args = parser.parse_args()
     size = (512, 384) if args.quick else (1024, 768)
     drag_s = 1.5 if args.quick else 8.0
     releases = 3 if args.quick else 10
     repeats = 3 if args.quick else 7
+    command = "python benchmarks/bench_viewer.py" + (" --quick" if args.quick else "")
+    note = ("Percentiles over one run; on a shared machine (other jobs running) the timings are "
+            "noisy.")
+    out = HERE / "results"
+    if args.only != "volumes":
+        print("pyramid ...", file=sys.stderr, flush=True)
+        result = {"command": command + " --only pyramid", "note": note, "machine": describe(),
+                  "pyramid": pyramid_case(args.quick, size, repeats)}
+        stem = "viewer_pyramid_quick" if args.quick else "viewer_pyramid"
+        (out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
+        write_pyramid_markdown(result, out / f"{stem}.md")
+        print(out / f"{stem}.md")
+        if args.only == "pyramid":
+            return
     rows = []
     specs = scenes(args.quick)
     for spec in specs:
@@ -303,18 +460,13 @@ def main() -> None:
                    mode=spec["mode"], direct_ms=direct)
         rows.append(row)
         print(json.dumps(row), file=sys.stderr, flush=True)
-    result = {
-        "command": "python benchmarks/bench_viewer.py" + (" --quick" if args.quick else ""),
-        "note": "Percentiles over one run; on a shared machine (other jobs running) the "
-                "timings are noisy.",
-        "machine": describe(), "size": list(size), "scenes": rows,
-    }
+    result = {"command": command, "note": note, "machine": describe(), "size": list(size),
+              "scenes": rows}
     if not args.no_browser:
         result["browser_scene"] = specs[0]["name"]
         print("browser ...", file=sys.stderr, flush=True)
         result["browser"] = browser_once(specs[0], size, drag_s, min(releases, 3))
     stem = "viewer_quick" if args.quick else "viewer"
-    out = HERE / "results"
     (out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
     write_markdown(result, out / f"{stem}.md")
     print(out / f"{stem}.md")

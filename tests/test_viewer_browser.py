@@ -345,3 +345,4 @@ def test_keyboard_reset_returns_to_the_default_camera(page, vol):
     assert camera == defaults
     assert_page_shows(page, vol)
     assert not page.problems, page.problems
+

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import signal
 import time
 import webbrowser
 
 import splinecast as sc
 
-from ._common import add_input_options, log, numbers, uncaptured
+from ._common import add_input_options, finite, log, numbers, uncaptured
 
 __all__ = ["add_parser", "run"]
 
@@ -22,9 +23,11 @@ __all__ = ["add_parser", "run"]
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     view = sub.add_parser("view", help="explore a volume interactively in the web browser")
-    view.add_argument("file", help="volume file, DICOM folder, Zarr folder or demo:NAME?size=N")
-    view.add_argument("--model", default="trilinear",
-                      help=f"initial reconstruction ({', '.join(sc.MODELS)}; default trilinear)")
+    view.add_argument("file", help="volume file, DICOM folder, Zarr folder (OME-Zarr pyramid or "
+                      "wavelet store) or demo:NAME?size=N")
+    view.add_argument("--model",
+                      help=f"initial reconstruction ({', '.join(sc.MODELS)}; default trilinear; "
+                           "bspline<d> for a degree-d wavelet store, the only model it renders)")
     view.add_argument("--mode", default="iso", choices=sc.scene.MODES,
                       help="initial render mode (default iso)")
     view.add_argument("--iso", help="initial isovalue(s) in data units, comma-separated "
@@ -36,6 +39,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                            "another address lets other machines in, protected by the token only)")
     view.add_argument("--no-browser", action="store_true",
                       help="do not open a web browser; just print the URL")
+    view.add_argument("--budget", help="multiscale (OME-Zarr) volumes: RAM for bricks, e.g. "
+                      "512MiB or 2GiB (default 2GiB)")
+    view.add_argument("--lod", type=finite, help="multiscale volumes: refine while a voxel "
+                      "covers more than this many pixels (default 1); wavelet stores: the angle "
+                      "ε in radians below which cells are not refined (0: full resolution; "
+                      "default one pixel's angle)")
     view.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_input_options(view)
 
@@ -66,17 +75,47 @@ def run(args: argparse.Namespace) -> int:
     require_aiohttp()
     from splinecast.viewer.server import ViewerServer
 
-    if args.model not in sc.MODELS:
+    if args.model is not None and args.model not in sc.MODELS:
         raise sc.ParameterError(f"--model must be one of {', '.join(sc.MODELS)}, "
                                 f"got {args.model!r}")
+    isos = numbers(args.iso, "--iso")
     start = time.perf_counter()
     vol = sc.read(args.file, allow_external=args.allow_external_data or None)
-    isos = numbers(args.iso, "--iso")
+    _check_multires_options(args, vol)
     iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
     server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,
-                          port=args.port)
-    read = f"read {vol.name}: {vol.shape} {vol.dtype} in {time.perf_counter() - start:.2f} s"
+                          port=args.port, budget=args.budget, lod=args.lod)
+    seconds = time.perf_counter() - start
+    if isinstance(vol, sc.Volume):
+        read = f"read {vol.name}: {vol.shape} {vol.dtype} in {seconds:.2f} s"
+    elif server.shown.kind == "wavelet":
+        read = (f"opened {vol.name}: degree-{vol.degree} wavelet store, {vol.layout.levels} "
+                f"levels, {vol.shape} in {seconds:.2f} s (coarsest level read)")
+    else:
+        read = (f"opened {vol.name}: {len(vol.levels)} levels, {vol.shape} {vol.dtype} in "
+                f"{seconds:.2f} s (coarsest level read; bricks load while you look)")
     with uncaptured(args):  # serving: warnings and log lines as they come, not at the end
         asyncio.run(_serve(server, args, read))
     log(args, "stopped")
     return 0
+
+
+def _check_multires_options(args: argparse.Namespace, vol: object) -> None:
+    """``--budget`` and ``--lod`` only for the data they apply to, checked as ``render`` does."""
+    if isinstance(vol, sc.Volume):
+        for flag, value in (("--budget", args.budget), ("--lod", args.lod)):
+            if value is not None:
+                raise sc.ParameterError(f"{flag} applies to multiscale (OME-Zarr) volumes and "
+                                        f"wavelet stores only; {args.file} is a plain volume")
+    elif isinstance(vol, sc.WaveletVolume):
+        if args.budget is not None:
+            raise sc.ParameterError(f"--budget does not apply to the wavelet store {args.file}")
+        if args.lod is not None and not (math.isfinite(args.lod) and args.lod >= 0):
+            raise sc.ParameterError(f"--lod must be an angle >= 0 in radians, got {args.lod}")
+    else:
+        if args.budget is not None:
+            from splinecast.errors import limits
+
+            limits.parse_bytes(args.budget, "--budget")
+        if args.lod is not None and not (math.isfinite(args.lod) and args.lod > 0):
+            raise sc.ParameterError(f"--lod must be a positive number of pixels, got {args.lod}")

@@ -99,13 +99,16 @@ class ViewerHandle:
 
 def view(data: Any, model: str | None = None, mode: str = "iso", iso: Any = None, *,
          host: str = "127.0.0.1", port: int = 0, open_browser: bool | None = None,
-         max_pixels: int | None = None) -> ViewerHandle:
+         max_pixels: int | None = None, budget: Any = None,
+         lod: float | None = None) -> ViewerHandle:
     """Show a volume or scene in the interactive browser viewer.
 
     Parameters
     ----------
-    data : Volume or Scene
-        What to show.
+    data : Volume, Scene, MultiscaleVolume, MultiscaleScene, WaveletVolume or WaveletScene
+        What to show. A pyramid or wavelet store (``sc.read("x.zarr")``) is rendered cut by cut;
+        the page refines the image as bricks arrive and shows their counts. A multiresolution
+        scene is shown with its own model only (and stays open after the viewer stops).
     model, mode, iso : optional
         Initial reconstruction, render mode and isovalue(s) (the page can change them).
     host : str
@@ -117,6 +120,11 @@ def view(data: Any, model: str | None = None, mode: str = "iso", iso: Any = None
         Jupyter notebook, where the returned handle shows the viewer in the cell.
     max_pixels : int, optional
         Largest image a page may request.
+    budget : int or str, optional
+        Brick cache of a pyramid volume (default ``"2GiB"``).
+    lod : float, optional
+        Level of detail of a pyramid volume (pixels per voxel, default 1) or a wavelet store (ε in
+        radians, default one pixel's angle).
 
     Returns
     -------
@@ -142,7 +150,7 @@ def view(data: Any, model: str | None = None, mode: str = "iso", iso: Any = None
     from .state import MAX_PIXELS
 
     server = ViewerServer(data, model=model, mode=mode, iso=iso, host=host, port=port,
-                          max_pixels=max_pixels or MAX_PIXELS)
+                          max_pixels=max_pixels or MAX_PIXELS, budget=budget, lod=lod)
     loop = asyncio.new_event_loop()
     started = threading.Event()
     failure: list[BaseException] = []
@@ -167,6 +175,7 @@ def view(data: Any, model: str | None = None, mode: str = "iso", iso: Any = None
     if not started.wait(_START_TIMEOUT_S):
         raise ParameterError(f"the viewer did not start within {_START_TIMEOUT_S:g} s")
     if failure:
+        server.renderer.close()  # a pyramid's loader thread
         raise failure[0]
     handle = ViewerHandle(server, loop, thread)
     if open_browser is None:

@@ -29,6 +29,7 @@ from ..volume import Volume
 
 __all__ = [
     "PROTOCOL_VERSION",
+    "PROTOCOL_MINOR",
     "MAX_MESSAGE_BYTES",
     "decode_request",
     "hello_message",
@@ -40,6 +41,9 @@ __all__ = [
 
 #: Version of the message protocol; a client should refuse a ``hello`` with another major number.
 PROTOCOL_VERSION = 1
+#: Minor version (``hello.v_minor``): additions a version-1 client may ignore. 1: the frame
+#: header's ``bricks`` and ``hello.multires`` (multiresolution data), ``hello.v_minor``.
+PROTOCOL_MINOR = 1
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.
@@ -103,8 +107,10 @@ def decode_request(text: Any) -> dict[str, Any]:
     return {"type": kind, "id": ident, "state": state, "interactive": interactive}
 
 
-def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS) -> dict[str, Any]:
-    """Value histogram of ``volume`` over its data range: ``{"lo", "hi", "counts"}``.
+def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS,
+              value_range: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Value histogram of ``volume`` over ``value_range`` (default: its data range):
+    ``{"lo", "hi", "counts"}``.
 
     Volumes above 16 million voxels are subsampled with a stride per axis (the page draws the
     histogram behind the sliders, where its shape is what matters).
@@ -113,7 +119,7 @@ def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS) -> dict[str, Any]:
     if data.size > _HISTOGRAM_SAMPLE:
         stride = int(math.ceil((data.size / _HISTOGRAM_SAMPLE) ** (1 / 3)))
         data = data[::stride, ::stride, ::stride]
-    lo, hi = volume.value_range
+    lo, hi = volume.value_range if value_range is None else value_range
     top = hi if hi > lo else lo + 1.0
     values = np.asarray(data).reshape(-1)
     if values.dtype.kind == "f":
@@ -122,24 +128,35 @@ def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS) -> dict[str, Any]:
     return {"lo": lo, "hi": top, "counts": counts.tolist()}
 
 
-def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, Any]) -> dict:
-    """The first message of every connection: what the page needs to build its controls."""
-    lo, hi = volume.bounds
+def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, Any], *,
+                  geometry: Any = None, models: Any = MODELS, modes: Any = MODES,
+                  multires: dict[str, Any] | None = None) -> dict:
+    """The first message of every connection: what the page needs to build its controls.
+
+    ``volume`` gives the histogram (a multiresolution volume's coarsest level: cheap, and never
+    the finest level); ``geometry`` (default ``volume``) the description of the data shown;
+    ``models`` and ``modes`` the choices offered; ``multires`` describes a pyramid or wavelet
+    store.
+    """
+    geometry = volume if geometry is None else geometry
+    lo, hi = geometry.bounds
     return {
         "type": "hello",
         "v": PROTOCOL_VERSION,
+        "v_minor": PROTOCOL_MINOR,
         "volume": {
-            "name": volume.name,
-            "shape": list(volume.shape),
-            "dtype": str(volume.dtype),
-            "spacing": list(volume.spacing),
-            "origin": list(volume.origin),
-            "bounds": [lo.tolist(), hi.tolist()],
-            "value_range": list(volume.value_range),
+            "name": geometry.name,
+            "shape": [int(n) for n in geometry.shape],
+            "dtype": str(geometry.dtype),
+            "spacing": [float(v) for v in geometry.spacing],
+            "origin": [float(v) for v in geometry.origin],
+            "bounds": [np.asarray(lo).tolist(), np.asarray(hi).tolist()],
+            "value_range": [float(v) for v in geometry.value_range],
         },
-        "histogram": histogram(volume),
-        "models": list(MODELS),
-        "modes": list(MODES),
+        "histogram": histogram(volume, value_range=geometry.value_range),
+        "multires": multires,
+        "models": list(models),
+        "modes": list(modes),
         "colormaps": {name: np.round(colormap_table(name, _COLORMAP_SAMPLES), 4).tolist()
                       for name in COLORMAPS},
         "defaults": defaults,

@@ -8,6 +8,8 @@ frames of several clients are rendered one after another.
 Stripes are windows of the full image (:meth:`Camera.tile`): their rays are bit-identical to the
 full image's, so a frame assembled from stripes equals ``Scene.render`` of the whole camera. They
 exist so a slow frame can be given up between stripes when the user has already moved on.
+Multiresolution scenes are rendered whole: their cut (and a wavelet store's ε) depends on the
+camera's whole image, which a stripe's camera would change.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..scene import Scene
 from ..volume import Volume
+from .data import Shown, shown
 from .state import RenderRequest, resized_camera
 
 __all__ = ["FrameRenderer", "RenderedImage"]
@@ -62,24 +65,28 @@ class FrameRenderer:
 
     Parameters
     ----------
-    volume : Volume
-        The data on display.
+    volume : Volume or Shown
+        The data on display (:func:`.data.shown` describes multiresolution data).
     scene : Scene, optional
         An already prepared scene (``sc.view(scene)``); it is kept for its model.
     max_scenes : int
-        How many prepared models to keep (each holds the model's arrays; s31 and qss are large).
+        How many prepared models to keep (each holds the model's arrays; s31 and qss are large;
+        a pyramid keeps one, since each scene of it holds a brick cache).
     stripe_rows : int, optional
         Fixed stripe height; by default chosen from the cost of recent frames so a stripe takes
         about :data:`STRIPE_MS`.
     """
 
-    def __init__(self, volume: Volume, scene: Scene | None = None, max_scenes: int = 2,
+    def __init__(self, volume: Volume | Shown, scene: Scene | None = None, max_scenes: int = 2,
                  stripe_rows: int | None = None) -> None:
-        self.volume = volume
+        self.shown = volume if isinstance(volume, Shown) else shown(scene or volume)
+        self.volume = self.shown.volume
         self._stripe_rows_fixed = stripe_rows
-        self._pinned = scene
-        self._scenes: OrderedDict[str, Scene] = OrderedDict()
-        self._max_scenes = max(1, int(max_scenes))
+        self._pinned = self.shown.pinned
+        self._scenes: OrderedDict[str, Any] = OrderedDict()
+        if self.shown.initial is not None:
+            self._scenes[self.shown.initial.model.name] = self.shown.initial
+        self._max_scenes = max(1, min(int(max_scenes), self.shown.max_scenes))
         # Milliseconds per pixel of recent renders, by (model, mode, several isovalues).
         self._cost: dict[tuple[str, str, bool], float] = {}
 
@@ -89,19 +96,41 @@ class FrameRenderer:
         return (self._pinned is not None and self._pinned.model.name == model) or (
             model in self._scenes)
 
-    def scene(self, model: str) -> Scene:
-        """The prepared scene of ``model``, building it if needed (least recent one dropped)."""
+    def scene(self, model: str) -> Any:
+        """The prepared scene of ``model``, building it if needed (least recent one dropped;
+        a pyramid's scene is closed first, so one brick cache at a time holds its budget)."""
         if self._pinned is not None and self._pinned.model.name == model:
             return self._pinned
         scene = self._scenes.get(model)
         if scene is None:
+            if model not in self.shown.models:  # before anything is dropped
+                raise ParameterError(f"model must be one of {', '.join(self.shown.models)} for "
+                                     f"{self.shown.geometry.name}, got {model!r}")
             budget = self._max_scenes - (self._pinned is not None)
             while self._scenes and len(self._scenes) >= max(budget, 1):
-                self._scenes.popitem(last=False)
-            scene = Scene(self.volume, model=model)
+                self.shown.close_scene(self._scenes.popitem(last=False)[1])
+            scene = self.shown.make_scene(model)
             self._scenes[model] = scene
         self._scenes.move_to_end(model)
         return scene
+
+    def bricks_loaded(self) -> dict[str, int]:
+        """Bricks read so far by each pyramid scene held, by model (empty for other data); safe
+        to call from any thread (the cache counts under its lock)."""
+        out = {}
+        scenes = list(self._scenes.items())
+        if self._pinned is not None:
+            scenes.append((self._pinned.model.name, self._pinned))
+        for model, scene in scenes:
+            stream = getattr(scene, "stream", None)
+            if stream is not None:
+                out[model] = int(stream.cache.stats()["loaded"])
+        return out
+
+    def close(self) -> None:
+        """Release the scenes the viewer made (a pyramid's loader thread stops)."""
+        while self._scenes:
+            self.shown.close_scene(self._scenes.popitem(last=False)[1])
 
     # ------------------------------------------------------------------------- cost model
     @staticmethod
@@ -129,11 +158,14 @@ class FrameRenderer:
 
     # -------------------------------------------------------------------------- rendering
     def render(self, request: RenderRequest, scale: float = 1.0,
-               abort: Callable[[], bool] | None = None) -> RenderedImage | None:
+               abort: Callable[[], bool] | None = None, step: str = "full"
+               ) -> RenderedImage | None:
         """Render ``request`` at ``scale`` times its size; ``None`` if ``abort()`` said stop.
 
-        ``abort`` is asked between stripes. Errors of the request (a combination of model and
-        mode the library refuses, an isovalue outside the range) raise ParameterError.
+        ``abort`` is asked between stripes. ``step`` names the pass (``interactive``,
+        ``coarse``, ``full``, ``refresh``, ``screenshot``): how long a pyramid's frame waits for
+        bricks (:meth:`.data.Shown.render_options`). Errors of the request (a combination of
+        model and mode the library refuses, an isovalue outside the range) raise ParameterError.
         """
         start = time.perf_counter()
         scene = self.scene(request.model)
@@ -143,6 +175,7 @@ class FrameRenderer:
             height = max(1, round(camera.height * scale))
             camera = resized_camera(camera, width, height)
         rows = self._stripe_rows(request, camera.width, camera.height)
+        options = {**request.options, **self.shown.render_options(step)}
         image = np.empty((camera.height, camera.width, 4), np.uint8)
         parts: list[tuple[int, dict[str, Any]]] = []
         for row0 in range(0, camera.height, rows):
@@ -151,7 +184,7 @@ class FrameRenderer:
             height = min(rows, camera.height - row0)
             window = camera if height == camera.height else camera.tile(
                 0, row0, camera.width, height)
-            frame = scene.render(window, **request.options)
+            frame = scene.render(window, **options)
             image[row0:row0 + height] = frame.to_uint8()
             parts.append((height, frame.stats))
         render_ms = (time.perf_counter() - start) * 1e3
@@ -160,6 +193,8 @@ class FrameRenderer:
         return RenderedImage(image, stats, render_ms, camera.height / request.camera.height)
 
     def _stripe_rows(self, request: RenderRequest, width: int, height: int) -> int:
+        if self.shown.multiresolution:
+            return height
         if self._stripe_rows_fixed is not None:
             return max(1, min(height, self._stripe_rows_fixed))
         per_pixel = self._cost.get(self._cost_key(request))

@@ -23,9 +23,8 @@ from typing import Any
 from aiohttp import WSMsgType, web
 
 from ..errors import ParameterError
-from ..scene import Scene
-from ..volume import Volume
 from . import security
+from .data import shown
 from .protocol import MAX_MESSAGE_BYTES, PROTOCOL_VERSION, hello_message
 from .renderer import FrameRenderer
 from .session import Session
@@ -68,10 +67,14 @@ class ViewerServer:
 
     Parameters
     ----------
-    data : Volume or Scene
+    data : Volume, Scene, or multiresolution volume or scene
         What to show; a Scene's prepared model is kept, other models are prepared on demand.
+        A pyramid (``MultiscaleVolume``) is opened as a ``MultiscaleScene`` (every model, one
+        brick cache at a time); a wavelet store (``WaveletVolume``) as its ``WaveletScene``
+        (model ``bspline<degree>`` only); a multiresolution scene passed in is shown with its
+        own model only.
     model : str, optional
-        Initial model (default: the scene's, or ``"trilinear"``).
+        Initial model (default: the scene's, a wavelet store's, or ``"trilinear"``).
     mode : str
         Initial render mode.
     iso : float or list of float, optional
@@ -86,32 +89,42 @@ class ViewerServer:
         The access token (default: a fresh random one).
     max_pixels : int
         Largest image a client may ask for.
+    budget : int or str, optional
+        Brick cache of a pyramid (default ``"2GiB"``, as ``splinecast render``).
+    lod : float, optional
+        Level of detail of a pyramid (pixels per voxel, default 1) or a wavelet store (ε in
+        radians, default one pixel's angle), as ``splinecast render --lod``.
     """
 
-    def __init__(self, data: Volume | Scene, model: str | None = None, mode: str = "iso",
+    #: How often (s) the server looks for bricks a pyramid's loader brought in.
+    brick_poll_s = 0.1
+
+    def __init__(self, data: Any, model: str | None = None, mode: str = "iso",
                  iso: Any = None, host: str = "127.0.0.1", port: int = 0,
-                 token: str | None = None, max_pixels: int = MAX_PIXELS) -> None:
-        if isinstance(data, Scene):
-            scene, volume = data, data.volume
-            model = model or data.model.name
-        elif isinstance(data, Volume):
-            scene, volume = None, data
-            model = model or "trilinear"
-        else:
-            raise ParameterError(f"the viewer shows a splinecast.Volume or Scene, got "
-                                 f"{type(data).__name__}")
+                 token: str | None = None, max_pixels: int = MAX_PIXELS,
+                 budget: Any = None, lod: float | None = None) -> None:
         if not isinstance(port, int) or not 0 <= port <= 65535:
             raise ParameterError(f"port must be an integer in 0..65535, got {port!r}")
-        self.volume = volume
-        self.defaults = default_state(volume, model=model, mode=mode, iso=iso)
-        self.renderer = FrameRenderer(volume, scene)
+        self.shown = shown(data, model=model, budget=budget, lod=lod)
+        try:
+            volume = self.shown.volume
+            self.volume = volume
+            self.defaults = default_state(volume, model=self.shown.default_model, mode=mode,
+                                          iso=iso, geometry=self.shown.geometry)
+            self.renderer = FrameRenderer(self.shown)
+        except BaseException:
+            self.shown.close_scene(self.shown.initial)  # stop a pyramid's loader thread
+            raise
         self.host = host
         self.port = port
         self.token = token or security.new_token()
         self.max_pixels = int(max_pixels)
         self._hello = hello_message(volume, self.defaults, {
             "max_pixels": self.max_pixels, "max_message_bytes": MAX_MESSAGE_BYTES,
-            "settle_ms": round(Session.settle_s * 1e3)})
+            "settle_ms": round(Session.settle_s * 1e3)}, geometry=self.shown.geometry,
+            models=self.shown.models, modes=self.shown.modes,
+            multires=self.shown.description())
+        self._watcher: asyncio.Task | None = None
         self._allowed: frozenset[str] = frozenset()
         self._sessions: set[Session] = set()
         self._sockets: set[web.WebSocketResponse] = set()
@@ -157,23 +170,47 @@ class ViewerServer:
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
         await self._runner.setup()
         await web.SockSite(self._runner, sock).start()
+        if self.shown.kind == "multiscale":
+            self._watcher = asyncio.create_task(self._watch_bricks())
         return self.url
 
     async def stop(self) -> None:
-        """Close every connection and stop serving."""
+        """Close every connection and stop serving (a pyramid's loader thread stops too)."""
+        if self._watcher is not None:
+            self._watcher.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await self._watcher
+            self._watcher = None
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
             self._executor = None
+        self.renderer.close()
 
     def refresh_all(self) -> None:
         """Ask every client's session to re-render its last full frame (from any thread): the
-        hook for data that gets more detailed over time (bricks of a pyramid arriving)."""
+        hook for data that gets more detailed over time. A pyramid needs no call: the server
+        watches its loader (:meth:`_watch_bricks`) and refreshes incomplete frames itself."""
         if self._loop is not None:
             for session in list(self._sessions):
                 self._loop.call_soon_threadsafe(session.refresh)
+
+    async def _watch_bricks(self) -> None:
+        """Poll the pyramid's loader and let each session refresh its frame when bricks of its
+        view arrived (the sessions decide, and rate-limit, in :meth:`Session.bricks_arrived`)."""
+        while True:
+            await asyncio.sleep(self.brick_poll_s)
+            if not self._sessions:
+                continue
+            try:
+                loaded = self.renderer.bricks_loaded()
+            except Exception:  # a scene being replaced on the render thread; try again
+                log.debug("brick poll failed", exc_info=True)
+                continue
+            for session in list(self._sessions):
+                session.bricks_arrived(loaded)
 
     async def _close_sockets(self, app: web.Application) -> None:
         for ws in list(self._sockets):

@@ -16,8 +16,11 @@ Scheduling rules (the interaction model of the issue):
   reduced frame (it comes from a drag).
 * **Screenshots** are rendered at full resolution as PNG and are never superseded.
 * **More detail later:** :meth:`Session.refresh` re-renders the last settled state at full
-  resolution; a brick loader (multiresolution volumes) calls it through
-  ``loop.call_soon_threadsafe`` when bricks arrive, without the client asking.
+  resolution. For a pyramid the server calls :meth:`Session.bricks_arrived` a few times a second
+  with the loader's count of bricks read; the session re-renders (pass ``full``, drawing what is
+  resident) when bricks landed since its last full frame, that frame was not complete, the page
+  shows it (no drag, no newer request waiting, nothing rendering) and at least
+  :attr:`Session.refresh_s` passed since the last refresh. It stops once a frame is complete.
 
 The session knows nothing of sockets: the server gives it two coroutines that send a text and a
 binary message, and a function that runs a callable on the render thread.
@@ -36,6 +39,7 @@ from typing import Any
 
 from ..errors import SplinecastError
 from ..volume import Volume
+from .data import bricks_header
 from .encoding import encode_image
 from .protocol import decode_request, json_safe_stats, pack_frame
 from .renderer import FrameRenderer, RenderedImage
@@ -90,6 +94,8 @@ class Session:
     interactive_ms = 40.0
     #: Full frames expected to take longer than this (ms) are preceded by a coarse one.
     progressive_ms = 250.0
+    #: Shortest time between two refreshes for arriving bricks (s).
+    refresh_s = 0.25
 
     def __init__(self, renderer: FrameRenderer, run_in_thread: RunInThread,
                  send_text: SendText, send_bytes: SendBytes, defaults: dict[str, Any],
@@ -108,6 +114,11 @@ class Session:
         self._settled: _Job | None = None  # the last full-resolution view request
         self._shown_final = True  # whether the last view frame sent was a full one (or none)
         self._closed = False
+        self._busy = False  # a job is being served
+        # The last full frame of a pyramid: (model, bricks read when its cut was resolved,
+        # whether its cut was complete); None for other data or before the first one.
+        self._bricks_seen: tuple[str, int, bool] | None = None
+        self._last_refresh = -math.inf
 
     @property
     def volume(self) -> Volume:
@@ -121,8 +132,10 @@ class Session:
         try:
             message = decode_request(text)
             ident = message["id"]
+            shown = self.renderer.shown
             request = parse_state(message["state"], self.volume, self._defaults,
-                                  self._max_pixels)
+                                  self._max_pixels, geometry=shown.geometry,
+                                  models=shown.models, modes=shown.modes)
         except SplinecastError as exc:
             await self._error(ident, str(exc))
             return
@@ -134,7 +147,7 @@ class Session:
         if message["interactive"]:
             job = _Job("interactive", ident, request)
             loop = asyncio.get_running_loop()
-            self._settle = loop.call_later(self.settle_s, self._submit_view,
+            self._settle = loop.call_later(self.settle_s, self._settled_now,
                                            _Job("final", ident, request))
         else:
             job = _Job("final", ident, request)
@@ -147,6 +160,30 @@ class Session:
             job = self._settled
             self._submit_view(_Job("refresh", job.ident, job.request))
 
+    def bricks_arrived(self, loaded: dict[str, int]) -> bool:
+        """Refresh the shown full frame if bricks of its model landed since it was rendered and
+        it was incomplete (see the module docstring); returns whether a refresh was queued.
+
+        Parameters
+        ----------
+        loaded : dict
+            Bricks read so far by each pyramid scene, by model
+            (:meth:`.renderer.FrameRenderer.bricks_loaded`).
+        """
+        seen = self._bricks_seen
+        if (seen is None or seen[2] or self._closed or self._busy or self._view is not None
+                or self._settle is not None or not self._shown_final or self._settled is None
+                or self._settled.request.model != seen[0]):
+            return False
+        if loaded.get(seen[0], seen[1]) <= seen[1]:
+            return False
+        now = time.perf_counter()
+        if now - self._last_refresh < self.refresh_s:
+            return False
+        self._last_refresh = now
+        self.refresh()
+        return True
+
     def close(self) -> None:
         """Stop: waiting requests are dropped and :meth:`run` returns."""
         self._closed = True
@@ -158,6 +195,11 @@ class Session:
         if self._settle is not None:
             self._settle.cancel()
             self._settle = None
+
+    def _settled_now(self, job: _Job) -> None:
+        """The settle timer fired: no drag in progress any more; render the full frame."""
+        self._settle = None
+        self._submit_view(job)
 
     def _submit_view(self, job: _Job) -> None:
         self._view = job
@@ -177,7 +219,11 @@ class Session:
                     job, self._view = self._view, None
                 else:
                     break
-                await self._serve(job)
+                self._busy = True
+                try:
+                    await self._serve(job)
+                finally:
+                    self._busy = False
 
     def _passes(self, job: _Job) -> list[_Pass]:
         if job.kind == "screenshot":
@@ -212,7 +258,8 @@ class Session:
         for step in self._passes(job):
             if stale is not None and stale():
                 return
-            work = partial(self._render_and_encode, job.request, step, stale)
+            name = "refresh" if job.kind == "refresh" else step.name
+            work = partial(self._render_and_encode, job.request, step, stale, name)
             try:
                 result = await self._run(work)
             except SplinecastError as exc:
@@ -230,12 +277,15 @@ class Session:
                 self._shown_final = step.final
                 if step.final:
                     self._settled = job
+                    bricks = bricks_header(image.stats)
+                    self._bricks_seen = None if bricks is None else (
+                        job.request.model, bricks["loaded"], bricks["complete"])
 
     def _render_and_encode(self, request: RenderRequest, step: _Pass,
-                           stale: Callable[[], bool] | None
+                           stale: Callable[[], bool] | None, name: str
                            ) -> tuple[RenderedImage, bytes, float] | None:
         """On the render thread: the image of one pass and its encoded bytes."""
-        image = self.renderer.render(request, step.scale, stale)
+        image = self.renderer.render(request, step.scale, stale, name)
         if image is None:
             return None
         start = time.perf_counter()
@@ -245,7 +295,7 @@ class Session:
     @staticmethod
     def _header(job: _Job, step: _Pass, image: RenderedImage, encode_ms: float) -> dict:
         height, width = image.rgba.shape[:2]
-        return {
+        header = {
             "type": "frame",
             "id": job.ident,
             "pass": step.name,
@@ -258,6 +308,10 @@ class Session:
             "encode_ms": round(encode_ms, 2),
             "stats": json_safe_stats(image.stats),
         }
+        bricks = bricks_header(image.stats)
+        if bricks is not None:
+            header["bricks"] = bricks
+        return header
 
     async def _error(self, ident: int | None, message: str) -> None:
         await self._send_text({"type": "error", "id": ident, "message": message})

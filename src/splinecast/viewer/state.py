@@ -108,7 +108,7 @@ def _default_tf(volume: Volume) -> dict[str, Any]:
 
 
 def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
-                  iso: Any = None) -> dict[str, Any]:
+                  iso: Any = None, *, geometry: Any = None) -> dict[str, Any]:
     """The complete state a viewer starts from (and that omitted fields take).
 
     Parameters
@@ -119,6 +119,9 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         Initial reconstruction and render mode.
     iso : float or list of float, optional
         Initial isovalue(s); by default :func:`default_iso`.
+    geometry : object, optional
+        The full-resolution data when ``volume`` is a multiresolution volume's coarsest level:
+        isovalues are checked against its ``value_range``.
 
     Raises
     ------
@@ -129,7 +132,8 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
     _check_choice(mode, MODES, "mode")
     if iso is None:
         iso = default_iso(volume)
-    isos = [check_iso(volume, v) for v in (iso if isinstance(iso, list | tuple) else [iso])]
+    values = volume if geometry is None else geometry
+    isos = [check_iso(values, v) for v in (iso if isinstance(iso, list | tuple) else [iso])]
     shading = Shading()
     return {
         "model": model,
@@ -280,7 +284,7 @@ def _size(value: Any, max_pixels: int) -> tuple[int, int]:
     return width, height
 
 
-def _iso_options(state: dict[str, Any], volume: Volume) -> dict[str, Any]:
+def _iso_options(state: dict[str, Any], volume: Any) -> dict[str, Any]:
     iso = state["iso"]
     if not isinstance(iso, list):
         return {"iso": check_iso(volume, _number(iso, "iso"))}
@@ -317,7 +321,7 @@ def _dvr_settings(dvr: dict[str, Any], lighting: dict[str, float]) -> DVRSetting
                        ambient=lighting["ambient"], diffuse=lighting["diffuse"])
 
 
-def _mode_options(state: dict[str, Any], volume: Volume) -> dict[str, Any]:
+def _mode_options(state: dict[str, Any], volume: Any) -> dict[str, Any]:
     mode = state["mode"]
     lighting = {k: _number(state["lighting"][k], f"lighting.{k}") for k in _LIGHTING_FIELDS}
     shading = Shading(**lighting)
@@ -349,7 +353,8 @@ def _mode_options(state: dict[str, Any], volume: Volume) -> dict[str, Any]:
 
 
 def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
-                max_pixels: int = MAX_PIXELS) -> RenderRequest:
+                max_pixels: int = MAX_PIXELS, *, geometry: Any = None,
+                models: Any = None, modes: Any = None) -> RenderRequest:
     """Validate a client's state into a :class:`RenderRequest`.
 
     Parameters
@@ -362,6 +367,12 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
         A complete state, as made by :func:`default_state`.
     max_pixels : int
         The largest image size allowed.
+    geometry : object, optional
+        What the camera orbits and isovalues are checked against (world ``bounds``,
+        ``value_range``; default ``volume``): the full-resolution data when ``volume`` is a
+        multiresolution volume's coarsest level.
+    models, modes : sequence of str, optional
+        The choices offered (default: every model and mode).
 
     Raises
     ------
@@ -369,10 +380,11 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
         One line naming the first field that is wrong.
     """
     full = _complete(state, defaults)
-    model = _check_choice(full["model"], MODELS, "model")
-    mode = _check_choice(full["mode"], MODES, "mode")
+    model = _check_choice(full["model"], MODELS if models is None else models, "model")
+    mode = _check_choice(full["mode"], MODES if modes is None else modes, "mode")
     camera_fields = _camera_fields(full["camera"])
     size = _size(full["size"], max_pixels)
-    camera = orbit_camera(volume, camera_fields, size)
-    options = _mode_options(full, volume)
+    geometry = volume if geometry is None else geometry
+    camera = orbit_camera(geometry, camera_fields, size)
+    options = _mode_options(full, geometry)
     return RenderRequest(model, mode, camera, options, full)

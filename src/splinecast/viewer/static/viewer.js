@@ -175,13 +175,18 @@
       while (interactiveTimes.length && now - interactiveTimes[0] > 1000) interactiveTimes.shift();
       parts.push(`${interactiveTimes.length} fps`);
     }
-    // Multiresolution volumes report their bricks; plain volumes have none to report.
-    const st = h.stats;
-    if (st.bricks_resident !== undefined) {
-      parts.push(`bricks ${st.bricks_resident}${st.bricks_total !== undefined ? "/" + st.bricks_total : ""}`);
+    // Pyramids report the bricks of the view (protocol 1.1); plain volumes have none.
+    const b = h.bricks;
+    if (b) {
+      let text = `bricks ${b.cut_resident}/${b.cut} resident`;
+      if (b.loading > 0) text += `, loading ${b.loading}`;
+      if (b.unavailable > 0) text += `, ${b.unavailable} unreadable`;
+      parts.push(text);
+      parts.push(b.complete ? "complete" : `${Math.round(b.progress * 100)}%`);
+    } else if (h.stats.chunks !== undefined) {
+      parts.push(`chunks ${h.stats.chunks}`);  // a wavelet store's reconstructed chunks
     }
-    if (st.load_progress !== undefined) parts.push(`loaded ${Math.round(st.load_progress * 100)}%`);
-    if (!h.final) parts.push("refining…");
+    if (!h.final || (b && !b.complete && b.loading > 0)) parts.push("refining…");
     statusLine.textContent = parts.join(" · ");
   }
 

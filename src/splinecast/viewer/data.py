@@ -1,0 +1,222 @@
+"""What a viewer shows: an in-memory volume, a prepared scene, or a multiresolution volume.
+
+:class:`Shown` gives the rest of the viewer one interface whatever was passed in:
+
+* ``volume`` - an in-memory :class:`~splinecast.Volume` for everything that looks at values
+  (automatic isovalue, window and transfer function, isovalue checks, the histogram behind the
+  sliders). For a multiresolution scene it is the scene's ``preview``: the coarsest level, which
+  stays resident, with the whole volume's value range. The finest level is never read for it.
+* ``geometry`` - what cameras frame (:meth:`Camera.orbit`) and what ``hello`` describes: the
+  volume itself, or the lazy multiscale / wavelet volume (level 0's placement).
+* ``models`` and ``modes`` - exactly what the page may choose (a wavelet store renders only its
+  ``bspline<degree>``; a scene passed in by the caller only its own model).
+* :meth:`Shown.make_scene` - the scene of another model, when that is offered.
+* :meth:`Shown.render_options` - per pass, how long a multiscale frame waits for bricks.
+* :meth:`Shown.bricks` - the brick counts of a frame for the frame header and the status line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..errors import ParameterError
+from ..models import MODELS
+from ..scene import MODES, Scene
+from ..volume import Volume
+
+__all__ = ["Shown", "shown", "DEFAULT_BUDGET", "DEFAULT_LOD", "FULL_WAIT_S"]
+
+#: Brick cache of a pyramid the viewer opens itself (the default of ``splinecast render``).
+DEFAULT_BUDGET = "2GiB"
+#: Level of detail of a pyramid the viewer opens itself (pixels per voxel; as ``render``).
+DEFAULT_LOD = 1.0
+#: Longest wait (s) of a full frame for the bricks of its cut; later bricks come as refreshes.
+FULL_WAIT_S = 0.5
+
+
+@dataclass
+class Shown:
+    """The data on display and what may be done with it (see the module docstring).
+
+    Attributes
+    ----------
+    kind : {"volume", "multiscale", "wavelet"}
+    volume : Volume
+        In memory: values, defaults and histogram (a multiresolution scene's coarsest level).
+    geometry : object
+        World placement (``bounds``, ``shape``, ``spacing``, ``origin``, ``name``, ``dtype``,
+        ``value_range``) of the full-resolution data.
+    models, modes : tuple of str
+        What the page may choose.
+    pinned : scene, optional
+        A scene given by the caller (kept; never closed by the viewer).
+    initial : scene, optional
+        A scene the viewer opened already (a pyramid's first model; the viewer closes it when
+        another model replaces it).
+    scene_options : dict
+        Keyword arguments of scenes the viewer makes itself.
+    default_model : str
+        The model shown first.
+    """
+
+    kind: str
+    volume: Volume
+    geometry: Any
+    models: tuple[str, ...]
+    modes: tuple[str, ...] = MODES
+    pinned: Any = None
+    initial: Any = None
+    scene_options: dict[str, Any] = field(default_factory=dict)
+    default_model: str = "trilinear"
+
+    @property
+    def multiresolution(self) -> bool:
+        """Whether the data is a pyramid or a wavelet store (rendered without stripes)."""
+        return self.kind != "volume"
+
+    @property
+    def max_scenes(self) -> int:
+        """Scenes kept at once: one brick cache at a time for a pyramid (its budget is RAM)."""
+        return 1 if self.kind == "multiscale" else 2
+
+    def make_scene(self, model: str) -> Any:
+        """A new scene of ``model`` (one the page may choose)."""
+        if model not in self.models:
+            raise ParameterError(f"model must be one of {', '.join(self.models)}, got {model!r}")
+        if self.kind == "volume":
+            return Scene(self.volume, model=model)
+        return Scene(self.geometry, model=model, **self.scene_options)
+
+    def render_options(self, step: str) -> dict[str, Any]:
+        """Extra keyword arguments of ``scene.render`` for a pass (``interactive``, ``coarse``,
+        ``full``, ``refresh`` or ``screenshot``).
+
+        A pyramid's reduced and refresh frames draw what is resident at once (the loader goes on
+        reading); a full frame waits up to :data:`FULL_WAIT_S` for its cut; a screenshot waits
+        for the whole cut (a still image, as ``splinecast render``).
+        """
+        if self.kind != "multiscale":
+            return {}
+        if step == "screenshot":
+            return {"complete": True}
+        if step == "full":
+            return {"wait": True, "timeout": FULL_WAIT_S}
+        return {"wait": False}
+
+    def close_scene(self, scene: Any) -> None:
+        """Release a scene the viewer made (a pyramid's loader thread); pinned ones are kept."""
+        if scene is not self.pinned and hasattr(scene, "close"):
+            scene.close()
+
+    def description(self) -> dict[str, Any]:
+        """The ``hello`` message's ``multires`` entry (None for an in-memory volume)."""
+        if self.kind == "multiscale":
+            scene = self.pinned or self.initial
+            budget = scene.budget if scene is not None else self.scene_options.get("budget")
+            lod = scene.lod if scene is not None else self.scene_options.get("lod")
+            return {"kind": "multiscale", "levels": len(self.geometry.levels),
+                    "budget": budget, "lod": lod,
+                    "preview_shape": list(self.volume.shape)}
+        if self.kind == "wavelet":
+            lod = self.pinned.lod if self.pinned is not None else self.scene_options.get("lod")
+            return {"kind": "wavelet", "degree": self.geometry.degree,
+                    "levels": self.geometry.layout.levels, "lod": lod,
+                    "preview_shape": list(self.volume.shape)}
+        return None  # type: ignore[return-value]
+
+
+def bricks_header(stats: dict[str, Any]) -> dict[str, Any] | None:
+    """The frame header's ``bricks`` object from a multiscale frame's statistics (None when the
+    frame has no bricks).
+
+    ``cut`` bricks make this view; ``cut_resident`` of them are drawn from their own data (the
+    others from a coarser ancestor); ``loading`` are still to be read; ``resident`` bricks (of
+    any view, ancestors included) hold ``resident_bytes`` of ``budget``; ``progress`` is
+    ``cut_resident / cut``; ``complete`` says nothing more will arrive for this view.
+    """
+    if "cut_bricks" not in stats or "substituted" not in stats:
+        return None
+    cut = int(stats["cut_bricks"])
+    resident_in_cut = cut - int(stats["substituted"])
+    loading = int(stats.get("requested", 0))
+    complete = bool(stats.get("complete", False)) and stats.get("cut_final", True) is not False
+    return {
+        "cut": cut,
+        "cut_resident": resident_in_cut,
+        "loading": loading,
+        "resident": int(stats.get("resident", 0)),
+        "resident_bytes": int(stats.get("resident_bytes", 0)),
+        "budget": int(stats.get("budget", 0)),
+        "unavailable": int(stats.get("unavailable", 0)),
+        "loaded": int(stats.get("loaded", 0)),
+        "progress": resident_in_cut / cut if cut else 1.0,
+        "complete": complete,
+    }
+
+
+def shown(data: Any, model: str | None = None, budget: Any = None,
+          lod: float | None = None) -> Shown:
+    """Classify what ``sc.view`` / ``splinecast view`` was given.
+
+    Parameters
+    ----------
+    data : Volume, Scene, MultiscaleVolume, MultiscaleScene, WaveletVolume or WaveletScene
+    model : str, optional
+        The model shown first (default: a scene's own, a wavelet store's ``bspline<degree>``,
+        else ``"trilinear"``).
+    budget : int or str, optional
+        Brick cache of a pyramid the viewer opens (default :data:`DEFAULT_BUDGET`).
+    lod : float, optional
+        Level of detail of a pyramid (pixels per voxel, default :data:`DEFAULT_LOD`) or a wavelet
+        store (ε in radians, default one pixel's angle, as ``splinecast render``).
+
+    Raises
+    ------
+    ParameterError
+        Anything else, a model the data cannot be rendered with, or ``budget`` / ``lod`` given
+        with data they do not apply to.
+    """
+    if model is not None and model not in MODELS:
+        raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    if isinstance(data, Scene | Volume):
+        if budget is not None or lod is not None:
+            raise ParameterError("budget and lod apply to multiresolution (OME-Zarr or wavelet) "
+                                 "data only")
+        if isinstance(data, Scene):
+            return Shown("volume", data.volume, data.volume, tuple(MODELS), pinned=data,
+                         default_model=model or data.model.name)
+        return Shown("volume", data, data, tuple(MODELS), default_model=model or "trilinear")
+    # Imported here: the viewer of an in-memory volume never loads zarr.
+    from ..io.omezarr import MultiscaleVolume
+    from ..multires.scene import MultiscaleScene
+    from ..multires.wavelet_scene import WaveletScene
+    from ..multires.wavelet_store import WaveletVolume
+
+    if isinstance(data, MultiscaleScene | WaveletScene):
+        if budget is not None or lod is not None:
+            raise ParameterError("budget and lod are the scene's own: pass a volume to set them")
+        _only_model(model, data.model.name, data.volume.name)
+        kind = "multiscale" if isinstance(data, MultiscaleScene) else "wavelet"
+        return Shown(kind, data.preview, data.volume, (data.model.name,), pinned=data,
+                     default_model=data.model.name)
+    if isinstance(data, WaveletVolume):
+        if budget is not None:
+            raise ParameterError(f"budget does not apply to the wavelet store {data.name}")
+        scene = WaveletScene(data, model=model, lod=lod)  # reads the coarsest level only
+        return Shown("wavelet", scene.preview, data, (scene.model.name,), pinned=scene,
+                     default_model=scene.model.name)
+    if isinstance(data, MultiscaleVolume):
+        options = {"budget": DEFAULT_BUDGET if budget is None else budget,
+                   "lod": DEFAULT_LOD if lod is None else lod}
+        scene = MultiscaleScene(data, model=model or "trilinear", **options)  # coarsest level
+        return Shown("multiscale", scene.preview, data, tuple(MODELS), initial=scene,
+                     scene_options=options, default_model=scene.model.name)
+    raise ParameterError(f"the viewer shows a splinecast Volume or Scene (or a multiresolution "
+                         f"volume or scene), got {type(data).__name__}")
+
+
+def _only_model(model: str | None, own: str, name: str) -> None:
+    if model is not None and model != own:
+        raise ParameterError(f"model must be {own} for the scene of {name} given to the viewer "
+                             f"(it renders that model only), got {model!r}")
