@@ -71,6 +71,12 @@ def test_scene_of_a_multiscale_volume_is_the_multires_scene(noise, model):
     with sc.Scene(sc.read(path), model=model, budget="64MiB") as scene:
         assert isinstance(scene, MultiscaleScene)
         assert scene.model.name == model
+        # The preview (the coarsest level in memory) checks isovalues against the range of the
+        # whole volume, also after the model scanned it for non-finite values.
+        assert scene.preview.nonfinite_counts() == (0, 0, 0)
+        assert scene.preview.value_range == (float(vol.data.min()), float(vol.data.max()))
+        coarse = sc.read(path).level(-1).to_volume()
+        assert coarse.value_range != scene.preview.value_range  # the levels' ranges differ
 
 
 @pytest.mark.parametrize("model", MODELS)

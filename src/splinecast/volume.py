@@ -385,10 +385,14 @@ class Volume(GridGeometry):
 
     def _scan(self) -> None:
         """One pass over the data, in slabs along its slowest axis (bounded temporary memory),
-        for the finite value range and the non-finite counts."""
+        for the finite value range and the non-finite counts.
+
+        A value range set before (a multiscale scene's preview carries the whole volume's range,
+        not its own level's) is kept: only the counts are filled in then.
+        """
         data = self.data
         if data.dtype.kind != "f":
-            if data.size:
+            if data.size and self._value_range is None:
                 self._value_range = (float(data.min()), float(data.max()))
             self._nonfinite = (0, 0, 0)
             if not data.size:
@@ -414,7 +418,8 @@ class Volume(GridGeometry):
         self._nonfinite = (nan, pos, neg)
         if lo > hi:
             raise DataError(f"{self.name}: the data contains no finite value")
-        self._value_range = (lo, hi)
+        if self._value_range is None:
+            self._value_range = (lo, hi)
 
     def __repr__(self) -> str:
         return (
