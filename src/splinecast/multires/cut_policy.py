@@ -53,13 +53,14 @@ Choices
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 
 from ..camera import Camera
-from ..errors import ParameterError
+from ..errors import ParameterError, ReadError
 from ..transfer import TransferFunction
 from .cut_histograms import (
     DEFAULT_BINS,
@@ -71,6 +72,7 @@ from .cut_histograms import (
 from .cut_metric import CutMetric, cut_error
 from .cut_tree import BrickTree
 from .cut_update import CutUpdate, CutUpdater
+from .hist_store import HIST2D, read_histograms
 from .lod import Cut, Key, cut_of_keys
 from .octree import BrickOctree
 from .relevance import ValueFilter
@@ -255,21 +257,36 @@ class ErrorCut:
         Time spent reading the levels and building the histograms.
     """
 
-    def __init__(self, octree: BrickOctree, *, bins: int = DEFAULT_BINS, improved: bool = True,
+    def __init__(self, octree: BrickOctree, *, bins: int | None = None, improved: bool = True,
                  interest: Any = None, fill: bool = True,
-                 levels: list[np.ndarray] | None = None) -> None:
+                 levels: list[np.ndarray] | None = None, stored: bool = True,
+                 frustum: bool = True) -> None:
         start = time.perf_counter()
         self.octree = octree
         self.improved = bool(improved)
         self.fill = bool(fill)
+        self.frustum = bool(frustum)
         self.interest = _check_interest(interest)
         volume = octree.volume
-        self.quantizer = Quantizer.for_data(volume.dtype, volume.value_range, bins)
-        if levels is None:
-            levels = [_read_level(octree, p) for p in range(octree.n_levels)]
-        ranges = [self._fill_ranges(p, levels[p]) for p in range(octree.n_levels)]
+        self._levels: dict[int, np.ndarray] = dict(enumerate(levels)) if levels else {}
+        #: Where the histograms came from: ``"store"`` (the pyramid's ``hist2d`` group) or
+        #: ``"built"`` (from the levels, at opening).
+        self.histogram_source = "built"
+        self.histogram_note = ""
+        hist = self._stored_histograms(bins) if stored and levels is None else None
+        if hist is None:
+            self.quantizer = Quantizer.for_data(volume.dtype, volume.value_range,
+                                                DEFAULT_BINS if bins is None else bins)
+        else:
+            self.quantizer = hist.quantizer
+            self.histogram_source = "store"
+        ranges = [self._fill_ranges(p) for p in range(octree.n_levels)]
         self.tree, self.keys, self.virtual = octree_tree(octree, ranges)
-        self.histograms = octree_histograms(octree, self.quantizer, levels)
+        if hist is None:
+            hist = octree_histograms(octree, self.quantizer,
+                                     [self._level(p) for p in range(octree.n_levels)])
+        self.histograms = hist
+        self._levels = {}  # the levels were only needed for the histograms
         self.brick_bytes = int(max(octree.brick_bytes(octree.levels[p],
                                                       np.zeros((1, 3), np.int64)).max()
                                    for p in range(octree.n_levels)))
@@ -282,12 +299,53 @@ class ErrorCut:
         self._signature: tuple | None = None
         self.build_ms = (time.perf_counter() - start) * 1e3
 
-    def _fill_ranges(self, p: int, data: np.ndarray) -> np.ndarray:
-        """The octree's own ranges of position ``p``, NaN entries computed from ``data`` over
-        each brick's window (as the ``minmax`` table is)."""
+    def _level(self, p: int) -> np.ndarray:
+        if p not in self._levels:
+            self._levels[p] = _read_level(self.octree, p)
+        return self._levels[p]
+
+    def _stored_histograms(self, bins: int | None) -> BrickHistograms | None:
+        """The store's ``hist2d`` group in node order, or None (with one warning saying why,
+        unless the store simply predates stored histograms and says nothing)."""
+        octree = self.octree
+        volume = octree.volume
+        attributes = getattr(volume, "attributes", {})
+        if octree.n_levels == 1:  # only leaves: nothing to store or build
+            return BrickHistograms(np.zeros(int(np.prod(octree.counts[0])) + 1, np.int64),
+                                   np.zeros(0, np.uint16), np.zeros(0, np.uint32),
+                                   Quantizer.for_data(volume.dtype, volume.value_range,
+                                                      DEFAULT_BINS if bins is None else bins))
+        if HIST2D not in attributes:
+            self.histogram_note = ("no stored brick histograms: building them from every level "
+                                   "(rebuild the pyramid with --histograms to skip this)")
+            warnings.warn(f"{getattr(volume, 'path', 'pyramid')}: {self.histogram_note}",
+                          UserWarning, stacklevel=4)
+            return None
+        try:
+            stored = read_histograms(volume, octree.brick, octree.levels[1:],
+                                     [octree.level_map(lv) for lv in octree.levels[1:]], bins)
+        except (ParameterError, ReadError) as exc:
+            self.histogram_note = f"{exc}; building them from every level instead"
+            warnings.warn(self.histogram_note, UserWarning, stacklevel=4)
+            return None
+        q = stored[0].quantizer if stored else Quantizer.for_data(
+            volume.dtype, volume.value_range, DEFAULT_BINS if bins is None else bins)
+        leaves = int(np.prod(octree.counts[0]))
+        empty = np.zeros(0, np.uint16)
+        parts = [BrickHistograms(np.zeros(leaves + 1, np.int64), empty,
+                                 np.zeros(0, np.uint32), q), *stored]
+        if int(np.prod(octree.counts[-1])) > 1:
+            parts.append(BrickHistograms(np.zeros(2, np.int64), empty, np.zeros(0, np.uint32),
+                                         q))
+        return stack_histograms(parts)
+
+    def _fill_ranges(self, p: int) -> np.ndarray:
+        """The octree's own ranges of position ``p``, NaN entries computed from the level over
+        each brick's window (as the ``minmax`` table is; the level is read only then)."""
         ranges = np.array(self.octree.ranges[p], dtype=np.float64, copy=True)
         missing = np.argwhere(np.isnan(ranges).any(axis=-1))
         if missing.size:
+            data = self._level(p)
             first, stop = self.octree.window(self.octree.levels[p], missing)
             for n, idx in enumerate(missing):
                 lo = np.clip(first[n], 0, data.shape)
