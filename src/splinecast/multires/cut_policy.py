@@ -69,7 +69,7 @@ from .cut_histograms import (
     box_histograms,
     stack_histograms,
 )
-from .cut_metric import CutMetric, cut_error
+from .cut_metric import CutMetric, cut_error, frustum_planes
 from .cut_tree import BrickTree
 from .cut_update import CutUpdate, CutUpdater
 from .hist_store import HIST2D, read_histograms
@@ -77,10 +77,13 @@ from .lod import Cut, Key, cut_of_keys
 from .octree import BrickOctree
 from .relevance import ValueFilter
 
-__all__ = ["CUT_POLICIES", "check_cut", "octree_tree", "octree_histograms", "ErrorCut"]
+__all__ = ["CUT_POLICIES", "CUT_PRIORITIES", "check_cut", "octree_tree", "octree_histograms",
+           "ErrorCut"]
 
 #: Cut policies of a multiscale scene: screen-space level of detail, or the 002 error metric.
 CUT_POLICIES = ("lod", "error")
+#: Split priorities of the error cut: ``P = ER`` (eq. 9) or ``P = E``.
+CUT_PRIORITIES = ("improved", "naive")
 
 
 def check_cut(cut: Any) -> str:
@@ -230,8 +233,9 @@ class ErrorCut:
     ----------
     octree : BrickOctree
         The stream's octree (its value ranges are those of the store's ``minmax`` table).
-    bins : int
-        Histogram bins per value axis (:data:`~.cut_histograms.DEFAULT_BINS`).
+    bins : int, optional
+        Histogram bins per value axis (default: the stored histograms', else
+        :data:`~.cut_histograms.DEFAULT_BINS`).
     improved : bool
         ``P = ER`` (the paper's "improved" priority, default) or ``P = E`` ("naive").
     interest : 3 floats, optional
@@ -241,7 +245,16 @@ class ErrorCut:
         Set aside a split that does not fit N or M and go on (default; see
         :mod:`.cut_update`), or end the frame there (the paper's rule).
     levels : list of ndarray, optional
-        The levels in memory (default: read from the store once, here).
+        The levels in memory (default: read from the store once, here, unless the store holds
+        its histograms).
+    stored : bool
+        Use the histograms stored with the pyramid (:mod:`.hist_store`) when it has them
+        (default); otherwise, or when they do not fit this octree or are damaged (one warning
+        says so), build them from the levels.
+    frustum : bool
+        Frustum culling (default): a brick more than :attr:`frustum_margin` outside the camera's
+        view frustum has importance 0, so it is never split (the cut still covers it once, as
+        coarse as it is).
 
     Attributes
     ----------
@@ -287,6 +300,12 @@ class ErrorCut:
                                      [self._level(p) for p in range(octree.n_levels)])
         self.histograms = hist
         self._levels = {}  # the levels were only needed for the histograms
+        finest = self.tree.level == 0
+        #: How far outside the view frustum a brick still counts as in view (world units): the
+        #: diagonal of a finest brick, so the finest neighbours of a brick in view are refined
+        #: with it and no seam between levels touches what the camera sees.
+        self.frustum_margin = float(np.linalg.norm(
+            self.tree.box_max[finest] - self.tree.box_min[finest], axis=1).max())
         self.brick_bytes = int(max(octree.brick_bytes(octree.levels[p],
                                                       np.zeros((1, 3), np.int64)).max()
                                    for p in range(octree.n_levels)))
@@ -369,12 +388,13 @@ class ErrorCut:
                                     eye=camera.position, improved=self.improved)
             self._set_visible(value_filter)
             self._signature = signature
-        else:
-            if signature != self._signature:
-                self.metric.set_transfer_function(tf)
-                self._set_visible(value_filter)
-                self._signature = signature
-            self.metric.set_view(interest=interest, eye=camera.position)
+        elif signature != self._signature:
+            self.metric.set_transfer_function(tf)
+            self._set_visible(value_filter)
+            self._signature = signature
+        frustum = frustum_planes(camera) if self.frustum else None
+        self.metric.set_view(interest=interest, eye=camera.position, frustum=frustum,
+                             margin=self.frustum_margin)
         if self.updater is None:
             start = self.roots[self.metric.visible[self.roots]]
             self.updater = _RenderUpdater(self.metric, budget, load_budget, start, self.virtual,
