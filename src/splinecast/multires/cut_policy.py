@@ -43,9 +43,16 @@ Choices
 * **Prefetch** (what the loader reads when idle): the visible children of the cut's bricks of
   highest split priority, i.e. the next splits of the split queue S in order (the head of the
   extended cut S+ of section 4).
-* **Histograms** are computed when the scene opens, from every level read whole (one pass; the
-  pyramid does not store them yet). That bounds ``cut="error"`` to volumes whose levels fit in
-  memory once at opening; storing the ``hist2d`` table with the pyramid lifts it.
+* **Histograms** come from the pyramid's ``hist2d`` group when it has one
+  (:mod:`.hist_store`, written by ``build_pyramid(..., histograms=True)``): opening reads no
+  level and a transfer-function edit no voxel. A store without it (or whose group does not fit
+  the octree or is damaged: one warning says which) gets them built here from every level read
+  whole, which bounds ``cut="error"`` on such stores to volumes whose levels fit in memory once.
+* **Frustum culling**: a brick more than one finest brick's diagonal outside the camera's view
+  frustum has importance 0 (:func:`~.cut_metric.frustum_planes`), so it is never split; the cut
+  still covers it once. The margin keeps the finest neighbours of a brick in view refined with
+  it, so no seam between levels touches a visible brick: at full budget the image is the finest
+  level's.
 * The isosurface modes keep the level-of-detail cut: D(b) measures classified colour, which an
   isosurface does not show (its error is geometric: the screen-space voxel size bounds it).
 """
