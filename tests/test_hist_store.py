@@ -140,6 +140,29 @@ def test_stored_histograms_are_those_the_error_cut_builds_without_them(stored):
     np.testing.assert_array_equal(a.counts, b.counts)
 
 
+def test_uint8_store_with_several_coarsest_bricks(tmp_path):
+    """8-bit data (bins over 0..255) and ``levels=2`` (a virtual root above several bricks):
+    the stored histograms are those built from the levels."""
+    from cut_reference import smooth_volume
+
+    vol = sc.Volume(smooth_volume((30, 20, 18), seed=5))
+    path = tmp_path / "u8.zarr"
+    sc.build_pyramid(vol, path, brick=B, shard=16, levels=2, progress=False, histograms=True)
+    octree = BrickOctree(sc.read(path))
+    a = ErrorCut(octree)
+    b = ErrorCut(octree, stored=False)
+    assert a.histogram_source == "store" and a.virtual >= 0
+    assert a.quantizer == b.quantizer and (a.quantizer.lo, a.quantizer.hi) == (0.0, 255.0)
+    np.testing.assert_array_equal(a.histograms.offsets, b.histograms.offsets)
+    np.testing.assert_array_equal(a.histograms.keys, b.histograms.keys)
+    np.testing.assert_array_equal(a.histograms.counts, b.histograms.counts)
+    # Every source voxel is counted once per level above the source.
+    h = a.histograms
+    level1 = np.flatnonzero(a.tree.level == 1)
+    assert level1.size > 1 and np.all(np.diff(level1) == 1)
+    assert int(h.counts[h.offsets[level1[0]]:h.offsets[level1[-1] + 1]].sum()) == vol.data.size
+
+
 def _level_chunks(path: Path) -> list[str]:
     """Chunk files opened inside the store's level arrays (``<store>/<digit>/c/...``; the
     arrays' ``zarr.json`` metadata is not voxels)."""
