@@ -26,8 +26,9 @@ Memory
 The source is read in cubic tiles of level 0 (``tile`` voxels a side, the pyramid's shard). Per
 tile and level the bricks' histograms restricted to the tile are computed from the tile and the
 few level voxels its trilinear reconstruction reads; histograms are additive over voxels, so a
-brick larger than a tile is the sum of its parts. Peak memory is one tile plus the histograms of
-one level (which the renderer holds anyway), never a whole level.
+brick larger than a tile is the sum of its parts. Peak memory is one tile and the level voxels
+it needs, plus the histograms themselves (a few percent of the source, what the error cut holds
+in memory anyway; about 2x that while a level's parts are merged), never a whole level.
 """
 
 from __future__ import annotations
