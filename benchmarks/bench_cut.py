@@ -597,6 +597,10 @@ def main(argv: list[str] | None = None) -> int:
 IMAGE_SHARES = (0.05, 0.15)
 
 
+#: Cuts compared by ``--images``: the error cut with each priority, and the LOD cut.
+IMAGE_POLICIES = ("naive", "improved", "lod")
+
+
 def delta_e(reference: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel ΔE*uv (CIELUV distance) and CIEDE2000 between two sRGB images (..., 3)."""
     from skimage.color import deltaE_ciede2000, rgb2lab
@@ -628,7 +632,7 @@ def compare_images(name: str, quick: bool, tmp: Path, png: Path | None) -> dict:
     vol, tf = image_volume(name, quick, tmp)
     path = tmp / f"{name}.zarr"
     t0 = time.perf_counter()
-    sc.build_pyramid(vol, path, brick=16, progress=False)
+    sc.build_pyramid(vol, path, brick=16, progress=False, histograms=True)
     build_s = time.perf_counter() - t0
     size = (256, 256) if quick else (512, 512)
     cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size)
@@ -654,18 +658,25 @@ def compare_images(name: str, quick: bool, tmp: Path, png: Path | None) -> dict:
                               for level in octree.levels))
         budget = int(max(1, round(share * finest)) * brick_bytes / 0.8)
         row["budget_bytes"] = budget
-        for policy in ("error", "lod"):
+        for policy in IMAGE_POLICIES:
             t0 = time.perf_counter()
-            with sc.Scene(mv, budget=budget, cut=policy, lod=0.5) as scene:
+            options = ({"cut": "lod"} if policy == "lod" else
+                       {"cut": "error", "cut_priority": policy})
+            with sc.Scene(mv, budget=budget, lod=0.5, **options) as scene:
                 open_s = time.perf_counter() - t0
                 if scene.error_cut is not None:
                     row["histogram_build_ms"] = scene.error_cut.build_ms
                 t0 = time.perf_counter()
                 frame = scene.render(cam, mode="dvr", tf=tf, dvr=dvr, complete=True)
                 render_s = time.perf_counter() - t0
+                frames = 1
+                # The error cut takes M bricks per frame: render until it is final.
+                while not frame.stats.get("cut_final", True) and frames < 200:
+                    frame = scene.render(cam, mode="dvr", tf=tf, dvr=dvr, complete=True)
+                    frames += 1
             luv, de2000 = delta_e(reference.rgba[..., :3], frame.rgba[..., :3])
             st = frame.stats
-            row[policy] = {"open_s": open_s, "render_complete_s": render_s,
+            row[policy] = {"open_s": open_s, "render_complete_s": render_s, "frames": frames,
                            "cut_bricks": st["cut_bricks"], "cut_bytes": st["cut_bytes"],
                            "cut_levels": {str(k): v for k, v in st["cut_levels"].items()},
                            "complete": st["complete"],
@@ -675,8 +686,9 @@ def compare_images(name: str, quick: bool, tmp: Path, png: Path | None) -> dict:
                 row[policy]["cut_error"] = st["cut_error"]
             panels.append((share, policy, frame.rgba[..., :3], luv, float(luv[covered].mean())))
         out["budgets"].append(row)
-        print(f"[{name}] share {share}: error ΔE*uv {row['error']['delta_e_uv']['mean']:.2f}, "
-              f"lod {row['lod']['delta_e_uv']['mean']:.2f}", file=sys.stderr, flush=True)
+        print(f"[{name}] share {share}: ΔE*uv " + ", ".join(
+            f"{p} {row[p]['delta_e_uv']['mean']:.2f}" for p in IMAGE_POLICIES),
+            file=sys.stderr, flush=True)
     if png is not None:
         _image_figure(name, reference.rgba[..., :3], panels, png)
         out["figure"] = png.name
@@ -691,21 +703,21 @@ def _image_figure(name: str, reference: np.ndarray, panels: list, png: Path) -> 
 
     shares = sorted({p[0] for p in panels})
     top = max(float(np.percentile(p[3], 99.5)) for p in panels) or 1.0
-    fig, axes = plt.subplots(len(shares), 5, figsize=(15, 3.2 * len(shares)), squeeze=False)
+    cols = 1 + 2 * len(IMAGE_POLICIES)
+    fig, axes = plt.subplots(len(shares), cols, figsize=(3 * cols, 3.2 * len(shares)),
+                             squeeze=False)
     for r, share in enumerate(shares):
         row = {p[1]: p for p in panels if p[0] == share}
-        images = [(reference, "full resolution"),
-                  (row["error"][2], f"error cut, {share:.0%} of finest bricks"),
-                  (row["lod"][2], f"LOD cut, {share:.0%}"),
-                  (row["error"][3], f"ΔE*uv error cut (mean {row['error'][4]:.2f})"),
-                  (row["lod"][3], f"ΔE*uv LOD cut (mean {row['lod'][4]:.2f})")]
+        images = [(reference, "full resolution")]
+        images += [(row[p][2], f"{p} cut, {share:.0%} of finest bricks") for p in IMAGE_POLICIES]
+        images += [(row[p][3], f"ΔE*uv {p} (mean {row[p][4]:.2f})") for p in IMAGE_POLICIES]
         for c, (img, title) in enumerate(images):
             ax = axes[r, c]
             if img.ndim == 3:
                 ax.imshow(np.clip(img, 0, 1))
             else:
                 shown = ax.imshow(img, cmap="magma", vmin=0, vmax=top)
-                if c == 4:
+                if c == cols - 1:
                     fig.colorbar(shown, ax=ax, fraction=0.046)
             ax.set_title(title, fontsize=9)
             ax.axis("off")
@@ -718,15 +730,18 @@ def _image_figure(name: str, reference: np.ndarray, panels: list, png: Path) -> 
 
 def images_markdown(results: dict) -> str:
     m = results["machine"]
-    lines = ["# Images at the same memory budget: error-metric cut vs level-of-detail cut "
-             "(reference 002, Fig. 9)", "",
+    lines = ["# Images at the same memory budget: naive and improved error cuts vs the "
+             "level-of-detail cut (reference 002, Fig. 9)", "",
              f"Machine: {m['cpu']}, {m['cores']} logical cores (shared with other jobs: times "
              f"are noisy). Command: `{results['command']}`.", "",
              "DVR (trilinear, step 0.5 voxel) of the multiresolution renderer, 16^3 bricks, "
              "the cut's budget a share of the finest level's bricks (full bricks with ghosts; "
              "the cache's budget is 1/0.8 of it), against the in-memory full-resolution image. "
-             "ΔE over the pixels the full-resolution image covers (alpha > 1%). Error cut: "
-             "improved priority (P = ER), importance from the eye, no point of interest. "
+             "ΔE over the pixels the full-resolution image covers (alpha > 1%). Error cuts: "
+             "*naive* (P = E) and *improved* (P = ER) priority (`Scene(..., cut=\"error\", "
+             "cut_priority=...)`), importance from the eye, no point of interest, frustum "
+             "culling, histograms stored with the pyramid. The paper's Fig. 9 (Angio, one "
+             "update): naive 9.834, improved 7.975 mean ΔE. "
              "LOD cut: lod = 0.5 pixel, refined largest-on-screen first while the budget "
              "allows.", "",
              "| volume | image | share | budget MiB | cut | bricks | levels | ΔE*uv mean | "
@@ -734,7 +749,7 @@ def images_markdown(results: dict) -> str:
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for v in results["volumes"]:
         for row in v["budgets"]:
-            for policy in ("error", "lod"):
+            for policy in IMAGE_POLICIES:
                 r = row[policy]
                 levels = ", ".join(f"{k}: {n}" for k, n in sorted(r["cut_levels"].items()))
                 lines.append(
@@ -747,9 +762,13 @@ def images_markdown(results: dict) -> str:
     for v in results["volumes"]:
         if "figure" in v:
             lines += [f"![{v['name']}: images and ΔE maps]({v['figure']})", ""]
-    lines.append("Histogram build when the scene opens (reads every level once): " + ", ".join(
-        f"{v['name']} {v['budgets'][0]['histogram_build_ms'] / 1e3:.1f} s"
-        for v in results["volumes"]) + ".")
+    lines.append("Error cut set-up when the scene opens (histograms read from the store): "
+                 + ", ".join(f"{v['name']} {v['budgets'][0]['histogram_build_ms'] / 1e3:.2f} s"
+                             for v in results["volumes"]) + ".")
+    lines += ["", "Mean ΔE*uv, naive vs improved (same budget): " + "; ".join(
+        f"{v['name']} {row['share']:.0%}: {row['naive']['delta_e_uv']['mean']:.2f} vs "
+        f"{row['improved']['delta_e_uv']['mean']:.2f}"
+        for v in results["volumes"] for row in v["budgets"]) + "."]
     return "\n".join(lines) + "\n"
 
 

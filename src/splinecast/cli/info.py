@@ -80,6 +80,14 @@ def _multiscale(mv) -> int:
     print(f"range:     {lo:g} .. {hi:g}{exact}")
     if mv.brick:
         print(f"bricks:    {mv.brick}^3 cells, tables: {', '.join(mv.tables()) or 'none'}")
+    from splinecast.multires.hist_store import histogram_info
+
+    hist = histogram_info(mv)
+    if hist is not None:
+        raw, source = int(hist.get("nbytes", 0)), int(hist.get("source_nbytes", 0)) or 1
+        print(f"histograms: {format_bytes(raw)} ({100 * raw / source:.1f}% of the "
+              f"{format_bytes(source)} source; {format_bytes(hist['disk_bytes'])} on disk), "
+              f"{hist.get('bins')} bins")
     print(f"levels:    {len(mv.levels)}")
     print(f"  {'level':>5}  {'shape (x, y, z)':<20} {'spacing':<24} {'chunks':<12} size")
     for lv in mv.levels:

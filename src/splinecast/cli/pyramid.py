@@ -30,6 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cmd.add_argument("--wavelet", type=int, metavar="DEGREE",
                      help="write a spline-wavelet pyramid for B-spline degree 1, 2 or 3 instead "
                           "(rendered with model bspline<DEGREE>; --brick does not apply)")
+    cmd.add_argument("--histograms", action="store_true",
+                     help="also store the brick histograms of the error cut (--cut error): "
+                          "opening it then reads no level, a transfer-function edit no voxel")
     cmd.add_argument("--overwrite", action="store_true", help="replace an existing store")
     cmd.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_input_options(cmd)
@@ -64,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     with contextlib.redirect_stderr(getattr(args, "stderr", sys.stderr)):
         mv = build_pyramid(args.source, out, brick=args.brick, levels=args.levels,
                            overwrite=args.overwrite, unit=args.unit, workers=args.workers,
-                           progress=not args.quiet,
+                           progress=not args.quiet, histograms=args.histograms,
                            allow_external=args.allow_external_data or None)
     log(args, f"wrote {len(mv.levels)} levels in {time.perf_counter() - start:.1f} s")
     print(out)

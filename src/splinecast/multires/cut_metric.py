@@ -59,6 +59,7 @@ __all__ = [
     "visible_nodes",
     "histogram_distortion",
     "importance",
+    "frustum_planes",
     "rank",
     "cut_error",
     "ArrayMetric",
@@ -119,12 +120,48 @@ def histogram_distortion(hist: BrickHistograms, table: np.ndarray,
 
 # ------------------------------------------------------------------------------ importance
 # A view is a float64 vector: [has_interest, is_region, px, py, pz, lo xyz, hi xyz, has_eye,
-# ex, ey, ez, t]; built by _view_vector.
-_VIEW_SIZE = 16
+# ex, ey, ez, t, frustum planes, margin, 6 x (nx, ny, nz, d)]; built by _view_vector.
+_VIEW_SIZE = 42
+_PLANES = 18  # index of the first frustum plane
 
 
-def _view_vector(interest: Any, region: Any, eye: Any, t: float) -> np.ndarray:
+def frustum_planes(camera: Any) -> np.ndarray:
+    """The half-spaces ``n . x + d >= 0`` (``(5, 4)``, unit ``n``) holding every ray of ``camera``.
+
+    Four side planes through the edges of the camera's image window (of its tile, for a tile
+    camera) and the plane through the eye facing forward (no far plane: rays are unbounded).
+    """
+    basis = camera.pixel_basis()
+    eye, forward, right, up = basis[0:3], basis[3:6], basis[6:9], basis[9:12]
+    half_w, half_h, ortho = basis[12], basis[13], basis[14] != 0.0
+    col0, row0 = basis[16], basis[17]
+    full_w, full_h = basis[18], basis[19]
+    x_lo = (col0 / full_w * 2.0 - 1.0) * half_w
+    x_hi = ((col0 + camera.width) / full_w * 2.0 - 1.0) * half_w
+    y_hi = (1.0 - row0 / full_h * 2.0) * half_h
+    y_lo = (1.0 - (row0 + camera.height) / full_h * 2.0) * half_h
+    planes = []
+    if ortho:  # x_lo <= (p - eye) . right <= x_hi, the same for up
+        sides = [(right, -x_lo), (-right, x_hi), (up, -y_lo), (-up, y_hi)]
+        for n, off in sides:
+            planes.append((*n, off - float(n @ eye)))
+    else:  # x_lo (q . forward) <= q . right <= x_hi (q . forward), q = p - eye
+        for n in (right - x_lo * forward, x_hi * forward - right, up - y_lo * forward,
+                  y_hi * forward - up):
+            n = n / np.linalg.norm(n)
+            planes.append((*n, -float(n @ eye)))
+    planes.append((*forward, -float(forward @ eye)))
+    return np.asarray(planes, np.float64)
+
+
+def _view_vector(interest: Any, region: Any, eye: Any, t: float, frustum: Any = None,
+                 margin: float = 0.0) -> np.ndarray:
     v = np.zeros(_VIEW_SIZE)
+    if frustum is not None:
+        planes = np.asarray(frustum, np.float64).reshape(-1, 4)
+        v[16] = planes.shape[0]
+        v[17] = margin
+        v[_PLANES:_PLANES + planes.size] = planes.ravel()
     if region is not None:
         lo, hi = (np.asarray(x, np.float64).reshape(3) for x in region)
         v[0:2] = 1.0
@@ -171,6 +208,14 @@ def _importance_one(box_min, box_max, b, view):
         g2 = _gap(z0, z1, view[14], view[14])
         d = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
         r_eye = diag / (diag + d) if diag + d > 0.0 else 1.0
+    # Frustum culling: a box entirely behind one plane (by more than the margin) is out of view.
+    for p in range(int(view[16])):
+        q = _PLANES + 4 * p
+        nx, ny, nz = view[q], view[q + 1], view[q + 2]
+        reach = (nx * 0.5 * (x0 + x1) + ny * 0.5 * (y0 + y1) + nz * 0.5 * (z0 + z1) + view[q + 3]
+                 + 0.5 * (abs(nx) * (x1 - x0) + abs(ny) * (y1 - y0) + abs(nz) * (z1 - z0)))
+        if reach < -view[17]:
+            return 0.0
     if r_x >= 0.0 and r_eye >= 0.0:
         return (1.0 - view[15]) * r_x + view[15] * r_eye
     if r_x >= 0.0:
@@ -543,10 +588,17 @@ class CutMetric(_LazyMetric):
         self.visible[:] = visible_nodes(self.tree, tf)
         self._bump(transfer=True, view=False)
 
-    def set_view(self, interest: Any = None, region: Any = None, eye: Any = None) -> None:
-        """New interest point or region and eye: every importance becomes stale."""
+    def set_view(self, interest: Any = None, region: Any = None, eye: Any = None,
+                 frustum: Any = None, margin: float = 0.0) -> None:
+        """New interest point or region, eye and view frustum: every importance becomes stale.
+
+        ``frustum`` (``(n, 4)`` half-spaces ``n . x + d >= 0``, :func:`frustum_planes`) makes the
+        importance of a box that lies more than ``margin`` outside one of them 0: its error is
+        0, so it is never split (it stays as coarse as the cut allows, still covered once).
+        """
         self.interest, self.region, self.eye = interest, region, eye
-        self._state.viewing[:] = _view_vector(interest, region, eye, self.t)
+        self.frustum = frustum
+        self._state.viewing[:] = _view_vector(interest, region, eye, self.t, frustum, margin)
         self._bump(transfer=False, view=True)
 
     def raw_distortion(self, nodes: Any) -> np.ndarray:

@@ -43,9 +43,16 @@ Choices
 * **Prefetch** (what the loader reads when idle): the visible children of the cut's bricks of
   highest split priority, i.e. the next splits of the split queue S in order (the head of the
   extended cut S+ of section 4).
-* **Histograms** are computed when the scene opens, from every level read whole (one pass; the
-  pyramid does not store them yet). That bounds ``cut="error"`` to volumes whose levels fit in
-  memory once at opening; storing the ``hist2d`` table with the pyramid lifts it.
+* **Histograms** come from the pyramid's ``hist2d`` group when it has one
+  (:mod:`.hist_store`, written by ``build_pyramid(..., histograms=True)``): opening reads no
+  level and a transfer-function edit no voxel. A store without it (or whose group does not fit
+  the octree or is damaged: one warning says which) gets them built here from every level read
+  whole, which bounds ``cut="error"`` on such stores to volumes whose levels fit in memory once.
+* **Frustum culling**: a brick more than one finest brick's diagonal outside the camera's view
+  frustum has importance 0 (:func:`~.cut_metric.frustum_planes`), so it is never split; the cut
+  still covers it once. The margin keeps the finest neighbours of a brick in view refined with
+  it, so no seam between levels touches a visible brick: at full budget the image is the finest
+  level's.
 * The isosurface modes keep the level-of-detail cut: D(b) measures classified colour, which an
   isosurface does not show (its error is geometric: the screen-space voxel size bounds it).
 """
@@ -53,13 +60,14 @@ Choices
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 
 from ..camera import Camera
-from ..errors import ParameterError
+from ..errors import ParameterError, ReadError
 from ..transfer import TransferFunction
 from .cut_histograms import (
     DEFAULT_BINS,
@@ -68,17 +76,21 @@ from .cut_histograms import (
     box_histograms,
     stack_histograms,
 )
-from .cut_metric import CutMetric, cut_error
+from .cut_metric import CutMetric, cut_error, frustum_planes
 from .cut_tree import BrickTree
 from .cut_update import CutUpdate, CutUpdater
+from .hist_store import HIST2D, read_histograms
 from .lod import Cut, Key, cut_of_keys
 from .octree import BrickOctree
 from .relevance import ValueFilter
 
-__all__ = ["CUT_POLICIES", "check_cut", "octree_tree", "octree_histograms", "ErrorCut"]
+__all__ = ["CUT_POLICIES", "CUT_PRIORITIES", "check_cut", "octree_tree", "octree_histograms",
+           "ErrorCut"]
 
 #: Cut policies of a multiscale scene: screen-space level of detail, or the 002 error metric.
 CUT_POLICIES = ("lod", "error")
+#: Split priorities of the error cut: ``P = ER`` (eq. 9) or ``P = E``.
+CUT_PRIORITIES = ("improved", "naive")
 
 
 def check_cut(cut: Any) -> str:
@@ -228,8 +240,9 @@ class ErrorCut:
     ----------
     octree : BrickOctree
         The stream's octree (its value ranges are those of the store's ``minmax`` table).
-    bins : int
-        Histogram bins per value axis (:data:`~.cut_histograms.DEFAULT_BINS`).
+    bins : int, optional
+        Histogram bins per value axis (default: the stored histograms', else
+        :data:`~.cut_histograms.DEFAULT_BINS`).
     improved : bool
         ``P = ER`` (the paper's "improved" priority, default) or ``P = E`` ("naive").
     interest : 3 floats, optional
@@ -239,7 +252,16 @@ class ErrorCut:
         Set aside a split that does not fit N or M and go on (default; see
         :mod:`.cut_update`), or end the frame there (the paper's rule).
     levels : list of ndarray, optional
-        The levels in memory (default: read from the store once, here).
+        The levels in memory (default: read from the store once, here, unless the store holds
+        its histograms).
+    stored : bool
+        Use the histograms stored with the pyramid (:mod:`.hist_store`) when it has them
+        (default); otherwise, or when they do not fit this octree or are damaged (one warning
+        says so), build them from the levels.
+    frustum : bool
+        Frustum culling (default): a brick more than :attr:`frustum_margin` outside the camera's
+        view frustum has importance 0, so it is never split (the cut still covers it once, as
+        coarse as it is).
 
     Attributes
     ----------
@@ -255,21 +277,42 @@ class ErrorCut:
         Time spent reading the levels and building the histograms.
     """
 
-    def __init__(self, octree: BrickOctree, *, bins: int = DEFAULT_BINS, improved: bool = True,
+    def __init__(self, octree: BrickOctree, *, bins: int | None = None, improved: bool = True,
                  interest: Any = None, fill: bool = True,
-                 levels: list[np.ndarray] | None = None) -> None:
+                 levels: list[np.ndarray] | None = None, stored: bool = True,
+                 frustum: bool = True) -> None:
         start = time.perf_counter()
         self.octree = octree
         self.improved = bool(improved)
         self.fill = bool(fill)
+        self.frustum = bool(frustum)
         self.interest = _check_interest(interest)
         volume = octree.volume
-        self.quantizer = Quantizer.for_data(volume.dtype, volume.value_range, bins)
-        if levels is None:
-            levels = [_read_level(octree, p) for p in range(octree.n_levels)]
-        ranges = [self._fill_ranges(p, levels[p]) for p in range(octree.n_levels)]
+        self._levels: dict[int, np.ndarray] = dict(enumerate(levels)) if levels else {}
+        #: Where the histograms came from: ``"store"`` (the pyramid's ``hist2d`` group) or
+        #: ``"built"`` (from the levels, at opening).
+        self.histogram_source = "built"
+        self.histogram_note = ""
+        hist = self._stored_histograms(bins) if stored and levels is None else None
+        if hist is None:
+            self.quantizer = Quantizer.for_data(volume.dtype, volume.value_range,
+                                                DEFAULT_BINS if bins is None else bins)
+        else:
+            self.quantizer = hist.quantizer
+            self.histogram_source = "store"
+        ranges = [self._fill_ranges(p) for p in range(octree.n_levels)]
         self.tree, self.keys, self.virtual = octree_tree(octree, ranges)
-        self.histograms = octree_histograms(octree, self.quantizer, levels)
+        if hist is None:
+            hist = octree_histograms(octree, self.quantizer,
+                                     [self._level(p) for p in range(octree.n_levels)])
+        self.histograms = hist
+        self._levels = {}  # the levels were only needed for the histograms
+        finest = self.tree.level == 0
+        #: How far outside the view frustum a brick still counts as in view (world units): the
+        #: diagonal of a finest brick, so the finest neighbours of a brick in view are refined
+        #: with it and no seam between levels touches what the camera sees.
+        self.frustum_margin = float(np.linalg.norm(
+            self.tree.box_max[finest] - self.tree.box_min[finest], axis=1).max())
         self.brick_bytes = int(max(octree.brick_bytes(octree.levels[p],
                                                       np.zeros((1, 3), np.int64)).max()
                                    for p in range(octree.n_levels)))
@@ -282,12 +325,53 @@ class ErrorCut:
         self._signature: tuple | None = None
         self.build_ms = (time.perf_counter() - start) * 1e3
 
-    def _fill_ranges(self, p: int, data: np.ndarray) -> np.ndarray:
-        """The octree's own ranges of position ``p``, NaN entries computed from ``data`` over
-        each brick's window (as the ``minmax`` table is)."""
+    def _level(self, p: int) -> np.ndarray:
+        if p not in self._levels:
+            self._levels[p] = _read_level(self.octree, p)
+        return self._levels[p]
+
+    def _stored_histograms(self, bins: int | None) -> BrickHistograms | None:
+        """The store's ``hist2d`` group in node order, or None (with one warning saying why,
+        unless the store simply predates stored histograms and says nothing)."""
+        octree = self.octree
+        volume = octree.volume
+        attributes = getattr(volume, "attributes", {})
+        if octree.n_levels == 1:  # only leaves: nothing to store or build
+            return BrickHistograms(np.zeros(int(np.prod(octree.counts[0])) + 1, np.int64),
+                                   np.zeros(0, np.uint16), np.zeros(0, np.uint32),
+                                   Quantizer.for_data(volume.dtype, volume.value_range,
+                                                      DEFAULT_BINS if bins is None else bins))
+        if HIST2D not in attributes:
+            self.histogram_note = ("no stored brick histograms: building them from every level "
+                                   "(rebuild the pyramid with --histograms to skip this)")
+            warnings.warn(f"{getattr(volume, 'path', 'pyramid')}: {self.histogram_note}",
+                          UserWarning, stacklevel=4)
+            return None
+        try:
+            stored = read_histograms(volume, octree.brick, octree.levels[1:],
+                                     [octree.level_map(lv) for lv in octree.levels[1:]], bins)
+        except (ParameterError, ReadError) as exc:
+            self.histogram_note = f"{exc}; building them from every level instead"
+            warnings.warn(self.histogram_note, UserWarning, stacklevel=4)
+            return None
+        q = stored[0].quantizer if stored else Quantizer.for_data(
+            volume.dtype, volume.value_range, DEFAULT_BINS if bins is None else bins)
+        leaves = int(np.prod(octree.counts[0]))
+        empty = np.zeros(0, np.uint16)
+        parts = [BrickHistograms(np.zeros(leaves + 1, np.int64), empty,
+                                 np.zeros(0, np.uint32), q), *stored]
+        if int(np.prod(octree.counts[-1])) > 1:
+            parts.append(BrickHistograms(np.zeros(2, np.int64), empty, np.zeros(0, np.uint32),
+                                         q))
+        return stack_histograms(parts)
+
+    def _fill_ranges(self, p: int) -> np.ndarray:
+        """The octree's own ranges of position ``p``, NaN entries computed from the level over
+        each brick's window (as the ``minmax`` table is; the level is read only then)."""
         ranges = np.array(self.octree.ranges[p], dtype=np.float64, copy=True)
         missing = np.argwhere(np.isnan(ranges).any(axis=-1))
         if missing.size:
+            data = self._level(p)
             first, stop = self.octree.window(self.octree.levels[p], missing)
             for n, idx in enumerate(missing):
                 lo = np.clip(first[n], 0, data.shape)
@@ -311,12 +395,13 @@ class ErrorCut:
                                     eye=camera.position, improved=self.improved)
             self._set_visible(value_filter)
             self._signature = signature
-        else:
-            if signature != self._signature:
-                self.metric.set_transfer_function(tf)
-                self._set_visible(value_filter)
-                self._signature = signature
-            self.metric.set_view(interest=interest, eye=camera.position)
+        elif signature != self._signature:
+            self.metric.set_transfer_function(tf)
+            self._set_visible(value_filter)
+            self._signature = signature
+        frustum = frustum_planes(camera) if self.frustum else None
+        self.metric.set_view(interest=interest, eye=camera.position, frustum=frustum,
+                             margin=self.frustum_margin)
         if self.updater is None:
             start = self.roots[self.metric.visible[self.roots]]
             self.updater = _RenderUpdater(self.metric, budget, load_budget, start, self.virtual,

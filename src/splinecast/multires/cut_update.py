@@ -307,10 +307,13 @@ class SplitCollapse:
         set_aside = 0
         collapsed_now: set[int] = set()  # fill: not split again in the frame that collapsed it
 
+        load_limited = False  # a split set aside for M: the frame is not final
+
         def aside(reason: str) -> bool:
             """With ``fill``, set S0 aside and go on (True); else the frame stops."""
-            nonlocal set_aside, stop
+            nonlocal set_aside, stop, load_limited
             stop = reason
+            load_limited = load_limited or reason == STOP_REASONS[1]
             if not self.fill or set_aside >= limit:
                 return False
             skipped_s.append(self.split_queue.pop())
@@ -325,7 +328,8 @@ class SplitCollapse:
                 break
             s_key, s0 = head
             if not -s_key[0] > 0.0:
-                stop = STOP_REASONS[0]
+                if not set_aside:  # as for an empty queue: what set splits aside stopped it
+                    stop = STOP_REASONS[0]
                 break
             if (allow_split is not None and not allow_split(s0)) or s0 in collapsed_now:
                 skipped_s.append(self.split_queue.pop())
@@ -375,6 +379,8 @@ class SplitCollapse:
         for key, node in skipped_c:
             if not self.in_cut[node] and self._collapsible(node):
                 self.collapse_queue.push(node, key)
+        if load_limited:  # a later frame still has a split to make
+            stop = STOP_REASONS[1]
         return stop, splits, collapses
 
     def _plan_collapses(self, s_key: tuple[float, int], s0: int,

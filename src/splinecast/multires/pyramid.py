@@ -275,6 +275,8 @@ def build_pyramid(
     degree: int = 3,
     chunk: int = 8,
     dtype: Any = None,
+    histograms: bool = False,
+    bins: int | None = None,
 ) -> Any:
     """Write ``source`` as an OME-Zarr 0.5 brick pyramid at ``path``.
 
@@ -317,6 +319,12 @@ def build_pyramid(
     degree, chunk, dtype
         Spline-wavelet pyramids only: B-spline degree 1..3, chunk edge in nodes, coefficient
         type (float32 or float64).
+    histograms : bool
+        Also store the sparse brick histograms of the ``cut="error"`` policy (group
+        ``splinecast/hist2d``, :mod:`.hist_store`; one more pass over the source, tile by tile).
+        Without them a ``Scene(..., cut="error")`` builds them when it opens, reading every level.
+    bins : int, optional
+        Histogram bins per value axis (default :data:`~.cut_histograms.DEFAULT_BINS`).
 
     Returns
     -------
@@ -338,6 +346,9 @@ def build_pyramid(
                                      allow_external=allow_external)
     if kind != "plain":
         raise ParameterError(f"kind must be 'plain' or 'wavelet', got {kind!r}")
+    if bins is not None and (isinstance(bins, bool) or int(bins) != bins
+                             or not 2 <= bins <= 65536):
+        raise ParameterError(f"bins must be an integer from 2 to 65536, got {bins!r}")
     zarr = require("zarr", path, action="writing", error=ParameterError)
     from zarr.codecs import ZstdCodec
 
@@ -430,9 +441,37 @@ def build_pyramid(
             "source_metadata": keep,
         })
         root.attrs.update({**attrs, ATTRIBUTE: ours})
+        if histograms:
+            _store_histograms(root, arrays, plan, brick, shard, src.dtype, value_range,
+                              bins, progress, path.name)
     from ..io.omezarr import open_zarr
 
     return open_zarr(path)
+
+
+def _store_histograms(root: Any, arrays: list[Any], plan: list[Any], brick: int, shard: int,
+                      dtype: np.dtype, value_range: list[float], bins: int | None,
+                      progress: bool, name: str) -> None:
+    """The ``hist2d`` group (:mod:`.hist_store`) from the levels just written, tile by tile."""
+    from .cut_histograms import DEFAULT_BINS, Quantizer
+    from .hist_store import stream_level_histograms, write_histograms
+
+    quantizer = Quantizer.for_data(dtype, value_range, int(bins or DEFAULT_BINS))
+    views = [_level_view(arrays[i], plan[i][0], i) for i in range(len(plan))]
+    factors = [np.asarray(f, np.int64) for _shape, f in plan]
+    maps = [(1.0 / f, np.zeros(3)) for f in factors]  # vertex-centred: same translation
+    bar = _Progress(f"{name} histograms", 1, progress)
+
+    def tick(done: int, total: int) -> None:
+        bar.total = total
+        bar._posttask()
+
+    hists = stream_level_histograms(views[0].read, [v.read for v in views[1:]],
+                                    [shape for shape, _f in plan], factors, maps, brick,
+                                    quantizer, tile=shard, progress=tick)
+    bar.finish()
+    source_nbytes = int(np.prod(plan[0][0])) * np.dtype(dtype).itemsize
+    write_histograms(root, hists, list(range(1, len(plan))), brick, maps[1:], source_nbytes)
 
 
 def _level_view(array: Any, shape: tuple[int, int, int], index: int) -> Level:

@@ -52,7 +52,7 @@ from ..scene import check_iso, finish_frame, prepare_render
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .budget import parse_bytes
-from .cut_policy import ErrorCut, check_cut, mip_transfer
+from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut, mip_transfer
 from .draw import CutRenderer, Piece
 from .relevance import ValueFilter
 from .seams import Seams
@@ -101,8 +101,14 @@ class MultiscaleScene:
         Bricks a frame waits for at most (M); the loader thread goes on reading in the
         background, and later frames draw what it read.
     cut : {"lod", "error"}
-        Cut policy (see above). ``"error"`` reads every level once when the scene opens to build
-        the brick histograms of the distortion metric (``prepare_ms`` includes it).
+        Cut policy (see above). ``"error"`` reads the brick histograms of the distortion metric
+        stored with the pyramid (``build_pyramid(..., histograms=True)``, ``splinecast pyramid
+        --histograms``); a store without them has every level read once when the scene opens to
+        build them (``prepare_ms`` includes it; a warning says so).
+    cut_priority : {"improved", "naive"}
+        Split priority of the ``"error"`` cut: ``"improved"`` (default) orders splits by the
+        error reduction per child brick, ``P = ER`` (eq. 9 of reference 002); ``"naive"`` by the
+        brick's error, ``P = E`` (the classic greedy rule the paper compares against).
     interest : 3 floats, optional
         Point of interest (world coordinates) of the ``"error"`` cut; without one its importance
         is the distance to the eye alone. :meth:`render` can move it per frame.
@@ -125,7 +131,8 @@ class MultiscaleScene:
 
     def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "2GiB",
                  lod: float = 1.0, load_budget: int = 64, *, cut: str = "lod",
-                 interest: Any = None, seams: bool = True, brick: int | None = None,
+                 cut_priority: str = "improved", interest: Any = None, seams: bool = True,
+                 brick: int | None = None,
                  **options: Any) -> None:
         if not isinstance(volume, MultiscaleVolume):
             raise ParameterError(f"volume must be a MultiscaleVolume, got {type(volume).__name__}")
@@ -137,6 +144,10 @@ class MultiscaleScene:
                 "interpolating B-spline coefficients depend on the whole volume, a brick cannot "
                 "reproduce them (render the voxels as coefficients, the default, or use s31)")
         self.cut = check_cut(cut)
+        if cut_priority not in CUT_PRIORITIES:
+            raise ParameterError(f"cut_priority must be one of "
+                                 f"{', '.join(map(repr, CUT_PRIORITIES))}, got {cut_priority!r}")
+        self.cut_priority = cut_priority
         start = time.perf_counter()
         self.volume = volume
         coarse = volume.level(-1)
@@ -151,8 +162,9 @@ class MultiscaleScene:
                                   loads_per_frame=load_budget, border=BORDER_RULES[model],
                                   brick=brick)
         #: The error-metric cut (``cut="error"``), None for the level-of-detail cut.
-        self.error_cut = (ErrorCut(self.stream.octree, interest=interest) if self.cut == "error"
-                          else None)
+        self.error_cut = (ErrorCut(self.stream.octree, interest=interest,
+                                   improved=cut_priority == "improved")
+                          if self.cut == "error" else None)
         self.renderer = CutRenderer(self.model, self.stream.octree,
                                     Seams(self.model) if seams else None)
         self.prepare_ms = (time.perf_counter() - start) * 1e3

@@ -1,4 +1,5 @@
-"""Per-brick tables stored with a pyramid: value ranges, later 2D histograms and wavelet subbands.
+"""Per-brick tables stored with a pyramid: value ranges (the sparse 2D histograms of the error cut
+have a layout of their own, :mod:`.hist_store`).
 
 A table holds one entry per brick of one level, as a Zarr array ``splinecast/<name>/<level>`` in
 the pyramid's group, indexed ``[bi, bj, bk, ...]`` with the brick index along x, y, z first
