@@ -9,6 +9,7 @@ build only.
 
     python benchmarks/bench_kernels.py --baseline /tmp/old/src [--quick] [--json PATH]
         [--only MODEL:MODE,...] [--volumes ml,mri] [--combo-repeats N] [--resume LOG]
+        [--clock wall|cpu]
 
 ``--resume LOG`` takes the rows already printed by an interrupted run (one JSON object per line)
 instead of measuring those cases again; the slow combinations (B-spline and type-6 MIP and DVR
@@ -62,10 +63,11 @@ for line in sys.stdin:
     try:
         scene.render(cam, **kwargs)  # warm-up (compilation, isovalue classification)
         times = []
+        clock = time.process_time if req.get("clock") == "cpu" else time.perf_counter
         for _ in range(req["repeats"]):
-            start = time.perf_counter()
+            start = clock()
             scene.render(cam, **kwargs)
-            times.append((time.perf_counter() - start) * 1e3)
+            times.append((clock() - start) * 1e3)
         print(json.dumps({"ms": times}), flush=True)
     except Exception as exc:  # a mode the build does not support
         print(json.dumps({"error": f"{type(exc).__name__}: {exc}"}), flush=True)
@@ -137,6 +139,9 @@ def main() -> None:
     ap.add_argument("--volumes", default="ml,mri", help="comma-separated: ml, mri")
     ap.add_argument("--resume", help="rows printed by an earlier run, not measured again")
     ap.add_argument("--json", help="output path (default results/kernels[_quick].json)")
+    ap.add_argument("--clock", choices=["wall", "cpu"], default="wall",
+                    help="wall time, or the worker's CPU time (steadier on a machine other "
+                         "processes load; use with NUMBA_NUM_THREADS=1)")
     args = ap.parse_args()
     if args.json is None:
         args.json = str(HERE / "results" / ("kernels_quick.json" if args.quick else "kernels.json"))
@@ -162,6 +167,7 @@ def main() -> None:
             rows.append(done[(label, case["model"], case["mode"])])
             continue
         req = {k: case[k] for k in ("volume", "size", "model", "image", "kwargs")}
+        req["clock"] = args.clock
         baseline_has = case["mode"] == "iso" or case["model"] == "trilinear"
         req["repeats"] = repeats if baseline_has or not args.combo_repeats else args.combo_repeats
         # Interleave: the builds take turns, so both see the same machine.
@@ -179,7 +185,7 @@ def main() -> None:
     new.close()
     if old:
         old.close()
-    out = {"machine": describe(), "quick": args.quick, "repeats": repeats,
+    out = {"machine": describe(), "quick": args.quick, "repeats": repeats, "clock": args.clock,
            "baseline": _revision(args.baseline), "build": _revision(str(HERE.parent)),
            "rows": rows}
     path = Path(args.json)
@@ -187,7 +193,8 @@ def main() -> None:
     lines = [f"# Frame times, this build vs baseline ({'quick' if args.quick else 'full'})", "",
              f"Machine: {out['machine']}", "",
              f"This build: {out['build']}; baseline: {out['baseline']}. Median of {repeats} "
-             "renders after a warm-up render, the builds taking turns.", "",
+             "renders after a warm-up render, the builds taking turns; "
+             f"{'CPU' if args.clock == 'cpu' else 'wall'} time.", "",
              "| volume | model | mode | new ms | baseline ms | new / baseline |",
              "|---|---|---|---|---|---|"]
     for r in rows:

@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from numba import njit
+from numba.extending import overload
 
 try:  # POSIX; elsewhere saving keeps numba's own (unlocked) behaviour
     import fcntl
@@ -34,7 +35,7 @@ try:
 except ImportError:  # pragma: no cover - a numba without this class: keep its behaviour
     IndexDataCacheFile = None  # type: ignore[assignment,misc]
 
-__all__ = ["jit"]
+__all__ = ["jit", "overload_jit"]
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
@@ -88,3 +89,14 @@ def jit(function: Callable | None = None, **options: Any) -> Any:
     if function is None:
         return lambda f: _lock_cache(njit(**settings)(f))
     return _lock_cache(njit(**settings)(function))
+
+
+def overload_jit(stub: Callable, inline: str = "never") -> Any:
+    """``numba.extending.overload`` with splinecast's error model.
+
+    An overload's implementation is compiled with its own options, not its caller's: without
+    ``error_model="numpy"`` every division in it gets a zero check and an exception path, which
+    also keeps LLVM from inlining it. ``inline="always"`` inlines it into the caller at Numba's
+    IR level (the render hooks: their arguments are long tuples that a real call would copy).
+    """
+    return overload(stub, jit_options={"error_model": "numpy", "nogil": True}, inline=inline)

@@ -39,7 +39,7 @@ from .bspline import (
     cell_transform,
     local_value_gradient,
 )
-from .pieces import cell_range, register, whole_cell
+from .pieces import cell_range, register
 
 __all__ = [
     "axis_basis_sb",
@@ -255,7 +255,22 @@ def _cell_load(grid, scratch, i, j, k):
 
 
 @jit()
-def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    """The whole cell is one piece; its polynomial is built here, into ``scratch[6]``.
+
+    Building it in this hook rather than in ``piece_poly`` leaves ``piece_poly`` small enough
+    for LLVM to inline: each hook called out of line increments and decrements the reference
+    count of every array of the grid and the scratch tuple.
+    """
+    cuts[0] = 0.0
+    cuts[1] = 1.0
+    tags[0] = 0
+    _build_poly(grid, scratch, i, j, k, ax, ay, az, ax + ex, ay + ey, az + ez)
+    return 1
+
+
+@jit(inline="always")
+def _build_poly(grid, scratch, i, j, k, ax, ay, az, bx, by, bz):
     d = grid.degree
     tensor, tmp, basis, inner, middle, inv = (scratch[0], scratch[1], scratch[2], scratch[3],
                                               scratch[4], scratch[5])
@@ -274,8 +289,14 @@ def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
     compose(tensor, basis[0], basis[1], basis[2], d, inner, middle, poly)
     for m in range(n + 1):
         poly[m] *= inv[m]
-    return PolyN(poly, n, grid.power, grid.finder, grid.iterations, grid.tol, scratch[7],
-                 scratch[8], scratch[9], scratch[10], scratch[11], scratch[12])
+
+
+@jit()
+def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+    """The polynomial :func:`_cell_pieces` built for the cell."""
+    return PolyN(scratch[6], 3 * grid.degree, grid.power, grid.finder, grid.iterations,
+                 grid.tol, scratch[7], scratch[8], scratch[9], scratch[10], scratch[11],
+                 scratch[12])
 
 
 @jit()
@@ -301,5 +322,5 @@ def _value_gradient_at(grid, scratch, x, y, z):
 
 
 register(BSplineGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
-         cell_pieces=whole_cell, piece_range=cell_range, piece_poly=_piece_poly,
+         cell_pieces=_cell_pieces, piece_range=cell_range, piece_poly=_piece_poly,
          gradient=_gradient, value_gradient_at=_value_gradient_at)

@@ -38,9 +38,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from numba.extending import overload
-
-from .._jit import jit
+from .._jit import jit, overload_jit
 
 __all__ = [
     "register", "cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range",
@@ -75,7 +73,7 @@ def cell_count(grid):
     raise NotImplementedError
 
 
-@overload(cell_count)
+@overload_jit(cell_count, inline="never")
 def _cell_count(grid):
     f = _impl(grid, "cell_count")
     return None if f is None else f.py_func
@@ -86,7 +84,7 @@ def new_scratch(grid):
     raise NotImplementedError
 
 
-@overload(new_scratch)
+@overload_jit(new_scratch, inline="never")
 def _new_scratch(grid):
     f = _impl(grid, "new_scratch")
     return None if f is None else f.py_func
@@ -97,7 +95,7 @@ def cell_load(grid, scratch, i, j, k):
     raise NotImplementedError
 
 
-@overload(cell_load)
+@overload_jit(cell_load, inline="never")
 def _cell_load(grid, scratch, i, j, k):
     f = _impl(grid, "cell_load")
     return None if f is None else f.py_func
@@ -108,7 +106,7 @@ def cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags)
     raise NotImplementedError
 
 
-@overload(cell_pieces)
+@overload_jit(cell_pieces, inline="never")
 def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
     f = _impl(grid, "cell_pieces")
     return None if f is None else f.py_func
@@ -119,7 +117,7 @@ def piece_range(grid, scratch, ctx, i, j, k, tag):
     raise NotImplementedError
 
 
-@overload(piece_range)
+@overload_jit(piece_range, inline="never")
 def _piece_range(grid, scratch, ctx, i, j, k, tag):
     f = _impl(grid, "piece_range")
     return None if f is None else f.py_func
@@ -130,7 +128,7 @@ def piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
     raise NotImplementedError
 
 
-@overload(piece_poly)
+@overload_jit(piece_poly, inline="never")
 def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
     f = _impl(grid, "piece_poly")
     return None if f is None else f.py_func
@@ -141,7 +139,7 @@ def gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
     raise NotImplementedError
 
 
-@overload(gradient)
+@overload_jit(gradient, inline="never")
 def _gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
     f = _impl(grid, "gradient")
     return None if f is None else f.py_func
@@ -152,7 +150,7 @@ def value_gradient_at(grid, scratch, x, y, z):
     raise NotImplementedError
 
 
-@overload(value_gradient_at)
+@overload_jit(value_gradient_at, inline="never")
 def _value_gradient_at(grid, scratch, x, y, z):
     f = _impl(grid, "value_gradient_at")
     return None if f is None else f.py_func

@@ -20,6 +20,13 @@ What is particular to these models (the interface is :mod:`.pieces`):
   classification of :mod:`splinecast.accel.active_cells` (iso mode) a cube's slot and 24-bit
   tetrahedron mask replace both (inactive cubes and tetrahedra are empty, active ones unbounded:
   the classification already tested them against the isovalue).
+* **Polynomials per cube.** ``cell_pieces`` builds the Bernstein coefficients and the range of
+  every piece that can contribute (its tetrahedron is in the cube's mask) in one go, into the
+  scratch array ``polys``, and the piece's tag carries its index there (``tag = tetrahedron + 32 *
+  piece``); ``piece_range`` and ``piece_poly`` are then small enough for LLVM to inline into the
+  driver. Each hook called out of line costs an increment and a decrement of the reference count
+  of every array of the grid and the scratch tuple (about 18 for these models), which for the
+  cheap per-piece hooks cost more than their work.
 * **Normals** come from the de Casteljau directional derivatives of the piece's patch.
 """
 
@@ -102,7 +109,8 @@ def _cell_count(grid):
 def _new_scratch(grid):
     keys = np.full(CACHE_ENTRIES, -1, np.int64)
     cache = np.empty((CACHE_ENTRIES, grid.n_slots))
-    return keys, cache, np.empty(grid.tet_points.shape[1]), np.empty(10), np.empty(4)
+    return (keys, cache, np.empty(grid.tet_points.shape[1]), np.empty(10), np.empty(4),
+            np.empty((8, 6)))
 
 
 @jit()
@@ -141,49 +149,80 @@ def _load_tet(grid, scratch, slot, i, j, k, tet):
     return c
 
 
-@jit()
-def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-    ax -= 0.5
-    ay -= 0.5
-    az -= 0.5
-    n = split_cube_segment(ax, ay, az, ex, ey, ez, cuts)
+@jit(inline="always")
+def _pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags, degree):
+    """Cut the cube's segment into tetrahedron pieces; build the polynomial (``scratch[5][piece,
+    :4]``) and the range (``[piece, 4:6]``) of each piece whose tetrahedron is in the mask."""
+    n = split_cube_segment(ax - 0.5, ay - 0.5, az - 0.5, ex, ey, ez, cuts)
+    polys = scratch[5]
     for p in range(n):
-        sm = 0.5 * (cuts[p] + cuts[p + 1])
-        tags[p] = tet_of_point(ax + sm * ex, ay + sm * ey, az + sm * ez)
+        s0 = cuts[p]
+        s1 = cuts[p + 1]
+        sm = 0.5 * (s0 + s1)
+        tet = tet_of_point(ax - 0.5 + sm * ex, ay - 0.5 + sm * ey, az - 0.5 + sm * ez)
+        tags[p] = tet + 32 * p
+        if (ctx[3] >> tet) & 1 == 0:
+            polys[p, 4] = math.inf  # not in the mask: the piece cannot contribute
+            polys[p, 5] = -math.inf
+            continue
+        # The piece's end points exactly as the driver passes them to ``piece_poly``.
+        pax, pay, paz = ax + s0 * ex, ay + s0 * ey, az + s0 * ez
+        pbx, pby, pbz = ax + s1 * ex, ay + s1 * ey, az + s1 * ez
+        c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
+        a0, a1, a2, a3 = barycentric(grid.bary, tet, pax - 0.5, pay - 0.5, paz - 0.5)
+        e0, e1, e2, e3 = barycentric(grid.bary, tet, pbx - 0.5, pby - 0.5, pbz - 0.5)
+        if degree == 3:
+            u0, u1, u2, u3 = ray_bernstein3(c, a0, a1, a2, a3, e0, e1, e2, e3)
+            polys[p, 3] = u3
+        else:
+            u0, u1, u2 = ray_bernstein2(c, a0, a1, a2, a3, e0, e1, e2, e3)
+        polys[p, 0] = u0
+        polys[p, 1] = u1
+        polys[p, 2] = u2
+        if ctx[2] >= 0:
+            polys[p, 4] = -math.inf  # classified active for the isovalue
+            polys[p, 5] = math.inf
+        else:
+            lo = c[0]
+            hi = c[0]
+            for m in range(1, c.shape[0]):
+                lo = min(lo, c[m])
+                hi = max(hi, c[m])
+            polys[p, 4] = lo
+            polys[p, 5] = hi
     return n
 
 
 @jit()
+def _cell_pieces3(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    return _pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags, 3)
+
+
+@jit()
+def _cell_pieces2(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    return _pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags, 2)
+
+
+@jit()
 def _piece_range(grid, scratch, ctx, i, j, k, tag):
-    if (ctx[3] >> tag) & 1 == 0:
-        return math.inf, -math.inf
-    if ctx[2] >= 0:
-        return -math.inf, math.inf  # classified active for the isovalue
-    c = _load_tet(grid, scratch, ctx[2], i, j, k, tag)
-    lo = c[0]
-    hi = c[0]
-    for n in range(1, c.shape[0]):
-        lo = min(lo, c[n])
-        hi = max(hi, c[n])
-    return lo, hi
+    # Built with the piece's polynomial: the convex hull of its tetrahedron's coefficients
+    # (empty outside the cube's mask; unbounded when classified active for the isovalue).
+    p = tag >> 5
+    return scratch[5][p, 4], scratch[5][p, 5]
 
 
 @jit()
 def _piece_poly3(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    c = _load_tet(grid, scratch, ctx[2], i, j, k, tag)
-    a0, a1, a2, a3 = barycentric(grid.bary, tag, ax - 0.5, ay - 0.5, az - 0.5)
-    e0, e1, e2, e3 = barycentric(grid.bary, tag, bx - 0.5, by - 0.5, bz - 0.5)
-    u0, u1, u2, u3 = ray_bernstein3(c, a0, a1, a2, a3, e0, e1, e2, e3)
-    return Bernstein3(u0, u1, u2, u3, grid.newton)
+    p = tag >> 5
+    polys = scratch[5]
+    return Bernstein3(polys[p, 0], polys[p, 1], polys[p, 2], polys[p, 3], grid.newton)
 
 
 @jit()
 def _piece_poly2(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    c = _load_tet(grid, scratch, ctx[2], i, j, k, tag)
-    a0, a1, a2, a3 = barycentric(grid.bary, tag, ax - 0.5, ay - 0.5, az - 0.5)
-    e0, e1, e2, e3 = barycentric(grid.bary, tag, bx - 0.5, by - 0.5, bz - 0.5)
-    u0, u1, u2 = ray_bernstein2(c, a0, a1, a2, a3, e0, e1, e2, e3)
-    return Bernstein2(u0, u1, u2)
+    p = tag >> 5
+    polys = scratch[5]
+    return Bernstein2(polys[p, 0], polys[p, 1], polys[p, 2])
 
 
 @jit()
@@ -196,12 +235,12 @@ def _gradient_deg(grid, scratch, slot, i, j, k, tag, x, y, z, degree):
 
 @jit()
 def _gradient3(grid, scratch, ctx, i, j, k, tag, x, y, z):
-    return _gradient_deg(grid, scratch, ctx[2], i, j, k, tag, x, y, z, 3)
+    return _gradient_deg(grid, scratch, ctx[2], i, j, k, tag & 31, x, y, z, 3)
 
 
 @jit()
 def _gradient2(grid, scratch, ctx, i, j, k, tag, x, y, z):
-    return _gradient_deg(grid, scratch, ctx[2], i, j, k, tag, x, y, z, 2)
+    return _gradient_deg(grid, scratch, ctx[2], i, j, k, tag & 31, x, y, z, 2)
 
 
 @jit()
@@ -232,8 +271,8 @@ def _value_gradient_at2(grid, scratch, x, y, z):
 
 
 register(S31Grid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
-         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly3,
+         cell_pieces=_cell_pieces3, piece_range=_piece_range, piece_poly=_piece_poly3,
          gradient=_gradient3, value_gradient_at=_value_gradient_at3)
 register(QSSGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
-         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly2,
+         cell_pieces=_cell_pieces2, piece_range=_piece_range, piece_poly=_piece_poly2,
          gradient=_gradient2, value_gradient_at=_value_gradient_at2)

@@ -58,6 +58,7 @@ from .mode_api import (
     state_new,
     state_store,
     wants,
+    watches_skips,
 )
 from .rays import pixel_ray
 
@@ -139,7 +140,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
             )
             if size > 0:
                 skipped += 1
-                st = on_skip(mode, grid, scr, st, ray, t, t_end, math.nan, math.nan)
+                if watches_skips(mode):
+                    st = on_skip(mode, grid, scr, st, ray, t, t_end, math.nan, math.nan)
             elif t_end >= t:
                 visited += 1
                 ctx = cell_load(grid, scr, ci, cj, ck)
@@ -160,7 +162,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
                         tag = tags[p]
                         lo, hi = piece_range(grid, scr, ctx, ci, cj, ck, tag)
                         if not wants(mode, st, lo, hi):
-                            st = on_skip(mode, grid, scr, st, ray, tp0, tp1, lo, hi)
+                            if watches_skips(mode):
+                                st = on_skip(mode, grid, scr, st, ray, tp0, tp1, lo, hi)
                             continue
                         pax, pay, paz = ax + s0 * ex, ay + s0 * ey, az + s0 * ez
                         pbx, pby, pbz = ax + s1 * ex, ay + s1 * ey, az + s1 * ez
@@ -170,12 +173,12 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
                                      tp0, tp1, pax, pay, paz, pbx, pby, pbz, ray, st)
                         if done(mode, st):
                             break
-                else:
+                elif watches_skips(mode):
                     st = on_skip(mode, grid, scr, st, ray, t, t_end, ctx[0], ctx[1])
                 if done(mode, st):
                     break
             ci, cj, ck, t = ni, nj, nk, t_next
-        if final:
+        if final and watches_skips(mode):
             st = ray_end(mode, grid, scr, st, ray, t_far)
     if store:
         state_store(mode, state, row, col, st)

@@ -111,6 +111,13 @@ def _dt(mode, ray):
     return mode.step / math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
 
 
+# Only the sampled method watches what is skipped (``_watches_skips``); the exact method's
+# path through ``_consume`` is kept short, the sampled method's work in separate functions.
+@jit()
+def _watches_skips(mode):
+    return mode.method == 1
+
+
 @jit()
 def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     if mode.method != 1:
@@ -143,9 +150,8 @@ def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
 @jit()
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
-    iso = mode.iso
     if mode.method == 0:
-        s = poly_first_root(poly, iso)
+        s = poly_first_root(poly, mode.iso)
         if s == s:  # not NaN
             gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
                                   ay + s * (by - ay), az + s * (bz - az))
@@ -153,6 +159,12 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
             return (t0 + s * (t1 - t0), gx / ray[12], gy / ray[13], gz / ray[14], st[4],
                     st[5])
         return st
+    return _consume_sampled(mode, grid, scratch, poly, t0, t1, ray, st)
+
+
+@jit()
+def _consume_sampled(mode, grid, scratch, poly, t0, t1, ray, st):
+    iso = mode.iso
     anchor = ray[15]
     dt = _dt(mode, ray)
     m = math.ceil((t0 - anchor) / dt)
@@ -205,7 +217,8 @@ register(IsoMode,
          consume=_consume,
          done=_done,
          ray_end=_ray_end,
-         finish=_finish)
+         finish=_finish,
+         watches_skips=_watches_skips)
 
 
 @jit(parallel=True)

@@ -26,6 +26,10 @@ bx, by, bz, ray, st)`` -> ``st``
     Early termination.
 ``ray_end(mode, grid, scratch, st, ray, t_far)`` -> ``st``
     After the walk of the ray's last segment.
+``watches_skips(mode)`` -> ``bool``
+    Whether ``on_skip`` and ``ray_end`` do anything (optional; default: no). The driver calls
+    them only then: a call that passes the ray and state tuples costs more than the cheap cells
+    it follows, and LLVM does not inline a function with that many arguments.
 ``finish(mode, out, row, col, st, ray)``
     Writes the pixel's outputs (colour, depth, ...).
 ``state_store(mode, state, row, col, st)``
@@ -46,15 +50,15 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba.extending import overload
 
-from .._jit import jit
+from .._jit import jit, overload_jit
 from ..accel.minmax import inactive_block_size
 
 __all__ = [
     "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
-    "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish",
+    "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
+    "never",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
@@ -63,11 +67,12 @@ _NAMES = ("state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
 
 
 def register(mode_class: type, **hooks: Any) -> None:
-    """Register a mode's compiled functions for its parameter tuple class (all of them)."""
+    """Register a mode's compiled functions for its parameter tuple class (all of
+    :data:`_NAMES`; ``watches_skips`` defaults to :func:`never`)."""
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
-    _HOOKS[mode_class] = dict(hooks)
+    _HOOKS[mode_class] = {"watches_skips": never, **hooks}
 
 
 def _impl(mode: Any, name: str) -> Any:
@@ -83,7 +88,7 @@ def state_new(mode):
     raise NotImplementedError
 
 
-@overload(state_new)
+@overload_jit(state_new, inline="never")
 def _state_new(mode):
     f = _impl(mode, "state_new")
     return None if f is None else f.py_func
@@ -94,7 +99,7 @@ def state_load(mode, state, row, col):
     raise NotImplementedError
 
 
-@overload(state_load)
+@overload_jit(state_load, inline="never")
 def _state_load(mode, state, row, col):
     f = _impl(mode, "state_load")
     return None if f is None else f.py_func
@@ -105,7 +110,7 @@ def state_store(mode, state, row, col, st):
     raise NotImplementedError
 
 
-@overload(state_store)
+@overload_jit(state_store, inline="never")
 def _state_store(mode, state, row, col, st):
     f = _impl(mode, "state_store")
     return None if f is None else f.py_func
@@ -116,7 +121,7 @@ def mode_scratch(mode):
     raise NotImplementedError
 
 
-@overload(mode_scratch)
+@overload_jit(mode_scratch, inline="never")
 def _mode_scratch(mode):
     f = _impl(mode, "mode_scratch")
     return None if f is None else f.py_func
@@ -127,7 +132,7 @@ def ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     raise NotImplementedError
 
 
-@overload(ray_begin)
+@overload_jit(ray_begin, inline="never")
 def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     f = _impl(mode, "ray_begin")
     return None if f is None else f.py_func
@@ -138,7 +143,7 @@ def skip_size(mode, blocks, i, j, k, st):
     raise NotImplementedError
 
 
-@overload(skip_size)
+@overload_jit(skip_size, inline="never")
 def _skip_size(mode, blocks, i, j, k, st):
     f = _impl(mode, "skip_size")
     return None if f is None else f.py_func
@@ -149,7 +154,7 @@ def wants(mode, st, lo, hi):
     raise NotImplementedError
 
 
-@overload(wants)
+@overload_jit(wants, inline="never")
 def _wants(mode, st, lo, hi):
     f = _impl(mode, "wants")
     return None if f is None else f.py_func
@@ -160,7 +165,7 @@ def on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     raise NotImplementedError
 
 
-@overload(on_skip)
+@overload_jit(on_skip, inline="never")
 def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     f = _impl(mode, "on_skip")
     return None if f is None else f.py_func
@@ -172,7 +177,7 @@ def consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, 
     raise NotImplementedError
 
 
-@overload(consume)
+@overload_jit(consume, inline="never")
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
     f = _impl(mode, "consume")
@@ -184,7 +189,7 @@ def done(mode, st):
     raise NotImplementedError
 
 
-@overload(done)
+@overload_jit(done, inline="never")
 def _done(mode, st):
     f = _impl(mode, "done")
     return None if f is None else f.py_func
@@ -195,7 +200,7 @@ def ray_end(mode, grid, scratch, st, ray, t_far):
     raise NotImplementedError
 
 
-@overload(ray_end)
+@overload_jit(ray_end, inline="never")
 def _ray_end(mode, grid, scratch, st, ray, t_far):
     f = _impl(mode, "ray_end")
     return None if f is None else f.py_func
@@ -206,14 +211,31 @@ def finish(mode, out, row, col, st, ray):
     raise NotImplementedError
 
 
-@overload(finish)
+@overload_jit(finish, inline="never")
 def _finish(mode, out, row, col, st, ray):
     f = _impl(mode, "finish")
     return None if f is None else f.py_func
 
 
+def watches_skips(mode):
+    """Whether the mode's ``on_skip`` and ``ray_end`` do anything (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(watches_skips, inline="never")
+def _watches_skips(mode):
+    f = _impl(mode, "watches_skips")
+    return None if f is None else f.py_func
+
+
 # Hooks several modes share: nothing to do at that point, or leaping over the blocks the mode's
 # flags (``blocks[0..2]``, one per hierarchy level) mark as unable to contribute.
+
+@jit()
+def never(mode):
+    """``watches_skips`` of a mode whose ``on_skip`` and ``ray_end`` leave the state alone."""
+    return False
+
 
 @jit()
 def no_scratch(mode):

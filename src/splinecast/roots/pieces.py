@@ -37,9 +37,8 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba.extending import overload
 
-from .._jit import jit
+from .._jit import jit, overload_jit
 from .bernstein import bernstein_eval, power_eval, power_to_bernstein
 from .bernstein_cubic import (
     bernstein3_value,
@@ -211,7 +210,7 @@ def poly_value(p, s):
     raise NotImplementedError
 
 
-@overload(poly_value)
+@overload_jit(poly_value)
 def _poly_value(p, s):
     if _is(p, PowerCubic):
         return lambda p, s: horner3(p.c3, p.c2, p.c1, p.c0, s)
@@ -236,7 +235,7 @@ def poly_first_root(p, value):
     raise NotImplementedError
 
 
-@overload(poly_first_root)
+@overload_jit(poly_first_root)
 def _poly_first_root(p, value):
     if _is(p, PowerCubic):
         return lambda p, value: cubic_first_root(p.c3, p.c2, p.c1, p.c0 - value, 0.0, 1.0)
@@ -274,7 +273,7 @@ def poly_roots(p, value, out, start):
     raise NotImplementedError
 
 
-@overload(poly_roots)
+@overload_jit(poly_roots)
 def _poly_roots(p, value, out, start):
     if _is(p, PowerCubic):
         return lambda p, value, out, start: cubic_roots_in_unit(p.c3, p.c2, p.c1, p.c0 - value,
@@ -310,7 +309,7 @@ def poly_max(p, sign):
     raise NotImplementedError
 
 
-@overload(poly_max)
+@overload_jit(poly_max)
 def _poly_max(p, sign):
     if _is(p, PowerCubic):
         return lambda p, sign: cubic_max(sign * p.c3, sign * p.c2, sign * p.c1, sign * p.c0)
@@ -358,7 +357,7 @@ def poly_bounds(p):
     raise NotImplementedError
 
 
-@overload(poly_bounds)
+@overload_jit(poly_bounds)
 def _poly_bounds(p):
     if _is(p, PowerCubic):
         def bounds_pc(p):
