@@ -216,6 +216,7 @@ def sort_first(args: argparse.Namespace) -> None:
         "load_average_before": load_before,
         "load_average_after": os.getloadavg(),
         "command": "python benchmarks/bench_distributed.py" + (" --quick" if args.quick else "")
+                   + (f" --part {args.part}" if args.part != "all" else "")
                    + (f" --sort-first-repeats {repeats}" if args.sort_first_repeats else ""),
         "source": source, "iso": iso, "frames": frames, "movie_size": movie_size,
         "frame_size": big, "repeats": repeats, "tiles_on_2_workers": tiles_2w,
