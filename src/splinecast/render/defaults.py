@@ -173,7 +173,7 @@ def auto_iso(volume: Volume) -> float:
         return float(volume.metadata["default_iso"])
 
     def compute() -> float:
-        lo = volume.value_range[0]
+        lo, hi = volume.value_range
         values = sample_values(volume)
         if values.size == 0:
             return float(lo)  # constant volume: nothing to show
@@ -181,7 +181,10 @@ def auto_iso(volume: Volume) -> float:
         if vmax == vmin:
             return 0.5 * (lo + vmin)
         integer = volume.dtype.kind in "iu"
-        return otsu_threshold(values, integer=integer)
+        # Within the volume's range: the samples' own bounds for a plain volume, but a preview
+        # of a multiresolution volume (coarse spline coefficients can overshoot the data)
+        # carries the whole volume's range, against which isovalues are checked.
+        return min(max(otsu_threshold(values, integer=integer), float(lo)), float(hi))
 
     return _cached(volume, "iso", compute)
 
