@@ -1,9 +1,12 @@
-"""Machine description saved with every benchmark result."""
+"""Machine description saved with every benchmark result, and the shared timing helper."""
 
 from __future__ import annotations
 
 import os
 import platform
+import statistics
+import time
+from collections.abc import Callable
 from importlib import metadata
 from typing import Any
 
@@ -45,3 +48,13 @@ def _threading_layer() -> str | None:
         return numba.threading_layer()
     except ValueError:  # no parallel kernel has run yet
         return None
+
+
+def median_ms(fn: Callable[[], object], repeats: int) -> float:
+    """Median wall time of ``repeats`` calls of ``fn``, in milliseconds (warm up before)."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times)

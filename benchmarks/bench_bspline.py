@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import mpmath
@@ -41,20 +39,12 @@ from splinecast.roots.bernstein import bernstein_to_power
 from splinecast.roots.first_root import DEFAULT_ITERATIONS, ROOT_FINDERS, first_root_by_id
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
+from _machine import describe, median_ms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 THESIS_FPS = {1: 4.6, 2: 2.8, 3: 1.5}
 
-
-def median_ms(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(times)
 
 
 # ------------------------------------------------------------------------------ composition

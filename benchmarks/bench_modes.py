@@ -26,7 +26,6 @@ import argparse
 import json
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,20 +33,10 @@ import numpy as np
 import splinecast as sc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
+from _machine import describe, median_ms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
-
-
-def median_ms(fn, repeats: int) -> float:
-    """Median wall time of ``fn()`` in ms (the caller warms up first)."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(times)
 
 
 def bench_mip(scene: sc.Scene, cam: sc.Camera, repeats: int) -> dict:

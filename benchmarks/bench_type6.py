@@ -31,20 +31,11 @@ import splinecast as sc
 from splinecast.io.synthetic import marschner_lobb_gradient
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
+from _machine import describe, median_ms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 VARIANTS = [("trilinear", {}), ("qss", {}), ("s31", {}), ("s31", {"precompute": True})]
-
-
-def median_ms(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(times)
 
 
 def normal_angles(frame: sc.Frame, volume: sc.Volume) -> tuple[float, float]:

@@ -39,21 +39,12 @@ from splinecast.multires.wavelet_reconstruct import ChunkReconstructor
 from splinecast.multires.wavelet_transform import MemmapSink, decompose
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
+from _machine import describe, median_ms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 PIXEL_MULTIPLES = (0, 25, 50, 100, 200, 400, 800)
 THESIS_TABLE_6_4 = {"reconstruction_ms": [7.23, 8.72, 9.25, 6.11, 6.92, 3.58],
                     "chunks_percent": [100, 73, 40, 12, 6, 1.6]}
-
-
-def median_ms(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(times)
 
 
 def peak_mib(fn) -> float:

@@ -14,10 +14,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -28,16 +26,7 @@ from splinecast.multires.wavelet_scene import wavelet_pieces
 from splinecast.multires.wavelet_store import build_wavelet_pyramid
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
-
-
-def _median_ms(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(times)
+from _machine import describe, median_ms  # noqa: E402
 
 
 def main() -> None:
@@ -58,9 +47,9 @@ def main() -> None:
         selection = select(store.layout, store.ranges, camera.position, eps, 0.0, store.spacing,
                            store.origin)
         pieces = len(wavelet_pieces(selection, scene.reconstructor))
-        pieces_ms = _median_ms(lambda s=selection, r=scene.reconstructor: wavelet_pieces(s, r),
+        pieces_ms = median_ms(lambda s=selection, r=scene.reconstructor: wavelet_pieces(s, r),
                                args.repeats)
-        frame_ms = _median_ms(lambda s=scene: s.render(camera, iso=0.0), max(3, args.repeats // 3))
+        frame_ms = median_ms(lambda s=scene: s.render(camera, iso=0.0), max(3, args.repeats // 3))
         rows.append({"label": args.label, "lod": eps, "pieces": pieces,
                      "pieces_ms": round(pieces_ms, 2),
                      "us_per_piece": round(pieces_ms / pieces * 1e3, 1),
