@@ -10,7 +10,6 @@ slowed down (a sleep in ``Level.read``) so frames arrive while bricks are still 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import os
 import signal
@@ -61,16 +60,6 @@ def wavelet(source, tmp_path_factory):
     path = tmp_path_factory.mktemp("wavelet") / "w.zarr"
     sc.build_pyramid(source, path, kind="wavelet", degree=3, progress=False)
     return path
-
-
-@contextlib.asynccontextmanager
-async def serving(data, **kw):
-    server = ViewerServer(data, **kw)
-    await server.start()
-    try:
-        yield server
-    finally:
-        await server.stop()
 
 
 def camera(geometry, size=SIZE, **orbit) -> sc.Camera:
@@ -126,7 +115,7 @@ def test_pyramid_hello_reads_only_the_coarsest_level(pyramid, monkeypatch):
     monkeypatch.setattr(Level, "read", watched)
 
     async def check():
-        async with serving(mv) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(mv) as server, ViewerClient(server.url) as client:
             hello = client.hello
             assert hello["v"] == 1 and hello["v_minor"] >= 1
             assert hello["models"] == list(sc.MODELS)  # every model renders a pyramid
@@ -153,7 +142,7 @@ def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid,
     assert ref_frame.stats["complete"] and set(ref_frame.stats["cut_levels"]) >= {0}
 
     async def check():
-        async with serving(sc.read(pyramid), lod=LOD) as server, \
+        async with ViewerServer(sc.read(pyramid), lod=LOD) as server, \
                 ViewerClient(server.url) as client:
             # After a drag the full frame follows by itself once input rests.
             ident = await client.render({"size": list(SIZE)}, interactive=interactive)
@@ -202,7 +191,7 @@ def test_pyramid_screenshot_is_the_complete_cut_in_every_mode(pyramid):
         }
 
     async def check():
-        async with serving(mv, lod=LOD) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(mv, lod=LOD) as server, ViewerClient(server.url) as client:
             out = {}
             for mode in refs:
                 ident = await client.screenshot({**states[mode], "size": list(size),
@@ -220,7 +209,7 @@ def test_pyramid_screenshot_is_the_complete_cut_in_every_mode(pyramid):
 def test_a_scene_given_to_the_viewer_offers_only_its_model(pyramid):
     with MultiscaleScene(sc.read(pyramid), lod=LOD) as scene:
         async def check():
-            async with serving(scene) as server, ViewerClient(server.url) as client:
+            async with ViewerServer(scene) as server, ViewerClient(server.url) as client:
                 assert client.hello["models"] == ["trilinear"]
                 ident = await client.render({"model": "bspline1", "size": [8, 6]})
                 with pytest.raises(ServerError, match="model must be one of trilinear"):
@@ -253,7 +242,7 @@ def test_wavelet_store_frames_equal_scene_render(wavelet):
     reference = ref_scene.render(camera(store, size=size), iso=iso).to_uint8()
 
     async def check():
-        async with serving(store, lod=eps) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(store, lod=eps) as server, ViewerClient(server.url) as client:
             hello = client.hello
             assert hello["models"] == ["bspline3"] and hello["defaults"]["model"] == "bspline3"
             assert hello["multires"]["kind"] == "wavelet"
@@ -278,7 +267,7 @@ def test_progressive_coarse_first_then_full_equal_to_scene_render(source, monkey
     size = (96, 72)
 
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             first = await client.render({"size": list(size)})
             await client.frame(first)
             # Every frame now counts as slow (the previous frame time is the estimate).

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import base64
-import contextlib
 import json
 import os
 import time
@@ -35,16 +34,6 @@ def run(coro):
 @pytest.fixture(scope="module")
 def vol() -> sc.Volume:
     return sc.demo("marschner-lobb", size=16)
-
-
-@contextlib.asynccontextmanager
-async def serving(data, **kw):
-    server = ViewerServer(data, **kw)
-    await server.start()
-    try:
-        yield server
-    finally:
-        await server.stop()
 
 
 async def raw_request(port: int, target: str, host: str | None = None,
@@ -82,7 +71,7 @@ def reference(vol, state_camera=None, size=SIZE, model="trilinear", **options) -
 # ------------------------------------------------------------------------------ access
 def test_page_and_websocket_refuse_missing_or_wrong_token_bad_host_and_foreign_origin(vol):
     async def check():
-        async with serving(vol) as server:
+        async with ViewerServer(vol) as server:
             port, token = server.port, server.token
             ok = f"?token={token}"
             status, body = await raw_request(port, "/" + ok)
@@ -115,7 +104,7 @@ def test_page_and_websocket_refuse_missing_or_wrong_token_bad_host_and_foreign_o
 
 def test_only_the_fixed_files_are_served(vol):
     async def check():
-        async with serving(vol) as server:
+        async with ViewerServer(vol) as server:
             port, token = server.port, server.token
             status, page = await raw_request(port, f"/?token={token}")
             assert status == 200
@@ -142,7 +131,7 @@ def test_only_the_fixed_files_are_served(vol):
 
 def test_security_headers_on_the_page(vol):
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             assert client.hello["type"] == "hello"
             import aiohttp
 
@@ -162,7 +151,7 @@ def test_refuses_other_arguments_and_ports(vol):
         ViewerServer(vol, iso=5.0)
 
     async def taken():
-        async with serving(vol) as server:
+        async with ViewerServer(vol) as server:
             with pytest.raises(sc.ParameterError, match="cannot listen"):
                 await ViewerServer(vol, port=server.port).start()
     run(taken())
@@ -195,7 +184,7 @@ def test_frames_equal_scene_render_for_every_mode(vol):
     ]
 
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             for state, options in cases:
                 ident = await client.render({**state, "camera": camera, "size": list(SIZE)})
                 frame = await client.frame(ident)
@@ -211,7 +200,7 @@ def test_every_model_and_mode_gives_scene_render_or_its_error():
     vol = sc.demo("sphere", size=10)
 
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             assert client.hello["models"] == list(sc.MODELS)
             assert client.hello["modes"] == list(sc.scene.MODES)
             for model in sc.MODELS:
@@ -243,7 +232,7 @@ def test_every_model_and_mode_gives_scene_render_or_its_error():
 
 def test_render_errors_reach_the_page_and_the_connection_stays_usable(vol):
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             ident = await client.render({"mode": "mip", "window": [1.0, 0.0]})
             with pytest.raises(ServerError, match="window must be two finite numbers"):
                 await client.frame(ident)
@@ -325,7 +314,7 @@ def test_random_and_malformed_messages_leave_the_server_answering_correctly(vol)
     assert invalid > 400
 
     async def check():
-        async with serving(vol, max_pixels=64 * 64) as server:
+        async with ViewerServer(vol, max_pixels=64 * 64) as server:
             async with ViewerClient(server.url) as client:
                 for message in messages:
                     if isinstance(message, bytes):
@@ -348,7 +337,7 @@ def test_random_and_malformed_messages_leave_the_server_answering_correctly(vol)
 
 def test_oversized_message_closes_only_that_connection(vol):
     async def check():
-        async with serving(vol) as server:
+        async with ViewerServer(vol) as server:
             async with ViewerClient(server.url) as client:
                 await client.ws.send_str(json.dumps({"type": "render", "pad": "x" * 70_000}))
                 with pytest.raises(ConnectionError):
@@ -364,7 +353,7 @@ def test_oversized_message_closes_only_that_connection(vol):
 # ------------------------------------------------------------------------------ scheduling
 def test_interactive_frames_are_reduced_jpeg_then_full_png_after_settling(vol):
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             state = {"size": [64, 48], "camera": {"azimuth": 80.0}}
             ident = await client.render(state, interactive=True)
             first = await client.frame(ident, final=False)
@@ -382,7 +371,7 @@ def test_interactive_frames_are_reduced_jpeg_then_full_png_after_settling(vol):
 
 def test_newest_interactive_request_wins(vol):
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             ids = [await client.render({"size": list(SIZE), "camera": {"azimuth": float(a)}},
                                        interactive=True) for a in range(0, 60, 2)]
             frames = []
@@ -445,7 +434,7 @@ def test_a_waiting_request_is_replaced_by_a_newer_one(vol):
 
 def test_progressive_coarse_frame_before_a_slow_full_frame(vol):
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             ident = await client.render({"size": list(SIZE)})
             coarse = await client.frame(ident, final=False)
             full = await client.frame(ident, final=True)
@@ -471,7 +460,7 @@ def test_striped_render_equals_whole_render_and_can_be_abandoned(vol):
 
 def test_screenshot_is_full_png_and_not_superseded(vol):
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             shot = await client.screenshot({"size": [50, 40], "mode": "mip"})
             later = await client.render({"size": list(SIZE)})
             frames = {}
@@ -488,7 +477,7 @@ def test_screenshot_is_full_png_and_not_superseded(vol):
 
 def test_refresh_renders_the_settled_state_again(vol):
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             ident = await client.render({"size": list(SIZE), "iso": 0.3})
             first = await client.frame(ident)
             server.refresh_all()  # what a brick loader does when more detail arrived
@@ -502,7 +491,7 @@ def test_view_of_a_scene_keeps_its_model(vol):
     scene = sc.Scene(vol, model="trilinear")
 
     async def check():
-        async with serving(scene) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(scene) as server, ViewerClient(server.url) as client:
             assert client.hello["defaults"]["model"] == "trilinear"
             assert server.renderer.scene("trilinear") is scene
             ident = await client.render({"size": list(SIZE)})
@@ -515,7 +504,7 @@ def test_view_of_a_scene_keeps_its_model(vol):
 def test_frames_are_rendered_off_the_event_loop(vol):
     """While a frame is being traced the server still answers HTTP requests."""
     async def check():
-        async with serving(vol) as server, ViewerClient(server.url) as client:
+        async with ViewerServer(vol) as server, ViewerClient(server.url) as client:
             ident = await client.render({"size": [800, 600]})
             start = time.perf_counter()
             status, _ = await raw_request(server.port, f"/viewer.css?token={server.token}")

@@ -174,6 +174,14 @@ class ViewerServer:
             self._watcher = asyncio.create_task(self._watch_bricks())
         return self.url
 
+    async def __aenter__(self) -> ViewerServer:
+        """``async with ViewerServer(data) as server``: started on entry, stopped on exit."""
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
     async def stop(self) -> None:
         """Close every connection and stop serving (a pyramid's loader thread stops too)."""
         if self._watcher is not None:
