@@ -1,7 +1,9 @@
 """Sort-first scale-out on Dask (issue 14): scaling from 1 to 2 single-threaded workers, overhead
 against the local 2-thread render, and a projection to a 64-worker cluster.
 
-On a LocalCluster of single-threaded worker processes, after warm-up (scene prepared on every
+On a LocalCluster of single-threaded worker processes (``splinecast.distributed.local_cluster``,
+Dask's background polling turned down; ``bench_movie_overhead.py`` measures what that changes),
+after warm-up (scene prepared on every
 worker, kernels loaded), medians of repeated runs, interleaved (1 worker, 2 workers, local) so a
 change in the machine's load hits all three alike:
 
@@ -119,8 +121,9 @@ def main() -> None:
     parser.add_argument("--sort-last-size", type=int, default=None,
                         help="voxels per axis of the sort-last pyramid (default 512; quick 129)")
     parser.add_argument("--sort-last-level", type=int, default=0)
-    parser.add_argument("--sort-last-image", type=int, default=None,
-                        help="image side of the sort-last renders (default 1024; quick 256)")
+    parser.add_argument("--sort-last-image", default=None,
+                        help="image side, or WxH, of the sort-last renders (default 1024; "
+                             "quick 256)")
     parser.add_argument("--sort-last-repeats", type=int, default=3)
     parser.add_argument("--sort-first-repeats", type=int, default=None,
                         help="interleaved runs of the sort-first part (default 5; quick 3)")
@@ -135,7 +138,9 @@ def main() -> None:
 
 
 def sort_first(args: argparse.Namespace) -> None:
-    from distributed import Client, LocalCluster
+    from distributed import Client
+
+    from splinecast.distributed import local_cluster
 
     if args.quick:
         source, iso, frames, movie_size, big, repeats = (
@@ -151,8 +156,7 @@ def sort_first(args: argparse.Namespace) -> None:
     big_cam = sc.Camera.orbit(volume, azimuth=40, elevation=25, size=big)
     scene.render(big_cam, iso=iso)  # compile / load kernels before the workers start
 
-    clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                dashboard_address=":0", silence_logs=40) for n in (1, 2)}
+    clusters = {n: local_cluster(n) for n in (1, 2)}
     clients = {n: Client(c) for n, c in clusters.items()}
     try:
         scenes = {n: DistributedScene(source, c) for n, c in clients.items()}
@@ -288,13 +292,14 @@ def merge_step(level_volume: sc.Volume, camera: sc.Camera, mode: str, repeats: i
 
 
 def sort_last(args: argparse.Namespace) -> None:
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    from splinecast.distributed import DistributedScene
+    from splinecast.distributed import DistributedScene, local_cluster
 
     size = args.sort_last_size or (129 if args.quick else 512)
-    side = args.sort_last_image or (256 if args.quick else 1024)
-    image = (side, side)
+    side = args.sort_last_image or str(256 if args.quick else 1024)
+    w, _, h = side.lower().partition("x")
+    image = (int(w), int(h or w))
     repeats = args.sort_last_repeats
     modes = [m for m in args.sort_last_modes.split(",") if m]
     if not set(modes) <= set(SORT_LAST_MODES):
@@ -309,8 +314,7 @@ def sort_last(args: argparse.Namespace) -> None:
     for mode in modes:  # compile / load the kernels before the workers start
         local.render(sc.Camera.orbit(level_volume, size=(16, 16)), **_sort_last_options(mode))
     merges = {mode: merge_step(level_volume, camera, mode, repeats) for mode in modes}
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                           dashboard_address=":0", silence_logs=40)
+    cluster = local_cluster(2)
     client = Client(cluster)
     rows = {}
     try:
@@ -389,7 +393,7 @@ def sort_last(args: argparse.Namespace) -> None:
         "projection": projection,
     }
     stem = ("distributed_sort_last_quick" if args.quick else
-            f"distributed_sort_last_{size}_level{level}_{side}px")
+            f"distributed_sort_last_{size}_level{level}_{side.lower()}px")
     if modes != list(SORT_LAST_MODES):
         stem += "_" + "-".join(modes)
     out = HERE / "results"
