@@ -117,7 +117,9 @@ def over_step(width: int, height: int, repeats: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, a few repeats")
-    parser.add_argument("--part", choices=("all", "sort-first", "sort-last"), default="all")
+    parser.add_argument("--part", choices=("all", "sort-first", "sort-last", "markdown"),
+                        default="all",
+                        help="markdown: rewrite distributed.md from the saved .json files")
     parser.add_argument("--sort-last-size", type=int, default=None,
                         help="voxels per axis of the sort-last pyramid (default 512; quick 129)")
     parser.add_argument("--sort-last-level", type=int, default=0)
@@ -135,6 +137,10 @@ def main() -> None:
         sort_first(args)
     if args.part in ("all", "sort-last"):
         sort_last(args)
+    if args.part == "markdown":
+        out = HERE / "results"
+        result = json.loads((out / "distributed.json").read_text())
+        (out / "distributed.md").write_text(markdown(result))
 
 
 def sort_first(args: argparse.Namespace) -> None:
@@ -512,7 +518,60 @@ def markdown(r: dict) -> str:
             f"{p['movie_speedup']:.1f}x | {p['tiles_frame_s']:.3f} | {p['tiles_speedup']:.1f}x "
             f"| {p['sort_last_frame_s']:.3f} | {p['sort_last_speedup']:.1f}x |")
     lines.append("")
+    lines += sort_last_section(HERE / "results")
     return "\n".join(lines)
+
+
+def sort_last_section(folder: Path) -> list[str]:
+    """The measured sort-last runs of the 1024^3 pyramid (``distributed_sort_last_1024_*``):
+    cost and bytes per frame, and their projection to 64 workers, as markdown lines."""
+    runs = [json.loads(p.read_text())
+            for p in sorted(folder.glob("distributed_sort_last_1024_*.json"))]
+    if not runs:
+        return []
+    mib = 2**20
+    lines = ["## Sort-last, 1024^3 pyramid", ""]
+    for r in runs:
+        w, h = r["image"]
+        lines += [
+            f"Measured by `{r['command']}` (results "
+            f"`distributed_sort_last_1024_level{r['level']}_*`): Marschner-Lobb 1024^3 float32 "
+            f"pyramid, level {r['level']} ({'x'.join(map(str, r['level_shape']))}) rendered "
+            f"at {w}x{h} by 2 single-threaded workers (load average "
+            f"{r['load_average_before'][0]:.0f} before / {r['load_average_after'][0]:.0f} after: "
+            "a heavily shared machine, so the traces' times are inflated; the merge and byte "
+            "counts are not). Per frame:",
+            "",
+            "| mode | sort-last 2 workers s | shares' traces sum s | merge tasks s | final task "
+            "s | one merge in process s | partial images merged MiB | moved between workers MiB "
+            "| sent to client MiB |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for mode, row in r["modes"].items():
+            md = row["median"]
+            lines.append(
+                f"| {mode} | {md['sort_last_s']:.2f} | {md['share_trace_sum_s']:.2f} | "
+                f"{md['merge_tasks_s']:.3f} | {md['finish_s']:.3f} | "
+                f"{row['merge_in_process_s']:.3f} | {row['partial_bytes'] / mib:.1f} | "
+                f"{md['moved_bytes'] / mib:.1f} | {row['frame_bytes'] / mib:.1f} |")
+        modes = list(r["modes"])
+        lines += [
+            "",
+            "Projection to W workers (the sort-last model of the module docstring, from these "
+            "measurements: traces split W ways, log2 W merge levels each of one task, one "
+            "measured merge and one full-image partial state moved; 'moved' is the most all "
+            "merges move, (W - 1) full-image states):",
+            "",
+            "| workers | " + " | ".join(f"{m} frame s | {m} speed-up | {m} moved MiB"
+                                        for m in modes) + " |",
+            "|---|" + "---|---|---|" * len(modes),
+        ]
+        for p in r["projection"]:
+            lines.append(f"| {p['workers']} | " + " | ".join(
+                f"{p[f'{m}_s']:.3f} | {p[f'{m}_speedup']:.1f}x | "
+                f"{p[f'{m}_moved_bytes_max'] / mib:.0f}" for m in modes) + " |")
+        lines.append("")
+    return lines
 
 
 if __name__ == "__main__":

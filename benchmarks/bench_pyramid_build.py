@@ -97,11 +97,11 @@ def markdown(r: dict) -> str:
         f"{r['load_before'][0]:.1f} before / {r['load_after'][0]:.1f} after), so wall times are "
         f"noisy and CPU times are the steadier measure. Command: `{r['command']}`. Baseline: "
         f"`{r['baseline']}`. Fresh interpreter per build, default shard (128) and threads; "
-        f"medians of {r['repeats']} alternating runs (one warm-up build of each first, so "
+        "medians of alternating runs (count per row; one warm-up build of each first, so "
         "compiled code is cached). CPU = the process's CPU time after the imports (every "
         "thread, zarr's codec threads included); tasks = CPU inside the build's tasks.",
         "",
-        "| volume | code | build wall s | CPU s | tasks CPU s (level 0 / 1 / rest) | "
+        "| volume (runs) | code | build wall s | CPU s | tasks CPU s (level 0 / 1 / rest) | "
         "peak RSS MiB | wall speed-up | CPU speed-up |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -114,7 +114,8 @@ def markdown(r: dict) -> str:
             rest = sum(levels[k] for k in names[2:])
             first = [levels[k] for k in names[:2]] + [0.0] * (2 - len(names[:2]))
             lines.append(
-                f"| {n}^3 | {code} | {s['build_s']:.1f} | {s['cpu_s']:.1f} | "
+                f"| {n}^3 ({row.get('repeats', '?')}) | {code} | {s['build_s']:.1f} | "
+                f"{s['cpu_s']:.1f} | "
                 f"{first[0]:.1f} / {first[1]:.1f} / {rest:.1f} | {s['maxrss'] / mib:.0f} | "
                 f"{base['build_s'] / s['build_s']:.2f}x | {base['cpu_s'] / s['cpu_s']:.2f}x |")
     lines.append("")
@@ -144,10 +145,14 @@ def main() -> None:
     baseline_dir = Path(tempfile.mkdtemp(prefix="baseline-", dir=work))
     codes = {"baseline": export_src(args.baseline, baseline_dir), "current": ROOT / "src"}
     load_before = os.getloadavg()
-    results: dict = {"machine": describe(), "baseline": args.baseline, "repeats": args.repeats,
+    out = Path(args.out)
+    previous = out / "pyramid_build.json"
+    # Sizes measured by earlier runs (e.g. a large one with fewer repeats) are kept.
+    kept = json.loads(previous.read_text())["sizes"] if previous.exists() else {}
+    results: dict = {"machine": describe(), "baseline": args.baseline,
                      "command": "python benchmarks/bench_pyramid_build.py --sizes "
                                 f"{args.sizes} --baseline {args.baseline} --repeats "
-                                f"{args.repeats}", "sizes": {}}
+                                f"{args.repeats}", "sizes": kept}
     try:
         for n in sizes:
             raw = work / f"synthetic{n}.raw"
@@ -164,10 +169,11 @@ def main() -> None:
                     print(f"{n}^3 {code} run {i + 1}: {runs[code][-1]}", file=sys.stderr)
             results["sizes"][str(n)] = {code: {**_median(r), "runs": r}
                                         for code, r in runs.items()}
+            results["sizes"][str(n)]["repeats"] = args.repeats
+            results["sizes"][str(n)]["load"] = os.getloadavg()
     finally:
         shutil.rmtree(baseline_dir, ignore_errors=True)
     results["load_before"], results["load_after"] = load_before, os.getloadavg()
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "pyramid_build.json").write_text(json.dumps(results, indent=1) + "\n")
     (out / "pyramid_build.md").write_text(markdown(results))
