@@ -228,6 +228,7 @@ def sort_first(args: argparse.Namespace) -> None:
         "command": "python benchmarks/bench_distributed.py" + (" --quick" if args.quick else "")
                    + (f" --part {args.part}" if args.part != "all" else "")
                    + (f" --sort-first-repeats {repeats}" if args.sort_first_repeats else ""),
+        "cluster": "splinecast.distributed.local_cluster",
         "source": source, "iso": iso, "frames": frames, "movie_size": movie_size,
         "frame_size": big, "repeats": repeats, "tiles_on_2_workers": tiles_2w,
         "runs_s": runs, "median_s": med,
@@ -518,11 +519,17 @@ def markdown(r: dict) -> str:
             f"{p['movie_speedup']:.1f}x | {p['tiles_frame_s']:.3f} | {p['tiles_speedup']:.1f}x "
             f"| {p['sort_last_frame_s']:.3f} | {p['sort_last_speedup']:.1f}x |")
     lines.append("")
-    lines += sort_last_section(HERE / "results")
+    if "cluster" not in r:  # measured before local_cluster existed
+        lines[2:2] = [
+            "These sort-first numbers were measured on a default `LocalCluster`, before "
+            "`splinecast.distributed.local_cluster` (Dask's background polling turned down) "
+            "existed; `distributed_movie_overhead.md` measures what that changes for the movie.",
+            ""]
+    lines += sort_last_section(HERE / "results", mo)
     return "\n".join(lines)
 
 
-def sort_last_section(folder: Path) -> list[str]:
+def sort_last_section(folder: Path, quiet_model: dict | None = None) -> list[str]:
     """The measured sort-last runs of the 1024^3 pyramid (``distributed_sort_last_1024_*``):
     cost and bytes per frame, and their projection to 64 workers, as markdown lines."""
     runs = [json.loads(p.read_text())
@@ -571,6 +578,28 @@ def sort_last_section(folder: Path) -> list[str]:
                 f"{p[f'{m}_s']:.3f} | {p[f'{m}_speedup']:.1f}x | "
                 f"{p[f'{m}_moved_bytes_max'] / mib:.0f}" for m in modes) + " |")
         lines.append("")
+        if quiet_model:
+            t_task, rate = quiet_model["task_overhead_s"], quiet_model["transfer_bytes_per_s"]
+            lines += [
+                f"The run above measured a per-task overhead of "
+                f"{r['model']['task_overhead_s'] * 1e3:.0f} ms and a transfer rate of "
+                f"{r['model']['transfer_bytes_per_s'] / mib:.0f} MiB/s, both inflated by the "
+                f"load; with the quiet sort-first run's {t_task * 1e3:.2f} ms and "
+                f"{rate / mib:.0f} MiB/s instead (same traces, merges and bytes):",
+                "",
+                "| workers | " + " | ".join(f"{m} frame s | {m} speed-up" for m in modes) + " |",
+                "|---|" + "---|---|" * len(modes),
+            ]
+            for w in WORKER_COUNTS:
+                cells = []
+                for m in modes:
+                    row, md = r["modes"][m], r["modes"][m]["median"]
+                    merge = t_task + row["merge_in_process_s"] + row["full_state_bytes"] / rate
+                    tail = md["finish_s"] + row["frame_bytes"] / rate
+                    t = md["share_trace_sum_s"] / w + math.log2(w) * merge + tail
+                    cells.append(f"{t:.3f} | {(md['share_trace_sum_s'] + tail) / t:.1f}x")
+                lines.append(f"| {w} | " + " | ".join(cells) + " |")
+            lines.append("")
     return lines
 
 
