@@ -5,6 +5,10 @@ the ray (the ray, the box clip, one float32 RGBA write and the thread scheduling
 compiled with splinecast's own options (:func:`splinecast._jit.jit`) and cuts the image into the
 same row bands, handed out in the same order, as the renderer's driver, so the difference
 between a mode's frame time and this one is the time the mode spends on its actual work.
+
+Import it as the top-level module ``floor_kernel`` (``benchmarks/`` on ``sys.path``), as every
+benchmark and test does: Numba's on-disk cache records the name of the module a kernel was
+compiled in, and a cached kernel loaded under another name (``benchmarks.floor_kernel``) fails.
 """
 
 from __future__ import annotations
