@@ -58,7 +58,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--clock", choices=["wall", "cpu"], default="wall")
-    ap.add_argument("--scenes", default="ml256,mri")
+    ap.add_argument("--scenes", default="mri,ml256")
     ap.add_argument("--json", default=str(HERE / "results" / "dvr_defaults.json"))
     args = ap.parse_args()
     clock = time.process_time if args.clock == "cpu" else time.perf_counter
@@ -96,6 +96,10 @@ def main() -> None:
                    "auto_tf_ms": statistics.median(times["auto"]), "runs_ms": times}
             rows.append(row)
             print(json.dumps(row), flush=True)
+            _write(rows, args)  # after every row: a long run stopped early keeps its rows
+
+
+def _write(rows: list[dict], args: argparse.Namespace) -> None:
     out = {"machine": describe(), "clock": args.clock, "repeats": args.repeats,
            "tolerance": 1.0 / 255.0, "rows": rows}
     path = Path(args.json)
