@@ -19,23 +19,12 @@ import numpy as np
 from numba import prange
 
 from splinecast._jit import jit
-from splinecast.render.driver import band_order
+
+# The driver's own slab clip, so the floor clips each ray exactly as a render does.
+from splinecast.render.driver import _slab, band_order
 from splinecast.render.rays import pixel_ray
 
 __all__ = ["floor_frame", "floor_render"]
-
-
-@jit(inline="always")
-def _slab(o: float, d: float, lo: float, hi: float, t0: float, t1: float) -> tuple:
-    if d == 0.0:
-        if o < lo or o > hi:
-            return math.inf, -math.inf
-        return t0, t1
-    ta = (lo - o) / d
-    tb = (hi - o) / d
-    if ta > tb:
-        ta, tb = tb, ta
-    return max(t0, ta), min(t1, tb)
 
 
 @jit(parallel=True)
