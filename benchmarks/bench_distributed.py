@@ -10,9 +10,10 @@ change in the machine's load hits all three alike:
 * a movie: ``F`` frames of a turntable rendered as one batch (``render_many``, 8-bit images
   back, as ``splinecast movie`` does) on 1 and 2 workers (target >= 1.8x), and locally in this
   process on 2 Numba threads (``render_locally``; distributed/local target <= 1.25x);
-* one large frame by tiles (``DistributedScene.render``, every buffer of the Frame back, and
-  with ``image_only=True`` just the 8-bit image) on 1 and 2 workers (target >= 1.6x), and
-  ``Scene.render`` locally on 2 threads;
+* one large frame by tiles (``DistributedScene.render``, every buffer of the Frame back; only
+  colour and depth with ``outputs=("rgba", "depth")``, what compositing needs; and with
+  ``image_only=True`` just the 8-bit image) on 1 and 2 workers (target >= 1.6x), and
+  ``Scene.render`` locally on 2 threads with the same outputs;
 * the parameters of a simple cost model: per-task overhead (a batch of empty tasks), client
   transfer rate (gathering a 16 MiB result), single-thread render times, and the cost of one
   compositing step (an "over" of two full-size premultiplied RGBA float32 images with depth,
@@ -161,6 +162,7 @@ def sort_first(args: argparse.Namespace) -> None:
     path = orbit_path(volume, frames, size=movie_size)
     big_cam = sc.Camera.orbit(volume, azimuth=40, elevation=25, size=big)
     scene.render(big_cam, iso=iso)  # compile / load kernels before the workers start
+    scene.render(big_cam, iso=iso, outputs=("rgba", "depth"))  # the variant without counters
 
     clusters = {n: local_cluster(n) for n in (1, 2)}
     clients = {n: Client(c) for n, c in clusters.items()}
@@ -169,10 +171,13 @@ def sort_first(args: argparse.Namespace) -> None:
         for ds in scenes.values():  # warm-up: kernels loaded, tables built on every worker
             list(ds.render_many(path[:4], iso=iso, image_only=True))
             ds.render(big_cam, iso=iso)
+            ds.render(big_cam, iso=iso, outputs=("rgba", "depth"))
 
         runs: dict[str, list[float]] = {k: [] for k in (
             "movie_1w", "movie_2w", "movie_local2", "frame_1w", "frame_2w", "frame_local2",
-            "image_1w", "image_2w", "image_local2", "frame_local1", "movie_frame_local1")}
+            "image_1w", "image_2w", "image_local2", "rgbd_1w", "rgbd_2w", "rgbd_local2",
+            "frame_local1", "movie_frame_local1")}
+        rgbd = ("rgba", "depth")
         threads = numba.get_num_threads()
         for _ in range(repeats):
             for n in (1, 2):
@@ -182,11 +187,16 @@ def sort_first(args: argparse.Namespace) -> None:
                                                                               iso=iso)))
                 runs[f"image_{n}w"].append(timed(lambda n=n: scenes[n].render(
                     big_cam, iso=iso, image_only=True)))
+                runs[f"rgbd_{n}w"].append(timed(lambda n=n: scenes[n].render(
+                    big_cam, iso=iso, outputs=rgbd)))
             runs["movie_local2"].append(timed(lambda: list(
                 render_locally(scene, sc.distributed.as_shots(path, iso=iso),
                                image_only=True))))
             runs["frame_local2"].append(timed(lambda: scene.render(big_cam, iso=iso)))
-            runs["image_local2"].append(timed(lambda: scene.render(big_cam, iso=iso).to_uint8()))
+            runs["image_local2"].append(timed(lambda: scene.render(
+                big_cam, iso=iso, outputs=("rgba",)).to_uint8()))
+            runs["rgbd_local2"].append(timed(lambda: scene.render(big_cam, iso=iso,
+                                                                  outputs=rgbd)))
             numba.set_num_threads(1)
             runs["frame_local1"].append(timed(lambda: scene.render(big_cam, iso=iso)))
             runs["movie_frame_local1"].append(timed(lambda: scene.render(path[0], iso=iso)))
@@ -236,6 +246,8 @@ def sort_first(args: argparse.Namespace) -> None:
         "frame_speedup_1_to_2": med["frame_1w"] / med["frame_2w"],
         "image_speedup_1_to_2": med["image_1w"] / med["image_2w"],
         "image_overhead_vs_local": med["image_2w"] / med["image_local2"],
+        "rgbd_speedup_1_to_2": med["rgbd_1w"] / med["rgbd_2w"],
+        "rgbd_overhead_vs_local": med["rgbd_2w"] / med["rgbd_local2"],
         "movie_overhead_vs_local": med["movie_2w"] / med["movie_local2"],
         "frame_overhead_vs_local": med["frame_2w"] / med["frame_local2"],
         "model": {"task_overhead_s": t_task, "transfer_bytes_per_s": rate,
@@ -496,6 +508,10 @@ def markdown(r: dict) -> str:
         f"| the same frame, 8-bit image only (`image_only=True`) | {med['image_1w']:.2f} | "
         f"{med['image_2w']:.2f} | {med['image_local2']:.2f} | "
         f"{r['image_speedup_1_to_2']:.2f}x (>= 1.6) | {r['image_overhead_vs_local']:.2f}x |",
+        *([f"| the same frame, colour and depth only (`outputs=(\"rgba\", \"depth\")`) | "
+           f"{med['rgbd_1w']:.2f} | {med['rgbd_2w']:.2f} | {med['rgbd_local2']:.2f} | "
+           f"{r['rgbd_speedup_1_to_2']:.2f}x (>= 1.6) | {r['rgbd_overhead_vs_local']:.2f}x |"]
+          if "rgbd_1w" in med else []),
         "",
         "Model parameters (measured in the same run): per-task overhead "
         f"{mo['task_overhead_s'] * 1e3:.2f} ms (400 empty tasks on 2 workers), worker -> "

@@ -125,6 +125,22 @@ def test_tiles_stream_as_they_complete_and_cover_the_image_once(scenes, volume):
     np.testing.assert_array_equal(image, local.to_uint8())
 
 
+def test_tiles_carry_only_the_requested_outputs(scenes, volume):
+    cam = sc.Camera.orbit(volume, azimuth=35, elevation=25, size=(70, 45))
+    everything = sc.Scene(volume).render(cam, iso=0.5)
+    frame = scenes["trilinear"].render(cam, iso=0.5, tile_size=24, outputs=("rgba", "depth"))
+    np.testing.assert_array_equal(frame.rgba, everything.rgba)
+    np.testing.assert_array_equal(frame.depth, everything.depth)
+    for name in ("position", "normal", "face", "cells_visited", "cells_tested",
+                 "blocks_skipped", "value"):
+        assert getattr(frame, name) is None, name
+    assert frame.stats["hits"] == everything.stats["hits"]
+    assert "mean_cells_visited" not in frame.stats
+    mip = scenes["trilinear"].render(cam, mode="mip", tile_size=24, outputs=("value",))
+    np.testing.assert_array_equal(mip.value, sc.Scene(volume).render(cam, mode="mip").value)
+    assert mip.rgba is None and mip.depth is None
+
+
 def test_automatic_tiles_and_positional_arguments_match_scene_render(scenes, volume):
     cam = sc.Camera.orbit(volume, size=(160, 128))
     local = sc.Scene(volume).render(cam, "iso", 0.4)

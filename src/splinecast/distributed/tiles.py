@@ -106,6 +106,9 @@ def tile_grid(camera: Camera, tile_size: int | tuple[int, int]) -> list[Tile]:
 class FrameCanvas:
     """The full image's buffers, filled tile by tile as tiles arrive (in any order).
 
+    Only the buffers the tiles carry are assembled: tiles rendered with ``outputs=`` leave the
+    others ``None`` in the assembled :class:`Frame`, as a local render does.
+
     Parameters
     ----------
     camera : Camera
@@ -138,9 +141,10 @@ class FrameCanvas:
         """Copy ``frame`` (the render of ``tile``) into its window of the full image."""
         if frame.size != (tile.width, tile.height):
             raise ValueError(f"a {frame.size} frame cannot fill tile {tile}")
-        fields = PIXEL_FIELDS + (("value",) if frame.value is not None else ())
-        for name in fields:
+        for name in PIXEL_FIELDS + ("value",):
             part = getattr(frame, name)
+            if part is None:  # not requested (``outputs=``) or not a MIP value
+                continue
             full = self._arrays.get(name)
             if full is None:
                 full = np.empty((self.height, self.width) + part.shape[2:], part.dtype)
@@ -162,9 +166,7 @@ class FrameCanvas:
         a = self._arrays
         stats = merge_stats(self._tile_stats, a, self.width, self.height)
         stats.update(extra_stats)
-        return Frame(a["rgba"], a["depth"], a["position"], a["normal"], a["face"],
-                     a["cells_visited"], a["cells_tested"], a["blocks_skipped"], stats,
-                     a.get("value"))
+        return Frame(*(a.get(name) for name in PIXEL_FIELDS), stats, a.get("value"))
 
 
 #: Statistics recomputed from the assembled per-ray arrays (exactly the local render's numbers).
@@ -201,9 +203,9 @@ def merge_stats(tile_stats: list[tuple[Tile, dict[str, Any]]], arrays: dict[str,
         else:
             merged[key] = first
     merged.update(width=width, height=height, rays=rays, tiles=len(tile_stats))
-    if "hits" in merged:
+    if "hits" in merged and "depth" in arrays:
         merged["hits"] = int(np.count_nonzero(np.isfinite(arrays["depth"])))
     for key, name in _FROM_ARRAYS.items():
-        if key in merged:
+        if key in merged and name in arrays:
             merged[key] = float(arrays[name].mean())
     return merged
