@@ -362,7 +362,10 @@ def run(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         # A still image: the whole cut, read.
         extra = {"complete": True} if multiscale and not wavelet else {}
-        frame = scene.render(camera, inside=args.inside, **extra, **kwargs)
+        # The PNG needs colour, --depth and the "hits" count the depth, the log line the per-ray
+        # counters; world position, normal and face are never written, so not kept.
+        frame = scene.render(camera, inside=args.inside, outputs=("rgba", "depth", "stats"),
+                             **extra, **kwargs)
         st = frame.stats
         what = f"at iso {st['iso']}" if "iso" in st else st["mode"]
         log(args, f"rendered {width}x{height} {what} in "
