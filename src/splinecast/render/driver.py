@@ -37,13 +37,16 @@ permutation that mixes busy and empty parts of the image), each band traversed i
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import prange
 
-from .._jit import jit
+from .._jit import inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step
+from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
+from . import mode_api
 from .clipping import clip_interval
 from .mode_api import (
     consume,
@@ -63,6 +66,9 @@ from .mode_api import (
 from .rays import pixel_ray
 
 __all__ = ["trace", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
+
+#: (grid class, mode class) -> :func:`_trace_image` specialized for the pair.
+_KERNELS: dict[tuple[type, type], Any] = {}
 
 #: Length of the ``geom`` array.
 GEOM_SIZE = 19
@@ -212,7 +218,6 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, ba
                 skipped[row, col] += ns
 
 
-@jit(parallel=True)
 def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
           load, store, final, visited, tested, skipped):
     """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
@@ -242,6 +247,15 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
     """
+    kernel = _pair_kernel(type(grid), type(mode))
+    kernel(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
+           load, store, final, visited, tested, skipped)
+
+
+@jit(parallel=True)
+def _trace_image(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows,
+                 tile, load, store, final, visited, tested, skipped):
+    """:func:`trace` compiled (the hooks resolved through the overloads of the hook stubs)."""
     # The parallel loop only hands out bands: its body stays a single call, which keeps
     # Numba's parallel passes (and the compile time) small.
     for b in prange(bands.shape[0]):
@@ -267,3 +281,35 @@ def reset_state(mode, state, height, width):
     for row in prange(height):
         for col in range(width):
             state_store(mode, state, row, col, state_new(mode))
+
+
+def _pair_kernel(grid_class: type, mode_class: type) -> Any:
+    """:func:`_trace_image` for one (model, mode) pair, its hooks inlined (made once per pair).
+
+    The generic loop calls each hook through an overload: a real call that LLVM does not inline
+    (its tuple arguments expand to a hundred values or more) and that increments and decrements
+    the reference count of every array of the grid and state tuples. Here the loop's functions
+    are copied with the hook names bound to the pair's registered implementations, inlined at
+    Numba's IR level, so the pair compiles into one function per band; the copies are cached
+    on disk under their own names (:func:`splinecast._jit.rebound`). A model may keep hooks
+    whose work dwarfs a call as calls (``register(..., called=...)``): the type-6 models'
+    ``cell_pieces`` inlined made their kernel slower and its compilation 45% longer. Pairs
+    the registries do not know (no such model or mode) keep the generic loop and its error.
+    """
+    key = (grid_class, mode_class)
+    kernel = _KERNELS.get(key)
+    if kernel is None:
+        model_hooks = model_api.hooks_of(grid_class)
+        mode_hooks = mode_api.hooks_of(mode_class)
+        if model_hooks is None or mode_hooks is None:
+            kernel = _trace_image
+        else:
+            called = model_api.called_of(grid_class)
+            bind = {name: f if name in called else inlined(f)
+                    for name, f in {**model_hooks, **mode_hooks}.items()}
+            suffix = f"{grid_class.__name__}_{mode_class.__name__}"
+            pixel = rebound(_trace_pixel, bind, suffix)
+            band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
+            kernel = rebound(_trace_image, {"_trace_band": band}, suffix)
+        _KERNELS[key] = kernel
+    return kernel
