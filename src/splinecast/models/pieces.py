@@ -5,8 +5,10 @@ class identifies the model (``TrilinearGrid``, ``BSplineGrid``, ``S31Grid``, ``Q
 grid covers a box of cells, the whole volume or one brick with its ghost layers; cell ``c`` of
 the grid depends on ``array[c .. c + support]`` per axis. The render layer walks a ray through
 the grid's cells (``splinecast.accel.traversal``) and calls the functions below on every cell it
-does not leap over; Numba resolves each call at compile time from the grid's class, so one
-driver serves every model without a function-typed argument (which its cache cannot store).
+does not leap over. The driver's loop is copied per (model, mode) pair with the registered
+functions inlined into it (:func:`splinecast.render.driver.trace`); elsewhere (the modes' own
+compiled code) Numba resolves each stub below from the grid's class at compile time, so one
+source serves every model without a function-typed argument (which its cache cannot store).
 
 Per cell, in the order a driver uses them:
 

@@ -26,8 +26,10 @@ Rendering a whole volume is one call (``load=False, store=False, final=True``). 
 brick by brick: reset the state arrays (:func:`reset_state`), call :func:`trace` for the bricks
 in front-to-back order per ray (``load=True, store=True``), then :func:`finalize`. Bricks traced
 independently (on other workers) give partial states that the mode's ``combine`` merges in depth
-order. Models and modes are resolved at compile time from the grid's and the mode's tuple
-classes: one loop, compiled once per (model, mode) pair and cached on disk.
+order. Models and modes are resolved from the grid's and the mode's tuple classes: the one loop
+written here is copied once per (model, mode) pair with the pair's hooks inlined into it at
+Numba's IR level (no call, no reference counting per hook), compiled once and cached on disk
+under its own name (:func:`_pair_kernel`).
 
 Work is spread over threads in bands of ``band_rows`` rows, in the order ``bands`` (a
 permutation that mixes busy and empty parts of the image), each band traversed in tiles of
