@@ -29,7 +29,7 @@ def test_pair_kernel_equals_generic_loop(monkeypatch):
     monkeypatch.setattr(driver, "_pair_kernel", lambda grid_class, mode_class:
                         driver._trace_image)
     slow = scene.render(cam, iso=0.5)
-    assert np.isfinite(slow.depth).sum() > 100  # the surface is in view
+    assert np.isfinite(slow.depth).sum() > 50  # the surface is in view
     np.testing.assert_array_equal(fast.depth, slow.depth)
     np.testing.assert_array_equal(fast.normal, slow.normal)
     np.testing.assert_array_equal(fast.rgba, slow.rgba)
