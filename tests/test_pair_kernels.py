@@ -71,7 +71,7 @@ def test_second_process_loads_pair_kernels_from_cache():
     first = run()
     assert set(first) == {"TrilinearGrid/IsoMode"}
     second = run()["TrilinearGrid/IsoMode"]
-    assert second["misses"] == 0 and second["hits"] >= 2, second
+    assert second["misses"] == 0 and second["hits"] >= 1, second  # loaded, not compiled
     assert second["index"] == "_LockedIndexFile"
     names = {p.name for p in Path(second["path"]).glob("*.nbi")}
     assert any(n.startswith("driver._trace_band__TrilinearGrid_IsoMode") for n in names), names
