@@ -195,16 +195,19 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
     return visited, tested, skipped
 
 
-@jit()
+# Without Numba's reference counting (``_nrt=False``): the hooks inlined here take the grid,
+# scratch, mode and state tuples, and Numba increments and decrements the count of every array
+# in a tuple each time an inlined function with branches receives it; it could not prune those
+# pairs, and their atomic operations took more than half of a qss iso frame. The band allocates
+# nothing (its buffers come from the caller, which keeps every array alive), so it needs no
+# counts; functions it calls count as usual.
+@jit(_nrt=False)
 def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, band, band_rows,
-                tile, load, store, final, count, visited, tested, skipped):
-    """Trace the pixels of one band of rows, tile by tile (one thread's work item)."""
+                tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts, tags):
+    """Trace the pixels of one band of rows, tile by tile (one thread's work item); ``scr``,
+    ``mscr``, ``cuts`` and ``tags`` are the thread's scratch buffers."""
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(grid)
-    scr = new_scratch(grid)
-    mscr = mode_scratch(mode)
-    cuts = np.empty(8)
-    tags = np.empty(8, np.int64)
     r0 = band * band_rows
     r1 = min(height, r0 + band_rows)
     for c0 in range(0, width, tile):
@@ -266,7 +269,8 @@ def _trace_image(grid, mode, blocks, state, out, basis, geom, planes, t_range, b
     # Numba's parallel passes (and the compile time) small.
     for b in prange(bands.shape[0]):
         _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands[b],
-                    band_rows, tile, load, store, final, count, visited, tested, skipped)
+                    band_rows, tile, load, store, final, count, visited, tested, skipped,
+                    new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64))
 
 
 @jit(parallel=True)
@@ -298,9 +302,10 @@ def _pair_kernel(grid_class: type, mode_class: type) -> Any:
     are copied with the hook names bound to the pair's registered implementations, inlined at
     Numba's IR level, so the pair compiles into one function per band; the copies are cached
     on disk under their own names (:func:`splinecast._jit.rebound`). A model may keep hooks
-    whose work dwarfs a call as calls (``register(..., called=...)``): the type-6 models'
-    ``cell_pieces`` inlined made their kernel slower and its compilation 45% longer. Pairs
-    the registries do not know (no such model or mode) keep the generic loop and its error.
+    whose work dwarfs a call as calls (``register(..., called=...)``; none does at present:
+    the band keeps no reference counts, so inlined hooks cost no counting, while a call still
+    counts every array of the tuples it is passed). Pairs the registries do not know (no such
+    model or mode) keep the generic loop and its error.
     """
     key = (grid_class, mode_class)
     kernel = _KERNELS.get(key)
