@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import types
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -35,7 +36,7 @@ try:
 except ImportError:  # pragma: no cover - a numba without this class: keep its behaviour
     IndexDataCacheFile = None  # type: ignore[assignment,misc]
 
-__all__ = ["jit", "overload_jit"]
+__all__ = ["jit", "overload_jit", "inlined", "rebound"]
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
@@ -100,3 +101,39 @@ def overload_jit(stub: Callable, inline: str = "never") -> Any:
     IR level (the render hooks: their arguments are long tuples that a real call would copy).
     """
     return overload(stub, jit_options={"error_model": "numpy", "nogil": True}, inline=inline)
+
+
+_INLINED: dict[Any, Any] = {}
+
+
+def inlined(dispatcher: Any) -> Any:
+    """The Python function behind ``dispatcher`` as a ``jit(inline="always")`` function.
+
+    Numba inlines such a function into its caller at IR level, before type inference: no call
+    remains, so nothing is copied and no reference count changes at the call. One wrapper per
+    function is kept so every specialization refers to the same object.
+    """
+    py_func = dispatcher.py_func
+    wrapper = _INLINED.get(py_func)
+    if wrapper is None:
+        wrapper = _INLINED[py_func] = jit(py_func, inline="always")
+    return wrapper
+
+
+def rebound(dispatcher: Any, bindings: dict[str, Any], suffix: str, **options: Any) -> Any:
+    """A compiled copy of ``dispatcher``'s function whose global names ``bindings`` override.
+
+    The copy has the same code and options (``options`` override them) and the qualified name
+    ``<name>__<suffix>``: numba's on-disk cache names its index file after the qualified name,
+    so each copy is cached on its own (keys of one index are signatures, which copies with
+    different bindings may share).
+    """
+    f = dispatcher.py_func
+    namespace = {**f.__globals__, **bindings}
+    copy = types.FunctionType(f.__code__, namespace, f.__name__, f.__defaults__, f.__closure__)
+    copy.__qualname__ = f"{f.__qualname__}__{suffix}"
+    copy.__module__ = f.__module__
+    copy.__doc__ = f.__doc__
+    copy.__kwdefaults__ = f.__kwdefaults__
+    settings = {k: v for k, v in dispatcher.targetoptions.items() if k != "nopython"}
+    return jit(copy, **{**settings, **options})

@@ -254,14 +254,9 @@ def _cell_load(grid, scratch, i, j, k):
     return _ic_range(grid.coeffs, i, j, k, grid.degree)
 
 
-@jit()
+@jit(inline="always")
 def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-    """The whole cell is one piece; its polynomial is built here, into ``scratch[6]``.
-
-    Building it in this hook rather than in ``piece_poly`` leaves ``piece_poly`` small enough
-    for LLVM to inline: each hook called out of line increments and decrements the reference
-    count of every array of the grid and the scratch tuple.
-    """
+    """The whole cell is one piece; its polynomial is built here, into ``scratch[6]``."""
     cuts[0] = 0.0
     cuts[1] = 1.0
     tags[0] = 0
@@ -321,6 +316,9 @@ def _value_gradient_at(grid, scratch, x, y, z):
     return local_value_gradient(grid.coeffs, grid.degree, i, j, k, u, v, w)
 
 
-register(BSplineGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
+# Every hook is inlined into the per-pair loop; the cell's transform and composition stay calls
+# inside ``cell_pieces`` (``cell_transform``, ``compose``), taking only the arrays they need.
+register(BSplineGrid, cell_count=_cell_count, new_scratch=_new_scratch,
+         cell_load=_cell_load,
          cell_pieces=_cell_pieces, piece_range=cell_range, piece_poly=_piece_poly,
          gradient=_gradient, value_gradient_at=_value_gradient_at)

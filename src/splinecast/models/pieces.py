@@ -5,8 +5,10 @@ class identifies the model (``TrilinearGrid``, ``BSplineGrid``, ``S31Grid``, ``Q
 grid covers a box of cells, the whole volume or one brick with its ghost layers; cell ``c`` of
 the grid depends on ``array[c .. c + support]`` per axis. The render layer walks a ray through
 the grid's cells (``splinecast.accel.traversal``) and calls the functions below on every cell it
-does not leap over; Numba resolves each call at compile time from the grid's class, so one
-driver serves every model without a function-typed argument (which its cache cannot store).
+does not leap over. The driver's loop is copied per (model, mode) pair with the registered
+functions inlined into it (:func:`splinecast.render.driver.trace`); elsewhere (the modes' own
+compiled code) Numba resolves each stub below from the grid's class at compile time, so one
+source serves every model without a function-typed argument (which its cache cannot store).
 
 Per cell, in the order a driver uses them:
 
@@ -41,22 +43,44 @@ from typing import Any
 from .._jit import jit, overload_jit
 
 __all__ = [
-    "register", "cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range",
-    "piece_poly", "gradient", "value_gradient_at", "whole_cell", "cell_range",
+    "register", "hooks_of", "called_of", "cell_count", "new_scratch", "cell_load", "cell_pieces",
+    "piece_range", "piece_poly", "gradient", "value_gradient_at", "whole_cell", "cell_range",
 ]
 
 #: Kernel grid class -> {hook name: compiled function}.
 _HOOKS: dict[type, dict[str, Any]] = {}
+#: Kernel grid class -> names of the hooks the driver keeps as calls (not inlined).
+_CALLED: dict[type, frozenset[str]] = {}
 _NAMES = ("cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range", "piece_poly",
           "gradient", "value_gradient_at")
 
 
-def register(grid_class: type, **hooks: Any) -> None:
-    """Register a model's compiled functions for its kernel grid class (all of :data:`_NAMES`)."""
+def register(grid_class: type, called: tuple[str, ...] = (), **hooks: Any) -> None:
+    """Register a model's compiled functions for its kernel grid class (all of :data:`_NAMES`).
+
+    The render driver inlines every hook into its per-(model, mode) loop except those named in
+    ``called``, which stay calls (hooks whose work per call dwarfs the cost of a call and whose
+    inlined body only makes the loop larger and slower to compile).
+    """
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{grid_class.__name__} is missing {', '.join(sorted(missing))}")
+    unknown = set(called) - set(_NAMES)
+    if unknown:
+        raise TypeError(f"called names unknown hooks: {', '.join(sorted(unknown))}")
     _HOOKS[grid_class] = dict(hooks)
+    _CALLED[grid_class] = frozenset(called)
+
+
+def hooks_of(grid_class: type) -> dict[str, Any] | None:
+    """The registered functions of a grid class by hook name (None: not registered)."""
+    hooks = _HOOKS.get(grid_class)
+    return None if hooks is None else dict(hooks)
+
+
+def called_of(grid_class: type) -> frozenset[str]:
+    """Names of the hooks of a grid class that the driver calls rather than inlines."""
+    return _CALLED.get(grid_class, frozenset())
 
 
 def _impl(grid: Any, name: str) -> Any:

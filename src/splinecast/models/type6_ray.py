@@ -20,13 +20,15 @@ What is particular to these models (the interface is :mod:`.pieces`):
   classification of :mod:`splinecast.accel.active_cells` (iso mode) a cube's slot and 24-bit
   tetrahedron mask replace both (inactive cubes and tetrahedra are empty, active ones unbounded:
   the classification already tested them against the isovalue).
-* **Polynomials per cube.** ``cell_pieces`` builds the Bernstein coefficients and the range of
-  every piece that can contribute (its tetrahedron is in the cube's mask) in one go, into the
-  scratch array ``polys``, and the piece's tag carries its index there (``tag = tetrahedron + 32 *
-  piece``); ``piece_range`` and ``piece_poly`` are then small enough for LLVM to inline into the
-  driver. Each hook called out of line costs an increment and a decrement of the reference count
-  of every array of the grid and the scratch tuple (about 18 for these models), which for the
-  cheap per-piece hooks cost more than their work.
+* **Polynomials on demand.** ``cell_pieces`` only cuts the segment, finds each piece's
+  tetrahedron and its range (from the mask, or the tetrahedron's coefficients without a
+  classification); ``piece_poly`` builds one piece's Bernstein coefficients when a mode asks for
+  it. A first-hit ray therefore builds no piece behind its hit (the old hand-written kernels'
+  order of work), and nothing of a piece whose range a mode refuses. Everything but the cube's
+  coefficient computation on a cache miss (:func:`_fill_cube`, a call taking only the arrays it
+  needs) is inlined into the driver's loop, which keeps no reference counts
+  (:mod:`splinecast.render.driver`); a hook called out of line would still increment and
+  decrement the count of every array of the grid and the scratch tuple (about 19 here).
 * **Normals** come from the de Casteljau directional derivatives of the piece's patch.
 """
 
@@ -110,7 +112,7 @@ def _new_scratch(grid):
     keys = np.full(CACHE_ENTRIES, -1, np.int64)
     cache = np.empty((CACHE_ENTRIES, grid.n_slots))
     return (keys, cache, np.empty(grid.tet_points.shape[1]), np.empty(10), np.empty(4),
-            np.empty((8, 6)))
+            np.empty((8, 2)))
 
 
 @jit()
@@ -123,6 +125,14 @@ def _cell_load(grid, scratch, i, j, k):
         return -math.inf, math.inf, s, np.int64(grid.tet_mask[s])
     return (np.float64(grid.cube_lo[i, j, k]), np.float64(grid.cube_hi[i, j, k]), np.int64(-1),
             np.int64(0xFFFFFF))
+
+
+@jit()
+def _fill_cube(pad, i, j, k, buf, targets, ptr, sources, weights):
+    """All coefficients of cube ``(i, j, k)`` into ``buf`` (a cache miss: kept out of line, it
+    takes the few arrays it needs instead of the grid and scratch tuples)."""
+    gather27(pad, i, j, k, buf)
+    run_program1(buf, targets, ptr, sources, weights)
 
 
 @jit(inline="always")
@@ -141,8 +151,7 @@ def _load_tet(grid, scratch, slot, i, j, k, tet):
     lin = (np.int64(i) * ny + j) * nz + k
     buf = cache[entry]
     if keys[entry] != lin:
-        gather27(grid.pad, i, j, k, buf)
-        run_program1(buf, grid.targets, grid.ptr, grid.sources, grid.weights)
+        _fill_cube(grid.pad, i, j, k, buf, grid.targets, grid.ptr, grid.sources, grid.weights)
         keys[entry] = lin
     for n in range(n_local):
         c[n] = buf[27 + grid.tet_points[tet, n]]
@@ -150,79 +159,61 @@ def _load_tet(grid, scratch, slot, i, j, k, tet):
 
 
 @jit(inline="always")
-def _pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags, degree):
-    """Cut the cube's segment into tetrahedron pieces; build the polynomial (``scratch[5][piece,
-    :4]``) and the range (``[piece, 4:6]``) of each piece whose tetrahedron is in the mask."""
+def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+    """Cut the cube's segment into tetrahedron pieces and give each its range
+    (``scratch[5][piece]``); the polynomials are built only for the pieces a mode asks for
+    (``piece_poly``), so a ray that ends early never pays for the pieces behind its hit."""
     n = split_cube_segment(ax - 0.5, ay - 0.5, az - 0.5, ex, ey, ez, cuts)
-    polys = scratch[5]
+    ranges = scratch[5]
     for p in range(n):
-        s0 = cuts[p]
-        s1 = cuts[p + 1]
-        sm = 0.5 * (s0 + s1)
+        sm = 0.5 * (cuts[p] + cuts[p + 1])
         tet = tet_of_point(ax - 0.5 + sm * ex, ay - 0.5 + sm * ey, az - 0.5 + sm * ez)
         tags[p] = tet + 32 * p
         if (ctx[3] >> tet) & 1 == 0:
-            polys[p, 4] = math.inf  # not in the mask: the piece cannot contribute
-            polys[p, 5] = -math.inf
-            continue
-        # The piece's end points exactly as the driver passes them to ``piece_poly``.
-        pax, pay, paz = ax + s0 * ex, ay + s0 * ey, az + s0 * ez
-        pbx, pby, pbz = ax + s1 * ex, ay + s1 * ey, az + s1 * ez
-        c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
-        a0, a1, a2, a3 = barycentric(grid.bary, tet, pax - 0.5, pay - 0.5, paz - 0.5)
-        e0, e1, e2, e3 = barycentric(grid.bary, tet, pbx - 0.5, pby - 0.5, pbz - 0.5)
-        if degree == 3:
-            u0, u1, u2, u3 = ray_bernstein3(c, a0, a1, a2, a3, e0, e1, e2, e3)
-            polys[p, 3] = u3
+            ranges[p, 0] = math.inf  # not in the mask: the piece cannot contribute
+            ranges[p, 1] = -math.inf
+        elif ctx[2] >= 0:
+            ranges[p, 0] = -math.inf  # classified active for the isovalue
+            ranges[p, 1] = math.inf
         else:
-            u0, u1, u2 = ray_bernstein2(c, a0, a1, a2, a3, e0, e1, e2, e3)
-        polys[p, 0] = u0
-        polys[p, 1] = u1
-        polys[p, 2] = u2
-        if ctx[2] >= 0:
-            polys[p, 4] = -math.inf  # classified active for the isovalue
-            polys[p, 5] = math.inf
-        else:
+            # The convex hull of the tetrahedron's coefficients.
+            c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
             lo = c[0]
             hi = c[0]
             for m in range(1, c.shape[0]):
                 lo = min(lo, c[m])
                 hi = max(hi, c[m])
-            polys[p, 4] = lo
-            polys[p, 5] = hi
+            ranges[p, 0] = lo
+            ranges[p, 1] = hi
     return n
 
 
 @jit()
-def _cell_pieces3(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-    return _pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags, 3)
-
-
-@jit()
-def _cell_pieces2(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-    return _pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags, 2)
-
-
-@jit()
 def _piece_range(grid, scratch, ctx, i, j, k, tag):
-    # Built with the piece's polynomial: the convex hull of its tetrahedron's coefficients
-    # (empty outside the cube's mask; unbounded when classified active for the isovalue).
+    # From cell_pieces: empty outside the cube's mask, unbounded when classified active for
+    # the isovalue, else the convex hull of the tetrahedron's coefficients.
     p = tag >> 5
-    return scratch[5][p, 4], scratch[5][p, 5]
+    return scratch[5][p, 0], scratch[5][p, 1]
 
 
 @jit()
 def _piece_poly3(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    p = tag >> 5
-    polys = scratch[5]
-    return Bernstein3(polys[p, 0], polys[p, 1], polys[p, 2], polys[p, 3], grid.newton)
+    tet = tag & 31
+    c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
+    a0, a1, a2, a3 = barycentric(grid.bary, tet, ax - 0.5, ay - 0.5, az - 0.5)
+    e0, e1, e2, e3 = barycentric(grid.bary, tet, bx - 0.5, by - 0.5, bz - 0.5)
+    u0, u1, u2, u3 = ray_bernstein3(c, a0, a1, a2, a3, e0, e1, e2, e3)
+    return Bernstein3(u0, u1, u2, u3, grid.newton)
 
 
 @jit()
 def _piece_poly2(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    p = tag >> 5
-    polys = scratch[5]
-    return Bernstein2(polys[p, 0], polys[p, 1], polys[p, 2])
+    tet = tag & 31
+    c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
+    a0, a1, a2, a3 = barycentric(grid.bary, tet, ax - 0.5, ay - 0.5, az - 0.5)
+    e0, e1, e2, e3 = barycentric(grid.bary, tet, bx - 0.5, by - 0.5, bz - 0.5)
+    u0, u1, u2 = ray_bernstein2(c, a0, a1, a2, a3, e0, e1, e2, e3)
+    return Bernstein2(u0, u1, u2)
 
 
 @jit()
@@ -270,9 +261,12 @@ def _value_gradient_at2(grid, scratch, x, y, z):
     return _value_gradient_deg(grid, scratch, x, y, z, 2)
 
 
-register(S31Grid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
-         cell_pieces=_cell_pieces3, piece_range=_piece_range, piece_poly=_piece_poly3,
-         gradient=_gradient3, value_gradient_at=_value_gradient_at3)
-register(QSSGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
-         cell_pieces=_cell_pieces2, piece_range=_piece_range, piece_poly=_piece_poly2,
-         gradient=_gradient2, value_gradient_at=_value_gradient_at2)
+# Every hook is inlined into the per-pair loop (the cache-miss path stays a call inside them).
+_CALLED = ()
+
+register(S31Grid, called=_CALLED, cell_count=_cell_count, new_scratch=_new_scratch,
+         cell_load=_cell_load, cell_pieces=_cell_pieces, piece_range=_piece_range,
+         piece_poly=_piece_poly3, gradient=_gradient3, value_gradient_at=_value_gradient_at3)
+register(QSSGrid, called=_CALLED, cell_count=_cell_count, new_scratch=_new_scratch,
+         cell_load=_cell_load, cell_pieces=_cell_pieces, piece_range=_piece_range,
+         piece_poly=_piece_poly2, gradient=_gradient2, value_gradient_at=_value_gradient_at2)

@@ -26,8 +26,10 @@ Rendering a whole volume is one call (``load=False, store=False, final=True``). 
 brick by brick: reset the state arrays (:func:`reset_state`), call :func:`trace` for the bricks
 in front-to-back order per ray (``load=True, store=True``), then :func:`finalize`. Bricks traced
 independently (on other workers) give partial states that the mode's ``combine`` merges in depth
-order. Models and modes are resolved at compile time from the grid's and the mode's tuple
-classes: one loop, compiled once per (model, mode) pair and cached on disk.
+order. Models and modes are resolved from the grid's and the mode's tuple classes: the one loop
+written here is copied once per (model, mode) pair with the pair's hooks inlined into it at
+Numba's IR level (no call, no reference counting per hook), compiled once and cached on disk
+under its own name (:func:`_pair_kernel`).
 
 Work is spread over threads in bands of ``band_rows`` rows, in the order ``bands`` (a
 permutation that mixes busy and empty parts of the image), each band traversed in tiles of
@@ -37,13 +39,16 @@ permutation that mixes busy and empty parts of the image), each band traversed i
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import prange
 
-from .._jit import jit
+from .._jit import inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step
+from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
+from . import mode_api
 from .clipping import clip_interval
 from .mode_api import (
     consume,
@@ -63,6 +68,9 @@ from .mode_api import (
 from .rays import pixel_ray
 
 __all__ = ["trace", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
+
+#: (grid class, mode class) -> :func:`_trace_image` specialized for the pair.
+_KERNELS: dict[tuple[type, type], Any] = {}
 
 #: Length of the ``geom`` array.
 GEOM_SIZE = 19
@@ -187,16 +195,19 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
     return visited, tested, skipped
 
 
-@jit()
+# Without Numba's reference counting (``_nrt=False``): the hooks inlined here take the grid,
+# scratch, mode and state tuples, and Numba increments and decrements the count of every array
+# in a tuple each time an inlined function with branches receives it; it could not prune those
+# pairs, and their atomic operations took more than half of a qss iso frame. The band allocates
+# nothing (its buffers come from the caller, which keeps every array alive), so it needs no
+# counts; functions it calls count as usual.
+@jit(_nrt=False)
 def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, band, band_rows,
-                tile, load, store, final, count, visited, tested, skipped):
-    """Trace the pixels of one band of rows, tile by tile (one thread's work item)."""
+                tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts, tags):
+    """Trace the pixels of one band of rows, tile by tile (one thread's work item); ``scr``,
+    ``mscr``, ``cuts`` and ``tags`` are the thread's scratch buffers."""
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(grid)
-    scr = new_scratch(grid)
-    mscr = mode_scratch(mode)
-    cuts = np.empty(8)
-    tags = np.empty(8, np.int64)
     r0 = band * band_rows
     r1 = min(height, r0 + band_rows)
     for c0 in range(0, width, tile):
@@ -213,7 +224,6 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, ba
                     skipped[row, col] += ns
 
 
-@jit(parallel=True)
 def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
           load, store, final, count, visited, tested, skipped):
     """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
@@ -246,11 +256,21 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
     """
+    kernel = _pair_kernel(type(grid), type(mode))
+    kernel(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
+           load, store, final, count, visited, tested, skipped)
+
+
+@jit(parallel=True)
+def _trace_image(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows,
+                 tile, load, store, final, count, visited, tested, skipped):
+    """:func:`trace` compiled (the hooks resolved through the overloads of the hook stubs)."""
     # The parallel loop only hands out bands: its body stays a single call, which keeps
     # Numba's parallel passes (and the compile time) small.
     for b in prange(bands.shape[0]):
         _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands[b],
-                    band_rows, tile, load, store, final, count, visited, tested, skipped)
+                    band_rows, tile, load, store, final, count, visited, tested, skipped,
+                    new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64))
 
 
 @jit(parallel=True)
@@ -271,3 +291,36 @@ def reset_state(mode, state, height, width):
     for row in prange(height):
         for col in range(width):
             state_store(mode, state, row, col, state_new(mode))
+
+
+def _pair_kernel(grid_class: type, mode_class: type) -> Any:
+    """:func:`_trace_image` for one (model, mode) pair, its hooks inlined (made once per pair).
+
+    The generic loop calls each hook through an overload: a real call that LLVM does not inline
+    (its tuple arguments expand to a hundred values or more) and that increments and decrements
+    the reference count of every array of the grid and state tuples. Here the loop's functions
+    are copied with the hook names bound to the pair's registered implementations, inlined at
+    Numba's IR level, so the pair compiles into one function per band; the copies are cached
+    on disk under their own names (:func:`splinecast._jit.rebound`). A model may keep hooks
+    whose work dwarfs a call as calls (``register(..., called=...)``; none does at present:
+    the band keeps no reference counts, so inlined hooks cost no counting, while a call still
+    counts every array of the tuples it is passed). Pairs the registries do not know (no such
+    model or mode) keep the generic loop and its error.
+    """
+    key = (grid_class, mode_class)
+    kernel = _KERNELS.get(key)
+    if kernel is None:
+        model_hooks = model_api.hooks_of(grid_class)
+        mode_hooks = mode_api.hooks_of(mode_class)
+        if model_hooks is None or mode_hooks is None:
+            kernel = _trace_image
+        else:
+            called = model_api.called_of(grid_class)
+            bind = {name: f if name in called else inlined(f)
+                    for name, f in {**model_hooks, **mode_hooks}.items()}
+            suffix = f"{grid_class.__name__}_{mode_class.__name__}"
+            pixel = rebound(_trace_pixel, bind, suffix)
+            band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
+            kernel = rebound(_trace_image, {"_trace_band": band}, suffix)
+        _KERNELS[key] = kernel
+    return kernel

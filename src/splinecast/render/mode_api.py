@@ -58,7 +58,7 @@ __all__ = [
     "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
-    "never",
+    "never", "hooks_of",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
@@ -73,6 +73,12 @@ def register(mode_class: type, **hooks: Any) -> None:
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
     _HOOKS[mode_class] = {"watches_skips": never, **hooks}
+
+
+def hooks_of(mode_class: type) -> dict[str, Any] | None:
+    """The registered functions of a mode class by hook name (None: not registered)."""
+    hooks = _HOOKS.get(mode_class)
+    return None if hooks is None else dict(hooks)
 
 
 def _impl(mode: Any, name: str) -> Any:
