@@ -63,13 +63,19 @@ from .mode_api import (
 )
 from .outputs import ALL_OUTPUTS, buffer
 
-__all__ = ["DVRSettings", "PREINTEGRATION", "TABLE_LAYOUTS", "DvrMode", "Dvr", "combine_dvr"]
+__all__ = ["DVRSettings", "DEFAULT_SETTINGS", "PREINTEGRATION", "TABLE_LAYOUTS", "SAMPLINGS",
+           "DvrMode", "Dvr", "combine_dvr"]
 
 #: Classification kinds accepted by :class:`DVRSettings`.
 PREINTEGRATION = ("none", "2d", "3d")
 
 #: Layouts of the 3D pre-integration table accepted by :class:`DVRSettings`.
 TABLE_LAYOUTS = ("uniform", "exponential")
+
+#: Where segments end, accepted by :class:`DVRSettings`: at samples every ``step`` voxels from
+#: the ray's entry and at every piece boundary ("grid"), or at equal divisions of every piece,
+#: none longer than ``step`` ("pieces").
+SAMPLINGS = ("grid", "pieces")
 
 
 @dataclass(frozen=True)
@@ -103,6 +109,13 @@ class DVRSettings:
     leap : bool
         Accepted for compatibility; has no effect (segments now end at every cell, so every
         visible cell is visited).
+    sampling : {"grid", "pieces"}
+        Where segments end. ``"grid"``: at samples every ``step`` voxels from the ray's entry
+        into the volume, and at every piece (cell or tetrahedron) boundary. ``"pieces"``: every
+        ray piece is cut into ``ceil(L / step)`` equal segments (``L`` its length in voxels), so
+        a cell shorter than ``step`` along the ray is one segment and one table lookup; no
+        segment is longer than ``step``, and the error stays second order in ``step``.
+        (The adaptive step, in this sampling, is chosen once per piece.)
     """
 
     step: float = 0.5
@@ -117,6 +130,7 @@ class DVRSettings:
     table_size: int = 256
     table_layout: str = "uniform"
     leap: bool = True
+    sampling: str = "grid"
 
     def __post_init__(self) -> None:
         # Bounds on work and memory (splinecast.errors.limits): the smallest step, finite
@@ -137,6 +151,9 @@ class DVRSettings:
                                        lo_open=True)
         if not self.exponent > 0:
             raise ParameterError(f"exponent must be positive, got {self.exponent}")
+        if self.sampling not in SAMPLINGS:
+            raise ParameterError(f"sampling must be one of {', '.join(SAMPLINGS)}, "
+                                 f"got {self.sampling!r}")
         if self.table_layout not in TABLE_LAYOUTS:
             raise ParameterError(f"table_layout must be one of {', '.join(TABLE_LAYOUTS)}, "
                                  f"got {self.table_layout!r}")
@@ -166,11 +183,21 @@ class DVRSettings:
         return {"none": 0, "2d": 1, "3d": 2}[self.preintegration]
 
 
+#: What ``mode="dvr"`` uses when no :class:`DVRSettings` are given: segments cut per ray piece no
+#: longer than one voxel (a cell is mostly one table lookup), and rays stopped once what remains
+#: visible behind them is below 2^-10 per channel (a quarter of the 8-bit step), which no 8-bit
+#: image can show. Measured against the comparison suite's dense reference, this meets its
+#: tolerance (mean absolute error 1/255) with a wide margin (benchmarks/results/dvr_speed.md);
+#: ``tests/test_dvr_pieces.py`` checks it. Bricks rendered independently and merged with "over"
+#: (sort-last) can differ from the whole-volume image by up to the same 2^-10, because a back
+#: brick cannot know the opacity in front of it; pass ``DVRSettings()`` for the exact merge.
+DEFAULT_SETTINGS = DVRSettings(step=1.0, sampling="pieces", termination=1.0 - 2.0**-10)
+
 #: Kernel parameters (see :class:`Dvr` for their meaning).
 DvrMode = namedtuple("DvrMode", [
     "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut_rgb",
     "lut_tau", "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
-    "background"])
+    "background", "pieces"])
 
 
 @jit(inline="always")
@@ -291,9 +318,50 @@ def _done(mode, st):
     return st[3] >= mode.term
 
 
+@jit(inline="always")
+def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az, bx, by,
+                    bz, ray, st):
+    """``sampling="pieces"``: the piece cut into ``ceil(L / h)`` equal segments."""
+    acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
+    dnorm = math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
+    span = t1 - t0
+    length = span * dnorm
+    if not length > 0.0:
+        return st
+    h = mode.h0
+    if mode.adaptive:
+        h = _adaptive_step(mode.pi_mode, mode.table.shape[0], mode.h0, mode.h_max,
+                           mode.exponent, acc_a)
+    n = max(int(math.ceil(length / h - 1e-9)), 1)
+    seg = length / n
+    va = poly_value(poly, 0.0)
+    for m in range(1, n + 1):
+        s = m / n
+        vb = poly_value(poly, s)
+        r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
+                               mode.lut_rgb, mode.lut_tau, mode.t_lo, mode.l_scale, va, vb, seg)
+        samples += 1
+        if a > 0.0:
+            factor = 1.0
+            if mode.shade:
+                gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
+                                      ay + s * (by - ay), az + s * (bz - az))
+                factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
+                                       ray[12], ray[13], ray[14], ray[3], ray[4], ray[5])
+            acc_r, acc_g, acc_b, acc_a, t_half = _composite(
+                acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, t0 + s * span)
+            if acc_a >= mode.term:
+                break
+        va = vb
+    return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
+
+
 @jit()
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
+    if mode.pieces:
+        return _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az,
+                               bx, by, bz, ray, st)
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
     ux, uy, uz = ray[3], ray[4], ray[5]
     sx, sy, sz = ray[12], ray[13], ray[14]
@@ -408,7 +476,8 @@ class Dvr:
     tf : TransferFunction
         The transfer function.
     settings : DVRSettings, optional
-        Step, classification, adaptive step, early termination, shading.
+        Step, classification, adaptive step, early termination, shading (default
+        :data:`DEFAULT_SETTINGS`, not ``DVRSettings()``).
     background : 4 floats
         What the rays composite over.
     cache : dict, optional
@@ -427,7 +496,7 @@ class Dvr:
         self.outputs = outputs
         if not isinstance(tf, TransferFunction):
             raise ParameterError("mode 'dvr' needs tf=TransferFunction(...)")
-        settings = settings or DVRSettings()
+        settings = settings or DEFAULT_SETTINGS
         if not isinstance(settings, DVRSettings):
             raise ParameterError(f"dvr must be a DVRSettings, got {type(settings).__name__}")
         self.tf = tf
@@ -449,7 +518,8 @@ class Dvr:
             lo, (table.shape[1] - 1) / (hi - lo), lut_rgb, lut_tau,
             (lut_tau.shape[0] - 1) / (hi - lo), bool(settings.adaptive), float(settings.h_max),
             float(settings.exponent), term, bool(settings.shade), float(settings.ambient),
-            float(settings.diffuse), np.asarray(background, np.float64).reshape(4))
+            float(settings.diffuse), np.asarray(background, np.float64).reshape(4),
+            settings.sampling == "pieces")
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Flags of the blocks whose value range meets a visible part of the transfer function."""
@@ -477,7 +547,7 @@ class Dvr:
         s = self.settings
         stats.update(step=s.step, preintegration=s.preintegration, adaptive=s.adaptive,
                      table_layout=s.table_layout, termination=s.termination,
-                     table_ms=self.table_ms)
+                     sampling=s.sampling, table_ms=self.table_ms)
         if samples.shape[0]:
             stats["mean_samples"] = float(samples.mean())
         return Frame(*(a if a.shape[0] else None for a in (rgba, depth, position)),
