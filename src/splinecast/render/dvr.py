@@ -197,7 +197,7 @@ DEFAULT_SETTINGS = DVRSettings(step=1.0, sampling="pieces", termination=1.0 - 2.
 DvrMode = namedtuple("DvrMode", [
     "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut_rgb",
     "lut_tau", "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
-    "background", "pieces"])
+    "background", "pieces", "od"])
 
 
 @jit(inline="always")
@@ -248,6 +248,47 @@ def _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale
         scale = a2 / a
         return r * scale, g * scale, b * scale, a2
     return r, g, b, a
+
+
+@jit(inline="always")
+def _classify_od(pi_mode, table, od, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale,
+                 va, vb, length):
+    """:func:`_classify` for segments of any length, with the table's optical depth at hand.
+
+    ``od[k] = -ln(1 - alpha)`` of table ``k``, interpolated bilinearly like the colours, so the
+    opacity of a length the table does not hold is ``1 - exp(-(L / held) od)`` (one ``expm1``
+    instead of a ``log1p`` of the interpolated opacity and an ``expm1``). Optical depth is what
+    adds up along a ray, so interpolating it is as accurate as interpolating the opacity.
+    """
+    if pi_mode == 0:
+        return _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale,
+                         va, vb, length)
+    n = table.shape[1]
+    steps = table.shape[0]
+    uf = min(max((va - t_lo) * t_scale, 0.0), n - 1.0)
+    ub = min(max((vb - t_lo) * t_scale, 0.0), n - 1.0)
+    if pi_mode == 3:
+        j = 0
+        if length > h0:
+            j = min(int(math.log2(length / h0) + 0.5), steps - 1)
+        k = j
+        held = h0 * 2.0**j
+    else:
+        k = min(max(int(length / h0 + 0.5), 1), steps) - 1
+        held = (k + 1) * h0
+    r, g, b, a = preint_lookup(table, k, uf, ub)
+    ratio = length / held
+    if abs(ratio - 1.0) <= 1e-9 or not a > 0.0:
+        return r, g, b, a
+    i0 = min(int(uf), n - 2)
+    j0 = min(int(ub), n - 2)
+    fx = uf - i0
+    fy = ub - j0
+    d = ((1.0 - fx) * ((1.0 - fy) * od[k, i0, j0] + fy * od[k, i0, j0 + 1])
+         + fx * ((1.0 - fy) * od[k, i0 + 1, j0] + fy * od[k, i0 + 1, j0 + 1]))
+    a2 = -math.expm1(-ratio * d)
+    scale = a2 / a
+    return r * scale, g * scale, b * scale, a2
 
 
 @jit(inline="always")
@@ -338,8 +379,9 @@ def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay
     for m in range(1, n + 1):
         s = m / n
         vb = poly_value(poly, s)
-        r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
-                               mode.lut_rgb, mode.lut_tau, mode.t_lo, mode.l_scale, va, vb, seg)
+        r, g, b, a = _classify_od(mode.pi_mode, mode.table, mode.od, mode.h0, mode.t_lo,
+                                  mode.t_scale, mode.lut_rgb, mode.lut_tau, mode.t_lo,
+                                  mode.l_scale, va, vb, seg)
         samples += 1
         if a > 0.0:
             factor = 1.0
@@ -519,7 +561,7 @@ class Dvr:
             (lut_tau.shape[0] - 1) / (hi - lo), bool(settings.adaptive), float(settings.h_max),
             float(settings.exponent), term, bool(settings.shade), float(settings.ambient),
             float(settings.diffuse), np.asarray(background, np.float64).reshape(4),
-            settings.sampling == "pieces")
+            settings.sampling == "pieces", _optical_depth(table, settings))
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Flags of the blocks whose value range meets a visible part of the transfer function."""
@@ -555,6 +597,15 @@ class Dvr:
                      np.zeros((h, w), np.int8) if "face" in o else None, *counters, stats)
 
     combine = staticmethod(combine_dvr)
+
+
+def _optical_depth(table: np.ndarray, settings: DVRSettings) -> np.ndarray:
+    """``-ln(1 - alpha)`` of every table entry (float32), for the pieces sampling; a 1x2x2
+    placeholder otherwise (the same array type, so no other kernel is compiled)."""
+    if settings.sampling != "pieces" or not settings.pi_mode:
+        return np.zeros((1, 2, 2), np.float32)
+    alpha = np.minimum(table[..., 3].astype(np.float64), 1.0 - 1e-12)
+    return (-np.log1p(-alpha)).astype(np.float32)
 
 
 def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> PreintegrationTable:
