@@ -134,6 +134,7 @@ def main() -> None:
                     samples = frame.stats.get("mean_samples", float("nan")) * width * height
                     row.update(samples_per_ray=samples / n,
                                ns_per_sample=ms * 1e6 / max(samples, 1))
+                if frame is not None and label == "step 1":
                     acc = _volume_alpha(scene, cam, tf, settings)
                     row.update(rays_reaching_099=float((acc[entered] >= 0.99).mean()),
                                rays_reaching_0999=float((acc[entered] >= 0.999).mean()),
