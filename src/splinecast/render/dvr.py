@@ -195,9 +195,9 @@ DEFAULT_SETTINGS = DVRSettings(step=1.0, sampling="pieces", termination=1.0 - 2.
 
 #: Kernel parameters (see :class:`Dvr` for their meaning).
 DvrMode = namedtuple("DvrMode", [
-    "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut_rgb",
-    "lut_tau", "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
-    "background", "pieces", "od"])
+    "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut",
+    "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
+    "bg_r", "bg_g", "bg_b", "bg_a", "pieces"])
 
 
 @jit(inline="always")
@@ -212,19 +212,19 @@ def _shade_factor(shade, ambient, diffuse, gx, gy, gz, sx, sy, sz, ux, uy, uz):
 
 
 @jit(inline="always")
-def _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale,
+def _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
               va, vb, length):
     """Premultiplied RGBA of a segment of ``length`` voxels from value ``va`` to ``vb``."""
     if pi_mode == 0:
-        n = lut_tau.shape[0]
+        n = lut.shape[0]
         u = min(max((vb - l_lo) * l_scale, 0.0), n - 1.0)
         i = min(int(u), n - 2)
         f = u - i
-        tau = (1.0 - f) * lut_tau[i] + f * lut_tau[i + 1]
+        tau = (1.0 - f) * lut[i, 3] + f * lut[i + 1, 3]
         a = -math.expm1(-tau * length)
-        r = ((1.0 - f) * lut_rgb[i, 0] + f * lut_rgb[i + 1, 0]) * a
-        g = ((1.0 - f) * lut_rgb[i, 1] + f * lut_rgb[i + 1, 1]) * a
-        b = ((1.0 - f) * lut_rgb[i, 2] + f * lut_rgb[i + 1, 2]) * a
+        r = ((1.0 - f) * lut[i, 0] + f * lut[i + 1, 0]) * a
+        g = ((1.0 - f) * lut[i, 1] + f * lut[i + 1, 1]) * a
+        b = ((1.0 - f) * lut[i, 2] + f * lut[i + 1, 2]) * a
         return r, g, b, a
     n = table.shape[1]
     steps = table.shape[0]
@@ -251,17 +251,18 @@ def _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale
 
 
 @jit(inline="always")
-def _classify_od(pi_mode, table, od, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale,
+def _classify_od(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
                  va, vb, length):
     """:func:`_classify` for segments of any length, with the table's optical depth at hand.
 
-    ``od[k] = -ln(1 - alpha)`` of table ``k``, interpolated bilinearly like the colours, so the
+    ``table[k, ..., 4] = -ln(1 - alpha)`` (the table's optical depth, a fifth channel the
+    pieces sampling adds), interpolated bilinearly like the colours, so the
     opacity of a length the table does not hold is ``1 - exp(-(L / held) od)`` (one ``expm1``
     instead of a ``log1p`` of the interpolated opacity and an ``expm1``). Optical depth is what
     adds up along a ray, so interpolating it is as accurate as interpolating the opacity.
     """
     if pi_mode == 0:
-        return _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale,
+        return _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
                          va, vb, length)
     n = table.shape[1]
     steps = table.shape[0]
@@ -284,8 +285,8 @@ def _classify_od(pi_mode, table, od, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, 
     j0 = min(int(ub), n - 2)
     fx = uf - i0
     fy = ub - j0
-    d = ((1.0 - fx) * ((1.0 - fy) * od[k, i0, j0] + fy * od[k, i0, j0 + 1])
-         + fx * ((1.0 - fy) * od[k, i0 + 1, j0] + fy * od[k, i0 + 1, j0 + 1]))
+    d = ((1.0 - fx) * ((1.0 - fy) * table[k, i0, j0, 4] + fy * table[k, i0, j0 + 1, 4])
+         + fx * ((1.0 - fy) * table[k, i0 + 1, j0, 4] + fy * table[k, i0 + 1, j0 + 1, 4]))
     a2 = -math.expm1(-ratio * d)
     scale = a2 / a
     return r * scale, g * scale, b * scale, a2
@@ -369,7 +370,6 @@ def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, a
     segment reads nothing else), and nothing is called that would not be inlined.
     """
     table = mode.table
-    od = mode.od
     nt = table.shape[1]
     top = nt - 1.0
     lo = mode.t_lo
@@ -403,8 +403,8 @@ def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, a
         b = (w00 * table[0, i0, j0, 2] + w10 * table[0, i0 + 1, j0, 2]
              + w01 * table[0, i0, j0 + 1, 2] + w11 * table[0, i0 + 1, j0 + 1, 2])
         if not held:
-            d = (w00 * od[0, i0, j0] + w10 * od[0, i0 + 1, j0] + w01 * od[0, i0, j0 + 1]
-                 + w11 * od[0, i0 + 1, j0 + 1])
+            d = (w00 * table[0, i0, j0, 4] + w10 * table[0, i0 + 1, j0, 4]
+                 + w01 * table[0, i0, j0 + 1, 4] + w11 * table[0, i0 + 1, j0 + 1, 4])
             a2 = -math.expm1(-ratio * d)
             f = a2 / a
             r, g, b, a = r * f, g * f, b * f, a2
@@ -445,8 +445,8 @@ def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay
     for m in range(1, n + 1):
         s = m / n
         vb = poly_value(poly, s)
-        r, g, b, a = _classify_od(mode.pi_mode, mode.table, mode.od, mode.h0, mode.t_lo,
-                                  mode.t_scale, mode.lut_rgb, mode.lut_tau, mode.t_lo,
+        r, g, b, a = _classify_od(mode.pi_mode, mode.table, mode.h0, mode.t_lo,
+                                  mode.t_scale, mode.lut, mode.t_lo,
                                   mode.l_scale, va, vb, seg)
         samples += 1
         if a > 0.0:
@@ -496,7 +496,7 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         length = (tb - ta) * dnorm
         if length > 0.0:
             r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
-                                   mode.lut_rgb, mode.lut_tau, mode.t_lo, mode.l_scale, va, vb,
+                                   mode.lut, mode.t_lo, mode.l_scale, va, vb,
                                    length)
             if a > 0.0:
                 factor = 1.0
@@ -524,12 +524,11 @@ def _finish(mode, out, row, col, st, ray):
     rgba, depth, position, samples = out
     # Buffers with no rows were not asked for (see .outputs).
     if rgba.shape[0] != 0:
-        bg = mode.background
         rest = 1.0 - st[3]
-        rgba[row, col, 0] = min(st[0] + rest * bg[0] * bg[3], 1.0)
-        rgba[row, col, 1] = min(st[1] + rest * bg[1] * bg[3], 1.0)
-        rgba[row, col, 2] = min(st[2] + rest * bg[2] * bg[3], 1.0)
-        rgba[row, col, 3] = st[3] + rest * bg[3]
+        rgba[row, col, 0] = min(st[0] + rest * mode.bg_r * mode.bg_a, 1.0)
+        rgba[row, col, 1] = min(st[1] + rest * mode.bg_g * mode.bg_a, 1.0)
+        rgba[row, col, 2] = min(st[2] + rest * mode.bg_b * mode.bg_a, 1.0)
+        rgba[row, col, 3] = st[3] + rest * mode.bg_a
     t = st[4]
     if depth.shape[0] != 0:
         depth[row, col] = t
@@ -613,21 +612,28 @@ class Dvr:
         start = time.perf_counter()
         pi_mode = settings.pi_mode
         if pi_mode:
-            table = _table(tf, settings, cache).table
+            table = _table(tf, settings, cache)
         else:
             table = np.zeros((1, 2, 2, 4), np.float32)
         self.table_ms = (time.perf_counter() - start) * 1e3
         _, lut_rgb, lut_tau = tf.sample(4096)
+        # One array for the plain classification's colour and extinction, scalars for the
+        # background: every array in the mode's tuple costs a reference count increment and
+        # decrement on each call of the (not inlined) consume hook, that is on every cell.
+        lut = np.empty((lut_tau.shape[0], 4))
+        lut[:, :3] = lut_rgb
+        lut[:, 3] = lut_tau
         prefix = tf.transparency_prefix(1024)
         lo, hi = (float(v) for v in tf.domain)
         term = 2.0 if settings.termination is None else float(settings.termination)
+        bg = np.asarray(background, np.float64).reshape(4)
         self.params = DvrMode(
             prefix, lo, (prefix.shape[0] - 1) / (hi - lo), pi_mode, table, float(settings.step),
-            lo, (table.shape[1] - 1) / (hi - lo), lut_rgb, lut_tau,
-            (lut_tau.shape[0] - 1) / (hi - lo), bool(settings.adaptive), float(settings.h_max),
-            float(settings.exponent), term, bool(settings.shade), float(settings.ambient),
-            float(settings.diffuse), np.asarray(background, np.float64).reshape(4),
-            settings.sampling == "pieces", _optical_depth(table, settings))
+            lo, (table.shape[1] - 1) / (hi - lo), lut, (lut.shape[0] - 1) / (hi - lo),
+            bool(settings.adaptive), float(settings.h_max), float(settings.exponent), term,
+            bool(settings.shade), float(settings.ambient), float(settings.diffuse),
+            float(bg[0]), float(bg[1]), float(bg[2]), float(bg[3]),
+            settings.sampling == "pieces")
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Flags of the blocks whose value range meets a visible part of the transfer function."""
@@ -665,16 +671,25 @@ class Dvr:
     combine = staticmethod(combine_dvr)
 
 
-def _optical_depth(table: np.ndarray, settings: DVRSettings) -> np.ndarray:
-    """``-ln(1 - alpha)`` of every table entry (float32), for the pieces sampling; a 1x2x2
-    placeholder otherwise (the same array type, so no other kernel is compiled)."""
-    if settings.sampling != "pieces" or not settings.pi_mode:
-        return np.zeros((1, 2, 2), np.float32)
-    alpha = np.minimum(table[..., 3].astype(np.float64), 1.0 - 1e-12)
-    return (-np.log1p(-alpha)).astype(np.float32)
+def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> np.ndarray:
+    """The kernel's table: the pre-integration table's RGBA (float32, ``(K, n, n, 4)``), and
+    for the pieces sampling a fifth channel ``-ln(1 - alpha)`` (cached with it)."""
+    base = _preintegration(tf, settings, cache)
+    if settings.sampling != "pieces":
+        return base.table
+    key = ("optical depth", id(base))
+    table = cache.get(key)
+    if table is None:
+        alpha = np.minimum(base.table[..., 3].astype(np.float64), 1.0 - 1e-12)
+        table = np.empty((*base.table.shape[:3], 5), np.float32)
+        table[..., :4] = base.table
+        table[..., 4] = -np.log1p(-alpha)
+        cache[key] = table
+    return table
 
 
-def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> PreintegrationTable:
+def _preintegration(tf: TransferFunction, settings: DVRSettings,
+                    cache: dict) -> PreintegrationTable:
     """The pre-integration table for ``tf`` and ``settings``, built once and cached."""
     key = (json.dumps(tf.to_dict()), settings.table_size, settings.step, settings.table_steps,
            settings.table_layout)
