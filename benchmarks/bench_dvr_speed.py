@@ -114,6 +114,8 @@ def main() -> None:
     ap.add_argument("--tfs", default="suite,auto")
     ap.add_argument("--size", default="1024x768")
     ap.add_argument("--stem", default="dvr_speed")
+    ap.add_argument("--cases", default="",
+                    help="comma-separated indices into CASES (default: all)")
     args = ap.parse_args()
     if args.worker:
         _worker()
@@ -126,7 +128,8 @@ def main() -> None:
     uptimes = [_uptime()]
     for scene in args.scenes.split(","):
         for tf in args.tfs.split(","):
-            for label, old_settings, new_settings in CASES:
+            picked = ([CASES[int(i)] for i in args.cases.split(",")] if args.cases else CASES)
+            for label, old_settings, new_settings in picked:
                 settings = {"old": old_settings, "new": new_settings}
                 row = {"scene": scene, "tf": tf, "case": label, "settings": settings,
                        "ms": {"old": [], "new": []}, "error": {}, "stats": {}}
