@@ -564,12 +564,16 @@ class SplinecastVolume(VolumeMethod):
             # dark grey), so the RGB is premultiplied colour over black.
             if "shading" in params:
                 self.kwargs["shading"] = sc.Shading(background=(0.0, 0.0, 0.0, 1.0))
-            # ``step`` > 0: that sample step (voxels), other settings at splinecast's defaults;
+            # ``step`` > 0: that sample step (voxels), other settings at splinecast's defaults
+            # (the settings ``mode="dvr"`` uses without ``dvr=``, where the build has them);
             # 0: splinecast's default settings.
             if step > 0 and "dvr" in params:
-                from splinecast.render.dvr import DVRSettings
+                import dataclasses
 
-                self.kwargs["dvr"] = DVRSettings(step=step)
+                from splinecast.render import dvr as dvr_module
+
+                default = getattr(dvr_module, "DEFAULT_SETTINGS", dvr_module.DVRSettings())
+                self.kwargs["dvr"] = dataclasses.replace(default, step=step)
 
     def _render(self, cam: sc.Camera) -> sc.Frame:
         return self.scene.render(cam, **self.kwargs)

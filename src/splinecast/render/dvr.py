@@ -16,6 +16,17 @@ operator, ``C += (1 - A) c``, ``A += (1 - A) a`` (premultiplied colours):
   opacity-adaptive step uses: its step is rounded to the nearest length in the table (for the
   exponential layout, nearest in ``log2``).
 
+With ``sampling="pieces"`` the segments are not anchored at the ray's entry: every piece is cut
+into ``ceil(L / step)`` equal segments (``L`` its length in voxels), so a cell shorter than
+``step`` along the ray is a single segment and a single table lookup, and segments of a length
+the table does not hold take their opacity from the table's optical depth (a fifth channel,
+``-ln(1 - alpha)``, scaled by the length ratio: one ``expm1``). This is what ``mode="dvr"`` uses
+without settings (:data:`DEFAULT_SETTINGS`, with early termination at ``1 - 2^-10``): measured
+on Marschner-Lobb 256^3 at 1024x768, the cost was in the calls per cell (the walk about 85 ns per
+cell, the consume call about 100 ns more whatever the number of samples in it), not in the
+samples, so a per-piece integration and termination are what pay (benchmarks/results/
+dvr_profile.md, dvr_speed.md).
+
 Segments end at every piece boundary, so no segment spans two cells: a ray traced brick by brick
 meets exactly the same segments as through the whole volume, and bricks traced independently
 combine with "over" into the same image (fixed step; the adaptive step depends on the opacity in
@@ -63,13 +74,19 @@ from .mode_api import (
 )
 from .outputs import ALL_OUTPUTS, buffer
 
-__all__ = ["DVRSettings", "PREINTEGRATION", "TABLE_LAYOUTS", "DvrMode", "Dvr", "combine_dvr"]
+__all__ = ["DVRSettings", "DEFAULT_SETTINGS", "PREINTEGRATION", "TABLE_LAYOUTS", "SAMPLINGS",
+           "DvrMode", "Dvr", "combine_dvr"]
 
 #: Classification kinds accepted by :class:`DVRSettings`.
 PREINTEGRATION = ("none", "2d", "3d")
 
 #: Layouts of the 3D pre-integration table accepted by :class:`DVRSettings`.
 TABLE_LAYOUTS = ("uniform", "exponential")
+
+#: Where segments end, accepted by :class:`DVRSettings`: at samples every ``step`` voxels from
+#: the ray's entry and at every piece boundary ("grid"), or at equal divisions of every piece,
+#: none longer than ``step`` ("pieces").
+SAMPLINGS = ("grid", "pieces")
 
 
 @dataclass(frozen=True)
@@ -103,6 +120,13 @@ class DVRSettings:
     leap : bool
         Accepted for compatibility; has no effect (segments now end at every cell, so every
         visible cell is visited).
+    sampling : {"grid", "pieces"}
+        Where segments end. ``"grid"``: at samples every ``step`` voxels from the ray's entry
+        into the volume, and at every piece (cell or tetrahedron) boundary. ``"pieces"``: every
+        ray piece is cut into ``ceil(L / step)`` equal segments (``L`` its length in voxels), so
+        a cell shorter than ``step`` along the ray is one segment and one table lookup; no
+        segment is longer than ``step``, and the error stays second order in ``step``.
+        (The adaptive step, in this sampling, is chosen once per piece.)
     """
 
     step: float = 0.5
@@ -117,6 +141,7 @@ class DVRSettings:
     table_size: int = 256
     table_layout: str = "uniform"
     leap: bool = True
+    sampling: str = "grid"
 
     def __post_init__(self) -> None:
         # Bounds on work and memory (splinecast.errors.limits): the smallest step, finite
@@ -137,6 +162,9 @@ class DVRSettings:
                                        lo_open=True)
         if not self.exponent > 0:
             raise ParameterError(f"exponent must be positive, got {self.exponent}")
+        if self.sampling not in SAMPLINGS:
+            raise ParameterError(f"sampling must be one of {', '.join(SAMPLINGS)}, "
+                                 f"got {self.sampling!r}")
         if self.table_layout not in TABLE_LAYOUTS:
             raise ParameterError(f"table_layout must be one of {', '.join(TABLE_LAYOUTS)}, "
                                  f"got {self.table_layout!r}")
@@ -166,11 +194,21 @@ class DVRSettings:
         return {"none": 0, "2d": 1, "3d": 2}[self.preintegration]
 
 
+#: What ``mode="dvr"`` uses when no :class:`DVRSettings` are given: segments cut per ray piece no
+#: longer than one voxel (a cell is mostly one table lookup), and rays stopped once what remains
+#: visible behind them is below 2^-10 per channel (a quarter of the 8-bit step), which no 8-bit
+#: image can show. Measured against the comparison suite's dense reference, this meets its
+#: tolerance (mean absolute error 1/255) with a wide margin (benchmarks/results/dvr_speed.md);
+#: ``tests/test_dvr_pieces.py`` checks it. Bricks rendered independently and merged with "over"
+#: (sort-last) can differ from the whole-volume image by up to the same 2^-10, because a back
+#: brick cannot know the opacity in front of it; pass ``DVRSettings()`` for the exact merge.
+DEFAULT_SETTINGS = DVRSettings(step=1.0, sampling="pieces", termination=1.0 - 2.0**-10)
+
 #: Kernel parameters (see :class:`Dvr` for their meaning).
 DvrMode = namedtuple("DvrMode", [
-    "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut_rgb",
-    "lut_tau", "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
-    "background"])
+    "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut",
+    "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
+    "bg_r", "bg_g", "bg_b", "bg_a", "pieces"])
 
 
 @jit(inline="always")
@@ -185,19 +223,19 @@ def _shade_factor(shade, ambient, diffuse, gx, gy, gz, sx, sy, sz, ux, uy, uz):
 
 
 @jit(inline="always")
-def _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale,
+def _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
               va, vb, length):
     """Premultiplied RGBA of a segment of ``length`` voxels from value ``va`` to ``vb``."""
     if pi_mode == 0:
-        n = lut_tau.shape[0]
+        n = lut.shape[0]
         u = min(max((vb - l_lo) * l_scale, 0.0), n - 1.0)
         i = min(int(u), n - 2)
         f = u - i
-        tau = (1.0 - f) * lut_tau[i] + f * lut_tau[i + 1]
+        tau = (1.0 - f) * lut[i, 3] + f * lut[i + 1, 3]
         a = -math.expm1(-tau * length)
-        r = ((1.0 - f) * lut_rgb[i, 0] + f * lut_rgb[i + 1, 0]) * a
-        g = ((1.0 - f) * lut_rgb[i, 1] + f * lut_rgb[i + 1, 1]) * a
-        b = ((1.0 - f) * lut_rgb[i, 2] + f * lut_rgb[i + 1, 2]) * a
+        r = ((1.0 - f) * lut[i, 0] + f * lut[i + 1, 0]) * a
+        g = ((1.0 - f) * lut[i, 1] + f * lut[i + 1, 1]) * a
+        b = ((1.0 - f) * lut[i, 2] + f * lut[i + 1, 2]) * a
         return r, g, b, a
     n = table.shape[1]
     steps = table.shape[0]
@@ -221,6 +259,48 @@ def _classify(pi_mode, table, h0, t_lo, t_scale, lut_rgb, lut_tau, l_lo, l_scale
         scale = a2 / a
         return r * scale, g * scale, b * scale, a2
     return r, g, b, a
+
+
+@jit(inline="always")
+def _classify_od(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
+                 va, vb, length):
+    """:func:`_classify` for segments of any length, with the table's optical depth at hand.
+
+    ``table[k, ..., 4] = -ln(1 - alpha)`` (the table's optical depth, a fifth channel the
+    pieces sampling adds), interpolated bilinearly like the colours, so the
+    opacity of a length the table does not hold is ``1 - exp(-(L / held) od)`` (one ``expm1``
+    instead of a ``log1p`` of the interpolated opacity and an ``expm1``). Optical depth is what
+    adds up along a ray, so interpolating it is as accurate as interpolating the opacity.
+    """
+    if pi_mode == 0:
+        return _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
+                         va, vb, length)
+    n = table.shape[1]
+    steps = table.shape[0]
+    uf = min(max((va - t_lo) * t_scale, 0.0), n - 1.0)
+    ub = min(max((vb - t_lo) * t_scale, 0.0), n - 1.0)
+    if pi_mode == 3:
+        j = 0
+        if length > h0:
+            j = min(int(math.log2(length / h0) + 0.5), steps - 1)
+        k = j
+        held = h0 * 2.0**j
+    else:
+        k = min(max(int(length / h0 + 0.5), 1), steps) - 1
+        held = (k + 1) * h0
+    r, g, b, a = preint_lookup(table, k, uf, ub)
+    ratio = length / held
+    if abs(ratio - 1.0) <= 1e-9 or not a > 0.0:
+        return r, g, b, a
+    i0 = min(int(uf), n - 2)
+    j0 = min(int(ub), n - 2)
+    fx = uf - i0
+    fy = ub - j0
+    d = ((1.0 - fx) * ((1.0 - fy) * table[k, i0, j0, 4] + fy * table[k, i0, j0 + 1, 4])
+         + fx * ((1.0 - fy) * table[k, i0 + 1, j0, 4] + fy * table[k, i0 + 1, j0 + 1, 4]))
+    a2 = -math.expm1(-ratio * d)
+    scale = a2 / a
+    return r * scale, g * scale, b * scale, a2
 
 
 @jit(inline="always")
@@ -291,9 +371,116 @@ def _done(mode, st):
     return st[3] >= mode.term
 
 
+@jit(inline="always")
+def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, az, bx, by, bz,
+               ray, n, seg, va, acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next):
+    """The pieces sampling with a 2D table: ``n`` segments of ``seg`` voxels.
+
+    The same integral as :func:`_classify_od`, written out for the common case: the table's
+    cell and weights are found once per segment, its opacity is read first (a transparent
+    segment reads nothing else), and nothing is called that would not be inlined.
+    """
+    table = mode.table
+    nt = table.shape[1]
+    top = nt - 1.0
+    lo = mode.t_lo
+    scale_u = mode.t_scale
+    ratio = seg / mode.h0
+    held = abs(ratio - 1.0) <= 1e-9  # the table's own length: no correction
+    uf = min(max((va - lo) * scale_u, 0.0), top)
+    inv_n = 1.0 / n
+    for m in range(1, n + 1):
+        s = m * inv_n
+        vb = poly_value(poly, s)
+        ub = min(max((vb - lo) * scale_u, 0.0), top)
+        samples += 1
+        i0 = min(int(uf), nt - 2)
+        j0 = min(int(ub), nt - 2)
+        fx = uf - i0
+        fy = ub - j0
+        w00 = (1.0 - fx) * (1.0 - fy)
+        w10 = fx * (1.0 - fy)
+        w01 = (1.0 - fx) * fy
+        w11 = fx * fy
+        a = (w00 * table[0, i0, j0, 3] + w10 * table[0, i0 + 1, j0, 3]
+             + w01 * table[0, i0, j0 + 1, 3] + w11 * table[0, i0 + 1, j0 + 1, 3])
+        uf = ub
+        if not a > 0.0:
+            continue
+        r = (w00 * table[0, i0, j0, 0] + w10 * table[0, i0 + 1, j0, 0]
+             + w01 * table[0, i0, j0 + 1, 0] + w11 * table[0, i0 + 1, j0 + 1, 0])
+        g = (w00 * table[0, i0, j0, 1] + w10 * table[0, i0 + 1, j0, 1]
+             + w01 * table[0, i0, j0 + 1, 1] + w11 * table[0, i0 + 1, j0 + 1, 1])
+        b = (w00 * table[0, i0, j0, 2] + w10 * table[0, i0 + 1, j0, 2]
+             + w01 * table[0, i0, j0 + 1, 2] + w11 * table[0, i0 + 1, j0 + 1, 2])
+        if not held:
+            d = (w00 * table[0, i0, j0, 4] + w10 * table[0, i0 + 1, j0, 4]
+                 + w01 * table[0, i0, j0 + 1, 4] + w11 * table[0, i0 + 1, j0 + 1, 4])
+            a2 = -math.expm1(-ratio * d)
+            f = a2 / a
+            r, g, b, a = r * f, g * f, b * f, a2
+        factor = 1.0
+        if mode.shade:
+            gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
+                                  ay + s * (by - ay), az + s * (bz - az))
+            factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
+                                   ray[12], ray[13], ray[14], ray[3], ray[4], ray[5])
+        acc_r, acc_g, acc_b, acc_a, t_half = _composite(
+            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, t0 + s * span)
+        if acc_a >= mode.term:
+            break
+    return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
+
+
+@jit(inline="always")
+def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az, bx, by,
+                    bz, ray, st):
+    """``sampling="pieces"``: the piece cut into ``ceil(L / h)`` equal segments."""
+    acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
+    dnorm = math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
+    span = t1 - t0
+    length = span * dnorm
+    if not length > 0.0:
+        return st
+    h = mode.h0
+    if mode.adaptive:
+        h = _adaptive_step(mode.pi_mode, mode.table.shape[0], mode.h0, mode.h_max,
+                           mode.exponent, acc_a)
+    n = max(int(math.ceil(length / h - 1e-9)), 1)
+    seg = length / n
+    va = poly_value(poly, 0.0)
+    if mode.pi_mode == 1:
+        return _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, az,
+                          bx, by, bz, ray, n, seg, va, acc_r, acc_g, acc_b, acc_a, t_half,
+                          samples, t_next)
+    for m in range(1, n + 1):
+        s = m / n
+        vb = poly_value(poly, s)
+        r, g, b, a = _classify_od(mode.pi_mode, mode.table, mode.h0, mode.t_lo,
+                                  mode.t_scale, mode.lut, mode.t_lo,
+                                  mode.l_scale, va, vb, seg)
+        samples += 1
+        if a > 0.0:
+            factor = 1.0
+            if mode.shade:
+                gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
+                                      ay + s * (by - ay), az + s * (bz - az))
+                factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
+                                       ray[12], ray[13], ray[14], ray[3], ray[4], ray[5])
+            acc_r, acc_g, acc_b, acc_a, t_half = _composite(
+                acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, t0 + s * span)
+            if acc_a >= mode.term:
+                break
+        va = vb
+    return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
+
+
 @jit()
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
+    if mode.pieces:
+        return _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az,
+                               bx, by, bz, ray, st)
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
     ux, uy, uz = ray[3], ray[4], ray[5]
     sx, sy, sz = ray[12], ray[13], ray[14]
@@ -320,7 +507,7 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         length = (tb - ta) * dnorm
         if length > 0.0:
             r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
-                                   mode.lut_rgb, mode.lut_tau, mode.t_lo, mode.l_scale, va, vb,
+                                   mode.lut, mode.t_lo, mode.l_scale, va, vb,
                                    length)
             if a > 0.0:
                 factor = 1.0
@@ -348,12 +535,11 @@ def _finish(mode, out, row, col, st, ray):
     rgba, depth, position, samples = out
     # Buffers with no rows were not asked for (see .outputs).
     if rgba.shape[0] != 0:
-        bg = mode.background
         rest = 1.0 - st[3]
-        rgba[row, col, 0] = min(st[0] + rest * bg[0] * bg[3], 1.0)
-        rgba[row, col, 1] = min(st[1] + rest * bg[1] * bg[3], 1.0)
-        rgba[row, col, 2] = min(st[2] + rest * bg[2] * bg[3], 1.0)
-        rgba[row, col, 3] = st[3] + rest * bg[3]
+        rgba[row, col, 0] = min(st[0] + rest * mode.bg_r * mode.bg_a, 1.0)
+        rgba[row, col, 1] = min(st[1] + rest * mode.bg_g * mode.bg_a, 1.0)
+        rgba[row, col, 2] = min(st[2] + rest * mode.bg_b * mode.bg_a, 1.0)
+        rgba[row, col, 3] = st[3] + rest * mode.bg_a
     t = st[4]
     if depth.shape[0] != 0:
         depth[row, col] = t
@@ -408,7 +594,8 @@ class Dvr:
     tf : TransferFunction
         The transfer function.
     settings : DVRSettings, optional
-        Step, classification, adaptive step, early termination, shading.
+        Step, classification, adaptive step, early termination, shading (default
+        :data:`DEFAULT_SETTINGS`, not ``DVRSettings()``).
     background : 4 floats
         What the rays composite over.
     cache : dict, optional
@@ -427,7 +614,7 @@ class Dvr:
         self.outputs = outputs
         if not isinstance(tf, TransferFunction):
             raise ParameterError("mode 'dvr' needs tf=TransferFunction(...)")
-        settings = settings or DVRSettings()
+        settings = settings or DEFAULT_SETTINGS
         if not isinstance(settings, DVRSettings):
             raise ParameterError(f"dvr must be a DVRSettings, got {type(settings).__name__}")
         self.tf = tf
@@ -436,20 +623,28 @@ class Dvr:
         start = time.perf_counter()
         pi_mode = settings.pi_mode
         if pi_mode:
-            table = _table(tf, settings, cache).table
+            table = _table(tf, settings, cache)
         else:
             table = np.zeros((1, 2, 2, 4), np.float32)
         self.table_ms = (time.perf_counter() - start) * 1e3
         _, lut_rgb, lut_tau = tf.sample(4096)
+        # One array for the plain classification's colour and extinction, scalars for the
+        # background: every array in the mode's tuple costs a reference count increment and
+        # decrement on each call of the (not inlined) consume hook, that is on every cell.
+        lut = np.empty((lut_tau.shape[0], 4))
+        lut[:, :3] = lut_rgb
+        lut[:, 3] = lut_tau
         prefix = tf.transparency_prefix(1024)
         lo, hi = (float(v) for v in tf.domain)
         term = 2.0 if settings.termination is None else float(settings.termination)
+        bg = np.asarray(background, np.float64).reshape(4)
         self.params = DvrMode(
             prefix, lo, (prefix.shape[0] - 1) / (hi - lo), pi_mode, table, float(settings.step),
-            lo, (table.shape[1] - 1) / (hi - lo), lut_rgb, lut_tau,
-            (lut_tau.shape[0] - 1) / (hi - lo), bool(settings.adaptive), float(settings.h_max),
-            float(settings.exponent), term, bool(settings.shade), float(settings.ambient),
-            float(settings.diffuse), np.asarray(background, np.float64).reshape(4))
+            lo, (table.shape[1] - 1) / (hi - lo), lut, (lut.shape[0] - 1) / (hi - lo),
+            bool(settings.adaptive), float(settings.h_max), float(settings.exponent), term,
+            bool(settings.shade), float(settings.ambient), float(settings.diffuse),
+            float(bg[0]), float(bg[1]), float(bg[2]), float(bg[3]),
+            settings.sampling == "pieces")
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Flags of the blocks whose value range meets a visible part of the transfer function."""
@@ -477,7 +672,7 @@ class Dvr:
         s = self.settings
         stats.update(step=s.step, preintegration=s.preintegration, adaptive=s.adaptive,
                      table_layout=s.table_layout, termination=s.termination,
-                     table_ms=self.table_ms)
+                     sampling=s.sampling, table_ms=self.table_ms)
         if samples.shape[0]:
             stats["mean_samples"] = float(samples.mean())
         return Frame(*(a if a.shape[0] else None for a in (rgba, depth, position)),
@@ -487,7 +682,25 @@ class Dvr:
     combine = staticmethod(combine_dvr)
 
 
-def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> PreintegrationTable:
+def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> np.ndarray:
+    """The kernel's table: the pre-integration table's RGBA (float32, ``(K, n, n, 4)``), and
+    for the pieces sampling a fifth channel ``-ln(1 - alpha)`` (cached with it)."""
+    base = _preintegration(tf, settings, cache)
+    if settings.sampling != "pieces":
+        return base.table
+    key = ("optical depth", id(base))
+    table = cache.get(key)
+    if table is None:
+        alpha = np.minimum(base.table[..., 3].astype(np.float64), 1.0 - 1e-12)
+        table = np.empty((*base.table.shape[:3], 5), np.float32)
+        table[..., :4] = base.table
+        table[..., 4] = -np.log1p(-alpha)
+        cache[key] = table
+    return table
+
+
+def _preintegration(tf: TransferFunction, settings: DVRSettings,
+                    cache: dict) -> PreintegrationTable:
     """The pre-integration table for ``tf`` and ``settings``, built once and cached."""
     key = (json.dumps(tf.to_dict()), settings.table_size, settings.step, settings.table_steps,
            settings.table_layout)
