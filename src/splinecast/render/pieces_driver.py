@@ -125,9 +125,9 @@ def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, heigh
 @jit()
 def _iso_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, geom,
                grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+    # The caller checked that the ray left a piece of another level at t_in.
     depth, gradient = state[0], state[1]
-    if not (t_in <= t_out and depth[row, col] == math.inf and exit_t[row, col] == t_in
-            and exit_level[row, col] != level):
+    if not (t_in <= t_out and depth[row, col] == math.inf):
         return 0
     before = _exit_value(grids_a, grids_b, which, geoms, exit_piece[row, col], basis, row, col,
                          width, height, t_in) - mode.iso
@@ -175,7 +175,7 @@ def _closure_enter(mode, state, basis, row, col, width, height, t_in, t_out, lev
     return (_iso_enter if _is_iso(mode) else _no_enter).py_func
 
 
-@overload_jit(closure_leave, inline="never")
+@overload_jit(closure_leave, inline="always")
 def _closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_piece,
                    exit_level):
     return (_iso_leave if _is_iso(mode) else _no_leave).py_func
@@ -202,7 +202,9 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
                 continue  # the ray misses the box: the driver would leave its state alone
             t_range[row, col, 0] = t0
             t_range[row, col, 1] = t1
-            if close:
+            # The closure's cheap test first (a ray leaving a piece of another level right
+            # here): calls with this many arguments cost more than the rest of a short ray.
+            if close and exit_t[row, col] == t0 and exit_level[row, col] != level:
                 hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
                                       level, kernel, geom, grids_a, grids_b, which, geoms,
                                       exit_t, exit_piece, exit_level)
