@@ -21,17 +21,25 @@ Grids
     through cells (the even B-spline and the type-6 models, whose cells are centred on voxels,
     or an ancestor drawn over a descendant's box) need nothing special. Grids of unmodified
     bricks are kept between frames while their bricks are in the cut; grids of bricks changed at
-    a seam are built when traced (:mod:`.seams`).
+    a seam are built when first traced and kept while the seam plan keeps its change
+    (:mod:`.seams`).
 
 Tracing
-    The pieces are put in front-to-back order (:mod:`.order`), and each is traced over the
-    screen rectangle its box projects to (a tile camera: the same rays as the full image): the
-    mode's per-pixel state of that rectangle is copied out, carried through the piece by
-    :func:`~splinecast.render.segment.trace_segment` and copied back. A ray thus crosses the
-    boxes one after the other exactly as it crosses the bricks of one volume (``tests/
-    test_bricks.py``), and a cut whose boxes all come from level 0 renders the in-memory image.
-    Boxes at the volume's border are extended to the model's domain (the type-6 splines render
-    half a voxel beyond the outer voxel centres); see :meth:`CutRenderer.box`.
+    The pieces are put in front-to-back order (:mod:`.order`) and traced in one compiled launch
+    per frame (:func:`splinecast.render.pieces_driver.trace_pieces`): parallel over screen
+    tiles, each tile walks the pieces whose screen rectangle (:func:`screen_rects`, the box's
+    projection) overlaps it, in that order, and hands each pixel of the rectangle to the
+    driver's per-ray unit with the ray's interval inside the piece's box; the mode's per-pixel
+    state stays in the full-image arrays. A ray thus crosses the boxes one after the other
+    exactly as it crosses the bricks of one volume (``tests/test_bricks.py``), and a cut whose
+    boxes all come from level 0 renders the in-memory image. The per-piece path (one
+    :func:`~splinecast.render.segment.trace_segment` call per piece over a tile camera of its
+    rectangle, the state copied out and back) is kept as the reference
+    (:attr:`CutRenderer.batched` off; ``tests/test_pieces_driver.py`` compares the two
+    bit for bit): per piece it costs a parallel launch and copies, milliseconds on a shared
+    machine, which dominated frames of many small bricks. Boxes at the volume's border are
+    extended to the model's domain (the type-6 splines render half a voxel beyond the outer
+    voxel centres); see :meth:`CutRenderer.box`.
 """
 
 from __future__ import annotations
