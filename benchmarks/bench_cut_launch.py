@@ -87,6 +87,8 @@ def run_plain(args) -> dict:
     fits = next(p for p, lv in enumerate(mv.levels) if lv.nbytes <= limit)
     rows = []
     for mode, options in bm._modes().items():
+        if mode not in args.modes.split(","):
+            continue
         row: dict = {"mode": mode}
         for label, level in (("memory_level0", 0), ("memory_fits", fits)):
             vol = mv.level(level).to_volume(max_bytes=2**40)
@@ -177,6 +179,7 @@ def main() -> None:
     parser.add_argument("--size", default="256x192")
     parser.add_argument("--budget", default="4MiB", help="plain: cache budget")
     parser.add_argument("--eps", default="100,200", help="wavelet: ε multiples (pixels)")
+    parser.add_argument("--modes", default="iso,dvr", help="plain: modes to run")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--workdir", default=None, help="plain: where source and store go")
     parser.add_argument("--out", required=True, help="results stem (writes .md and .json)")

@@ -70,7 +70,7 @@ def test_one_launch_equals_one_call_per_piece_in_every_mode(torus, mode):
     vol, path = torus
     cams = [sc.Camera.orbit(vol, azimuth=a, elevation=e, size=(44, 36), zoom=1.6)
             for a, e in ((25, 20), (200, -35))]
-    with sc.Scene(sc.read(path), model="trilinear", budget="64MiB", lod=3.0) as scene:
+    with sc.Scene(sc.read(path), model="trilinear", budget="512KiB", lod=1.0) as scene:
         for cam in cams:
             each, batched, _, stats = _both(scene, cam, **_options(mode))
             what = f"{mode} {cam.position.round(2)}"
@@ -87,7 +87,7 @@ def test_seam_closure_inside_the_launch_equals_the_per_piece_closure(torus, mode
     with the same depths and normals in both paths."""
     vol, path = torus
     hits = 0
-    with sc.Scene(sc.read(path), model=model, budget="64MiB", lod=3.0) as scene:
+    with sc.Scene(sc.read(path), model=model, budget="512KiB", lod=1.0) as scene:
         for azimuth in (25, 110, 200, 290):
             cam = sc.Camera.orbit(vol, azimuth=azimuth, elevation=30, size=(48, 40), zoom=1.6)
             each, batched, each_stats, stats = _both(scene, cam, **_options("iso"))
@@ -106,7 +106,7 @@ def test_clip_planes_and_a_camera_tile(torus):
     vol, path = torus
     cam = sc.Camera.orbit(vol, azimuth=60, elevation=25, size=(48, 40), zoom=1.6)
     options = {**_options("iso"), "clip": [((0.0, 0.0, 0.1), (0.3, -1.0, 0.2))]}
-    with sc.Scene(sc.read(path), model="trilinear", budget="64MiB", lod=3.0) as scene:
+    with sc.Scene(sc.read(path), model="trilinear", budget="512KiB", lod=1.0) as scene:
         each, batched, _, _ = _both(scene, cam, **options)
         _assert_identical(each, batched, "clipped")
         plain = scene.render(cam, **_options("iso"))

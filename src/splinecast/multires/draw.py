@@ -252,6 +252,8 @@ class CutRenderer:
         self._changed: dict[Hashable, tuple[Any, Grid]] = {}
         #: Per brick: its grid's (kernel, blocks) pair for the launch (see :meth:`_pair`).
         self._pairs: dict[Hashable, tuple] = {}
+        #: The last frame's typed lists of pairs (see :meth:`_pack`).
+        self._packed: tuple | None = None
         #: Trace all pieces of a frame in one compiled launch (else one call per piece).
         self.batched = True
         self.stats: dict[str, Any] = {}
@@ -421,9 +423,9 @@ class CutRenderer:
         keep = np.flatnonzero(seen)
         rebuilt = 0
         blocks_key = _blocks_key(setup)
-        lists: dict[Any, Any] = {}  # type signature -> typed List of (kernel, blocks)
-        slots: dict[int, tuple[int, int]] = {}  # id(grid) -> (list, index)
-        which = np.empty((len(keep), 2), dtype=np.int64)
+        pairs: list[tuple[tuple, Hashable]] = []  # distinct grids' (kernel, blocks), signature
+        index: dict[int, int] = {}  # id(grid) -> position in pairs
+        per_piece = np.empty(len(keep), dtype=np.int64)
         geoms = np.empty((len(keep), GEOM_SIZE))
         for m, n in enumerate(keep):
             piece = ordered[int(n)]
@@ -431,22 +433,18 @@ class CutRenderer:
                 grid, changed = self._piece_grid(piece, changes)
             rebuilt += changed
             geoms[m] = grid.geom
-            slot = slots.get(id(grid))
-            if slot is None:
-                pair, signature = self._pair(piece.key, grid, setup, blocks_key)
-                if signature not in lists:
-                    if len(lists) == 2:
-                        return None
-                    lists[signature] = (len(lists), List.empty_list(numba.typeof(pair)))
-                number, items = lists[signature]
-                items.append(pair)
-                slot = slots[id(grid)] = (number, len(items) - 1)
-            which[m] = slot
+            at = index.get(id(grid))
+            if at is None:
+                at = index[id(grid)] = len(pairs)
+                pairs.append(self._pair(piece.key, grid, setup, blocks_key))
+            per_piece[m] = at
         if not len(keep):
             return 0, rebuilt
-        grids = [items for _, items in sorted(lists.values(), key=lambda v: v[0])]
-        if len(grids) == 1:
-            grids.append(List.empty_list(grids[0]._list_type.item_type))
+        packed = self._pack(pairs)
+        if packed is None:
+            return None
+        grids, slot = packed
+        which = np.ascontiguousarray(slot[per_piece])
         h, w = camera.height, camera.width
         boxes = np.ascontiguousarray(np.stack([lo[keep], hi[keep]], axis=1))
         levels = np.array([ordered[int(n)].level for n in keep], dtype=np.int64)
@@ -464,6 +462,32 @@ class CutRenderer:
         if closure is not None:
             closure.hits += int(hits)
         return len(keep), rebuilt
+
+    def _pack(self, pairs: list[tuple[tuple, Hashable]]) -> tuple[list, np.ndarray] | None:
+        """The launch's two typed lists of ``(kernel, blocks)`` and each pair's ``(list,
+        index)``; ``None`` for more than two Numba types. Kept while the pairs are the same
+        objects (a steady view): filling typed lists costs tens of microseconds per item."""
+        key = [pair for pair, _ in pairs]
+        kept = self._packed
+        if kept is not None and len(kept[0]) == len(key) and all(
+                a is b for a, b in zip(kept[0], key, strict=True)):
+            return kept[1], kept[2]
+        lists: dict[Hashable, tuple[int, Any]] = {}
+        slot = np.empty((len(pairs), 2), dtype=np.int64)
+        for at, (pair, signature) in enumerate(pairs):
+            if signature not in lists:
+                if len(lists) == 2:
+                    return None
+                lists[signature] = (len(lists), List.empty_list(numba.typeof(pair)))
+            number, items = lists[signature]
+            items.append(pair)
+            slot[at] = number, len(items) - 1
+        grids = [items for _, items in sorted(lists.values(), key=lambda v: v[0])]
+        if len(grids) == 1:
+            grids.append(List.empty_list(grids[0]._list_type.item_type))
+        # The pairs themselves are kept (compared by identity: the lists hold copies).
+        self._packed = (key, grids, slot)
+        return grids, slot
 
     def _pair(self, key: Hashable, grid: Grid, setup: Any,
               blocks_key: Any) -> tuple[tuple, Hashable]:
