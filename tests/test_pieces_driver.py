@@ -105,7 +105,7 @@ def test_clip_planes_and_a_camera_tile(torus):
 
     vol, path = torus
     cam = sc.Camera.orbit(vol, azimuth=60, elevation=25, size=(48, 40), zoom=1.6)
-    options = {**_options("iso"), "clip": [((0.0, 0.0, 0.1), (0.3, -1.0, 0.2))]}
+    options = {**_options("iso"), "clip": [(0.3, -1.0, 0.2, 0.1)]}
     with sc.Scene(sc.read(path), model="trilinear", budget="512KiB", lod=1.0) as scene:
         each, batched, _, _ = _both(scene, cam, **options)
         _assert_identical(each, batched, "clipped")
