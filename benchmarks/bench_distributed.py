@@ -1,7 +1,9 @@
 """Sort-first scale-out on Dask (issue 14): scaling from 1 to 2 single-threaded workers, overhead
 against the local 2-thread render, and a projection to a 64-worker cluster.
 
-On a LocalCluster of single-threaded worker processes, after warm-up (scene prepared on every
+On a LocalCluster of single-threaded worker processes (``splinecast.distributed.local_cluster``,
+Dask's background polling turned down; ``bench_movie_overhead.py`` measures what that changes),
+after warm-up (scene prepared on every
 worker, kernels loaded), medians of repeated runs, interleaved (1 worker, 2 workers, local) so a
 change in the machine's load hits all three alike:
 
@@ -115,12 +117,15 @@ def over_step(width: int, height: int, repeats: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, a few repeats")
-    parser.add_argument("--part", choices=("all", "sort-first", "sort-last"), default="all")
+    parser.add_argument("--part", choices=("all", "sort-first", "sort-last", "markdown"),
+                        default="all",
+                        help="markdown: rewrite distributed.md from the saved .json files")
     parser.add_argument("--sort-last-size", type=int, default=None,
                         help="voxels per axis of the sort-last pyramid (default 512; quick 129)")
     parser.add_argument("--sort-last-level", type=int, default=0)
-    parser.add_argument("--sort-last-image", type=int, default=None,
-                        help="image side of the sort-last renders (default 1024; quick 256)")
+    parser.add_argument("--sort-last-image", default=None,
+                        help="image side, or WxH, of the sort-last renders (default 1024; "
+                             "quick 256)")
     parser.add_argument("--sort-last-repeats", type=int, default=3)
     parser.add_argument("--sort-first-repeats", type=int, default=None,
                         help="interleaved runs of the sort-first part (default 5; quick 3)")
@@ -132,10 +137,16 @@ def main() -> None:
         sort_first(args)
     if args.part in ("all", "sort-last"):
         sort_last(args)
+    if args.part == "markdown":
+        out = HERE / "results"
+        result = json.loads((out / "distributed.json").read_text())
+        (out / "distributed.md").write_text(markdown(result))
 
 
 def sort_first(args: argparse.Namespace) -> None:
-    from distributed import Client, LocalCluster
+    from distributed import Client
+
+    from splinecast.distributed import local_cluster
 
     if args.quick:
         source, iso, frames, movie_size, big, repeats = (
@@ -151,8 +162,7 @@ def sort_first(args: argparse.Namespace) -> None:
     big_cam = sc.Camera.orbit(volume, azimuth=40, elevation=25, size=big)
     scene.render(big_cam, iso=iso)  # compile / load kernels before the workers start
 
-    clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                dashboard_address=":0", silence_logs=40) for n in (1, 2)}
+    clusters = {n: local_cluster(n) for n in (1, 2)}
     clients = {n: Client(c) for n, c in clusters.items()}
     try:
         scenes = {n: DistributedScene(source, c) for n, c in clients.items()}
@@ -218,6 +228,7 @@ def sort_first(args: argparse.Namespace) -> None:
         "command": "python benchmarks/bench_distributed.py" + (" --quick" if args.quick else "")
                    + (f" --part {args.part}" if args.part != "all" else "")
                    + (f" --sort-first-repeats {repeats}" if args.sort_first_repeats else ""),
+        "cluster": "splinecast.distributed.local_cluster",
         "source": source, "iso": iso, "frames": frames, "movie_size": movie_size,
         "frame_size": big, "repeats": repeats, "tiles_on_2_workers": tiles_2w,
         "runs_s": runs, "median_s": med,
@@ -288,13 +299,14 @@ def merge_step(level_volume: sc.Volume, camera: sc.Camera, mode: str, repeats: i
 
 
 def sort_last(args: argparse.Namespace) -> None:
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    from splinecast.distributed import DistributedScene
+    from splinecast.distributed import DistributedScene, local_cluster
 
     size = args.sort_last_size or (129 if args.quick else 512)
-    side = args.sort_last_image or (256 if args.quick else 1024)
-    image = (side, side)
+    side = args.sort_last_image or str(256 if args.quick else 1024)
+    w, _, h = side.lower().partition("x")
+    image = (int(w), int(h or w))
     repeats = args.sort_last_repeats
     modes = [m for m in args.sort_last_modes.split(",") if m]
     if not set(modes) <= set(SORT_LAST_MODES):
@@ -309,8 +321,7 @@ def sort_last(args: argparse.Namespace) -> None:
     for mode in modes:  # compile / load the kernels before the workers start
         local.render(sc.Camera.orbit(level_volume, size=(16, 16)), **_sort_last_options(mode))
     merges = {mode: merge_step(level_volume, camera, mode, repeats) for mode in modes}
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                           dashboard_address=":0", silence_logs=40)
+    cluster = local_cluster(2)
     client = Client(cluster)
     rows = {}
     try:
@@ -389,7 +400,7 @@ def sort_last(args: argparse.Namespace) -> None:
         "projection": projection,
     }
     stem = ("distributed_sort_last_quick" if args.quick else
-            f"distributed_sort_last_{size}_level{level}_{side}px")
+            f"distributed_sort_last_{size}_level{level}_{side.lower()}px")
     if modes != list(SORT_LAST_MODES):
         stem += "_" + "-".join(modes)
     out = HERE / "results"
@@ -508,7 +519,88 @@ def markdown(r: dict) -> str:
             f"{p['movie_speedup']:.1f}x | {p['tiles_frame_s']:.3f} | {p['tiles_speedup']:.1f}x "
             f"| {p['sort_last_frame_s']:.3f} | {p['sort_last_speedup']:.1f}x |")
     lines.append("")
+    if "cluster" not in r:  # measured before local_cluster existed
+        lines[2:2] = [
+            "These sort-first numbers were measured on a default `LocalCluster`, before "
+            "`splinecast.distributed.local_cluster` (Dask's background polling turned down) "
+            "existed; `distributed_movie_overhead.md` measures what that changes for the movie.",
+            ""]
+    lines += sort_last_section(HERE / "results", mo)
     return "\n".join(lines)
+
+
+def sort_last_section(folder: Path, quiet_model: dict | None = None) -> list[str]:
+    """The measured sort-last runs of the 1024^3 pyramid (``distributed_sort_last_1024_*``):
+    cost and bytes per frame, and their projection to 64 workers, as markdown lines."""
+    runs = [json.loads(p.read_text())
+            for p in sorted(folder.glob("distributed_sort_last_1024_*.json"))]
+    if not runs:
+        return []
+    mib = 2**20
+    lines = ["## Sort-last, 1024^3 pyramid", ""]
+    for r in runs:
+        w, h = r["image"]
+        lines += [
+            f"Measured by `{r['command']}` (results "
+            f"`distributed_sort_last_1024_level{r['level']}_*`): Marschner-Lobb 1024^3 float32 "
+            f"pyramid, level {r['level']} ({'x'.join(map(str, r['level_shape']))}) rendered "
+            f"at {w}x{h} by 2 single-threaded workers (load average "
+            f"{r['load_average_before'][0]:.0f} before / {r['load_average_after'][0]:.0f} after: "
+            "a heavily shared machine, so the traces' times are inflated; the merge and byte "
+            "counts are not). Per frame:",
+            "",
+            "| mode | sort-last 2 workers s | shares' traces sum s | merge tasks s | final task "
+            "s | one merge in process s | partial images merged MiB | moved between workers MiB "
+            "| sent to client MiB |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for mode, row in r["modes"].items():
+            md = row["median"]
+            lines.append(
+                f"| {mode} | {md['sort_last_s']:.2f} | {md['share_trace_sum_s']:.2f} | "
+                f"{md['merge_tasks_s']:.3f} | {md['finish_s']:.3f} | "
+                f"{row['merge_in_process_s']:.3f} | {row['partial_bytes'] / mib:.1f} | "
+                f"{md['moved_bytes'] / mib:.1f} | {row['frame_bytes'] / mib:.1f} |")
+        modes = list(r["modes"])
+        lines += [
+            "",
+            "Projection to W workers (the sort-last model of the module docstring, from these "
+            "measurements: traces split W ways, log2 W merge levels each of one task, one "
+            "measured merge and one full-image partial state moved; 'moved' is the most all "
+            "merges move, (W - 1) full-image states):",
+            "",
+            "| workers | " + " | ".join(f"{m} frame s | {m} speed-up | {m} moved MiB"
+                                        for m in modes) + " |",
+            "|---|" + "---|---|---|" * len(modes),
+        ]
+        for p in r["projection"]:
+            lines.append(f"| {p['workers']} | " + " | ".join(
+                f"{p[f'{m}_s']:.3f} | {p[f'{m}_speedup']:.1f}x | "
+                f"{p[f'{m}_moved_bytes_max'] / mib:.0f}" for m in modes) + " |")
+        lines.append("")
+        if quiet_model:
+            t_task, rate = quiet_model["task_overhead_s"], quiet_model["transfer_bytes_per_s"]
+            lines += [
+                f"The run above measured a per-task overhead of "
+                f"{r['model']['task_overhead_s'] * 1e3:.0f} ms and a transfer rate of "
+                f"{r['model']['transfer_bytes_per_s'] / mib:.0f} MiB/s, both inflated by the "
+                f"load; with the quiet sort-first run's {t_task * 1e3:.2f} ms and "
+                f"{rate / mib:.0f} MiB/s instead (same traces, merges and bytes):",
+                "",
+                "| workers | " + " | ".join(f"{m} frame s | {m} speed-up" for m in modes) + " |",
+                "|---|" + "---|---|" * len(modes),
+            ]
+            for w in WORKER_COUNTS:
+                cells = []
+                for m in modes:
+                    row, md = r["modes"][m], r["modes"][m]["median"]
+                    merge = t_task + row["merge_in_process_s"] + row["full_state_bytes"] / rate
+                    tail = md["finish_s"] + row["frame_bytes"] / rate
+                    t = md["share_trace_sum_s"] / w + math.log2(w) * merge + tail
+                    cells.append(f"{t:.3f} | {(md['share_trace_sum_s'] + tail) / t:.1f}x")
+                lines.append(f"| {w} | " + " | ".join(cells) + " |")
+            lines.append("")
+    return lines
 
 
 if __name__ == "__main__":

@@ -57,8 +57,7 @@ def client(volume):
     cam = sc.Camera.orbit(volume, size=(4, 4))
     for model, mode in CASES:
         sc.Scene(volume, model=model).render(cam, **MODE_OPTIONS[mode])
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                       dashboard_address=":0", silence_logs=40)
+    cluster = sc.distributed.local_cluster(2)  # every test below runs on its quiet settings
     with cluster, distributed.Client(cluster) as client:
         yield client
 
@@ -158,6 +157,23 @@ def test_the_workers_keep_the_prepared_scene(client, scenes):
     assert all(client.run(lambda: source in worker._scenes).values())
 
 
+def test_local_cluster_workers_get_the_quiet_settings_and_this_process_keeps_its_own(client):
+    import dask
+
+    def settings():
+        import dask
+
+        return {key: dask.config.get(key) for key in sc.distributed.QUIET_CONFIG}
+
+    for got in client.run(settings).values():
+        assert got == sc.distributed.QUIET_CONFIG
+    assert len(client.scheduler_info()["workers"]) == 2
+    assert all(w["nthreads"] == 1 for w in client.scheduler_info()["workers"].values())
+    # Only the cluster's start-up saw them: this process's configuration is Dask's default.
+    assert dask.config.get("distributed.worker.profile.enabled") is True
+    assert dask.config.get("distributed.admin.tick.interval") == "20ms"
+
+
 def test_a_path_the_workers_cannot_open_is_one_clear_error(client, tmp_path):
     missing = tmp_path / "missing.nii.gz"
     with pytest.raises(sc.ReadError) as info:
@@ -178,10 +194,14 @@ def test_bad_render_options_fail_like_a_local_render(scenes, volume):
                                         prefilter=True)
 
 
-def test_movie_on_the_cluster_writes_the_local_frames(client, tmp_path, capsys):
+@pytest.mark.parametrize("where", ["scheduler", "workers"])
+def test_movie_on_the_cluster_writes_the_local_frames(client, tmp_path, capsys, where):
     out = tmp_path / "frames"
+    # --workers starts its own local_cluster of one process for the run.
+    cluster = (["--scheduler", client.scheduler.address] if where == "scheduler"
+               else ["--workers", "1"])
     code = main(["movie", SRC, "--frames", "4", "--azimuth", "10:100", "--iso", "0.5",
-                 "--size", "40x30", "--scheduler", client.scheduler.address, "-o", f"{out}/"])
+                 "--size", "40x30", *cluster, "-o", f"{out}/"])
     _, err = capsys.readouterr()
     assert code == 0 and "4/4" in err
     names = sorted(p.name for p in out.iterdir())

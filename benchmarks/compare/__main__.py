@@ -34,11 +34,15 @@ def machine() -> dict[str, Any]:
 
 
 def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes: bool = True,
-        log=print, only_volume: bool = False) -> dict[str, Any]:
+        log=print, only_volume: bool = False, scenes_only: list[str] | None = None,
+        sizes_only: list[tuple[int, int]] | None = None, stem: str | None = None
+        ) -> dict[str, Any]:
     """Run the suite and write its results; returns the results dictionary.
 
     ``only_volume``: run only MIP/DVR and merge them into the stored results of ``out`` (the
     isosurface, quality and memory sections of the stored JSON are kept as they are).
+    ``scenes_only`` keeps the scenes whose label contains one of its strings, ``sizes_only``
+    replaces the image sizes (a partial run on a busy machine; write it under another ``stem``).
     """
     start = time.perf_counter()
     vtk = M.vtk_status()
@@ -61,6 +65,16 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
             "marschner-lobb 128^3", "marschner-lobb 256^3", "noise 256^3")
             or s.kind == "mri"]
     notes += more
+    if scenes_only:
+        def kept(spec) -> bool:
+            return any(part in spec.label for part in scenes_only)
+
+        suite = [spec for spec in suite if kept(spec)]
+        volume_scenes = [spec for spec in volume_scenes if kept(spec)]
+        notes.append("partial run: scenes " + ", ".join(spec.label for spec in suite))
+    if sizes_only:
+        sizes = list(sizes_only)
+        notes.append("partial run: images " + ", ".join(f"{w}x{h}" for w, h in sizes))
     for note in notes:
         log(f"note: {note}")
     results: dict[str, Any] = {
@@ -68,7 +82,7 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
         "machine": machine(), "vtk": vtk, "notes": notes, "iso": [], "volume": [],
         "memory": {}, "threads": {},
     }
-    stem = "compare_quick" if quick else "compare"
+    stem = stem or ("compare_quick" if quick else "compare")
     if only_volume:
         return run_only_volume(quick, repeats, out, stem, volume_scenes, notes, log, start)
     error_images: dict[str, dict] = {}
@@ -155,7 +169,10 @@ def mode_notes(volume_results: list[dict[str, Any]], ran: bool) -> list[str]:
     return notes
 
 
-ISO_LABELS_SHORT = {"splinecast": "splinecast", "vtk-flying-edges": "VTK flying edges",
+ISO_LABELS_SHORT = {"splinecast": "splinecast", "splinecast-s31": "splinecast s31",
+                    "splinecast-bspline3": "splinecast bspline3",
+                    "vtk-flying-edges-smoothed": "VTK flying edges + smoothing",
+                    "vtk-flying-edges": "VTK flying edges",
                     "vtk-marching-cubes": "VTK marching cubes",
                     "skimage-mc": "skimage marching cubes + VTK"}
 
@@ -172,6 +189,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-volume", action="store_true", help="skip MIP/DVR")
     parser.add_argument("--only-volume", action="store_true",
                         help="run only MIP/DVR and merge them into the stored results")
+    parser.add_argument("--scenes", help="comma-separated parts of scene labels to keep "
+                        "(e.g. 'marschner-lobb 256,MNI152')")
+    parser.add_argument("--sizes", help="comma-separated image sizes, e.g. 1024x768")
+    parser.add_argument("--stem", help="name of the result files (default compare[_quick])")
     parser.add_argument("--memory-worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_worker:
@@ -181,8 +202,16 @@ def main(argv: list[str] | None = None) -> int:
             job["data_path"], job["meta"], job["kind"], job["key"], tuple(job["size"]),
             job["mode"], job["step"])))
         return 0
+    sizes = None
+    if args.sizes:
+        try:
+            sizes = [tuple(int(v) for v in part.split("x")) for part in args.sizes.split(",")]
+        except ValueError:
+            parser.error(f"--sizes must look like 1024x768,512x512, got {args.sizes!r}")
     run(args.quick, args.repeats, Path(args.out), memory=not args.no_memory,
-        volume_modes=not args.no_volume, only_volume=args.only_volume)
+        volume_modes=not args.no_volume, only_volume=args.only_volume,
+        scenes_only=args.scenes.split(",") if args.scenes else None, sizes_only=sizes,
+        stem=args.stem)
     return 0
 
 

@@ -53,6 +53,25 @@ def markdown(results: dict[str, Any]) -> str:
                      if sc_ and fe else "-")
             lines.append(f"| {r['scene']} | {s['width']}x{s['height']} | "
                          + " | ".join(cells) + f" | {ratio} |")
+    if any("floor_ms" in s for r in results["iso"] for s in r["sizes"]):
+        lines += ["", "### Ratio to the floor (steady frame / floor)", "",
+                  "The floor (benchmarks/floor_kernel.py) is the least any ray caster pays per "
+                  "frame: each pixel's ray generated, clipped to the volume's box, one colour "
+                  "written, no traversal; it is timed in the same rounds as the steady frames "
+                  "(median of the rounds, best of 3 calls per round). A ratio of 1 would be a "
+                  "renderer that does nothing but reach every pixel; the meshes' ratio shows how "
+                  "far a rasterizer is from that bound.", "",
+                  "| scene | image | floor ms | " + " | ".join(ISO_LABELS[k] for k in keys)
+                  + " |", "|" + "---|" * (len(keys) + 3)]
+        for r in results["iso"]:
+            for s in r["sizes"]:
+                floor = s.get("floor_ms")
+                if floor is None:
+                    continue
+                cells = [_fmt(s["methods"][k]["steady_frame_ms"] / floor, 1)
+                         if k in s["methods"] else "-" for k in keys]
+                lines.append(f"| {r['scene']} | {s['width']}x{s['height']} | {_fmt(floor, 1)} | "
+                             + " | ".join(cells) + " |")
     lines += ["", "## Isosurface quality against the analytic function",
               "",
               "Position error: distance of each rendered hit point to the exact isosurface, in "
@@ -92,7 +111,7 @@ def markdown(results: dict[str, Any]) -> str:
                   "tolerance; one that never reaches it runs at 1/8 (\"finest step tried\").",
                   "",
                   "| scene | mode | image | method | step (voxels) | error vs reference "
-                  "| ms/frame |", "|---|---|---|---|---|---|---|"]
+                  "| ms/frame | ratio to the floor |", "|---|---|---|---|---|---|---|---|"]
         for r in results["volume"]:
             for s in r["sizes"]:
                 for k, e in s["methods"].items():
@@ -101,17 +120,19 @@ def markdown(results: dict[str, Any]) -> str:
                     flag = (" (finest step tried; above the tolerance "
                             f"{r['tolerance']:.4f})") if err is not None \
                         and q.get("step") != "exact" and err > r["tolerance"] else ""
+                    floor = s.get("floor_ms")
+                    ratio = _fmt(e["frame_ms"] / floor, 1) if floor else "-"
                     lines.append(
                         f"| {r['scene']} | {r['mode']} | {s['width']}x{s['height']} | "
                         f"{VOLUME_LABELS[k]} | {q.get('step', '-')} | "
-                        f"{_fmt(err, 4)}{flag} | {_fmt(e['frame_ms'])} |")
+                        f"{_fmt(err, 4)}{flag} | {_fmt(e['frame_ms'])} | {ratio} |")
             if r.get("default_error") is not None:
                 lines.append(f"| {r['scene']} | {r['mode']} | {qsize} | splinecast defaults "
                              f"(quality only; sets the tolerance {r['tolerance']:.4f}) | 0.5 | "
-                             f"{_fmt(r['default_error'], 4)} | - |")
+                             f"{_fmt(r['default_error'], 4)} | - | - |")
             for k, why in r["skipped"].items():
                 lines.append(f"| {r['scene']} | {r['mode']} | - | {VOLUME_LABELS[k]} | - | - | "
-                             f"skipped: {why} |")
+                             f"skipped: {why} | - |")
     lines += ["", "## Peak resident memory (MiB, fresh process per method, 1024x768)", "",
               "| scene | method | peak | increase over the loaded volume |", "|---|---|---|---|"]
     for label, per in results.get("memory", {}).items():

@@ -22,6 +22,11 @@ from .reference import image_error, reference_dvr, reference_mip
 from .scenes import SceneSpec
 
 REPO = Path(__file__).resolve().parents[2]
+# The floor kernel is imported as the top-level module ``floor_kernel`` everywhere (see its
+# docstring): Numba's on-disk cache records the module name it was compiled under.
+sys.path.insert(0, str(REPO / "benchmarks"))
+from floor_kernel import floor_render  # noqa: E402
+
 #: Azimuths of the steady-frame cameras: every timed frame follows a camera rotation.
 ROTATIONS = (40.0, 50.0, 60.0, 70.0)
 #: Sample steps (voxels) tried when matching MIP / DVR quality (coarsest first).
@@ -39,6 +44,13 @@ def _timed(fn) -> float:
 
 def _camera(volume: sc.Volume, size: tuple[int, int], azimuth: float = 30.0) -> sc.Camera:
     return sc.Camera.orbit(volume, azimuth=azimuth, elevation=20.0, size=size)
+
+
+def _floor_ms(cam: sc.Camera, volume: sc.Volume) -> float:
+    """The floor of a ray-cast frame (``benchmarks/floor_kernel.py``: the pixel's ray, clipped
+    to the volume's box, one colour written), best of three calls: it takes a few ms, so one
+    call is at the mercy of the scheduler."""
+    return min(_timed(lambda: floor_render(cam, volume.bounds)) for _ in range(3))
 
 
 def run_iso_scene(spec: SceneSpec, sizes: list[tuple[int, int]], keys: list[str], repeats: int,
@@ -80,11 +92,15 @@ def run_iso_scene(spec: SceneSpec, sizes: list[tuple[int, int]], keys: list[str]
                 first[key].append(_timed(lambda m=method, v=value, c=cam: m.new_iso(v, c)))
         for method in active.values():
             method.new_iso(iso, cam)
+        floor = []
+        floor_render(cam, volume.bounds)  # compilation
         for r in range(n):
             rotated = _camera(volume, size, ROTATIONS[r % len(ROTATIONS)])
+            floor.append(_floor_ms(rotated, volume))
             for key, method in active.items():
                 steady[key].append(_timed(lambda m=method, c=rotated: m.frame(c)))
-        entry = {"width": size[0], "height": size[1], "repeats": n, "methods": {}}
+        entry = {"width": size[0], "height": size[1], "repeats": n, "methods": {},
+                 "floor_ms": statistics.median(floor), "floor_runs_ms": floor}
         for key in active:
             entry["methods"][key] = {
                 "first_image_ms": statistics.median(first[key]),
@@ -171,12 +187,16 @@ def run_volume_scene(spec: SceneSpec, mode: str, sizes: list[tuple[int, int]], k
     for size in sizes:
         for method in active.values():
             method.frame(_camera(volume, size))  # warm-up
+        floor_render(_camera(volume, size), volume.bounds)  # compilation
         times = {key: [] for key in active}
+        floor = []
         for r in range(repeats):
             cam = _camera(volume, size, ROTATIONS[r % len(ROTATIONS)])
+            floor.append(_floor_ms(cam, volume))
             for key, method in active.items():
                 times[key].append(_timed(lambda m=method, c=cam: m.frame(c)))
-        entry = {"width": size[0], "height": size[1], "methods": {
+        entry = {"width": size[0], "height": size[1], "floor_ms": statistics.median(floor),
+                 "floor_runs_ms": floor, "methods": {
             key: {"frame_ms": statistics.median(t), "runs_ms": t} for key, t in times.items()}}
         result["sizes"].append(entry)
         log(f"  {spec.label} {mode} {size[0]}x{size[1]} ms/frame: " + ", ".join(

@@ -28,6 +28,7 @@ from .render.frame import Frame
 from .render.iso import METHODS, Iso
 from .render.mip import Mip
 from .render.multi_iso import MultiIso
+from .render.outputs import OUTPUTS, check_outputs
 from .render.segment import make_grid, render_grid
 from .render.shading import Shading
 from .transfer import TransferFunction
@@ -226,6 +227,7 @@ class Scene:
         colormap: Any = "gray",
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
+        outputs: Any = None,
     ) -> Frame:
         """Render one image.
 
@@ -271,16 +273,33 @@ class Scene:
             :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).
         dvr : DVRSettings, optional
             Step, pre-integration, adaptive step, early termination, shading of ``mode="dvr"``.
+        outputs : list of str, optional
+            The Frame's buffers to fill, from ``"rgba"``, ``"depth"``, ``"position"``,
+            ``"normal"``, ``"face"``, ``"value"`` (MIP/minIP) and ``"stats"`` (the per-ray
+            counters); default all. The others are ``None`` in the Frame and cost nothing:
+            ``outputs=("rgba",)`` is what an image viewer needs, ``("rgba", "depth")`` what
+            compositing with other geometry needs. Summary numbers (``Frame.stats``) that
+            need a buffer that was not requested (``hits``: depth; ``mean_cells_visited``:
+            stats) are left out.
 
         Returns
         -------
         Frame
+
+        Examples
+        --------
+        >>> import splinecast as sc
+        >>> vol = sc.demo("sphere", size=32)
+        >>> cam = sc.Camera.orbit(vol, size=(64, 48))
+        >>> frame = sc.Scene(vol).render(cam, iso=0.0, outputs=("rgba", "depth"))
+        >>> frame.rgba.shape, frame.position is None
+        ((48, 64, 4), True)
         """
         request = prepare_render(
             self.volume, camera, mode, iso, method, step, shading, inside, clip=clip,
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name)
+            check_iso=self._check_iso, model=self.model.name, outputs=outputs)
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:
             classify_ms = 0.0
@@ -293,7 +312,8 @@ class Scene:
             stats["classify_ms"] = classify_ms
             stats.update(self.iso_stats)
         start = time.perf_counter()
-        out, counters = render_grid(grid, request.setup, camera, planes, flags)
+        out, counters = render_grid(grid, request.setup, camera, planes, flags,
+                                    count="stats" in request.outputs)
         return finish_frame(request, out, counters, camera, start)
 
 
@@ -313,6 +333,9 @@ class RenderRequest:
         The isovalue of a single isosurface (``mode="iso"`` with one value), else ``None``.
     shading : Shading
     effects : SurfaceEffects or None
+    outputs : frozenset of str
+        The buffers the Frame keeps (:mod:`splinecast.render.outputs`); the mode may fill more
+        (surface effects need position, normal and face).
     """
 
     setup: Any
@@ -321,6 +344,7 @@ class RenderRequest:
     iso: float | None
     shading: Shading
     effects: SurfaceEffects | None
+    outputs: frozenset[str] = frozenset(OUTPUTS)
 
 
 def prepare_render(
@@ -328,13 +352,14 @@ def prepare_render(
     shading: Shading | None, inside: str | None, *, clip: Any, crop: Any, colors: Any,
     opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
     tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
-    check_iso: Any, model: str,
+    check_iso: Any, model: str, outputs: Any = None,
 ) -> RenderRequest:
     """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
     type: in memory, multiresolution).
 
     ``volume`` supplies the automatic choices (:mod:`splinecast.render.defaults`), the metadata
     and the value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
+    ``outputs`` names the Frame's buffers (``None``: all).
     """
     if not isinstance(camera, Camera):
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
@@ -350,30 +375,35 @@ def prepare_render(
     if effects is not None and not isinstance(effects, SurfaceEffects):
         raise ParameterError(f"effects must be a SurfaceEffects, got {type(effects).__name__}")
     planes = make_planes(clip, crop)
+    wanted = check_outputs(outputs)
+    # Surface effects are applied on the host from the hit's position, normal and face.
+    filled = wanted | {"position", "normal", "face"} if (
+        effects is not None and effects.active) else wanted
     stats: dict[str, Any] = {"mode": mode, "model": model}
     value = None
     if mode in ("mip", "minip"):
         window = auto_window(volume) if window is None else window
         setup: Any = Mip(mode, method, step, window, colormap, shading.background,
-                         volume.value_range)
+                         volume.value_range, outputs=filled)
         stats["method"] = method
     elif mode == "dvr":
         tf = auto_transfer_function(volume) if tf is None else tf
-        setup = Dvr(tf, dvr, shading.background, table_cache)
+        setup = Dvr(tf, dvr, shading.background, table_cache, outputs=filled)
     elif isinstance(iso, (list, tuple, np.ndarray)):
         if len(iso) == 0:
             raise ParameterError("iso must hold at least one isovalue")
-        setup = MultiIso([check_iso(v) for v in iso], colors, opacity, inside, shading, effects)
+        setup = MultiIso([check_iso(v) for v in iso], colors, opacity, inside, shading, effects,
+                         outputs=filled)
         stats["method"] = "exact"
     else:
         value = check_iso(iso)
-        setup = Iso(value, method, step, inside, shading)
+        setup = Iso(value, method, step, inside, shading, outputs=filled)
         if len(planes):
             stats["planes"] = len(planes)
         stats.update(method=method, iso=value)
         if method == "sampled":
             stats["step"] = float(step)
-    return RenderRequest(setup, planes, stats, value, shading, effects)
+    return RenderRequest(setup, planes, stats, value, shading, effects, wanted)
 
 
 def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Camera,
@@ -386,15 +416,26 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
         apply_effects(camera.pixel_basis(), request.shading.as_array(), effects.as_array(),
                       frame.position, frame.normal, frame.face, frame.rgba)
     trace_ms = (time.perf_counter() - start) * 1e3
-    visited, tested, skipped = counters
     stats.update({
         "width": camera.width,
         "height": camera.height,
         "rays": camera.width * camera.height,
-        "hits": int(np.count_nonzero(np.isfinite(frame.depth))),
         "trace_ms": trace_ms,
-        "mean_cells_visited": float(visited.mean()),
-        "mean_cells_tested": float(tested.mean()),
-        "mean_blocks_skipped": float(skipped.mean()),
     })
+    wanted = request.outputs
+    if frame.depth is not None:
+        stats["hits"] = int(np.count_nonzero(np.isfinite(frame.depth)))
+    if "stats" in wanted:
+        visited, tested, skipped = counters
+        stats.update({
+            "mean_cells_visited": float(visited.mean()),
+            "mean_cells_tested": float(tested.mean()),
+            "mean_blocks_skipped": float(skipped.mean()),
+        })
+    else:
+        frame.cells_visited = frame.cells_tested = frame.blocks_skipped = None
+    # Buffers filled for the mode's own use (surface effects) but not requested.
+    for name in ("depth", "position", "normal", "face"):
+        if name not in wanted:
+            setattr(frame, name, None)
     return frame

@@ -126,7 +126,9 @@ def _dask_client(args: argparse.Namespace) -> Iterator[Any]:
     """A client of the cluster ``--scheduler`` names, or of a local one of ``--workers``
     single-threaded processes (shut down afterwards)."""
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client
+
+        from splinecast.distributed.cluster import local_cluster
     except ImportError:
         raise sc.ParameterError("--workers/--scheduler need Dask: "
                                 "pip install 'splinecast[distributed]'") from None
@@ -139,11 +141,10 @@ def _dask_client(args: argparse.Namespace) -> Iterator[Any]:
         with client:
             yield client
         return
-    # Worker logs stay quiet below errors: a user mistake is reported once, by the client.
-    # Any free port for the HTTP server: several local clusters may run on one machine.
-    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                      dashboard_address=":0", silence_logs=40) as cluster, \
-            Client(cluster) as client:
+    # Single-threaded worker processes with Dask's background polling turned down (it would
+    # take its share of the cores from the renders); worker logs quiet below errors, any free
+    # port for the dashboard (see splinecast.distributed.cluster).
+    with local_cluster(args.workers) as cluster, Client(cluster) as client:
         yield client
 
 

@@ -11,7 +11,9 @@ per frame. Movies (:mod:`.movie`) write such batches to MP4, GIF or a folder of 
 - :mod:`.tiles`: tiles of an image and the assembly of their frames;
 - :mod:`.shots`: one frame's camera and options (:class:`Shot`), camera paths, local batches;
 - :mod:`.scene`: :class:`DistributedScene`;
-- :mod:`.movie`: movie files written frame by frame, all or nothing.
+- :mod:`.movie`: movie files written frame by frame, all or nothing;
+- :mod:`.cluster`: :func:`local_cluster`, a ``LocalCluster`` whose background polling does not
+  take the renders' cores.
 
 Sort-last scale-out: the data is split, the image is not. ``DistributedScene(store, client,
 model, strategy="sort-last", level=k)`` (:mod:`.sort_last`, :class:`SortLastScene`) assigns the
@@ -26,6 +28,7 @@ tree in visibility order by tasks on the workers, so the client receives only th
 Importing this package does not import Dask; creating a :class:`DistributedScene` does.
 """
 
+from .cluster import QUIET_CONFIG, local_cluster
 from .movie import MovieWriter
 from .scene import STRATEGIES, DistributedScene
 from .shots import Shot, as_shots, orbit_path, ramp, render_locally
@@ -38,6 +41,7 @@ __all__ = [
     "FrameCanvas",
     "KdNode",
     "MovieWriter",
+    "QUIET_CONFIG",
     "Partial",
     "STRATEGIES",
     "SceneSource",
@@ -47,6 +51,7 @@ __all__ = [
     "Tile",
     "VolumeInfo",
     "as_shots",
+    "local_cluster",
     "auto_tile_size",
     "merge_stats",
     "orbit_path",

@@ -105,5 +105,8 @@ def render_locally(scene: Scene, shots: Iterable[Shot], image_only: bool = False
     :meth:`DistributedScene.render_many` does.
     """
     for shot in shots:
-        frame = scene.render(shot.camera, **shot.options)
+        options = shot.options
+        if image_only:  # colour is all that is kept: the other buffers are not even filled
+            options = {"outputs": ("rgba",), **options}
+        frame = scene.render(shot.camera, **options)
         yield frame.to_uint8() if image_only else frame

@@ -111,6 +111,8 @@ def render_shot(source: SceneSource, camera: Camera, options: dict[str, Any],
                 image_only: bool = False) -> Frame | np.ndarray:
     """Render one image; with ``image_only`` return just its 8-bit RGBA colours, which is all
     a movie or a display needs and 1/18 of the frame's buffers."""
+    if image_only:  # colour is all that is kept: the other buffers are not even filled
+        options = {"outputs": ("rgba",), **options}
     with _lock:
         _use_worker_threads()
         frame = _scene(source).render(camera, **options)

@@ -221,6 +221,7 @@ class MultiscaleScene:
         colormap: Any = "gray",
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
+        outputs: Any = None,
         lod: float | None = None,
         interest: Any = None,
         wait: bool = True,
@@ -232,6 +233,8 @@ class MultiscaleScene:
 
         Parameters
         ----------
+        outputs : list of str, optional
+            The Frame's buffers to keep (as :meth:`splinecast.Scene.render`; default all).
         lod : float, optional
             Level of detail of this frame (default: the scene's; ``cut="lod"`` and the
             isosurface modes).
@@ -256,7 +259,7 @@ class MultiscaleScene:
             self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name)
+            check_iso=self._check_iso, model=self.model.name, outputs=outputs)
         start = time.perf_counter()
         value_filter = self._filter(request.setup)
         selector = self._selector(request.setup, camera, value_filter, interest)

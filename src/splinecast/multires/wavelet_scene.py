@@ -270,12 +270,15 @@ class WaveletScene:
         colormap: Any = "gray",
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
+        outputs: Any = None,
         lod: float | None = None,
     ) -> Frame:
         """Render one image (see :meth:`splinecast.Scene.render` for the mode options).
 
         Parameters
         ----------
+        outputs : list of str, optional
+            The Frame's buffers to keep (as :meth:`splinecast.Scene.render`; default all).
         lod : float, optional
             ε of this frame (default: the scene's, else one pixel's angle).
 
@@ -287,7 +290,7 @@ class WaveletScene:
             self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name)
+            check_iso=self._check_iso, model=self.model.name, outputs=outputs)
         eps = self.epsilon(camera, lod)
         setup = request.setup
         isos: Any = None

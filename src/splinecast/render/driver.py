@@ -189,7 +189,7 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
 
 @jit()
 def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, band, band_rows,
-                tile, load, store, final, visited, tested, skipped):
+                tile, load, store, final, count, visited, tested, skipped):
     """Trace the pixels of one band of rows, tile by tile (one thread's work item)."""
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(grid)
@@ -207,14 +207,15 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, ba
                     grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
                     final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz,
                 )
-                visited[row, col] += nv
-                tested[row, col] += nt
-                skipped[row, col] += ns
+                if count:
+                    visited[row, col] += nv
+                    tested[row, col] += nt
+                    skipped[row, col] += ns
 
 
 @jit(parallel=True)
 def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
-          load, store, final, visited, tested, skipped):
+          load, store, final, count, visited, tested, skipped):
     """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
 
     Parameters (all prepared by the host side, :mod:`.segment`)
@@ -239,6 +240,9 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
         Order of the bands of ``band_rows`` rows; ``tile`` columns per tile.
     load, store, final : bool
         Read the state arrays at the start, write them at the end, write the outputs.
+    count : bool
+        Increment the per-ray statistics (a caller that does not want them passes False and
+        arrays that are only read for the image's size).
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
     """
@@ -246,7 +250,7 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
     # Numba's parallel passes (and the compile time) small.
     for b in prange(bands.shape[0]):
         _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands[b],
-                    band_rows, tile, load, store, final, visited, tested, skipped)
+                    band_rows, tile, load, store, final, count, visited, tested, skipped)
 
 
 @jit(parallel=True)

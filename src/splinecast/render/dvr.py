@@ -61,6 +61,7 @@ from .mode_api import (
     unchanged_end,
     unchanged_skip,
 )
+from .outputs import ALL_OUTPUTS, buffer
 
 __all__ = ["DVRSettings", "PREINTEGRATION", "TABLE_LAYOUTS", "DvrMode", "Dvr", "combine_dvr"]
 
@@ -345,17 +346,22 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
 @jit()
 def _finish(mode, out, row, col, st, ray):
     rgba, depth, position, samples = out
-    bg = mode.background
-    rest = 1.0 - st[3]
-    rgba[row, col, 0] = min(st[0] + rest * bg[0] * bg[3], 1.0)
-    rgba[row, col, 1] = min(st[1] + rest * bg[1] * bg[3], 1.0)
-    rgba[row, col, 2] = min(st[2] + rest * bg[2] * bg[3], 1.0)
-    rgba[row, col, 3] = st[3] + rest * bg[3]
+    # Buffers with no rows were not asked for (see .outputs).
+    if rgba.shape[0] != 0:
+        bg = mode.background
+        rest = 1.0 - st[3]
+        rgba[row, col, 0] = min(st[0] + rest * bg[0] * bg[3], 1.0)
+        rgba[row, col, 1] = min(st[1] + rest * bg[1] * bg[3], 1.0)
+        rgba[row, col, 2] = min(st[2] + rest * bg[2] * bg[3], 1.0)
+        rgba[row, col, 3] = st[3] + rest * bg[3]
     t = st[4]
-    depth[row, col] = t
-    for c in range(3):
-        position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
-    samples[row, col] = st[5]
+    if depth.shape[0] != 0:
+        depth[row, col] = t
+    if position.shape[0] != 0:
+        for c in range(3):
+            position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
+    if samples.shape[0] != 0:
+        samples[row, col] = st[5]
 
 
 register(DvrMode,
@@ -408,12 +414,17 @@ class Dvr:
     cache : dict, optional
         Keeps the last pre-integration table between renders (tables take milliseconds to
         seconds to build).
+    outputs : set of str, optional
+        The Frame's buffers to fill (:mod:`.outputs`; default all; ``"stats"`` includes the
+        per-ray sample counts).
     """
 
     name = "dvr"
 
     def __init__(self, tf: TransferFunction, settings: DVRSettings | None = None,
-                 background: Any = (0.0, 0.0, 0.0, 1.0), cache: dict | None = None) -> None:
+                 background: Any = (0.0, 0.0, 0.0, 1.0), cache: dict | None = None,
+                 outputs: frozenset[str] = ALL_OUTPUTS) -> None:
+        self.outputs = outputs
         if not isinstance(tf, TransferFunction):
             raise ParameterError("mode 'dvr' needs tf=TransferFunction(...)")
         settings = settings or DVRSettings()
@@ -450,22 +461,28 @@ class Dvr:
         return (np.empty((height, width, 4)), np.empty((height, width)),
                 np.empty((height, width)), np.empty((height, width), np.int32))
 
-    @staticmethod
-    def output(height: int, width: int) -> tuple:
-        """Output buffers: rgba, depth, position, samples."""
-        return (np.empty((height, width, 4), np.float32), np.empty((height, width)),
-                np.empty((height, width, 3)), np.empty((height, width), np.int32))
+    def output(self, height: int, width: int) -> tuple:
+        """Output buffers: rgba, depth, position, samples (zero rows: not requested)."""
+        o = self.outputs
+        return (buffer("rgba" in o, (height, width, 4), np.float32),
+                buffer("depth" in o, (height, width)),
+                buffer("position" in o, (height, width, 3)),
+                buffer("stats" in o, (height, width), np.int32))
 
     def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
         """The Frame (``depth``: where the opacity passes 1/2)."""
         rgba, depth, position, samples = out
-        h, w = depth.shape
+        o = self.outputs
+        h, w = counters[0].shape
         s = self.settings
         stats.update(step=s.step, preintegration=s.preintegration, adaptive=s.adaptive,
                      table_layout=s.table_layout, termination=s.termination,
-                     table_ms=self.table_ms, mean_samples=float(samples.mean()))
-        return Frame(rgba, depth, position, np.full((h, w, 3), np.nan, np.float32),
-                     np.zeros((h, w), np.int8), *counters, stats)
+                     table_ms=self.table_ms)
+        if samples.shape[0]:
+            stats["mean_samples"] = float(samples.mean())
+        return Frame(*(a if a.shape[0] else None for a in (rgba, depth, position)),
+                     np.full((h, w, 3), np.nan, np.float32) if "normal" in o else None,
+                     np.zeros((h, w), np.int8) if "face" in o else None, *counters, stats)
 
     combine = staticmethod(combine_dvr)
 

@@ -19,6 +19,11 @@ __all__ = ["Frame"]
 class Frame:
     """The buffers of one rendered image.
 
+    A render fills the buffers its ``outputs`` name (``Scene.render(..., outputs=...)``, default
+    all); a buffer that was not requested is ``None``, as ``value`` is for modes without a
+    projected value, and what needs it (:attr:`hit` needs ``depth``) raises a
+    :class:`~splinecast.errors.ParameterError` that says which output to request.
+
     Attributes
     ----------
     rgba : ndarray, shape (height, width, 4), float32 in [0, 1]
@@ -42,37 +47,51 @@ class Frame:
         volume); ``None`` for other modes.
     """
 
-    rgba: np.ndarray
-    depth: np.ndarray
-    position: np.ndarray
-    normal: np.ndarray
-    face: np.ndarray
-    cells_visited: np.ndarray
-    cells_tested: np.ndarray
-    blocks_skipped: np.ndarray
+    rgba: np.ndarray | None
+    depth: np.ndarray | None
+    position: np.ndarray | None
+    normal: np.ndarray | None
+    face: np.ndarray | None
+    cells_visited: np.ndarray | None
+    cells_tested: np.ndarray | None
+    blocks_skipped: np.ndarray | None
     stats: dict[str, Any] = field(default_factory=dict)
     value: np.ndarray | None = None
 
+    def _needs(self, name: str) -> np.ndarray:
+        array = getattr(self, name)
+        if array is None:
+            raise ParameterError(f"this frame has no {name} buffer: render with outputs "
+                                 f"including {name!r}")
+        return array
+
     @property
     def hit(self) -> np.ndarray:
-        """Boolean mask of pixels whose ray hit the surface."""
-        return np.isfinite(self.depth)
+        """Boolean mask of pixels whose ray hit the surface (needs the ``depth`` output)."""
+        return np.isfinite(self._needs("depth"))
 
     @property
     def size(self) -> tuple[int, int]:
         """Image ``(width, height)``."""
-        return int(self.depth.shape[1]), int(self.depth.shape[0])
+        for array in (self.rgba, self.depth, self.position, self.normal, self.face,
+                      self.cells_visited, self.value):
+            if array is not None:
+                return int(array.shape[1]), int(array.shape[0])
+        return int(self.stats["width"]), int(self.stats["height"])
 
     def to_uint8(self) -> np.ndarray:
-        """The colour buffer as 8-bit RGBA."""
-        return (np.clip(self.rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+        """The colour buffer as 8-bit RGBA (needs the ``rgba`` output)."""
+        return (np.clip(self._needs("rgba"), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
-    def _repr_png_(self) -> bytes:
-        """PNG bytes of the colour buffer: Jupyter and IPython show a Frame as its image."""
+    def _repr_png_(self) -> bytes | None:
+        """PNG bytes of the colour buffer: Jupyter and IPython show a Frame as its image
+        (``None`` without one: they fall back to the text form)."""
         import io
 
         from PIL import Image
 
+        if self.rgba is None:
+            return None
         buffer = io.BytesIO()
         Image.fromarray(self.to_uint8(), mode="RGBA").save(buffer, format="PNG")
         return buffer.getvalue()
@@ -83,6 +102,7 @@ class Frame:
 
         if Path(path).suffix.lower() != ".png":
             raise ParameterError(f"{path}: the image must be saved as .png")
+        self._needs("rgba")
         image = Image.fromarray(self.to_uint8(), mode="RGBA")
         with atomic_outputs(Path(path)) as (tmp,):
             image.save(tmp, format="PNG")
@@ -91,6 +111,7 @@ class Frame:
         """Write the depth buffer as ``.npy`` (float64, ``inf`` on misses)."""
         if Path(path).suffix.lower() != ".npy":
             raise ParameterError(f"{path}: the depth buffer must be saved as .npy")
+        depth = self._needs("depth")
         with atomic_outputs(Path(path)) as (tmp,):
             with open(tmp, "wb") as f:  # a file object: np.save must not append ".npy"
-                np.save(f, self.depth)
+                np.save(f, depth)

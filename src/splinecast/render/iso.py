@@ -28,6 +28,7 @@ from ..models.pieces import gradient, value_gradient_at
 from ..roots.pieces import poly_first_root, poly_value
 from .frame import Frame
 from .mode_api import flagged_block_size, no_scratch, register, unchanged_begin
+from .outputs import ALL_OUTPUTS, buffer
 from .pixels import store_hit, store_miss
 from .shading import Shading
 
@@ -253,12 +254,16 @@ class Iso:
         Which side of the isovalue is the object's inside.
     shading : Shading, optional
         Colours and lighting.
+    outputs : set of str, optional
+        The Frame's buffers to fill (:mod:`.outputs`; default all).
     """
 
     name = "iso"
 
     def __init__(self, iso: float, method: str = "exact", step: float = 0.25,
-                 inside: str = "high", shading: Shading | None = None) -> None:
+                 inside: str = "high", shading: Shading | None = None,
+                 outputs: frozenset[str] = ALL_OUTPUTS) -> None:
+        self.outputs = outputs
         if method not in METHODS:
             raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
         if method == "sampled":  # against the volume's size too: limits.check_render
@@ -280,16 +285,17 @@ class Iso:
         return (np.empty((height, width)), np.empty((height, width, 3)),
                 np.empty((height, width, 2)))
 
-    @staticmethod
-    def output(height: int, width: int) -> tuple:
-        """Output buffers: rgba, depth, position, normal, face."""
-        return (np.empty((height, width, 4), np.float32), np.empty((height, width)),
-                np.empty((height, width, 3)), np.empty((height, width, 3), np.float32),
-                np.empty((height, width), np.int8))
+    def output(self, height: int, width: int) -> tuple:
+        """Output buffers: rgba, depth, position, normal, face (zero rows: not requested)."""
+        o = self.outputs
+        return (buffer("rgba" in o, (height, width, 4), np.float32),
+                buffer("depth" in o, (height, width)),
+                buffer("position" in o, (height, width, 3)),
+                buffer("normal" in o, (height, width, 3), np.float32),
+                buffer("face" in o, (height, width), np.int8))
 
     def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
-        """The Frame of finished outputs."""
-        rgba, depth, position, normal, face = out
-        return Frame(rgba, depth, position, normal, face, *counters, stats)
+        """The Frame of finished outputs (``None`` for those not requested)."""
+        return Frame(*(a if a.shape[0] else None for a in out), *counters, stats)
 
     combine = staticmethod(combine_iso)

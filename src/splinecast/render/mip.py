@@ -37,6 +37,7 @@ from ..roots.pieces import poly_max, poly_value
 from ..transfer import apply_colormap, colormap_table
 from .frame import Frame
 from .mode_api import no_scratch, register, unchanged_end, unchanged_skip
+from .outputs import ALL_OUTPUTS, buffer
 
 __all__ = ["MipMode", "Mip", "combine_mip"]
 
@@ -136,17 +137,24 @@ def _done(mode, st):
 def _finish(mode, out, row, col, st, ray):
     value, depth, position = out
     t = st[1]
+    # Buffers with no rows were not asked for (see .outputs).
     if t == math.inf:
-        value[row, col] = math.nan
-        depth[row, col] = math.inf
-        for c in range(3):
-            position[row, col, c] = math.nan
+        if value.shape[0] != 0:
+            value[row, col] = math.nan
+        if depth.shape[0] != 0:
+            depth[row, col] = math.inf
+        if position.shape[0] != 0:
+            for c in range(3):
+                position[row, col, c] = math.nan
     else:
-        value[row, col] = mode.sign * st[0]
-        depth[row, col] = t
-        position[row, col, 0] = ray[0] + t * ray[3]
-        position[row, col, 1] = ray[1] + t * ray[4]
-        position[row, col, 2] = ray[2] + t * ray[5]
+        if value.shape[0] != 0:
+            value[row, col] = mode.sign * st[0]
+        if depth.shape[0] != 0:
+            depth[row, col] = t
+        if position.shape[0] != 0:
+            position[row, col, 0] = ray[0] + t * ray[3]
+            position[row, col, 1] = ray[1] + t * ray[4]
+            position[row, col, 2] = ray[2] + t * ray[5]
 
 
 register(MipMode,
@@ -210,12 +218,17 @@ class Mip:
         Colour of rays that miss the volume.
     value_range : (lo, hi)
         The data range (the default window).
+    outputs : set of str, optional
+        The Frame's buffers to fill (:mod:`.outputs`; default all). The colour is mapped from
+        the projected values, so ``"rgba"`` computes them even when ``"value"`` is not kept.
     """
 
     def __init__(self, kind: str = "mip", method: str = "exact", step: float = 0.25,
                  window: Any = None, colormap: Any = "gray",
                  background: Any = (0.0, 0.0, 0.0, 1.0),
-                 value_range: tuple[float, float] = (0.0, 1.0)) -> None:
+                 value_range: tuple[float, float] = (0.0, 1.0),
+                 outputs: frozenset[str] = ALL_OUTPUTS) -> None:
+        self.outputs = outputs
         if method not in _METHODS:
             raise ParameterError(f"method must be one of {', '.join(_METHODS)}, got {method!r}")
         if method == "sampled":  # against the volume's size too: limits.check_render
@@ -239,21 +252,27 @@ class Mip:
         """Per-pixel state arrays: best value (times the sign) and where."""
         return np.empty((height, width)), np.empty((height, width))
 
-    @staticmethod
-    def output(height: int, width: int) -> tuple:
-        """Output buffers: value, depth, position."""
-        return np.empty((height, width)), np.empty((height, width)), np.empty((height, width, 3))
+    def output(self, height: int, width: int) -> tuple:
+        """Output buffers: value, depth, position (zero rows: not requested)."""
+        o = self.outputs
+        return (buffer("value" in o or "rgba" in o, (height, width)),
+                buffer("depth" in o, (height, width)),
+                buffer("position" in o, (height, width, 3)))
 
     def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
         """The Frame: colormapped values; ``Frame.value`` holds the projected values."""
         value, depth, position = out
-        h, w = depth.shape
-        rgba = apply_colormap(value, self.window, self.colormap, self.background)
-        normal = np.full((h, w, 3), np.nan, np.float32)
-        face = np.zeros((h, w), np.int8)
+        o = self.outputs
+        h, w = counters[0].shape
+        rgba = (apply_colormap(value, self.window, self.colormap, self.background)
+                if "rgba" in o else None)
+        normal = np.full((h, w, 3), np.nan, np.float32) if "normal" in o else None
+        face = np.zeros((h, w), np.int8) if "face" in o else None
         stats.update(window=self.window)
         if self.method == "sampled":
             stats["step"] = self.params.step
-        return Frame(rgba, depth, position, normal, face, *counters, stats, value)
+        return Frame(rgba, depth if "depth" in o else None,
+                     position if "position" in o else None, normal, face, *counters, stats,
+                     value if "value" in o else None)
 
     combine = staticmethod(combine_mip)

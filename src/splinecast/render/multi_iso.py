@@ -32,6 +32,7 @@ from ..transfer import COLORMAPS, colormap_table
 from .effects import NO_EFFECTS, SurfaceEffects, surface_rgb
 from .frame import Frame
 from .mode_api import flagged_block_size, register, unchanged_begin, unchanged_end, unchanged_skip
+from .outputs import ALL_OUTPUTS, buffer
 from .shading import Shading
 
 __all__ = ["MultiIsoMode", "MultiIso", "combine_multi_iso"]
@@ -156,22 +157,29 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
 @jit()
 def _finish(mode, out, row, col, st, ray):
     rgba, depth, position, normal, face, layers = out
-    sh = mode.shading
-    rest = 1.0 - st[3]
-    bg_a = sh[9]
-    rgba[row, col, 0] = min(st[0] + rest * sh[6] * bg_a, 1.0)
-    rgba[row, col, 1] = min(st[1] + rest * sh[7] * bg_a, 1.0)
-    rgba[row, col, 2] = min(st[2] + rest * sh[8] * bg_a, 1.0)
-    rgba[row, col, 3] = st[3] + rest * bg_a
+    # Buffers with no rows were not asked for (see .outputs).
+    if rgba.shape[0] != 0:
+        sh = mode.shading
+        rest = 1.0 - st[3]
+        bg_a = sh[9]
+        rgba[row, col, 0] = min(st[0] + rest * sh[6] * bg_a, 1.0)
+        rgba[row, col, 1] = min(st[1] + rest * sh[7] * bg_a, 1.0)
+        rgba[row, col, 2] = min(st[2] + rest * sh[8] * bg_a, 1.0)
+        rgba[row, col, 3] = st[3] + rest * bg_a
     t = st[4]
-    depth[row, col] = t
-    face[row, col] = st[8]
-    layers[row, col] = st[9]
-    for c in range(3):
-        position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
-    normal[row, col, 0] = st[5]
-    normal[row, col, 1] = st[6]
-    normal[row, col, 2] = st[7]
+    if depth.shape[0] != 0:
+        depth[row, col] = t
+    if face.shape[0] != 0:
+        face[row, col] = st[8]
+    if layers.shape[0] != 0:
+        layers[row, col] = st[9]
+    if position.shape[0] != 0:
+        for c in range(3):
+            position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
+    if normal.shape[0] != 0:
+        normal[row, col, 0] = st[5]
+        normal[row, col, 1] = st[6]
+        normal[row, col, 2] = st[7]
 
 
 register(MultiIsoMode,
@@ -257,13 +265,18 @@ class MultiIso:
     inside : {"high", "low"}
     shading : Shading, optional
     effects : SurfaceEffects, optional
+    outputs : set of str, optional
+        The Frame's buffers to fill (:mod:`.outputs`; default all; ``"stats"`` includes the
+        per-ray layer counts).
     """
 
     name = "iso"
 
     def __init__(self, isos: list[float], colors: Any = None, opacity: Any = None,
                  inside: str = "high", shading: Shading | None = None,
-                 effects: SurfaceEffects | None = None) -> None:
+                 effects: SurfaceEffects | None = None,
+                 outputs: frozenset[str] = ALL_OUTPUTS) -> None:
+        self.outputs = outputs
         count = len(isos)
         if colors is None:
             order = np.argsort(np.argsort(isos))
@@ -289,17 +302,23 @@ class MultiIso:
                 np.empty((height, width, 3)), np.empty((height, width), np.int8),
                 np.empty((height, width), np.int32), np.empty((height, width, 2)))
 
-    @staticmethod
-    def output(height: int, width: int) -> tuple:
-        """Output buffers: rgba, depth, position, normal, face, layers."""
-        return (np.empty((height, width, 4), np.float32), np.empty((height, width)),
-                np.empty((height, width, 3)), np.empty((height, width, 3), np.float32),
-                np.empty((height, width), np.int8), np.empty((height, width), np.int32))
+    def output(self, height: int, width: int) -> tuple:
+        """Output buffers: rgba, depth, position, normal, face, layers (zero rows: not
+        requested)."""
+        o = self.outputs
+        return (buffer("rgba" in o, (height, width, 4), np.float32),
+                buffer("depth" in o, (height, width)),
+                buffer("position" in o, (height, width, 3)),
+                buffer("normal" in o, (height, width, 3), np.float32),
+                buffer("face" in o, (height, width), np.int8),
+                buffer("stats" in o, (height, width), np.int32))
 
     def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
         """The Frame; ``stats["mean_layers"]`` counts the crossings composited per pixel."""
-        rgba, depth, position, normal, face, layers = out
-        stats.update(iso=list(self.isos), mean_layers=float(layers.mean()))
-        return Frame(rgba, depth, position, normal, face, *counters, stats)
+        layers = out[5]
+        stats.update(iso=list(self.isos))
+        if layers.shape[0]:
+            stats["mean_layers"] = float(layers.mean())
+        return Frame(*(a if a.shape[0] else None for a in out[:5]), *counters, stats)
 
     combine = staticmethod(combine_multi_iso)

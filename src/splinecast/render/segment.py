@@ -153,27 +153,33 @@ def counters(height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 def _run(grid: Grid, mode: Any, camera: Any, blocks: tuple, state: tuple, out: tuple,
          planes: np.ndarray, t_range: np.ndarray, load: bool, store: bool, final: bool,
-         stats: tuple) -> None:
+         stats: tuple, count: bool = True) -> None:
     h, w = camera.height, camera.width
     band_rows = max(1, grid.band_rows)
     tile = grid.tile if grid.tile > 0 else w
     bands = band_order((h + band_rows - 1) // band_rows)
     trace(grid.kernel, mode.params, blocks, state, out, camera.pixel_basis(), grid.geom,
           np.ascontiguousarray(planes, np.float64), t_range, bands, band_rows, tile, load, store,
-          final, *stats)
+          final, count, *stats)
 
 
 def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLANES,
-                flags: tuple | None = None) -> tuple[tuple, tuple]:
+                flags: tuple | None = None, count: bool = True) -> tuple[tuple, tuple]:
     """Trace a whole image through one grid; returns ``(outputs, counters)``.
 
-    ``flags`` replaces the hierarchy's own classification for the iso mode.
+    ``flags`` replaces the hierarchy's own classification for the iso mode. Without ``count``
+    the per-ray statistics are not gathered: the counters returned are one uninitialised array
+    (never written, so never paged in) standing for all three.
     """
     h, w = camera.height, camera.width
     out = mode.output(h, w)
-    stats = counters(h, w)
+    if count:
+        stats = counters(h, w)
+    else:
+        unused = np.empty((h, w), np.int32)
+        stats = (unused, unused, unused)
     _run(grid, mode, camera, mode.blocks(grid.hierarchy, flags), mode.state(0, 0), out, planes,
-         _NO_RANGE, False, False, True, stats)
+         _NO_RANGE, False, False, True, stats, count)
     return out, stats
 
 

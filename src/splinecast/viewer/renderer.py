@@ -175,7 +175,8 @@ class FrameRenderer:
             height = max(1, round(camera.height * scale))
             camera = resized_camera(camera, width, height)
         rows = self._stripe_rows(request, camera.width, camera.height)
-        options = {**request.options, **self.shown.render_options(step)}
+        # The viewer shows colour only: no depth, position, normal or per-ray counters.
+        options = {"outputs": ("rgba",), **request.options, **self.shown.render_options(step)}
         image = np.empty((camera.height, camera.width, 4), np.uint8)
         parts: list[tuple[int, dict[str, Any]]] = []
         for row0 in range(0, camera.height, rows):
