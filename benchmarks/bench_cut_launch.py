@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import tempfile
 import time
@@ -141,6 +142,11 @@ def markdown(result: dict, command: str, note: str) -> str:
              f"{result['repeats']} steady frames after warm-up, both paths interleaved in one "
              "process (two rounds each). CPU = process "
              "time of all threads.", ""]
+    if "load_average" in result:
+        la = result["load_average"]
+        lines += ["Load average (1, 5, 15 min) before: "
+                  + ", ".join(f"{v:.2f}" for v in la["before"]) + "; after: "
+                  + ", ".join(f"{v:.2f}" for v in la["after"]) + ".", ""]
     if result["kind"] == "plain":
         lines += [f"{result['n']}^3 uint8 pyramid, {w}x{h}, trilinear, budget "
                   f"{result['budget']}, lod 1.", "",
@@ -185,7 +191,9 @@ def main() -> None:
     parser.add_argument("--out", required=True, help="results stem (writes .md and .json)")
     parser.add_argument("--note", default="machine shared with other agents' jobs (noisy)")
     args = parser.parse_args()
+    load_before = os.getloadavg()
     result = run_plain(args) if args.kind == "plain" else run_wavelet(args)
+    result["load_average"] = {"before": list(load_before), "after": list(os.getloadavg())}
     result.update({"machine": describe(), "repeats": args.repeats, "note": args.note,
                    "command": "python benchmarks/bench_cut_launch.py " + " ".join(sys.argv[1:])})
     out = Path(args.out)

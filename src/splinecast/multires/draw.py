@@ -57,11 +57,11 @@ from numba.typed import List
 
 from ..camera import Camera
 from ..render.clipping import NO_PLANES
-from ..render.driver import GEOM_SIZE, band_order
+from ..render.driver import GEOM_SIZE, band_order, finalize, reset_state
 from ..render.iso import Iso
 from ..render.multi_iso import MultiIso
 from ..render.pieces_driver import TILE, trace_pieces
-from ..render.segment import Grid, counters, finish_state, make_grid, new_state, trace_segment
+from ..render.segment import Grid, counters, make_grid, trace_segment
 from .order import front_to_back
 from .probe import box_ranges, sample_grid
 
@@ -353,10 +353,13 @@ class CutRenderer:
     def render(self, pieces: Sequence[Piece], setup: Any, camera: Camera,
                planes: np.ndarray = NO_PLANES) -> tuple[tuple, tuple]:
         """Trace an image through the pieces of a cut; returns ``(outputs, counters)``."""
-        state = new_state(setup, camera)
-        stats = counters(camera.height, camera.width)
-        self.trace(pieces, setup, camera, state, stats, planes)
-        return finish_state(setup, state, camera), stats
+        h, w = camera.height, camera.width
+        stats = counters(h, w)
+        out = setup.output(h, w)
+        # The states are reset and the outputs written inside the one launch (no separate
+        # passes over the image), or around the per-piece path.
+        self._trace(pieces, setup, camera, setup.state(h, w), stats, planes, out)
+        return out, stats
 
     def trace(self, pieces: Sequence[Piece], setup: Any, camera: Camera, state: tuple,
               stats: tuple, planes: np.ndarray = NO_PLANES) -> None:
@@ -372,6 +375,12 @@ class CutRenderer:
         Numba types, each piece is traced by its own call of the segment entry point (the
         reference the batched launch is tested against).
         """
+        self._trace(pieces, setup, camera, state, stats, planes, None)
+
+    def _trace(self, pieces: Sequence[Piece], setup: Any, camera: Camera, state: tuple,
+               stats: tuple, planes: np.ndarray, out: tuple | None) -> None:
+        """:meth:`trace`; with ``out``, from uninitialised ``state`` arrays (reset here) to the
+        finished outputs written into ``out``."""
         start = time.perf_counter()
         planes = np.ascontiguousarray(planes, dtype=np.float64).reshape(-1, 4)
         changes = self.seams.plan(pieces, self) if self.seams is not None else {}
@@ -379,14 +388,17 @@ class CutRenderer:
         closure = self.seams.closure(setup, camera) if self.seams is not None else None
         keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
         order = front_to_back(keys, camera, self.tree)
+        done = None
         if self.batched:
             done = self._trace_batched(pieces, order, changes, closure, setup, camera, state,
-                                       stats, planes)
-        else:
-            done = None
+                                       stats, planes, out)
         if done is None:
+            if out is not None:
+                reset_state(setup.params, state, camera.height, camera.width)
             done = self._trace_each(pieces, order, changes, closure, setup, camera, state,
                                     stats, planes)
+            if out is not None:
+                finalize(setup.params, state, out, camera.pixel_basis())
         traced, rebuilt = done
         self.stats = {"pieces": len(pieces), "pieces_traced": traced,
                       "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
@@ -410,11 +422,13 @@ class CutRenderer:
 
     def _trace_batched(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
                        closure: Any, setup: Any, camera: Camera, state: tuple, stats: tuple,
-                       planes: np.ndarray) -> tuple[int, int] | None:
-        """All pieces in one compiled launch; ``None`` if their grids have too many types."""
+                       planes: np.ndarray, out: tuple | None) -> tuple[int, int] | None:
+        """All pieces in one compiled launch (with ``out``: the states reset and the outputs
+        written in it too); ``None``, before anything is traced, if their grids have too many
+        types."""
         ordered = [pieces[int(n)] for n in order]
         if not ordered:
-            return 0, 0
+            return None
         lo, hi, closed = self.boxes(ordered)
         world_lo = self.origin0 + lo * self.spacing0
         world_hi = self.origin0 + hi * self.spacing0
@@ -439,6 +453,9 @@ class CutRenderer:
                 pairs.append(self._pair(piece.key, grid, setup, blocks_key))
             per_piece[m] = at
         if not len(keep):
+            if out is not None:
+                reset_state(setup.params, state, camera.height, camera.width)
+                finalize(setup.params, state, out, camera.pixel_basis())
             return 0, rebuilt
         packed = self._pack(pairs)
         if packed is None:
@@ -453,12 +470,13 @@ class CutRenderer:
         else:
             exits = (np.empty((0, 0)), np.empty((0, 0), dtype=np.int64),
                      np.empty((0, 0), dtype=np.int64))
-        hits = trace_pieces(grids[0], grids[1], which, setup.params, state, setup.output(0, 0),
-                            camera.pixel_basis(), geoms, boxes,
-                            np.ascontiguousarray(closed[keep]),
+        final = out is not None
+        hits = trace_pieces(grids[0], grids[1], which, setup.params, state,
+                            out if final else setup.output(0, 0), camera.pixel_basis(), geoms,
+                            boxes, np.ascontiguousarray(closed[keep]),
                             np.ascontiguousarray(rects[keep]), levels, self.origin0,
-                            self.spacing0, planes, np.empty((h, w, 2)), _tiles(h, w),
-                            closure is not None, *exits, *stats)
+                            self.spacing0, planes, np.empty((h, w, 2)), _tiles(h, w), final,
+                            final, closure is not None, *exits, *stats)
         if closure is not None:
             closure.hits += int(hits)
         return len(keep), rebuilt

@@ -35,7 +35,7 @@ from ..models.pieces import cell_count, new_scratch, value_gradient_at
 from .clipping import clip_interval
 from .driver import _trace_pixel
 from .iso import IsoMode
-from .mode_api import mode_scratch
+from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import pixel_ray
 
 __all__ = ["trace_pieces", "box_interval", "TILE"]
@@ -184,9 +184,10 @@ def _closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exi
 @jit()
 def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
                 origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
-                grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, visited, tested,
-                skipped):
-    """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns closure hits."""
+                grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0, tc0,
+                visited, tested, skipped):
+    """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns the closure's hits
+    and the number of rays that ended in it (marked in the tile's ``ended``)."""
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(kernel)
     # Model scratch per piece: some models cache cells of their grid in it.
@@ -194,8 +195,13 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
     cuts = np.empty(8)
     tags = np.empty(8, np.int64)
     hits = 0
+    n_ended = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
+            if ended[row - tr0, col - tc0]:
+                # The ray ended in a piece in front (a first hit, opaque): the driver would
+                # load its state, see it done and store it unchanged.
+                continue
             t0, t1 = box_interval(basis, origin0, spacing0, box_lo, box_hi, closed, planes, row,
                                   col, width, height)
             if t0 > t1:
@@ -218,20 +224,39 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
             if close:
                 closure_leave(mode, state, row, col, t0, t1, level, piece, exit_t, exit_piece,
                               exit_level)
-    return hits
+            if done(mode, state_load(mode, state, row, col)):
+                ended[row - tr0, col - tc0] = True
+                n_ended += 1
+    return hits, n_ended
 
 
 @jit()
 def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
-                levels, origin0, spacing0, planes, t_range, tr0, tc0, close, exit_t, exit_piece,
-                exit_level, visited, tested, skipped):
-    """One thread's work item: the pieces overlapping one tile, in order."""
+                levels, origin0, spacing0, planes, t_range, tr0, tc0, fresh, final, close, exit_t,
+                exit_piece, exit_level, visited, tested, skipped):
+    """One thread's work item: the pieces overlapping one tile, in order (the tile's states
+    reset first when ``fresh``, its outputs written at the end when ``final``)."""
     height, width = visited.shape
     tr1 = min(tr0 + TILE, height)
     tc1 = min(tc0 + TILE, width)
     mscr = mode_scratch(mode)
+    # Rays of the tile that ended (``done``) are left out of the pieces behind, and the tile
+    # stops when all have: a first hit near the front otherwise still pays every piece's
+    # interval and state round trip behind it.
+    ended = np.zeros((TILE, TILE), np.bool_)
+    alive = 0
+    for row in range(tr0, tr1):
+        for col in range(tc0, tc1):
+            if fresh:
+                state_store(mode, state, row, col, state_new(mode))
+            if done(mode, state_load(mode, state, row, col)):
+                ended[row - tr0, col - tc0] = True
+            else:
+                alive += 1
     hits = 0
     for p in range(which.shape[0]):
+        if alive == 0:
+            break
         c0 = max(rects[p, 0], tc0)
         r0 = max(rects[p, 1], tr0)
         c1 = min(rects[p, 2], tc1)
@@ -240,26 +265,35 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
             continue
         if which[p, 0] == 0:
             pair_a = grids_a[which[p, 1]]
-            hits += _piece_tile(pair_a[0], pair_a[1], mode, mscr, state, out, basis, geoms[p],
-                                boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
-                                t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
-                                grids_b, which, geoms, exit_t, exit_piece, exit_level, visited,
-                                tested, skipped)
+            h, e = _piece_tile(pair_a[0], pair_a[1], mode, mscr, state, out, basis, geoms[p],
+                               boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
+                               t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
+                               grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
+                               tr0, tc0, visited, tested, skipped)
         else:
             # Another name than above: the two lists may hold different types.
             pair_b = grids_b[which[p, 1]]
-            hits += _piece_tile(pair_b[0], pair_b[1], mode, mscr, state, out, basis, geoms[p],
-                                boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
-                                t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
-                                grids_b, which, geoms, exit_t, exit_piece, exit_level, visited,
-                                tested, skipped)
+            h, e = _piece_tile(pair_b[0], pair_b[1], mode, mscr, state, out, basis, geoms[p],
+                               boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
+                               t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
+                               grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
+                               tr0, tc0, visited, tested, skipped)
+        hits += h
+        alive -= e
+    if final:
+        # As the driver's ``finalize``, while the tile's states are still in the cache.
+        for row in range(tr0, tr1):
+            for col in range(tc0, tc1):
+                wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+                ray = (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+                finish(mode, out, row, col, state_load(mode, state, row, col), ray)
     return hits
 
 
 @jit(parallel=True)
 def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
-                 levels, origin0, spacing0, planes, t_range, tiles, close, exit_t, exit_piece,
-                 exit_level, visited, tested, skipped):
+                 levels, origin0, spacing0, planes, t_range, tiles, fresh, final, close, exit_t,
+                 exit_piece, exit_level, visited, tested, skipped):
     """Trace every pixel through the pieces of a cut, front to back, in one launch.
 
     Parameters (prepared by :class:`splinecast.multires.draw.CutRenderer`)
@@ -273,7 +307,8 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     mode : named tuple
         The mode's parameters.
     state, out : tuples of arrays
-        The mode's full-image state arrays (updated in place) and an (unused) output tuple.
+        The mode's full-image state arrays (updated in place) and output buffers (written
+        only with ``final``).
     basis : ndarray (20,)
         :meth:`Camera.pixel_basis` of the image.
     geoms : ndarray (n, 19)
@@ -293,7 +328,12 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     t_range : ndarray (height, width, 2)
         Work space: each ray's interval in the piece being traced.
     tiles : ndarray (k, 2) of int64
-        First row and column of each tile of :data:`TILE` pixels, in the order handed out.
+        First row and column of each tile of :data:`TILE` pixels, in the order handed out
+        (they cover the image).
+    fresh, final : bool
+        Start from fresh states (the state arrays' contents are ignored) as the driver's
+        ``reset_state`` does, and write the outputs at the end as its ``finalize`` does: a
+        whole frame in one launch, each tile's states touched while in the cache.
     close : bool
         Run the isosurface's seam closure (``exit_t``, ``exit_piece``, ``exit_level``:
         per-pixel work arrays, NaN, any and -1 at the start).
@@ -311,6 +351,6 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     for n in prange(tiles.shape[0]):
         hits[n] = _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
                               closed, rects, levels, origin0, spacing0, planes, t_range,
-                              tiles[n, 0], tiles[n, 1], close, exit_t, exit_piece, exit_level,
-                              visited, tested, skipped)
+                              tiles[n, 0], tiles[n, 1], fresh, final, close, exit_t, exit_piece,
+                              exit_level, visited, tested, skipped)
     return hits.sum()
