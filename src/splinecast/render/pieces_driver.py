@@ -9,7 +9,11 @@ per frame: parallel over screen tiles, each tile walks the pieces overlapping it
 pixels of the piece's screen rectangle, with the ray's interval inside the piece's box as its
 ``t_range``. The mode's state stays in the full-image state arrays (``load`` and ``store`` per
 piece, as the segment entry point does), so a ray sees exactly the sequence of grids and
-intervals of one :func:`.segment.trace_segment` call per piece.
+intervals of one :func:`.segment.trace_segment` call per piece. A ray whose state is ``done``
+(a first hit, opaque) is left out of the pieces behind it, and a tile stops once all its rays
+are: the driver would only load and store such a state. With ``fresh`` and ``final`` the launch
+also resets the states and writes the outputs (the driver's ``reset_state`` and ``finalize``)
+tile by tile, so a frame is one pass.
 
 Grids come in typed lists of ``(kernel, blocks)`` pairs. All pairs of one list have one Numba
 type; a cut may hold two (a pyramid's bricks in the store's dtype and the float64 copies of
