@@ -21,17 +21,25 @@ Grids
     through cells (the even B-spline and the type-6 models, whose cells are centred on voxels,
     or an ancestor drawn over a descendant's box) need nothing special. Grids of unmodified
     bricks are kept between frames while their bricks are in the cut; grids of bricks changed at
-    a seam are built when traced (:mod:`.seams`).
+    a seam are built when first traced and kept while the seam plan keeps its change
+    (:mod:`.seams`).
 
 Tracing
-    The pieces are put in front-to-back order (:mod:`.order`), and each is traced over the
-    screen rectangle its box projects to (a tile camera: the same rays as the full image): the
-    mode's per-pixel state of that rectangle is copied out, carried through the piece by
-    :func:`~splinecast.render.segment.trace_segment` and copied back. A ray thus crosses the
-    boxes one after the other exactly as it crosses the bricks of one volume (``tests/
-    test_bricks.py``), and a cut whose boxes all come from level 0 renders the in-memory image.
-    Boxes at the volume's border are extended to the model's domain (the type-6 splines render
-    half a voxel beyond the outer voxel centres); see :meth:`CutRenderer.box`.
+    The pieces are put in front-to-back order (:mod:`.order`) and traced in one compiled launch
+    per frame (:func:`splinecast.render.pieces_driver.trace_pieces`): parallel over screen
+    tiles, each tile walks the pieces whose screen rectangle (:func:`screen_rects`, the box's
+    projection) overlaps it, in that order, and hands each pixel of the rectangle to the
+    driver's per-ray unit with the ray's interval inside the piece's box; the mode's per-pixel
+    state stays in the full-image arrays. A ray thus crosses the boxes one after the other
+    exactly as it crosses the bricks of one volume (``tests/test_bricks.py``), and a cut whose
+    boxes all come from level 0 renders the in-memory image. The per-piece path (one
+    :func:`~splinecast.render.segment.trace_segment` call per piece over a tile camera of its
+    rectangle, the state copied out and back) is kept as the reference
+    (:attr:`CutRenderer.batched` off; ``tests/test_pieces_driver.py`` compares the two
+    bit for bit): per piece it costs a parallel launch and copies, milliseconds on a shared
+    machine, which dominated frames of many small bricks. Boxes at the volume's border are
+    extended to the model's domain (the type-6 splines render half a voxel beyond the outer
+    voxel centres); see :meth:`CutRenderer.box`.
 """
 
 from __future__ import annotations
@@ -45,15 +53,20 @@ from typing import Any
 
 import numba
 import numpy as np
+from numba.typed import List
 
 from ..camera import Camera
 from ..render.clipping import NO_PLANES
-from ..render.segment import Grid, counters, finish_state, make_grid, new_state, trace_segment
+from ..render.driver import GEOM_SIZE, band_order, finalize, reset_state
+from ..render.iso import Iso
+from ..render.multi_iso import MultiIso
+from ..render.pieces_driver import TILE, trace_pieces
+from ..render.segment import Grid, counters, make_grid, trace_segment
 from .order import front_to_back
 from .probe import box_ranges, sample_grid
 
-__all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect", "SERIAL_PIXELS",
-           "SERIAL_CELLS"]
+__all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect", "screen_rects",
+           "SERIAL_PIXELS", "SERIAL_CELLS"]
 
 #: Tiles of fewer pixels are traced on one thread, and grids of bricks of fewer cells built on
 #: one: waking the thread pool costs more than such work (tens of milliseconds per call on a busy
@@ -157,6 +170,49 @@ def screen_rect(camera: Camera, lo: np.ndarray, hi: np.ndarray) -> tuple[int, in
     return c0, r0, c1 - c0, r1 - r0
 
 
+def screen_rects(camera: Camera, lo: np.ndarray,
+                 hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`screen_rect` of many world boxes ``[lo[n], hi[n]]`` at once.
+
+    Returns
+    -------
+    rects : ndarray (n, 4) of int64
+        ``(col0, row0, col1, row1)`` (end exclusive) of each box.
+    seen : ndarray (n,) of bool
+        Whether the box can project into the image (``rects`` is meaningless where not).
+    """
+    basis = camera.pixel_basis()
+    eye, fwd, right, up = basis[0:3], basis[3:6], basis[6:9], basis[9:12]
+    half_w, half_h, ortho = basis[12], basis[13], basis[14] != 0.0
+    col0, row0, full_w, full_h = basis[16:20]
+    n = len(lo)
+    pick = np.array([[(b >> a) & 1 for a in range(3)] for b in range(8)], dtype=bool)
+    corners = np.where(pick[None], np.asarray(hi, np.float64)[:, None, :],
+                       np.asarray(lo, np.float64)[:, None, :]) - eye  # (n, 8, 3)
+    sx, sy = corners @ right, corners @ up
+    seen = np.ones(n, dtype=bool)
+    whole = np.zeros(n, dtype=bool)
+    if not ortho:
+        depth = corners @ fwd
+        seen = ~np.all(depth <= 0, axis=1)
+        whole = np.any(depth <= 1e-9 * (np.abs(sx) + np.abs(sy) + 1.0), axis=1)  # at the eye
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sx, sy = sx / depth, sy / depth
+    cols = (sx / half_w + 1.0) * 0.5 * full_w - 0.5 - col0
+    rows = (1.0 - sy / half_h) * 0.5 * full_h - 0.5 - row0
+    with np.errstate(invalid="ignore"):
+        bounds = np.stack([np.floor(cols.min(axis=1)) - 1, np.floor(rows.min(axis=1)) - 1,
+                           np.ceil(cols.max(axis=1)) + 2, np.ceil(rows.max(axis=1)) + 2], axis=1)
+    bounds[whole] = (0, 0, camera.width, camera.height)
+    bounds = np.nan_to_num(bounds, nan=0.0, posinf=0.0, neginf=0.0)
+    lim = np.array([camera.width, camera.height], dtype=np.float64)
+    bounds[:, :2] = np.maximum(bounds[:, :2], 0.0)
+    bounds[:, 2:] = np.minimum(bounds[:, 2:], lim)
+    rects = bounds.astype(np.int64)
+    seen &= (rects[:, 0] < rects[:, 2]) & (rects[:, 1] < rects[:, 3])
+    return rects, seen
+
+
 class CutRenderer:
     """Traces the pieces of a cut with one model, front to back per ray.
 
@@ -191,6 +247,15 @@ class CutRenderer:
         self.spacing0 = g0.scale * g0.spacing
         self._grids: dict[Hashable, Grid] = {}
         self._prepared: dict[Hashable, tuple[np.ndarray, np.ndarray]] = {}
+        #: Grids of arrays changed at a seam, kept with their change while the seam plan
+        #: (which keeps its ``Change`` objects while the cut stays) hands out the same one.
+        self._changed: dict[Hashable, tuple[Any, Grid]] = {}
+        #: Per brick: its grid's (kernel, blocks) pair for the launch (see :meth:`_pair`).
+        self._pairs: dict[Hashable, tuple] = {}
+        #: The last frame's typed lists of pairs (see :meth:`_pack`).
+        self._packed: tuple | None = None
+        #: Trace all pieces of a frame in one compiled launch (else one call per piece).
+        self.batched = True
         self.stats: dict[str, Any] = {}
 
     def _geometry(self, level: int) -> LevelGeometry:
@@ -234,8 +299,13 @@ class CutRenderer:
                 array, first = self.prepared(piece)
                 grid = self._grids[piece.key] = self.grid(piece.level, array, first)
             return grid, False
+        kept = self._changed.get(piece.key)
+        if kept is not None and kept[0] is change:
+            return kept[1], False
         array, first = self.prepared(piece)
-        return self.grid(piece.level, change.apply(array), first), True
+        grid = self.grid(piece.level, change.apply(array), first)
+        self._changed[piece.key] = (change, grid)
+        return grid, True
 
     def evaluate(self, piece: Piece, points: np.ndarray, changes: dict | None = None) -> np.ndarray:
         """The reconstruction a piece draws (with its seam ``changes``, if any) at level-0 index
@@ -254,7 +324,7 @@ class CutRenderer:
     def forget(self, keep: Iterable[Hashable]) -> None:
         """Drop the grids and arrays of bricks not in ``keep`` (the cache may evict them)."""
         keep = set(keep)
-        for store in (self._grids, self._prepared):
+        for store in (self._grids, self._prepared, self._changed, self._pairs):
             for key in [k for k in store if k not in keep]:
                 del store[key]
 
@@ -283,10 +353,13 @@ class CutRenderer:
     def render(self, pieces: Sequence[Piece], setup: Any, camera: Camera,
                planes: np.ndarray = NO_PLANES) -> tuple[tuple, tuple]:
         """Trace an image through the pieces of a cut; returns ``(outputs, counters)``."""
-        state = new_state(setup, camera)
-        stats = counters(camera.height, camera.width)
-        self.trace(pieces, setup, camera, state, stats, planes)
-        return finish_state(setup, state, camera), stats
+        h, w = camera.height, camera.width
+        stats = counters(h, w)
+        out = setup.output(h, w)
+        # The states are reset and the outputs written inside the one launch (no separate
+        # passes over the image), or around the per-piece path.
+        self._trace(pieces, setup, camera, setup.state(h, w), stats, planes, out)
+        return out, stats
 
     def trace(self, pieces: Sequence[Piece], setup: Any, camera: Camera, state: tuple,
               stats: tuple, planes: np.ndarray = NO_PLANES) -> None:
@@ -296,7 +369,18 @@ class CutRenderer:
         new_state`, :func:`~splinecast.render.segment.counters`), updated in place; a renderer
         that splits a cut (a distributed worker) traces its share into its own state and
         merges the states with the mode's ``combine`` in depth order.
+
+        One compiled launch traces all pieces (:func:`~splinecast.render.pieces_driver.
+        trace_pieces`); with :attr:`batched` off, or for a cut whose grids have more than two
+        Numba types, each piece is traced by its own call of the segment entry point (the
+        reference the batched launch is tested against).
         """
+        self._trace(pieces, setup, camera, state, stats, planes, None)
+
+    def _trace(self, pieces: Sequence[Piece], setup: Any, camera: Camera, state: tuple,
+               stats: tuple, planes: np.ndarray, out: tuple | None) -> None:
+        """:meth:`trace`; with ``out``, from uninitialised ``state`` arrays (reset here) to the
+        finished outputs written into ``out``."""
         start = time.perf_counter()
         planes = np.ascontiguousarray(planes, dtype=np.float64).reshape(-1, 4)
         changes = self.seams.plan(pieces, self) if self.seams is not None else {}
@@ -304,6 +388,143 @@ class CutRenderer:
         closure = self.seams.closure(setup, camera) if self.seams is not None else None
         keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
         order = front_to_back(keys, camera, self.tree)
+        done = None
+        if self.batched:
+            done = self._trace_batched(pieces, order, changes, closure, setup, camera, state,
+                                       stats, planes, out)
+        if done is None:
+            if out is not None:
+                reset_state(setup.params, state, camera.height, camera.width)
+            done = self._trace_each(pieces, order, changes, closure, setup, camera, state,
+                                    stats, planes)
+            if out is not None:
+                finalize(setup.params, state, out, camera.pixel_basis())
+        traced, rebuilt = done
+        self.stats = {"pieces": len(pieces), "pieces_traced": traced,
+                      "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
+                      "seam_plan_ms": plan_s * 1e3}
+        if closure is not None:
+            self.stats["seam_closure_hits"] = closure.hits
+
+    def boxes(self, pieces: Sequence[Piece]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`box` of many pieces at once: ``lo``, ``hi`` (n, 3) and ``closed`` (n, 3)."""
+        n = len(pieces)
+        lo = np.array([p.box_lo for p in pieces], dtype=np.float64).reshape(n, 3)
+        hi = np.array([p.box_hi for p in pieces], dtype=np.float64).reshape(n, 3)
+        placed = np.array([p.placed for p in pieces], dtype=bool)[:, None]
+        d_lo, d_hi = self.domain0
+        shift = float(self.model.shift)
+        first, last = lo <= 0.0, hi >= d_hi - self.margin
+        out_lo = np.where(placed, lo, np.where(first, d_lo, lo - shift))
+        out_hi = np.where(placed, hi, np.where(last, d_hi, hi - shift))
+        closed = np.where(placed, hi >= d_hi, last)
+        return out_lo, out_hi, closed
+
+    def _trace_batched(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
+                       closure: Any, setup: Any, camera: Camera, state: tuple, stats: tuple,
+                       planes: np.ndarray, out: tuple | None) -> tuple[int, int] | None:
+        """All pieces in one compiled launch (with ``out``: the states reset and the outputs
+        written in it too); ``None``, before anything is traced, if their grids have too many
+        types."""
+        ordered = [pieces[int(n)] for n in order]
+        if not ordered:
+            return None
+        lo, hi, closed = self.boxes(ordered)
+        world_lo = self.origin0 + lo * self.spacing0
+        world_hi = self.origin0 + hi * self.spacing0
+        rects, seen = screen_rects(camera, np.minimum(world_lo, world_hi),
+                                   np.maximum(world_lo, world_hi))
+        keep = np.flatnonzero(seen)
+        rebuilt = 0
+        blocks_key = _blocks_key(setup)
+        pairs: list[tuple[tuple, Hashable]] = []  # distinct grids' (kernel, blocks), signature
+        index: dict[int, int] = {}  # id(grid) -> position in pairs
+        per_piece = np.empty(len(keep), dtype=np.int64)
+        geoms = np.empty((len(keep), GEOM_SIZE))
+        for m, n in enumerate(keep):
+            piece = ordered[int(n)]
+            with _threads(piece.data.size < SERIAL_CELLS):
+                grid, changed = self._piece_grid(piece, changes)
+            rebuilt += changed
+            geoms[m] = grid.geom
+            at = index.get(id(grid))
+            if at is None:
+                at = index[id(grid)] = len(pairs)
+                pairs.append(self._pair(piece.key, grid, setup, blocks_key))
+            per_piece[m] = at
+        if not len(keep):
+            if out is not None:
+                reset_state(setup.params, state, camera.height, camera.width)
+                finalize(setup.params, state, out, camera.pixel_basis())
+            return 0, rebuilt
+        packed = self._pack(pairs)
+        if packed is None:
+            return None
+        grids, slot = packed
+        which = np.ascontiguousarray(slot[per_piece])
+        h, w = camera.height, camera.width
+        boxes = np.ascontiguousarray(np.stack([lo[keep], hi[keep]], axis=1))
+        levels = np.array([ordered[int(n)].level for n in keep], dtype=np.int64)
+        if closure is not None:
+            exits = (closure.exit_t, np.zeros((h, w), dtype=np.int64), closure.exit_level)
+        else:
+            exits = (np.empty((0, 0)), np.empty((0, 0), dtype=np.int64),
+                     np.empty((0, 0), dtype=np.int64))
+        final = out is not None
+        hits = trace_pieces(grids[0], grids[1], which, setup.params, state,
+                            out if final else setup.output(0, 0), camera.pixel_basis(), geoms,
+                            boxes, np.ascontiguousarray(closed[keep]),
+                            np.ascontiguousarray(rects[keep]), levels, self.origin0,
+                            self.spacing0, planes, np.empty((h, w, 2)), _tiles(h, w), final,
+                            final, closure is not None, *exits, *stats)
+        if closure is not None:
+            closure.hits += int(hits)
+        return len(keep), rebuilt
+
+    def _pack(self, pairs: list[tuple[tuple, Hashable]]) -> tuple[list, np.ndarray] | None:
+        """The launch's two typed lists of ``(kernel, blocks)`` and each pair's ``(list,
+        index)``; ``None`` for more than two Numba types. Kept while the pairs are the same
+        objects (a steady view): filling typed lists costs tens of microseconds per item."""
+        key = [pair for pair, _ in pairs]
+        kept = self._packed
+        if kept is not None and len(kept[0]) == len(key) and all(
+                a is b for a, b in zip(kept[0], key, strict=True)):
+            return kept[1], kept[2]
+        lists: dict[Hashable, tuple[int, Any]] = {}
+        slot = np.empty((len(pairs), 2), dtype=np.int64)
+        for at, (pair, signature) in enumerate(pairs):
+            if signature not in lists:
+                if len(lists) == 2:
+                    return None
+                lists[signature] = (len(lists), List.empty_list(numba.typeof(pair)))
+            number, items = lists[signature]
+            items.append(pair)
+            slot[at] = number, len(items) - 1
+        grids = [items for _, items in sorted(lists.values(), key=lambda v: v[0])]
+        if len(grids) == 1:
+            grids.append(List.empty_list(grids[0]._list_type.item_type))
+        # The pairs themselves are kept (compared by identity: the lists hold copies).
+        self._packed = (key, grids, slot)
+        return grids, slot
+
+    def _pair(self, key: Hashable, grid: Grid, setup: Any,
+              blocks_key: Any) -> tuple[tuple, Hashable]:
+        """A grid's ``(kernel, blocks)`` for the launch and the signature of its Numba type;
+        kept between frames while the grid and the mode's block selection stay the same (block
+        flags and Numba's typing cost a millisecond or more per piece)."""
+        kept = self._pairs.get(key)
+        if kept is not None and kept[0] is grid and blocks_key is not None and (
+                kept[1] == blocks_key):
+            return kept[2], kept[3]
+        pair = (grid.kernel, setup.blocks(grid.hierarchy))
+        signature = _signature(pair)
+        self._pairs[key] = (grid, blocks_key, pair, signature)
+        return pair, signature
+
+    def _trace_each(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
+                    closure: Any, setup: Any, camera: Camera, state: tuple, stats: tuple,
+                    planes: np.ndarray) -> tuple[int, int]:
+        """One segment-entry-point call per piece, over the screen rectangle of its box."""
         origin0, spacing0 = self.origin0, self.spacing0
         traced = rebuilt = 0
         for n in order:
@@ -337,11 +558,48 @@ class CutRenderer:
             for total, part in zip(stats, local_stats, strict=True):
                 c0, r0, w, h = rect
                 total[r0:r0 + h, c0:c0 + w] += part
-        self.stats = {"pieces": len(pieces), "pieces_traced": traced,
-                      "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
-                      "seam_plan_ms": plan_s * 1e3}
-        if closure is not None:
-            self.stats["seam_closure_hits"] = closure.hits
+        return traced, rebuilt
+
+
+def _blocks_key(setup: Any) -> Hashable:
+    """What a mode's block selection (``setup.blocks``) depends on besides the grid, or None
+    when unknown (then it is recomputed every frame)."""
+    params = getattr(setup, "params", None)
+    try:
+        if isinstance(setup, Iso):
+            return ("iso", float(setup.params.iso))
+        if isinstance(setup, MultiIso):
+            return ("isos", tuple(float(v) for v in setup.isos))
+        if hasattr(setup, "tf"):
+            return ("tf", tuple(tuple(float(v) for v in r) for r in setup.tf.visible_ranges()))
+        if params is not None and hasattr(params, "sign") and hasattr(setup, "window"):
+            return ("mip", float(params.sign))
+    except (TypeError, ValueError):
+        pass
+    return None
+
+
+def _signature(value: Any) -> Hashable:
+    """A cheap stand-in for ``numba.typeof(value)`` of tuples of arrays and numbers: equal
+    signatures, equal Numba types."""
+    if isinstance(value, np.ndarray):
+        f = value.flags
+        return (value.dtype.str, value.ndim, f.c_contiguous, f.f_contiguous, f.writeable,
+                f.aligned)
+    if isinstance(value, tuple):
+        return (type(value), tuple(_signature(v) for v in value))
+    if isinstance(value, np.generic):
+        return (type(value), value.dtype.str)
+    return type(value)
+
+
+def _tiles(height: int, width: int) -> np.ndarray:
+    """First row and column of the launch's tiles, in an order that spreads every contiguous
+    run of tiles (one thread's share) over the image."""
+    rows = np.arange(0, height, TILE)
+    cols = np.arange(0, width, TILE)
+    grid = np.stack(np.meshgrid(rows, cols, indexing="ij"), axis=-1).reshape(-1, 2)
+    return np.ascontiguousarray(grid[band_order(len(grid))], dtype=np.int64)
 
 
 def _gather(state: tuple, rect: tuple[int, int, int, int], whole: bool) -> tuple:

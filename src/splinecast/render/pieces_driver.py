@@ -1,0 +1,360 @@
+"""One compiled launch for a whole cut: every piece of it, front to back per ray, tile by tile.
+
+A multiresolution frame is drawn from many grids (the bricks of a cut, each with its own kernel
+grid, block flags, placement and box). Tracing them one driver call at a time costs a parallel
+launch, a camera tile, and copies of the mode's per-pixel state per piece -- milliseconds each,
+far more than a small brick's rays on a shared machine. :func:`trace_pieces` instead runs once
+per frame: parallel over screen tiles, each tile walks the pieces overlapping it in the given
+(front-to-back) order and calls the driver's per-ray unit :func:`.driver._trace_pixel` on the
+pixels of the piece's screen rectangle, with the ray's interval inside the piece's box as its
+``t_range``. The mode's state stays in the full-image state arrays (``load`` and ``store`` per
+piece, as the segment entry point does), so a ray sees exactly the sequence of grids and
+intervals of one :func:`.segment.trace_segment` call per piece. A ray whose state is ``done``
+(a first hit, opaque) is left out of the pieces behind it, and a tile stops once all its rays
+are: the driver would only load and store such a state. With ``fresh`` and ``final`` the launch
+also resets the states and writes the outputs (the driver's ``reset_state`` and ``finalize``)
+tile by tile, so a frame is one pass.
+
+Grids come in typed lists of ``(kernel, blocks)`` pairs. All pairs of one list have one Numba
+type; a cut may hold two (a pyramid's bricks in the store's dtype and the float64 copies of
+bricks changed at a level seam), so the launch takes two lists, and ``which[p]`` says in which
+list and where piece ``p``'s pair is.
+
+The first-hit isosurface's seam closure (:class:`splinecast.multires.seams.IsoClosure`) runs
+inside the launch too (``close``): per ray, where it left the last piece without a hit, the
+field there and that piece's level; entering a piece of another level at the same parameter
+with the field on the other side of the isovalue is a hit on the face. Other modes compile the
+closure away.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._jit import jit, overload_jit
+from ..models.pieces import cell_count, new_scratch, value_gradient_at
+from .clipping import clip_interval
+from .driver import _trace_pixel
+from .iso import IsoMode
+from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
+from .rays import pixel_ray
+
+__all__ = ["trace_pieces", "box_interval", "TILE"]
+
+#: Edge in pixels of the square screen tiles the launch hands out to threads: small enough for
+#: a balanced split of a 256x192 image over a few threads, large enough that a tile's pixels
+#: reuse a piece's cells and the per-(tile, piece) set-up is small next to its rays.
+TILE = 16
+
+
+@jit(inline="always")
+def _axis(v: float, d: float, lo: float, hi: float, closed: bool, t0: float,
+          t1: float) -> tuple[float, float]:
+    if d == 0.0:
+        # A ray lying in a face plane belongs to the box above it (the traversal gives a cell's
+        # faces to the next cell); the last box of the volume keeps its far face.
+        if v < lo or v > hi or (v == hi and not closed):
+            return math.inf, -math.inf
+        return t0, t1
+    ta = (lo - v) / d
+    tb = (hi - v) / d
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@jit(inline="always")
+def box_interval(basis, origin, spacing, lo, hi, closed, planes, row, col, width, height):
+    """Parameter interval ``(t0, t1)`` of pixel ``(row, col)``'s ray inside the index box
+    ``[lo, hi]`` (index ``v`` at ``origin + v * spacing``), clipped by ``planes``; ``t0 > t1``
+    when the ray misses it. The arithmetic of :func:`splinecast.multires.probe.box_ranges`."""
+    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+    t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
+    t0, t1 = _axis((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
+                   t0, t1)
+    t0, t1 = _axis((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
+                   t0, t1)
+    t0, t1 = _axis((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
+                   t0, t1)
+    return t0, t1
+
+
+@jit(inline="always")
+def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
+    """Value and world gradient of the grid's reconstruction at parameter ``t`` of the ray
+    (the point as :func:`splinecast.multires.probe.grid_point` computes it)."""
+    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+    x = (wx - geom[0]) / geom[3] + geom[6] - geom[7] + t * (ux / geom[3])
+    y = (wy - geom[1]) / geom[4] + geom[6] - geom[8] + t * (uy / geom[4])
+    z = (wz - geom[2]) / geom[5] + geom[6] - geom[9] + t * (uz / geom[5])
+    v, gx, gy, gz = value_gradient_at(kernel, scr, x, y, z)
+    return v, gx / geom[3], gy / geom[4], gz / geom[5]
+
+
+# The closure reads and writes the isosurface mode's state (depth, world gradient): it is
+# compiled for IsoMode only, every other mode gets the no-op. Where a ray left a piece is noted
+# for every piece; the field there is evaluated only when the ray enters a piece of another
+# level at that parameter (few rays: the seams), from the piece it left.
+
+def closure_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel,
+                  geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+    """Before a piece: a hit on its entry face if the field jumps across the isovalue there
+    (compiled code only); returns 1 for a hit, else 0."""
+    raise NotImplementedError
+
+
+def closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_piece,
+                  exit_level):
+    """After a piece: where a ray without a hit left it (compiled code only)."""
+    raise NotImplementedError
+
+
+@jit()
+def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, height, t):
+    """The field of piece ``q`` (as drawn) at parameter ``t`` of the ray."""
+    if which[q, 0] == 0:
+        pair_a = grids_a[which[q, 1]]
+        v, _, _, _ = _field_at(pair_a[0], new_scratch(pair_a[0]), geoms[q], basis, row, col,
+                               width, height, t)
+        return v
+    pair_b = grids_b[which[q, 1]]
+    v, _, _, _ = _field_at(pair_b[0], new_scratch(pair_b[0]), geoms[q], basis, row, col, width,
+                           height, t)
+    return v
+
+
+@jit()
+def _iso_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, geom,
+               grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+    # The caller checked that the ray left a piece of another level at t_in.
+    depth, gradient = state[0], state[1]
+    if not (t_in <= t_out and depth[row, col] == math.inf):
+        return 0
+    before = _exit_value(grids_a, grids_b, which, geoms, exit_piece[row, col], basis, row, col,
+                         width, height, t_in) - mode.iso
+    v, gx, gy, gz = _field_at(kernel, new_scratch(kernel), geom, basis, row, col, width,
+                              height, t_in)
+    g = v - mode.iso
+    if g == 0.0 or (g < 0.0) != (before < 0.0):
+        depth[row, col] = t_in
+        gradient[row, col, 0] = gx
+        gradient[row, col, 1] = gy
+        gradient[row, col, 2] = gz
+        return 1
+    return 0
+
+
+@jit()
+def _iso_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_piece,
+               exit_level):
+    if t_in <= t_out and state[0][row, col] == math.inf:
+        exit_t[row, col] = t_out
+        exit_piece[row, col] = piece
+        exit_level[row, col] = level
+    return 0
+
+
+@jit()
+def _no_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, geom,
+              grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+    return 0
+
+
+@jit()
+def _no_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_piece,
+              exit_level):
+    return 0
+
+
+def _is_iso(mode) -> bool:
+    return getattr(mode, "instance_class", None) is IsoMode
+
+
+@overload_jit(closure_enter, inline="never")
+def _closure_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel,
+                   geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+    return (_iso_enter if _is_iso(mode) else _no_enter).py_func
+
+
+@overload_jit(closure_leave, inline="always")
+def _closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_piece,
+                   exit_level):
+    return (_iso_leave if _is_iso(mode) else _no_leave).py_func
+
+
+@jit()
+def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
+                origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
+                grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0, tc0,
+                visited, tested, skipped):
+    """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns the closure's hits
+    and the number of rays that ended in it (marked in the tile's ``ended``)."""
+    height, width = visited.shape
+    ncx, ncy, ncz = cell_count(kernel)
+    # Model scratch per piece: some models cache cells of their grid in it.
+    scr = new_scratch(kernel)
+    cuts = np.empty(8)
+    tags = np.empty(8, np.int64)
+    hits = 0
+    n_ended = 0
+    for row in range(r0, r1):
+        for col in range(c0, c1):
+            if ended[row - tr0, col - tc0]:
+                # The ray ended in a piece in front (a first hit, opaque): the driver would
+                # load its state, see it done and store it unchanged.
+                continue
+            t0, t1 = box_interval(basis, origin0, spacing0, box_lo, box_hi, closed, planes, row,
+                                  col, width, height)
+            if t0 > t1:
+                continue  # the ray misses the box: the driver would leave its state alone
+            t_range[row, col, 0] = t0
+            t_range[row, col, 1] = t1
+            # The closure's cheap test first (a ray leaving a piece of another level right
+            # here): calls with this many arguments cost more than the rest of a short ray.
+            if close and exit_t[row, col] == t0 and exit_level[row, col] != level:
+                hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
+                                      level, kernel, geom, grids_a, grids_b, which, geoms,
+                                      exit_t, exit_piece, exit_level)
+            nv, nt, ns = _trace_pixel(
+                kernel, mode, blocks, state, out, basis, geom, planes, t_range, True, True,
+                False, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz,
+            )
+            visited[row, col] += nv
+            tested[row, col] += nt
+            skipped[row, col] += ns
+            if close:
+                closure_leave(mode, state, row, col, t0, t1, level, piece, exit_t, exit_piece,
+                              exit_level)
+            if done(mode, state_load(mode, state, row, col)):
+                ended[row - tr0, col - tc0] = True
+                n_ended += 1
+    return hits, n_ended
+
+
+@jit()
+def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
+                levels, origin0, spacing0, planes, t_range, tr0, tc0, fresh, final, close, exit_t,
+                exit_piece, exit_level, visited, tested, skipped):
+    """One thread's work item: the pieces overlapping one tile, in order (the tile's states
+    reset first when ``fresh``, its outputs written at the end when ``final``)."""
+    height, width = visited.shape
+    tr1 = min(tr0 + TILE, height)
+    tc1 = min(tc0 + TILE, width)
+    mscr = mode_scratch(mode)
+    # Rays of the tile that ended (``done``) are left out of the pieces behind, and the tile
+    # stops when all have: a first hit near the front otherwise still pays every piece's
+    # interval and state round trip behind it.
+    ended = np.zeros((TILE, TILE), np.bool_)
+    alive = 0
+    for row in range(tr0, tr1):
+        for col in range(tc0, tc1):
+            if fresh:
+                state_store(mode, state, row, col, state_new(mode))
+            if done(mode, state_load(mode, state, row, col)):
+                ended[row - tr0, col - tc0] = True
+            else:
+                alive += 1
+    hits = 0
+    for p in range(which.shape[0]):
+        if alive == 0:
+            break
+        c0 = max(rects[p, 0], tc0)
+        r0 = max(rects[p, 1], tr0)
+        c1 = min(rects[p, 2], tc1)
+        r1 = min(rects[p, 3], tr1)
+        if c0 >= c1 or r0 >= r1:
+            continue
+        if which[p, 0] == 0:
+            pair_a = grids_a[which[p, 1]]
+            h, e = _piece_tile(pair_a[0], pair_a[1], mode, mscr, state, out, basis, geoms[p],
+                               boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
+                               t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
+                               grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
+                               tr0, tc0, visited, tested, skipped)
+        else:
+            # Another name than above: the two lists may hold different types.
+            pair_b = grids_b[which[p, 1]]
+            h, e = _piece_tile(pair_b[0], pair_b[1], mode, mscr, state, out, basis, geoms[p],
+                               boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
+                               t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
+                               grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
+                               tr0, tc0, visited, tested, skipped)
+        hits += h
+        alive -= e
+    if final:
+        # As the driver's ``finalize``, while the tile's states are still in the cache.
+        for row in range(tr0, tr1):
+            for col in range(tc0, tc1):
+                wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+                ray = (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+                finish(mode, out, row, col, state_load(mode, state, row, col), ray)
+    return hits
+
+
+@jit(parallel=True)
+def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
+                 levels, origin0, spacing0, planes, t_range, tiles, fresh, final, close, exit_t,
+                 exit_piece, exit_level, visited, tested, skipped):
+    """Trace every pixel through the pieces of a cut, front to back, in one launch.
+
+    Parameters (prepared by :class:`splinecast.multires.draw.CutRenderer`)
+    ----------
+    grids_a, grids_b : typed List of (kernel, blocks)
+        The pieces' kernel grids and the mode's view of their block hierarchies, one Numba
+        type per list.
+    which : ndarray (n, 2) of int64
+        Piece ``p``'s list (0: ``grids_a``, 1: ``grids_b``) and index in it; pieces in the
+        order they are traced (front to back).
+    mode : named tuple
+        The mode's parameters.
+    state, out : tuples of arrays
+        The mode's full-image state arrays (updated in place) and output buffers (written
+        only with ``final``).
+    basis : ndarray (20,)
+        :meth:`Camera.pixel_basis` of the image.
+    geoms : ndarray (n, 19)
+        The pieces' grid placements (:mod:`.driver`).
+    boxes : ndarray (n, 2, 3)
+        The pieces' boxes (lo, hi) in the index space placed by ``origin0``/``spacing0``.
+    closed : ndarray (n, 3) of bool
+        Whether a ray lying in a box's upper face plane belongs to the box.
+    rects : ndarray (n, 4) of int64
+        Screen rectangle ``(col0, row0, col1, row1)`` the piece's box can project to.
+    levels : ndarray (n,) of int64
+        The pieces' levels (for the closure).
+    origin0, spacing0 : ndarray (3,)
+        World placement of the boxes' index space.
+    planes : ndarray (m, 4)
+        Clip planes.
+    t_range : ndarray (height, width, 2)
+        Work space: each ray's interval in the piece being traced.
+    tiles : ndarray (k, 2) of int64
+        First row and column of each tile of :data:`TILE` pixels, in the order handed out
+        (they cover the image).
+    fresh, final : bool
+        Start from fresh states (the state arrays' contents are ignored) as the driver's
+        ``reset_state`` does, and write the outputs at the end as its ``finalize`` does: a
+        whole frame in one launch, each tile's states touched while in the cache.
+    close : bool
+        Run the isosurface's seam closure (``exit_t``, ``exit_piece``, ``exit_level``:
+        per-pixel work arrays, NaN, any and -1 at the start).
+    visited, tested, skipped : ndarray of int32, shape (height, width)
+        Per-ray statistics, incremented.
+
+    Returns
+    -------
+    int
+        Rays the closure ended on a face.
+    """
+    hits = np.zeros(tiles.shape[0], np.int64)
+    # The parallel loop only hands out tiles: its body stays a single call (small parallel
+    # passes and compile time, as in the driver).
+    for n in prange(tiles.shape[0]):
+        hits[n] = _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
+                              closed, rects, levels, origin0, spacing0, planes, t_range,
+                              tiles[n, 0], tiles[n, 1], fresh, final, close, exit_t, exit_piece,
+                              exit_level, visited, tested, skipped)
+    return hits.sum()

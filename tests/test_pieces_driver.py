@@ -1,0 +1,153 @@
+"""The one-launch renderer of a cut (:mod:`splinecast.render.pieces_driver`) against the
+per-piece one (one segment-entry-point call per piece, :meth:`CutRenderer._trace_each`).
+
+The per-piece path is the independent reference: its images equal the in-memory renderer's
+(``tests/test_multires_render.py``, ``tests/test_bricks.py``). Tracing a ray through the same
+grids in the same order with the same intervals must give bit-identical states, so the two paths
+are compared exactly, on cuts that mix levels (seam-changed float64 grids next to the store's
+float32 ones: two grid types in one launch), for every mode, with clip planes, on a camera tile
+(a sort-last worker's share) and with the isosurface's seam closure at work.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
+pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
+
+import splinecast as sc  # noqa: E402
+from splinecast.multires.draw import screen_rect, screen_rects  # noqa: E402
+
+MODES = ["iso", "multi", "mip", "minip", "dvr"]
+
+
+@pytest.fixture(scope="module")
+def torus(tmp_path_factory) -> tuple[sc.Volume, Path]:
+    """The demo torus distance field (40^3, float32) as a pyramid of 8^3 bricks."""
+    demo = sc.demo("torus", size=40)
+    vol = sc.Volume(demo.data.astype(np.float32), spacing=demo.spacing, origin=demo.origin)
+    path = tmp_path_factory.mktemp("torus") / "torus.zarr"
+    sc.build_pyramid(vol, path, brick=8, shard=16, progress=False)
+    return vol, path
+
+
+def _options(mode: str) -> dict:
+    if mode == "iso":
+        return {"mode": "iso", "iso": 0.0, "inside": "low"}
+    if mode == "multi":
+        return {"mode": "iso", "iso": [-0.1, 0.05], "opacity": [0.5, 0.5], "inside": "low"}
+    if mode in ("mip", "minip"):
+        return {"mode": mode, "window": (-0.5, 0.5)}
+    tf = sc.TransferFunction([(-0.3, 0.5), (0.0, 0.2), (0.2, 0.0)], domain=(-1.0, 1.0))
+    return {"mode": "dvr", "tf": tf, "dvr": sc.DVRSettings(step=0.5)}
+
+
+def _both(scene, cam: sc.Camera, **options) -> tuple[sc.Frame, sc.Frame, dict, dict]:
+    """The same cut rendered per piece and in one launch."""
+    scene.renderer.batched = False
+    each = scene.render(cam, complete=True, **options)
+    each_stats = dict(scene.renderer.stats)
+    scene.renderer.batched = True
+    batched = scene.render(cam, complete=True, **options)
+    return each, batched, each_stats, dict(scene.renderer.stats)
+
+
+def _assert_identical(a: sc.Frame, b: sc.Frame, what: str) -> None:
+    for name in ("rgba", "depth", "cells_visited", "cells_tested", "blocks_skipped"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=f"{what} {name}")
+    for name in ("value", "normal", "position"):
+        if getattr(a, name, None) is not None:
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name),
+                                          err_msg=f"{what} {name}")
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_one_launch_equals_one_call_per_piece_in_every_mode(torus, mode):
+    vol, path = torus
+    cams = [sc.Camera.orbit(vol, azimuth=a, elevation=e, size=(44, 36), zoom=1.6)
+            for a, e in ((25, 20), (200, -35))]
+    with sc.Scene(sc.read(path), model="trilinear", budget="512KiB", lod=1.0) as scene:
+        for cam in cams:
+            each, batched, _, stats = _both(scene, cam, **_options(mode))
+            what = f"{mode} {cam.position.round(2)}"
+            assert len(batched.stats["cut_levels"]) >= 2, what  # levels meet in this cut
+            assert stats["pieces_changed_at_seams"] > 0, what  # two grid types in the launch
+            if mode == "iso":
+                assert np.isfinite(batched.depth).sum() > 100, what
+            _assert_identical(each, batched, what)
+
+
+@pytest.mark.parametrize("model", ["bspline2", "s31"])
+def test_seam_closure_inside_the_launch_equals_the_per_piece_closure(torus, model):
+    """Models whose levels do not nest: the closure ends rays on level faces, the same rays
+    with the same depths and normals in both paths."""
+    vol, path = torus
+    hits = 0
+    with sc.Scene(sc.read(path), model=model, budget="512KiB", lod=1.0) as scene:
+        for azimuth in (25, 110, 200, 290):
+            cam = sc.Camera.orbit(vol, azimuth=azimuth, elevation=30, size=(48, 40), zoom=1.6)
+            each, batched, each_stats, stats = _both(scene, cam, **_options("iso"))
+            assert stats["seam_closure_hits"] == each_stats["seam_closure_hits"]
+            hits += stats["seam_closure_hits"]
+            _assert_identical(each, batched, f"{model} azimuth {azimuth}")
+    assert hits > 0  # the closure did end rays (else this test checks nothing of it)
+
+
+def test_clip_planes_and_a_camera_tile(torus):
+    """Clipped rays, and a tile of the image traced into its own state (a sort-last worker)."""
+    from splinecast.multires.scene import pieces_of
+    from splinecast.render.iso import Iso
+    from splinecast.render.segment import counters, new_state
+
+    vol, path = torus
+    cam = sc.Camera.orbit(vol, azimuth=60, elevation=25, size=(48, 40), zoom=1.6)
+    options = {**_options("iso"), "clip": [(0.3, -1.0, 0.2, 0.1)]}
+    with sc.Scene(sc.read(path), model="trilinear", budget="512KiB", lod=1.0) as scene:
+        each, batched, _, _ = _both(scene, cam, **options)
+        _assert_identical(each, batched, "clipped")
+        plain = scene.render(cam, **_options("iso"))
+        assert not np.array_equal(np.isfinite(plain.depth), np.isfinite(batched.depth))
+        # A tile: the pieces of the last frame traced into a tile's state, both ways.
+        tile = cam.tile(7, 5, 30, 21)
+        setup = Iso(0.0, inside="low")
+        pieces = pieces_of(scene.stream.frame(cam, None, wait=True))
+        assert len({p.level for p in pieces}) >= 2
+        results = []
+        for batched_flag in (False, True):
+            scene.renderer.batched = batched_flag
+            state = new_state(setup, tile)
+            stats = counters(tile.height, tile.width)
+            scene.renderer.trace(pieces, setup, tile, state, stats)
+            results.append((state, stats))
+        for a, b in zip(results[0][0] + results[0][1], results[1][0] + results[1][1],
+                        strict=True):
+            np.testing.assert_array_equal(a, b)
+        assert np.isfinite(results[1][0][0]).sum() > 50
+
+
+def test_screen_rects_agree_with_screen_rect():
+    """The vectorised rectangles equal the per-box ones, for boxes in front of, around and
+    behind the eye, for perspective and orthographic cameras."""
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(-3.0, 3.0, (300, 3))
+    hi = lo + rng.uniform(0.01, 2.0, (300, 3))
+    for cam in (sc.Camera((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), size=(64, 48)),
+                sc.Camera((1.0, 2.0, 5.0), (0.0, 0.0, 0.0), size=(50, 40)).tile(10, 5, 30, 20),
+                sc.Camera((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), ortho=True, ortho_height=4.0,
+                          size=(40, 40))):
+        rects, seen = screen_rects(cam, lo, hi)
+        kinds = set()
+        for n in range(len(lo)):
+            one = screen_rect(cam, lo[n], hi[n])
+            assert seen[n] == (one is not None), n
+            if one is not None:
+                c0, r0, w, h = one
+                assert tuple(rects[n]) == (c0, r0, c0 + w, r0 + h), n
+                kinds.add("whole" if (w, h) == (cam.width, cam.height) else "part")
+            else:
+                kinds.add("none")
+        assert kinds >= {"part", "none"} or cam.ortho
