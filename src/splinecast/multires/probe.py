@@ -13,33 +13,15 @@ parameters are those the renderer sees.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import prange
 
 from .._jit import jit
 from ..models.pieces import new_scratch, value_gradient_at
-from ..render.clipping import clip_interval
+from ..render.clipping import box_slab, clip_interval
 from ..render.rays import pixel_ray
 
 __all__ = ["box_ranges", "sample_grid", "grid_values_at"]
-
-
-@jit(inline="always")
-def _axis(v: float, d: float, lo: float, hi: float, closed: bool, t0: float,
-          t1: float) -> tuple[float, float]:
-    if d == 0.0:
-        # A ray in a face plane belongs to the box above it (as the traversal gives a cell's
-        # faces to the next cell); the last box of the volume keeps its far face.
-        if v < lo or v > hi or (v == hi and not closed):
-            return math.inf, -math.inf
-        return t0, t1
-    ta = (lo - v) / d
-    tb = (hi - v) / d
-    if ta > tb:
-        ta, tb = tb, ta
-    return max(t0, ta), min(t1, tb)
 
 
 @jit(inline="always")
@@ -49,11 +31,11 @@ def _box_row(basis, origin, spacing, lo, hi, closed, planes, out, row) -> int:
     for col in range(width):
         wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
         t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-        t0, t1 = _axis((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
+        t0, t1 = box_slab((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
                        t0, t1)
-        t0, t1 = _axis((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
+        t0, t1 = box_slab((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
                        t0, t1)
-        t0, t1 = _axis((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
+        t0, t1 = box_slab((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
                        t0, t1)
         out[row, col, 0] = t0
         out[row, col, 1] = t1

@@ -17,10 +17,30 @@ import numpy as np
 from .._jit import jit
 from ..errors import ParameterError
 
-__all__ = ["clip_interval", "NO_PLANES", "make_planes"]
+__all__ = ["clip_interval", "box_slab", "NO_PLANES", "make_planes"]
 
 #: An empty plane list, shape (0, 4).
 NO_PLANES = np.zeros((0, 4), dtype=np.float64)
+
+
+@jit(inline="always")
+def box_slab(v: float, d: float, lo: float, hi: float, closed: bool, t0: float,
+             t1: float) -> tuple[float, float]:
+    """``[t0, t1]`` clipped to the slab ``lo <= v + t d <= hi`` of one axis of a box.
+
+    A ray lying in a face plane (``d == 0``) belongs to the box above it, as the traversal gives
+    a cell's faces to the next cell; the last box of the volume (``closed``) keeps its far face.
+    An empty result is ``(inf, -inf)``.
+    """
+    if d == 0.0:
+        if v < lo or v > hi or (v == hi and not closed):
+            return math.inf, -math.inf
+        return t0, t1
+    ta = (lo - v) / d
+    tb = (hi - v) / d
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
 
 
 @jit(inline="always")

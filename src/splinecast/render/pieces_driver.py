@@ -36,7 +36,7 @@ from numba import prange
 
 from .._jit import jit, overload_jit
 from ..models.pieces import cell_count, new_scratch, value_gradient_at
-from .clipping import clip_interval
+from .clipping import box_slab, clip_interval
 from .driver import _trace_pixel
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
@@ -51,33 +51,17 @@ TILE = 16
 
 
 @jit(inline="always")
-def _axis(v: float, d: float, lo: float, hi: float, closed: bool, t0: float,
-          t1: float) -> tuple[float, float]:
-    if d == 0.0:
-        # A ray lying in a face plane belongs to the box above it (the traversal gives a cell's
-        # faces to the next cell); the last box of the volume keeps its far face.
-        if v < lo or v > hi or (v == hi and not closed):
-            return math.inf, -math.inf
-        return t0, t1
-    ta = (lo - v) / d
-    tb = (hi - v) / d
-    if ta > tb:
-        ta, tb = tb, ta
-    return max(t0, ta), min(t1, tb)
-
-
-@jit(inline="always")
 def box_interval(basis, origin, spacing, lo, hi, closed, planes, row, col, width, height):
     """Parameter interval ``(t0, t1)`` of pixel ``(row, col)``'s ray inside the index box
     ``[lo, hi]`` (index ``v`` at ``origin + v * spacing``), clipped by ``planes``; ``t0 > t1``
     when the ray misses it. The arithmetic of :func:`splinecast.multires.probe.box_ranges`."""
     wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
     t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-    t0, t1 = _axis((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
+    t0, t1 = box_slab((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
                    t0, t1)
-    t0, t1 = _axis((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
+    t0, t1 = box_slab((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
                    t0, t1)
-    t0, t1 = _axis((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
+    t0, t1 = box_slab((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
                    t0, t1)
     return t0, t1
 
