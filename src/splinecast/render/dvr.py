@@ -372,6 +372,20 @@ def _done(mode, st):
 
 
 @jit(inline="always")
+def _shaded_over(mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray, acc_r,
+                 acc_g, acc_b, acc_a, t_half, r, g, b, a, t):
+    """One segment's colour composited behind the ray's, shaded (when asked) with the gradient
+    at the point ``s`` of the piece from ``(ax, ay, az)`` to ``(bx, by, bz)``."""
+    factor = 1.0
+    if mode.shade:
+        gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
+                              ay + s * (by - ay), az + s * (bz - az))
+        factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
+                               ray[12], ray[13], ray[14], ray[3], ray[4], ray[5])
+    return _composite(acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, t)
+
+
+@jit(inline="always")
 def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, az, bx, by, bz,
                ray, n, seg, va, acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next):
     """The pieces sampling with a 2D table: ``n`` segments of ``seg`` voxels.
@@ -419,14 +433,9 @@ def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, a
             a2 = -math.expm1(-ratio * d)
             f = a2 / a
             r, g, b, a = r * f, g * f, b * f, a2
-        factor = 1.0
-        if mode.shade:
-            gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
-                                  ay + s * (by - ay), az + s * (bz - az))
-            factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
-                                   ray[12], ray[13], ray[14], ray[3], ray[4], ray[5])
-        acc_r, acc_g, acc_b, acc_a, t_half = _composite(
-            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, t0 + s * span)
+        acc_r, acc_g, acc_b, acc_a, t_half = _shaded_over(
+            mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray,
+            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, t0 + s * span)
         if acc_a >= mode.term:
             break
     return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
@@ -461,14 +470,9 @@ def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay
                                   mode.l_scale, va, vb, seg)
         samples += 1
         if a > 0.0:
-            factor = 1.0
-            if mode.shade:
-                gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
-                                      ay + s * (by - ay), az + s * (bz - az))
-                factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
-                                       ray[12], ray[13], ray[14], ray[3], ray[4], ray[5])
-            acc_r, acc_g, acc_b, acc_a, t_half = _composite(
-                acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, t0 + s * span)
+            acc_r, acc_g, acc_b, acc_a, t_half = _shaded_over(
+                mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray,
+                acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, t0 + s * span)
             if acc_a >= mode.term:
                 break
         va = vb
@@ -482,8 +486,6 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         return _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az,
                                bx, by, bz, ray, st)
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
-    ux, uy, uz = ray[3], ray[4], ray[5]
-    sx, sy, sz = ray[12], ray[13], ray[14]
     anchor = ray[15]
     dnorm = math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
     dt = mode.h0 / dnorm  # the base step in world units
@@ -510,14 +512,9 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
                                    mode.lut, mode.t_lo, mode.l_scale, va, vb,
                                    length)
             if a > 0.0:
-                factor = 1.0
-                if mode.shade:
-                    gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
-                                          ay + s * (by - ay), az + s * (bz - az))
-                    factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
-                                           sx, sy, sz, ux, uy, uz)
-                acc_r, acc_g, acc_b, acc_a, t_half = _composite(
-                    acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, tb)
+                acc_r, acc_g, acc_b, acc_a, t_half = _shaded_over(
+                    mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray,
+                    acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, tb)
         if not sample or acc_a >= mode.term:
             break
         samples += 1
