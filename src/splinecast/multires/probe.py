@@ -18,7 +18,7 @@ from numba import prange
 
 from .._jit import jit
 from ..models.pieces import new_scratch, value_gradient_at
-from ..render.clipping import box_slab, clip_interval
+from ..render.pieces_driver import box_interval
 from ..render.rays import pixel_ray
 
 __all__ = ["box_ranges", "sample_grid", "grid_values_at"]
@@ -29,14 +29,8 @@ def _box_row(basis, origin, spacing, lo, hi, closed, planes, out, row) -> int:
     height, width = out.shape[0], out.shape[1]
     met = 0
     for col in range(width):
-        wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-        t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-        t0, t1 = box_slab((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
-                       t0, t1)
-        t0, t1 = box_slab((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
-                       t0, t1)
-        t0, t1 = box_slab((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
-                       t0, t1)
+        t0, t1 = box_interval(basis, origin, spacing, lo, hi, closed, planes, row, col, width,
+                              height)
         out[row, col, 0] = t0
         out[row, col, 1] = t1
         if t0 <= t1:

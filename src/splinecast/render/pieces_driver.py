@@ -54,15 +54,15 @@ TILE = 16
 def box_interval(basis, origin, spacing, lo, hi, closed, planes, row, col, width, height):
     """Parameter interval ``(t0, t1)`` of pixel ``(row, col)``'s ray inside the index box
     ``[lo, hi]`` (index ``v`` at ``origin + v * spacing``), clipped by ``planes``; ``t0 > t1``
-    when the ray misses it. The arithmetic of :func:`splinecast.multires.probe.box_ranges`."""
+    when the ray misses it (also what :func:`splinecast.multires.probe.box_ranges` computes)."""
     wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
     t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
     t0, t1 = box_slab((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
-                   t0, t1)
+                      t0, t1)
     t0, t1 = box_slab((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
-                   t0, t1)
+                      t0, t1)
     t0, t1 = box_slab((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
-                   t0, t1)
+                      t0, t1)
     return t0, t1
 
 
