@@ -34,7 +34,8 @@ TF_B = sc.TransferFunction([(0.1, 0.0), (0.4, 0.2), (0.6, 0.0)], domain=(0.0, 1.
 
 
 def dvr(**kw: Any) -> sc.DVRSettings:
-    """The CLI's documented DVR defaults: --step 0.25, --preintegration 2d."""
+    """The CLI's documented DVR values of the options not given when another DVR option is:
+    --step 0.25, --preintegration 2d (with no DVR option at all, the library's default)."""
     return sc.DVRSettings(**{"step": 0.25, "preintegration": "2d", **kw})
 
 
@@ -138,8 +139,16 @@ CASES = [
     Case("mip-clip", ["--mode", "minip", "--clip", "0,1,0,0"],
          {"mode": "minip", "clip": [(0.0, 1.0, 0.0, 0.0)]}, {"mode": "minip"}),
     # --- DVR ----------------------------------------------------------------------------
-    Case("tf", ["--mode", "dvr", "--tf", "{tf_b}"], {"mode": "dvr", "tf": TF_B, "dvr": dvr()},
-         {"mode": "dvr", "tf": TF_A, "dvr": dvr()}, src=NOISE),
+    # No DVR option: what Scene.render(mode="dvr") gives without dvr= (DEFAULT_SETTINGS).
+    Case("tf", ["--mode", "dvr", "--tf", "{tf_b}"], {"mode": "dvr", "tf": TF_B},
+         {"mode": "dvr", "tf": TF_A}, src=NOISE),
+    # An option given with its documented value still counts: DVRSettings(step=0.25).
+    Case("dvr-step-documented", ["--mode", "dvr", "--tf", "{tf_a}", "--step", "0.25"],
+         {"mode": "dvr", "tf": TF_A, "dvr": sc.DVRSettings(step=0.25)},
+         {"mode": "dvr", "tf": TF_A}, src=NOISE),
+    Case("preintegration-2d", ["--mode", "dvr", "--tf", "{tf_a}", "--preintegration", "2d"],
+         {"mode": "dvr", "tf": TF_A, "dvr": dvr()},
+         {"mode": "dvr", "tf": TF_A}, src=NOISE),
     Case("dvr-step", ["--mode", "dvr", "--tf", "{tf_a}", "--step", "1"],
          {"mode": "dvr", "tf": TF_A, "dvr": dvr(step=1.0)},
          {"mode": "dvr", "tf": TF_A, "dvr": dvr()}, src=NOISE),
@@ -166,8 +175,8 @@ CASES = [
          {"mode": "dvr", "tf": TF_A, "dvr": dvr(termination=0.5)},
          {"mode": "dvr", "tf": TF_A, "dvr": dvr()}, src=NOISE),
     Case("dvr-crop", ["--mode", "dvr", "--tf", "{tf_a}", "--crop=-1,0.2,-1,1,-1,1"],
-         {"mode": "dvr", "tf": TF_A, "dvr": dvr(), "crop": (-1.0, 0.2, -1.0, 1.0, -1.0, 1.0)},
-         {"mode": "dvr", "tf": TF_A, "dvr": dvr()}, src=NOISE),
+         {"mode": "dvr", "tf": TF_A, "crop": (-1.0, 0.2, -1.0, 1.0, -1.0, 1.0)},
+         {"mode": "dvr", "tf": TF_A}, src=NOISE),
 ]
 
 

@@ -91,8 +91,7 @@ def test_mip_and_dvr_movies_use_the_render_options(tmp_path, capsys):
         vol = sc.read(SRC)
         cam = orbit_path(vol, 2, size=(16, 16))[1]
         options = {"mode": "mip", "colormap": "bone"} if argv[1] == "mip" else \
-            {"mode": "dvr", "tf": sc.TransferFunction.load(tf),
-             "dvr": sc.DVRSettings(step=0.25, h_max=2.0)}  # the CLI's --step default
+            {"mode": "dvr", "tf": sc.TransferFunction.load(tf)}  # no DVR option: no dvr=
         want = sc.Scene(vol).render(cam, **options).to_uint8()
         np.testing.assert_array_equal(np.asarray(Image.open(out / "frame_0001.png")), want)
 

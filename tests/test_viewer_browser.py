@@ -117,6 +117,7 @@ def expected(vol, state: dict, size: tuple[int, int]) -> np.ndarray:
                        dvr=sc.DVRSettings(step=dvr["step"], shade=dvr["shade"],
                                           preintegration=dvr["preintegration"],
                                           termination=dvr["termination"],
+                                          sampling=dvr["sampling"],
                                           ambient=light["ambient"], diffuse=light["diffuse"]))
     return sc.Scene(vol, model=state["model"]).render(camera, **options).to_uint8()
 

@@ -178,7 +178,7 @@ def test_pyramid_screenshot_is_the_complete_cut_in_every_mode(pyramid):
     states = {
         "mip": {"mode": "mip", "window": [0.0, 0.9], "colormap": "viridis"},
         "dvr": {"mode": "dvr", "tf": tf, "dvr": {"termination": None, "preintegration": "none",
-                                                 "step": 0.5}},
+                                                 "step": 0.5, "sampling": "grid"}},
     }
     with MultiscaleScene(sc.read(pyramid), lod=LOD) as ref_scene:
         cam = camera(mv, size=size, azimuth=70.0)

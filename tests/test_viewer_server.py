@@ -12,12 +12,14 @@ import base64
 import json
 import os
 import time
+from dataclasses import replace
 from importlib import resources
 
 import numpy as np
 import pytest
 
 import splinecast as sc
+from splinecast.render.dvr import DEFAULT_SETTINGS
 from splinecast.viewer.client import ServerError, ViewerClient
 from splinecast.viewer.renderer import FrameRenderer
 from splinecast.viewer.server import STATIC_FILES, ViewerServer
@@ -168,13 +170,20 @@ def test_frames_equal_scene_render_for_every_mode(vol):
         ({"mode": "mip", "window": [0.0, 0.9], "colormap": "viridis"},
          {"mode": "mip", "window": (0.0, 0.9), "colormap": "viridis"}),
         ({"mode": "minip"}, {"mode": "minip"}),
+        # The dvr fields not sent are the library's default (DEFAULT_SETTINGS).
+        ({"mode": "dvr", "tf": tf}, {"mode": "dvr", "tf": sc.TransferFunction.from_dict(tf)}),
         ({"mode": "dvr", "tf": tf, "dvr": {"step": 0.5, "shade": True},
+          "lighting": {"ambient": 0.2, "diffuse": 0.6}},
+         {"mode": "dvr", "tf": sc.TransferFunction.from_dict(tf),
+          "dvr": replace(DEFAULT_SETTINGS, step=0.5, shade=True, ambient=0.2, diffuse=0.6)}),
+        ({"mode": "dvr", "tf": tf, "dvr": {"step": 0.5, "shade": True, "sampling": "grid",
+                                           "termination": 0.99},
           "lighting": {"ambient": 0.2, "diffuse": 0.6}},
          {"mode": "dvr", "tf": sc.TransferFunction.from_dict(tf),
           "dvr": sc.DVRSettings(step=0.5, shade=True, ambient=0.2, diffuse=0.6,
                                 termination=0.99)}),
         ({"mode": "dvr", "tf": tf, "dvr": {"termination": None, "preintegration": "none",
-                                           "step": 0.3}},
+                                           "step": 0.3, "sampling": "grid"}},
          {"mode": "dvr", "tf": sc.TransferFunction.from_dict(tf),
           "dvr": sc.DVRSettings(step=0.3, preintegration="none")}),
         ({"clip": [[1.0, 0.0, 0.0, 0.1]], "crop": [-1, 1, -0.8, 1, -1, 0.7],
@@ -210,14 +219,14 @@ def test_every_model_and_mode_gives_scene_render_or_its_error():
                     options = {"mode": mode, "iso": 0.0}
                     if mode == "dvr":
                         tf = sc.TransferFunction([(-0.2, 0.3), (0.2, 0.0)], (-1, 1))
-                        options.update(tf=tf, dvr=sc.DVRSettings())
+                        options.update(tf=tf)  # the viewer's default is the library's
                     try:
                         expected = scene.render(cam, **options).to_uint8()
                     except sc.ParameterError as exc:
                         expected = str(exc)
                     state = {"model": model, "mode": mode, "iso": 0.0, "size": [24, 18]}
                     if mode == "dvr":
-                        state.update(tf=tf.to_dict(), dvr={"termination": None})
+                        state.update(tf=tf.to_dict())
                     ident = await client.render(state)
                     try:
                         got = (await client.frame(ident)).image
@@ -256,7 +265,8 @@ def _fuzz_messages(rng: np.random.Generator, base: dict, count: int) -> tuple[li
                                                       "fov", "ortho"],
               "size": None, "iso": None, "opacity": None, "window": None, "colormap": None,
               "tf": ["domain", "opacity", "colormap"], "dvr": ["step", "shade",
-                                                                "preintegration", "termination"],
+                                                                "preintegration", "termination",
+                                                                "sampling"],
               "lighting": ["ambient", "diffuse", "specular", "shininess"], "clip": None,
               "crop": None, "bogus": None}
     messages, invalid = [], 0

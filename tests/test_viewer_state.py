@@ -124,6 +124,8 @@ def test_resized_camera_keeps_the_view(vol):
      "increasing order"),
     ({"mode": "dvr", "dvr": {"step": -1}}, "step (voxels) must be a finite number >= 0.001"),
     ({"mode": "dvr", "dvr": {"preintegration": "4d"}}, "preintegration must be one of"),
+    ({"mode": "dvr", "dvr": {"sampling": "cells"}}, "sampling must be one of"),
+    ({"mode": "dvr", "dvr": {"sampling": 1}}, "dvr.sampling must be a name"),
     ({"lighting": {"ambient": -1}}, "ambient must be >= 0"),
     ({"clip": [[0, 0, 0, 1]]}, "non-zero normal"),
     ({"clip": [[1, 0, 0]]}, "clip[0] must hold 4 numbers"),
@@ -151,6 +153,32 @@ def test_mode_options_are_what_scene_render_takes(vol, defaults):
     assert multi["iso"] == [0.2, 0.6] and multi["opacity"] == [0.3, 1.0]
     # Omitted fields are the defaults: the complete state is the same either way.
     assert parse({}, vol, defaults).state == parse({"mode": "iso"}, vol, defaults).state == defaults
+
+
+def test_default_dvr_state_is_the_library_default_and_fields_change_one_thing(vol, defaults):
+    """Untouched, the viewer renders DVR as Scene.render(mode="dvr") without dvr= does
+    (DEFAULT_SETTINGS); a field the client sets changes that field only."""
+    from dataclasses import replace
+
+    from splinecast.render.dvr import DEFAULT_SETTINGS
+
+    def drawn(settings):  # what the image depends on: every field but the unused weights
+        return replace(settings, ambient=0.0, diffuse=0.0)
+
+    request = parse({"mode": "dvr"}, vol, defaults)
+    assert not request.options["dvr"].shade
+    assert drawn(request.options["dvr"]) == drawn(DEFAULT_SETTINGS)
+    tf = sc.TransferFunction([(0.3, 0.0), (0.6, 0.4)], (0, 1), "hot")
+    cam = sc.Camera.orbit(vol, size=(24, 18))
+    scene = sc.Scene(vol)
+    np.testing.assert_array_equal(
+        scene.render(cam, mode="dvr", tf=tf, dvr=request.options["dvr"]).rgba,
+        scene.render(cam, mode="dvr", tf=tf).rgba)
+    step = parse({"mode": "dvr", "dvr": {"step": 0.25}}, vol, defaults).options["dvr"]
+    assert drawn(step) == drawn(replace(DEFAULT_SETTINGS, step=0.25))
+    grid = parse({"mode": "dvr", "dvr": {"sampling": "grid", "termination": None, "step": 0.5}},
+                 vol, defaults).options["dvr"]
+    assert drawn(grid) == drawn(sc.DVRSettings())
 
 
 # ------------------------------------------------------------------------------ protocol

@@ -16,7 +16,8 @@ from splinecast.render.defaults import WINDOW_PERCENTILES
 from ._common import add_input_options, check_output, finite, log, numbers
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
-           "mode_kwargs", "orbit_options"]
+           "mode_kwargs", "orbit_options", "sampled_step", "dvr_settings", "SAMPLED_STEP",
+           "DVR_FALLBACK"]
 
 #: Options only some modes read: flag -> (attribute, modes). Given with another mode they would be
 #: ignored without a word, so :func:`_refuse_ignored_options` refuses them instead.
@@ -39,6 +40,21 @@ _MODE_ONLY = {
 
 #: The render subcommand's option defaults (attribute -> default), filled by :func:`add_parser`.
 _DEFAULTS: dict[str, object] = {}
+
+#: The sampling step (voxels) of ``--method sampled`` when ``--step`` is not given.
+SAMPLED_STEP = 0.25
+
+#: The DVR options. With none of them given, ``--mode dvr`` renders as ``Scene.render`` without
+#: ``dvr=`` does (the library's fast default, :data:`splinecast.render.dvr.DEFAULT_SETTINGS`);
+#: with any of them, ``DVRSettings`` of the given ones and, for the others, these values (the
+#: meaning the options always had). Their parser defaults are None so that an option given
+#: with its documented value (``--step 0.25``) still counts as given.
+DVR_FALLBACK: dict[str, object] = {"step": SAMPLED_STEP, "preintegration": "2d",
+                                   "table_layout": "uniform", "adaptive": False,
+                                   "termination": None}
+#: What an unset DVR option holds after parsing.
+_DVR_UNSET: dict[str, object] = {"step": None, "preintegration": None, "table_layout": None,
+                                 "adaptive": False, "termination": None}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -92,8 +108,9 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
     render.add_argument("--method", default="exact", choices=("exact", "sampled"),
                         help="exact analytic roots (default) or fixed-step sampling")
-    render.add_argument("--step", type=finite, default=0.25,
-                        help="sampling step in voxels for --method sampled (default 0.25)")
+    render.add_argument("--step", type=finite,
+                        help="sampling step in voxels for --method sampled (default 0.25) and "
+                             "--mode dvr (default 0.25 when another DVR option is given)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default from the data)")
     _add_mode_options(render)
@@ -118,9 +135,13 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="smooth Blinn-Phong (default) or 4-band cel shading")
     render.add_argument("--smooth", type=int, choices=(3, 5),
                         help="Gaussian pre-smoothing kernel size")
-    render.add_argument("--preintegration", default="2d", choices=("none", "2d", "3d"),
-                        help="DVR classification (default 2d pre-integration)")
-    render.add_argument("--table-layout", default="uniform", choices=("uniform", "exponential"),
+    render.add_argument("--preintegration", choices=("none", "2d", "3d"),
+                        help="DVR classification (default 2d pre-integration). With none of "
+                             "--step, --preintegration, --table-layout, --adaptive and "
+                             "--termination, --mode dvr renders with the library's fast default "
+                             "(splinecast.render.dvr.DEFAULT_SETTINGS, as Scene.render without "
+                             "dvr=)")
+    render.add_argument("--table-layout", choices=("uniform", "exponential"),
                         help="DVR 3D pre-integration table lengths: k x step (default) or "
                              "2^j x step")
     render.add_argument("--adaptive", action="store_true",
@@ -177,7 +198,7 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
                 "non-background values; set --window LO,HI)".format(
                     *kwargs["window"], *WINDOW_PERCENTILES))
         kwargs["method"] = args.method
-        kwargs["step"] = args.step
+        kwargs["step"] = sampled_step(args)
         return kwargs, notes
     if args.mode == "dvr":
         if args.tf:
@@ -188,11 +209,9 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
             notes.append(f"transfer function: opacity 0 at {v0:g} rising to {a1:g} per voxel at "
                       f"{v1:g}, {tf.colormap} colours (automatic, from the histogram; set "
                       "--tf FILE.json)")
-        pre = "3d" if args.adaptive and args.preintegration == "2d" else args.preintegration
-        kwargs["dvr"] = sc.DVRSettings(step=args.step, preintegration=pre,
-                                       adaptive=args.adaptive, h_max=8 * args.step,
-                                       termination=args.termination,
-                                       table_layout=args.table_layout)
+        settings = dvr_settings(args)
+        if settings is not None:  # else Scene.render's own default (dvr= not passed)
+            kwargs["dvr"] = settings
         return kwargs, notes
     isos = numbers(args.iso, "--iso")
     if isos is not None and (len(isos) > 1 or args.opacity):
@@ -206,11 +225,30 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
                    else "automatic: Otsu's threshold of the non-background histogram")
             notes.append(f"iso {kwargs['iso']:g} ({how}; set --iso)")
         kwargs["method"] = args.method
-        kwargs["step"] = args.step
+        kwargs["step"] = sampled_step(args)
     if args.texture or args.shading == "cel":
         kwargs["effects"] = sc.SurfaceEffects(texture=args.texture, scale=args.texture_scale,
                                               cel_bands=4 if args.shading == "cel" else 0)
     return kwargs, notes
+
+
+def sampled_step(args: argparse.Namespace) -> float:
+    """``--step``, or :data:`SAMPLED_STEP` when it is not given."""
+    return SAMPLED_STEP if args.step is None else args.step
+
+
+def dvr_settings(args: argparse.Namespace) -> sc.DVRSettings | None:
+    """The ``DVRSettings`` the DVR options stand for, or None when none of them is given (the
+    library's default then applies, see :data:`DVR_FALLBACK`)."""
+    given = {name: getattr(args, name) for name, unset in _DVR_UNSET.items()
+             if getattr(args, name) != unset}
+    if not given:
+        return None
+    o = {**DVR_FALLBACK, **given}
+    pre = "3d" if o["adaptive"] and o["preintegration"] == "2d" else o["preintegration"]
+    return sc.DVRSettings(step=o["step"], preintegration=pre, adaptive=o["adaptive"],
+                          h_max=8 * o["step"], termination=o["termination"],
+                          table_layout=o["table_layout"])
 
 
 def _fit(args: argparse.Namespace, vol: sc.Volume, kwargs: dict) -> object:
@@ -237,7 +275,7 @@ def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
     limits.check_finite_number(args.zoom, "--zoom", lo=1e-6, hi=1e6)
     if args.distance is not None:
         limits.check_finite_number(args.distance, "--distance", lo=0, lo_open=True)
-    if args.method == "sampled" or args.mode == "dvr":
+    if args.step is not None and (args.method == "sampled" or args.mode == "dvr"):
         limits.check_finite_number(args.step, "--step (voxels)", lo=limits.MIN_STEP)
     if args.iterations is not None:
         limits.check_count(args.iterations, "--iterations", hi=limits.MAX_ROOT_ITERATIONS)
@@ -323,8 +361,8 @@ def run(args: argparse.Namespace) -> int:
     if args.model is None and wavelet:
         args.model = f"bspline{vol.degree}"
     _refuse_multiscale_options(args, multiscale, wavelet)
-    if args.method == "sampled" or args.mode == "dvr":
-        limits.check_step(args.step, "--step", vol.shape)
+    if args.method == "sampled" or (args.mode == "dvr" and args.step is not None):
+        limits.check_step(sampled_step(args), "--step", vol.shape)
     with contextlib.ExitStack() as stack:
         options = model_options(args)
         scene = None

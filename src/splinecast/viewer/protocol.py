@@ -42,8 +42,9 @@ __all__ = [
 #: Version of the message protocol; a client should refuse a ``hello`` with another major number.
 PROTOCOL_VERSION = 1
 #: Minor version (``hello.v_minor``): additions a version-1 client may ignore. 1: the frame
-#: header's ``bricks`` and ``hello.multires`` (multiresolution data), ``hello.v_minor``.
-PROTOCOL_MINOR = 1
+#: header's ``bricks`` and ``hello.multires`` (multiresolution data), ``hello.v_minor``. 2: the
+#: state's ``dvr.sampling``, and the default ``dvr`` state is the library's default DVR.
+PROTOCOL_MINOR = 2
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.

@@ -221,7 +221,8 @@
       });
       $("dvr-shade").addEventListener("change", (e) => { this.state.dvr.shade = e.target.checked; this.onChange(false); });
       $("dvr-termination").addEventListener("change", (e) => {
-        this.state.dvr.termination = e.target.checked ? 0.99 : null;
+        // Checked: the server's default threshold (what Scene.render uses without settings).
+        this.state.dvr.termination = e.target.checked ? (this.hello.defaults.dvr.termination ?? 0.99) : null;
         this.onChange(false);
       });
     }
