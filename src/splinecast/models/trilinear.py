@@ -202,6 +202,11 @@ class TrilinearModel:
     cell_offset = 0.0
     #: The traversal walks cells in ``voxel index + shift`` (cell ``c`` is ``[c, c + 1]`` there).
     shift = 0.0
+    #: Rays are traced in tiles of 8 x 8 pixels: neighbouring rays read the same voxels while
+    #: they are in the cache (whole rows left them to fall out: ML 256^3 at 1024x768, one core,
+    #: DVR 2074 -> 1599 ms, iso 190 -> 147, MIP 4200 -> 3080; benchmarks/results/dvr_issue15e.md).
+    band_rows = 8
+    tile = 8
 
     def __init__(self, volume: Volume) -> None:
         require_renderable(volume)
