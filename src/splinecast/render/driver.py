@@ -67,13 +67,10 @@ from .mode_api import (
 )
 from .rays import pixel_ray
 
-__all__ = ["trace", "finalize", "reset_state", "band_order", "pair_pixel", "GEOM_SIZE"]
+__all__ = ["trace", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
 
 #: (grid class, mode class) -> :func:`_trace_image` specialized for the pair.
 _KERNELS: dict[tuple[type, type], Any] = {}
-
-#: (grid class, mode class) -> (:func:`_trace_pixel` with the pair's hooks, bindings, suffix).
-_PIXELS: dict[tuple[type, type], Any] = {}
 
 #: Length of the ``geom`` array.
 GEOM_SIZE = 19
@@ -297,37 +294,6 @@ def reset_state(mode, state, height, width):
             state_store(mode, state, row, col, state_new(mode))
 
 
-def pair_hooks(grid_class: type, mode_class: type) -> tuple[dict[str, Any], str] | None:
-    """The hook bindings of one (model, mode) pair and the suffix naming its copies.
-
-    ``None`` for a pair the registries do not know (no such model or mode): callers keep the
-    generic functions and their error. Hooks are bound to their ``inline="always"`` copies,
-    except those the model keeps as calls (``register(..., called=...)``).
-    """
-    model_hooks = model_api.hooks_of(grid_class)
-    mode_hooks = mode_api.hooks_of(mode_class)
-    if model_hooks is None or mode_hooks is None:
-        return None
-    called = model_api.called_of(grid_class)
-    bind = {name: f if name in called else inlined(f)
-            for name, f in {**model_hooks, **mode_hooks}.items()}
-    return bind, f"{grid_class.__name__}_{mode_class.__name__}"
-
-
-def pair_pixel(grid_class: type, mode_class: type) -> tuple[Any, dict[str, Any], str] | None:
-    """:func:`_trace_pixel` with one pair's hooks bound, the bindings and the suffix
-    (:func:`pair_hooks`); made once per pair, shared by every loop that traces pixels."""
-    key = (grid_class, mode_class)
-    made = _PIXELS.get(key)
-    if made is None:
-        hooks = pair_hooks(grid_class, mode_class)
-        if hooks is None:
-            return None
-        bind, suffix = hooks
-        made = _PIXELS[key] = (rebound(_trace_pixel, bind, suffix), bind, suffix)
-    return made
-
-
 def _pair_kernel(grid_class: type, mode_class: type) -> Any:
     """:func:`_trace_image` for one (model, mode) pair, its hooks inlined (made once per pair).
 
@@ -345,11 +311,16 @@ def _pair_kernel(grid_class: type, mode_class: type) -> Any:
     key = (grid_class, mode_class)
     kernel = _KERNELS.get(key)
     if kernel is None:
-        made = pair_pixel(grid_class, mode_class)
-        if made is None:
+        model_hooks = model_api.hooks_of(grid_class)
+        mode_hooks = mode_api.hooks_of(mode_class)
+        if model_hooks is None or mode_hooks is None:
             kernel = _trace_image
         else:
-            pixel, bind, suffix = made
+            called = model_api.called_of(grid_class)
+            bind = {name: f if name in called else inlined(f)
+                    for name, f in {**model_hooks, **mode_hooks}.items()}
+            suffix = f"{grid_class.__name__}_{mode_class.__name__}"
+            pixel = rebound(_trace_pixel, bind, suffix)
             band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
             kernel = rebound(_trace_image, {"_trace_band": band}, suffix)
         _KERNELS[key] = kernel

@@ -30,16 +30,14 @@ closure away.
 from __future__ import annotations
 
 import math
-from typing import Any
 
-import numba
 import numpy as np
 from numba import prange
 
-from .._jit import jit, overload_jit, rebound
+from .._jit import jit, overload_jit
 from ..models.pieces import cell_count, new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
-from .driver import _trace_pixel, pair_pixel
+from .driver import _trace_pixel
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import pixel_ray
@@ -98,10 +96,7 @@ def closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit
     raise NotImplementedError
 
 
-# The closure's calls allocate (scratch buffers, typed list items) and so need reference
-# counting, which a function called from a launch compiled without it (:func:`_pieces_kernel`)
-# would otherwise inherit the absence of: they ask for it explicitly.
-@jit(_nrt=True)
+@jit()
 def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, height, t):
     """The field of piece ``q`` (as drawn) at parameter ``t`` of the ray."""
     if which[q, 0] == 0:
@@ -115,7 +110,7 @@ def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, heigh
     return v
 
 
-@jit(_nrt=True)
+@jit()
 def _iso_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, geom,
                grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
     # The caller checked that the ray left a piece of another level at t_in.
@@ -146,7 +141,7 @@ def _iso_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_pi
     return 0
 
 
-@jit(_nrt=True)
+@jit()
 def _no_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, geom,
               grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
     return 0
@@ -174,18 +169,19 @@ def _closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exi
     return (_iso_leave if _is_iso(mode) else _no_leave).py_func
 
 
-# Compiled without reference counting for each (model, mode) pair, as the driver's band and for
-# the same reason (see :func:`_pieces_kernel`): it allocates nothing, its scratch buffers come
-# from the tile.
 @jit()
-def _piece_tile(kernel, blocks, mode, scr, mscr, cuts, tags, state, out, basis, geom, box_lo,
-                box_hi, closed, origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level,
-                close, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
-                tc0, visited, tested, skipped):
+def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
+                origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
+                grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0, tc0,
+                visited, tested, skipped):
     """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns the closure's hits
     and the number of rays that ended in it (marked in the tile's ``ended``)."""
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(kernel)
+    # Model scratch per piece: some models cache cells of their grid in it.
+    scr = new_scratch(kernel)
+    cuts = np.empty(8)
+    tags = np.empty(8, np.int64)
     hits = 0
     n_ended = 0
     for row in range(r0, r1):
@@ -232,8 +228,6 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
     tr1 = min(tr0 + TILE, height)
     tc1 = min(tc0 + TILE, width)
     mscr = mode_scratch(mode)
-    cuts = np.empty(8)
-    tags = np.empty(8, np.int64)
     # Rays of the tile that ended (``done``) are left out of the pieces behind, and the tile
     # stops when all have: a first hit near the front otherwise still pays every piece's
     # interval and state round trip behind it.
@@ -259,9 +253,7 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
             continue
         if which[p, 0] == 0:
             pair_a = grids_a[which[p, 1]]
-            # Model scratch per piece: some models cache cells of their grid in it.
-            h, e = _piece_tile(pair_a[0], pair_a[1], mode, new_scratch(pair_a[0]), mscr, cuts,
-                               tags, state, out, basis, geoms[p],
+            h, e = _piece_tile(pair_a[0], pair_a[1], mode, mscr, state, out, basis, geoms[p],
                                boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
                                t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
                                grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
@@ -269,8 +261,7 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
         else:
             # Another name than above: the two lists may hold different types.
             pair_b = grids_b[which[p, 1]]
-            h, e = _piece_tile(pair_b[0], pair_b[1], mode, new_scratch(pair_b[0]), mscr, cuts,
-                               tags, state, out, basis, geoms[p],
+            h, e = _piece_tile(pair_b[0], pair_b[1], mode, mscr, state, out, basis, geoms[p],
                                boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
                                t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
                                grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
@@ -287,6 +278,7 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
     return hits
 
 
+@jit(parallel=True)
 def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
                  levels, origin0, spacing0, planes, t_range, tiles, fresh, final, close, exit_t,
                  exit_piece, exit_level, visited, tested, skipped):
@@ -341,17 +333,6 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     int
         Rays the closure ended on a face.
     """
-    kernel = _pieces_kernel(_grid_class(grids_a, grids_b), type(mode))
-    return kernel(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
-                  levels, origin0, spacing0, planes, t_range, tiles, fresh, final, close, exit_t,
-                  exit_piece, exit_level, visited, tested, skipped)
-
-
-@jit(parallel=True)
-def _trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
-                  levels, origin0, spacing0, planes, t_range, tiles, fresh, final, close, exit_t,
-                  exit_piece, exit_level, visited, tested, skipped):
-    """:func:`trace_pieces` compiled (generic: the hooks resolved through their overloads)."""
     hits = np.zeros(tiles.shape[0], np.int64)
     # The parallel loop only hands out tiles: its body stays a single call (small parallel
     # passes and compile time, as in the driver).
@@ -361,49 +342,3 @@ def _trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes
                               tiles[n, 0], tiles[n, 1], fresh, final, close, exit_t, exit_piece,
                               exit_level, visited, tested, skipped)
     return hits.sum()
-
-
-#: (grid class, mode class) -> :func:`_trace_pieces` specialized for the pair.
-_KERNELS: dict[tuple[type, type], Any] = {}
-
-
-def _grid_class(grids_a: Any, grids_b: Any) -> type | None:
-    """The model's grid class (both lists hold one model's grids, perhaps of two dtypes)."""
-    for grids in (grids_a, grids_b):
-        item = getattr(numba.typeof(grids), "item_type", None)
-        kernel_type = getattr(item, "types", (None,))[0]
-        grid_class = getattr(kernel_type, "instance_class", None)
-        if grid_class is not None:
-            return grid_class
-    return None
-
-
-def _pieces_kernel(grid_class: type | None, mode_class: type) -> Any:
-    """:func:`_trace_pieces` for one (model, mode) pair, made once per pair as the driver's
-    :func:`.driver._pair_kernel`: the pair's hooks and pixel loop inlined into
-    :func:`_piece_tile`, compiled without reference counting (issue 9 measured the counting of
-    the grid and state tuples' arrays at more than half of a frame), and the copies cached on
-    disk under their own names. Unknown pairs keep the generic launch and its error."""
-    key = (grid_class, mode_class)
-    kernel = _KERNELS.get(key)
-    if kernel is None:
-        made = None if grid_class is None else pair_pixel(grid_class, mode_class)
-        if made is None:
-            kernel = _trace_pieces
-        else:
-            _, bind, suffix = made
-            # The pixel loop is called, not inlined: inlined into this loop at Numba's IR level,
-            # it traced no hits (a miscompilation not understood yet; inlined into the driver's
-            # band it is right, and tests/test_pieces_driver.py compares the two paths). The
-            # call is one per ray and piece and counts no references (nothing here does).
-            pixel = rebound(_trace_pixel, bind, f"{suffix}_called", inline="never")
-            # The closure's entry test is called, not inlined: it allocates.
-            enter = _iso_enter if mode_class is IsoMode else _no_enter
-            # Called from compiled code only: no Python entry, which would need reference
-            # counting to unbox the typed lists.
-            piece = rebound(_piece_tile, {**bind, "_trace_pixel": pixel, "closure_enter": enter},
-                            suffix, _nrt=False, no_cpython_wrapper=True)
-            tile = rebound(_trace_tile, {"_piece_tile": piece}, suffix)
-            kernel = rebound(_trace_pieces, {"_trace_tile": tile}, suffix)
-        _KERNELS[key] = kernel
-    return kernel
