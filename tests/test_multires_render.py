@@ -37,8 +37,10 @@ B = 8
 
 @pytest.fixture(scope="module")
 def noise(tmp_path_factory) -> tuple[sc.Volume, Path]:
-    """Smooth noise (float64, sizes that are not powers of two) and its pyramid of 8^3 bricks."""
-    vol = sc.Volume(smooth_noise((27, 23, 21), seed=3, sigma=2.0))
+    """Smooth noise (float32 as most stores, sizes that are not powers of two) and its pyramid of
+    8^3 bricks. (float32 like the other brick tests' stores: the suite then compiles one launch
+    per model and mode, see ``tests/test_distributed_sort_last.py``.)"""
+    vol = sc.Volume(smooth_noise((27, 23, 21), seed=3, sigma=2.0).astype(np.float32))
     path = tmp_path_factory.mktemp("noise") / "noise.zarr"
     sc.build_pyramid(vol, path, brick=B, shard=16, progress=False)
     return vol, path
@@ -121,11 +123,11 @@ SHAPES = {"sphere": (sphere_sdf, 0.15), "torus": (torus_sdf, 0.08)}  # sdf, core
 
 @pytest.fixture(scope="module")
 def shapes(tmp_path_factory) -> dict[str, tuple[sc.Volume, Path]]:
-    """The demo sphere and torus distance fields (48^3, float64) as pyramids of 8^3 bricks."""
+    """The demo sphere and torus distance fields (48^3, float32) as pyramids of 8^3 bricks."""
     out = {}
     for name in SHAPES:
         demo = sc.demo(name, size=48)
-        vol = sc.Volume(demo.data.astype(np.float64), spacing=demo.spacing, origin=demo.origin,
+        vol = sc.Volume(demo.data.astype(np.float32), spacing=demo.spacing, origin=demo.origin,
                         metadata=demo.metadata)
         path = tmp_path_factory.mktemp(name) / f"{name}.zarr"
         sc.build_pyramid(vol, path, brick=B, shard=16, progress=False)

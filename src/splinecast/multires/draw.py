@@ -47,7 +47,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Hashable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Hashable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -252,6 +252,8 @@ class CutRenderer:
         self._changed: dict[Hashable, tuple[Any, Grid]] = {}
         #: Per brick: its grid's (kernel, blocks) pair for the launch (see :meth:`_pair`).
         self._pairs: dict[Hashable, tuple] = {}
+        #: Per mode type: the (kernel, blocks) pair type of a grid changed at a seam.
+        self._seam_pairs: dict[Hashable, tuple[tuple, Hashable]] = {}
         #: The last frame's typed lists of pairs (see :meth:`_pack`).
         self._packed: tuple | None = None
         #: Trace all pieces of a frame in one compiled launch (else one call per piece).
@@ -457,7 +459,7 @@ class CutRenderer:
                 reset_state(setup.params, state, camera.height, camera.width)
                 finalize(setup.params, state, out, camera.pixel_basis())
             return 0, rebuilt
-        packed = self._pack(pairs)
+        packed = self._pack(pairs, lambda: self._seam_pair(ordered[int(keep[0])], setup))
         if packed is None:
             return None
         grids, slot = packed
@@ -481,31 +483,57 @@ class CutRenderer:
             closure.hits += int(hits)
         return len(keep), rebuilt
 
-    def _pack(self, pairs: list[tuple[tuple, Hashable]]) -> tuple[list, np.ndarray] | None:
+    def _pack(self, pairs: list[tuple[tuple, Hashable]],
+              seam_pair: Callable[[], tuple[tuple, Hashable]]) -> tuple[list, np.ndarray] | None:
         """The launch's two typed lists of ``(kernel, blocks)`` and each pair's ``(list,
         index)``; ``None`` for more than two Numba types. Kept while the pairs are the same
-        objects (a steady view): filling typed lists costs tens of microseconds per item."""
+        objects (a steady view): filling typed lists costs tens of microseconds per item.
+
+        The second list always has the type of grids changed at a seam (``seam_pair``, a
+        float64 copy), empty or not, so a view with seams and one without use the same compiled
+        launch: otherwise the first seam of a session (and every test with another mix) would
+        compile the launch again (tens of seconds) for the same store."""
         key = [pair for pair, _ in pairs]
         kept = self._packed
         if kept is not None and len(kept[0]) == len(key) and all(
                 a is b for a, b in zip(kept[0], key, strict=True)):
             return kept[1], kept[2]
-        lists: dict[Hashable, tuple[int, Any]] = {}
+        members: dict[Hashable, list[int]] = {}
+        for at, (_, signature) in enumerate(pairs):
+            members.setdefault(signature, []).append(at)
+        seam, seam_signature = seam_pair()
+        stored = [signature for signature in members if signature != seam_signature]
+        if len(stored) > 1:
+            return None
+        order = [stored[0] if stored else seam_signature, seam_signature]
         slot = np.empty((len(pairs), 2), dtype=np.int64)
-        for at, (pair, signature) in enumerate(pairs):
-            if signature not in lists:
-                if len(lists) == 2:
-                    return None
-                lists[signature] = (len(lists), List.empty_list(numba.typeof(pair)))
-            number, items = lists[signature]
-            items.append(pair)
-            slot[at] = number, len(items) - 1
-        grids = [items for _, items in sorted(lists.values(), key=lambda v: v[0])]
-        if len(grids) == 1:
-            grids.append(List.empty_list(grids[0]._list_type.item_type))
+        grids: list[Any] = []
+        for number, signature in enumerate(order):
+            if number == 1 and signature == order[0]:  # only float64 copies: one type
+                grids.append(List.empty_list(grids[0]._list_type.item_type))
+                break
+            ats = members.get(signature, [])
+            items = List.empty_list(numba.typeof(pairs[ats[0]][0] if ats else seam))
+            for k, at in enumerate(ats):
+                items.append(pairs[at][0])
+                slot[at] = number, k
+            grids.append(items)
         # The pairs themselves are kept (compared by identity: the lists hold copies).
         self._packed = (key, grids, slot)
         return grids, slot
+
+    def _seam_pair(self, piece: Piece, setup: Any) -> tuple[tuple, Hashable]:
+        """A ``(kernel, blocks)`` pair of the type a grid changed at a seam has (built from a
+        float64 copy of ``piece``'s array, as :meth:`~.seams.Change.apply` makes), and its
+        signature; one per mode type."""
+        key = _signature(setup.params)
+        kept = self._seam_pairs.get(key)
+        if kept is None:
+            array, first = self.prepared(piece)
+            grid = self.grid(piece.level, np.array(array, dtype=np.float64, order="C"), first)
+            pair = (grid.kernel, setup.blocks(grid.hierarchy))
+            kept = self._seam_pairs[key] = (pair, _signature(pair))
+        return kept
 
     def _pair(self, key: Hashable, grid: Grid, setup: Any,
               blocks_key: Any) -> tuple[tuple, Hashable]:

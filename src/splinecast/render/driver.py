@@ -200,7 +200,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
 # in a tuple each time an inlined function with branches receives it; it could not prune those
 # pairs, and their atomic operations took more than half of a qss iso frame. The band allocates
 # nothing (its buffers come from the caller, which keeps every array alive), so it needs no
-# counts; functions it calls count as usual.
+# counts. Functions it calls inherit that (numba passes ``nrt`` on to callees that do not set it),
+# so one that allocates must be compiled with ``_nrt=True`` (none of the band's does).
 @jit(_nrt=False)
 def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, band, band_rows,
                 tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts, tags):
