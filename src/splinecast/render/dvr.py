@@ -223,6 +223,24 @@ def _shade_factor(shade, ambient, diffuse, gx, gy, gz, sx, sy, sz, ux, uy, uz):
 
 
 @jit(inline="always")
+def _table_entry(pi_mode, table, h0, t_lo, t_scale, va, vb, length):
+    """Where a segment ``(va, vb, length)`` reads a pre-integration table: the front and back
+    value coordinates, the length index ``k`` and the length that table row holds."""
+    n = table.shape[1]
+    steps = table.shape[0]
+    uf = min(max((va - t_lo) * t_scale, 0.0), n - 1.0)
+    ub = min(max((vb - t_lo) * t_scale, 0.0), n - 1.0)
+    if pi_mode == 3:
+        # Exponential layout: the table nearest in log2 of the length.
+        j = 0
+        if length > h0:
+            j = min(int(math.log2(length / h0) + 0.5), steps - 1)
+        return uf, ub, j, h0 * 2.0**j
+    k = min(max(int(length / h0 + 0.5), 1), steps)
+    return uf, ub, k - 1, k * h0
+
+
+@jit(inline="always")
 def _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
               va, vb, length):
     """Premultiplied RGBA of a segment of ``length`` voxels from value ``va`` to ``vb``."""
@@ -237,21 +255,8 @@ def _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
         g = ((1.0 - f) * lut[i, 1] + f * lut[i + 1, 1]) * a
         b = ((1.0 - f) * lut[i, 2] + f * lut[i + 1, 2]) * a
         return r, g, b, a
-    n = table.shape[1]
-    steps = table.shape[0]
-    uf = min(max((va - t_lo) * t_scale, 0.0), n - 1.0)
-    ub = min(max((vb - t_lo) * t_scale, 0.0), n - 1.0)
-    if pi_mode == 3:
-        # Exponential layout: the table nearest in log2 of the length.
-        j = 0
-        if length > h0:
-            j = min(int(math.log2(length / h0) + 0.5), steps - 1)
-        k = j + 1
-        held = h0 * 2.0**j
-    else:
-        k = min(max(int(length / h0 + 0.5), 1), steps)
-        held = k * h0
-    r, g, b, a = preint_lookup(table, k - 1, uf, ub)
+    uf, ub, k, held = _table_entry(pi_mode, table, h0, t_lo, t_scale, va, vb, length)
+    r, g, b, a = preint_lookup(table, k, uf, ub)
     ratio = length / held
     if abs(ratio - 1.0) > 1e-9 and a > 0.0:
         # A length the table does not hold: correct the opacity for it (colour follows).
@@ -276,18 +281,7 @@ def _classify_od(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
         return _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
                          va, vb, length)
     n = table.shape[1]
-    steps = table.shape[0]
-    uf = min(max((va - t_lo) * t_scale, 0.0), n - 1.0)
-    ub = min(max((vb - t_lo) * t_scale, 0.0), n - 1.0)
-    if pi_mode == 3:
-        j = 0
-        if length > h0:
-            j = min(int(math.log2(length / h0) + 0.5), steps - 1)
-        k = j
-        held = h0 * 2.0**j
-    else:
-        k = min(max(int(length / h0 + 0.5), 1), steps) - 1
-        held = (k + 1) * h0
+    uf, ub, k, held = _table_entry(pi_mode, table, h0, t_lo, t_scale, va, vb, length)
     r, g, b, a = preint_lookup(table, k, uf, ub)
     ratio = length / held
     if abs(ratio - 1.0) <= 1e-9 or not a > 0.0:
