@@ -231,6 +231,32 @@ def test_cache_never_exceeds_its_budget_and_converges(sphere):
     assert cache.stats()["evicted"] > 0  # the views did not all fit: eviction happened
 
 
+def test_a_brick_read_while_a_frame_resolves_still_counts_as_requested(sphere):
+    """The loader may finish a brick between the frame's look at the cache and its stats: the
+    frame drew the brick's ancestor, so the brick must still count as requested, or a caller
+    rendering until nothing is requested (``complete=True``) stops with a substituted brick."""
+    data, path = sphere
+    mv = sc.read(path)
+    stream = BrickStream(mv, "64MiB", lod=0.25, loads_per_frame=1)
+    cache = stream.cache
+    resolve = cache.resolve
+
+    def late(cut):
+        items = resolve(cut)
+        cache.wait(max_loads=10**6, timeout=10)  # the loader finishes right after resolving
+        return items
+
+    cache.resolve = late
+    with stream:
+        cam = _camera(mv, zoom=2.5)
+        fb = stream.frame(cam, ValueFilter.iso(RADIUS), timeout=5)
+        assert not fb.complete and fb.stats["substituted"] > 0
+        assert cache.stats()["requested"] == 0  # everything arrived since ...
+        assert fb.stats["requested"] > 0  # ... but not in time for this frame
+        fb = stream.frame(cam, ValueFilter.iso(RADIUS), timeout=5)
+        assert fb.complete and fb.stats["requested"] == 0
+
+
 def test_missing_bricks_are_drawn_from_the_finest_resident_ancestor(sphere):
     data, path = sphere
     mv = sc.read(path)

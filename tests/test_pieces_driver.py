@@ -53,6 +53,9 @@ def _both(scene, cam: sc.Camera, **options) -> tuple[sc.Frame, sc.Frame, dict, d
     each_stats = dict(scene.renderer.stats)
     scene.renderer.batched = True
     batched = scene.render(cam, complete=True, **options)
+    # Both drew the whole cut from its own bricks (else they may draw different arrays).
+    assert each.stats["complete"] and batched.stats["complete"]
+    assert each.stats["cut_bricks"] == batched.stats["cut_bricks"]
     return each, batched, each_stats, dict(scene.renderer.stats)
 
 

@@ -110,8 +110,14 @@ class BrickStream:
         if wait:
             self.cache.wait(timeout=timeout)
         t2 = time.perf_counter()
+        # What is still to read, taken before resolving: a brick that arrives between the two
+        # is drawn from an ancestor in this frame yet would no longer count as requested, and
+        # a caller rendering until nothing is requested (``complete=True``, the viewer's
+        # refinement) would stop one brick short.
+        requested = self.cache.stats()["requested"]
         items = self.cache.resolve(cut)
         stats = self.cache.stats()
+        stats["requested"] = requested
         stats.update(cut_bricks=len(cut), cut_levels=cut.levels(), cut_bytes=cut.nbytes,
                      cut_limited_by_budget=cut.limited, time_select=t1 - t0, time_load=t2 - t1)
         return FrameBricks(cut, items, stats)
