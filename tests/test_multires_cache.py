@@ -396,3 +396,51 @@ def test_store_without_tables_learns_ranges_and_covers_shifted_levels(sphere, tm
             last = first + np.array(brick.data.shape) - 1
             assert np.all(first <= np.floor(fb.cut.level_lo[n] + 1e-9) - GHOST)
             assert np.all(last >= np.ceil(fb.cut.level_hi[n] - 1e-9) + GHOST)
+
+
+def test_chunk_cache_reads_equal_the_store_and_reuse_decoded_chunks(sphere):
+    """Windows read through the chunk cache equal the level's own reads (a second code path:
+    zarr's selection), neighbours' windows reuse decoded chunks, and the cache stays within
+    its bytes."""
+    from splinecast.multires.chunk_cache import ChunkCache
+
+    data, path = sphere
+    mv = sc.read(path)
+    level = mv.level(0)
+    chunk_bytes = int(np.prod(level.chunks)) * level.dtype.itemsize
+    chunks = ChunkCache(6 * chunk_bytes)
+    rng = np.random.default_rng(3)
+    shape = np.array(level.shape)
+    for _ in range(40):
+        lo = rng.integers(0, shape - 1)
+        hi = np.minimum(lo + rng.integers(1, 20, 3), shape)
+        np.testing.assert_array_equal(chunks.read(0, level, lo, hi), level.read(lo, hi))
+        np.testing.assert_array_equal(chunks.read(0, level, lo, hi), data[lo[0]:hi[0],
+                                      lo[1]:hi[1], lo[2]:hi[2]])
+        assert chunks.nbytes <= 6 * chunk_bytes
+    assert chunks.hits > 0 and chunks.misses > 0
+    # Two neighbouring windows sharing chunks: the second decodes only what it adds.
+    fresh = ChunkCache(64 * chunk_bytes)
+    fresh.read(0, level, np.array([0, 0, 0]), np.array([10, 10, 10]))
+    before = fresh.misses
+    fresh.read(0, level, np.array([6, 0, 0]), np.array([16, 10, 10]))
+    assert fresh.hits > 0 and fresh.misses - before < before
+
+
+def test_chunk_cache_keeps_nothing_of_a_failed_read(sphere, tmp_path):
+    from splinecast.errors import ReadError
+    from splinecast.multires.chunk_cache import ChunkCache
+
+    data, path = sphere
+    copy = tmp_path / "damaged.zarr"
+    shutil.copytree(path, copy)
+    shard = copy / "0" / "c" / "0" / "0" / "0"
+    raw = bytearray(shard.read_bytes())
+    raw[50:300] = bytes(250)
+    shard.write_bytes(bytes(raw))
+    level = sc.read(copy).level(0)
+    chunks = ChunkCache(2**24)
+    for _ in range(2):  # the second time too: nothing of the failed read was kept
+        with pytest.raises(ReadError):
+            chunks.read(0, level, np.array([0, 0, 0]), np.array([12, 12, 12]))
+    assert chunks.nbytes == 0

@@ -47,6 +47,7 @@ import math
 import os
 import re
 import stat
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, Any
@@ -441,23 +442,54 @@ def _address_space_left() -> int | None:
     return soft
 
 
+#: How long (seconds) a reading of the machine's memory serves :func:`memory_limit`: a brick
+#: loader checks every chunk it reads (thousands per second), and reading /proc and the cgroup
+#: files each time took a tenth of a 2048^3 pyramid's loading.
+_MACHINE_READING_S = 0.5
+_machine_reading: list = [-math.inf, None, []]
+
+
+def _reading_key() -> tuple:
+    """What invalidates a reading at once: another process (a fork) or another ``ulimit -v``."""
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except ImportError:  # not on Unix
+        soft = None
+    return os.getpid(), soft
+
+
+def _machine_limits() -> list[tuple[int, str]]:
+    """The available memory, the cgroup's remaining memory and the address space left under
+    ``ulimit -v`` (those known), read at most every :data:`_MACHINE_READING_S` seconds."""
+    now = time.monotonic()
+    key = _reading_key()
+    if now - _machine_reading[0] > _MACHINE_READING_S or key != _machine_reading[1]:
+        found = []
+        for value, what in (
+            (_meminfo_available(), "available memory"),
+            (_cgroup_available(), "memory left under the cgroup limit"),
+            (_address_space_left(), "address space left under ulimit -v"),
+        ):
+            if value is not None:
+                found.append((value, f"the {fmt_bytes(value)} of {what}"))
+        _machine_reading[:] = [now, key, found]
+    return list(_machine_reading[2])
+
+
 def memory_limit() -> tuple[int, str]:
     """The largest allocation allowed now, and what sets it (for messages).
 
-    The smallest of ``SPLINECAST_MAX_BYTES`` (when set), the available memory, the cgroup's
-    remaining memory and the address space left under ``ulimit -v``.
+    The smallest of ``SPLINECAST_MAX_BYTES`` (when set, read at every call), the available
+    memory, the cgroup's remaining memory and the address space left under ``ulimit -v`` (read
+    at most twice a second).
     """
     candidates: list[tuple[int, str]] = []
     cap = os.environ.get(ENV_MAX_BYTES)
     if cap:
         candidates.append((parse_bytes(cap), f"the cap {ENV_MAX_BYTES}={cap}"))
-    for value, what in (
-        (_meminfo_available(), "available memory"),
-        (_cgroup_available(), "memory left under the cgroup limit"),
-        (_address_space_left(), "address space left under ulimit -v"),
-    ):
-        if value is not None:
-            candidates.append((value, f"the {fmt_bytes(value)} of {what}"))
+    candidates.extend(_machine_limits())
     if not candidates:
         return (1 << 62, "no known limit")
     return min(candidates, key=lambda c: c[0])

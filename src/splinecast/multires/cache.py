@@ -11,8 +11,10 @@ draws every brick that is not resident yet from its finest resident ancestor
 Budget accounting: the bytes of the resident brick arrays never exceed ``budget`` (checked before
 each insertion; ``peak_bytes`` records the maximum). A brick that does not fit without evicting
 what the current view needs is not loaded (``dropped``). Transient buffers of one read (the union
-window of up to 8 sibling bricks and its padded copies) are the fixed overhead on top of the
-budget; ``benchmarks/bench_multires.py`` measures it.
+window of up to 8 sibling bricks and its padded copies) and the decoded chunks kept for the
+neighbours' ghost layers (:class:`~.chunk_cache.ChunkCache`: an eighth of the budget, at most
+:data:`CHUNK_CACHE_MAX`) are the fixed overhead on top of the budget;
+``benchmarks/bench_multires.py`` measures it.
 
 Faults: a read that fails (missing or corrupt chunk, store deleted, I/O error) marks the brick
 unavailable; the next call from the rendering thread issues a :class:`BrickUnavailableWarning`
@@ -34,10 +36,15 @@ import numpy as np
 from ..errors import ParameterError, ReadError
 from ..io.omezarr import MultiscaleVolume
 from .budget import format_bytes, parse_bytes
+from .chunk_cache import ChunkCache
 from .lod import Cut
 from .octree import BrickOctree
 
-__all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS", "read_bricks"]
+__all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS", "read_bricks",
+           "CHUNK_CACHE_MAX"]
+
+#: Most bytes of decoded store chunks a brick cache keeps besides its budget.
+CHUNK_CACHE_MAX = 64 * 2**20
 
 Key = tuple[int, int, int, int]
 #: Ghost filling beyond a level's ends, as the models pad a whole volume: ``"edge"`` repeats the
@@ -92,12 +99,13 @@ class DrawItem:
 
 
 def read_bricks(volume: MultiscaleVolume, octree: BrickOctree, keys: list[Key],
-                border: str = "edge") -> list[Brick]:
+                border: str = "edge", chunks: ChunkCache | None = None) -> list[Brick]:
     """Read bricks ``keys`` of one level with one store read (the union of their windows).
 
     Each brick's array holds its window of the level (:meth:`BrickOctree.window`: its voxels
     and the ghost layers), the voxels beyond the level's ends filled by the ``border`` rule
-    (``"edge"`` or ``"reflect"``). The store chunks read are those the union window overlaps.
+    (``"edge"`` or ``"reflect"``). The store chunks read are those the union window overlaps
+    (only those not in ``chunks``, a cache of decoded chunks, when given).
 
     Raises
     ------
@@ -111,7 +119,10 @@ def read_bricks(volume: MultiscaleVolume, octree: BrickOctree, keys: list[Key],
     shape = np.array(level.shape)
     have_lo = np.clip(first.min(axis=0), 0, shape - 1)
     have_hi = np.clip(stop.max(axis=0), have_lo + 1, shape)
-    block = level.read(have_lo, have_hi)
+    if chunks is None:
+        block = level.read(have_lo, have_hi)
+    else:
+        block = chunks.read(level_index, level, have_lo, have_hi)
     scale, offset = octree.level_map(level_index)
     out = []
     for n, key in enumerate(keys):
@@ -172,6 +183,10 @@ class BrickCache:
         self.budget = parse_bytes(budget, "budget")
         self.border = border
         self.loads_per_frame = loads_per_frame
+        #: Decoded store chunks shared by neighbouring bricks' reads (their ghost layers): an
+        #: eighth of the budget, at most :data:`CHUNK_CACHE_MAX` bytes, outside the budget
+        #: (part of the fixed overhead).
+        self.chunks = ChunkCache(min(CHUNK_CACHE_MAX, self.budget // 8))
         self._cond = threading.Condition()
         self._bricks: OrderedDict[Key, Brick] = OrderedDict()  # least recently used first
         self._bytes = 0
@@ -234,7 +249,7 @@ class BrickCache:
 
     def _read(self, keys: list[Key]) -> list[Brick]:
         """Read bricks of one level with one store read (their union window); no lock held."""
-        bricks = read_bricks(self.volume, self.octree, keys, self.border)
+        bricks = read_bricks(self.volume, self.octree, keys, self.border, self.chunks)
         for brick in bricks:
             self._note_range(brick.key, brick.data)
         return bricks
@@ -273,14 +288,20 @@ class BrickCache:
     def _make_room(self, nbytes: int) -> bool:
         if self._bytes + nbytes <= self.budget:
             return True
-        for key in list(self._bricks):  # least recently used first
+        # The victims, least recently used first, are chosen before any is dropped: copying
+        # every key for each insert made a full cache of tens of thousands of bricks quadratic.
+        victims, freed = [], 0
+        for key, brick in self._bricks.items():
             if key in self._pinned or key in self._keep:
                 continue
+            victims.append(key)
+            freed += brick.nbytes
+            if self._bytes - freed + nbytes <= self.budget:
+                break
+        for key in victims:
             self._bytes -= self._bricks.pop(key).nbytes
             self._counts["evicted"] += 1
-            if self._bytes + nbytes <= self.budget:
-                return True
-        return False
+        return self._bytes + nbytes <= self.budget
 
     # ------------------------------------------------------------------ the loader thread
     def _next_batch(self) -> list[Key]:
@@ -464,6 +485,8 @@ class BrickCache:
                 "unavailable": len(self._failed),
                 "evicted": self._counts["evicted"],
                 "dropped": self._counts["dropped"],
+                "chunks_decoded": self.chunks.misses,
+                "chunks_reused": self.chunks.hits,
             }
 
     def __repr__(self) -> str:

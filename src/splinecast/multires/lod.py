@@ -303,21 +303,63 @@ def cut_of_keys(octree: BrickOctree, key_arr: np.ndarray, priority: np.ndarray,
     cut = Cut(key_arr, priority, box_lo, box_hi, volume.index_to_world(box_lo),
               volume.index_to_world(box_hi), level_lo, level_hi, nbytes, limited=limited)
 
-    # What the cache must keep, and what to read, coarse first.
-    want: dict[Key, float] = {}
-    for n in range(len(cut)):
-        key = cut.key(n)
-        chain = [key, *octree.ancestors(key)]
-        cut.keep.update(chain)
-        for k in chain:
-            if k[0] == octree.coarsest or resident(k):
-                break  # what lies above a resident brick is not needed
-            p = octree.position(k[0])
-            own = octree.ranges[p][k[1:]]
-            if k == key or value_filter.contributes(own[0], own[1]):
-                want[k] = max(want.get(k, 0.0), float(cut.priority[n]))
+    cut.keep, want = _chains(octree, key_arr, priority, value_filter, resident)
     cut.requests = sorted(want, key=lambda k: (-k[0], -want[k]))
     return cut
+
+
+def _chains(octree: BrickOctree, key_arr: np.ndarray, priority: np.ndarray,
+            value_filter: ValueFilter, resident: Callable[[Key], bool]
+            ) -> tuple[set[Key], dict[Key, float]]:
+    """What the cache must keep (every brick of the cut and its ancestors) and what to read
+    with its priority: along each brick's chain of ancestors up to the first resident one (or
+    the coarsest level), the brick itself and the ancestors that can contribute, at the highest
+    priority of the bricks below them.
+
+    Level by level, finest first, with the chains that meet at a brick merged (from there up
+    they are the same chain; it goes on reading if any of them does): a cut of a 2048^3 pyramid
+    under a 1 GiB budget holds 20 000 bricks, and one loop over them in Python took most of two
+    seconds per frame.
+    """
+    keep: set[Key] = set()
+    want: dict[Key, float] = {}
+    up_index = np.zeros((0, 3), np.int64)  # ancestors carried up from the level below
+    up_priority = np.zeros(0)
+    up_active = np.zeros(0, bool)
+    for p, level in enumerate(octree.levels):
+        rows = key_arr[:, 0] == level
+        index = np.concatenate([key_arr[rows, 1:], up_index])
+        if not len(index):
+            continue
+        prio = np.concatenate([priority[rows], up_priority])
+        active = np.concatenate([np.ones(int(rows.sum()), bool), up_active])
+        own = np.concatenate([np.ones(int(rows.sum()), bool), np.zeros(len(up_index), bool)])
+        unique, inverse = np.unique(index, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        m = len(unique)
+        is_active = np.zeros(m, bool)
+        np.logical_or.at(is_active, inverse, active)
+        is_own = np.zeros(m, bool)
+        np.logical_or.at(is_own, inverse, own)
+        best = np.full(m, -np.inf)
+        np.maximum.at(best, inverse[active], prio[active])
+        keys = [(int(level), i, j, k) for i, j, k in unique.tolist()]
+        keep.update(keys)
+        if level == octree.coarsest:
+            break  # always resident: nothing above is read
+        ranges = octree.ranges[p][unique[:, 0], unique[:, 1], unique[:, 2]]
+        shows = is_own | value_filter.contributes(ranges[:, 0], ranges[:, 1])
+        goes_on = is_active.copy()
+        for u in np.flatnonzero(is_active):
+            if resident(keys[u]):
+                goes_on[u] = False  # what lies above a resident brick is not needed
+            elif shows[u]:
+                want[keys[u]] = float(best[u])
+        ratio = octree.factors[p + 1] // octree.factors[p]
+        up_index = unique // ratio
+        up_priority = best
+        up_active = goes_on
+    return keep, want
 
 
 def _assemble(octree: BrickOctree, levels: list[_Level], value_filter: ValueFilter,
