@@ -295,14 +295,21 @@ def _snapshot(root: Path) -> dict[str, tuple[int, int]]:
             for p in root.rglob("*") if p.is_file()}
 
 
-def test_corrupt_chunk_gives_a_warning_and_a_coarser_level(sphere, tmp_path):
-    data, path = sphere
+def _damaged_copy(path: Path, tmp_path: Path, shard: str, start: int, stop: int) -> Path:
+    """A copy of the store with bytes ``start:stop`` of one shard file zeroed."""
     copy = tmp_path / "damaged.zarr"
     shutil.copytree(path, copy)
-    shard = copy / "0" / "c" / "1" / "1" / "1"  # level 0, the shard holding the centre
-    raw = bytearray(shard.read_bytes())
-    raw[100:400] = bytes(300)
-    shard.write_bytes(bytes(raw))
+    target = copy / shard
+    raw = bytearray(target.read_bytes())
+    raw[start:stop] = bytes(stop - start)
+    target.write_bytes(bytes(raw))
+    return copy
+
+
+def test_corrupt_chunk_gives_a_warning_and_a_coarser_level(sphere, tmp_path):
+    data, path = sphere
+    # Level 0, the shard holding the centre.
+    copy = _damaged_copy(path, tmp_path, "0/c/1/1/1", 100, 400)
     before = _snapshot(copy)
     mv = sc.read(copy)
     with BrickStream(mv, "64MiB", lod=1e-9, loads_per_frame=1000) as stream:
@@ -432,13 +439,7 @@ def test_chunk_cache_keeps_nothing_of_a_failed_read(sphere, tmp_path):
     from splinecast.multires.chunk_cache import ChunkCache
 
     data, path = sphere
-    copy = tmp_path / "damaged.zarr"
-    shutil.copytree(path, copy)
-    shard = copy / "0" / "c" / "0" / "0" / "0"
-    raw = bytearray(shard.read_bytes())
-    raw[50:300] = bytes(250)
-    shard.write_bytes(bytes(raw))
-    level = sc.read(copy).level(0)
+    level = sc.read(_damaged_copy(path, tmp_path, "0/c/0/0/0", 50, 300)).level(0)
     chunks = ChunkCache(2**24)
     for _ in range(2):  # the second time too: nothing of the failed read was kept
         with pytest.raises(ReadError):
