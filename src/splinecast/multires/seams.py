@@ -52,7 +52,7 @@ import numpy as np
 from ..render.iso import Iso
 from .probe import grid_values_at, sample_grid
 
-__all__ = ["Seams", "Change", "IsoClosure", "BoxIndex", "NESTED_DEGREE", "refine"]
+__all__ = ["Seams", "Change", "IsoClosure", "NESTED_DEGREE", "refine"]
 
 #: Models whose coarse reconstruction is exactly a fine one, by their spline degree.
 NESTED_DEGREE = {"trilinear": 1, "bspline1": 1, "bspline3": 3}
@@ -144,26 +144,18 @@ class Seams:
         box_hi = np.array([b[1] for b in boxes]).reshape(-1, 3)
         changes: dict[Hashable, Change] = {}
         grids: dict[Hashable, Any] = {}
-        index = BoxIndex(box_lo, box_hi)
         for key in sorted(by_key, key=lambda k: -by_key[k].level):
             piece = by_key[key]
             array, first = renderer.prepared(piece)
             geometry = renderer.levels[piece.level]
-            # The pieces whose boxes come near this array at all (a superset, in index order),
-            # then the exact test below on those only: testing every coarser piece of the cut
-            # for every array made a plan quadratic in the cut's size (minutes for the 20 000
-            # bricks of a 2048^3 pyramid's cut).
-            reach = self.radius + 1e-6
-            w_lo = first.astype(np.float64)
-            w_hi = w_lo + np.asarray(array.shape) - 1
-            candidates = index.query((w_lo - reach - geometry.offset) / geometry.scale,
-                                     (w_hi + reach - geometry.offset) / geometry.scale)
-            coarser = candidates[levels[candidates] > piece.level]
+            coarser = np.flatnonzero(levels > piece.level)
             if len(coarser) == 0:
                 continue
             # The coarser boxes in this level's index space, and those within reach.
             lo = geometry.from_level0(box_lo[coarser])
             hi = geometry.from_level0(box_hi[coarser])
+            w_lo = first.astype(np.float64)
+            w_hi = w_lo + np.asarray(array.shape) - 1
             gap = np.maximum(np.maximum(lo - w_hi, w_lo - hi), 0.0).max(axis=1)
             near = gap < self.radius
             if not near.any():
@@ -247,69 +239,6 @@ def _subdivided(array: np.ndarray, first: np.ndarray, where: np.ndarray, coarse:
     if np.any(local < 0) or np.any(local >= np.asarray(block.shape)):
         return None
     return block[local[:, 0], local[:, 1], local[:, 2]]
-
-
-class BoxIndex:
-    """Which of many axis-aligned boxes meet a query box: a uniform grid of cells as large as
-    the smallest box, each box listed in the cells it overlaps (a cut is a partition, so that is
-    about one entry per cell of the volume); few boxes or too many cells: every box.
-
-    Parameters
-    ----------
-    lo, hi : ndarray (n, 3)
-        The boxes.
-    """
-
-    #: More cell entries than this: the index gives up and :meth:`query` returns every box.
-    MAX_ENTRIES = 4_000_000
-
-    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        lo = np.asarray(lo, dtype=np.float64).reshape(-1, 3)
-        hi = np.asarray(hi, dtype=np.float64).reshape(-1, 3)
-        self.n = len(lo)
-        self.cells: np.ndarray | None = None
-        if self.n < 64:
-            return
-        self.size = max(float(np.min(hi - lo)), 1e-9)
-        self.origin = lo.min(axis=0)
-        c_lo = np.floor((lo - self.origin) / self.size).astype(np.int64)
-        c_hi = np.floor((hi - self.origin) / self.size).astype(np.int64)
-        self.shape = c_hi.max(axis=0) + 1
-        extent = c_hi - c_lo + 1
-        counts = np.prod(extent, axis=1)
-        total = int(counts.sum())
-        if total > self.MAX_ENTRIES:
-            return
-        box = np.repeat(np.arange(self.n), counts)
-        # Each entry's position inside its box's block of cells, unravelled per box.
-        rank = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-        ez, ey = extent[box, 2], extent[box, 1]
-        cz = rank % ez
-        cy = (rank // ez) % ey
-        cx = rank // (ez * ey)
-        cells = self._linear(c_lo[box, 0] + cx, c_lo[box, 1] + cy, c_lo[box, 2] + cz)
-        order = np.lexsort((box, cells))
-        self.cells, self.boxes = cells[order], box[order]
-
-    def _linear(self, i: np.ndarray, j: np.ndarray, k: np.ndarray) -> np.ndarray:
-        return (i * self.shape[1] + j) * self.shape[2] + k
-
-    def query(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Indices (ascending) of the boxes that may meet ``[lo, hi]`` (every box that does)."""
-        if self.cells is None:
-            return np.arange(self.n)
-        a = np.floor((np.asarray(lo, dtype=np.float64) - self.origin) / self.size)
-        b = np.floor((np.asarray(hi, dtype=np.float64) - self.origin) / self.size)
-        a = np.clip(a, 0, self.shape - 1).astype(np.int64)
-        b = np.clip(b, -1, self.shape - 1).astype(np.int64)
-        if np.any(b < a):
-            return np.zeros(0, dtype=np.int64)
-        i, j, k = np.meshgrid(*(np.arange(a[d], b[d] + 1) for d in range(3)), indexing="ij")
-        wanted = self._linear(i.ravel(), j.ravel(), k.ravel())
-        start = np.searchsorted(self.cells, wanted, side="left")
-        stop = np.searchsorted(self.cells, wanted, side="right")
-        parts = [self.boxes[s:e] for s, e in zip(start, stop, strict=True) if e > s]
-        return np.unique(np.concatenate(parts)) if parts else np.zeros(0, dtype=np.int64)
 
 
 class IsoClosure:
