@@ -135,16 +135,14 @@ def shapes(tmp_path_factory) -> dict[str, tuple[sc.Volume, Path]]:
     return out
 
 
-def _checkerboard_cut(mv, model: str):
-    """A cut that puts levels 0, 1 and 2 side by side in every direction: level-2 bricks with an
-    odd index sum stay whole, the others split into level-1 bricks, of which those with an even
-    index sum split into level-0 bricks. Brick arrays come from the levels read whole and padded
-    by numpy with the model's border rule (independent of the cache)."""
-    from splinecast.multires.draw import CutRenderer, Piece
-    from splinecast.multires.octree import GHOST, BrickOctree
+def _brick_maker(mv, model: str, tree):
+    """``piece(level, index)``: the :class:`Piece` of one brick of levels 0-2, its array cut
+    from the level read whole and padded by numpy with the model's border rule (independent of
+    the cache)."""
+    from splinecast.multires.draw import Piece
+    from splinecast.multires.octree import GHOST
     from splinecast.multires.scene import BORDER_RULES
 
-    tree = BrickOctree(mv)
     padded = {}
     for level in (0, 1, 2):
         lv = mv.level(level)
@@ -159,6 +157,18 @@ def _checkerboard_cut(mv, model: str):
         return Piece(key, key, level, np.ascontiguousarray(padded[level][window]),
                      tuple(int(v) for v in first), lo, hi)
 
+    return piece
+
+
+def _checkerboard_cut(mv, model: str):
+    """A cut that puts levels 0, 1 and 2 side by side in every direction: level-2 bricks with an
+    odd index sum stay whole, the others split into level-1 bricks, of which those with an even
+    index sum split into level-0 bricks (arrays from :func:`_brick_maker`)."""
+    from splinecast.multires.draw import CutRenderer
+    from splinecast.multires.octree import BrickOctree
+
+    tree = BrickOctree(mv)
+    piece = _brick_maker(mv, model, tree)
     pieces = []
     for i2 in np.indices(tree.counts[2]).reshape(3, -1).T:
         if i2.sum() % 2:
@@ -332,6 +342,51 @@ def test_frames_converge_without_holes_while_bricks_arrive(shapes):
             assert bad.sum() == 0, frame.stats
         final = scene.render(cam, iso=0.0)
         np.testing.assert_array_equal(final.depth, frames[-1].depth)  # converged: it stays
+
+
+@pytest.mark.parametrize("model", ["trilinear", "bspline3", "qss"])
+def test_the_incremental_seam_plan_equals_a_plan_from_scratch(shapes, model):
+    """Bricks arriving change the cut every frame; the seam plan reuses the change of every
+    array whose coarser neighbours (their boxes and their own changes) are as before. A
+    sequence of cuts, from most bricks drawn by their parents to none, each planned by one
+    :class:`Seams` in turn, must give the plans of a new :class:`Seams` per cut, and reuse."""
+    from dataclasses import replace
+
+    from splinecast.multires.seams import Seams
+
+    mv = sc.read(shapes["torus"][1])
+    pieces, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
+    brick = _brick_maker(mv, model, tree)
+
+    def parent(piece):  # drawn from its level-2 ancestor, or its parent (level 0, even index)
+        level, *index = piece.key
+        up = 1 if level == 0 and sum(index) % 2 == 0 else 2
+        up = brick(up, np.array(index) // 2 ** (up - level))
+        return replace(piece, key=up.key, level=up.level, data=up.data, first=up.first,
+                       substituted=True)
+
+    rng = np.random.default_rng(7)
+    fine = np.array([n for n, p in enumerate(pieces) if p.level < 2])
+    renderer = CutRenderer(prepared, tree, Seams(prepared))
+    reused = 0
+    # Most bricks missing at first, then fewer; a few evicted again on the way (a change of a
+    # coarser array must reach the finer arrays next to it even where their own neighbours
+    # stay the same).
+    missing = set(fine.tolist())
+    for share in (0.7, 0.5, 0.5, 0.3, 0.3, 0.1, 0.0):
+        arrived = rng.choice(sorted(missing), size=len(missing) - int(share * len(fine)),
+                             replace=False) if len(missing) > share * len(fine) else []
+        missing -= set(np.asarray(arrived).tolist())
+        missing |= set(rng.choice(fine, size=int(0.05 * len(fine) * share)).tolist())
+        cut = [parent(p) if n in missing else p for n, p in enumerate(pieces)]
+        changes = renderer.seams.plan(cut, renderer)
+        reused += len(changes) - renderer.seams.recomputed
+        fresh = Seams(prepared)._plan(cut, renderer)
+        assert len(fresh) > 0 and set(fresh) == set(changes)
+        for key, change in fresh.items():
+            np.testing.assert_array_equal(changes[key].index, change.index)
+            np.testing.assert_array_equal(changes[key].values, change.values)
+    assert reused > 0
 
 
 def _snapshot(root: Path) -> dict[str, tuple[int, int]]:

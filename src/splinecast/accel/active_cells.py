@@ -32,7 +32,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from .minmax import BLOCK_SHIFTS, MinMaxHierarchy, _coarsen
+from .minmax import BLOCK_SHIFTS, MinMaxHierarchy
 
 __all__ = ["ActiveCells", "CubeBoundHierarchy", "block_ranges", "candidate_cubes", "tet_list"]
 
@@ -112,12 +112,7 @@ class CubeBoundHierarchy(MinMaxHierarchy):
 
     def __init__(self, blo: np.ndarray, bhi: np.ndarray, n_cells: tuple[int, int, int]) -> None:
         self.n_cells = tuple(int(n) for n in n_cells)
-        self.lows = [blo]
-        self.highs = [bhi]
-        for finer, coarser in zip(BLOCK_SHIFTS[:-1], BLOCK_SHIFTS[1:], strict=True):
-            factor = 1 << (coarser - finer)
-            self.lows.append(_coarsen(self.lows[-1], factor, np.minimum, np.inf))
-            self.highs.append(_coarsen(self.highs[-1], factor, np.maximum, -np.inf))
+        self._levels_from(blo, bhi)
         self.iso = None
         self.active = ()
 

@@ -71,12 +71,25 @@ def inactive_block_size(
     return 0
 
 
-def _coarsen(arr: np.ndarray, factor: int, reduce: np.ufunc, fill: float) -> np.ndarray:
-    pad = [(0, (-s) % factor) for s in arr.shape]
-    padded = np.pad(arr, pad, constant_values=fill)
-    nx, ny, nz = (s // factor for s in padded.shape)
-    view = padded.reshape(nx, factor, ny, factor, nz, factor)
-    return reduce.reduce(reduce.reduce(reduce.reduce(view, axis=5), axis=3), axis=1)
+@jit
+def _coarsened(lo: np.ndarray, hi: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges of blocks ``factor`` times larger per axis (partial blocks at the upper ends).
+
+    Compiled: the numpy version (pad, reshape, three reductions for each of min and max) cost
+    about as much as the finest ranges for the small arrays of a brick cut, which builds
+    hundreds of hierarchies per frame while it refines."""
+    nx, ny, nz = lo.shape
+    cx, cy = (nx + factor - 1) // factor, (ny + factor - 1) // factor
+    cz = (nz + factor - 1) // factor
+    out_lo = np.full((cx, cy, cz), np.inf)
+    out_hi = np.full((cx, cy, cz), -np.inf)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                a, b, c = i // factor, j // factor, k // factor
+                out_lo[a, b, c] = min(out_lo[a, b, c], lo[i, j, k])
+                out_hi[a, b, c] = max(out_hi[a, b, c], hi[i, j, k])
+    return out_lo, out_hi
 
 
 class MinMaxHierarchy:
@@ -96,14 +109,18 @@ class MinMaxHierarchy:
         self.n_cells = tuple(int(n) for n in n_cells)
         block0 = 1 << BLOCK_SHIFTS[0]
         lo, hi = _finest_ranges(coeffs, block0, support, np.asarray(self.n_cells, np.int64))
+        self._levels_from(lo, hi)
+        self.iso: float | None = None
+        self.active: tuple[np.ndarray, ...] = ()
+
+    def _levels_from(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """The levels' ranges from the finest blocks' ``lo``, ``hi``."""
         self.lows = [lo]
         self.highs = [hi]
         for finer, coarser in zip(BLOCK_SHIFTS[:-1], BLOCK_SHIFTS[1:], strict=True):
-            factor = 1 << (coarser - finer)
-            self.lows.append(_coarsen(self.lows[-1], factor, np.minimum, np.inf))
-            self.highs.append(_coarsen(self.highs[-1], factor, np.maximum, -np.inf))
-        self.iso: float | None = None
-        self.active: tuple[np.ndarray, ...] = ()
+            lo, hi = _coarsened(lo, hi, 1 << (coarser - finer))
+            self.lows.append(lo)
+            self.highs.append(hi)
 
     def classify(self, iso: float) -> tuple[np.ndarray, ...]:
         """Active flags (uint8, one array per level, finest first) for ``iso``."""

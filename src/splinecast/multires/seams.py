@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -116,6 +117,13 @@ class Seams:
         #: Elements closer than this (level voxels, max norm) to a coarser piece are replaced.
         self.radius = (int(model.support) + 1) / 2.0
         self._last: tuple[Any, dict] | None = None
+        # Per array key: what its change was computed from (the coarser pieces within reach,
+        # with their boxes and the versions of their own changes), the change, and its version.
+        # A cut that changes by a few bricks recomputes only the arrays near them.
+        self._memo: dict[Hashable, tuple[tuple, Change | None, int]] = {}
+        self._version = 0
+        #: Arrays whose change was computed (not reused) by the last plan.
+        self.recomputed = 0
 
     def closure(self, setup: Any, camera: Any) -> IsoClosure | None:
         """The closure of the first-hit isosurface (other modes: none)."""
@@ -127,13 +135,16 @@ class Seams:
         """The changes of every array of the cut whose bricks meet coarser ones."""
         signature = tuple((p.key, tuple(p.box_lo), tuple(p.box_hi)) for p in pieces)
         if self._last is not None and self._last[0] == signature:
+            self.recomputed = 0
             return self._last[1]
         changes = self._plan(pieces, renderer)
         self._last = (signature, changes)
         return changes
 
     def _plan(self, pieces: Sequence[Any], renderer: Any) -> dict[Hashable, Change]:
+        self.recomputed = 0
         if len({p.level for p in pieces}) < 2:
+            self._memo = {}
             return {}
         by_key: dict[Hashable, Any] = {}
         for p in pieces:
@@ -142,62 +153,140 @@ class Seams:
         boxes = [renderer.box(p)[:2] for p in pieces]
         box_lo = np.array([b[0] for b in boxes]).reshape(-1, 3)
         box_hi = np.array([b[1] for b in boxes]).reshape(-1, 3)
+        # Every piece's box in the index space of each level that has arrays (once per level,
+        # not once per array: the boxes are compared with every array of that level).
+        in_level = {level: (renderer.levels[level].from_level0(box_lo),
+                            renderer.levels[level].from_level0(box_hi))
+                    for level in {p.level for p in by_key.values()}}
+        reach = self._reach(by_key, levels, in_level, renderer)
+        aligned = self.degree is not None and _aligned(renderer.tree)
         changes: dict[Hashable, Change] = {}
+        versions: dict[Hashable, int] = {}
+        memo: dict[Hashable, tuple[tuple, Change | None, int]] = {}
         grids: dict[Hashable, Any] = {}
-        for key in sorted(by_key, key=lambda k: -by_key[k].level):
+        arrays: dict[Hashable, tuple[np.ndarray, np.ndarray]] = {}
+        for key in sorted(reach, key=lambda k: -by_key[k].level):
             piece = by_key[key]
             array, first = renderer.prepared(piece)
-            geometry = renderer.levels[piece.level]
-            coarser = np.flatnonzero(levels > piece.level)
-            if len(coarser) == 0:
+            candidates = reach[key]
+            lo, hi = in_level[piece.level][0][candidates], in_level[piece.level][1][candidates]
+            depends = (tuple(pieces[int(n)].key for n in candidates), lo.tobytes(),
+                       hi.tobytes(), tuple(versions.get(pieces[int(n)].key, 0)
+                                           for n in candidates))
+            kept = self._memo.get(key)
+            if kept is not None and kept[0] == depends:
+                memo[key] = kept
+                if kept[1] is not None:
+                    changes[key], versions[key] = kept[1], kept[2]
                 continue
-            # The coarser boxes in this level's index space, and those within reach.
-            lo = geometry.from_level0(box_lo[coarser])
-            hi = geometry.from_level0(box_hi[coarser])
-            w_lo = first.astype(np.float64)
-            w_hi = w_lo + np.asarray(array.shape) - 1
-            gap = np.maximum(np.maximum(lo - w_hi, w_lo - hi), 0.0).max(axis=1)
-            near = gap < self.radius
-            if not near.any():
-                continue
-            order = np.argsort(levels[coarser[near]], kind="stable")  # finest coarser first
-            candidates = coarser[near][order]
-            lo, hi = lo[near][order], hi[near][order]
-            axes = [first[a] + np.arange(array.shape[a], dtype=np.float64) for a in range(3)]
-            taken = np.zeros(array.shape, dtype=bool)
-            index_parts, value_parts = [], []
-            for m, n in enumerate(candidates):
-                d = [np.maximum(np.maximum(lo[m, a] - axes[a], axes[a] - hi[m, a]), 0.0)
-                     for a in range(3)]
-                dist = np.maximum(np.maximum(d[0][:, None, None], d[1][None, :, None]),
-                                  d[2][None, None, :])
-                new = (dist < self.radius) & ~taken
-                if not new.any():
-                    continue
-                taken |= new
-                flat = np.flatnonzero(new)
-                where = np.column_stack(np.unravel_index(flat, array.shape)) + first
-                source = pieces[int(n)]
-                values = self._values(source, where, piece.level, renderer, changes, grids)
-                index_parts.append(flat)
-                value_parts.append(values)
-            if index_parts:
-                changes[key] = Change(np.concatenate(index_parts), np.concatenate(value_parts))
+            self.recomputed += 1
+            change = self._change(pieces, candidates, lo, hi, array, first, piece.level,
+                                  renderer, changes, arrays, grids, aligned)
+            self._version += 1
+            memo[key] = (depends, change, self._version)
+            if change is not None:
+                changes[key], versions[key] = change, self._version
+        self._memo = memo
         return changes
 
+    def _reach(self, by_key: dict[Hashable, Any], levels: np.ndarray, in_level: dict,
+               renderer: Any) -> dict[Hashable, np.ndarray]:
+        """For every array that has coarser pieces within the radius of its elements: those
+        pieces (indices into the cut), finest level first, then in the cut's order."""
+        reach: dict[Hashable, np.ndarray] = {}
+        for level in sorted(in_level):
+            coarser = np.flatnonzero(levels > level)
+            keys = [k for k, p in by_key.items() if p.level == level]
+            if len(coarser) == 0 or not keys:
+                continue
+            firsts, extents = [], []
+            for k in keys:
+                array, first = renderer.prepared(by_key[k])
+                firsts.append(first)
+                extents.append(array.shape)
+            w_lo = np.array(firsts, dtype=np.float64).reshape(-1, 3)
+            w_hi = w_lo + np.array(extents, dtype=np.float64).reshape(-1, 3) - 1
+            lo, hi = in_level[level][0][coarser], in_level[level][1][coarser]
+            which, near = _within_reach(w_lo, w_hi, lo, hi, self.radius)
+            # Finest coarser piece first, then the cut's order (the order the values are taken
+            # in where several coarser pieces are within reach of one element).
+            order = np.lexsort((near, levels[coarser[near]], which))
+            which, near = which[order], coarser[near[order]]
+            bounds = np.flatnonzero(np.diff(which)) + 1
+            for group in np.split(np.arange(len(which)), bounds):
+                if len(group):
+                    reach[keys[int(which[group[0]])]] = near[group]
+        return reach
+
+    def _change(self, pieces: Sequence[Any], candidates: np.ndarray, lo: np.ndarray,
+                hi: np.ndarray, array: np.ndarray, first: np.ndarray, level: int,
+                renderer: Any, changes: dict, arrays: dict, grids: dict,
+                aligned: bool) -> Change | None:
+        """The change of one array (level ``level``, first index ``first``) from the coarser
+        pieces ``candidates`` (finest first) whose boxes in this level's index space are
+        ``lo``, ``hi``."""
+        shape = np.asarray(array.shape)
+        taken = np.zeros(array.shape, dtype=bool)
+        index_parts, value_parts = [], []
+        for m, n in enumerate(candidates):
+            # The elements closer than the radius (max norm) to the box form a box themselves:
+            # index i with lo - r < first + i < hi + r on every axis.
+            start = np.clip(np.floor(lo[m] - self.radius - first).astype(np.int64) + 1, 0, shape)
+            stop = np.clip(np.ceil(hi[m] + self.radius - first).astype(np.int64), 0, shape)
+            if np.any(stop <= start):
+                continue
+            region = tuple(slice(a, b) for a, b in zip(start, stop, strict=True))
+            new = ~taken[region]
+            if not new.any():
+                continue
+            taken[region] = True
+            local = np.nonzero(new)
+            flat = np.ravel_multi_index(tuple(i + a for i, a in zip(local, start, strict=True)),
+                                        array.shape)
+            source = pieces[int(n)]
+            values = None
+            if aligned:
+                src, src_first = self._source(source, renderer, changes, arrays)
+                box = _subdivided(src, src_first, first + start, first + stop - 1,
+                                  source.level, level, renderer.tree, self.degree)
+                if box is not None:
+                    values = box[new]
+            if values is None:
+                where = np.column_stack(local) + start + first
+                values = self._values(source, where, level, renderer, changes, arrays, grids,
+                                      aligned)
+            index_parts.append(flat)
+            value_parts.append(values)
+        if not index_parts:
+            return None
+        return Change(np.concatenate(index_parts), np.concatenate(value_parts))
+
+    @staticmethod
+    def _source(source: Any, renderer: Any, changes: dict,
+                arrays: dict) -> tuple[np.ndarray, np.ndarray]:
+        """A coarser piece's array with its own change applied (once per plan), and its first
+        index."""
+        kept = arrays.get(source.key)
+        if kept is None:
+            array, first = renderer.prepared(source)
+            change = changes.get(source.key)
+            if change is not None:
+                array = change.apply(array)
+            kept = arrays[source.key] = (array, first)
+        return kept
+
     def _values(self, source: Any, where: np.ndarray, level: int, renderer: Any,
-                changes: dict, grids: dict) -> np.ndarray:
+                changes: dict, arrays: dict, grids: dict, aligned: bool) -> np.ndarray:
         """The (changed) function of the coarser piece ``source`` at the level-``level``
         indices ``where`` (n, 3), as level-``level`` coefficients."""
-        array, first = renderer.prepared(source)
-        change = changes.get(source.key)
-        if change is not None:
-            array = change.apply(array)
-        tree = renderer.tree
-        if self.degree is not None and _aligned(tree):
-            values = _subdivided(array, first, where, source.level, level, tree, self.degree)
-            if values is not None:
-                return values
+        array, first = self._source(source, renderer, changes, arrays)
+        if aligned:
+            lo, hi = where.min(axis=0), where.max(axis=0)
+            box = _subdivided(array, first, lo, hi, source.level, level, renderer.tree,
+                              self.degree)
+            if box is not None:
+                local = where - lo
+                return box[local[:, 0], local[:, 1], local[:, 2]]
         grid = grids.get(source.key)
         if grid is None:
             grid = grids[source.key] = renderer.grid(source.level, array, first)
@@ -206,6 +295,40 @@ class Seams:
         out = np.empty(len(points))
         sample_grid(grid.kernel, np.ascontiguousarray(points - grid.geom[7:10]), out)
         return out
+
+
+def _within_reach(q_lo: np.ndarray, q_hi: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs ``(query, box)`` of query boxes ``q_lo .. q_hi`` (m, 3) and boxes ``lo .. hi``
+    (n, 3) closer than ``radius`` in the max norm (the gap between the boxes).
+
+    A k-d tree of the box centres (scipy) finds the candidates, per class of box sizes so that
+    the search radius stays tight (a cut's boxes span many sizes); the exact gap then decides.
+    A loop over the queries comparing each with every box cost a quadratic time in a cut of
+    20 000 bricks."""
+    from scipy.spatial import cKDTree
+
+    centre, half = (lo + hi) / 2.0, (hi - lo) / 2.0
+    q_centre, q_half = (q_lo + q_hi) / 2.0, (q_hi - q_lo) / 2.0
+    size_class = np.floor(np.log2(np.maximum(half.max(axis=1), 0.5))).astype(np.int64)
+    which_parts, box_parts = [], []
+    for cls in np.unique(size_class):
+        members = np.flatnonzero(size_class == cls)
+        tree = cKDTree(centre[members])
+        search = half[members].max() + q_half.max(axis=1) + radius + 1e-9
+        found = tree.query_ball_point(q_centre, search, p=np.inf)
+        counts = np.fromiter((len(f) for f in found), dtype=np.int64, count=len(found))
+        if counts.sum() == 0:
+            continue
+        which_parts.append(np.repeat(np.arange(len(found)), counts))
+        box_parts.append(members[np.concatenate([np.asarray(f, dtype=np.int64)
+                                                 for f in found])])
+    if not which_parts:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    which, box = np.concatenate(which_parts), np.concatenate(box_parts)
+    gap = np.maximum(np.maximum(lo[box] - q_hi[which], q_lo[which] - hi[box]), 0.0).max(axis=1)
+    keep = gap < radius
+    return which[keep], box[keep]
 
 
 def _aligned(tree: Any) -> bool:
@@ -217,28 +340,62 @@ def _aligned(tree: Any) -> bool:
     return True
 
 
-def _subdivided(array: np.ndarray, first: np.ndarray, where: np.ndarray, coarse: int, fine: int,
-                tree: Any, degree: int) -> np.ndarray | None:
-    """Coefficients of the spline ``array`` (level ``coarse``) at level ``fine``'s indices
-    ``where`` by repeated subdivision, or ``None`` if ``array`` does not reach far enough."""
+def _subdivided(array: np.ndarray, first: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray,
+                coarse: int, fine: int, tree: Any, degree: int) -> np.ndarray | None:
+    """Coefficients of the spline ``array`` (level ``coarse``) on level ``fine``'s index box
+    ``box_lo .. box_hi`` (inclusive) by repeated subdivision, or ``None`` if ``array`` does not
+    reach far enough.
+
+    Subdivision is separable and linear, so the levels' steps along one axis compose into one
+    matrix (:func:`_subdivision_matrix`, cached: it depends only on the block's length and the
+    ratios); the block of coarse coefficients the box needs is then mapped by three matrix
+    products instead of a chain of 3D refinements (a refinement per level and axis cost more in
+    Python than in arithmetic)."""
     p_fine, p_coarse = tree.position(fine), tree.position(coarse)
     factor = np.asarray(tree.factors[p_coarse]) // np.asarray(tree.factors[p_fine])
-    # Only the part of the array the positions need (the masks reach two coarse elements out).
-    need_lo = np.floor(where.min(axis=0) / factor).astype(np.int64) - 2 - first
-    need_hi = np.ceil(where.max(axis=0) / factor).astype(np.int64) + 3 - first
+    # Only the part of the array the box needs (the masks reach two coarse elements out).
+    need_lo = np.floor(np.asarray(box_lo) / factor).astype(np.int64) - 2 - first
+    need_hi = np.ceil(np.asarray(box_hi) / factor).astype(np.int64) + 3 - first
     need_lo = np.maximum(need_lo, 0)
     need_hi = np.minimum(need_hi, array.shape)
     block = array[tuple(slice(a, b) for a, b in zip(need_lo, need_hi, strict=True))]
-    start = first + need_lo
-    for p in range(p_coarse, p_fine, -1):
-        ratio = np.asarray(tree.factors[p]) // np.asarray(tree.factors[p - 1])
-        if min(block.shape) < 3:
+    fine_start = first + need_lo
+    ratios = [np.asarray(tree.factors[p]) // np.asarray(tree.factors[p - 1])
+              for p in range(p_coarse, p_fine, -1)]
+    # Each step needs at least three elements on every axis (as a 3D refinement would).
+    length = np.asarray(block.shape)
+    for ratio in ratios:
+        if length.min() < 3:
             return None
-        block, start = refine(block, start, ratio, degree)
-    local = where - start
-    if np.any(local < 0) or np.any(local >= np.asarray(block.shape)):
-        return None
-    return block[local[:, 0], local[:, 1], local[:, 2]]
+        length = np.where(ratio == 2, 2 * length - (1 if degree == 1 else 3), length)
+    rows = []
+    for axis in range(3):
+        chain = tuple(int(r[axis]) for r in ratios)
+        for r in chain:
+            if r == 2:
+                fine_start[axis] = 2 * fine_start[axis] + (0 if degree == 1 else 1)
+        lo = int(box_lo[axis] - fine_start[axis])
+        hi = int(box_hi[axis] - fine_start[axis]) + 1
+        if lo < 0 or hi > length[axis]:
+            return None
+        rows.append(_subdivision_matrix(block.shape[axis], chain, degree)[lo:hi])
+    out = np.tensordot(rows[0], np.asarray(block, dtype=np.float64), axes=(1, 0))
+    out = np.tensordot(out, rows[1], axes=(1, 1))  # (fx, nz, fy)
+    return np.tensordot(out, rows[2], axes=(1, 1))  # (fx, fy, fz)
+
+
+@lru_cache(maxsize=4096)
+def _subdivision_matrix(length: int, chain: tuple[int, ...], degree: int) -> np.ndarray:
+    """The matrix taking ``length`` coefficients along one axis through the subdivision steps
+    ``chain`` (ratio 2: one :func:`refine` step; 1: unchanged) to the finest level's."""
+    matrix = np.eye(length)
+    for ratio in chain:
+        if ratio == 2:
+            matrix, _ = refine(matrix[:, :, None], np.zeros(3, dtype=np.int64),
+                               np.array([2, 1, 1]), degree)
+            matrix = matrix[:, :, 0]
+    matrix.setflags(write=False)
+    return matrix
 
 
 class IsoClosure:
