@@ -182,10 +182,17 @@ class Seams:
             self.recomputed += 1
             change = self._change(pieces, candidates, lo, hi, array, first, piece.level,
                                   renderer, changes, arrays, grids, aligned)
-            self._version += 1
-            memo[key] = (depends, change, self._version)
+            if kept is not None and _same(kept[1], change):
+                # The same values again (what changed was too far away to matter): keep the
+                # version, so the finer arrays next to this one are not recomputed in turn,
+                # and the object, so the renderer keeps the grid it built from it.
+                change, version = kept[1], kept[2]
+            else:
+                self._version += 1
+                version = self._version
+            memo[key] = (depends, change, version)
             if change is not None:
-                changes[key], versions[key] = change, self._version
+                changes[key], versions[key] = change, version
         self._memo = memo
         return changes
 
@@ -227,7 +234,7 @@ class Seams:
         ``lo``, ``hi``."""
         shape = np.asarray(array.shape)
         taken = np.zeros(array.shape, dtype=bool)
-        index_parts, value_parts = [], []
+        regions = []  # (candidate, start, stop, new elements of the region, flat indices)
         for m, n in enumerate(candidates):
             # The elements closer than the radius (max norm) to the box form a box themselves:
             # index i with lo - r < first + i < hi + r on every axis.
@@ -243,23 +250,44 @@ class Seams:
             local = np.nonzero(new)
             flat = np.ravel_multi_index(tuple(i + a for i, a in zip(local, start, strict=True)),
                                         array.shape)
-            source = pieces[int(n)]
+            regions.append((int(n), start, stop, new, local, flat))
+        if not regions:
+            return None
+        # One subdivision per source array over the box around all its regions (a cut's
+        # substituted bricks share their ancestor's array: many regions, one source).
+        boxes: dict[Hashable, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
+        if aligned:
+            for n, start, stop, _, _, _ in regions:
+                key = pieces[n].key
+                lo_, hi_ = boxes.get(key, (start, stop, None))[:2]
+                boxes[key] = (np.minimum(lo_, start), np.maximum(hi_, stop), None)
+            for key, (lo_, hi_, _) in boxes.items():
+                source = next(pieces[n] for n, *_ in regions if pieces[n].key == key)
+                src, src_first = self._source(source, renderer, changes, arrays)
+                boxes[key] = (lo_, hi_, _subdivided(src, src_first, first + lo_, first + hi_ - 1,
+                                                    source.level, level, renderer.tree,
+                                                    self.degree))
+        value_parts = []
+        for n, start, stop, new, local, _ in regions:
+            source = pieces[n]
             values = None
             if aligned:
-                src, src_first = self._source(source, renderer, changes, arrays)
-                box = _subdivided(src, src_first, first + start, first + stop - 1,
-                                  source.level, level, renderer.tree, self.degree)
+                lo_, _, box = boxes[source.key]
+                if box is None:  # the union does not fit: this region alone may
+                    src, src_first = self._source(source, renderer, changes, arrays)
+                    box, lo_ = _subdivided(src, src_first, first + start, first + stop - 1,
+                                           source.level, level, renderer.tree,
+                                           self.degree), start
                 if box is not None:
-                    values = box[new]
+                    at = start - lo_
+                    values = box[tuple(slice(a, a + b - c) for a, b, c in
+                                       zip(at, stop, start, strict=True))][new]
             if values is None:
                 where = np.column_stack(local) + start + first
                 values = self._values(source, where, level, renderer, changes, arrays, grids,
                                       aligned)
-            index_parts.append(flat)
             value_parts.append(values)
-        if not index_parts:
-            return None
-        return Change(np.concatenate(index_parts), np.concatenate(value_parts))
+        return Change(np.concatenate([r[5] for r in regions]), np.concatenate(value_parts))
 
     @staticmethod
     def _source(source: Any, renderer: Any, changes: dict,
@@ -295,6 +323,13 @@ class Seams:
         out = np.empty(len(points))
         sample_grid(grid.kernel, np.ascontiguousarray(points - grid.geom[7:10]), out)
         return out
+
+
+def _same(a: Change | None, b: Change | None) -> bool:
+    """Two plans' changes of one array replace the same elements by the same values."""
+    if a is None or b is None:
+        return a is b
+    return np.array_equal(a.index, b.index) and np.array_equal(a.values, b.values)
 
 
 def _within_reach(q_lo: np.ndarray, q_hi: np.ndarray, lo: np.ndarray, hi: np.ndarray,
