@@ -353,6 +353,7 @@ def test_the_incremental_seam_plan_equals_a_plan_from_scratch(shapes, model):
     from dataclasses import replace
 
     from splinecast.multires.seams import Seams
+    from splinecast.render.iso import Iso
 
     mv = sc.read(shapes["torus"][1])
     pieces, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
@@ -368,6 +369,7 @@ def test_the_incremental_seam_plan_equals_a_plan_from_scratch(shapes, model):
     rng = np.random.default_rng(7)
     fine = np.array([n for n, p in enumerate(pieces) if p.level < 2])
     renderer = CutRenderer(prepared, tree, Seams(prepared))
+    camera = sc.Camera.orbit(mv, azimuth=20, elevation=-30, size=(48, 48), zoom=0.8)
     reused = 0
     # Most bricks missing at first, then fewer; a few evicted again on the way (a change of a
     # coarser array must reach the finer arrays next to it even where their own neighbours
@@ -386,6 +388,10 @@ def test_the_incremental_seam_plan_equals_a_plan_from_scratch(shapes, model):
         for key, change in fresh.items():
             np.testing.assert_array_equal(changes[key].index, change.index)
             np.testing.assert_array_equal(changes[key].values, change.values)
+        # Drawing the cut keeps changed grids (float64 copies) only of arrays changed now.
+        renderer.render(cut, Iso(0.0), camera)
+        assert set(renderer._changed) <= set(changes)
+        assert len(renderer._changed) == len({p.key for p in cut} & set(changes))
     assert reused > 0
 
 

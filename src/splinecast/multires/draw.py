@@ -386,6 +386,11 @@ class CutRenderer:
         start = time.perf_counter()
         planes = np.ascontiguousarray(planes, dtype=np.float64).reshape(-1, 4)
         changes = self.seams.plan(pieces, self) if self.seams is not None else {}
+        # Grids built for a change an array no longer has go: kept while the array stayed in
+        # the cut, such float64 copies (8 bytes per voxel) grew to several times the brick
+        # budget while a large cut refined.
+        for key in [k for k, (change, _) in self._changed.items() if changes.get(k) is not change]:
+            del self._changed[key]
         plan_s = time.perf_counter() - start
         closure = self.seams.closure(setup, camera) if self.seams is not None else None
         keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
