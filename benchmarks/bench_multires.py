@@ -222,7 +222,7 @@ def _image_error(a: dict, b: dict, mode: str, voxel: float) -> dict:
 
 
 def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
-                reference_budget: int) -> dict:
+                reference_budget: int, keep_reference: bool = False) -> dict:
     """Both modes, the in-memory baseline and the image errors."""
     import splinecast as sc
     from splinecast.multires.budget import parse_bytes
@@ -239,7 +239,15 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
                       lod=1.0, image=str(images["multi"]))
         memory = child("memory", store=str(store), mode=mode, size=list(size), level=level,
                        image=str(images["memory"]))
-        if mv.levels[0].nbytes <= reference_budget:
+        ref: dict | None = None
+        if keep_reference:
+            # The finer reference of an earlier run in this workdir (its render takes hours at
+            # 2048^3); none yet: no error is measured for the mode.
+            ref_what = f"{images['ref']} of an earlier run"
+            if not images["ref"].exists():
+                images.pop("ref")
+                ref_what = "none (no reference image kept)"
+        elif mv.levels[0].nbytes <= reference_budget:
             ref = child("memory", store=str(store), mode=mode, size=list(size), level=0,
                         image=str(images["ref"]))
             ref_what = "level 0 in memory"
@@ -252,8 +260,10 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
         multi["overhead"] = multi["peak_anon_above_start"] - multi["final"]["peak_bytes"]
         out["modes"][mode] = {
             "multires": multi, "memory": memory, "reference": ref_what, "reference_run": ref,
-            "error_multires": _image_error(loaded["multi"], loaded["ref"], mode, voxel),
-            "error_memory": _image_error(loaded["memory"], loaded["ref"], mode, voxel)}
+            "error_multires": (_image_error(loaded["multi"], loaded["ref"], mode, voxel)
+                               if "ref" in loaded else {}),
+            "error_memory": (_image_error(loaded["memory"], loaded["ref"], mode, voxel)
+                             if "ref" in loaded else {})}
     return out
 
 
@@ -281,7 +291,7 @@ def render_markdown(r: dict) -> list[str]:
               "|---|---|---|"]
     for mode, m in r["modes"].items():
         def fmt(e):
-            return ", ".join(f"{k} {v:.4g}" for k, v in e.items())
+            return ", ".join(f"{k} {v:.4g}" for k, v in e.items()) or "not measured"
         lines.append(f"| {mode} | {fmt(m['error_multires'])} | {fmt(m['error_memory'])} |")
     return lines + [""]
 
@@ -334,6 +344,8 @@ def main() -> None:
     parser.add_argument("--reference-budget", default="4GiB",
                         help="largest level 0 rendered in memory as the error reference")
     parser.add_argument("--workdir", help="where the source and the store go (default: temp)")
+    parser.add_argument("--keep-reference", action="store_true",
+                        help="reuse the reference images of an earlier run in --workdir")
     parser.add_argument("--repeats", type=int, help="build repeats (default 3 quick, 1 full)")
     parser.add_argument("--out", default=str(HERE / "results"))
     args = parser.parse_args()
@@ -380,7 +392,8 @@ def main() -> None:
             child("build", source=str(source), out=str(store))
         size = (256, 192) if args.quick else (1024, 768)
         results["render"] = render_part(store, "4MiB" if args.quick else "1GiB", size, work,
-                                        parse_bytes(args.reference_budget, "--reference-budget"))
+                                        parse_bytes(args.reference_budget, "--reference-budget"),
+                                        args.keep_reference)
     else:
         results["render"] = old.get("render")
     out.mkdir(parents=True, exist_ok=True)

@@ -167,3 +167,31 @@ def test_screen_rects_agree_with_screen_rect():
             else:
                 kinds.add("none")
         assert kinds >= {"part", "none"} or cam.ortho
+
+
+def test_tile_lists_name_every_overlapping_piece_in_order():
+    """Each tile's list is exactly the pieces whose rectangle meets it, ascending (a brute-force
+    overlap test of every tile and rectangle): rectangles at the image's edges, one pixel
+    wide, covering the image, and empty ones."""
+    from splinecast.render.pieces_driver import TILE, tile_lists
+
+    rng = np.random.default_rng(7)
+    height, width = 3 * TILE + 5, 5 * TILE + 11
+    c0 = rng.integers(0, width, 300)
+    r0 = rng.integers(0, height, 300)
+    c1 = np.minimum(c0 + rng.integers(0, 3 * TILE, 300), width)
+    r1 = np.minimum(r0 + rng.integers(0, 3 * TILE, 300), height)
+    rects = np.stack([c0, r0, c1, r1], axis=1)
+    rects[:3] = [(0, 0, width, height), (width - 1, height - 1, width, height), (4, 4, 4, 9)]
+    start, pieces = tile_lists(rects, height, width)
+    ncol = -(-width // TILE)
+    nrow = -(-height // TILE)
+    assert len(start) == nrow * ncol + 1
+    for tr in range(nrow):
+        for tc in range(ncol):
+            y0, x0 = tr * TILE, tc * TILE
+            y1, x1 = min(y0 + TILE, height), min(x0 + TILE, width)
+            expect = [p for p, (a, b, c, d) in enumerate(rects)
+                      if max(a, x0) < min(c, x1) and max(b, y0) < min(d, y1)]
+            t = tr * ncol + tc
+            assert pieces[start[t]:start[t + 1]].tolist() == expect

@@ -27,7 +27,7 @@ from __future__ import annotations
 import threading
 import warnings
 from collections import OrderedDict
-from collections.abc import Iterable
+from collections.abc import Container, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -195,6 +195,10 @@ class BrickCache:
         self._keep: set[Key] = set()
         self._queue: list[Key] = []
         self._needed: set[Key] = set()
+        #: The bricks read ahead for the next frames (see :meth:`request`): they may not evict
+        #: one another, which made a steady view read and evict the same bricks forever.
+        self._prefetch: set[Key] = set()
+        self._pinned_bytes = 0
         self._inflight: set[Key] = set()
         self._failed: dict[Key, str] = {}
         self._warnings: list[str] = []
@@ -202,6 +206,10 @@ class BrickCache:
         self._counts = dict(loaded=0, loaded_frame=0, evicted=0, dropped=0, substituted=0)
         self._stop = False
         self._thread: threading.Thread | None = None
+        #: Counts every change of what a cut can be drawn from (a brick read, evicted or found
+        #: unavailable, a value range learnt): equal versions, equal cuts and draw items for
+        #: an unchanged view (:class:`~.stream.BrickStream` keeps them).
+        self.version = 0
         self._pin_coarsest()
         self.update_ranges()
         if start:
@@ -246,6 +254,7 @@ class BrickCache:
         for key, brick in zip(keys, self._read(keys), strict=True):
             self._insert(brick)
             self._pinned.add(key)
+            self._pinned_bytes += brick.nbytes
 
     def _read(self, keys: list[Key]) -> list[Brick]:
         """Read bricks of one level with one store read (their union window); no lock held."""
@@ -272,27 +281,36 @@ class BrickCache:
             updates, self._ranges = self._ranges, []
         for key, lo, hi in updates:
             self.octree.set_range(key, lo, hi)
+        if updates:
+            with self._cond:
+                self.version += 1
 
     # ------------------------------------------------------------------ residency (locked)
     def _insert(self, brick: Brick) -> bool:
         if brick.key in self._bricks:
             return True
-        if not self._make_room(brick.nbytes):
+        ahead = brick.key in self._prefetch and brick.key not in self._needed
+        if not self._make_room(brick.nbytes, self._prefetch if ahead else ()):
             self._counts["dropped"] += 1
+            if not ahead:  # a brick of the cut that did not fit: its next cut may keep less
+                self.version += 1
             return False
         self._bricks[brick.key] = brick
+        self.version += 1
         self._bytes += brick.nbytes
         self.peak_bytes = max(self.peak_bytes, self._bytes)
         return True
 
-    def _make_room(self, nbytes: int) -> bool:
+    def _make_room(self, nbytes: int, protect: Container[Key] = ()) -> bool:
+        """Evict least recently used bricks (never pinned or kept ones, nor ``protect``) until
+        ``nbytes`` more fit; whether they do."""
         if self._bytes + nbytes <= self.budget:
             return True
         # The victims, least recently used first, are chosen before any is dropped: copying
         # every key for each insert made a full cache of tens of thousands of bricks quadratic.
         victims, freed = [], 0
         for key, brick in self._bricks.items():
-            if key in self._pinned or key in self._keep:
+            if key in self._pinned or key in self._keep or key in protect:
                 continue
             victims.append(key)
             freed += brick.nbytes
@@ -301,6 +319,7 @@ class BrickCache:
         for key in victims:
             self._bytes -= self._bricks.pop(key).nbytes
             self._counts["evicted"] += 1
+            self.version += 1
         return self._bytes + nbytes <= self.budget
 
     # ------------------------------------------------------------------ the loader thread
@@ -339,8 +358,9 @@ class BrickCache:
                     self._cond.notify_all()
                     continue
                 self._inflight.update(batch)
-            if not batch:
-                continue
+                if not batch:  # the queue held only bricks read meanwhile: tell settle()
+                    self._cond.notify_all()
+                    continue
             bricks, failures = self._read_safely(batch)
             with self._cond:
                 for brick in bricks:
@@ -349,6 +369,7 @@ class BrickCache:
                         self._counts["loaded_frame"] += 1
                 for key, message in failures.items():
                     self._failed[key] = message
+                    self.version += 1
                     self._warnings.append(message)
                 for key in batch:
                     self._inflight.discard(key)
@@ -374,16 +395,47 @@ class BrickCache:
     def request(self, keys: Iterable[Key], keep: Iterable[Key] = (),
                 prefetch: Iterable[Key] = ()) -> None:
         """Replace what the loader reads: ``keys`` in this order, then ``prefetch``; ``keep``
-        (plus ``keys``) must not be evicted for it. Bricks resident or unavailable are skipped."""
+        (plus ``keys``) must not be evicted for it. Bricks resident or unavailable are skipped.
+
+        ``prefetch`` is the read-ahead set in priority order, resident bricks included: its
+        longest head that fits in the budget beside ``keep``, the pinned bricks and ``keys``
+        is read, and its bricks evict only bricks outside the set. A view that stays the same
+        thus reads nothing once that head is resident."""
         self.update_ranges()
         keys = list(keys)
+        prefetch = list(prefetch)
+        sizes = self._estimated_bytes(prefetch)
         with self._cond:
             self._keep = set(keep) | set(keys)
             wanted = [k for k in keys if k not in self._bricks and k not in self._failed]
             self._needed = set(wanted)
-            self._queue = wanted + [k for k in prefetch if k not in self._bricks
-                                    and k not in self._failed and k not in self._needed]
+            # Read ahead only what fits beside the bricks kept and those still to read: a
+            # prefetch that evicted the bricks prefetched before it was read again every frame.
+            room = (self.budget - self._pinned_bytes - sum(self._estimated_bytes(wanted))
+                    - sum(self._bricks[k].nbytes for k in self._keep
+                          if k in self._bricks and k not in self._pinned))
+            ahead = []
+            for key, size in zip(prefetch, sizes, strict=True):
+                if key in self._failed or key in self._needed or key in self._keep:
+                    continue
+                if size > room:
+                    break
+                room -= size
+                ahead.append(key)
+            self._prefetch = set(ahead)
+            self._queue = wanted + [k for k in ahead if k not in self._bricks]
             self._cond.notify_all()
+
+    def _estimated_bytes(self, keys: list[Key]) -> list[int]:
+        """Bytes each brick takes when resident (from the octree's windows)."""
+        if not keys:
+            return []
+        arr = np.asarray(keys, dtype=np.int64).reshape(-1, 4)
+        out = np.zeros(len(arr), dtype=np.int64)
+        for level in np.unique(arr[:, 0]):
+            rows = arr[:, 0] == level
+            out[rows] = self.octree.brick_bytes(int(level), arr[rows, 1:])
+        return out.tolist()
 
     def request_cut(self, cut: Cut) -> None:
         """:meth:`request` the bricks of a cut (its requests, keep set and prefetch list)."""
@@ -407,6 +459,13 @@ class BrickCache:
             loaded = self._counts["loaded_frame"]
         self._flush_warnings()
         return loaded
+
+    def settle(self, timeout: float | None = None) -> bool:
+        """Block until the loader has nothing left to read (requests and read-ahead) or
+        ``timeout`` seconds passed; whether it is idle."""
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: (not self._queue and not self._inflight) or not self.running, timeout)
 
     def get(self, key: Key) -> Brick | None:
         """The resident brick ``key`` (marked as recently used) or ``None``."""
@@ -452,6 +511,12 @@ class BrickCache:
             self._counts["substituted"] = substituted
         return items
 
+    def note_substituted(self, count: int) -> None:
+        """Set the substitution count of this frame (a caller drawing the items of an earlier
+        :meth:`resolve` again, unchanged since)."""
+        with self._cond:
+            self._counts["substituted"] = int(count)
+
     def _flush_warnings(self) -> None:
         with self._cond:
             pending, self._warnings = self._warnings, []
@@ -465,7 +530,7 @@ class BrickCache:
 
     @property
     def pinned_bytes(self) -> int:
-        return sum(self._bricks[k].nbytes for k in self._pinned)
+        return self._pinned_bytes
 
     def stats(self) -> dict[str, Any]:
         """Counts for ``frame.stats``: resident bricks and bytes, budget, requested (still to

@@ -496,7 +496,7 @@ class ErrorCut:
                 kids = self.tree.children_of(int(nodes[n]))
                 for kid in kids[self.metric.visible[kids]].tolist():
                     key: Key = tuple(int(v) for v in self.keys[kid])  # type: ignore[assignment]
-                    if not resident(key) and key not in want:
+                    if key not in want:  # resident ones too: see lod._assemble
                         extra.append(key)
             cut.prefetch = extra[:prefetch]
         return cut

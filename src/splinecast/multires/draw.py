@@ -60,7 +60,7 @@ from ..render.clipping import NO_PLANES
 from ..render.driver import GEOM_SIZE, band_order, finalize, reset_state
 from ..render.iso import Iso
 from ..render.multi_iso import MultiIso
-from ..render.pieces_driver import TILE, trace_pieces
+from ..render.pieces_driver import TILE, tile_lists, trace_pieces
 from ..render.segment import Grid, counters, make_grid, trace_segment
 from .order import front_to_back
 from .probe import box_ranges, sample_grid
@@ -256,6 +256,9 @@ class CutRenderer:
         self._seam_pairs: dict[Hashable, tuple[tuple, Hashable]] = {}
         #: The last frame's typed lists of pairs (see :meth:`_pack`).
         self._packed: tuple | None = None
+        #: The last frame's pieces, seam changes, view, order and launch arrays (see
+        #: :meth:`_trace`).
+        self._last: tuple | None = None
         #: Trace all pieces of a frame in one compiled launch (else one call per piece).
         self.batched = True
         self.stats: dict[str, Any] = {}
@@ -385,20 +388,38 @@ class CutRenderer:
         finished outputs written into ``out``."""
         start = time.perf_counter()
         planes = np.ascontiguousarray(planes, dtype=np.float64).reshape(-1, 4)
-        changes = self.seams.plan(pieces, self) if self.seams is not None else {}
-        # Grids built for a change an array no longer has go: kept while the array stayed in
-        # the cut, such float64 copies (8 bytes per voxel) grew to several times the brick
-        # budget while a large cut refined.
-        for key in [k for k, (change, _) in self._changed.items() if changes.get(k) is not change]:
-            del self._changed[key]
+        # The same pieces (the scene hands out the same list while the cut and what is
+        # resident stay) seen the same way: the seam plan, the order and the launch's arrays
+        # of the last frame are still right (tens of microseconds per piece to redo).
+        view = (camera.pixel_basis().tobytes(), planes.tobytes(), _blocks_key(setup),
+                type(setup.params))
+        last = self._last
+        steady = last is not None and last[0] is pieces and view[2] is not None
+        if steady:
+            assert last is not None
+            changes = last[1]
+        else:
+            changes = self.seams.plan(pieces, self) if self.seams is not None else {}
+            # Grids built for a change an array no longer has go: kept while the array stayed
+            # in the cut, such float64 copies (8 bytes per voxel) grew to several times the
+            # brick budget while a large cut refined.
+            for key in [k for k, (change, _) in self._changed.items()
+                        if changes.get(k) is not change]:
+                del self._changed[key]
         plan_s = time.perf_counter() - start
         closure = self.seams.closure(setup, camera) if self.seams is not None else None
-        keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
-        order = front_to_back(keys, camera, self.tree)
+        if steady and last is not None and last[2] == view:
+            order, launch = last[3], last[4]
+        else:
+            keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
+            order, launch = front_to_back(keys, camera, self.tree), None
+        self._last = None
         done = None
         if self.batched:
-            done = self._trace_batched(pieces, order, changes, closure, setup, camera, state,
-                                       stats, planes, out)
+            done, launch = self._trace_batched(pieces, order, changes, closure, setup, camera,
+                                               state, stats, planes, out, launch)
+            if done is not None and view[2] is not None:
+                self._last = (pieces, changes, view, order, launch)
         if done is None:
             if out is not None:
                 reset_state(setup.params, state, camera.height, camera.width)
@@ -407,7 +428,7 @@ class CutRenderer:
             if out is not None:
                 finalize(setup.params, state, out, camera.pixel_basis())
         traced, rebuilt = done
-        self.stats = {"pieces": len(pieces), "pieces_traced": traced,
+        self.stats = {"pieces": len(pieces), "pieces_traced": traced, "launch_reused": steady,
                       "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
                       "seam_plan_ms": plan_s * 1e3}
         if closure is not None:
@@ -429,10 +450,43 @@ class CutRenderer:
 
     def _trace_batched(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
                        closure: Any, setup: Any, camera: Camera, state: tuple, stats: tuple,
-                       planes: np.ndarray, out: tuple | None) -> tuple[int, int] | None:
+                       planes: np.ndarray, out: tuple | None,
+                       launch: _Launch | None = None) -> tuple[tuple[int, int] | None, Any]:
         """All pieces in one compiled launch (with ``out``: the states reset and the outputs
         written in it too); ``None``, before anything is traced, if their grids have too many
-        types."""
+        types. Returns that and the launch's arrays (``launch``: those of the last frame, for
+        the same pieces, seam changes, view and mode)."""
+        if launch is None:
+            launch = self._launch(pieces, order, changes, setup, camera)
+        if launch is None:
+            return None, None
+        h, w = camera.height, camera.width
+        if not len(launch.which):
+            if out is not None:
+                reset_state(setup.params, state, h, w)
+                finalize(setup.params, state, out, camera.pixel_basis())
+            return (0, launch.rebuilt), launch
+        if closure is not None:
+            exits = (closure.exit_t, np.zeros((h, w), dtype=np.int64), closure.exit_level)
+        else:
+            exits = (np.empty((0, 0)), np.empty((0, 0), dtype=np.int64),
+                     np.empty((0, 0), dtype=np.int64))
+        final = out is not None
+        hits = trace_pieces(launch.grids[0], launch.grids[1], launch.which, setup.params, state,
+                            out if final else setup.output(0, 0), camera.pixel_basis(),
+                            launch.geoms, launch.boxes, launch.closed, launch.rects,
+                            launch.levels, self.origin0, self.spacing0, planes,
+                            np.empty((h, w, 2)), _tiles(h, w), *launch.tile_lists, final, final,
+                            closure is not None, *exits, *stats)
+        if closure is not None:
+            closure.hits += int(hits)
+        rebuilt, launch.rebuilt = launch.rebuilt, 0  # built once, for the first frame
+        return (len(launch.which), rebuilt), launch
+
+    def _launch(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict, setup: Any,
+                camera: Camera) -> _Launch | None:
+        """The arrays :func:`trace_pieces` takes for the pieces seen by ``camera`` (grids built
+        where missing); ``None`` if their grids have more than two Numba types."""
         ordered = [pieces[int(n)] for n in order]
         if not ordered:
             return None
@@ -460,33 +514,19 @@ class CutRenderer:
                 pairs.append(self._pair(piece.key, grid, setup, blocks_key))
             per_piece[m] = at
         if not len(keep):
-            if out is not None:
-                reset_state(setup.params, state, camera.height, camera.width)
-                finalize(setup.params, state, out, camera.pixel_basis())
-            return 0, rebuilt
+            return _Launch((), np.zeros((0, 2), np.int64), geoms, np.zeros((0, 2, 3)),
+                           np.zeros((0, 3), bool), np.zeros((0, 4), np.int64),
+                           np.zeros(0, np.int64), rebuilt, ())
         packed = self._pack(pairs, lambda: self._seam_pair(ordered[int(keep[0])], setup))
         if packed is None:
             return None
         grids, slot = packed
-        which = np.ascontiguousarray(slot[per_piece])
-        h, w = camera.height, camera.width
-        boxes = np.ascontiguousarray(np.stack([lo[keep], hi[keep]], axis=1))
-        levels = np.array([ordered[int(n)].level for n in keep], dtype=np.int64)
-        if closure is not None:
-            exits = (closure.exit_t, np.zeros((h, w), dtype=np.int64), closure.exit_level)
-        else:
-            exits = (np.empty((0, 0)), np.empty((0, 0), dtype=np.int64),
-                     np.empty((0, 0), dtype=np.int64))
-        final = out is not None
-        hits = trace_pieces(grids[0], grids[1], which, setup.params, state,
-                            out if final else setup.output(0, 0), camera.pixel_basis(), geoms,
-                            boxes, np.ascontiguousarray(closed[keep]),
-                            np.ascontiguousarray(rects[keep]), levels, self.origin0,
-                            self.spacing0, planes, np.empty((h, w, 2)), _tiles(h, w), final,
-                            final, closure is not None, *exits, *stats)
-        if closure is not None:
-            closure.hits += int(hits)
-        return len(keep), rebuilt
+        rects = np.ascontiguousarray(rects[keep])
+        return _Launch(tuple(grids), np.ascontiguousarray(slot[per_piece]), geoms,
+                       np.ascontiguousarray(np.stack([lo[keep], hi[keep]], axis=1)),
+                       np.ascontiguousarray(closed[keep]), rects,
+                       np.array([ordered[int(n)].level for n in keep], dtype=np.int64), rebuilt,
+                       tile_lists(rects, camera.height, camera.width))
 
     def _pack(self, pairs: list[tuple[tuple, Hashable]],
               seam_pair: Callable[[], tuple[tuple, Hashable]]) -> tuple[list, np.ndarray] | None:
@@ -592,6 +632,23 @@ class CutRenderer:
                 c0, r0, w, h = rect
                 total[r0:r0 + h, c0:c0 + w] += part
         return traced, rebuilt
+
+
+@dataclass
+class _Launch:
+    """What :func:`trace_pieces` takes for one frame's pieces, besides the mode's arrays."""
+
+    grids: tuple
+    which: np.ndarray
+    geoms: np.ndarray
+    boxes: np.ndarray
+    closed: np.ndarray
+    rects: np.ndarray
+    levels: np.ndarray
+    #: Grids built at seams for it (reported by the first frame that traces it).
+    rebuilt: int
+    #: :func:`~splinecast.render.pieces_driver.tile_lists` of ``rects``.
+    tile_lists: tuple
 
 
 def _blocks_key(setup: Any) -> Hashable:

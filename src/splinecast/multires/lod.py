@@ -311,10 +311,10 @@ def cut_of_keys(octree: BrickOctree, key_arr: np.ndarray, priority: np.ndarray,
 def _chains(octree: BrickOctree, key_arr: np.ndarray, priority: np.ndarray,
             value_filter: ValueFilter, resident: Callable[[Key], bool]
             ) -> tuple[set[Key], dict[Key, float]]:
-    """What the cache must keep (every brick of the cut and its ancestors) and what to read
-    with its priority: along each brick's chain of ancestors up to the first resident one (or
-    the coarsest level), the brick itself and the ancestors that can contribute, at the highest
-    priority of the bricks below them.
+    """What the cache must keep and what to read with its priority: along each brick's chain
+    of ancestors up to the first resident one (or the coarsest level), the brick itself and the
+    ancestors (kept all, read those that can contribute, at the highest priority of the bricks
+    below them).
 
     Level by level, finest first, with the chains that meet at a brick merged (from there up
     they are the same chain; it goes on reading if any of them does): a cut of a 2048^3 pyramid
@@ -344,7 +344,10 @@ def _chains(octree: BrickOctree, key_arr: np.ndarray, priority: np.ndarray,
         best = np.full(m, -np.inf)
         np.maximum.at(best, inverse[active], prio[active])
         keys = [(int(level), i, j, k) for i, j, k in unique.tolist()]
-        keep.update(keys)
+        # Kept: the cut's bricks and the chains above the missing ones up to their first
+        # resident ancestor (what a frame may draw). Keeping every ancestor of the cut made the
+        # kept set outgrow the budget under small budgets, and the cut's last brick never fit.
+        keep.update(keys[u] for u in np.flatnonzero(is_active))
         if level == octree.coarsest:
             break  # always resident: nothing above is read
         ranges = octree.ranges[p][unique[:, 0], unique[:, 1], unique[:, 2]]
@@ -377,7 +380,10 @@ def _assemble(octree: BrickOctree, levels: list[_Level], value_filter: ValueFilt
     cut = cut_of_keys(octree, key_arr, priority, value_filter, resident, limited)
     want = set(cut.requests)
 
-    # Prefetch: children of the cut's bricks nearest to being refined.
+    # Prefetch: the contributing children of the cut's bricks nearest to being refined.
+    # Resident ones stay in the list, so that it stays the same while the view does (the
+    # cache reads what is missing of it; a list of only missing bricks moved on to the next
+    # ones as soon as the first were read, and evicted them for those).
     order = np.argsort(-cut.priority, kind="stable")
     extra: list[Key] = []
     for n in order:
@@ -386,10 +392,13 @@ def _assemble(octree: BrickOctree, levels: list[_Level], value_filter: ValueFilt
         level = int(cut.keys[n, 0])
         if level == octree.levels[0]:
             continue
-        finer = octree.levels[octree.position(level) - 1]
-        for idx in octree.children(level, cut.keys[n, 1:][None]):
+        p = octree.position(level) - 1
+        finer = octree.levels[p]
+        kids = octree.children(level, cut.keys[n, 1:][None])
+        ranges = octree.ranges[p][tuple(kids.T)]
+        for idx in kids[value_filter.contributes(ranges[:, 0], ranges[:, 1])]:
             key = (finer, int(idx[0]), int(idx[1]), int(idx[2]))
-            if not resident(key) and key not in want:
+            if key not in want:
                 extra.append(key)
     cut.prefetch = extra[:prefetch]
     return cut

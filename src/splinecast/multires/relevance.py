@@ -36,6 +36,10 @@ class ValueFilter:
                                                          for a, b in intervals]
         self.widen = float(widen)
 
+    def key(self) -> tuple:
+        """What decides the filter's answers (equal keys, equal filters)."""
+        return (None if self.intervals is None else tuple(self.intervals), self.widen)
+
     @classmethod
     def iso(cls, values: Any, widen: float = 0.0) -> ValueFilter:
         """Bricks that an isosurface (or several) crosses."""

@@ -42,12 +42,51 @@ from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import pixel_ray
 
-__all__ = ["trace_pieces", "box_interval", "TILE"]
+__all__ = ["trace_pieces", "tile_lists", "box_interval", "TILE"]
 
 #: Edge in pixels of the square screen tiles the launch hands out to threads: small enough for
 #: a balanced split of a 256x192 image over a few threads, large enough that a tile's pixels
 #: reuse a piece's cells and the per-(tile, piece) set-up is small next to its rays.
 TILE = 16
+
+
+def tile_lists(rects: np.ndarray, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces overlapping each tile of :data:`TILE` pixels, in the order of ``rects``.
+
+    Parameters
+    ----------
+    rects : ndarray (n, 4) of int64
+        ``(col0, row0, col1, row1)`` of each piece (end exclusive), inside the image.
+    height, width : int
+        The image's size.
+
+    Returns
+    -------
+    tile_start, tile_pieces : ndarray of int64
+        Tile ``t`` (row-major over the tile grid) has pieces
+        ``tile_pieces[tile_start[t]:tile_start[t + 1]]``, ascending. A tile walking every
+        piece's rectangle instead cost tens of milliseconds per frame for cuts of ten
+        thousand pieces.
+    """
+    rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
+    ncol = (width + TILE - 1) // TILE
+    nrow = (height + TILE - 1) // TILE
+    empty = (rects[:, 2] <= rects[:, 0]) | (rects[:, 3] <= rects[:, 1])
+    c0, r0 = rects[:, 0] // TILE, rects[:, 1] // TILE
+    c1 = np.where(empty, c0, (rects[:, 2] - 1) // TILE + 1)
+    r1 = np.where(empty, r0, (rects[:, 3] - 1) // TILE + 1)
+    nc, nr = c1 - c0, r1 - r0
+    count = nc * nr
+    piece = np.repeat(np.arange(len(rects), dtype=np.int64), count)
+    # Position of each pair inside its piece's block of tiles, then its tile's number.
+    k = np.arange(int(count.sum()), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+    width_p = np.repeat(nc, count)
+    tile = (np.repeat(r0, count) + k // np.maximum(width_p, 1)) * ncol + np.repeat(c0, count) \
+        + k % np.maximum(width_p, 1)
+    order = np.argsort(tile, kind="stable")  # stable: pieces stay in order within a tile
+    tile_start = np.zeros(nrow * ncol + 1, dtype=np.int64)
+    np.cumsum(np.bincount(tile, minlength=nrow * ncol), out=tile_start[1:])
+    return tile_start, np.ascontiguousarray(piece[order])
 
 
 @jit(inline="always")
@@ -84,7 +123,7 @@ def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
 # level at that parameter (few rays: the seams), from the piece it left.
 
 def closure_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel,
-                  geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+                  scr, geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
     """Before a piece: a hit on its entry face if the field jumps across the isovalue there
     (compiled code only); returns 1 for a hit, else 0."""
     raise NotImplementedError
@@ -96,7 +135,9 @@ def closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit
     raise NotImplementedError
 
 
-@jit()
+# Reference counting on (``_nrt=True``) although its caller runs without: it allocates the
+# scratch of the other piece's grid (see :func:`_piece_pixels`).
+@jit(_nrt=True)
 def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, height, t):
     """The field of piece ``q`` (as drawn) at parameter ``t`` of the ray."""
     if which[q, 0] == 0:
@@ -111,16 +152,15 @@ def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, heigh
 
 
 @jit()
-def _iso_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, geom,
-               grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+def _iso_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, scr,
+               geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
     # The caller checked that the ray left a piece of another level at t_in.
     depth, gradient = state[0], state[1]
     if not (t_in <= t_out and depth[row, col] == math.inf):
         return 0
     before = _exit_value(grids_a, grids_b, which, geoms, exit_piece[row, col], basis, row, col,
                          width, height, t_in) - mode.iso
-    v, gx, gy, gz = _field_at(kernel, new_scratch(kernel), geom, basis, row, col, width,
-                              height, t_in)
+    v, gx, gy, gz = _field_at(kernel, scr, geom, basis, row, col, width, height, t_in)
     g = v - mode.iso
     if g == 0.0 or (g < 0.0) != (before < 0.0):
         depth[row, col] = t_in
@@ -142,8 +182,8 @@ def _iso_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_pi
 
 
 @jit()
-def _no_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, geom,
-              grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+def _no_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, scr,
+              geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
     return 0
 
 
@@ -159,7 +199,7 @@ def _is_iso(mode) -> bool:
 
 @overload_jit(closure_enter, inline="never")
 def _closure_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel,
-                   geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+                   scr, geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
     return (_iso_enter if _is_iso(mode) else _no_enter).py_func
 
 
@@ -176,12 +216,31 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
                 visited, tested, skipped):
     """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns the closure's hits
     and the number of rays that ended in it (marked in the tile's ``ended``)."""
-    height, width = visited.shape
-    ncx, ncy, ncz = cell_count(kernel)
-    # Model scratch per piece: some models cache cells of their grid in it.
+    # Model scratch per piece: some models cache cells of their grid in it. Allocated here,
+    # with reference counting; the pixels run without (:func:`_piece_pixels`).
     scr = new_scratch(kernel)
     cuts = np.empty(8)
     tags = np.empty(8, np.int64)
+    return _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi,
+                         closed, origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece,
+                         level, close, grids_a, grids_b, which, geoms, exit_t, exit_piece,
+                         exit_level, ended, tr0, tc0, visited, tested, skipped, scr, cuts, tags)
+
+
+# Without Numba's reference counting, as the driver's band (:func:`.driver._trace_band`): the
+# per-ray unit inlined here hands the grid, scratch, mode and state tuples to hooks with
+# branches, and with counting on every array in them was incremented and decremented at each
+# (atomic operations per ray and piece). Nothing here allocates; the closure's evaluation of
+# another piece's grid, which does, is compiled with counting (:func:`_exit_value`). No Python
+# entry: unboxing the typed lists of its arguments needs counting.
+@jit(_nrt=False, no_cpython_wrapper=True)
+def _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
+                  origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
+                  grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
+                  tc0, visited, tested, skipped, scr, cuts, tags):
+    """The pixel loop of :func:`_piece_tile` (``scr``, ``cuts``, ``tags``: its buffers)."""
+    height, width = visited.shape
+    ncx, ncy, ncz = cell_count(kernel)
     hits = 0
     n_ended = 0
     for row in range(r0, r1):
@@ -200,7 +259,7 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
             # here): calls with this many arguments cost more than the rest of a short ray.
             if close and exit_t[row, col] == t0 and exit_level[row, col] != level:
                 hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
-                                      level, kernel, geom, grids_a, grids_b, which, geoms,
+                                      level, kernel, scr, geom, grids_a, grids_b, which, geoms,
                                       exit_t, exit_piece, exit_level)
             nv, nt, ns = _trace_pixel(
                 kernel, mode, blocks, state, out, basis, geom, planes, t_range, True, True,
@@ -220,8 +279,8 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
 
 @jit()
 def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
-                levels, origin0, spacing0, planes, t_range, tr0, tc0, fresh, final, close, exit_t,
-                exit_piece, exit_level, visited, tested, skipped):
+                levels, origin0, spacing0, planes, t_range, tile_start, tile_pieces, tr0, tc0,
+                fresh, final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
     """One thread's work item: the pieces overlapping one tile, in order (the tile's states
     reset first when ``fresh``, its outputs written at the end when ``final``)."""
     height, width = visited.shape
@@ -242,9 +301,11 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
             else:
                 alive += 1
     hits = 0
-    for p in range(which.shape[0]):
+    tile = (tr0 // TILE) * ((width + TILE - 1) // TILE) + tc0 // TILE
+    for q in range(tile_start[tile], tile_start[tile + 1]):
         if alive == 0:
             break
+        p = tile_pieces[q]
         c0 = max(rects[p, 0], tc0)
         r0 = max(rects[p, 1], tr0)
         c1 = min(rects[p, 2], tc1)
@@ -280,8 +341,8 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
 
 @jit(parallel=True)
 def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
-                 levels, origin0, spacing0, planes, t_range, tiles, fresh, final, close, exit_t,
-                 exit_piece, exit_level, visited, tested, skipped):
+                 levels, origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh,
+                 final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
     """Trace every pixel through the pieces of a cut, front to back, in one launch.
 
     Parameters (prepared by :class:`splinecast.multires.draw.CutRenderer`)
@@ -318,6 +379,10 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     tiles : ndarray (k, 2) of int64
         First row and column of each tile of :data:`TILE` pixels, in the order handed out
         (they cover the image).
+    tile_start, tile_pieces : ndarray of int64
+        The pieces whose rectangle overlaps each tile, in order: those of the tile in tile row
+        ``r``, column ``c`` (``r * ceil(width / TILE) + c``) are
+        ``tile_pieces[tile_start[t]:tile_start[t + 1]]`` (:func:`tile_lists`).
     fresh, final : bool
         Start from fresh states (the state arrays' contents are ignored) as the driver's
         ``reset_state`` does, and write the outputs at the end as its ``finalize`` does: a
@@ -339,6 +404,6 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     for n in prange(tiles.shape[0]):
         hits[n] = _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
                               closed, rects, levels, origin0, spacing0, planes, t_range,
-                              tiles[n, 0], tiles[n, 1], fresh, final, close, exit_t, exit_piece,
-                              exit_level, visited, tested, skipped)
+                              tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
+                              close, exit_t, exit_piece, exit_level, visited, tested, skipped)
     return hits.sum()
