@@ -105,3 +105,89 @@ def test_the_render_brick_grows_to_64_only_where_level_0_keeps_8_bricks_per_axis
     assert render_brick(volume(8, (53, 47, 41))) == 8
     assert render_brick(volume(128, (4096,) * 3)) == 128  # never smaller than the pyramid's
     assert render_brick(volume(None, (4096,) * 3)) == 64
+
+
+@pytest.mark.parametrize("model", ["trilinear", "bspline3"])
+def test_bricks_drawn_from_one_ancestor_are_one_piece_that_draws_the_coarse_level(
+        tmp_path, model):
+    """Before any brick is read, the whole cut is drawn from the coarsest level. Its bricks
+    become one piece per coarsest brick over that brick's box, so the frame is the in-memory
+    render of the coarsest level (reference: :class:`splinecast.Scene` of that level's voxels;
+    a 33^3 volume, whose coarse levels cover level 0's domain exactly)."""
+    n = 33
+    x, y, z = np.meshgrid(*(np.arange(n, dtype=np.float64),) * 3, indexing="ij")
+    data = np.sqrt((x - 15.3) ** 2 + (y - 16.2) ** 2 + (z - 17.1) ** 2).astype(np.float32)
+    path = tmp_path / "ball.zarr"
+    sc.build_pyramid(sc.Volume(data, spacing=(0.5, 0.5, 0.5)), path, brick=8, shard=16,
+                     progress=False)
+    mv = sc.read(path)
+    cam = sc.Camera.orbit(mv, azimuth=35, elevation=25, size=(64, 48), zoom=1.4)
+    with sc.Scene(mv, model=model, budget="8MiB", lod=0.3) as scene:
+        scene.stream.cache.close()  # nothing but the pinned coarsest level, ever
+        frame = scene.render(cam, iso=11.0, inside="low", wait=False)
+        tree = scene.stream.octree
+        roots = len(tree.roots())
+    coarse = mv.level(tree.coarsest)
+    assert frame.stats["substituted"] == frame.stats["cut_bricks"] > roots
+    assert frame.stats["pieces"] <= roots
+    reference = sc.Scene(coarse.to_volume(max_bytes=2**30), model=model).render(
+        cam, iso=11.0, inside="low")
+    hit = np.isfinite(reference.depth)
+    assert hit.sum() > 200
+    np.testing.assert_array_equal(np.isfinite(frame.depth), hit)
+    np.testing.assert_allclose(frame.depth[hit], reference.depth[hit], rtol=0, atol=1e-9)
+
+
+def test_merged_nodes_are_the_coarsest_whose_cut_bricks_share_the_drawn_ancestor(sphere):
+    """Random residency over a cut of mixed levels: each substituted brick's node is an
+    ancestor-or-self at or below the brick drawn, every brick of the cut inside the node is
+    drawn from that brick, and the node's parent (where still at or below it) has one that is
+    not (brute force over the cut's boxes)."""
+    from types import SimpleNamespace
+
+    from splinecast.multires.lod import select_cut
+    from splinecast.multires.octree import BrickOctree
+    from splinecast.multires.scene import _merged_nodes
+
+    mv = sc.read(sphere)
+    tree = BrickOctree(mv)
+    cut = select_cut(tree, _camera(mv), lod=0.3, budget=150_000,
+                     value_filter=ValueFilter.iso(RADIUS))
+    keys = [tuple(int(v) for v in cut.keys[n]) for n in range(len(cut))]
+    assert len({k[0] for k in keys}) > 1
+    rng = np.random.default_rng(3)
+    kinds = set()
+    for trial in range(6):
+        resident = {tuple(k) for k in keys if rng.random() < 0.3 * (trial % 3)}
+        for key in keys:
+            for up in tree.ancestors(key):
+                if rng.random() < 0.3 or up[0] == tree.coarsest:
+                    resident.add(up)
+        items = []
+        for n, key in enumerate(keys):
+            drawn = key if key in resident else next(a for a in tree.ancestors(key)
+                                                     if a in resident)
+            items.append(SimpleNamespace(n=n, brick=SimpleNamespace(key=drawn),
+                                         substituted=drawn != key))
+        nodes = _merged_nodes(cut.keys, items, tree)
+        assert set(nodes) == {it.n for it in items if it.substituted}
+
+        def inside(node, key):
+            lo, hi = tree.box(node[0], np.array([node[1:]]))
+            klo, khi = tree.box(key[0], np.array([key[1:]]))
+            return bool(np.all(klo[0] >= lo[0]) and np.all(khi[0] <= hi[0])
+                        and tree.position(key[0]) <= tree.position(node[0]))
+
+        def all_drawn_from(node, drawn, items=items):
+            return all(items[m].brick.key == drawn for m, k in enumerate(keys)
+                       if inside(node, k))
+
+        for n, node in nodes.items():
+            drawn = items[n].brick.key
+            chain = [keys[n], *tree.ancestors(keys[n])]
+            assert node in chain and chain.index(node) <= chain.index(drawn)
+            assert all_drawn_from(node, drawn)
+            if node != drawn:
+                assert not all_drawn_from(tree.parent(node), drawn)
+            kinds.add("alone" if node == keys[n] else "whole" if node == drawn else "between")
+    assert kinds == {"alone", "whole", "between"}  # the cases the test means to cover

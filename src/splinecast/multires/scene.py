@@ -54,7 +54,7 @@ from ..volume import Volume
 from .budget import parse_bytes
 from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut, mip_transfer
 from .draw import CutRenderer, Piece
-from .octree import DEFAULT_BRICK
+from .octree import DEFAULT_BRICK, BrickOctree
 from .relevance import ValueFilter
 from .seams import Seams
 from .stream import BrickStream, FrameBricks
@@ -94,16 +94,84 @@ def render_brick(volume: MultiscaleVolume) -> int:
     return brick
 
 
-def pieces_of(frame: FrameBricks) -> list[Piece]:
+def pieces_of(frame: FrameBricks, octree: BrickOctree | None = None) -> list[Piece]:
     """The pieces of a frame of a :class:`~.stream.BrickStream`: each brick of the cut with the
-    array drawn for it (its own or its finest resident ancestor's)."""
+    array drawn for it (its own or its finest resident ancestor's).
+
+    With the ``octree``, bricks of the cut drawn from one ancestor are drawn as one piece per
+    octree node under that ancestor whose bricks in the cut are all drawn from it: the ancestor
+    over the node's whole box (bricks left out of the cut there, which cannot contribute at
+    their own level, are then drawn from the ancestor as well: its level as it is). Every piece
+    costs per ray that crosses it, and the first frames of a view draw thousands of bricks from
+    a few coarse ones.
+    """
     cut = frame.cut
+    items = frame.items
+    nodes: dict[int, tuple[int, int, int, int]] = {}
+    if octree is not None and any(item.substituted for item in items):
+        nodes = _merged_nodes(cut.keys, items, octree)
     out = []
-    for item in frame.items:
+    done: set[tuple] = set()
+    for item in items:
         brick = item.brick
+        node = nodes.get(item.n)
+        if node is not None and node != cut.key(item.n):
+            if node in done:
+                continue
+            done.add(node)
+            lo, hi = octree.box(node[0], np.array([node[1:]]))  # type: ignore[union-attr]
+            out.append(Piece(node, brick.key, int(brick.key[0]), brick.data,
+                             tuple(int(v) for v in brick.first),  # type: ignore[arg-type]
+                             lo[0], hi[0], True))
+            continue
         out.append(Piece(cut.key(item.n), brick.key, int(brick.key[0]), brick.data,
                          tuple(int(v) for v in brick.first),  # type: ignore[arg-type]
                          cut.box_lo[item.n], cut.box_hi[item.n], item.substituted))
+    return out
+
+
+def _merged_nodes(keys: np.ndarray, items: list,
+                  octree: BrickOctree) -> dict[int, tuple[int, int, int, int]]:
+    """For each substituted brick ``n`` of the cut: the coarsest node between it and the
+    ancestor it is drawn from (that ancestor included) whose bricks in the cut are all drawn
+    from that ancestor."""
+    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 4)
+    position = np.array([octree.position(int(level)) for level in keys[:, 0]], dtype=np.int64)
+    drawn = np.full(len(keys), -1, dtype=np.int64)  # an id per drawing ancestor, -1: itself
+    ancestors: dict[tuple, int] = {}
+    for item in items:
+        if item.substituted:
+            drawn[item.n] = ancestors.setdefault(tuple(int(v) for v in item.brick.key),
+                                                 len(ancestors))
+    top = np.full(len(ancestors), 0, dtype=np.int64)
+    for key, a in ancestors.items():
+        top[a] = octree.position(key[0])
+    out: dict[int, tuple[int, int, int, int]] = {}
+    left = drawn >= 0
+    for q in range(int(top.max()), -1, -1):  # coarse to fine: the coarsest node wins
+        under = position <= q
+        if not np.any(left & under):
+            continue
+        # Every cut brick's node on level position q; a node is whole when all the cut's
+        # bricks in it are drawn from one ancestor that lies at or above q.
+        node = keys[:, 1:] * octree.factors[position] // octree.factors[q]
+        rows = np.flatnonzero(under)
+        ids = np.concatenate([node[rows], drawn[rows, None]], axis=1)
+        found, inverse, count = np.unique(node[rows], axis=0, return_inverse=True,
+                                          return_counts=True)
+        inverse = inverse.reshape(-1)
+        first_drawn = np.full(len(found), -2, dtype=np.int64)
+        first_drawn[inverse] = ids[:, 3]
+        same = np.zeros(len(found), dtype=np.int64)
+        np.add.at(same, inverse, ids[:, 3] == first_drawn[inverse])
+        whole = (same == count) & (first_drawn >= 0)
+        whole &= top[np.maximum(first_drawn, 0)] >= q
+        level = int(octree.levels[q])
+        for m in np.flatnonzero(left[rows] & whole[inverse]):
+            n = int(rows[m])
+            idx = found[inverse[m]]
+            out[n] = (level, int(idx[0]), int(idx[1]), int(idx[2]))
+            left[n] = False
     return out
 
 
@@ -121,9 +189,10 @@ class MultiscaleScene:
         Hard byte budget of the brick cache (``"2GiB"``).
     lod : float
         Refine a brick while one of its voxels covers more than ``lod`` pixels.
-    load_budget : int
+    load_budget : int, optional
         Bricks a frame waits for at most (M); the loader thread goes on reading in the
-        background, and later frames draw what it read.
+        background, and later frames draw what it read. Default: 64 bricks of 32^3 cells'
+        worth of voxels (8 bricks of 64^3), at most 64 bricks.
     cut : {"lod", "error"}
         Cut policy (see above). ``"error"`` reads the brick histograms of the distortion metric
         stored with the pyramid (``build_pyramid(..., histograms=True)``, ``splinecast pyramid
@@ -154,7 +223,7 @@ class MultiscaleScene:
     """
 
     def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "2GiB",
-                 lod: float = 1.0, load_budget: int = 64, *, cut: str = "lod",
+                 lod: float = 1.0, load_budget: int | None = None, *, cut: str = "lod",
                  cut_priority: str = "improved", interest: Any = None, seams: bool = True,
                  brick: int | None = None,
                  **options: Any) -> None:
@@ -182,9 +251,13 @@ class MultiscaleScene:
         self.preview._value_range = volume.value_range
         self.model = MODELS[model](self.preview, **options)
         self.budget = parse_bytes(budget, "budget")
+        brick = brick or render_brick(volume)
+        if load_budget is None:
+            # The frame's wait is for bytes read: bricks of 64^3 are 8 of 32^3.
+            load_budget = max(4, min(64, round(64 * (32 / brick) ** 3)))
         self.stream = BrickStream(volume, self._cache_budget(), lod=lod,
                                   loads_per_frame=load_budget, border=BORDER_RULES[model],
-                                  brick=brick or render_brick(volume))
+                                  brick=brick)
         #: The error-metric cut (``cut="error"``), None for the level-of-detail cut.
         self.error_cut = (ErrorCut(self.stream.octree, interest=interest,
                                    improved=cut_priority == "improved")
@@ -300,7 +373,7 @@ class MultiscaleScene:
         if last is not None and last[0] is bricks.items:
             pieces = last[1]
         else:
-            pieces = pieces_of(bricks)
+            pieces = pieces_of(bricks, self.stream.octree)
             self._last_pieces = (bricks.items, pieces)
         request.stats["cut_ms"] = (time.perf_counter() - start) * 1e3
         start = time.perf_counter()
