@@ -222,7 +222,8 @@ def _image_error(a: dict, b: dict, mode: str, voxel: float) -> dict:
 
 
 def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
-                reference_budget: int, keep_reference: bool = False) -> dict:
+                reference_budget: int, keep_reference: bool = False,
+                coarser: tuple[float, ...] = ()) -> dict:
     """Both modes, the in-memory baseline and the image errors."""
     import splinecast as sc
     from splinecast.multires.budget import parse_bytes
@@ -255,15 +256,28 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
             ref = child("render", store=str(store), mode=mode, size=list(size),
                         budget=reference_budget, lod=0.5, image=str(images["ref"]))
             ref_what = f"multiresolution, lod 0.5, budget {mib(reference_budget)}"
+        # Coarser levels of detail (``--coarser-lod``): lod 2 draws voxels of up to 2 pixels,
+        # about the in-memory level's resolution, so its ratio compares equal detail.
+        extra = {}
+        for lod in coarser:
+            name = f"multi_lod{lod:g}"
+            images[name] = work / f"{mode}_{name}.npz"
+            extra[f"{lod:g}"] = child("render", store=str(store), mode=mode, size=list(size),
+                                      budget=budget, lod=lod, image=str(images[name]))
         loaded = {k: dict(np.load(v)) for k, v in images.items()}
         voxel = float(min(mv.spacing))
-        multi["overhead"] = multi["peak_anon_above_start"] - multi["final"]["peak_bytes"]
+        for run in (multi, *extra.values()):
+            run["overhead"] = run["peak_anon_above_start"] - run["final"]["peak_bytes"]
         out["modes"][mode] = {
             "multires": multi, "memory": memory, "reference": ref_what, "reference_run": ref,
             "error_multires": (_image_error(loaded["multi"], loaded["ref"], mode, voxel)
                                if "ref" in loaded else {}),
             "error_memory": (_image_error(loaded["memory"], loaded["ref"], mode, voxel)
-                             if "ref" in loaded else {})}
+                             if "ref" in loaded else {}),
+            "coarser": {lod: dict(run, error=(_image_error(loaded[f"multi_lod{lod}"],
+                                                           loaded["ref"], mode, voxel)
+                                              if "ref" in loaded else {}))
+                        for lod, run in extra.items()}}
     return out
 
 
@@ -277,8 +291,12 @@ def render_markdown(r: dict) -> list[str]:
              "| mode | open | first image | complete (frames) | steady | in-memory | ratio | "
              "bricks read / frame (mean, max) | cut bricks | peak RSS | peak anon above start | "
              "cache peak | overhead |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    rows = []
     for mode, m in r["modes"].items():
-        a, b = m["multires"], m["memory"]
+        rows.append((mode, m["multires"], m["memory"]))
+        rows += [(f"{mode}, lod {lod}", run, m["memory"])
+                 for lod, run in m.get("coarser", {}).items()]
+    for mode, a, b in rows:
         lines.append(
             f"| {mode} | {a['open_s']:.2f} s | {a['first_s']:.2f} s | {a['complete_s']:.2f} s "
             f"({a['frames_to_complete']}) | {a['steady_s'] * 1e3:.0f} ms | "
@@ -293,6 +311,8 @@ def render_markdown(r: dict) -> list[str]:
         def fmt(e):
             return ", ".join(f"{k} {v:.4g}" for k, v in e.items()) or "not measured"
         lines.append(f"| {mode} | {fmt(m['error_multires'])} | {fmt(m['error_memory'])} |")
+        for lod, run in m.get("coarser", {}).items():
+            lines.append(f"| {mode}, lod {lod} | {fmt(run['error'])} | |")
     return lines + [""]
 
 
@@ -344,6 +364,8 @@ def main() -> None:
     parser.add_argument("--reference-budget", default="4GiB",
                         help="largest level 0 rendered in memory as the error reference")
     parser.add_argument("--workdir", help="where the source and the store go (default: temp)")
+    parser.add_argument("--coarser-lod", default="",
+                        help="comma-separated further lod values rendered (e.g. 2)")
     parser.add_argument("--keep-reference", action="store_true",
                         help="reuse the reference images of an earlier run in --workdir")
     parser.add_argument("--repeats", type=int, help="build repeats (default 3 quick, 1 full)")
@@ -393,7 +415,8 @@ def main() -> None:
         size = (256, 192) if args.quick else (1024, 768)
         results["render"] = render_part(store, "4MiB" if args.quick else "1GiB", size, work,
                                         parse_bytes(args.reference_budget, "--reference-budget"),
-                                        args.keep_reference)
+                                        args.keep_reference,
+                                        tuple(float(v) for v in args.coarser_lod.split(",") if v))
     else:
         results["render"] = old.get("render")
     out.mkdir(parents=True, exist_ok=True)
