@@ -174,14 +174,15 @@ def render_job(job: str, args: dict, anon, sample, stop, peak) -> dict:
     # substitution bring the seam bricks' kernels); refining a 1 GiB cut to completion here
     # took longer than the measurement itself.
     other = sc.Camera.orbit(mv, azimuth=210, elevation=-25, size=tuple(args["size"]), zoom=1.3)
-    with sc.Scene(mv, budget=args["budget"], lod=args["lod"]) as warm:
+    brick = args.get("brick")  # None: the scene's default render brick
+    with sc.Scene(mv, budget=args["budget"], lod=args["lod"], brick=brick) as warm:
         for _ in range(4):
             if warm.render(other, **options).stats["complete"]:
                 break
     before = anon()
     threading.Thread(target=sample, daemon=True).start()
     t0 = time.perf_counter()
-    scene = sc.Scene(mv, budget=args["budget"], lod=args["lod"])
+    scene = sc.Scene(mv, budget=args["budget"], lod=args["lod"], brick=brick)
     open_s = time.perf_counter() - t0
     frame = scene.render(cam, **options)
     first_s = time.perf_counter() - t0
@@ -223,7 +224,7 @@ def _image_error(a: dict, b: dict, mode: str, voxel: float) -> dict:
 
 def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
                 reference_budget: int, keep_reference: bool = False,
-                coarser: tuple[float, ...] = ()) -> dict:
+                coarser: tuple[float, ...] = (), baseline_brick: int | None = None) -> dict:
     """Both modes, the in-memory baseline and the image errors."""
     import splinecast as sc
     from splinecast.multires.budget import parse_bytes
@@ -264,6 +265,14 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
             images[name] = work / f"{mode}_{name}.npz"
             extra[f"{lod:g}"] = child("render", store=str(store), mode=mode, size=list(size),
                                       budget=budget, lod=lod, image=str(images[name]))
+        if baseline_brick and mode == "iso":
+            # The same run with another render brick (``--baseline-brick``; the isosurface only:
+            # a DVR run of 32^3 bricks takes most of ten minutes).
+            name = f"multi_brick{baseline_brick}"
+            images[name] = work / f"{mode}_{name}.npz"
+            extra[f"1, bricks of {baseline_brick}"] = child(
+                "render", store=str(store), mode=mode, size=list(size), budget=budget, lod=1.0,
+                brick=baseline_brick, image=str(images[name]))
         loaded = {k: dict(np.load(v)) for k, v in images.items()}
         voxel = float(min(mv.spacing))
         for run in (multi, *extra.values()):
@@ -274,10 +283,11 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
                                if "ref" in loaded else {}),
             "error_memory": (_image_error(loaded["memory"], loaded["ref"], mode, voxel)
                              if "ref" in loaded else {}),
-            "coarser": {lod: dict(run, error=(_image_error(loaded[f"multi_lod{lod}"],
-                                                           loaded["ref"], mode, voxel)
-                                              if "ref" in loaded else {}))
-                        for lod, run in extra.items()}}
+            "coarser": {lod: dict(run, error=(_image_error(loaded[name], loaded["ref"], mode,
+                                                           voxel) if "ref" in loaded else {}))
+                        for (lod, run), name in zip(extra.items(),
+                                                    [k for k in images if k.startswith("multi_")],
+                                                    strict=True)}}
     return out
 
 
@@ -366,6 +376,8 @@ def main() -> None:
     parser.add_argument("--workdir", help="where the source and the store go (default: temp)")
     parser.add_argument("--coarser-lod", default="",
                         help="comma-separated further lod values rendered (e.g. 2)")
+    parser.add_argument("--baseline-brick", type=int,
+                        help="also render the isosurface with this render brick (e.g. 32)")
     parser.add_argument("--keep-reference", action="store_true",
                         help="reuse the reference images of an earlier run in --workdir")
     parser.add_argument("--repeats", type=int, help="build repeats (default 3 quick, 1 full)")
@@ -416,7 +428,8 @@ def main() -> None:
         results["render"] = render_part(store, "4MiB" if args.quick else "1GiB", size, work,
                                         parse_bytes(args.reference_budget, "--reference-budget"),
                                         args.keep_reference,
-                                        tuple(float(v) for v in args.coarser_lod.split(",") if v))
+                                        tuple(float(v) for v in args.coarser_lod.split(",") if v),
+                                        args.baseline_brick)
     else:
         results["render"] = old.get("render")
     out.mkdir(parents=True, exist_ok=True)
