@@ -206,9 +206,9 @@ class BrickCache:
         self._counts = dict(loaded=0, loaded_frame=0, evicted=0, dropped=0, substituted=0)
         self._stop = False
         self._thread: threading.Thread | None = None
-        #: Counts every change of what a cut can be drawn from (a brick read, evicted or found
-        #: unavailable, a value range learnt): equal versions, equal cuts and draw items for
-        #: an unchanged view (:class:`~.stream.BrickStream` keeps them).
+        #: Counts every change of what a cut can be drawn from (a brick read, evicted, found
+        #: unavailable or dropped for want of room, a value range learnt): equal versions,
+        #: equal cuts and draw items for an unchanged view (:class:`~.stream.BrickStream`).
         self.version = 0
         self._pin_coarsest()
         self.update_ranges()
