@@ -389,7 +389,7 @@ def main() -> None:
     stem = "multires_quick" if args.quick else "multires"
     out = Path(args.out)
     old = json.loads((out / f"{stem}.json").read_text()) if (out / f"{stem}.json").exists() else {}
-    command = "python benchmarks/bench_multires.py" + (" --quick" if args.quick else "")
+    command = " ".join(["python benchmarks/bench_multires.py", *sys.argv[1:]])
     results = {"machine": describe(), "quick": args.quick, "command": command,
                "note": "Medians of fresh processes; the build includes zarr's and dask's "
                        "start-up inside the process but not the interpreter's."}
