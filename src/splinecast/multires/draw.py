@@ -258,7 +258,7 @@ class CutRenderer:
         self._packed: tuple | None = None
         #: The last frame's pieces, seam changes, view, order and launch arrays (see
         #: :meth:`_trace`).
-        self._last: tuple | None = None
+        self._last: _LastDraw | None = None
         #: Trace all pieces of a frame in one compiled launch (else one call per piece).
         self.batched = True
         self.stats: dict[str, Any] = {}
@@ -394,10 +394,10 @@ class CutRenderer:
         view = (camera.pixel_basis().tobytes(), planes.tobytes(), _blocks_key(setup),
                 type(setup.params))
         last = self._last
-        steady = last is not None and last[0] is pieces and view[2] is not None
+        steady = last is not None and last.pieces is pieces and view[2] is not None
         if steady:
             assert last is not None
-            changes = last[1]
+            changes = last.changes
         else:
             changes = self.seams.plan(pieces, self) if self.seams is not None else {}
             # Grids built for a change an array no longer has go: kept while the array stayed
@@ -408,8 +408,8 @@ class CutRenderer:
                 del self._changed[key]
         plan_s = time.perf_counter() - start
         closure = self.seams.closure(setup, camera) if self.seams is not None else None
-        if steady and last is not None and last[2] == view:
-            order, launch = last[3], last[4]
+        if steady and last is not None and last.view == view:
+            order, launch = last.order, last.launch
         else:
             keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
             order, launch = front_to_back(keys, camera, self.tree), None
@@ -419,7 +419,7 @@ class CutRenderer:
             done, launch = self._trace_batched(pieces, order, changes, closure, setup, camera,
                                                state, stats, planes, out, launch)
             if done is not None and view[2] is not None:
-                self._last = (pieces, changes, view, order, launch)
+                self._last = _LastDraw(pieces, changes, view, order, launch)
         if done is None:
             if out is not None:
                 reset_state(setup.params, state, camera.height, camera.width)
@@ -632,6 +632,19 @@ class CutRenderer:
                 c0, r0, w, h = rect
                 total[r0:r0 + h, c0:c0 + w] += part
         return traced, rebuilt
+
+
+@dataclass
+class _LastDraw:
+    """What the last frame drew: its pieces (the list object), their seam changes, the view
+    (camera basis, clip planes, block selection, mode type), the front-to-back order and the
+    launch's arrays."""
+
+    pieces: Sequence[Piece]
+    changes: dict
+    view: tuple
+    order: np.ndarray
+    launch: Any
 
 
 @dataclass

@@ -155,18 +155,16 @@ def _merged_nodes(keys: np.ndarray, items: list,
             continue
         # Every cut brick's node on level position q; a node is whole when all the cut's
         # bricks in it are drawn from one ancestor that lies at or above q.
-        node = keys[:, 1:] * octree.factors[position] // octree.factors[q]
         rows = np.flatnonzero(under)
-        ids = np.concatenate([node[rows], drawn[rows, None]], axis=1)
-        found, inverse, count = np.unique(node[rows], axis=0, return_inverse=True,
-                                          return_counts=True)
+        node = keys[rows, 1:] * octree.factors[position[rows]] // octree.factors[q]
+        found, inverse, count = np.unique(node, axis=0, return_inverse=True, return_counts=True)
         inverse = inverse.reshape(-1)
-        first_drawn = np.full(len(found), -2, dtype=np.int64)
-        first_drawn[inverse] = ids[:, 3]
-        same = np.zeros(len(found), dtype=np.int64)
-        np.add.at(same, inverse, ids[:, 3] == first_drawn[inverse])
-        whole = (same == count) & (first_drawn >= 0)
-        whole &= top[np.maximum(first_drawn, 0)] >= q
+        # One member's drawing ancestor per node; the node is whole if all members share it.
+        one = np.empty(len(found), dtype=np.int64)
+        one[inverse] = drawn[rows]
+        same = np.bincount(inverse, weights=drawn[rows] == one[inverse], minlength=len(found))
+        whole = (same == count) & (one >= 0)
+        whole &= top[np.maximum(one, 0)] >= q
         level = int(octree.levels[q])
         for m in np.flatnonzero(left[rows] & whole[inverse]):
             n = int(rows[m])
