@@ -160,6 +160,7 @@ def test_small_budget_cut_is_the_greedy_cut_within_budget_and_above_the_optimum(
     n_bricks = 20
     budget = _budget(n_bricks, brick_bytes)
     with sc.Scene(mv, budget=budget, cut="error", interest=interest, load_budget=3) as scene:
+        scene.seams_in_budget = False  # N follows from the budget alone
         frames = _converge(scene, cam, DVR)
         last = frames[-1].stats
         # M = 3 (8, a whole split, in effect) bricks per frame: the cut refines over frames.
@@ -211,6 +212,7 @@ def test_a_transfer_function_edit_coarsens_what_became_transparent(ramp):
     budget = _budget(20, probe.error_cut.brick_bytes)
     probe.close()
     with sc.Scene(mv, budget=budget, cut="error", load_budget=64) as scene:
+        scene.seams_in_budget = False  # the same N before and after the edit
         # The edit hides everything above the smallest value of some level-1 brick.
         tree = scene.error_cut.tree
         cut_at = float(tree.value_min[tree.level == 1].max()) - 1e-9

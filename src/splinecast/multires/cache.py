@@ -8,8 +8,9 @@ frame can show the whole volume at some resolution. A frame asks for its cut
 draws every brick that is not resident yet from its finest resident ancestor
 (:meth:`BrickCache.resolve`). Rendering the same view again converges to the complete cut.
 
-Budget accounting: the bytes of the resident brick arrays never exceed ``budget`` (checked before
-each insertion; ``peak_bytes`` records the maximum). A brick that does not fit without evicting
+Budget accounting: the bytes of the resident brick arrays never exceed ``budget`` less what
+:meth:`BrickCache.reserve` holds back for the renderer (the seam copies), checked before each
+insertion (``peak_bytes`` records the maximum). A brick that does not fit without evicting
 what the current view needs is not loaded (``dropped``). Transient buffers of one read (the union
 window of up to 8 sibling bricks and its padded copies) and the decoded chunks kept for the
 neighbours' ghost layers (:class:`~.chunk_cache.ChunkCache`: an eighth of the budget, at most
@@ -42,6 +43,9 @@ from .octree import BrickOctree
 
 __all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS", "read_bricks",
            "CHUNK_CACHE_MAX"]
+
+#: Steps of :meth:`BrickCache.reserve`, as a share of the budget.
+RESERVE_STEP = 1 / 32
 
 #: Most bytes of decoded store chunks a brick cache keeps besides its budget.
 CHUNK_CACHE_MAX = 64 * 2**20
@@ -199,6 +203,9 @@ class BrickCache:
         #: one another, which made a steady view read and evict the same bricks forever.
         self._prefetch: set[Key] = set()
         self._pinned_bytes = 0
+        #: Bytes of the budget held back for what the renderer keeps beside the bricks (see
+        #: :meth:`reserve`).
+        self._reserved = 0
         self._inflight: set[Key] = set()
         self._failed: dict[Key, str] = {}
         self._warnings: list[str] = []
@@ -303,8 +310,9 @@ class BrickCache:
 
     def _make_room(self, nbytes: int, protect: Container[Key] = ()) -> bool:
         """Evict least recently used bricks (never pinned or kept ones, nor ``protect``) until
-        ``nbytes`` more fit; whether they do."""
-        if self._bytes + nbytes <= self.budget:
+        ``nbytes`` more fit in :attr:`brick_budget`; whether they do."""
+        limit = self.brick_budget
+        if self._bytes + nbytes <= limit:
             return True
         # The victims, least recently used first, are chosen before any is dropped: copying
         # every key for each insert made a full cache of tens of thousands of bricks quadratic.
@@ -314,13 +322,13 @@ class BrickCache:
                 continue
             victims.append(key)
             freed += brick.nbytes
-            if self._bytes - freed + nbytes <= self.budget:
+            if self._bytes - freed + nbytes <= limit:
                 break
         for key in victims:
             self._bytes -= self._bricks.pop(key).nbytes
             self._counts["evicted"] += 1
             self.version += 1
-        return self._bytes + nbytes <= self.budget
+        return self._bytes + nbytes <= limit
 
     # ------------------------------------------------------------------ the loader thread
     def _next_batch(self) -> list[Key]:
@@ -411,7 +419,7 @@ class BrickCache:
             self._needed = set(wanted)
             # Read ahead only what fits beside the bricks kept and those still to read: a
             # prefetch that evicted the bricks prefetched before it was read again every frame.
-            room = (self.budget - self._pinned_bytes - sum(self._estimated_bytes(wanted))
+            room = (self.brick_budget - self._pinned_bytes - sum(self._estimated_bytes(wanted))
                     - sum(self._bricks[k].nbytes for k in self._keep
                           if k in self._bricks and k not in self._pinned))
             ahead = []
@@ -532,6 +540,41 @@ class BrickCache:
     def pinned_bytes(self) -> int:
         return self._pinned_bytes
 
+    @property
+    def brick_budget(self) -> int:
+        """The bytes resident bricks may take: the budget less what :meth:`reserve` holds."""
+        return self.budget - self._reserved
+
+    @property
+    def reserved_bytes(self) -> int:
+        return self._reserved
+
+    def reserve(self, nbytes: int) -> bool:
+        """Hold back ``nbytes`` of the budget for what the renderer keeps beside the bricks
+        (the float64 copies of the bricks changed at level seams), so that the two together
+        stay within the budget; bricks not needed by the view are evicted down to what is
+        left. The reservation moves in steps of :data:`RESERVE_STEP` of the budget, up as soon
+        as ``nbytes`` passes it and down only when it falls a whole step below: small changes
+        from frame to frame would otherwise change the cut's share, hence the cut and its seams,
+        every frame. The pinned coarsest level is never given up.
+
+        Returns
+        -------
+        bool
+            Whether the reservation changed (then :attr:`version` does too: the next frame
+            chooses its cut for the room left).
+        """
+        step = max(1, int(self.budget * RESERVE_STEP))
+        wanted = -(-max(0, int(nbytes)) // step) * step
+        with self._cond:
+            wanted = min(wanted, self.budget - self._pinned_bytes)
+            if wanted <= self._reserved and wanted >= self._reserved - step:
+                return False
+            self._reserved = wanted
+            self.version += 1
+            self._make_room(0)
+            return True
+
     def stats(self) -> dict[str, Any]:
         """Counts for ``frame.stats``: resident bricks and bytes, budget, requested (still to
         read), loaded (this frame / in total), substituted (last :meth:`resolve`), unavailable,
@@ -542,6 +585,7 @@ class BrickCache:
                 "resident_bytes": self._bytes,
                 "peak_bytes": self.peak_bytes,
                 "budget": self.budget,
+                "reserved_bytes": self._reserved,
                 "requested": len(self._needed),
                 "loaded_this_frame": self._counts["loaded_frame"],
                 "loaded": self._counts["loaded"],

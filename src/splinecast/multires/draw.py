@@ -48,7 +48,7 @@ import contextlib
 import math
 import time
 from collections.abc import Callable, Hashable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numba
@@ -62,8 +62,9 @@ from ..render.iso import Iso
 from ..render.multi_iso import MultiIso
 from ..render.pieces_driver import TILE, tile_lists, trace_pieces
 from ..render.segment import Grid, counters, make_grid, trace_segment
-from .order import front_to_back
+from .order import eye_index, front_to_back
 from .probe import box_ranges, sample_grid
+from .seam_parts import SHELL_SHARE_MAX, Parts, crop_range, part_order, split_box
 
 __all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect", "screen_rects",
            "SERIAL_PIXELS", "SERIAL_CELLS"]
@@ -114,6 +115,10 @@ class Piece:
         ``box_lo``/``box_hi`` are already the box to trace, on the model's cell boundaries and
         inside its domain (spline-wavelet chunk regions): :meth:`CutRenderer.box` neither moves
         nor extends them.
+    seam_part : {"", "core", "shell"}
+        Part of a brick changed at a seam (:mod:`.seam_parts`): the core is drawn from the
+        brick's own grid (no seam change applies to it), a shell from ``data``, which is
+        already the changed prepared array around it.
     """
 
     cut_key: tuple[int, int, int, int]
@@ -125,6 +130,7 @@ class Piece:
     box_hi: np.ndarray
     substituted: bool = False
     placed: bool = False
+    seam_part: str = ""
 
 
 @dataclass(frozen=True)
@@ -249,7 +255,14 @@ class CutRenderer:
         self._prepared: dict[Hashable, tuple[np.ndarray, np.ndarray]] = {}
         #: Grids of arrays changed at a seam, kept with their change while the seam plan
         #: (which keeps its ``Change`` objects while the cut stays) hands out the same one.
-        self._changed: dict[Hashable, tuple[Any, Grid]] = {}
+        self._changed: dict[Hashable, tuple[Any, Grid, int]] = {}
+        #: Per (brick key, box) changed at a seam: the change and the parts it is drawn as
+        #: (:mod:`.seam_parts`: shells, then the core last), or ``None`` for a whole copy.
+        self._split: dict[tuple, tuple[Any, list[Piece] | None, Any]] = {}
+        #: Draw bricks changed at a seam as shells around their unchanged core (else each from
+        #: a float64 copy of its whole array, the reference the parts are tested against).
+        self.split_seams = True
+        self._serial = 0
         #: Per brick: its grid's (kernel, blocks) pair for the launch (see :meth:`_pair`).
         self._pairs: dict[Hashable, tuple] = {}
         #: Per mode type: the (kernel, blocks) pair type of a grid changed at a seam.
@@ -276,6 +289,8 @@ class CutRenderer:
     def prepared(self, piece: Piece) -> tuple[np.ndarray, np.ndarray]:
         """The array the model's kernels read for a piece, and the level index of its first
         element (the brick's voxels; the type-6 prefilter applied when the model has it)."""
+        if piece.seam_part == "shell":
+            return piece.data, np.asarray(piece.first, dtype=np.int64)
         cached = self._prepared.get(piece.key)
         if cached is not None:
             return cached
@@ -297,7 +312,7 @@ class CutRenderer:
 
     def _piece_grid(self, piece: Piece, changes: dict) -> tuple[Grid, bool]:
         """The grid to trace for a piece: cached, or built from the array changed at a seam."""
-        change = changes.get(piece.key)
+        change = None if piece.seam_part else changes.get(piece.key)
         if change is None:
             grid = self._grids.get(piece.key)
             if grid is None:
@@ -308,8 +323,9 @@ class CutRenderer:
         if kept is not None and kept[0] is change:
             return kept[1], False
         array, first = self.prepared(piece)
-        grid = self.grid(piece.level, change.apply(array), first)
-        self._changed[piece.key] = (change, grid)
+        copy = change.apply(array)
+        grid = self.grid(piece.level, copy, first)
+        self._changed[piece.key] = (change, grid, copy.nbytes)
         return grid, True
 
     def evaluate(self, piece: Piece, points: np.ndarray, changes: dict | None = None) -> np.ndarray:
@@ -329,6 +345,9 @@ class CutRenderer:
     def forget(self, keep: Iterable[Hashable]) -> None:
         """Drop the grids and arrays of bricks not in ``keep`` (the cache may evict them)."""
         keep = set(keep)
+        for key in [k for k in self._split if k[0] not in keep]:
+            self._drop_split(key)
+        keep.update(shell.key for entry in self._split.values() for shell in (entry[1] or [])[:-1])
         for store in (self._grids, self._prepared, self._changed, self._pairs):
             for key in [k for k in store if k not in keep]:
                 del store[key]
@@ -403,36 +422,145 @@ class CutRenderer:
             # Grids built for a change an array no longer has go: kept while the array stayed
             # in the cut, such float64 copies (8 bytes per voxel) grew to several times the
             # brick budget while a large cut refined.
-            for key in [k for k, (change, _) in self._changed.items()
+            for key in [k for k, (change, *_) in self._changed.items()
                         if changes.get(k) is not change]:
                 del self._changed[key]
+            for key in [k for k, entry in self._split.items()
+                        if changes.get(k[0]) is not entry[0]]:
+                self._drop_split(key)
         plan_s = time.perf_counter() - start
         closure = self.seams.closure(setup, camera) if self.seams is not None else None
         if steady and last is not None and last.view == view:
-            order, launch = last.order, last.launch
+            drawn, drawn_changes, launch = last.drawn, last.drawn_changes, last.launch
         else:
             keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
-            order, launch = front_to_back(keys, camera, self.tree), None
+            drawn, drawn_changes = self._drawn(pieces, front_to_back(keys, camera, self.tree),
+                                               changes, camera)
+            launch = None
+        order = np.arange(len(drawn))
         self._last = None
         done = None
         if self.batched:
-            done, launch = self._trace_batched(pieces, order, changes, closure, setup, camera,
-                                               state, stats, planes, out, launch)
+            done, launch = self._trace_batched(drawn, order, drawn_changes, closure, setup,
+                                               camera, state, stats, planes, out, launch)
             if done is not None and view[2] is not None:
-                self._last = _LastDraw(pieces, changes, view, order, launch)
+                self._last = _LastDraw(pieces, changes, view, drawn, drawn_changes, launch)
         if done is None:
             if out is not None:
                 reset_state(setup.params, state, camera.height, camera.width)
-            done = self._trace_each(pieces, order, changes, closure, setup, camera, state,
+            done = self._trace_each(drawn, order, drawn_changes, closure, setup, camera, state,
                                     stats, planes)
             if out is not None:
                 finalize(setup.params, state, out, camera.pixel_basis())
         traced, rebuilt = done
         self.stats = {"pieces": len(pieces), "pieces_traced": traced, "launch_reused": steady,
                       "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
-                      "seam_plan_ms": plan_s * 1e3}
+                      "seam_plan_ms": plan_s * 1e3, "seam_parts": len(drawn) - len(pieces),
+                      "seam_copy_bytes": self.seam_copy_bytes()}
         if closure is not None:
             self.stats["seam_closure_hits"] = closure.hits
+
+    # ------------------------------------------------------------------ seams drawn in parts
+    def seam_copy_bytes(self) -> int:
+        """Bytes of changed values held for seams: the shells' arrays and the whole copies of
+        bricks not split (memory beside the brick cache's budget)."""
+        shells = sum(shell.data.nbytes for _, parts, _ in self._split.values() if parts
+                     for shell in parts[:-1])
+        return shells + sum(nbytes for _, _, nbytes in self._changed.values())
+
+    def _drawn(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
+               camera: Camera) -> tuple[list[Piece], dict]:
+        """The pieces to trace, front to back, and the seam changes still to apply to them:
+        each piece changed at a seam is replaced by its parts (:mod:`.seam_parts`) in the order
+        seen from ``camera``, where it splits."""
+        ordered = [pieces[int(n)] for n in order]
+        if not changes or not self.split_seams:
+            return ordered, changes
+        point, eye = eye_index(camera, self.tree)
+        drawn: list[Piece] = []
+        used: set[tuple] = set()
+        for piece in ordered:
+            change = changes.get(piece.key)
+            if change is None:
+                drawn.append(piece)
+                continue
+            lo, hi, _ = self.box(piece)
+            key = (piece.key, lo.tobytes(), hi.tobytes())
+            entry = self._split.get(key)
+            if entry is None or entry[0] is not change:
+                if entry is not None:
+                    self._drop_split(key)
+                entry = self._split[key] = (change, *self._parts(piece, change, lo, hi))
+            used.add(key)
+            parts, split = entry[1], entry[2]
+            if parts is None:
+                drawn.append(piece)
+            elif split is None:  # no changed element reaches the box: the brick's own grid
+                drawn.extend(parts)
+            else:
+                lv = self.levels[piece.level]
+                if eye is None:
+                    at = part_order(split, point * lv.scale, perspective=False)
+                else:
+                    at = part_order(split, lv.from_level0(eye), perspective=True)
+                drawn.extend(parts[int(p)] for p in at)
+        # Only what this frame draws is kept: parts of boxes no longer drawn, and whole copies
+        # of bricks now drawn in parts (or from an ancestor's box that splits) go.
+        for key in [k for k in self._split if k not in used]:
+            self._drop_split(key)
+        whole = {piece.key for piece in drawn if not piece.seam_part}
+        for key in [k for k in self._changed if k not in whole]:
+            del self._changed[key]
+        return drawn, {k: c for k, c in changes.items() if k in whole}
+
+    def _parts(self, piece: Piece, change: Any, lo: np.ndarray,
+               hi: np.ndarray) -> tuple[list[Piece] | None, Parts | None]:
+        """A changed piece's parts (shells, then the core) and their split, or ``(None,
+        None)`` when it is drawn from a whole copy."""
+        array, first = self.prepared(piece)
+        lv = self.levels[piece.level]
+        lo_b, hi_b = lv.from_level0(lo), lv.from_level0(hi)
+        radius = float(self.seams.radius) if self.seams is not None else 0.0
+        elements = np.stack(np.unravel_index(change.index, array.shape), axis=1) + first
+        # Only elements a point of the box can read matter (an ancestor standing in for a
+        # missing brick carries the changes of its whole array).
+        reach = np.all((elements >= lo_b - radius - 1.0) & (elements <= hi_b + radius + 1.0),
+                       axis=1)
+        if not reach.any():
+            return [replace(piece, seam_part="core")], None
+        split = split_box(lo_b, hi_b, elements[reach], radius)
+        if split is None:
+            return None, None
+        crops = [crop_range(box_lo, box_hi, first, array.shape, radius)
+                 for box_lo, box_hi in split.boxes[:-1]]
+        if sum(int(np.prod(stop - start)) for start, stop in crops) > (
+                SHELL_SHARE_MAX * array.size):
+            return None, None
+        changed = change.apply(array)  # transient: only the shells' elements are kept
+        parts: list[Piece] = []
+        for p, (box_lo, box_hi) in enumerate(split.boxes):
+            # Back to level 0, exactly where a part's face is the brick's.
+            lo0 = np.where(box_lo == lo_b, lo, (box_lo - lv.offset) / lv.scale)
+            hi0 = np.where(box_hi == hi_b, hi, (box_hi - lv.offset) / lv.scale)
+            if p == len(split.boxes) - 1:
+                parts.append(replace(piece, box_lo=lo0, box_hi=hi0, placed=True,
+                                     seam_part="core"))
+                continue
+            start, stop = crops[p]
+            data = np.ascontiguousarray(changed[start[0]:stop[0], start[1]:stop[1],
+                                                start[2]:stop[2]])
+            self._serial += 1
+            parts.append(replace(piece, key=("seam shell", self._serial), data=data,
+                                 first=tuple(int(v) for v in first + start), box_lo=lo0,
+                                 box_hi=hi0, placed=True, seam_part="shell"))
+        return parts, split
+
+    def _drop_split(self, key: tuple) -> None:
+        """Forget a changed piece's parts and the grids built for its shells."""
+        _, parts, _ = self._split.pop(key)
+        for shell in (parts or [])[:-1]:
+            for store in (self._grids, self._pairs):
+                store.pop(shell.key, None)
 
     def boxes(self, pieces: Sequence[Piece]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`box` of many pieces at once: ``lo``, ``hi`` (n, 3) and ``closed`` (n, 3)."""
@@ -517,7 +645,8 @@ class CutRenderer:
             return _Launch((), np.zeros((0, 2), np.int64), geoms, np.zeros((0, 2, 3)),
                            np.zeros((0, 3), bool), np.zeros((0, 4), np.int64),
                            np.zeros(0, np.int64), rebuilt, ())
-        packed = self._pack(pairs, lambda: self._seam_pair(ordered[int(keep[0])], setup))
+        packed = self._pack(pairs, lambda: self._seam_pair(ordered[int(keep[0])], setup),
+                            lambda: self._float32_pair(ordered[int(keep[0])], setup))
         if packed is None:
             return None
         grids, slot = packed
@@ -529,7 +658,8 @@ class CutRenderer:
                        tile_lists(rects, camera.height, camera.width))
 
     def _pack(self, pairs: list[tuple[tuple, Hashable]],
-              seam_pair: Callable[[], tuple[tuple, Hashable]]) -> tuple[list, np.ndarray] | None:
+              seam_pair: Callable[[], tuple[tuple, Hashable]],
+              float32_pair: Callable[[], tuple]) -> tuple[list, np.ndarray] | None:
         """The launch's two typed lists of ``(kernel, blocks)`` and each pair's ``(list,
         index)``; ``None`` for more than two Numba types. Kept while the pairs are the same
         objects (a steady view): filling typed lists costs tens of microseconds per item.
@@ -537,7 +667,10 @@ class CutRenderer:
         The second list always has the type of grids changed at a seam (``seam_pair``, a
         float64 copy), empty or not, so a view with seams and one without use the same compiled
         launch: otherwise the first seam of a session (and every test with another mix) would
-        compile the launch again (tens of seconds) for the same store."""
+        compile the launch again (tens of seconds) for the same store. When every grid has that
+        type (a float64 store, spline-wavelet bricks) the first list is an empty one of the
+        type a float32 store's grids have (``float32_pair``), so the launch compiled for
+        float32 stores serves them too (for the same reason)."""
         key = [pair for pair, _ in pairs]
         kept = self._packed
         if kept is not None and len(kept[0]) == len(key) and all(
@@ -550,13 +683,13 @@ class CutRenderer:
         stored = [signature for signature in members if signature != seam_signature]
         if len(stored) > 1:
             return None
-        order = [stored[0] if stored else seam_signature, seam_signature]
+        order = [stored[0] if stored else None, seam_signature]
         slot = np.empty((len(pairs), 2), dtype=np.int64)
         grids: list[Any] = []
         for number, signature in enumerate(order):
-            if number == 1 and signature == order[0]:  # only float64 copies: one type
-                grids.append(List.empty_list(grids[0]._list_type.item_type))
-                break
+            if signature is None:  # only float64 grids
+                grids.append(List.empty_list(numba.typeof(float32_pair())))
+                continue
             ats = members.get(signature, [])
             items = List.empty_list(numba.typeof(pairs[ats[0]][0] if ats else seam))
             for k, at in enumerate(ats):
@@ -579,6 +712,17 @@ class CutRenderer:
             pair = (grid.kernel, setup.blocks(grid.hierarchy))
             kept = self._seam_pairs[key] = (pair, _signature(pair))
         return kept
+
+    def _float32_pair(self, piece: Piece, setup: Any) -> tuple:
+        """A ``(kernel, blocks)`` pair of the type a float32 store's grids have (the type-6
+        models convert every array to their own dtype: there it is the seam pair's type)."""
+        key = ("float32", _signature(setup.params))
+        kept = self._seam_pairs.get(key)
+        if kept is None:
+            array, first = self.prepared(piece)
+            grid = self.grid(piece.level, np.asarray(array, dtype=np.float32), first)
+            kept = self._seam_pairs[key] = ((grid.kernel, setup.blocks(grid.hierarchy)), None)
+        return kept[0]
 
     def _pair(self, key: Hashable, grid: Grid, setup: Any,
               blocks_key: Any) -> tuple[tuple, Hashable]:
@@ -637,13 +781,15 @@ class CutRenderer:
 @dataclass
 class _LastDraw:
     """What the last frame drew: its pieces (the list object), their seam changes, the view
-    (camera basis, clip planes, block selection, mode type), the front-to-back order and the
+    (camera basis, clip planes, block selection, mode type), the pieces as traced and the
     launch's arrays."""
 
     pieces: Sequence[Piece]
     changes: dict
     view: tuple
-    order: np.ndarray
+    #: The pieces as traced (changed ones in parts), front to back, and their changes.
+    drawn: list[Piece]
+    drawn_changes: dict
     launch: Any
 
 

@@ -25,11 +25,12 @@ import numpy as np
 
 from ..camera import Camera
 
-__all__ = ["front_to_back"]
+__all__ = ["front_to_back", "eye_index"]
 
 
-def _eye(camera: Camera, tree: Any) -> tuple[np.ndarray, np.ndarray | None]:
-    """The eye in level-0 index space, or (for orthographic cameras) the direction there."""
+def eye_index(camera: Camera, tree: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    """The eye in level-0 index space and again (perspective cameras), or the viewing direction
+    there and ``None`` (orthographic: the eye is at infinity)."""
     volume = tree.volume
     spacing = np.asarray(volume.spacing, dtype=np.float64)
     if camera.ortho:
@@ -58,7 +59,7 @@ def front_to_back(keys: np.ndarray, camera: Camera, tree: Any) -> np.ndarray:
     keys = np.asarray(keys, dtype=np.int64).reshape(-1, 4)
     if len(keys) == 0:
         return np.zeros(0, dtype=np.int64)
-    point, eye = _eye(camera, tree)
+    point, eye = eye_index(camera, tree)
     size = tree.brick * np.asarray(tree.factors, dtype=np.float64)  # (n_levels, 3) level-0 voxels
     n_levels = len(tree.levels)
     position = np.array([tree.levels.index(int(level)) for level in keys[:, 0]])
@@ -89,8 +90,8 @@ def front_to_back(keys: np.ndarray, camera: Camera, tree: Any) -> np.ndarray:
         else:
             # The child on the eye's side of the parent's split plane comes first.
             first_child = index - offset
-            eye_index = np.floor(eye / size[p]).astype(np.int64)
-            near_offset = np.where(eye_index <= first_child, 0, split - 1)
+            eye_brick = np.floor(eye / size[p]).astype(np.int64)
+            near_offset = np.where(eye_brick <= first_child, 0, split - 1)
             far = offset != near_offset
         ranks[here, root - p] = (far & (split > 1)).sum(axis=1)
     return np.lexsort(ranks.T[::-1])

@@ -185,7 +185,8 @@ class MultiscaleScene:
     model : str
         Any of :data:`splinecast.models.MODELS`.
     budget : int or str
-        Hard byte budget of the brick cache (``"2GiB"``).
+        Hard byte budget (``"2GiB"``) of the resident bricks and the copies of bricks changed
+        at level seams (see :attr:`seams_in_budget`).
     lod : float
         Refine a brick while one of its voxels covers more than ``lod`` pixels.
     load_budget : int, optional
@@ -211,6 +212,14 @@ class MultiscaleScene:
         Cells per brick (default: :func:`render_brick`, the pyramid's or a multiple of it).
     **options
         Model options (``root_finder``, ``prefilter`` for the type-6 splines, ...).
+
+    Attributes
+    ----------
+    seams_in_budget : bool
+        The seam copies' bytes (``frame.stats["seam_copy_bytes"]``) are held back from the
+        bricks' share of the budget, from the frame after they appear (default). ``False``
+        leaves them beside the budget, so that the cut's brick count follows from the budget
+        alone (the error cut's ``N`` of reference 002, for comparing cut algorithms).
 
     Raises
     ------
@@ -266,6 +275,7 @@ class MultiscaleScene:
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self._table_cache: dict = {}
         self._last_pieces: tuple[list, list[Piece]] | None = None
+        self.seams_in_budget = True
 
     def _cache_budget(self) -> int:
         """The cache's share of the budget: all of it, unless the model's grids copy the bricks
@@ -378,8 +388,12 @@ class MultiscaleScene:
         start = time.perf_counter()
         out, counters = self.renderer.render(pieces, request.setup, camera, request.planes)
         self.renderer.forget(p.key for p in pieces)
+        # The seam copies count against the budget: the bricks get what they leave.
+        seam_bytes = self.renderer.seam_copy_bytes()
+        self.stream.cache.reserve(seam_bytes if self.seams_in_budget else 0)
         stats = request.stats
         stats.update(self.renderer.stats)
+        stats["seam_copy_bytes"] = seam_bytes
         stats.update(bricks.stats)
         stats["lod"] = self.lod if lod is None else lod
         return finish_frame(request, out, counters, camera, start)

@@ -111,7 +111,7 @@ class BrickStream:
         """
         t0 = time.perf_counter()
         self.cache.update_ranges()
-        budget = max(int(self.cache.budget * self.cut_fraction), self.cache.pinned_bytes)
+        budget = max(int(self.cache.brick_budget * self.cut_fraction), self.cache.pinned_bytes)
         lod = self.lod if lod is None else lod
         # The level-of-detail cut is a function of the view, the filter, the budget and what
         # is resident: while none of them changes (a steady view, a viewer redrawing), the
