@@ -40,8 +40,10 @@ DVR = {"mode": "dvr", "tf": TF, "dvr": sc.DVRSettings(step=0.4)}
 
 @pytest.fixture(scope="module")
 def noise(tmp_path_factory) -> tuple[sc.Volume, Path]:
-    """Smooth noise (float64, sizes that are not powers of two) and its pyramid of 8^3 bricks."""
-    vol = sc.Volume(smooth_noise((27, 23, 21), seed=3, sigma=2.0))
+    """Smooth noise (float32, sizes that are not powers of two) and its pyramid of 8^3 bricks.
+    (float32 as in the other multiresolution tests: a float64 store costs the suite its own
+    compiled kernels for every model and mode.)"""
+    vol = sc.Volume(smooth_noise((27, 23, 21), seed=3, sigma=2.0).astype(np.float32))
     path = tmp_path_factory.mktemp("noise") / "noise.zarr"
     sc.build_pyramid(vol, path, brick=B, shard=16, progress=False)
     return vol, path
@@ -50,7 +52,7 @@ def noise(tmp_path_factory) -> tuple[sc.Volume, Path]:
 @pytest.fixture(scope="module")
 def wide(tmp_path_factory) -> tuple[sc.Volume, Path]:
     """A pyramid whose coarsest level keeps several bricks (``levels=2``): a virtual root."""
-    vol = sc.Volume(smooth_noise((30, 20, 18), seed=5, sigma=2.0))
+    vol = sc.Volume(smooth_noise((30, 20, 18), seed=5, sigma=2.0).astype(np.float32))
     path = tmp_path_factory.mktemp("wide") / "wide.zarr"
     sc.build_pyramid(vol, path, brick=B, shard=16, levels=2, progress=False)
     return vol, path
@@ -194,7 +196,7 @@ def test_small_budget_cut_is_the_greedy_cut_within_budget_and_above_the_optimum(
 def ramp(tmp_path_factory) -> tuple[sc.Volume, Path]:
     """Values rising along x (-2 to 2) with smooth noise: regions a transfer function can hide."""
     x = np.linspace(-2.0, 2.0, 27)[:, None, None]
-    vol = sc.Volume(x + 0.3 * smooth_noise((27, 23, 21), seed=4, sigma=2.0))
+    vol = sc.Volume((x + 0.3 * smooth_noise((27, 23, 21), seed=4, sigma=2.0)).astype(np.float32))
     path = tmp_path_factory.mktemp("ramp") / "ramp.zarr"
     sc.build_pyramid(vol, path, brick=B, shard=16, progress=False)
     return vol, path

@@ -184,6 +184,8 @@ def test_parts_draw_what_the_whole_changed_copy_draws(torus, model, mode):
         split, whole, split_stats, whole_stats = _split_and_whole(scene, cam, **options)
     assert len(split.stats["cut_levels"]) >= 2
     assert split_stats["seam_parts"] > 0 and whole_stats["seam_parts"] == 0
+    # Shells are float64 grids like whole copies: still two grid types, one launch.
+    assert split_stats["one_launch"] and whole_stats["one_launch"]
     # Held for the seams: the shells' copies against (after the second render) the shells
     # plus every whole copy.
     shells = split_stats["seam_copy_bytes"]

@@ -454,6 +454,7 @@ class CutRenderer:
                 finalize(setup.params, state, out, camera.pixel_basis())
         traced, rebuilt = done
         self.stats = {"pieces": len(pieces), "pieces_traced": traced, "launch_reused": steady,
+                      "one_launch": self._last is not None,
                       "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
                       "seam_plan_ms": plan_s * 1e3, "seam_parts": len(drawn) - len(pieces),
                       "seam_copy_bytes": self.seam_copy_bytes()}
@@ -833,8 +834,11 @@ def _signature(value: Any) -> Hashable:
     signatures, equal Numba types."""
     if isinstance(value, np.ndarray):
         f = value.flags
-        return (value.dtype.str, value.ndim, f.c_contiguous, f.f_contiguous, f.writeable,
-                f.aligned)
+        # Numba's layout: an array both C- and F-contiguous (a thin shell's coarsest block
+        # level, (3, 1, 1)) is typed "C"; telling the two apart split one type in two and sent
+        # every frame with seam shells to the per-piece path.
+        layout = "C" if f.c_contiguous else "F" if f.f_contiguous else "A"
+        return (value.dtype.str, value.ndim, layout, f.writeable, f.aligned)
     if isinstance(value, tuple):
         return (type(value), tuple(_signature(v) for v in value))
     if isinstance(value, np.generic):
