@@ -19,6 +19,8 @@ import pytest
 pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
+from frame_replay import replay  # noqa: E402
+
 import splinecast as sc  # noqa: E402
 from splinecast.multires.draw import screen_rect, screen_rects  # noqa: E402
 
@@ -50,25 +52,14 @@ def _both(scene, cam: sc.Camera, **options) -> tuple[sc.Frame, sc.Frame, dict, d
     """The same cut rendered per piece and in one launch: the launch is handed the very bricks
     the per-piece render drew (the loader thread goes on prefetching and evicting between the
     two renders; what is compared here is the tracing, not the stream)."""
-    frames = []
-    stream_frame = scene._frame
-
-    def recorded(*args, **kwargs):
-        frames.append(stream_frame(*args, **kwargs))
-        return frames[-1]
-
-    scene._frame = recorded
-    try:
+    with replay(scene) as frames:
         scene.renderer.batched = False
         each = scene.render(cam, complete=True, **options)
         each_stats = dict(scene.renderer.stats)
         assert each.stats["complete"]  # the whole cut drawn from its own bricks
-        drawn = frames[-1]
-        scene._frame = lambda *args, **kwargs: drawn
+        frames.hold()
         scene.renderer.batched = True
         batched = scene.render(cam, complete=True, **options)
-    finally:
-        scene._frame = stream_frame
     return each, batched, each_stats, dict(scene.renderer.stats)
 
 

@@ -47,6 +47,12 @@ __all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDER
 #: Steps of :meth:`BrickCache.reserve`, as a share of the budget.
 RESERVE_STEP = 1 / 32
 
+#: Most of the budget :meth:`BrickCache.reserve` holds back. The reservation shrinks the next
+#: cut, whose seams it was measured on; held without limit, small budgets with small bricks
+#: (whole copies at 8 bytes per voxel) gave so little to the cut that it fell to the coarsest
+#: level (measured: ``bench_multires.py --quick``, 62 bricks to 1).
+RESERVE_MAX = 1 / 2
+
 #: Most bytes of decoded store chunks a brick cache keeps besides its budget.
 CHUNK_CACHE_MAX = 64 * 2**20
 
@@ -556,7 +562,8 @@ class BrickCache:
         left. The reservation moves in steps of :data:`RESERVE_STEP` of the budget, up as soon
         as ``nbytes`` passes it and down only when it falls a whole step below: small changes
         from frame to frame would otherwise change the cut's share, hence the cut and its seams,
-        every frame. The pinned coarsest level is never given up.
+        every frame. It holds at most :data:`RESERVE_MAX` of the budget (what is more stays
+        beside the budget) and never the pinned coarsest level.
 
         Returns
         -------
@@ -567,7 +574,8 @@ class BrickCache:
         step = max(1, int(self.budget * RESERVE_STEP))
         wanted = -(-max(0, int(nbytes)) // step) * step
         with self._cond:
-            wanted = min(wanted, self.budget - self._pinned_bytes)
+            wanted = min(wanted, int(self.budget * RESERVE_MAX),
+                         self.budget - self._pinned_bytes)
             if wanted <= self._reserved and wanted >= self._reserved - step:
                 return False
             self._reserved = wanted
