@@ -464,7 +464,8 @@ class CutRenderer:
     # ------------------------------------------------------------------ seams drawn in parts
     def seam_copy_bytes(self) -> int:
         """Bytes of changed values held for seams: the shells' arrays and the whole copies of
-        bricks not split (memory beside the brick cache's budget)."""
+        bricks not split (the scene holds them inside its budget with
+        :meth:`~.cache.BrickCache.reserve`)."""
         shells = sum(shell.data.nbytes for _, parts, _ in self._split.values() if parts
                      for shell in parts[:-1])
         return shells + sum(nbytes for _, _, nbytes in self._changed.values())
