@@ -17,9 +17,10 @@ of a box one after the other in the k-d order seen from the eye (:func:`part_ord
 pieces of a cut stay in a valid front-to-back order when a brick is replaced by its parts.
 
 Shell thicknesses are whole level voxels counted from the box's faces, which lie on the
-model's cell boundaries; the parts therefore cut rays where cells do, and a first hit, its
-normal and MIP's maximum are those of the whole changed copy, bit for bit (DVR's segments
-restart at the parts' faces: the same integral to about 1e-5; ``tests/test_seam_parts.py``).
+model's cell boundaries; the parts therefore cut rays where cells do, and a first hit and its
+normal are those of the whole changed copy, bit for bit (translucent isosurfaces too; DVR's
+segments restart at the parts' faces: the same integral to about 1e-5;
+``tests/test_seam_parts.py``, whose views do not exercise MIP at a seam).
 Where the shells would hold more than :data:`SHELL_SHARE_MAX` of the brick's elements (small
 bricks, cubic models with coarser neighbours on many faces, changes reaching deep) the whole
 copy is kept. With 64^3 bricks the shells held a third to a half of what the whole copies did
