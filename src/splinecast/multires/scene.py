@@ -84,9 +84,9 @@ def render_brick(volume: MultiscaleVolume) -> int:
     frame (a grid, seams, a piece of the launch); the pyramid's bricks are its storage chunks,
     kept small so that reads are fine-grained. At 2048^3 with 32^3 chunks and a 1 GiB budget,
     bricks of 64^3 (2 614 instead of 16 958 in the cut) refined a view to its complete cut in
-    118 s instead of 306 s and drew its steady isosurface frame in 511 ms instead of 553 ms, for
-    350 MiB more memory beside the budget (larger seam copies; ``benchmarks/results/
-    multires.md``). Small volumes keep their bricks: their cuts are small anyway.
+    118 s instead of 306 s and drew its steady isosurface frame in 511 ms instead of 553 ms
+    (session 28, before the seam copies counted against the budget; ``benchmarks/results/
+    multires.md``'s history). Small volumes keep their bricks: their cuts are small anyway.
     """
     brick = int(volume.brick or DEFAULT_BRICK)
     shortest = int(min(volume.levels[0].shape))
