@@ -26,7 +26,9 @@ previous results.
   in-memory ``Scene`` of the finest level that fits in the budget (2048^3: level 2, 513^3), same
   view, median of 5 after warm-up; and the image error of both against the finest level
   rendered in memory (``--quick``) or, when it does not fit in ``--reference-budget``, the
-  multiresolution render at ``lod=0.5`` with that budget.
+  multiresolution render at ``lod=0.5`` with that budget. ``--budgets 512MiB,2GiB`` renders the
+  isosurface to completion at further budgets too: the memory above the budget at each, which
+  shows whether the overhead is fixed.
 """
 
 from __future__ import annotations
@@ -235,8 +237,10 @@ def _image_error(a: dict, b: dict, mode: str, voxel: float) -> dict:
 
 def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
                 reference_budget: int, keep_reference: bool = False,
-                coarser: tuple[float, ...] = (), baseline_brick: int | None = None) -> dict:
-    """Both modes, the in-memory baseline and the image errors."""
+                coarser: tuple[float, ...] = (), baseline_brick: int | None = None,
+                other_budgets: tuple[str, ...] = ()) -> dict:
+    """Both modes, the in-memory baseline and the image errors; the isosurface's memory
+    above the budget at ``other_budgets``."""
     import splinecast as sc
     from splinecast.multires.budget import parse_bytes
 
@@ -300,7 +304,36 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
                         for (lod, run), name in zip(extra.items(),
                                                     [k for k in images if k.startswith("multi_")],
                                                     strict=True)}}
+    # The fixed overhead: the isosurface rendered to completion at other budgets (the same
+    # view), peak anonymous memory above the process's start against each budget.
+    out["budgets"] = {}
+    for other in other_budgets:
+        run = child("render", store=str(store), mode="iso", size=list(size), budget=other,
+                    lod=1.0, image=str(work / f"iso_budget_{other}.npz"))
+        other_limit = parse_bytes(other, "budget")
+        run["above_budget"] = run["peak_anon_above_start"] - other_limit
+        run["overhead"] = run["peak_anon_above_start"] - run["final"]["peak_bytes"]
+        out["budgets"][str(other_limit)] = run
     return out
+
+
+def budgets_markdown(r: dict) -> list[str]:
+    """The table of the isosurface's memory at several budgets."""
+    runs = dict(r.get("budgets") or {})
+    if not runs:
+        return []
+    runs.setdefault(str(r["budget"]), r["modes"]["iso"]["multires"])
+    lines = ["", "### Memory above the budget (iso, lod 1, rendered to completion)", "",
+             "| budget | cut bricks | cache peak | seam copies (end) | peak anon above start | "
+             "above the budget | complete | steady |", "|---|---|---|---|---|---|---|---|"]
+    for limit, run in sorted(runs.items(), key=lambda kv: int(kv[0])):
+        fin = run["final"]
+        lines.append(
+            f"| {mib(int(limit))} | {fin['cut_bricks']} | {mib(fin['peak_bytes'])} | "
+            f"{mib(fin.get('seam_copy_bytes', 0))} | {mib(run['peak_anon_above_start'])} | "
+            f"{mib(run['peak_anon_above_start'] - int(limit))} | {run['complete_s']:.1f} s | "
+            f"{run['steady_s'] * 1e3:.0f} ms |")
+    return lines
 
 
 def render_markdown(r: dict) -> list[str]:
@@ -339,7 +372,7 @@ def render_markdown(r: dict) -> list[str]:
         lines.append(f"| {mode} | {fmt(m['error_multires'])} | {fmt(m['error_memory'])} |")
         for lod, run in m.get("coarser", {}).items():
             lines.append(f"| {mode}, lod {lod} | {fmt(run['error'])} | |")
-    return lines + [""]
+    return lines + budgets_markdown(r) + [""]
 
 
 def child(job: str, **args) -> dict:
@@ -394,6 +427,9 @@ def main() -> None:
                         help="comma-separated further lod values rendered (e.g. 2)")
     parser.add_argument("--baseline-brick", type=int,
                         help="also render the isosurface with this render brick (e.g. 32)")
+    parser.add_argument("--budgets", default="",
+                        help="comma-separated further budgets the isosurface is rendered with "
+                             "(memory above the budget; e.g. 512MiB,2GiB)")
     parser.add_argument("--keep-reference", action="store_true",
                         help="reuse the reference images of an earlier run in --workdir")
     parser.add_argument("--repeats", type=int, help="build repeats (default 3 quick, 1 full)")
@@ -445,7 +481,8 @@ def main() -> None:
                                         parse_bytes(args.reference_budget, "--reference-budget"),
                                         args.keep_reference,
                                         tuple(float(v) for v in args.coarser_lod.split(",") if v),
-                                        args.baseline_brick)
+                                        args.baseline_brick,
+                                        tuple(v for v in args.budgets.split(",") if v))
     else:
         results["render"] = old.get("render")
     out.mkdir(parents=True, exist_ok=True)

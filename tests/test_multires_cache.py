@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import shutil
 import threading
+import time
 import warnings
 from pathlib import Path
 
@@ -445,3 +446,81 @@ def test_chunk_cache_keeps_nothing_of_a_failed_read(sphere, tmp_path):
         with pytest.raises(ReadError):
             chunks.read(0, level, np.array([0, 0, 0]), np.array([12, 12, 12]))
     assert chunks.nbytes == 0
+
+
+def test_resolve_draws_each_brick_from_its_finest_resident_ancestor(sphere):
+    """Against a walk up each brick's ancestors in the set of resident keys (``resolve``
+    remembers what it found for shared parents)."""
+    data, path = sphere
+    mv = sc.read(path)
+    cache = BrickCache(mv, "64MiB", start=False)
+    octree = cache.octree
+    rng = np.random.default_rng(5)
+    for level in octree.levels[:-1]:
+        keys = [(level, *map(int, idx))
+                for idx in np.indices(octree.counts[octree.position(level)]).reshape(3, -1).T]
+        for n in rng.choice(len(keys), size=max(1, len(keys) // 4), replace=False):
+            cache._insert(cache._read([keys[n]])[0])
+    resident = set(cache.resident_keys())
+    assert {key[0] for key in resident} == set(octree.levels)
+    cut = select_cut(octree, _camera(mv), lod=1e-9)
+    items = cache.resolve(cut)
+    substituted = 0
+    for item in items:
+        key = cut.key(item.n)
+        expected = key if key in resident else next(
+            a for a in octree.ancestors(key) if a in resident)
+        assert item.brick.key == expected and item.substituted == (expected != key)
+        substituted += expected != key
+    assert 0 < substituted < len(cut) and cache.stats()["substituted"] == substituted
+    cache.close()
+
+
+def test_no_read_starts_while_a_frame_is_drawn(sphere):
+    data, path = sphere
+    mv = sc.read(path)
+    cache = BrickCache(mv, "64MiB")
+    cut = select_cut(cache.octree, _camera(mv), lod=1e-9)
+    try:
+        with cache.drawing():
+            cache.request_cut(cut)
+            time.sleep(0.5)
+            assert cache.stats()["loaded"] == 0
+        assert cache.settle(timeout=30)
+        assert cache.stats()["loaded"] > 0  # the reads ran once the frame was drawn
+        with pytest.raises(RuntimeError), cache.drawing():  # a failed frame lets reads go on
+            raise RuntimeError("trace failed")
+        assert cache._drawing == 0
+        cache.pause_while_drawing = False
+        with cache.drawing():
+            assert cache._drawing == 0
+    finally:
+        cache.close()
+
+
+def test_the_loader_starts_no_read_beside_the_trace_of_a_frame_drawn_at_once(sphere):
+    """A frame drawn at once (``wait=False``) has none of the reads it asks for start before its
+    trace ends."""
+    data, path = sphere
+    mv = sc.read(path)
+    with sc.Scene(mv, budget="64MiB", lod=0.25, load_budget=2) as scene:
+        cache = scene.stream.cache
+        render, read = scene.renderer.render, cache._read
+        traces, starts = [], []
+
+        def slow_trace(*args, **kwargs):
+            t0 = time.perf_counter()
+            time.sleep(0.4)  # time enough for reads to start
+            traces.append((t0, time.perf_counter()))
+            return render(*args, **kwargs)
+
+        def timed_read(keys):
+            starts.append(time.perf_counter())
+            return read(keys)
+
+        scene.renderer.render, cache._read = slow_trace, timed_read
+        frame = scene.render(_camera(mv, zoom=2.5), mode="iso", iso=RADIUS, wait=False)
+        assert not frame.stats["complete"] and frame.stats["requested"] > 0
+        assert cache.settle(timeout=30) and starts
+        (t0, t1), = traces
+        assert min(starts) > t1
