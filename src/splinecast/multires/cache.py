@@ -25,7 +25,7 @@ nothing is ever written into it.
 A frame drawn at once (:meth:`BrickCache.drawing`) starts no read while it is drawn: a read
 decompresses chunks on zarr's threads, and on a machine with few cores those took the trace's
 cores. Measured at 2048^3 on 2 cores, the first DVR image drawn at once from the coarsest level
-took 1.5 s with the loader reading beside it and 0.8-1.0 s without. Frames that wait for their
+took 1.5 s with the loader reading beside it and 0.8-1.2 s without. Frames that wait for their
 load budget let the read-ahead run beside their trace, which makes a cut complete in fewer
 frames.
 """
