@@ -170,14 +170,17 @@ class Scene:
             return a.act0, a.act1, a.act2
         return self.hierarchy.active
 
-    def _active_box_planes(self, flags: tuple[np.ndarray, ...]) -> np.ndarray:
-        """Six clip planes around the blocks that can hold the current isovalue (world space).
+    def _active_box(self, flags: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray] | None:
+        """The box, in voxel index space, around the blocks that can hold the current isovalue
+        (``None`` if none can).
 
         The box is padded outwards by a millionth of a voxel so rounding can never cut a hit.
+        Rays are clipped to it as to the volume's box (:meth:`Grid.with_domain`); as six clip
+        planes it cost about a fifth of a steady isosurface frame.
         """
         act = flags[0].view(bool)
         if not act.any():
-            return np.zeros((0, 4))
+            return None
         block = 1 << BLOCK_SHIFTS[0]
         lo_cells, hi_cells = np.empty(3), np.empty(3)
         for axis in range(3):
@@ -186,16 +189,7 @@ class Scene:
             hi_cells[axis] = min((used[-1] + 1) * block, self.grid.n_cells[axis])
         # Cell c spans [c, c + 1] in voxel index + shift.
         shift = self.model.shift
-        origin, spacing = np.asarray(self.volume.origin), np.asarray(self.volume.spacing)
-        lo = origin + (lo_cells - shift - 1e-6) * spacing
-        hi = origin + (hi_cells - shift + 1e-6) * spacing
-        rows = []
-        for axis in range(3):
-            normal = np.zeros(3)
-            normal[axis] = 1.0
-            rows.append([*normal, -lo[axis]])  # keeps x_axis >= lo
-            rows.append([*(-normal), hi[axis]])  # keeps x_axis <= hi
-        return np.asarray(rows)
+        return lo_cells - shift - 1e-6, hi_cells - shift + 1e-6
 
     def set_iso(self, iso: float) -> float:
         """Classify the blocks for a new isovalue; returns the time it took in ms."""
@@ -310,7 +304,9 @@ class Scene:
             flags = self._iso_flags()
             if self.active_cells is not None:
                 grid = grid.with_kernel(self.model.kernel_grid(active=self.active_cells))
-            planes = np.vstack([planes, self._active_box_planes(flags)])
+            box = self._active_box(flags)
+            if box is not None:
+                grid = grid.with_domain(*box)
             stats["classify_ms"] = classify_ms
             stats.update(self.iso_stats)
         start = time.perf_counter()
