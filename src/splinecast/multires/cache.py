@@ -529,27 +529,22 @@ class BrickCache:
     def is_unavailable(self, key: Key) -> bool:
         return tuple(key) in self._failed
 
-    def ancestor(self, key: Key) -> Brick:
-        """The finest resident ancestor of ``key`` (the coarsest level is always resident)."""
-        for parent in self.octree.ancestors(tuple(key)):
-            brick = self.get(parent)
-            if brick is not None:
-                return brick
-        raise RuntimeError(f"no resident ancestor of {key}: the coarsest level must be pinned")
+    def ancestor(self, key: Key, found: dict[Key, Brick] | None = None) -> Brick:
+        """The finest resident ancestor of ``key`` (the coarsest level is always resident).
 
-    def _ancestor_of(self, key: Key, drawn_for: dict[Key, Brick]) -> Brick:
-        """:meth:`ancestor` remembering, in ``drawn_for``, the brick found for each parent on
-        the way."""
+        ``found`` remembers the brick found for each parent on the way, for later calls that
+        pass the same dict (siblings share their ancestors)."""
+        found = {} if found is None else found
         visited = []
-        parent = self.octree.parent(key)
+        parent = self.octree.parent(tuple(key))
         while parent is not None:
-            brick = drawn_for.get(parent)
+            brick = found.get(parent)
             if brick is None:
                 brick = self.get(parent)
             if brick is not None:
                 for seen in visited:
-                    drawn_for[seen] = brick
-                drawn_for[parent] = brick
+                    found[seen] = brick
+                found[parent] = brick
                 return brick
             visited.append(parent)
             parent = self.octree.parent(parent)
@@ -563,12 +558,12 @@ class BrickCache:
         substituted = 0
         # Siblings share their ancestors: each parent's finest resident ancestor is looked up
         # once (a first frame substitutes thousands of bricks from a few coarse ones).
-        drawn_for: dict[Key, Brick] = {}
+        found: dict[Key, Brick] = {}
         for n in range(len(cut)):
             key = cut.key(n)
             brick = self.get(key)
             if brick is None:
-                brick = self._ancestor_of(key, drawn_for)
+                brick = self.ancestor(key, found)
                 substituted += 1
             items.append(DrawItem(n, brick, brick.key != key))
         with self._cond:
