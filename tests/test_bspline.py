@@ -17,7 +17,7 @@ from scipy import ndimage
 
 import splinecast as sc
 from splinecast.accel.minmax import MinMaxHierarchy
-from splinecast.models.bspline_ray import segment_polynomial
+from splinecast.models.bspline_ray import _fill_cell, segment_polynomial
 from splinecast.roots.bernstein import bernstein_eval, power_eval
 
 ISO = 0.5
@@ -178,6 +178,34 @@ def test_composition_equals_direct_evaluation(volume, degree):
             assert abs(bernstein_eval(bern, n, x) - r) <= 1e-12 * scale
             assert abs(power_eval(power, n, x) - r) <= 1e-12 * scale
             assert abs(power_eval(naive, n, x) - r) <= 1e-12 * scale
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3])
+def test_cell_cache_ranges_bound_the_spline_and_are_tighter(volume, degree):
+    """The range the kernels test a cell's segments against (its Bernstein control points,
+    :func:`splinecast.models.bspline_ray._fill_cell`) holds every value of the spline in the
+    cell, as scipy evaluates it, and lies inside the influence coefficients' range."""
+    coeffs = coefficient_array(volume, degree, False)
+    model = sc.Scene(volume, model=f"bspline{degree}").model
+    grid = model.kernel_grid()
+    h = 0.5 if degree % 2 == 0 else 0.0
+    rng = np.random.default_rng(10 + degree)
+    u = np.stack(np.meshgrid(*[np.linspace(0, 1, 9)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    tensor, tmp, bounds = np.empty((4, 4, 4)), np.empty((4, 4, 4)), np.empty(2)
+    tighter = 0
+    for _ in range(60):
+        cell = rng.integers(1, np.array(model.n_cells) - 1)
+        _fill_cell(grid.coeffs, degree, grid.power, *(int(c) for c in cell), tensor, tmp, bounds)
+        values = spline(coeffs, degree, cell + u - h)
+        assert bounds[0] <= values.min() and values.max() <= bounds[1]
+        i, j, k = cell
+        influence = grid.coeffs[i:i + degree + 1, j:j + degree + 1, k:k + degree + 1]
+        assert influence.min() <= bounds[0] and bounds[1] <= influence.max()
+        tighter += bounds[1] - bounds[0] < influence.max() - influence.min()
+        if degree == 1:  # trilinear: the control points are the corners
+            np.testing.assert_allclose(bounds, [influence.min(), influence.max()], rtol=1e-9)
+    if degree > 1:
+        assert tighter > 30  # the point of the range: most cells get a narrower one
 
 
 @pytest.mark.parametrize("degree", [2, 3])

@@ -59,3 +59,54 @@ def test_concurrent_saves_keep_index_and_data_consistent(tmp_path: Path) -> None
         with open(indexes[0].parent / name, "rb") as fh:
             data = pickle.loads(fh.read())
         assert data["payload"] == key, (key, name)
+
+
+_CALLER = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    import splinecast._jit as J
+    if sys.argv[2] == "edited":  # as if a module of the package had been edited since
+        stamp = J.package_stamp(J.os.path.dirname(J.__file__))
+        J._PACKAGE_STAMP[:] = [stamp + (("edited.py", 1, 1),)]
+    import cached_caller
+    assert cached_caller.f(2) == 3
+    stats = cached_caller.f.stats
+    print(sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))
+""")
+
+
+def test_a_change_anywhere_in_the_package_recompiles_cached_kernels(tmp_path: Path) -> None:
+    """A kernel inlines functions of other modules (a driver: its model's and mode's hooks), so
+    its cache must go stale when any module of the package changes, not only its own file.
+
+    The same cached function is compiled, loaded again, then loaded as if another module of the
+    package had been edited: the third process must compile anew instead of using the cache."""
+    (tmp_path / "cached_caller.py").write_text(
+        "from splinecast._jit import jit\n\n@jit\ndef f(x):\n    return x + 1\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run(state: str) -> list[str]:
+        out = subprocess.run([sys.executable, "-c", _CALLER, str(tmp_path), state], env=env,
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return out.stdout.split()
+
+    assert run("same") == ["0", "1"]    # first run: compiled (a miss) and saved
+    assert run("same") == ["1", "0"]    # unchanged package: loaded from the cache
+    assert run("edited") == ["0", "1"]  # another module changed: compiled again
+
+
+def test_package_stamp_follows_every_module_but_not_caches(tmp_path: Path) -> None:
+    from splinecast._jit import package_stamp
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "sub" / "b.py").write_text("y = 2\n")
+    before = package_stamp(str(tmp_path))
+    assert [e[0] for e in before] == ["a.py", os.path.join("sub", "b.py")]
+    (tmp_path / "__pycache__").mkdir()
+    (tmp_path / "__pycache__" / "c.py").write_text("z = 3\n")
+    (tmp_path / "notes.txt").write_text("not code\n")
+    assert package_stamp(str(tmp_path)) == before
+    (tmp_path / "sub" / "b.py").write_text("y = 22\n")
+    assert package_stamp(str(tmp_path)) != before

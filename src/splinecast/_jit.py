@@ -41,7 +41,7 @@ try:
 except ImportError:  # pragma: no cover - a numba without this class: keep its behaviour
     IndexDataCacheFile = None  # type: ignore[assignment,misc]
 
-__all__ = ["jit", "overload_jit", "inlined", "rebound"]
+__all__ = ["jit", "overload_jit", "inlined", "rebound", "package_stamp"]
 
 
 class _CopyModuleSharingScopes:
@@ -133,11 +133,38 @@ else:  # pragma: no cover
     _LockedIndexFile = None  # type: ignore[assignment,misc]
 
 
+def package_stamp(root: str) -> tuple:
+    """Name, modification time and size of every ``.py`` file under ``root``, as one tuple.
+
+    Numba stamps a function's cache with its own source file only. A splinecast kernel inlines
+    functions of many modules (a render driver inlines every hook of its model and mode), so
+    after an edit of ``models/bspline_ray.py`` the driver's cached kernels would still load
+    with the old model code inside, silently. Every splinecast cache therefore carries this
+    stamp of the whole package too: a change to any module recompiles every kernel once.
+    """
+    entries = []
+    for folder, dirs, files in os.walk(root):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        for name in sorted(files):
+            if name.endswith(".py"):
+                path = os.path.join(folder, name)
+                st = os.stat(path)
+                entries.append((os.path.relpath(path, root), st.st_mtime_ns, st.st_size))
+    return tuple(entries)
+
+
+_PACKAGE_STAMP: list[tuple] = []
+
+
 def _lock_cache(dispatcher: Any) -> Any:
     cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
     if _LockedIndexFile is not None and type(cache_file) is IndexDataCacheFile:
         # Same state, safer ``save``: the subclass adds no attributes.
         cache_file.__class__ = _LockedIndexFile
+    if cache_file is not None and hasattr(cache_file, "_source_stamp"):
+        if not _PACKAGE_STAMP:
+            _PACKAGE_STAMP.append(package_stamp(os.path.dirname(os.path.abspath(__file__))))
+        cache_file._source_stamp = (cache_file._source_stamp, _PACKAGE_STAMP[0])
     return dispatcher
 
 

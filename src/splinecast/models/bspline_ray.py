@@ -39,7 +39,7 @@ from .bspline import (
     cell_transform,
     local_value_gradient,
 )
-from .pieces import cell_range, register
+from .pieces import register
 
 __all__ = [
     "axis_basis_sb",
@@ -222,6 +222,21 @@ def _cell_count(grid):
     return c.shape[0] - d, c.shape[1] - d, c.shape[2] - d
 
 
+#: Entries of the per-thread cell cache (:func:`_cached_cell`): direct-mapped by the low bits of
+#: the cell index, so the cells of any 4 x 4 x 8 box have distinct entries.
+CACHE_ENTRIES = 128
+
+#: Relative widening of a cell's Bernstein range (:func:`_cached_cell`): far above the rounding
+#: of the transform and of a segment's composition (tens of ``eps``), so a segment polynomial's
+#: control points, as computed, never leave the widened range.
+_RANGE_SLACK = 1e-10
+
+#: ``_CONTROL_WEIGHTS[d, p] = 1 / (SCALE[d] C(d, p))``: per axis, what turns a cell's scaled
+#: Bernstein coefficient (times ``SCALE[d]``) into a Bernstein control point.
+_CONTROL_WEIGHTS = np.array([[1.0 / (SCALE[d] * math.comb(d, p)) if p <= d else 0.0
+                              for p in range(4)] for d in range(4)])
+
+
 @jit()
 def _new_scratch(grid):
     n = 3 * grid.degree
@@ -231,8 +246,10 @@ def _new_scratch(grid):
         # True-scale coefficients: the matrices carry SCALE^3, the Bernstein form C(n, m).
         inv[m] = 1.0 / scale if grid.power else 1.0 / (scale * binomial(n, m))
     coeffs, tmp, work, degrees, stack, spans, cand = polyn_workspace()
+    keys = np.full(CACHE_ENTRIES, -1, np.int64)
     return (np.empty((4, 4, 4)), np.empty((4, 4, 4)), np.empty((3, 4, 4)), np.empty(4),
-            np.empty(7), inv, coeffs, tmp, work, degrees, stack, spans, cand)
+            np.empty(7), inv, coeffs, tmp, work, degrees, stack, spans, cand,
+            keys, np.empty((CACHE_ENTRIES, 4, 4, 4)), np.empty((CACHE_ENTRIES, 2)))
 
 
 @jit(inline="always")
@@ -254,42 +271,87 @@ def _cell_load(grid, scratch, i, j, k):
     return _ic_range(grid.coeffs, i, j, k, grid.degree)
 
 
+@jit()
+def _fill_cell(coeffs, d, power, i, j, k, tensor, tmp, bounds):
+    """The cell's transformed coefficients into ``tensor`` and its value range into ``bounds``
+    (a cache miss: kept out of line, with only the arrays it needs)."""
+    if power:
+        lo, hi = cell_transform(coeffs, i, j, k, d, POWER_MATRIX[d], tensor, tmp)
+    else:
+        ic_lo, ic_hi = cell_transform(coeffs, i, j, k, d, SB_MATRIX[d], tensor, tmp)
+        # The cell's Bernstein control points (the scaled Bernstein coefficients divided by
+        # their binomial weights and SCALE^3) bound its polynomial more tightly than the
+        # influence coefficients, which bound them in turn.
+        w = _CONTROL_WEIGHTS[d]
+        lo = math.inf
+        hi = -math.inf
+        for p in range(d + 1):
+            for q in range(d + 1):
+                wpq = w[p] * w[q]
+                for r in range(d + 1):
+                    v = tensor[p, q, r] * (wpq * w[r])
+                    lo = min(lo, v)
+                    hi = max(hi, v)
+        slack = _RANGE_SLACK * max(abs(lo), abs(hi))
+        lo = max(lo - slack, ic_lo)
+        hi = min(hi + slack, ic_hi)
+    bounds[0] = lo
+    bounds[1] = hi
+
+
+@jit(inline="always")
+def _cached_cell(grid, scratch, i, j, k):
+    """Entry of cell ``(i, j, k)`` in the thread's cell cache, filled on a miss.
+
+    Neighbouring rays (the driver traces tiles of 8 x 8 pixels) test the same cells, and the
+    transform of a cell's 64 influence coefficients cost about as much as the segment's
+    composition; the cache keeps it, and the cell's Bernstein range, per cell."""
+    keys, tensors, bounds = scratch[13], scratch[14], scratch[15]
+    entry = ((i & 3) << 5) | ((j & 3) << 3) | (k & 7)
+    nx, ny, nz = _cell_count(grid)
+    lin = (np.int64(i) * ny + j) * nz + k
+    if keys[entry] != lin:
+        _fill_cell(grid.coeffs, grid.degree, grid.power, i, j, k, tensors[entry], scratch[1],
+                   bounds[entry])
+        keys[entry] = lin
+    return entry
+
+
 @jit(inline="always")
 def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
-    """The whole cell is one piece; its polynomial is built here, into ``scratch[6]``."""
+    """The whole cell is one piece; its tag is the cell's entry in the cell cache, which holds
+    its range (``piece_range``) and transform (``piece_poly`` builds the polynomial from it only
+    for a piece a mode asks for)."""
     cuts[0] = 0.0
     cuts[1] = 1.0
-    tags[0] = 0
-    _build_poly(grid, scratch, i, j, k, ax, ay, az, ax + ex, ay + ey, az + ez)
+    tags[0] = _cached_cell(grid, scratch, i, j, k)
     return 1
 
 
-@jit(inline="always")
-def _build_poly(grid, scratch, i, j, k, ax, ay, az, bx, by, bz):
-    d = grid.degree
-    tensor, tmp, basis, inner, middle, inv = (scratch[0], scratch[1], scratch[2], scratch[3],
-                                              scratch[4], scratch[5])
-    poly = scratch[6]
-    n = 3 * d
-    if grid.power:
-        cell_transform(grid.coeffs, i, j, k, d, POWER_MATRIX[d], tensor, tmp)
-        axis_basis_power(ax, bx, d, basis[0])
-        axis_basis_power(ay, by, d, basis[1])
-        axis_basis_power(az, bz, d, basis[2])
-    else:
-        cell_transform(grid.coeffs, i, j, k, d, SB_MATRIX[d], tensor, tmp)
-        axis_basis_sb(ax, bx, d, basis[0])
-        axis_basis_sb(ay, by, d, basis[1])
-        axis_basis_sb(az, bz, d, basis[2])
-    compose(tensor, basis[0], basis[1], basis[2], d, inner, middle, poly)
-    for m in range(n + 1):
-        poly[m] *= inv[m]
+@jit()
+def _piece_range(grid, scratch, ctx, i, j, k, tag):
+    """The cell's Bernstein range (power form: its influence coefficients' range)."""
+    return scratch[15][tag, 0], scratch[15][tag, 1]
 
 
 @jit()
 def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    """The polynomial :func:`_cell_pieces` built for the cell."""
-    return PolyN(scratch[6], 3 * grid.degree, grid.power, grid.finder, grid.iterations,
+    """The segment's polynomial from the cell's cached transform (``tag``), into ``scratch[6]``."""
+    d = grid.degree
+    basis, inner, middle, inv = scratch[2], scratch[3], scratch[4], scratch[5]
+    poly = scratch[6]
+    if grid.power:
+        axis_basis_power(ax, bx, d, basis[0])
+        axis_basis_power(ay, by, d, basis[1])
+        axis_basis_power(az, bz, d, basis[2])
+    else:
+        axis_basis_sb(ax, bx, d, basis[0])
+        axis_basis_sb(ay, by, d, basis[1])
+        axis_basis_sb(az, bz, d, basis[2])
+    compose(scratch[14][tag], basis[0], basis[1], basis[2], d, inner, middle, poly)
+    for m in range(3 * d + 1):
+        poly[m] *= inv[m]
+    return PolyN(poly, 3 * d, grid.power, grid.finder, grid.iterations,
                  grid.tol, scratch[7], scratch[8], scratch[9], scratch[10], scratch[11],
                  scratch[12])
 
@@ -316,9 +378,9 @@ def _value_gradient_at(grid, scratch, x, y, z):
     return local_value_gradient(grid.coeffs, grid.degree, i, j, k, u, v, w)
 
 
-# Every hook is inlined into the per-pair loop; the cell's transform and composition stay calls
-# inside ``cell_pieces`` (``cell_transform``, ``compose``), taking only the arrays they need.
+# Every hook is inlined into the per-pair loop; the cell's transform (on a cache miss) and the
+# segment's composition stay calls (``_fill_cell``, ``compose``), taking only the arrays they need.
 register(BSplineGrid, cell_count=_cell_count, new_scratch=_new_scratch,
          cell_load=_cell_load,
-         cell_pieces=_cell_pieces, piece_range=cell_range, piece_poly=_piece_poly,
+         cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly,
          gradient=_gradient, value_gradient_at=_value_gradient_at)

@@ -1,0 +1,159 @@
+"""Isosurface frame time of two builds side by side, per model: interleaved worker processes.
+
+The baseline is another checkout of the repository (``--old``, e.g. ``git worktree add --detach
+/tmp/iso-old HEAD~1``); this checkout is the new build. Each build runs in its own worker process
+(``PYTHONPATH=<checkout>/src``, one Numba thread) that loads the scenes once; the parent asks
+them in turn to render the same frame and records the process CPU time of each render, so both
+builds see the same machine load, round by round. Each worker also saves the frame's depth, and
+the parent reports whether the two builds' depths are bit-identical and their largest difference.
+
+    python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5]
+        [--models trilinear,bspline1,bspline2,bspline3] [--stem iso_builds]
+
+Results go to ``benchmarks/results/<stem>.md`` and ``.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+SIZE = (1024, 768)
+#: (label, demo name, size): the comparison suite's analytic scenes.
+SCENES = (("marschner-lobb 128^3", "marschner-lobb", 128), ("sphere SDF 128^3", "sphere", 128),
+          ("marschner-lobb 256^3", "marschner-lobb", 256))
+
+
+def _worker(outdir: str) -> None:
+    """Serve render requests on stdin (one JSON per line); answer on stdout."""
+    import splinecast as sc
+
+    scenes: dict[tuple[str, str], tuple] = {}
+    print(json.dumps({"ready": sc.__file__}), flush=True)
+    for line in sys.stdin:
+        req = json.loads(line)
+        key = (req["scene"], req["model"])
+        if key not in scenes:
+            _, name, size = next(s for s in SCENES if s[0] == req["scene"])
+            vol = sc.demo(name, size=size)
+            cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=SIZE)
+            scene = sc.Scene(vol, model=req["model"])
+            iso = vol.metadata["default_iso"]
+            scene.render(cam, iso=iso, outputs=("rgba",))  # compile and prepare
+            scenes[key] = (scene, cam, iso)
+        scene, cam, iso = scenes[key]
+        if req.get("depth"):
+            frame = scene.render(cam, iso=iso, outputs=("rgba", "depth"))
+            path = os.path.join(outdir, f"{os.getpid()}_{len(os.listdir(outdir))}.npy")
+            np.save(path, frame.depth)
+            print(json.dumps({"depth": path}), flush=True)
+            continue
+        start = time.process_time()
+        scene.render(cam, iso=iso, outputs=("rgba",))
+        print(json.dumps({"ms": (time.process_time() - start) * 1e3}), flush=True)
+
+
+class _Build:
+    """A worker process running one checkout's splinecast."""
+
+    def __init__(self, checkout: Path, outdir: str) -> None:
+        env = {**os.environ, "PYTHONPATH": str(checkout / "src"), "NUMBA_NUM_THREADS": "1"}
+        self.proc = subprocess.Popen([sys.executable, __file__, "--worker", outdir], env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        self.source = self._read()["ready"]
+
+    def _read(self) -> dict:
+        line = self.proc.stdout.readline()
+        if not line:
+            raise SystemExit("a worker stopped; run it alone to see its error")
+        return json.loads(line)
+
+    def ask(self, **req) -> dict:
+        self.proc.stdin.write(json.dumps(req) + "\n")
+        self.proc.stdin.flush()
+        return self._read()
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(timeout=60)
+
+
+def main() -> None:
+    if len(sys.argv) > 2 and sys.argv[1] == "--worker":
+        _worker(sys.argv[2])
+        return
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--old", required=True, help="checkout of the baseline build")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--models", default="trilinear,bspline1,bspline2,bspline3")
+    ap.add_argument("--scenes", default=",".join(s[0] for s in SCENES),
+                    help="comma-separated scene labels")
+    ap.add_argument("--stem", default="iso_builds")
+    args = ap.parse_args()
+    os.environ["NUMBA_NUM_THREADS"] = "1"  # what the workers run with, for the description
+    sys.path.insert(0, str(HERE))
+    from _machine import describe
+
+    rows = []
+    with tempfile.TemporaryDirectory() as outdir:
+        builds = {"old": _Build(Path(args.old).resolve(), outdir), "new": _Build(REPO, outdir)}
+        for label in args.scenes.split(","):
+            for model in args.models.split(","):
+                req = {"scene": label, "model": model}
+                depths = {k: np.load(b.ask(**req, depth=True)["depth"])
+                          for k, b in builds.items()}
+                times: dict[str, list[float]] = {k: [] for k in builds}
+                for _ in range(args.rounds):
+                    for k, b in builds.items():
+                        times[k].append(b.ask(**req)["ms"])
+                old, new = depths["old"], depths["new"]
+                both = np.isfinite(old) & np.isfinite(new)
+                row = {"scene": label, "model": model,
+                       "old_ms": statistics.median(times["old"]),
+                       "new_ms": statistics.median(times["new"]),
+                       "identical": bool(np.array_equal(old, new, equal_nan=True)),
+                       "max_depth_diff": float(np.max(np.abs(old[both] - new[both]),
+                                                      initial=0.0)),
+                       "hits_old": int(np.isfinite(old).sum()),
+                       "hits_new": int(np.isfinite(new).sum()), "times": times}
+                row["speedup"] = row["old_ms"] / row["new_ms"]
+                rows.append(row)
+                print(f"{label} {model}: {row['old_ms']:.1f} -> {row['new_ms']:.1f} ms "
+                      f"({row['speedup']:.2f}x), identical {row['identical']}", flush=True)
+        sources = {k: b.source for k, b in builds.items()}
+        for b in builds.values():
+            b.close()
+    out = HERE / "results"
+    out.mkdir(exist_ok=True)
+    machine = describe()
+    (out / f"{args.stem}.json").write_text(json.dumps(
+        {"machine": machine, "builds": sources, "rounds": args.rounds, "rows": rows}, indent=1))
+    lines = [f"# Isosurface frames, two builds side by side ({args.stem})", "",
+             f"Machine: {machine}. Command: `python benchmarks/bench_iso_builds.py --old <checkout>"
+             f" --rounds {args.rounds}`. Builds: old `{sources['old']}`, new "
+             f"`{sources['new']}`. 1024x768, colour only, one Numba thread, process CPU time, "
+             "median of the rounds after a warm-up, the builds alternating within every round; "
+             "depths compared on a frame with depth.", "",
+             "| scene | model | old ms | new ms | speed-up | depths bit-identical | largest depth "
+             "difference | hits |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['scene']} | {r['model']} | {r['old_ms']:.1f} | {r['new_ms']:.1f} | "
+                     f"{r['speedup']:.2f}x | {'yes' if r['identical'] else 'no'} | "
+                     f"{r['max_depth_diff']:.3g} | {r['hits_new']} |")
+    (out / f"{args.stem}.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {out / (args.stem + '.md')}")
+
+
+if __name__ == "__main__":
+    main()
