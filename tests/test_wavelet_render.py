@@ -159,3 +159,15 @@ def test_user_mistakes_name_the_parameter(case, tmp_path, capsys):
     assert "--budget" in capsys.readouterr().err
     assert main([*argv, "--cut", "error", "-o", str(out)]) == 2
     assert "--cut" in capsys.readouterr().err
+
+
+def test_every_kind_of_scene_works_in_a_with_block(case):
+    """``with sc.Scene(...) as scene`` for an in-memory volume and a wavelet store too, as for a
+    brick pyramid (whose scene has a loader thread to stop): the same frame either way."""
+    degree, vol, store = case
+    camera = _camera(vol)
+    for source, options in ((vol, {"model": f"bspline{degree}"}), (store, {"lod": 0.0})):
+        plain = sc.Scene(source, **options).render(camera, iso=0.0)
+        with sc.Scene(source, **options) as scene:
+            framed = scene.render(camera, iso=0.0)
+        np.testing.assert_array_equal(plain.depth, framed.depth)
