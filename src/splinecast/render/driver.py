@@ -33,8 +33,7 @@ under its own name (:func:`_pair_kernel`).
 
 Work is spread over threads in bands of ``band_rows`` rows, in the order ``bands`` (a
 permutation that mixes busy and empty parts of the image), each band traversed in tiles of
-``tile`` columns so neighbouring rays reuse the model's per-thread caches. A tile whose rays
-all miss the domain (:mod:`.tile_cull`) is written without clipping or walking its rays.
+``tile`` columns so neighbouring rays reuse the model's per-thread caches.
 """
 
 from __future__ import annotations
@@ -67,7 +66,6 @@ from .mode_api import (
     watches_skips,
 )
 from .rays import pixel_ray
-from .tile_cull import tile_misses_box
 
 __all__ = ["trace", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
 
@@ -197,31 +195,6 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
     return visited, tested, skipped
 
 
-@jit(inline="always")
-def _miss_pixel(mode, state, out, basis, geom, load, store, final, row, col, width, height):
-    """What :func:`_trace_pixel` does for a ray that misses the domain (its tile was culled,
-    :mod:`.tile_cull`): the state passes through unchanged and the outputs are written. No
-    mode's ``finish`` reads the ray's entry parameter (``ray[15]``) for such a ray."""
-    wx, wy, wz, ux, uy, uz, dx, dy, dz, vx, vy, vz = _pixel_ray(basis, geom, row, col, width,
-                                                                height)
-    st = state_load(mode, state, row, col) if load else state_new(mode)
-    if store:
-        state_store(mode, state, row, col, st)
-    if final:
-        ray = (wx, wy, wz, ux, uy, uz, vx + geom[6] - geom[7], vy + geom[6] - geom[8],
-               vz + geom[6] - geom[9], dx, dy, dz, geom[3], geom[4], geom[5], math.nan)
-        finish(mode, out, row, col, st, ray)
-
-
-@jit(inline="always")
-def _world_domain(geom):
-    """The rendered domain (``geom[10:16]``, level index space) as a world box, lo xyz, hi xyz."""
-    x0, x1 = geom[0] + geom[10] * geom[3], geom[0] + geom[13] * geom[3]
-    y0, y1 = geom[1] + geom[11] * geom[4], geom[1] + geom[14] * geom[4]
-    z0, z1 = geom[2] + geom[12] * geom[5], geom[2] + geom[15] * geom[5]
-    return (min(x0, x1), min(y0, y1), min(z0, z1), max(x0, x1), max(y0, y1), max(z0, z1))
-
-
 # Without Numba's reference counting (``_nrt=False``): the hooks inlined here take the grid,
 # scratch, mode and state tuples, and Numba increments and decrements the count of every array
 # in a tuple each time an inlined function with branches receives it; it could not prune those
@@ -238,17 +211,8 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, ba
     ncx, ncy, ncz = cell_count(grid)
     r0 = band * band_rows
     r1 = min(height, r0 + band_rows)
-    box = _world_domain(geom)
     for c0 in range(0, width, tile):
         c1 = min(width, c0 + tile)
-        if tile_misses_box(basis, r0, r1, c0, c1, width, height, box):
-            # No ray of the tile meets the domain: no clipping, no walk (the pixels outside an
-            # isosurface's active box, around the volume, ...).
-            for row in range(r0, r1):
-                for col in range(c0, c1):
-                    _miss_pixel(mode, state, out, basis, geom, load, store, final, row, col,
-                                width, height)
-            continue
         for row in range(r0, r1):
             for col in range(c0, c1):
                 nv, nt, ns = _trace_pixel(
@@ -357,9 +321,7 @@ def _pair_kernel(grid_class: type, mode_class: type) -> Any:
                     for name, f in {**model_hooks, **mode_hooks}.items()}
             suffix = f"{grid_class.__name__}_{mode_class.__name__}"
             pixel = rebound(_trace_pixel, bind, suffix)
-            miss = rebound(_miss_pixel, bind, suffix)
-            band = rebound(_trace_band, {**bind, "_trace_pixel": pixel, "_miss_pixel": miss},
-                           suffix)
+            band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
             kernel = rebound(_trace_image, {"_trace_band": band}, suffix)
         _KERNELS[key] = kernel
     return kernel
