@@ -13,7 +13,9 @@
    (selection, reconstruction of every brick, grids) and the median steady frame (bricks and
    grids reused) in ms, the share of chunks reconstructed and refined, and the image MSE (RGB in
    [0, 1]) against the full-resolution render of the in-memory ``bspline<d>`` model, whose
-   time is the baseline of the ratio column.
+   time is the baseline of the ratio column. The Chmutov stores are rendered from a close-up
+   (zoom 2.5, nearly every ray hits within a few cells), the 512^3 store from a view of the
+   whole volume (zoom 1), where rays cross many cells.
 
 Run ``python benchmarks/bench_wavelet.py [--quick]``; results go to
 ``benchmarks/results/wavelet[_quick].json`` and ``.md``. Medians after warm-up.
@@ -126,9 +128,9 @@ RENDER_MULTIPLES = (0, 25, 50, 100, 200, 400)
 
 
 def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
-                       multiples: tuple[int, ...]) -> dict:
+                       multiples: tuple[int, ...], zoom: float = 2.5) -> dict:
     """Store build (time, peak memory) and frames of ``Scene(store, lod=ε)`` against the
-    full-resolution in-memory render."""
+    full-resolution in-memory render, from an orbit view at ``zoom``."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "w.zarr"
         source = sc.Volume(vol.data.astype(dtype), spacing=vol.spacing, origin=vol.origin)
@@ -144,7 +146,7 @@ def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
         build_ms = (time.perf_counter() - start) * 1e3
         build_peak = peak_mib(build)
         store = sc.read(path)
-        cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size, zoom=2.5)
+        cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size, zoom=zoom)
         pixel = math.radians(cam.fov) / 768  # ε in pixels of a 1024x768 image, as in bench_lod
         ref = sc.Scene(source, model=f"bspline{degree}")
         full = ref.render(cam, iso=iso)
@@ -152,7 +154,7 @@ def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
         # Compile the cut launch for this store's model, mode and dtype outside the timings
         # (a small image at every ε): without it the first timed frame held the compilation
         # (70 s of the quick run's ε = 0 "first frame").
-        small = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(32, 24), zoom=2.5)
+        small = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(32, 24), zoom=zoom)
         for multiple in multiples:
             sc.Scene(store, lod=multiple * pixel).render(small, iso=iso)
         rows = []
@@ -186,7 +188,8 @@ def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
                 "details_read": st["details_read"],
             })
         return {"store_build_ms": build_ms, "store_build_peak_mib": build_peak,
-                "full_resolution_ms": full_ms, "size": list(size), "render": rows}
+                "full_resolution_ms": full_ms, "size": list(size), "zoom": zoom,
+                "render": rows}
 
 
 def markdown(results: dict) -> str:
@@ -226,7 +229,8 @@ def markdown(results: dict) -> str:
             lines += [
                 f"Zarr store (`build_pyramid(kind=\"wavelet\")`): {st['store_build_ms']:.0f} ms, "
                 f"peak {st['store_build_peak_mib']:.0f} MiB. Rendering {w}x{h}, iso "
-                f"{v['iso']}: full-resolution in-memory `bspline{v['degree']}` "
+                f"{v['iso']}, zoom {st.get('zoom', 2.5)}: full-resolution in-memory "
+                f"`bspline{v['degree']}` "
                 f"{st['full_resolution_ms']:.0f} ms per frame.",
                 "",
                 "| ε (pixels) | chunks % | refined % | pieces | first frame ms (reconstruct) "
@@ -264,13 +268,16 @@ def main() -> None:
     repeats = 2 if args.quick else 5
     if args.quick:
         cases = [("chmutov", 64, 0.0, 3, np.float64), ("noise", 96, 0.5, 3, np.float32)]
-        render_cases = {("chmutov", 64, 3)}
-        multiples = (0, 50, 100, 200, 400, 800)
+        render_cases = {("chmutov", 64, 3): (2.5, (0, 50, 100, 200, 400, 800))}
     else:
         cases = [("chmutov", 128, 0.0, d, np.float64) for d in (1, 2, 3)]
         cases.append(("noise", 512, 0.5, 3, np.float32))
-        render_cases = {("chmutov", 128, 1), ("chmutov", 128, 3)}
-        multiples = RENDER_MULTIPLES
+        # (zoom, ε in pixels): the Chmutov views are close-ups where nearly every ray hits
+        # within a few cells; the 512^3 view shows the whole volume (zoom 1, about one voxel
+        # per pixel), where rays cross many cells and coarser levels can save traversal.
+        render_cases = {("chmutov", 128, 1): (2.5, RENDER_MULTIPLES),
+                        ("chmutov", 128, 3): (2.5, RENDER_MULTIPLES),
+                        ("noise", 512, 3): (1.0, (0, 5, 10, 25, 50, 100, 200))}
     # Warm-up: compile every kernel once outside the timings.
     warm = sc.demo("chmutov", size=12)
     for dtype in {np.dtype(c[4]) for c in cases}:
@@ -296,8 +303,9 @@ def main() -> None:
             "lod": bench_lod(vol, pyramid, iso, size, repeats),
         }
         if (label, n, degree) in render_cases:
+            zoom, multiples = render_cases[label, n, degree]
             entry["store"] = bench_store_render(vol, degree, dtype, iso, render_size, repeats,
-                                                multiples)
+                                                multiples, zoom)
         results["volumes"].append(entry)
         print(f"{label} {n}^3 degree {degree}: done", flush=True)
     out = Path(args.out)

@@ -171,3 +171,37 @@ def test_every_kind_of_scene_works_in_a_with_block(case):
         with sc.Scene(source, **options) as scene:
             framed = scene.render(camera, iso=0.0)
         np.testing.assert_array_equal(plain.depth, framed.depth)
+
+
+def test_frames_of_one_scene_equal_fresh_scenes_through_steady_moved_and_evicted_views(case):
+    """One scene's frames reuse the last frame's pieces and launch when the same bricks are
+    drawn and none was rewritten; every frame of a sequence (the same view again, a moved one,
+    back, a new isovalue, each with and without a budget that evicts bricks between frames)
+    equals a fresh scene's render of that view (reference: no state carried between frames)."""
+    degree, vol, store = case
+    near = _camera(vol)
+    far = sc.Camera.orbit(vol, azimuth=110, elevation=-30, size=SIZE, fit="box", zoom=2.5)
+    steps = [(near, 0.0), (near, 0.0), (far, 0.0), (near, 0.0), (near, 0.0), (near, 0.4),
+             (near, 0.4)]
+    fresh = {}
+    computed = {}
+    for budget in (None, "24KiB"):
+        scene = sc.Scene(store, lod=0.08, budget=budget)
+        reused, computed[budget] = [], []
+        for camera, iso in steps:
+            frame = scene.render(camera, iso=iso)
+            key = (camera is near, iso)
+            if key not in fresh:
+                fresh[key] = sc.Scene(store, lod=0.08).render(camera, iso=iso)
+            np.testing.assert_array_equal(frame.depth, fresh[key].depth)
+            np.testing.assert_array_equal(frame.rgba, fresh[key].rgba)
+            reused.append(frame.stats["launch_reused"])
+            computed[budget].append(frame.stats["bricks_computed"])
+        # The second frame of each repeated view is steady; every first view is not.
+        assert reused[1] and reused[4] and reused[6]
+        assert not (reused[0] or reused[2] or reused[3] or reused[5])
+        # The new isovalue draws the same bricks but rewrites some (their active details
+        # change): the list must not be reused then.
+        assert computed[budget][5] > 0
+    # The budget did evict: back at the first view, more bricks are computed again.
+    assert computed["24KiB"][3] > computed[None][3]

@@ -309,6 +309,9 @@ class ChunkReconstructor:
         size = lay.brick_size
         dtype = np.dtype(pyramid.dtype)
         self._frame = 0
+        #: Counts the updates (and clears) that wrote or dropped a brick: while it stays, every
+        #: brick array handed out earlier still holds its chunk's current coefficients.
+        self.version = 0
         self._budget = Budget(budget, self._remapped)
         self._bricks = SlotPool((size, size, size), dtype, self._release_bricks,
                                 "coefficient bricks", label)
@@ -414,6 +417,7 @@ class ChunkReconstructor:
     def clear(self) -> None:
         """Forget every brick but the roots (detail blocks stay resident)."""
         top = self.layout.levels
+        self.version += 1
         live = (self._bricks.level >= 0) & (self._bricks.level < top)
         self._bricks.level[live] = -1
         for j in range(top):
@@ -456,6 +460,7 @@ class ChunkReconstructor:
             todo = need & ~current
             used = np.zeros(lay.chunks(j), dtype=bool)
             if todo.any():
+                self.version += 1
                 stats.details_read += self._ensure_blocks(j + 1, active & _dilate(todo))
                 children = np.argwhere(todo).astype(np.int64)
                 out_slot = self._slots_for(j, todo)

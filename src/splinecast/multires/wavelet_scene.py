@@ -54,7 +54,7 @@ from ..scene import check_iso, finish_frame, prepare_render
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .budget import parse_bytes
-from .draw import CutRenderer, Piece
+from .draw import CutRenderer, Piece, gc_paused
 from .wavelet_layout import WaveletLayout
 from .wavelet_lod import Selection, select
 from .wavelet_reconstruct import ChunkReconstructor
@@ -111,6 +111,11 @@ class WaveletTree:
         return np.full(3, scale), np.full(3, -self.layout.node_origin(level) * scale)
 
 
+# Entries of a scene's box cache before it starts over (about 0.5 kB each): several frames of
+# the largest selections the benchmarks make (about 33 k pieces for a 512^3 store).
+_BOXES_KEPT = 200_000
+
+
 def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[list[float], list[float]]:
     """A chunk's region clipped to the voxel box (level-0 voxel index space): the arithmetic of
     :meth:`.WaveletLayout.region` on Python floats (numpy per scalar cost most of a frame's
@@ -126,34 +131,51 @@ def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[list[fl
     return lo, hi
 
 
-def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor) -> list[Piece]:
+def _boxes(lay: WaveletLayout, level: int, idx: tuple[int, int, int],
+           mask: int) -> list[tuple[tuple[int, int, int, int], np.ndarray, np.ndarray]]:
+    """``(cut key, lo, hi)`` of what a drawn brick draws: its region, or the octants of it
+    whose finer chunk is not reconstructed; empty boxes left out."""
+    boxes = []
+    if level == 0:
+        boxes.append(((0, *idx), _region(lay, 0, idx)))
+    else:
+        kids = [tuple(2 * idx[a] + ((o >> (2 - a)) & 1) for a in range(3)) for o in range(8)]
+        below = lay.chunks(level - 1)
+        exist = sum(1 << o for o, kid in enumerate(kids)
+                    if all(kid[a] < below[a] for a in range(3)))
+        if mask == exist:
+            boxes.append(((level, *idx), _region(lay, level, idx)))
+        else:
+            boxes += [((level - 1, *kids[o]), _region(lay, level - 1, kids[o]))
+                      for o in range(8) if mask >> o & 1]
+    return [(cut_key, np.array(lo), np.array(hi)) for cut_key, (lo, hi) in boxes
+            if hi[0] > lo[0] and hi[1] > lo[1] and hi[2] > lo[2]]
+
+
+def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor,
+                   boxes: dict | None = None) -> list[Piece]:
     """The pieces of a selection: each drawn brick over its region, or over the octants of it
     whose finer chunk is not reconstructed (one piece per octant, named by that child chunk so
-    the front-to-back order sees leaves of one octree). Call ``reconstructor.update`` first."""
+    the front-to-back order sees leaves of one octree). Call ``reconstructor.update`` first.
+
+    ``boxes`` keeps each ``(level, chunk, octant mask)``'s boxes between calls (they depend on
+    the layout only): a frame of tens of thousands of pieces otherwise spends most of its
+    Python time recomputing them.
+    """
     lay = selection.layout
+    if boxes is None:
+        boxes = {}
     out = []
-    counts = [lay.chunks(j) for j in range(lay.levels + 1)]
     for level, idx, mask in selection.drawn():
+        drawn = boxes.get((level, idx, mask))
+        if drawn is None:
+            drawn = boxes[level, idx, mask] = _boxes(lay, level, idx, mask)
         coeffs = reconstructor.coefficients(level, idx)
         key = ("wavelet", level, idx, reconstructor.signature(level, idx))
-        first = tuple(lay.chunk * int(i) - lay.pad for i in idx)
-        boxes = []
-        if level == 0:
-            boxes.append(((0, *idx), _region(lay, 0, idx)))
-        else:
-            kids = [tuple(2 * idx[a] + ((o >> (2 - a)) & 1) for a in range(3)) for o in range(8)]
-            below = counts[level - 1]
-            exist = sum(1 << o for o, kid in enumerate(kids)
-                        if all(kid[a] < below[a] for a in range(3)))
-            if mask == exist:
-                boxes.append(((level, *idx), _region(lay, level, idx)))
-            else:
-                boxes += [((level - 1, *kids[o]), _region(lay, level - 1, kids[o]))
-                          for o in range(8) if mask >> o & 1]
-        for cut_key, (lo, hi) in boxes:
-            if hi[0] > lo[0] and hi[1] > lo[1] and hi[2] > lo[2]:
-                out.append(Piece(cut_key, key, level, coeffs, first, np.array(lo),  # type: ignore[arg-type]
-                                 np.array(hi), placed=True))
+        first = (lay.chunk * idx[0] - lay.pad, lay.chunk * idx[1] - lay.pad,
+                 lay.chunk * idx[2] - lay.pad)
+        for cut_key, lo, hi in drawn:
+            out.append(Piece(cut_key, key, level, coeffs, first, lo, hi, placed=True))
     return out
 
 
@@ -220,6 +242,9 @@ class WaveletScene:
                                                 budget=self.budget, label=str(volume.path))
         self.renderer = CutRenderer(self.model, place, None)
         self.selection: Selection | None = None
+        self._boxes: dict = {}  # wavelet_pieces' boxes per (level, chunk, octant mask)
+        # (reconstructor version, octant tables, pieces) of the last frame.
+        self._last_pieces: tuple[int, list[np.ndarray], list[Piece]] | None = None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self._table_cache: dict = {}
 
@@ -314,11 +339,24 @@ class WaveletScene:
                            vol.origin)
         select_ms = (time.perf_counter() - start) * 1e3
         rstats = self.reconstructor.update(selection)
-        pieces = wavelet_pieces(selection, self.reconstructor)
-        self.selection = selection
-        start = time.perf_counter()
-        out, counters = self.renderer.render(pieces, setup, camera, request.planes)
-        self.renderer.forget(p.key for p in pieces)
+        if len(self._boxes) > _BOXES_KEPT:
+            self._boxes.clear()
+        with gc_paused():
+            last = self._last_pieces
+            if (last is not None and last[0] == self.reconstructor.version
+                    and all(np.array_equal(a, b)
+                            for a, b in zip(last[1], selection.octants, strict=True))):
+                # The same bricks drawn the same way, none rewritten: the same list, which
+                # lets the renderer keep its draw order and launch arrays (a steady view).
+                pieces, reused = last[2], True
+            else:
+                pieces, reused = wavelet_pieces(selection, self.reconstructor, self._boxes), False
+                self._last_pieces = (self.reconstructor.version, selection.octants, pieces)
+            self.selection = selection
+            start = time.perf_counter()
+            out, counters = self.renderer.render(pieces, setup, camera, request.planes)
+            if not reused:
+                self.renderer.forget(p.key for p in pieces)
         stats = request.stats
         stats.update(self.renderer.stats)
         stats.update({
