@@ -6,14 +6,20 @@ This measures, on a Chmutov 64^3 degree-3 store (k = 8) from one orbit view, for
 chunk, 512 pieces) and a small ε: the median time of the piece list (per piece) and the median
 steady frame (bricks reused; 64x48 pixels, so the trace is small next to the overhead).
 
-Run ``python benchmarks/bench_wavelet_pieces.py --label NAME --json OUT.json`` once per code
-version (the results file keeps every label's rows side by side).
+``--large``: a noise 512^3 degree-3 store seen whole (zoom 1) at 1024x768, ε = 5, 10 and 25
+pixels (tens of thousands of pieces down to a few hundred): the median steady frame and its
+trace.
+
+Run ``python benchmarks/bench_wavelet_pieces.py --label NAME --json OUT.json [--large]`` once
+per code version, e.g. with ``PYTHONPATH=<old checkout>/src`` for the baseline (the results file
+keeps every label's rows side by side).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import tempfile
 from pathlib import Path
@@ -29,12 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import describe, median_ms  # noqa: E402
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--label", required=True)
-    parser.add_argument("--json", required=True)
-    parser.add_argument("--repeats", type=int, default=15)
-    args = parser.parse_args()
+def _small(args) -> list[dict]:
     folder = Path(tempfile.mkdtemp())
     build_wavelet_pyramid(sc.demo("chmutov", size=64), folder / "w.zarr", degree=3, chunk=8,
                           dtype=np.float32)
@@ -55,6 +56,43 @@ def main() -> None:
                      "us_per_piece": round(pieces_ms / pieces * 1e3, 1),
                      "steady_frame_ms": round(frame_ms, 1)})
         print(rows[-1], flush=True)
+    return rows
+
+
+def _large(args) -> list[dict]:
+    folder = Path(tempfile.mkdtemp())
+    vol = sc.demo("noise", size=512)
+    build_wavelet_pyramid(vol, folder / "w.zarr", degree=3, chunk=8, dtype=np.float32)
+    store = sc.read(folder / "w.zarr")
+    camera = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(1024, 768), zoom=1.0)
+    small = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(32, 24), zoom=1.0)
+    pixel = math.radians(camera.fov) / camera.height
+    rows = []
+    for multiple in (5, 10, 25):
+        scene = sc.Scene(store, lod=multiple * pixel)
+        scene.render(small, iso=0.5)  # compile
+        frame = scene.render(camera, iso=0.5)  # reconstruct, read
+        traces: list[float] = []
+
+        def steady(scene=scene, traces=traces):
+            traces.append(scene.render(camera, iso=0.5).stats["trace_ms"])
+
+        frame_ms = median_ms(steady, 5)
+        rows.append({"label": args.label, "lod_pixels": multiple,
+                     "pieces": frame.stats["pieces"], "steady_frame_ms": round(frame_ms, 1),
+                     "steady_trace_ms": round(sorted(traces)[len(traces) // 2], 1)})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--label", required=True)
+    parser.add_argument("--json", required=True)
+    parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--large", action="store_true", help="the noise 512^3 store instead")
+    args = parser.parse_args()
+    rows = _large(args) if args.large else _small(args)
     out = Path(args.json)
     old = json.loads(out.read_text()) if out.exists() else {"machine": describe(), "rows": []}
     old["rows"] = [r for r in old["rows"] if r["label"] != args.label] + rows
