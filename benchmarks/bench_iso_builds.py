@@ -1,14 +1,15 @@
-"""Isosurface frame time of two builds side by side, per model: interleaved worker processes.
+"""Frame time of two builds side by side, per model: interleaved worker processes.
 
 The baseline is another checkout of the repository (``--old``, e.g. ``git worktree add --detach
 /tmp/iso-old HEAD~1``); this checkout is the new build. Each build runs in its own worker process
 (``PYTHONPATH=<checkout>/src``, one Numba thread) that loads the scenes once; the parent asks
 them in turn to render the same frame and records the process CPU time of each render, so both
-builds see the same machine load, round by round. Each worker also saves the frame's depth, and
-the parent reports whether the two builds' depths are bit-identical and their largest difference.
+builds see the same machine load, round by round. Each worker also saves the frame's depth
+(isosurfaces) or value (MIP), and the parent reports whether the two builds' are bit-identical
+and their largest difference.
 
-    python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5]
-        [--models trilinear,bspline1,bspline2,bspline3] [--stem iso_builds]
+    python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip]
+        [--models trilinear,bspline1,bspline2,bspline3] [--scenes LABELS] [--stem iso_builds]
 
 Results go to ``benchmarks/results/<stem>.md`` and ``.json``.
 """
@@ -30,9 +31,12 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 SIZE = (1024, 768)
-#: (label, demo name, size): the comparison suite's analytic scenes.
+#: The comparison suite's MRI (isovalue 80), read from the shared data folder.
+MRI = REPO.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
+#: (label, demo name or file, size): the comparison suite's scenes.
 SCENES = (("marschner-lobb 128^3", "marschner-lobb", 128), ("sphere SDF 128^3", "sphere", 128),
-          ("torus SDF 128^3", "torus", 128), ("marschner-lobb 256^3", "marschner-lobb", 256))
+          ("torus SDF 128^3", "torus", 128), ("marschner-lobb 256^3", "marschner-lobb", 256),
+          ("noise 256^3", "noise", 256), ("MNI152 T1 MRI", str(MRI), 0))
 
 
 def _worker(outdir: str) -> None:
@@ -43,24 +47,29 @@ def _worker(outdir: str) -> None:
     print(json.dumps({"ready": sc.__file__}), flush=True)
     for line in sys.stdin:
         req = json.loads(line)
-        key = (req["scene"], req["model"])
+        key = (req["scene"], req["model"], req["mode"])
         if key not in scenes:
             _, name, size = next(s for s in SCENES if s[0] == req["scene"])
-            vol = sc.demo(name, size=size)
+            if size:
+                vol = sc.demo(name, size=size)
+                iso = vol.metadata["default_iso"]
+            else:
+                vol, iso = sc.read(name), 80.0
             cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=SIZE)
             scene = sc.Scene(vol, model=req["model"])
-            iso = vol.metadata["default_iso"]
-            scene.render(cam, iso=iso, outputs=("rgba",))  # compile and prepare
-            scenes[key] = (scene, cam, iso)
-        scene, cam, iso = scenes[key]
+            options = {"iso": iso} if req["mode"] == "iso" else {"mode": req["mode"]}
+            scene.render(cam, **options, outputs=("rgba",))  # compile and prepare
+            scenes[key] = (scene, cam, options)
+        scene, cam, options = scenes[key]
         if req.get("depth"):
-            frame = scene.render(cam, iso=iso, outputs=("rgba", "depth"))
+            kept = "depth" if options.get("mode", "iso") == "iso" else "value"
+            frame = scene.render(cam, **options, outputs=("rgba", kept))
             path = os.path.join(outdir, f"{os.getpid()}_{len(os.listdir(outdir))}.npy")
-            np.save(path, frame.depth)
+            np.save(path, getattr(frame, kept))
             print(json.dumps({"depth": path}), flush=True)
             continue
         start = time.process_time()
-        scene.render(cam, iso=iso, outputs=("rgba",))
+        scene.render(cam, **options, outputs=("rgba",))
         print(json.dumps({"ms": (time.process_time() - start) * 1e3}), flush=True)
 
 
@@ -99,6 +108,7 @@ def main() -> None:
     ap.add_argument("--models", default="trilinear,bspline1,bspline2,bspline3")
     ap.add_argument("--scenes", default=",".join(s[0] for s in SCENES[:2] + SCENES[3:]),
                     help="comma-separated scene labels")
+    ap.add_argument("--mode", default="iso", choices=("iso", "mip"))
     ap.add_argument("--stem", default="iso_builds")
     args = ap.parse_args()
     os.environ["NUMBA_NUM_THREADS"] = "1"  # what the workers run with, for the description
@@ -110,7 +120,7 @@ def main() -> None:
         builds = {"old": _Build(Path(args.old).resolve(), outdir), "new": _Build(REPO, outdir)}
         for label in args.scenes.split(","):
             for model in args.models.split(","):
-                req = {"scene": label, "model": model}
+                req = {"scene": label, "model": model, "mode": args.mode}
                 depths = {k: np.load(b.ask(**req, depth=True)["depth"])
                           for k, b in builds.items()}
                 times: dict[str, list[float]] = {k: [] for k in builds}
@@ -139,14 +149,16 @@ def main() -> None:
     machine = describe()
     (out / f"{args.stem}.json").write_text(json.dumps(
         {"machine": machine, "builds": sources, "rounds": args.rounds, "rows": rows}, indent=1))
-    lines = [f"# Isosurface frames, two builds side by side ({args.stem})", "",
+    what = "Isosurface" if args.mode == "iso" else "MIP"
+    kept = "depths" if args.mode == "iso" else "values"
+    lines = [f"# {what} frames, two builds side by side ({args.stem})", "",
              f"Machine: {machine}. Command: `python benchmarks/bench_iso_builds.py --old <checkout>"
-             f" --rounds {args.rounds}`. Builds: old `{sources['old']}`, new "
+             f" --rounds {args.rounds} --mode {args.mode}`. Builds: old `{sources['old']}`, new "
              f"`{sources['new']}`. 1024x768, colour only, one Numba thread, process CPU time, "
              "median of the rounds after a warm-up, the builds alternating within every round; "
-             "depths compared on a frame with depth.", "",
-             "| scene | model | old ms | new ms | speed-up | depths bit-identical | largest depth "
-             "difference | hits |", "|---|---|---|---|---|---|---|---|"]
+             f"{kept} compared on a frame with them.", "",
+             f"| scene | model | old ms | new ms | speed-up | {kept} bit-identical | largest "
+             "difference | pixels with a value |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['scene']} | {r['model']} | {r['old_ms']:.1f} | {r['new_ms']:.1f} | "
                      f"{r['speedup']:.2f}x | {'yes' if r['identical'] else 'no'} | "

@@ -140,7 +140,7 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
     if t0 <= t1 and not done(mode, st):
         inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
         if inside:
-            st = ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t, t_far)
+            st = ray_begin(mode, grid, scr, blocks, st, ray, ncx, ncy, ncz, t, t_far)
         while inside:
             size = skip_size(mode, blocks, ci, cj, ck, st)
             t_end, inside, ni, nj, nk, t_next = walk_step(

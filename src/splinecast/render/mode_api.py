@@ -8,8 +8,9 @@ arrays*. The driver (:mod:`.driver`) calls, per ray:
 
 ``state_new(mode)`` or ``state_load(mode, state, row, col)`` -> ``st``
     A fresh state, or the one left by an earlier segment of the same ray.
-``ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1)`` -> ``st``
-    Once per ray and grid, before the walk (MIP takes a lower bound of its answer here).
+``ray_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1)`` -> ``st``
+    Once per ray and grid, before the walk (MIP takes a lower bound of its answer here, from
+    block ranges and a few values of the model along the ray).
 ``skip_size(mode, blocks, i, j, k, st)`` -> ``int``
     Edge in cells of the block around cell ``(i, j, k)`` to leap over, 0 to process the cell.
 ``wants(mode, st, lo, hi)`` -> ``bool``
@@ -133,13 +134,13 @@ def _mode_scratch(mode):
     return None if f is None else f.py_func
 
 
-def ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+def ray_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     """Per-ray set-up before the walk through one grid (compiled code only)."""
     raise NotImplementedError
 
 
 @overload_jit(ray_begin, inline="never")
-def _ray_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+def _ray_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     f = _impl(mode, "ray_begin")
     return None if f is None else f.py_func
 
@@ -250,7 +251,7 @@ def no_scratch(mode):
 
 
 @jit()
-def unchanged_begin(mode, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+def unchanged_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     """``ray_begin`` with nothing to prepare."""
     return st
 
