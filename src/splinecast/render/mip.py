@@ -13,9 +13,10 @@ ray meets inside a block is at least the block's minimum, so the largest block m
 ray bounds the MIP from below; so do the model's values at a few points of the ray inside the
 block with the largest maximum (values the ray does meet, where the maximum most likely is).
 Blocks (cells, pieces) whose maximum lies strictly below the bound are left out from the start,
-so a bright structure far behind dim ones is reached without testing the dim ones first (1.3-1.9x
-on the comparison suite's volumes, ``benchmarks/results/mip_builds_seed.md``). Minimum intensity projection is the same computation on the negated
-field.
+so a bright structure far behind dim ones is reached without testing the dim ones first (frames
+1.4-2.2x faster on the comparison suite's synthetic volumes, 1.0-1.35x on its MRI:
+``benchmarks/results/mip_builds_seed.md``). Minimum intensity projection is the same computation
+on the negated field.
 
 The sampled method takes samples every ``step`` voxels from the ray's entry (the reference common
 viewers use); it can only report values the field takes, so it never exceeds the exact MIP.
