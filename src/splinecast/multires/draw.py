@@ -336,8 +336,8 @@ class CutRenderer:
         """The grid to trace for a piece: cached, or built from the array changed at a seam.
         Builds of small bricks run their compiled calls on one thread (thread start-up costs
         more than they do); a cached grid costs a dictionary lookup only, which matters at tens
-        of thousands of pieces per frame (switching the thread count per piece cost about
-        10 µs each)."""
+        of thousands of pieces per frame (switching the thread count for every piece took
+        0.44 s of a profiled 32 k-piece wavelet frame)."""
         change = None if piece.seam_part else changes.get(piece.key)
         if change is None:
             grid = self._grids.get(piece.key)

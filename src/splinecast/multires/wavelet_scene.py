@@ -111,8 +111,9 @@ class WaveletTree:
         return np.full(3, scale), np.full(3, -self.layout.node_origin(level) * scale)
 
 
-# Entries of a scene's box cache before it starts over (about 0.5 kB each): several frames of
-# the largest selections the benchmarks make (about 33 k pieces for a 512^3 store).
+# Entries of a scene's box cache before it starts over: several frames of the largest
+# selections the benchmarks make (about 33 k pieces for a 512^3 store); each entry is a key and
+# one to eight small boxes.
 _BOXES_KEPT = 200_000
 
 
