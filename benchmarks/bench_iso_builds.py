@@ -5,11 +5,13 @@ The baseline is another checkout of the repository (``--old``, e.g. ``git worktr
 (``PYTHONPATH=<checkout>/src``, one Numba thread) that loads the scenes once; the parent asks
 them in turn to render the same frame and records the process CPU time of each render, so both
 builds see the same machine load, round by round. Each worker also saves the frame's depth
-(isosurfaces) or value (MIP), and the parent reports whether the two builds' are bit-identical
+(isosurfaces), value (MIP) or colour (DVR, the comparison suite's transfer function), and the
+parent reports whether the two builds' are bit-identical
 and their largest difference.
 
-    python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip]
-        [--models trilinear,bspline1,bspline2,bspline3] [--scenes LABELS] [--stem iso_builds]
+    python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip|dvr]
+        [--dvr-sampling OLD,NEW] [--models trilinear,bspline1,bspline2,bspline3]
+        [--scenes LABELS] [--stem iso_builds]
 
 Results go to ``benchmarks/results/<stem>.md`` and ``.json``.
 """
@@ -47,7 +49,7 @@ def _worker(outdir: str) -> None:
     print(json.dumps({"ready": sc.__file__}), flush=True)
     for line in sys.stdin:
         req = json.loads(line)
-        key = (req["scene"], req["model"], req["mode"])
+        key = (req["scene"], req["model"], req["mode"], req.get("sampling"))
         if key not in scenes:
             _, name, size = next(s for s in SCENES if s[0] == req["scene"])
             if size:
@@ -58,11 +60,13 @@ def _worker(outdir: str) -> None:
             cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=SIZE)
             scene = sc.Scene(vol, model=req["model"])
             options = {"iso": iso} if req["mode"] == "iso" else {"mode": req["mode"]}
+            if req["mode"] == "dvr":
+                options.update(_dvr_options(vol, iso, req.get("sampling") or None))
             scene.render(cam, **options, outputs=("rgba",))  # compile and prepare
             scenes[key] = (scene, cam, options)
         scene, cam, options = scenes[key]
         if req.get("depth"):
-            kept = "depth" if options.get("mode", "iso") == "iso" else "value"
+            kept = {"iso": "depth", "mip": "value", "dvr": "rgba"}[options.get("mode", "iso")]
             frame = scene.render(cam, **options, outputs=("rgba", kept))
             path = os.path.join(outdir, f"{os.getpid()}_{len(os.listdir(outdir))}.npy")
             np.save(path, getattr(frame, kept))
@@ -71,6 +75,25 @@ def _worker(outdir: str) -> None:
         start = time.process_time()
         scene.render(cam, **options, outputs=("rgba",))
         print(json.dumps({"ms": (time.process_time() - start) * 1e3}), flush=True)
+
+
+def _dvr_options(vol, iso: float, sampling: str | None) -> dict:
+    """The comparison suite's DVR: its transfer function over black, the build's default
+    settings (with another ``sampling`` when given)."""
+    import dataclasses
+
+    import splinecast as sc
+    from splinecast.render import dvr
+    from splinecast.transfer import TransferFunction
+
+    sys.path.insert(0, str(REPO))
+    from benchmarks.compare.methods import dvr_transfer
+
+    options = {"tf": TransferFunction(dvr_transfer(vol, iso), vol.value_range, "gray"),
+               "shading": sc.Shading(background=(0.0, 0.0, 0.0, 1.0))}
+    if sampling:
+        options["dvr"] = dataclasses.replace(dvr.DEFAULT_SETTINGS, sampling=sampling)
+    return options
 
 
 class _Build:
@@ -108,7 +131,10 @@ def main() -> None:
     ap.add_argument("--models", default="trilinear,bspline1,bspline2,bspline3")
     ap.add_argument("--scenes", default=",".join(s[0] for s in SCENES[:2] + SCENES[3:]),
                     help="comma-separated scene labels")
-    ap.add_argument("--mode", default="iso", choices=("iso", "mip"))
+    ap.add_argument("--mode", default="iso", choices=("iso", "mip", "dvr"))
+    ap.add_argument("--dvr-sampling", default=",",
+                    help="DVR: the sampling of the old and the new build, 'OLD,NEW' (empty: the "
+                         "build's default settings)")
     ap.add_argument("--stem", default="iso_builds")
     args = ap.parse_args()
     os.environ["NUMBA_NUM_THREADS"] = "1"  # what the workers run with, for the description
@@ -121,12 +147,13 @@ def main() -> None:
         for label in args.scenes.split(","):
             for model in args.models.split(","):
                 req = {"scene": label, "model": model, "mode": args.mode}
-                depths = {k: np.load(b.ask(**req, depth=True)["depth"])
+                samplings = dict(zip(builds, args.dvr_sampling.split(","), strict=True))
+                depths = {k: np.load(b.ask(**req, depth=True, sampling=samplings[k])["depth"])
                           for k, b in builds.items()}
                 times: dict[str, list[float]] = {k: [] for k in builds}
                 for _ in range(args.rounds):
                     for k, b in builds.items():
-                        times[k].append(b.ask(**req)["ms"])
+                        times[k].append(b.ask(**req, sampling=samplings[k])["ms"])
                 old, new = depths["old"], depths["new"]
                 both = np.isfinite(old) & np.isfinite(new)
                 row = {"scene": label, "model": model,
@@ -149,11 +176,13 @@ def main() -> None:
     machine = describe()
     (out / f"{args.stem}.json").write_text(json.dumps(
         {"machine": machine, "builds": sources, "rounds": args.rounds, "rows": rows}, indent=1))
-    what = "Isosurface" if args.mode == "iso" else "MIP"
-    kept = "depths" if args.mode == "iso" else "values"
+    what = {"iso": "Isosurface", "mip": "MIP", "dvr": "DVR"}[args.mode]
+    kept = {"iso": "depths", "mip": "values", "dvr": "colours"}[args.mode]
     lines = [f"# {what} frames, two builds side by side ({args.stem})", "",
              f"Machine: {machine}. Command: `python benchmarks/bench_iso_builds.py --old <checkout>"
-             f" --rounds {args.rounds} --mode {args.mode}`. Builds: old `{sources['old']}`, new "
+             f" --rounds {args.rounds} --mode {args.mode}"
+             + (f" --dvr-sampling {args.dvr_sampling}" if args.mode == "dvr" else "")
+             + f"`. Builds: old `{sources['old']}`, new "
              f"`{sources['new']}`. 1024x768, colour only, one Numba thread, process CPU time, "
              "median of the rounds after a warm-up, the builds alternating within every round; "
              f"{kept} compared on a frame with them.", "",

@@ -30,6 +30,9 @@ Per cell, in the order a driver uses them:
 ``value_gradient_at(grid, scratch, x, y, z) -> (v, gx, gy, gz)``
     Value and gradient at any point of the grid's traversal space (clamped into the grid; the
     sampled methods' bisection uses it).
+``value_at(grid, scratch, x, y, z) -> v`` (optional)
+    The value alone, for the fixed-step loop (:mod:`splinecast.render.sampler`), which takes
+    one per sample; a model that does not register it gets ``value_gradient_at``'s value.
 
 And once per grid: ``cell_count(grid) -> (nx, ny, nz)`` and ``new_scratch(grid)`` (per-thread
 buffers, allocated once per band of rows). A model module defines these for its grid class and
@@ -44,7 +47,8 @@ from .._jit import jit, overload_jit
 
 __all__ = [
     "register", "hooks_of", "called_of", "cell_count", "new_scratch", "cell_load", "cell_pieces",
-    "piece_range", "piece_poly", "gradient", "value_gradient_at", "whole_cell", "cell_range",
+    "piece_range", "piece_poly", "gradient", "value_gradient_at", "value_at", "whole_cell",
+    "cell_range",
 ]
 
 #: Kernel grid class -> {hook name: compiled function}.
@@ -53,6 +57,8 @@ _HOOKS: dict[type, dict[str, Any]] = {}
 _CALLED: dict[type, frozenset[str]] = {}
 _NAMES = ("cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range", "piece_poly",
           "gradient", "value_gradient_at")
+#: Hooks a model may leave out (the stub then derives them from the others).
+_OPTIONAL = ("value_at",)
 
 
 def register(grid_class: type, called: tuple[str, ...] = (), **hooks: Any) -> None:
@@ -65,7 +71,7 @@ def register(grid_class: type, called: tuple[str, ...] = (), **hooks: Any) -> No
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{grid_class.__name__} is missing {', '.join(sorted(missing))}")
-    unknown = set(called) - set(_NAMES)
+    unknown = set(called) - set(_NAMES) - set(_OPTIONAL)
     if unknown:
         raise TypeError(f"called names unknown hooks: {', '.join(sorted(unknown))}")
     _HOOKS[grid_class] = dict(hooks)
@@ -85,7 +91,7 @@ def called_of(grid_class: type) -> frozenset[str]:
 
 def _impl(grid: Any, name: str) -> Any:
     cls = getattr(grid, "instance_class", None)
-    return _HOOKS[cls][name] if cls in _HOOKS else None
+    return _HOOKS[cls].get(name) if cls in _HOOKS else None
 
 
 # Each hook below is a stub for Python and an overload for compiled code that compiles the
@@ -178,6 +184,23 @@ def value_gradient_at(grid, scratch, x, y, z):
 def _value_gradient_at(grid, scratch, x, y, z):
     f = _impl(grid, "value_gradient_at")
     return None if f is None else f.py_func
+
+
+def value_at(grid, scratch, x, y, z):
+    """Value at a point of the grid's traversal space, clamped into it (compiled code only)."""
+    raise NotImplementedError
+
+
+def _value_of_value_gradient(grid, scratch, x, y, z):
+    return value_gradient_at(grid, scratch, x, y, z)[0]
+
+
+@overload_jit(value_at, inline="never")
+def _value_at(grid, scratch, x, y, z):
+    if getattr(grid, "instance_class", None) not in _HOOKS:
+        return None
+    f = _impl(grid, "value_at")
+    return _value_of_value_gradient if f is None else f.py_func
 
 
 # Hooks shared by the models whose cell is a single piece (trilinear, B-splines).

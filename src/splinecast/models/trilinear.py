@@ -172,9 +172,38 @@ def _value_gradient_at(grid, scratch, x, y, z):
     return local_value(k0, k1, k2, k3, k4, k5, k6, k7, u, v, w), gx, gy, gz
 
 
+@jit()
+def _value_at(grid, scratch, x, y, z):
+    """The interpolant at a point, clamped into the grid, as three rounds of linear
+    interpolation (a fixed-step ray caster takes one per sample)."""
+    data = grid.data
+    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
+    x = min(max(x, 0.0), float(nx))
+    y = min(max(y, 0.0), float(ny))
+    z = min(max(z, 0.0), float(nz))
+    # Unsigned indices: the coordinates are clamped to be non-negative, and numba then leaves
+    # out the negative-index wrap-around it would otherwise add to each of the eight reads.
+    ci, cj, ck = min(int(x), nx - 1), min(int(y), ny - 1), min(int(z), nz - 1)
+    u, v, w = x - ci, y - cj, z - ck
+    i, j, k = np.uint64(ci), np.uint64(cj), np.uint64(ck)
+    i1, j1, k1 = i + np.uint64(1), j + np.uint64(1), k + np.uint64(1)
+    # In float64 before any difference: the data may be unsigned integers.
+    d000, d100 = np.float64(data[i, j, k]), np.float64(data[i1, j, k])
+    d010, d110 = np.float64(data[i, j1, k]), np.float64(data[i1, j1, k])
+    d001, d101 = np.float64(data[i, j, k1]), np.float64(data[i1, j, k1])
+    d011, d111 = np.float64(data[i, j1, k1]), np.float64(data[i1, j1, k1])
+    c00 = d000 + u * (d100 - d000)
+    c10 = d010 + u * (d110 - d010)
+    c01 = d001 + u * (d101 - d001)
+    c11 = d011 + u * (d111 - d011)
+    c0 = c00 + v * (c10 - c00)
+    c1 = c01 + v * (c11 - c01)
+    return c0 + w * (c1 - c0)
+
+
 register(TrilinearGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
          cell_pieces=whole_cell, piece_range=cell_range, piece_poly=_piece_poly,
-         gradient=_gradient, value_gradient_at=_value_gradient_at)
+         gradient=_gradient, value_gradient_at=_value_gradient_at, value_at=_value_at)
 
 
 class TrilinearModel:

@@ -44,12 +44,11 @@ from typing import Any
 import numpy as np
 from numba import prange
 
-from .._jit import inlined, jit, rebound
+from .._jit import inlined, jit, overload_jit, rebound
 from ..accel.traversal import walk_begin, walk_step
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
 from . import mode_api
-from .clipping import clip_interval
 from .mode_api import (
     consume,
     done,
@@ -65,9 +64,10 @@ from .mode_api import (
     wants,
     watches_skips,
 )
-from .rays import pixel_ray
+from .rays import grid_ray, pixel_ray
+from .sampler import sample_pixel
 
-__all__ = ["trace", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
+__all__ = ["trace", "trace_pixel", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
 
 #: (grid class, mode class) -> :func:`_trace_image` specialized for the pair.
 _KERNELS: dict[tuple[type, type], Any] = {}
@@ -88,51 +88,11 @@ def band_order(n_bands: int) -> np.ndarray:
 
 
 @jit(inline="always")
-def _slab(o: float, d: float, lo: float, hi: float, t0: float, t1: float) -> tuple:
-    if d == 0.0:
-        if o < lo or o > hi:
-            return math.inf, -math.inf
-        return t0, t1
-    ta = (lo - o) / d
-    tb = (hi - o) / d
-    if ta > tb:
-        ta, tb = tb, ta
-    return max(t0, ta), min(t1, tb)
-
-
-@jit(inline="always")
-def _pixel_ray(basis, geom, row, col, width, height):
-    """World ray of a pixel and the same ray in the level's voxel index space."""
-    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-    sx, sy, sz = geom[3], geom[4], geom[5]
-    return (wx, wy, wz, ux, uy, uz, ux / sx, uy / sy, uz / sz,
-            (wx - geom[0]) / sx, (wy - geom[1]) / sy, (wz - geom[2]) / sz)
-
-
-@jit(inline="always")
 def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store, final,
                  scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
     """Trace one pixel's ray; returns (cells visited, cells tested, blocks skipped)."""
-    wx, wy, wz, ux, uy, uz, dx, dy, dz, vx, vy, vz = _pixel_ray(basis, geom, row, col, width,
-                                                                height)
-    t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-    t0, t1 = _slab(vx, dx, geom[10], geom[13], t0, t1)
-    t0, t1 = _slab(vy, dy, geom[11], geom[14], t0, t1)
-    t0, t1 = _slab(vz, dz, geom[12], geom[15], t0, t1)
-    anchor = t0  # where the ray enters the rendered domain: the same for every grid
-    if t_range.shape[0] > 0:
-        t0 = max(t0, t_range[row, col, 0])
-        t1 = min(t1, t_range[row, col, 1])
-    ox = vx + geom[6] - geom[7]
-    oy = vy + geom[6] - geom[8]
-    oz = vz + geom[6] - geom[9]
-    # A ray lying in the plane between this grid and the next one belongs to the next one (the
-    # traversal's rule for cell faces), so bricks never trace the same stretch twice.
-    if ((dx == 0.0 and ox == ncx and geom[7] + ncx < geom[16])
-            or (dy == 0.0 and oy == ncy and geom[8] + ncy < geom[17])
-            or (dz == 0.0 and oz == ncz and geom[9] + ncz < geom[18])):
-        t1 = -math.inf
-    ray = (wx, wy, wz, ux, uy, uz, ox, oy, oz, dx, dy, dz, geom[3], geom[4], geom[5], anchor)
+    t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
+    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
     st = state_load(mode, state, row, col) if load else state_new(mode)
     visited = 0
     tested = 0
@@ -193,6 +153,22 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
     if final:
         finish(mode, out, row, col, st, ray)
     return visited, tested, skipped
+
+
+def trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
+                final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
+    """One pixel's ray through one grid, by the mode's loop: the cell walk
+    (:func:`_trace_pixel`) or, for a sampled mode, :func:`.sampler.sample_pixel` (compiled code
+    only; the pieces driver's per-ray unit)."""
+    raise NotImplementedError
+
+
+@overload_jit(trace_pixel, inline="always")
+def _trace_pixel_of_mode(grid, mode, blocks, state, out, basis, geom, planes, t_range, load,
+                         store, final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy,
+                         ncz):
+    sampled = mode_api.sampled_of(getattr(mode, "instance_class", None))
+    return (sample_pixel if sampled else _trace_pixel).py_func
 
 
 # Without Numba's reference counting (``_nrt=False``): the hooks inlined here take the grid,
@@ -320,7 +296,8 @@ def _pair_kernel(grid_class: type, mode_class: type) -> Any:
             bind = {name: f if name in called else inlined(f)
                     for name, f in {**model_hooks, **mode_hooks}.items()}
             suffix = f"{grid_class.__name__}_{mode_class.__name__}"
-            pixel = rebound(_trace_pixel, bind, suffix)
+            loop = sample_pixel if mode_api.sampled_of(mode_class) else _trace_pixel
+            pixel = rebound(loop, bind, suffix)
             band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
             kernel = rebound(_trace_image, {"_trace_band": band}, suffix)
         _KERNELS[key] = kernel

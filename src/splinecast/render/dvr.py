@@ -27,12 +27,20 @@ cell, the consume call about 100 ns more whatever the number of samples in it), 
 samples, so a per-piece integration and termination are what pay (benchmarks/results/
 dvr_profile.md, dvr_speed.md).
 
-Segments end at every piece boundary, so no segment spans two cells: a ray traced brick by brick
-meets exactly the same segments as through the whole volume, and bricks traced independently
-combine with "over" into the same image (fixed step; the adaptive step depends on the opacity in
-front). Cells whose value range is fully transparent (the transfer function's prefix-sum table,
-reference 002, section 1.5) and blocks the hierarchy marks invisible contribute nothing and are
-left out.
+With ``sampling="ray"`` there is no cell walk: the fixed-step loop of :mod:`.sampler` takes
+the model's value every ``step`` voxels from the ray's entry, and the stretch between two
+samples, across however many cells, is one segment and one table lookup (the ray caster of VTK
+and most viewers, with the segments pre-integrated rather than classified by one sample). Blocks
+whose value range is transparent are leapt to the last sample inside them. Bricks sample at the
+same places; a segment crossing a brick face is cut in two there, which changes it only by the
+field's curvature along it (``tests/test_dvr_ray.py``).
+
+Otherwise segments end at every piece boundary, so no segment spans two cells: a ray traced
+brick by brick meets exactly the same segments as through the whole volume, and bricks traced
+independently combine with "over" into the same image (fixed step; the adaptive step depends
+on the opacity in front). Cells whose value range is fully transparent (the transfer function's
+prefix-sum table, reference 002, section 1.5) and blocks the hierarchy marks invisible
+contribute nothing and are left out.
 
 Opacity-adaptive step (reference 002, eq. 10): ``h = h_min + (h_max - h_min) A^n`` with ``A`` the
 accumulated opacity, so the step grows where little of what follows can still be seen. Early ray
@@ -59,7 +67,7 @@ from numba import prange
 
 from .._jit import jit
 from ..errors import ParameterError, limits
-from ..models.pieces import gradient
+from ..models.pieces import gradient, value_gradient_at
 from ..preintegration import PreintegrationTable, preint_lookup, preintegrate
 from ..roots.pieces import poly_value
 from ..transfer import TransferFunction
@@ -75,7 +83,7 @@ from .mode_api import (
 from .outputs import ALL_OUTPUTS, buffer
 
 __all__ = ["DVRSettings", "DEFAULT_SETTINGS", "PREINTEGRATION", "TABLE_LAYOUTS", "SAMPLINGS",
-           "DvrMode", "Dvr", "combine_dvr"]
+           "DvrMode", "DvrRayMode", "Dvr", "combine_dvr"]
 
 #: Classification kinds accepted by :class:`DVRSettings`.
 PREINTEGRATION = ("none", "2d", "3d")
@@ -84,9 +92,10 @@ PREINTEGRATION = ("none", "2d", "3d")
 TABLE_LAYOUTS = ("uniform", "exponential")
 
 #: Where segments end, accepted by :class:`DVRSettings`: at samples every ``step`` voxels from
-#: the ray's entry and at every piece boundary ("grid"), or at equal divisions of every piece,
-#: none longer than ``step`` ("pieces").
-SAMPLINGS = ("grid", "pieces")
+#: the ray's entry and at every piece boundary ("grid"), at equal divisions of every piece,
+#: none longer than ``step`` ("pieces"), or only at the samples ("ray": a segment may span
+#: several cells; the fixed-step loop of :mod:`.sampler`).
+SAMPLINGS = ("grid", "pieces", "ray")
 
 
 @dataclass(frozen=True)
@@ -120,13 +129,19 @@ class DVRSettings:
     leap : bool
         Accepted for compatibility; has no effect (segments now end at every cell, so every
         visible cell is visited).
-    sampling : {"grid", "pieces"}
+    sampling : {"grid", "pieces", "ray"}
         Where segments end. ``"grid"``: at samples every ``step`` voxels from the ray's entry
         into the volume, and at every piece (cell or tetrahedron) boundary. ``"pieces"``: every
         ray piece is cut into ``ceil(L / step)`` equal segments (``L`` its length in voxels), so
         a cell shorter than ``step`` along the ray is one segment and one table lookup; no
         segment is longer than ``step``, and the error stays second order in ``step``.
-        (The adaptive step, in this sampling, is chosen once per piece.)
+        (The adaptive step, in this sampling, is chosen once per piece.) ``"ray"``: only at
+        the samples every ``step`` voxels from the entry (and at the ends of a brick's
+        stretch of the ray): a segment may span several cells, and the model's value is taken
+        at the samples only, the classic ray caster's loop (:mod:`.sampler`) with the
+        segments pre-integrated; no cell walk, so it is the fastest, and the error is second
+        order in ``step`` (the field is taken as linear between samples). Not with
+        ``adaptive``.
     """
 
     step: float = 0.5
@@ -165,6 +180,9 @@ class DVRSettings:
         if self.sampling not in SAMPLINGS:
             raise ParameterError(f"sampling must be one of {', '.join(SAMPLINGS)}, "
                                  f"got {self.sampling!r}")
+        if self.sampling == "ray" and self.adaptive:
+            raise ParameterError("adaptive=True needs sampling 'grid' or 'pieces' (the 'ray' "
+                                 "sampling takes samples at a fixed step)")
         if self.table_layout not in TABLE_LAYOUTS:
             raise ParameterError(f"table_layout must be one of {', '.join(TABLE_LAYOUTS)}, "
                                  f"got {self.table_layout!r}")
@@ -209,6 +227,10 @@ DvrMode = namedtuple("DvrMode", [
     "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut",
     "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
     "bg_r", "bg_g", "bg_b", "bg_a", "pieces"])
+
+#: The same parameters for ``sampling="ray"``: another class, so the driver runs the fixed-step
+#: loop of :mod:`.sampler` for it.
+DvrRayMode = namedtuple("DvrRayMode", DvrMode._fields)
 
 
 @jit(inline="always")
@@ -545,19 +567,62 @@ def _finish(mode, out, row, col, st, ray):
         samples[row, col] = st[5]
 
 
-register(DvrMode,
-         state_new=_state_new,
-         state_load=_state_load,
-         state_store=_state_store,
-         mode_scratch=no_scratch,
-         ray_begin=unchanged_begin,
-         skip_size=flagged_block_size,
-         wants=_wants,
-         on_skip=unchanged_skip,
-         consume=_consume,
-         done=_done,
-         ray_end=unchanged_end,
-         finish=_finish)
+@jit()
+def _sample_step(mode):
+    return mode.h0
+
+
+@jit()
+def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
+    """``sampling="ray"``: the stretch between two samples, composited behind the ray's colour
+    (shaded with the model's gradient at its back end, ``(x, y, z)``)."""
+    acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
+    samples += 1
+    if mode.pi_mode == 1 and abs(length - mode.h0) <= 1e-9 * mode.h0:
+        # The common case, a whole step with a 2D table: the table's own length, so no
+        # correction; its opacity is read first and a transparent segment reads nothing else.
+        table = mode.table
+        top = table.shape[1] - 1.0
+        uf = min(max((va - mode.t_lo) * mode.t_scale, 0.0), top)
+        ub = min(max((vb - mode.t_lo) * mode.t_scale, 0.0), top)
+        i0 = min(int(uf), table.shape[1] - 2)
+        j0 = min(int(ub), table.shape[1] - 2)
+        fx = uf - i0
+        fy = ub - j0
+        w00 = (1.0 - fx) * (1.0 - fy)
+        w10 = fx * (1.0 - fy)
+        w01 = (1.0 - fx) * fy
+        w11 = fx * fy
+        a = (w00 * table[0, i0, j0, 3] + w10 * table[0, i0 + 1, j0, 3]
+             + w01 * table[0, i0, j0 + 1, 3] + w11 * table[0, i0 + 1, j0 + 1, 3])
+        if not a > 0.0:
+            return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
+        r = (w00 * table[0, i0, j0, 0] + w10 * table[0, i0 + 1, j0, 0]
+             + w01 * table[0, i0, j0 + 1, 0] + w11 * table[0, i0 + 1, j0 + 1, 0])
+        g = (w00 * table[0, i0, j0, 1] + w10 * table[0, i0 + 1, j0, 1]
+             + w01 * table[0, i0, j0 + 1, 1] + w11 * table[0, i0 + 1, j0 + 1, 1])
+        b = (w00 * table[0, i0, j0, 2] + w10 * table[0, i0 + 1, j0, 2]
+             + w01 * table[0, i0, j0 + 1, 2] + w11 * table[0, i0 + 1, j0 + 1, 2])
+    else:
+        r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
+                               mode.lut, mode.t_lo, mode.l_scale, va, vb, length)
+    if a > 0.0:
+        factor = 1.0
+        if mode.shade:
+            _, gx, gy, gz = value_gradient_at(grid, scratch, x, y, z)
+            factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz, ray[12],
+                                   ray[13], ray[14], ray[3], ray[4], ray[5])
+        acc_r, acc_g, acc_b, acc_a, t_half = _composite(acc_r, acc_g, acc_b, acc_a, t_half, r,
+                                                        g, b, a, factor, tb)
+    return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
+
+
+_HOOKS = dict(state_new=_state_new, state_load=_state_load, state_store=_state_store,
+              mode_scratch=no_scratch, ray_begin=unchanged_begin, skip_size=flagged_block_size,
+              wants=_wants, on_skip=unchanged_skip, consume=_consume, done=_done,
+              ray_end=unchanged_end, finish=_finish)
+register(DvrMode, **_HOOKS)
+register(DvrRayMode, sample_step=_sample_step, segment=_segment, **_HOOKS)
 
 
 @jit(parallel=True)
@@ -633,7 +698,8 @@ class Dvr:
         lo, hi = (float(v) for v in tf.domain)
         term = 2.0 if settings.termination is None else float(settings.termination)
         bg = np.asarray(background, np.float64).reshape(4)
-        self.params = DvrMode(
+        params_class = DvrRayMode if settings.sampling == "ray" else DvrMode
+        self.params = params_class(
             prefix, lo, (prefix.shape[0] - 1) / (hi - lo), pi_mode, table, float(settings.step),
             lo, (table.shape[1] - 1) / (hi - lo), lut, (lut.shape[0] - 1) / (hi - lo),
             bool(settings.adaptive), float(settings.h_max), float(settings.exponent), term,

@@ -36,6 +36,17 @@ bx, by, bz, ray, st)`` -> ``st``
 ``state_store(mode, state, row, col, st)``
     Keeps the state for the ray's next segment.
 
+A mode may instead be *sampled*: it registers ``sample_step`` and ``segment`` as well, and the
+driver then runs the fixed-step loop of :mod:`.sampler` for it (no cell walk, so no
+``ray_begin``, ``wants``, ``on_skip`` or ``consume``):
+
+``sample_step(mode)`` -> ``float``
+    Distance between samples, in voxels.
+``segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z)`` -> ``st``
+    The stretch ``[ta, tb]`` of the ray between two samples (or a sample and an end of the
+    grid's interval), the model's values ``va`` and ``vb`` there, its length in voxels, and
+    ``(x, y, z)``, the point at ``tb`` in the grid's traversal space (for a gradient).
+
 plus ``mode_scratch(mode)`` (per-thread buffers). ``ray`` is the tuple ``(wx, wy, wz, ux, uy,
 uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)``: world origin and unit direction, the same ray in
 the grid's traversal space (``o + t d``, the parameter ``t`` staying the world distance), the
@@ -59,12 +70,14 @@ __all__ = [
     "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
-    "never", "hooks_of",
+    "never", "hooks_of", "sampled_of", "sample_step", "segment",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
 _NAMES = ("state_new", "state_load", "state_store", "mode_scratch", "ray_begin", "skip_size",
           "wants", "on_skip", "consume", "done", "ray_end", "finish")
+#: The hooks of a sampled mode, registered together or not at all.
+_SAMPLED = ("sample_step", "segment")
 
 
 def register(mode_class: type, **hooks: Any) -> None:
@@ -73,7 +86,15 @@ def register(mode_class: type, **hooks: Any) -> None:
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
+    if 0 < len(set(_SAMPLED) & set(hooks)) < len(_SAMPLED):
+        raise TypeError(f"{mode_class.__name__}: a sampled mode registers all of "
+                        f"{', '.join(_SAMPLED)}")
     _HOOKS[mode_class] = {"watches_skips": never, **hooks}
+
+
+def sampled_of(mode_class: type) -> bool:
+    """Whether a mode class is sampled (the driver runs :mod:`.sampler`'s loop for it)."""
+    return "segment" in _HOOKS.get(mode_class, {})
 
 
 def hooks_of(mode_class: type) -> dict[str, Any] | None:
@@ -84,7 +105,7 @@ def hooks_of(mode_class: type) -> dict[str, Any] | None:
 
 def _impl(mode: Any, name: str) -> Any:
     cls = getattr(mode, "instance_class", None)
-    return _HOOKS[cls][name] if cls in _HOOKS else None
+    return _HOOKS[cls].get(name) if cls in _HOOKS else None
 
 
 # Stubs for Python, overloads for compiled code that compile the mode's registered function in
@@ -232,6 +253,28 @@ def watches_skips(mode):
 @overload_jit(watches_skips, inline="never")
 def _watches_skips(mode):
     f = _impl(mode, "watches_skips")
+    return None if f is None else f.py_func
+
+
+def sample_step(mode):
+    """Distance between the samples of a sampled mode, in voxels (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(sample_step, inline="never")
+def _sample_step(mode):
+    f = _impl(mode, "sample_step")
+    return None if f is None else f.py_func
+
+
+def segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
+    """Take the stretch of a ray between two samples into the state (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(segment, inline="never")
+def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
+    f = _impl(mode, "segment")
     return None if f is None else f.py_func
 
 

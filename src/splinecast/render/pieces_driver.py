@@ -5,7 +5,7 @@ grid, block flags, placement and box). Tracing them one driver call at a time co
 launch, a camera tile, and copies of the mode's per-pixel state per piece -- milliseconds each,
 far more than a small brick's rays on a shared machine. :func:`trace_pieces` instead runs once
 per frame: parallel over screen tiles, each tile walks the pieces overlapping it in the given
-(front-to-back) order and calls the driver's per-ray unit :func:`.driver._trace_pixel` on the
+(front-to-back) order and calls the driver's per-ray unit :func:`.driver.trace_pixel` on the
 pixels of the piece's screen rectangle, with the ray's interval inside the piece's box as its
 ``t_range``. The mode's state stays in the full-image state arrays (``load`` and ``store`` per
 piece, as the segment entry point does), so a ray sees exactly the sequence of grids and
@@ -37,7 +37,7 @@ from numba import prange
 from .._jit import jit, overload_jit
 from ..models.pieces import cell_count, new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
-from .driver import _trace_pixel
+from .driver import trace_pixel
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import pixel_ray
@@ -261,7 +261,7 @@ def _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, b
                 hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
                                       level, kernel, scr, geom, grids_a, grids_b, which, geoms,
                                       exit_t, exit_piece, exit_level)
-            nv, nt, ns = _trace_pixel(
+            nv, nt, ns = trace_pixel(
                 kernel, mode, blocks, state, out, basis, geom, planes, t_range, True, True,
                 False, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz,
             )

@@ -12,8 +12,9 @@ import math
 import numpy as np
 
 from .._jit import jit
+from .clipping import clip_interval
 
-__all__ = ["pixel_ray"]
+__all__ = ["pixel_ray", "grid_ray"]
 
 
 @jit(inline="always")
@@ -36,3 +37,50 @@ def pixel_ray(basis: np.ndarray, row: int, col: int, width: int, height: int) ->
     dz = basis[5] + sx * basis[8] + sy * basis[11]
     norm = math.sqrt(dx * dx + dy * dy + dz * dz)
     return basis[0], basis[1], basis[2], dx / norm, dy / norm, dz / norm
+
+
+@jit(inline="always")
+def _slab(o: float, d: float, lo: float, hi: float, t0: float, t1: float) -> tuple:
+    if d == 0.0:
+        if o < lo or o > hi:
+            return math.inf, -math.inf
+        return t0, t1
+    ta = (lo - o) / d
+    tb = (hi - o) / d
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@jit(inline="always")
+def grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz):
+    """Pixel ``(row, col)``'s ray set up for one grid of the driver (:mod:`.driver`'s ``geom``).
+
+    Returns ``(t0, t1, ray)``: the interval of the ray kept by the clip ``planes``, the rendered
+    domain and the pixel's ``t_range`` (when not empty), empty (``t0 > t1``) when nothing is
+    left, and the mode API's ``ray`` tuple (:mod:`.mode_api`), whose last entry, the anchor of
+    the sample grids, is where the ray enters the domain: the same for every grid.
+    """
+    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+    sx, sy, sz = geom[3], geom[4], geom[5]
+    dx, dy, dz = ux / sx, uy / sy, uz / sz
+    vx, vy, vz = (wx - geom[0]) / sx, (wy - geom[1]) / sy, (wz - geom[2]) / sz
+    t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
+    t0, t1 = _slab(vx, dx, geom[10], geom[13], t0, t1)
+    t0, t1 = _slab(vy, dy, geom[11], geom[14], t0, t1)
+    t0, t1 = _slab(vz, dz, geom[12], geom[15], t0, t1)
+    anchor = t0  # where the ray enters the rendered domain: the same for every grid
+    if t_range.shape[0] > 0:
+        t0 = max(t0, t_range[row, col, 0])
+        t1 = min(t1, t_range[row, col, 1])
+    ox = vx + geom[6] - geom[7]
+    oy = vy + geom[6] - geom[8]
+    oz = vz + geom[6] - geom[9]
+    # A ray lying in the plane between this grid and the next one belongs to the next one (the
+    # traversal's rule for cell faces), so bricks never trace the same stretch twice.
+    if ((dx == 0.0 and ox == ncx and geom[7] + ncx < geom[16])
+            or (dy == 0.0 and oy == ncy and geom[8] + ncy < geom[17])
+            or (dz == 0.0 and oz == ncz and geom[9] + ncz < geom[18])):
+        t1 = -math.inf
+    ray = (wx, wy, wz, ux, uy, uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)
+    return t0, t1, ray

@@ -1,0 +1,119 @@
+"""The fixed-step loop: a ray sampled every ``step`` voxels, for the sampled modes.
+
+The driver's cell walk (:mod:`.driver`) hands a mode every cell the ray crosses; a walk step
+and a cell's set-up cost about 100 ns, whatever the mode does with the cell. A sampled mode
+(DVR's ``sampling="ray"``, the reference VTK's and most viewers' ray casters use) only needs
+the model's value every ``step`` voxels, and the stretch between two samples, which may span
+several cells, is one segment: a table lookup. This loop gives it exactly that, for every
+model (the value is the model's ``value_at``, inlined into the pair's kernel):
+
+* samples at ``anchor + m * step`` (``anchor``: where the ray enters the rendered domain, the
+  same for every grid), so bricks sample at the same places as the whole volume; a grid's
+  first and last segments are cut at its interval's ends, so bricks traced one after another
+  composite the same stretches as one grid (cut in two at each brick face);
+* empty-space leaping: at each sample in another 4-cell block than the last one found
+  visible, the mode's ``skip_size`` names the largest block around the sample's cell that
+  cannot contribute (DVR: the transfer function is zero over its value range; a sampled mode's
+  ``skip_size`` depends on the position only); the loop moves to the last sample inside that
+  block, without evaluating the ones in between, whose segments lie wholly in the block and
+  add nothing;
+* early termination by the mode's ``done``.
+
+It returns the driver's three per-ray counters with this meaning: samples evaluated, segments
+handed to the mode, blocks leapt.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._jit import jit
+from ..accel.traversal import axis_exit, clip_to_box
+from ..models.pieces import value_at
+from .mode_api import (
+    done,
+    finish,
+    sample_step,
+    segment,
+    skip_size,
+    state_load,
+    state_new,
+    state_store,
+)
+from .rays import grid_ray
+
+__all__ = ["sample_pixel"]
+
+
+@jit(inline="always")
+def _cell(p: float, n: int) -> int:
+    """The cell holding coordinate ``p``, clamped into ``[0, n - 1]``."""
+    c = int(math.floor(p))
+    return min(max(c, 0), n - 1)
+
+
+@jit(inline="always")
+def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
+                 final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
+    """Sample one pixel's ray through ``grid`` (the driver's per-ray unit for sampled modes;
+    same arguments as :func:`.driver._trace_pixel`). Returns (samples evaluated, segments
+    taken, blocks leapt)."""
+    t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
+    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    st = state_load(mode, state, row, col) if load else state_new(mode)
+    evaluated = 0
+    taken = 0
+    leaps = 0
+    if t0 <= t1 and not done(mode, st):
+        ta, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
+        speed = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if ta <= t_far and speed > 0.0:
+            anchor = ray[15]
+            dt = sample_step(mode) / speed
+            m = math.floor((ta - anchor) / dt) + 1.0
+            va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
+            evaluated += 1
+            while True:
+                px, py, pz = ox + ta * dx, oy + ta * dy, oz + ta * dz
+                ci, cj, ck = _cell(px, ncx), _cell(py, ncy), _cell(pz, ncz)
+                size = skip_size(mode, blocks, ci, cj, ck, st)
+                if size > 0:
+                    # The block cannot contribute: go to the last sample inside it (segments
+                    # between samples inside it add nothing), or end the ray if it reaches
+                    # the end of the interval.
+                    _, tx = axis_exit(ci, ox, dx, size)
+                    _, ty = axis_exit(cj, oy, dy, size)
+                    _, tz = axis_exit(ck, oz, dz, size)
+                    t_exit = min(tx, ty, tz)
+                    if t_exit >= t_far:
+                        leaps += 1
+                        break
+                    last = math.floor((t_exit - anchor) / dt)
+                    if last >= m:
+                        leaps += 1
+                        m = last
+                        ta = anchor + m * dt
+                        va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
+                        evaluated += 1
+                        m += 1.0
+                tb = anchor + m * dt
+                end = tb >= t_far
+                if end:
+                    tb = t_far
+                bx, by, bz = ox + tb * dx, oy + tb * dy, oz + tb * dz
+                vb = value_at(grid, scr, bx, by, bz)
+                evaluated += 1
+                length = (tb - ta) * speed
+                if length > 0.0:
+                    st = segment(mode, grid, scr, st, ray, ta, tb, va, vb, length, bx, by, bz)
+                    taken += 1
+                if end or done(mode, st):
+                    break
+                ta = tb
+                va = vb
+                m += 1.0
+    if store:
+        state_store(mode, state, row, col, st)
+    if final:
+        finish(mode, out, row, col, st, ray)
+    return evaluated, taken, leaps

@@ -1,0 +1,173 @@
+"""DVR sampled at a fixed step along the ray (``DVRSettings(sampling="ray")``, the loop of
+``splinecast.render.sampler``) and the model's ``value_at`` it reads.
+
+References, independent of the code under test:
+
+- the dense emission-absorption integral of ``test_dvr.py`` (``reference.dense_dvr``), same
+  cases and metric (largest error over the visible pixels, premultiplied RGB over black);
+- the fixed-grid sampling (``sampling="grid"``, the cell walk the other DVR tests check) at a
+  fine step: a second code path converging to the same integral;
+- the same sampler with its empty-space leaping switched off (every block flagged visible);
+- the whole-volume render for bricks traced chained and combined (``test_bricks.py``);
+- the model's ``value_gradient_at`` (monomial form, checked against finite differences and the
+  reference interpolant elsewhere) for ``value_at`` (lerp form).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_bricks import _cameras, _render_bricks
+from test_dvr import BLACK, TARGET, _ml_ramp, _noise_ramp
+
+import splinecast as sc
+from splinecast._jit import jit
+from splinecast.models.pieces import value_at, value_gradient_at
+from splinecast.render.dvr import Dvr
+from splinecast.render.segment import render_grid
+
+
+@pytest.fixture(scope="module")
+def cases():
+    return {"ml-ramp": _ml_ramp(), "noise-ramp": _noise_ramp()}
+
+
+@pytest.fixture(scope="module")
+def scenes(cases):
+    return {name: sc.Scene(case.volume) for name, case in cases.items()}
+
+
+@pytest.mark.parametrize("name", ["ml-ramp", "noise-ramp"])
+def test_ray_sampling_meets_1_255_where_the_grid_does(cases, scenes, name):
+    """The README's accuracy statement (step 0.25 within 1/255) holds for the ray sampling."""
+    case = cases[name]
+    err = case.error(case.render(scenes[name], step=0.25, sampling="ray"))
+    assert err <= TARGET - case.ref_err, f"{name}: {err * 255:.3f}/255"
+
+
+def test_ray_sampling_converges_second_order_to_the_grid_sampling(cases, scenes):
+    case, scene = cases["noise-ramp"], scenes["noise-ramp"]
+    errs = [case.error(case.render(scene, step=h, table_size=1024, sampling="ray"))
+            for h in (1.0, 0.5, 0.25)]
+    # Halving the step divides the error by about 4 (3 allows for the transfer function's kinks).
+    assert errs[0] / errs[1] > 3 and errs[1] / errs[2] > 3, errs
+    fine_grid = case.render(scene, step=0.0625, table_size=1024)
+    fine_ray = case.render(scene, step=0.0625, table_size=1024, sampling="ray")
+    diff = np.abs(fine_grid.rgba - fine_ray.rgba).max()
+    assert diff < 0.1 * TARGET, diff * 255
+
+
+@pytest.mark.parametrize("model", ["bspline3", "s31"])
+def test_every_model_is_sampled_through_its_own_value(model):
+    """Models without a ``value_at`` of their own (the value of ``value_gradient_at``): the
+    ray sampling at a fine step equals the grid sampling (the cell walk with the model's
+    polynomial pieces) at the same step."""
+    case = _noise_ramp()
+    scene = sc.Scene(case.volume, model=model)
+    grid = case.render(scene, step=0.125, table_size=1024)
+    ray = case.render(scene, step=0.125, table_size=1024, sampling="ray")
+    assert grid.rgba[..., 3].max() > 0.5
+    assert np.abs(grid.rgba - ray.rgba).max() < 0.2 * TARGET
+
+
+def _visible_everywhere(setup: Dvr) -> Dvr:
+    """The same DVR with every block flagged visible: the sampler leaps over nothing."""
+    flagged = setup.blocks
+
+    def blocks(hierarchy, flags=None):
+        return tuple(np.ones_like(a) for a in flagged(hierarchy, flags))
+
+    setup.blocks = blocks
+    return setup
+
+
+def test_leaping_changes_nothing_but_the_work():
+    """A transfer function transparent over most of the data: the leaping sampler takes far
+    fewer samples and gives the image of the sampler that evaluates every one."""
+    vol = sc.demo("marschner-lobb", size=40)
+    scene = sc.Scene(vol)
+    tf = sc.TransferFunction([(0.0, 0.0), (0.8, 0.0), (0.85, 0.5), (1.0, 0.9)],
+                             domain=vol.value_range)
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(48, 36))
+    settings = sc.DVRSettings(step=0.7, sampling="ray")
+    (rgba, *_), leapt = render_grid(scene.grid, Dvr(tf, settings), cam)
+    (rgba_all, *_), every = render_grid(scene.grid, _visible_everywhere(Dvr(tf, settings)), cam)
+    assert rgba[..., 3].max() > 0.3
+    assert leapt[2].sum() > 0 and every[2].sum() == 0
+    assert leapt[0].sum() < 0.6 * every[0].sum()  # samples evaluated
+    # Segments inside a transparent block read the table at values its visible part is at
+    # most one table cell away from: the difference is that cell's interpolation, no more.
+    np.testing.assert_allclose(rgba, rgba_all, atol=0.05 * TARGET)
+
+
+def test_samples_are_taken_every_step_from_the_entry():
+    """A constant, visible volume seen along an axis: each ray takes ``n / step`` segments
+    (the last one cut at the exit) and the colour is the closed-form slab integral."""
+    n = 12
+    vol = sc.Volume(np.full((n + 1, n + 1, n + 1), 0.5, np.float32))
+    scene = sc.Scene(vol)
+    tf = sc.TransferFunction([(0.0, 0.2), (1.0, 0.2)], domain=(0.0, 1.0),
+                             colormap=[(0.0, 1.0, 1.0, 1.0), (1.0, 1.0, 1.0, 1.0)])
+    c = n / 2
+    cam = sc.Camera((c, c, 60.0), (c, c, 0.0), up=(0.0, 1.0, 0.0), ortho=True,
+                    ortho_height=n - 2.0, size=(6, 6))
+    frame = scene.render(cam, mode="dvr", tf=tf, shading=BLACK,
+                         dvr=sc.DVRSettings(step=0.7, sampling="ray"))
+    assert frame.stats["sampling"] == "ray"
+    np.testing.assert_array_equal(frame.cells_tested, int(np.ceil(n / 0.7)))
+    # Opacity 0.2 per voxel over n voxels, white emission over black: the premultiplied colour
+    # is the ray's opacity, 1 - 0.8^n.
+    np.testing.assert_allclose(frame.rgba[..., :3], 1.0 - 0.8**n, atol=1e-4)
+
+
+@pytest.mark.parametrize("model", ["trilinear", "bspline3"])
+def test_ray_sampling_through_bricks_equals_the_whole_volume(model):
+    """Bricks traced chained or combined: the same samples (anchored at the ray's entry into the
+    volume); a segment crossing a brick face is cut in two there, which changes it by the
+    curvature of the field along it only: second order in the step, like the sampling error
+    itself (this transfer function's peaks are steep: 1/255 needs a step of about 0.25)."""
+    from reference import smooth_noise
+
+    volume = sc.Volume(smooth_noise((20, 19, 21), seed=3, sigma=2.0).astype(np.float32))
+    scene = sc.Scene(volume, model=model)
+    tf = sc.TransferFunction([(-0.8, 0.0), (-0.2, 0.4), (0.2, 0.0), (0.7, 0.6)],
+                             domain=(-3.0, 3.0))
+    for step in (0.4, 1.0):
+        setup = Dvr(tf, sc.DVRSettings(step=step, sampling="ray"))
+        for cam in _cameras(scene.model.shift):
+            whole, _ = render_grid(scene.grid, setup, cam)
+            assert whole[0][..., 3].max() > 0.5
+            for chained in (True, False):
+                bricks = _render_bricks(scene, setup, cam, 8, chained)
+                what = f"{model} step {step} {'chained' if chained else 'combined'}"
+                np.testing.assert_allclose(bricks[0], whole[0], atol=3 * TARGET * step**2,
+                                           err_msg=what)
+
+
+def test_adaptive_step_needs_another_sampling():
+    with pytest.raises(sc.ParameterError, match="adaptive"):
+        sc.DVRSettings(sampling="ray", adaptive=True)
+
+
+@jit()
+def _values(grid, points):
+    out = np.empty((points.shape[0], 2))
+    scratch = np.empty(0)
+    for n in range(points.shape[0]):
+        x, y, z = points[n, 0], points[n, 1], points[n, 2]
+        out[n, 0] = value_at(grid, scratch, x, y, z)
+        out[n, 1] = value_gradient_at(grid, scratch, x, y, z)[0]
+    return out
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.float32, np.float64])
+def test_trilinear_value_at_equals_value_gradient_at(dtype):
+    """Every dtype a reader hands the model, points inside, on the faces and outside (clamped)."""
+    rng = np.random.default_rng(7)
+    data = rng.integers(0, 250, size=(9, 8, 10)).astype(dtype)
+    scene = sc.Scene(sc.Volume(data))
+    points = rng.uniform(-1.5, 10.5, size=(400, 3))
+    points[:40] = np.round(points[:40])  # on grid planes, and corners
+    values = _values(scene.grid.kernel, points)
+    assert np.ptp(values[:, 1]) > 100  # the points see the data's range
+    np.testing.assert_allclose(values[:, 0], values[:, 1], rtol=1e-12, atol=1e-9)
