@@ -60,7 +60,7 @@ def test_every_model_in_every_mode_from_the_cli_equals_the_api(tmp_path, capsys,
         (["--iso=-0.3,0", "--opacity", "0.4,0.8"], {"iso": [-0.3, 0.0], "opacity": [0.4, 0.8]}),
         (["--mode", "mip"], {"mode": "mip"}),
         (["--mode", "minip"], {"mode": "minip"}),
-        # The API without dvr= uses render.dvr.DEFAULT_SETTINGS (pieces, early termination),
+        # The API without dvr= uses render.dvr.DEFAULT_SETTINGS (ray, early termination),
         # which the CLI's DVR options do not spell: both sides get the same explicit settings.
         (["--mode", "dvr", "--tf", str(tf_path), "--step", "0.5"],
          {"mode": "dvr", "tf": tf, "dvr": sc.DVRSettings(step=0.5)}),

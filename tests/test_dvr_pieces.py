@@ -1,4 +1,5 @@
-"""DVR segments cut per ray piece (``DVRSettings(sampling="pieces")``) and the default settings.
+"""DVR segments cut per ray piece (``DVRSettings(sampling="pieces")``) and the default settings
+(the fixed-step sampling, ``tests/test_dvr_ray.py``).
 
 References, independent of the code under test:
 
@@ -89,14 +90,17 @@ def test_pieces_through_bricks_equal_the_whole_volume(model):
 @pytest.mark.parametrize("name", ["ml-ramp", "noise-ramp"])
 def test_default_settings_meet_the_suites_tolerance(cases, scenes, name):
     """``mode="dvr"`` without settings: within 1/255 of the dense integral in mean absolute
-    error (the comparison suite's quality criterion), and within 6/255 at every visible pixel;
-    early termination changes no pixel by more than the transparency it leaves."""
+    error (the comparison suite's quality criterion), and within 10/255 at every visible pixel
+    (the fixed-step default on these small volumes, whose field bends within a voxel, measured
+    5.4/255 and 9.3/255; the per-piece sampling it replaced, 5.0/255 and 4.1/255: README, "Use it
+    from Python"); early termination changes no pixel by more than the transparency it
+    leaves."""
     case, scene = cases[name], scenes[name]
     frame = scene.render(case.camera, mode="dvr", tf=case.tf, shading=BLACK)
     assert frame.stats["sampling"] == DEFAULT_SETTINGS.sampling
     diff = np.abs(frame.rgba[..., :3] - case.ref)
     assert diff.mean() <= TARGET - case.ref_err, diff.mean() * 255
-    assert case.error(frame) <= 6 * TARGET - case.ref_err, case.error(frame) * 255
+    assert case.error(frame) <= 10 * TARGET - case.ref_err, case.error(frame) * 255
     endless = scene.render(case.camera, mode="dvr", tf=case.tf, shading=BLACK,
                            dvr=sc.DVRSettings(**{**DEFAULT_SETTINGS.__dict__,
                                                  "termination": None}))

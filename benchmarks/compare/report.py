@@ -105,10 +105,11 @@ def markdown(results: dict[str, Any]) -> str:
                   "per one-voxel slab corrected as 1 - (1 - a)^h for a step of h voxels "
                   "(splinecast's convention; VTK gets ScalarOpacityUnitDistance = one voxel), "
                   "premultiplied RGB over black, error averaged over pixels and RGB. Tolerance: "
-                  "the error of splinecast at its default settings (DVR: 0.5-voxel step, 2D "
-                  "pre-integration), at least 1/255. Each method (VTK's casters; for DVR also "
-                  "splinecast) runs at the coarsest step of 1, 1/2, 1/4, 1/8 voxel within the "
-                  "tolerance; one that never reaches it runs at 1/8 (\"finest step tried\").",
+                  "the error of splinecast at its default settings (DVR: "
+                  "splinecast.render.dvr.DEFAULT_SETTINGS), at least 1/255. Each method (VTK's "
+                  "casters; for DVR also splinecast, its other settings the defaults) runs at "
+                  "the coarsest step of 2, 1, 1/2, 1/4, 1/8 voxel within the tolerance; one that "
+                  "never reaches it runs at 1/8 (\"finest step tried\").",
                   "",
                   "| scene | mode | image | method | step (voxels) | error vs reference "
                   "| ms/frame | ratio to the floor |", "|---|---|---|---|---|---|---|---|"]
