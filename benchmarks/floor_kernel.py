@@ -19,10 +19,10 @@ import numpy as np
 from numba import prange
 
 from splinecast._jit import jit
+from splinecast.render.driver import band_order
 
-# The driver's own slab clip, so the floor clips each ray exactly as a render does.
-from splinecast.render.driver import _slab, band_order
-from splinecast.render.rays import pixel_ray
+# The driver's own ray and slab clip, so the floor clips each ray exactly as a render does.
+from splinecast.render.rays import pixel_ray, slab
 
 __all__ = ["floor_frame", "floor_render"]
 
@@ -37,9 +37,9 @@ def floor_frame(basis: np.ndarray, box: np.ndarray, colour: np.ndarray, bands: n
         row = bands[b]
         for col in range(width):
             wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-            t0, t1 = _slab(wx, ux, box[0], box[3], 0.0, math.inf)
-            t0, t1 = _slab(wy, uy, box[1], box[4], t0, t1)
-            t0, t1 = _slab(wz, uz, box[2], box[5], t0, t1)
+            t0, t1 = slab(wx, ux, box[0], box[3], 0.0, math.inf)
+            t0, t1 = slab(wy, uy, box[1], box[4], t0, t1)
+            t0, t1 = slab(wz, uz, box[2], box[5], t0, t1)
             c = 0 if t0 <= t1 else 1
             for k in range(4):
                 rgba[row, col, k] = colour[c, k]

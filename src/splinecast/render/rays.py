@@ -14,7 +14,7 @@ import numpy as np
 from .._jit import jit
 from .clipping import clip_interval
 
-__all__ = ["pixel_ray", "grid_ray"]
+__all__ = ["pixel_ray", "grid_ray", "slab"]
 
 
 @jit(inline="always")
@@ -40,7 +40,8 @@ def pixel_ray(basis: np.ndarray, row: int, col: int, width: int, height: int) ->
 
 
 @jit(inline="always")
-def _slab(o: float, d: float, lo: float, hi: float, t0: float, t1: float) -> tuple:
+def slab(o: float, d: float, lo: float, hi: float, t0: float, t1: float) -> tuple:
+    """``[t0, t1]`` cut to where ``o + t d`` lies in ``[lo, hi]`` (empty: ``t0 > t1``)."""
     if d == 0.0:
         if o < lo or o > hi:
             return math.inf, -math.inf
@@ -66,9 +67,9 @@ def grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, nc
     dx, dy, dz = ux / sx, uy / sy, uz / sz
     vx, vy, vz = (wx - geom[0]) / sx, (wy - geom[1]) / sy, (wz - geom[2]) / sz
     t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-    t0, t1 = _slab(vx, dx, geom[10], geom[13], t0, t1)
-    t0, t1 = _slab(vy, dy, geom[11], geom[14], t0, t1)
-    t0, t1 = _slab(vz, dz, geom[12], geom[15], t0, t1)
+    t0, t1 = slab(vx, dx, geom[10], geom[13], t0, t1)
+    t0, t1 = slab(vy, dy, geom[11], geom[14], t0, t1)
+    t0, t1 = slab(vz, dz, geom[12], geom[15], t0, t1)
     anchor = t0  # where the ray enters the rendered domain: the same for every grid
     if t_range.shape[0] > 0:
         t0 = max(t0, t_range[row, col, 0])
