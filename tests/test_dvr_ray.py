@@ -100,6 +100,30 @@ def test_leaping_changes_nothing_but_the_work():
     np.testing.assert_allclose(rgba, rgba_all, atol=0.05 * TARGET)
 
 
+def test_rays_through_transparent_blocks_take_no_value():
+    """A sphere seen through empty space: a ray that only crosses blocks the transfer function
+    makes transparent goes from block to block without taking a single value, and every ray's
+    colour is that of the sampler that evaluates every sample."""
+    vol = sc.demo("sphere", size=40)
+    scene = sc.Scene(vol)
+    lo, hi = vol.value_range
+    tf = sc.TransferFunction([(lo, 0.4), (-0.05 * (hi - lo), 0.4), (0.0, 0.0), (hi, 0.0)],
+                             domain=(lo, hi))
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(40, 30), zoom=1.8)
+    settings = sc.DVRSettings(step=1.0, sampling="ray")
+    (rgba, *_), (evaluated, _, leapt) = render_grid(scene.grid, Dvr(tf, settings), cam)
+    (rgba_all, *_), (every, _, _) = render_grid(scene.grid,
+                                                _visible_everywhere(Dvr(tf, settings)), cam)
+    crossing = every > 0  # rays that cross the volume's box
+    empty = crossing & (evaluated == 0)
+    assert crossing.sum() > 0.8 * crossing.size and rgba[..., 3].max() > 0.9
+    assert empty.sum() > 0.3 * crossing.sum(), (empty.sum(), crossing.sum())
+    # Block to block: most of those rays leave several blocks (a ray leaving the volume from
+    # its first block takes one leap).
+    assert (leapt[empty] >= 2).mean() > 0.5, np.bincount(leapt[empty])
+    np.testing.assert_allclose(rgba, rgba_all, atol=0.05 * TARGET)
+
+
 def test_samples_are_taken_every_step_from_the_entry():
     """A constant, visible volume seen along an axis: each ray takes ``n / step`` segments
     (the last one cut at the exit) and the colour is the closed-form slab integral."""

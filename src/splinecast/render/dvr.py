@@ -217,9 +217,10 @@ class DVRSettings:
 #: pre-integrated, and rays stopped once what remains visible behind them is below 2^-10 per
 #: channel (a quarter of the 8-bit step), which no 8-bit image can show. Measured against the
 #: comparison suite's dense reference, this meets its tolerance (mean absolute error 1/255) with a
-#: wide margin: 0.0004-0.0006 on its volumes, 2.1-2.5x faster than the per-piece sampling
-#: it replaces (``sampling="pieces"``, whose error is about half) on the synthetic ones and 1.2x
-#: on the MRI (benchmarks/results/dvr_ray.md); ``tests/test_dvr_pieces.py`` checks it. On small
+#: wide margin: 0.0002-0.0006 on its volumes, 2.1-2.4x faster than the per-piece sampling
+#: it replaces (``sampling="pieces"``, whose error is about half) on the synthetic ones and 1.1x
+#: on the MRI, then 1.19x more there from the stretches left out between transparent blocks
+#: (benchmarks/results/dvr_ray.md, dvr_chain.md); ``tests/test_dvr_pieces.py`` checks it. On small
 #: volumes whose field bends within a voxel the per-piece sampling is the more accurate (largest
 #: pixel error 4/255 against 9/255 on a 16^3 noise volume). Bricks rendered independently and
 #: merged with "over" (sort-last) can differ from the whole-volume image by up to the same
@@ -714,8 +715,10 @@ class Dvr:
             settings.sampling == "pieces")
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
-        """Flags of the blocks whose value range meets a visible part of the transfer function."""
-        return (*hierarchy.flags_for(self.tf.visible_ranges()), np.zeros(0))
+        """Flags of the blocks whose value range meets a visible part of the transfer function,
+        and the ranges of the finest blocks (the fixed-step loop's test between two leaps)."""
+        return (*hierarchy.flags_for(self.tf.visible_ranges()), hierarchy.lows[0],
+                hierarchy.highs[0])
 
     @staticmethod
     def state(height: int, width: int) -> tuple:

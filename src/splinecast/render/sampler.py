@@ -39,6 +39,7 @@ from .mode_api import (
     state_load,
     state_new,
     state_store,
+    wants,
 )
 from .rays import grid_ray
 
@@ -50,6 +51,12 @@ def _cell(p: float, n: int) -> int:
     """The cell holding coordinate ``p``, clamped into ``[0, n - 1]``."""
     c = int(math.floor(p))
     return min(max(c, 0), n - 1)
+
+
+@jit(inline="always")
+def _cells(ox, oy, oz, dx, dy, dz, t, ncx, ncy, ncz):
+    """The cell holding the ray's point at ``t`` (clamped into the grid)."""
+    return _cell(ox + t * dx, ncx), _cell(oy + t * dy, ncy), _cell(oz + t * dz, ncz)
 
 
 @jit(inline="always")
@@ -71,12 +78,13 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
             anchor = ray[15]
             dt = sample_step(mode) / speed
             m = math.floor((ta - anchor) / dt) + 1.0
-            va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
-            evaluated += 1
+            va = 0.0
+            known = False  # whether va holds the value at ta (taken when first needed)
+            lows, highs = blocks[3], blocks[4]
             while True:
-                px, py, pz = ox + ta * dx, oy + ta * dy, oz + ta * dz
-                ci, cj, ck = _cell(px, ncx), _cell(py, ncy), _cell(pz, ncz)
+                ci, cj, ck = _cells(ox, oy, oz, dx, dy, dz, ta, ncx, ncy, ncz)
                 size = skip_size(mode, blocks, ci, cj, ck, st)
+                tb = anchor + m * dt
                 if size > 0:
                     # The block cannot contribute: go to the last sample inside it (segments
                     # between samples inside it add nothing), or end the ray if it reaches
@@ -93,10 +101,30 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
                         leaps += 1
                         m = last
                         ta = anchor + m * dt
-                        va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
-                        evaluated += 1
+                        known = False
                         m += 1.0
-                tb = anchor + m * dt
+                        tb = anchor + m * dt
+                        ci, cj, ck = _cells(ox, oy, oz, dx, dy, dz, ta, ncx, ncy, ncz)
+                    # The next sample lies beyond the block. When it lies in a block that cannot
+                    # contribute either, and the mode refuses every value between the two
+                    # blocks' ranges (the segment's values, taken as linear between its ends,
+                    # lie there), the segment adds nothing: go on from that sample without
+                    # taking a value. Rays crossing background cross it block to block so.
+                    if tb < t_far:
+                        bi, bj, bk = _cells(ox, oy, oz, dx, dy, dz, tb, ncx, ncy, ncz)
+                        if skip_size(mode, blocks, bi, bj, bk, st) > 0:
+                            lo = min(lows[ci >> 2, cj >> 2, ck >> 2],
+                                     lows[bi >> 2, bj >> 2, bk >> 2])
+                            hi = max(highs[ci >> 2, cj >> 2, ck >> 2],
+                                     highs[bi >> 2, bj >> 2, bk >> 2])
+                            if not wants(mode, st, lo, hi):
+                                ta = tb
+                                known = False
+                                m += 1.0
+                                continue
+                if not known:
+                    va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
+                    evaluated += 1
                 end = tb >= t_far
                 if end:
                     tb = t_far
@@ -111,6 +139,7 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
                     break
                 ta = tb
                 va = vb
+                known = True
                 m += 1.0
     if store:
         state_store(mode, state, row, col, st)
