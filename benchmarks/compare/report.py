@@ -129,7 +129,8 @@ def markdown(results: dict[str, Any]) -> str:
                         f"{_fmt(err, 4)}{flag} | {_fmt(e['frame_ms'])} | {ratio} |")
             if r.get("default_error") is not None:
                 lines.append(f"| {r['scene']} | {r['mode']} | {qsize} | splinecast defaults "
-                             f"(quality only; sets the tolerance {r['tolerance']:.4f}) | 0.5 | "
+                             f"(quality only; sets the tolerance {r['tolerance']:.4f}) | "
+                             f"{r.get('default_step', '-')} | "
                              f"{_fmt(r['default_error'], 4)} | - | - |")
             for k, why in r["skipped"].items():
                 lines.append(f"| {r['scene']} | {r['mode']} | - | {VOLUME_LABELS[k]} | - | - | "

@@ -169,7 +169,10 @@ def run_volume_scene(spec: SceneSpec, mode: str, sizes: list[tuple[int, int]], k
                 result["quality"][key] = {"step": "exact", "mean_abs_error": err}
                 active[key] = method
             else:
+                from splinecast.render.dvr import DEFAULT_SETTINGS
+
                 result["default_error"] = err
+                result["default_step"] = DEFAULT_SETTINGS.step
     for key in keys:
         if key in result["skipped"] or key in active:
             continue
