@@ -345,23 +345,32 @@ def preintegrate(tf: TransferFunction, n: int = 256, h0: float = 1.0, steps: int
 
 
 @jit(inline="always")
-def preint_lookup(table: np.ndarray, k: int, u_f: float, u_b: float) -> tuple:
-    """Bilinear lookup of table ``k`` at continuous value indices ``u_f, u_b`` in ``[0, n-1]``."""
+def table_cell(table: np.ndarray, u_f: float, u_b: float) -> tuple:
+    """The table cell and bilinear weights at continuous value indices ``u_f, u_b`` in
+    ``[0, n-1]``: ``(i0, j0, w00, w10, w01, w11)``, for :func:`table_channel`.
+
+    Split from the lookup so a caller can read one channel (the opacity) first and skip the
+    others when it is zero.
+    """
     n = table.shape[1]
     i0 = min(int(u_f), n - 2)
     j0 = min(int(u_b), n - 2)
     fx = u_f - i0
     fy = u_b - j0
-    w00 = (1.0 - fx) * (1.0 - fy)
-    w10 = fx * (1.0 - fy)
-    w01 = (1.0 - fx) * fy
-    w11 = fx * fy
-    r = (w00 * table[k, i0, j0, 0] + w10 * table[k, i0 + 1, j0, 0]
-         + w01 * table[k, i0, j0 + 1, 0] + w11 * table[k, i0 + 1, j0 + 1, 0])
-    g = (w00 * table[k, i0, j0, 1] + w10 * table[k, i0 + 1, j0, 1]
-         + w01 * table[k, i0, j0 + 1, 1] + w11 * table[k, i0 + 1, j0 + 1, 1])
-    b = (w00 * table[k, i0, j0, 2] + w10 * table[k, i0 + 1, j0, 2]
-         + w01 * table[k, i0, j0 + 1, 2] + w11 * table[k, i0 + 1, j0 + 1, 2])
-    a = (w00 * table[k, i0, j0, 3] + w10 * table[k, i0 + 1, j0, 3]
-         + w01 * table[k, i0, j0 + 1, 3] + w11 * table[k, i0 + 1, j0 + 1, 3])
-    return float(r), float(g), float(b), float(a)
+    return i0, j0, (1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy
+
+
+@jit(inline="always")
+def table_channel(table: np.ndarray, k: int, cell: tuple, c: int) -> float:
+    """Channel ``c`` of table ``k``, interpolated in the :func:`table_cell` ``cell``."""
+    i0, j0, w00, w10, w01, w11 = cell
+    return (w00 * table[k, i0, j0, c] + w10 * table[k, i0 + 1, j0, c]
+            + w01 * table[k, i0, j0 + 1, c] + w11 * table[k, i0 + 1, j0 + 1, c])
+
+
+@jit(inline="always")
+def preint_lookup(table: np.ndarray, k: int, u_f: float, u_b: float) -> tuple:
+    """Bilinear lookup of table ``k`` at continuous value indices ``u_f, u_b`` in ``[0, n-1]``."""
+    cell = table_cell(table, u_f, u_b)
+    return (float(table_channel(table, k, cell, 0)), float(table_channel(table, k, cell, 1)),
+            float(table_channel(table, k, cell, 2)), float(table_channel(table, k, cell, 3)))

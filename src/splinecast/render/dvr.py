@@ -68,7 +68,13 @@ from numba import prange
 from .._jit import jit
 from ..errors import ParameterError, limits
 from ..models.pieces import gradient, value_gradient_at
-from ..preintegration import PreintegrationTable, preint_lookup, preintegrate
+from ..preintegration import (
+    PreintegrationTable,
+    preint_lookup,
+    preintegrate,
+    table_cell,
+    table_channel,
+)
 from ..roots.pieces import poly_value
 from ..transfer import TransferFunction
 from .frame import Frame
@@ -309,18 +315,12 @@ def _classify_od(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
     if pi_mode == 0:
         return _classify(pi_mode, table, h0, t_lo, t_scale, lut, l_lo, l_scale,
                          va, vb, length)
-    n = table.shape[1]
     uf, ub, k, held = _table_entry(pi_mode, table, h0, t_lo, t_scale, va, vb, length)
     r, g, b, a = preint_lookup(table, k, uf, ub)
     ratio = length / held
     if abs(ratio - 1.0) <= 1e-9 or not a > 0.0:
         return r, g, b, a
-    i0 = min(int(uf), n - 2)
-    j0 = min(int(ub), n - 2)
-    fx = uf - i0
-    fy = ub - j0
-    d = ((1.0 - fx) * ((1.0 - fy) * table[k, i0, j0, 4] + fy * table[k, i0, j0 + 1, 4])
-         + fx * ((1.0 - fy) * table[k, i0 + 1, j0, 4] + fy * table[k, i0 + 1, j0 + 1, 4]))
+    d = table_channel(table, k, table_cell(table, uf, ub), 4)
     a2 = 1.0 - math.exp(-ratio * d)  # not expm1: see _pieces_2d
     scale = a2 / a
     return r * scale, g * scale, b * scale, a2
@@ -431,28 +431,16 @@ def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, a
         vb = poly_value(poly, s)
         ub = min(max((vb - lo) * scale_u, 0.0), top)
         samples += 1
-        i0 = min(int(uf), nt - 2)
-        j0 = min(int(ub), nt - 2)
-        fx = uf - i0
-        fy = ub - j0
-        w00 = (1.0 - fx) * (1.0 - fy)
-        w10 = fx * (1.0 - fy)
-        w01 = (1.0 - fx) * fy
-        w11 = fx * fy
-        a = (w00 * table[0, i0, j0, 3] + w10 * table[0, i0 + 1, j0, 3]
-             + w01 * table[0, i0, j0 + 1, 3] + w11 * table[0, i0 + 1, j0 + 1, 3])
+        cell = table_cell(table, uf, ub)
+        a = table_channel(table, 0, cell, 3)
         uf = ub
         if not a > 0.0:
             continue
-        r = (w00 * table[0, i0, j0, 0] + w10 * table[0, i0 + 1, j0, 0]
-             + w01 * table[0, i0, j0 + 1, 0] + w11 * table[0, i0 + 1, j0 + 1, 0])
-        g = (w00 * table[0, i0, j0, 1] + w10 * table[0, i0 + 1, j0, 1]
-             + w01 * table[0, i0, j0 + 1, 1] + w11 * table[0, i0 + 1, j0 + 1, 1])
-        b = (w00 * table[0, i0, j0, 2] + w10 * table[0, i0 + 1, j0, 2]
-             + w01 * table[0, i0, j0 + 1, 2] + w11 * table[0, i0 + 1, j0 + 1, 2])
+        r = table_channel(table, 0, cell, 0)
+        g = table_channel(table, 0, cell, 1)
+        b = table_channel(table, 0, cell, 2)
         if not held:
-            d = (w00 * table[0, i0, j0, 4] + w10 * table[0, i0 + 1, j0, 4]
-                 + w01 * table[0, i0, j0 + 1, 4] + w11 * table[0, i0 + 1, j0 + 1, 4])
+            d = table_channel(table, 0, cell, 4)
             # ``1 - exp`` rather than ``-expm1``: libm's exp costs about half (5.9 against
             # 11.3 ns), and what expm1 keeps, the relative precision of a tiny opacity, does
             # not matter here: opacities and colours add up absolutely (the difference is
@@ -592,24 +580,13 @@ def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
         top = table.shape[1] - 1.0
         uf = min(max((va - mode.t_lo) * mode.t_scale, 0.0), top)
         ub = min(max((vb - mode.t_lo) * mode.t_scale, 0.0), top)
-        i0 = min(int(uf), table.shape[1] - 2)
-        j0 = min(int(ub), table.shape[1] - 2)
-        fx = uf - i0
-        fy = ub - j0
-        w00 = (1.0 - fx) * (1.0 - fy)
-        w10 = fx * (1.0 - fy)
-        w01 = (1.0 - fx) * fy
-        w11 = fx * fy
-        a = (w00 * table[0, i0, j0, 3] + w10 * table[0, i0 + 1, j0, 3]
-             + w01 * table[0, i0, j0 + 1, 3] + w11 * table[0, i0 + 1, j0 + 1, 3])
+        cell = table_cell(table, uf, ub)
+        a = table_channel(table, 0, cell, 3)
         if not a > 0.0:
             return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
-        r = (w00 * table[0, i0, j0, 0] + w10 * table[0, i0 + 1, j0, 0]
-             + w01 * table[0, i0, j0 + 1, 0] + w11 * table[0, i0 + 1, j0 + 1, 0])
-        g = (w00 * table[0, i0, j0, 1] + w10 * table[0, i0 + 1, j0, 1]
-             + w01 * table[0, i0, j0 + 1, 1] + w11 * table[0, i0 + 1, j0 + 1, 1])
-        b = (w00 * table[0, i0, j0, 2] + w10 * table[0, i0 + 1, j0, 2]
-             + w01 * table[0, i0, j0 + 1, 2] + w11 * table[0, i0 + 1, j0 + 1, 2])
+        r = table_channel(table, 0, cell, 0)
+        g = table_channel(table, 0, cell, 1)
+        b = table_channel(table, 0, cell, 2)
     else:
         r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
                                mode.lut, mode.t_lo, mode.l_scale, va, vb, length)
