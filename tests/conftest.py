@@ -1,5 +1,4 @@
-"""Suite-wide pytest set-up: the order in which test files are handed to the xdist workers, and
-one compile per kernel across the workers (see the second half).
+"""Suite-wide pytest hooks: the order in which test files are handed to the xdist workers.
 
 The suite runs with ``--dist loadfile``: each file goes whole to one of the (two, on CI) workers,
 which take the next file from a queue when they run out. Most of a file's time on an empty Numba
@@ -14,15 +13,7 @@ keeps this order.
 
 from __future__ import annotations
 
-import fcntl
-import hashlib
-import os
-import tempfile
-
 import pytest
-from numba.core import sigutils
-from numba.core.compiler_lock import global_compiler_lock
-from numba.core.dispatcher import Dispatcher
 
 #: Test files by cost, most costly first: seconds on one worker of the 2-core CI machine from
 #: an empty Numba cache (``pytest --durations=0``, summed per file; re-measure when a file's
@@ -51,39 +42,3 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     tests within a file and of the other files is kept)."""
     rank = {path: n for n, path in enumerate(COSTLY_FILES)}
     items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))
-
-
-# --------------------------------------------------------------------------- one compile per kernel
-# Two workers that need the same kernel at the same time each compile it (Numba's on-disk cache
-# is only read before compiling), and a one-launch kernel takes 30-110 s. Each worker therefore
-# takes a lock file per (function, signature) around the compile: the second waits for the
-# first and then loads the kernel from the cache. The lock is taken inside Numba's own
-# (per-process) compiler lock, so a thread holding it never waits for that lock; functions call
-# only functions below them, so two workers' nested compiles cannot wait for each other in a
-# cycle. Test processes only: the library and the subprocesses the tests start are unchanged.
-_LOCKS = os.path.join(tempfile.gettempdir(), f"splinecast-numba-locks-{os.getuid()}")
-_compile = Dispatcher.compile
-_held: set[str] = set()
-
-
-def _compile_once(self: Dispatcher, sig):  # noqa: ANN001, ANN202 (Numba's own signature)
-    with global_compiler_lock:
-        args, _ = sigutils.normalize_signature(sig)
-        if tuple(args) in self.overloads or type(self._cache).__name__ == "NullCache":
-            return _compile(self, sig)
-        func = self.py_func
-        key = hashlib.sha1(f"{func.__module__}.{func.__qualname__}{args}".encode()).hexdigest()
-        if key in _held:  # the same compile further up this process's stack
-            return _compile(self, sig)
-        os.makedirs(_LOCKS, exist_ok=True)
-        with open(os.path.join(_LOCKS, key), "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            _held.add(key)
-            try:
-                return _compile(self, sig)
-            finally:
-                _held.discard(key)
-                fcntl.flock(lock, fcntl.LOCK_UN)
-
-
-Dispatcher.compile = _compile_once
