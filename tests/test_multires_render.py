@@ -1,4 +1,4 @@
-"""Rendering a multiresolution cut: every model and every mode, level boundaries, faults.
+"""Rendering a multiresolution cut: every model in every mode, level boundaries, faults.
 
 References, independent of the code under test:
 
@@ -81,23 +81,8 @@ def test_scene_of_a_multiscale_volume_is_the_multires_scene(noise, model):
         assert coarse.value_range != scene.preview.value_range  # the levels' ranges differ
 
 
-# Which (model, mode) pairs the finest-level check compiles a one-launch renderer for. Each pair
-# costs 30-110 s of Numba compilation on the CI machine (with all 16 grid-class x mode-class
-# pairs, this test was a third of the whole suite's time), so it covers the product along both
-# axes rather than in full:
-# - every mode with trilinear, the model every other multiresolution test draws;
-# - every model with the first-hit isosurface (its seam closure runs in this launch), and the
-#   B-splines and s31 with DVR (pre-integrated segments cut at brick faces); qss shares s31's
-#   type-6 code at a lower degree.
-# The pairs left out run elsewhere: MIP, MinIP and several isosurfaces with the B-splines in this
-# launch in ``tests/test_wavelet_render.py`` (every mode against the in-memory model), and every
-# pair in memory in ``tests/test_pairs.py`` and ``tests/test_clipping.py``.
-FINEST_PAIRS = ([(model, "iso") for model in MODELS]
-                + [(model, "dvr") for model in MODELS if model != "qss"]
-                + [("trilinear", mode) for mode in MODES if mode not in ("iso", "dvr")])
-
-
-@pytest.mark.parametrize(("model", "mode"), FINEST_PAIRS)
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("mode", MODES)
 def test_whole_finest_level_in_budget_equals_the_in_memory_render(noise, model, mode):
     """lod so fine that every brick is refined to level 0, a budget that holds them all."""
     vol, path = noise
