@@ -47,8 +47,7 @@ def band_ir(model: str, mode: str, settings: object = None) -> str:
     elif mode == "iso":
         kw["iso"] = 0.5
     scene.render(cam, **kw)
-    kernel = driver._KERNELS[(type(scene.model.kernel_grid()), _MODE_CLASSES[mode])]
-    band = kernel.py_func.__globals__["_trace_band"]
+    band = driver.pair_band(type(scene.model.kernel_grid()), _MODE_CLASSES[mode])
     return "\n".join(band.inspect_llvm().values())
 
 

@@ -46,8 +46,7 @@ _RENDER = textwrap.dedent("""
     cam = sc.Camera.orbit(vol, azimuth=31, elevation=17, size=(37, 29))
     sc.Scene(vol, model="trilinear").render(cam, iso=0.5)
     report = {}
-    for (g, m), kernel in driver._KERNELS.items():
-        band = kernel.py_func.__globals__["_trace_band"]
+    for (g, m), (band, kernel) in driver._KERNELS.items():
         report[g.__name__ + "/" + m.__name__] = {
             "misses": sum(kernel.stats.cache_misses.values())
                       + sum(band.stats.cache_misses.values()),

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from numba import prange
 
-from .._jit import inlined, jit, overload_jit, rebound
+from .._jit import inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
@@ -67,10 +67,10 @@ from .mode_api import (
 from .rays import grid_ray, pixel_ray
 from .sampler import sample_pixel
 
-__all__ = ["trace", "trace_pixel", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
+__all__ = ["trace", "pair_band", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
 
-#: (grid class, mode class) -> :func:`_trace_image` specialized for the pair.
-_KERNELS: dict[tuple[type, type], Any] = {}
+#: (grid class, mode class) -> the pair's (:func:`_trace_band`, :func:`_trace_image`).
+_KERNELS: dict[tuple[type, type], tuple[Any, Any]] = {}
 
 #: Length of the ``geom`` array.
 GEOM_SIZE = 19
@@ -155,22 +155,6 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
     return visited, tested, skipped
 
 
-def trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
-                final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
-    """One pixel's ray through one grid, by the mode's loop: the cell walk
-    (:func:`_trace_pixel`) or, for a sampled mode, :func:`.sampler.sample_pixel` (compiled code
-    only; the pieces driver's per-ray unit)."""
-    raise NotImplementedError
-
-
-@overload_jit(trace_pixel, inline="always")
-def _trace_pixel_of_mode(grid, mode, blocks, state, out, basis, geom, planes, t_range, load,
-                         store, final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy,
-                         ncz):
-    sampled = mode_api.sampled_of(getattr(mode, "instance_class", None))
-    return (sample_pixel if sampled else _trace_pixel).py_func
-
-
 # Without Numba's reference counting (``_nrt=False``): the hooks inlined here take the grid,
 # scratch, mode and state tuples, and Numba increments and decrements the count of every array
 # in a tuple each time an inlined function with branches receives it; it could not prune those
@@ -179,18 +163,28 @@ def _trace_pixel_of_mode(grid, mode, blocks, state, out, basis, geom, planes, t_
 # counts. Functions it calls inherit that (numba passes ``nrt`` on to callees that do not set it),
 # so one that allocates must be compiled with ``_nrt=True`` (none of the band's does).
 @jit(_nrt=False)
-def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, band, band_rows,
+def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0, r1, c0, c1,
                 tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts, tags):
-    """Trace the pixels of one band of rows, tile by tile (one thread's work item); ``scr``,
-    ``mscr``, ``cuts`` and ``tags`` are the thread's scratch buffers."""
+    """Trace the pixels of rows ``[r0, r1)`` x columns ``[c0, c1)``, ``tile`` columns at a time
+    (one thread's work item); ``scr``, ``mscr``, ``cuts`` and ``tags`` are the thread's scratch
+    buffers.
+
+    This is also the one-launch cut renderer's per-piece unit (:mod:`.pieces_driver`), which
+    calls the pair's compiled band instead of inlining its own copy of the pixel loop: both
+    renderers then share one compiled loop per (model, mode, argument types). Without
+    ``final``, a pixel whose ``t_range`` is empty (``t0 > t1``) is left alone, state included:
+    the cut renderer marks so the pixels a piece does not cover (tracing them would load their
+    state and store it unchanged).
+    """
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(grid)
-    r0 = band * band_rows
-    r1 = min(height, r0 + band_rows)
-    for c0 in range(0, width, tile):
-        c1 = min(width, c0 + tile)
+    ranged = t_range.shape[0] > 0 and not final
+    for tc0 in range(c0, c1, tile):
+        tc1 = min(c1, tc0 + tile)
         for row in range(r0, r1):
-            for col in range(c0, c1):
+            for col in range(tc0, tc1):
+                if ranged and t_range[row, col, 0] > t_range[row, col, 1]:
+                    continue
                 nv, nt, ns = _trace_pixel(
                     grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
                     final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz,
@@ -244,10 +238,16 @@ def _trace_image(grid, mode, blocks, state, out, basis, geom, planes, t_range, b
     """:func:`trace` compiled (the hooks resolved through the overloads of the hook stubs)."""
     # The parallel loop only hands out bands: its body stays a single call, which keeps
     # Numba's parallel passes (and the compile time) small.
+    height, width = visited.shape
+    # The first column as a variable: a constant argument is typed as a literal, which would
+    # compile a band of its own instead of the one the cut renderer shares (.pieces_driver).
+    first = width - width
     for b in prange(bands.shape[0]):
-        _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands[b],
-                    band_rows, tile, load, store, final, count, visited, tested, skipped,
-                    new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64))
+        r0 = bands[b] * band_rows
+        _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0,
+                    min(height, r0 + band_rows), first, width, tile, load, store, final, count,
+                    visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
+                    np.empty(8), np.empty(8, np.int64))
 
 
 @jit(parallel=True)
@@ -284,13 +284,25 @@ def _pair_kernel(grid_class: type, mode_class: type) -> Any:
     counts every array of the tuples it is passed). Pairs the registries do not know (no such
     model or mode) keep the generic loop and its error.
     """
+    return _pair(grid_class, mode_class)[1]
+
+
+def pair_band(grid_class: type, mode_class: type) -> Any:
+    """The compiled band (:func:`_trace_band`) of one (model, mode) pair, hooks inlined: the
+    unit the one-launch cut renderer calls per piece and tile (the generic band for pairs the
+    registries do not know)."""
+    return _pair(grid_class, mode_class)[0]
+
+
+def _pair(grid_class: type, mode_class: type) -> tuple[Any, Any]:
+    """``(band, image kernel)`` of a pair, made once (:func:`_pair_kernel`)."""
     key = (grid_class, mode_class)
-    kernel = _KERNELS.get(key)
-    if kernel is None:
+    kernels = _KERNELS.get(key)
+    if kernels is None:
         model_hooks = model_api.hooks_of(grid_class)
         mode_hooks = mode_api.hooks_of(mode_class)
         if model_hooks is None or mode_hooks is None:
-            kernel = _trace_image
+            kernels = (_trace_band, _trace_image)
         else:
             called = model_api.called_of(grid_class)
             bind = {name: f if name in called else inlined(f)
@@ -299,6 +311,6 @@ def _pair_kernel(grid_class: type, mode_class: type) -> Any:
             loop = sample_pixel if mode_api.sampled_of(mode_class) else _trace_pixel
             pixel = rebound(loop, bind, suffix)
             band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
-            kernel = rebound(_trace_image, {"_trace_band": band}, suffix)
-        _KERNELS[key] = kernel
-    return kernel
+            kernels = (band, rebound(_trace_image, {"_trace_band": band}, suffix))
+        _KERNELS[key] = kernels
+    return kernels

@@ -5,13 +5,14 @@ grid, block flags, placement and box). Tracing them one driver call at a time co
 launch, a camera tile, and copies of the mode's per-pixel state per piece -- milliseconds each,
 far more than a small brick's rays on a shared machine. :func:`trace_pieces` instead runs once
 per frame: parallel over screen tiles, each tile walks the pieces overlapping it in the given
-(front-to-back) order and calls the driver's per-ray unit :func:`.driver.trace_pixel` on the
-pixels of the piece's screen rectangle, with the ray's interval inside the piece's box as its
-``t_range``. The mode's state stays in the full-image state arrays (``load`` and ``store`` per
-piece, as the segment entry point does), so a ray sees exactly the sequence of grids and
-intervals of one :func:`.segment.trace_segment` call per piece. A ray whose state is ``done``
-(a first hit, opaque) is left out of the pieces behind it, and a tile stops once all its rays
-are: the driver would only load and store such a state. With ``fresh`` and ``final`` the launch
+(front-to-back) order and calls the (model, mode) pair's compiled band of the driver
+(:func:`.driver.pair_band`, the in-memory renderer's own loop) on the pixels of the piece's
+screen rectangle, with the ray's interval inside the piece's box as its ``t_range``. The
+mode's state stays in the full-image state arrays (``load`` and ``store`` per piece, as the
+segment entry point does), so a ray sees exactly the sequence of grids and intervals of one
+:func:`.segment.trace_segment` call per piece. A ray whose state is ``done`` (a first hit,
+opaque) is left out of the pieces behind it, and a tile stops once all its rays are: the
+driver would only load and store such a state. With ``fresh`` and ``final`` the launch
 also resets the states and writes the outputs (the driver's ``reset_state`` and ``finalize``)
 tile by tile, so a frame is one pass.
 
@@ -30,14 +31,15 @@ closure away.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import prange
 
-from .._jit import jit, overload_jit
-from ..models.pieces import cell_count, new_scratch, value_gradient_at
+from .._jit import jit, overload_jit, rebound
+from ..models.pieces import new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
-from .driver import trace_pixel
+from .driver import _trace_band, pair_band
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import pixel_ray
@@ -228,46 +230,60 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
 
 
 # Without Numba's reference counting, as the driver's band (:func:`.driver._trace_band`): the
-# per-ray unit inlined here hands the grid, scratch, mode and state tuples to hooks with
-# branches, and with counting on every array in them was incremented and decremented at each
-# (atomic operations per ray and piece). Nothing here allocates; the closure's evaluation of
-# another piece's grid, which does, is compiled with counting (:func:`_exit_value`). No Python
-# entry: unboxing the typed lists of its arguments needs counting.
+# closure's hooks take the mode's state tuple and would count every array in it at each call.
+# Nothing here allocates; the closure's evaluation of another piece's grid, which does, is
+# compiled with counting (:func:`_exit_value`). No Python entry: unboxing the typed lists of
+# its arguments needs counting.
 @jit(_nrt=False, no_cpython_wrapper=True)
 def _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
                   origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
                   grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
                   tc0, visited, tested, skipped, scr, cuts, tags):
-    """The pixel loop of :func:`_piece_tile` (``scr``, ``cuts``, ``tags``: its buffers)."""
+    """The pixel loop of :func:`_piece_tile` (``scr``, ``cuts``, ``tags``: its buffers).
+
+    Three passes over the rectangle: each ray's interval in the piece's box (empty for a ray
+    that ended in a piece in front or misses the box) and the closure's test on entry; the
+    pair's compiled band over the rectangle, which traces exactly the rays with an interval
+    (the driver's per-pixel unit, compiled once per model, mode and types and shared with the
+    in-memory renderer); then the closure's note on exit and which rays ended here."""
     height, width = visited.shape
-    ncx, ncy, ncz = cell_count(kernel)
     hits = 0
-    n_ended = 0
+    traced = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
             if ended[row - tr0, col - tc0]:
                 # The ray ended in a piece in front (a first hit, opaque): the driver would
                 # load its state, see it done and store it unchanged.
+                t_range[row, col, 0] = math.inf
+                t_range[row, col, 1] = -math.inf
                 continue
             t0, t1 = box_interval(basis, origin0, spacing0, box_lo, box_hi, closed, planes, row,
                                   col, width, height)
-            if t0 > t1:
-                continue  # the ray misses the box: the driver would leave its state alone
             t_range[row, col, 0] = t0
             t_range[row, col, 1] = t1
+            if t0 > t1:
+                continue  # the ray misses the box: the driver would leave its state alone
+            traced += 1
             # The closure's cheap test first (a ray leaving a piece of another level right
             # here): calls with this many arguments cost more than the rest of a short ray.
             if close and exit_t[row, col] == t0 and exit_level[row, col] != level:
                 hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
                                       level, kernel, scr, geom, grids_a, grids_b, which, geoms,
                                       exit_t, exit_piece, exit_level)
-            nv, nt, ns = trace_pixel(
-                kernel, mode, blocks, state, out, basis, geom, planes, t_range, True, True,
-                False, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz,
-            )
-            visited[row, col] += nv
-            tested[row, col] += nt
-            skipped[row, col] += ns
+    if traced == 0:
+        return hits, 0
+    # Flags as values of the launch's own arguments, not constants: a constant argument would
+    # be typed as a literal and compile the band again instead of sharing the in-memory one.
+    yes = tr0 >= 0
+    _trace_band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, r0, r1, c0, c1,
+                c1 - c0, yes, yes, not yes, yes, visited, tested, skipped, scr, mscr, cuts, tags)
+    n_ended = 0
+    for row in range(r0, r1):
+        for col in range(c0, c1):
+            t0 = t_range[row, col, 0]
+            t1 = t_range[row, col, 1]
+            if t0 > t1:
+                continue
             if close:
                 closure_leave(mode, state, row, col, t0, t1, level, piece, exit_t, exit_piece,
                               exit_level)
@@ -340,6 +356,22 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
 
 
 @jit(parallel=True)
+def _launch(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
+            levels, origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh,
+            final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
+    """:func:`trace_pieces` compiled (generic: the band named by the module's globals; per pair
+    copies call the pair's band, see :func:`_pair_launch`)."""
+    hits = np.zeros(tiles.shape[0], np.int64)
+    # The parallel loop only hands out tiles: its body stays a single call (small parallel
+    # passes and compile time, as in the driver).
+    for n in prange(tiles.shape[0]):
+        hits[n] = _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
+                              closed, rects, levels, origin0, spacing0, planes, t_range,
+                              tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
+                              close, exit_t, exit_piece, exit_level, visited, tested, skipped)
+    return hits.sum()
+
+
 def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
                  levels, origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh,
                  final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
@@ -398,12 +430,35 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     int
         Rays the closure ended on a face.
     """
-    hits = np.zeros(tiles.shape[0], np.int64)
-    # The parallel loop only hands out tiles: its body stays a single call (small parallel
-    # passes and compile time, as in the driver).
-    for n in prange(tiles.shape[0]):
-        hits[n] = _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
-                              closed, rects, levels, origin0, spacing0, planes, t_range,
-                              tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
-                              close, exit_t, exit_piece, exit_level, visited, tested, skipped)
-    return hits.sum()
+    grid_class = grids_a._list_type.item_type[0].instance_class
+    return _pair_launch(grid_class, type(mode))(
+        grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects, levels,
+        origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh, final, close,
+        exit_t, exit_piece, exit_level, visited, tested, skipped)
+
+
+#: (grid class, mode class) -> the launch (:func:`_launch`) whose pieces call the pair's band.
+_LAUNCHES: dict[tuple[type, type], Any] = {}
+
+
+def _pair_launch(grid_class: type, mode_class: type) -> Any:
+    """:func:`_launch` for one (model, mode) pair: its functions copied down to
+    :func:`_piece_pixels` with ``_trace_band`` bound to the pair's compiled band
+    (:func:`.driver.pair_band`), each copy cached on disk under its own name. The band is a
+    real call, once per piece and tile, and its compiled code is the in-memory renderer's: the
+    launch no longer compiles its own copy of the per-pixel loop for each of its grid types
+    (that copy made it the test suite's costliest compile, 50-150 s per pair)."""
+    key = (grid_class, mode_class)
+    launch = _LAUNCHES.get(key)
+    if launch is None:
+        band = pair_band(grid_class, mode_class)
+        if band is _trace_band:  # a pair the registries do not know: the generic loop
+            launch = _launch
+        else:
+            suffix = f"{grid_class.__name__}_{mode_class.__name__}"
+            pixels = rebound(_piece_pixels, {"_trace_band": band}, suffix)
+            piece = rebound(_piece_tile, {"_piece_pixels": pixels}, suffix)
+            tile = rebound(_trace_tile, {"_piece_tile": piece}, suffix)
+            launch = rebound(_launch, {"_trace_tile": tile}, suffix)
+        _LAUNCHES[key] = launch
+    return launch
