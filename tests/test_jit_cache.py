@@ -110,3 +110,59 @@ def test_package_stamp_follows_every_module_but_not_caches(tmp_path: Path) -> No
     assert package_stamp(str(tmp_path)) == before
     (tmp_path / "sub" / "b.py").write_text("y = 22\n")
     assert package_stamp(str(tmp_path)) != before
+
+
+_WAITER = textwrap.dedent("""
+    import sys, time
+    sys.path.insert(0, sys.argv[1])
+    from numba import types
+    import splinecast._jit as J
+    import waited_module
+    f = waited_module.f
+    path = J._compile_lock_path(f._cache._cache_file._index_path, (types.int64,))
+    if sys.argv[2] == "as-holder":  # compiles as the process that holds the lock would
+        J._HELD.add(path)
+    print(path, flush=True)
+    sys.stdin.readline()  # the test holds the lock now
+    assert f(2) == 3
+    stats = f.stats
+    print(sum(stats.cache_hits.values()), sum(stats.cache_misses.values()), flush=True)
+""")
+
+
+def test_a_process_waits_for_the_same_compile_in_another_and_loads_its_code(
+        tmp_path: Path) -> None:
+    """Two processes that need the same signature at once compile it once: the second waits
+    for the first's lock and then loads the first's code from the disk cache.
+
+    The test holds the signature's lock (as a process compiling it would); a waiting process
+    must not finish while it does, even after a third process (acting as the lock's holder)
+    has compiled and saved the code; once the lock is released, the waiting process loads
+    that code instead of compiling (a cache hit, no miss)."""
+    from splinecast._jit import _locked
+
+    (tmp_path / "waited_module.py").write_text(
+        "from splinecast._jit import jit\n\n@jit\ndef f(x):\n    return x + 1\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def start(role: str) -> subprocess.Popen:
+        return subprocess.Popen([sys.executable, "-c", _WAITER, str(tmp_path), role], env=env,
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+
+    waiter = start("waiter")
+    path = waiter.stdout.readline().strip()
+    assert path.endswith(".compiling"), waiter.stderr.read()[-2000:]
+    with _locked(path):
+        waiter.stdin.write("go\n")
+        waiter.stdin.flush()
+        holder = start("as-holder")
+        assert holder.stdout.readline().strip() == path
+        out, err = holder.communicate("go\n", timeout=300)
+        assert holder.returncode == 0, err[-2000:]
+        assert out.split() == ["0", "1"]  # compiled (a miss) and saved
+        time.sleep(1.0)
+        assert waiter.poll() is None  # still waiting for the lock
+    out, err = waiter.communicate(timeout=300)
+    assert waiter.returncode == 0, err[-2000:]
+    assert out.split() == ["1", "0"]  # loaded the holder's code, compiled nothing

@@ -12,7 +12,9 @@ two processes that save at the same moment can pick the same data-file name, and
 up naming the other process's code for a signature, which would be loaded and called with the
 wrong types. Every splinecast function therefore saves through :class:`_LockedIndexFile`, which
 holds an exclusive lock on the index while it saves and writes the data file before the index
-entry that names it. Loading needs no lock: both files are replaced atomically by numba.
+entry that names it. Loading needs no lock: both files are replaced atomically by numba. And a
+process about to compile a signature another process is compiling waits for it and loads its
+result instead of compiling the same code at the same time (:func:`_compile_once`).
 
 Compiling is slow mostly because of inlining (the render hooks are inlined at Numba's IR level, see
 :func:`overload_jit`); :func:`_copy_each_inlined_function_once` removes the largest avoidable part.
@@ -23,12 +25,15 @@ from __future__ import annotations
 import contextlib
 import copy
 import functools
+import hashlib
 import os
 import types
 from collections.abc import Callable, Iterator
 from typing import Any
 
 from numba import njit
+from numba.core import sigutils
+from numba.core.compiler_lock import global_compiler_lock
 from numba.extending import overload
 
 try:  # POSIX; elsewhere saving keeps numba's own (unlocked) behaviour
@@ -156,6 +161,48 @@ def package_stamp(root: str) -> tuple:
 _PACKAGE_STAMP: list[tuple] = []
 
 
+#: Lock files this process holds (a compile that re-enters itself must not wait for itself).
+_HELD: set[str] = set()
+
+
+def _compile_lock_path(index_path: str, args: tuple) -> str:
+    """The lock file of one signature: next to the function's cache index, named by a digest
+    of the argument types (whose text is the same in every process)."""
+    digest = hashlib.sha1(str(args).encode()).hexdigest()[:16]
+    return f"{index_path}.{digest}.compiling"
+
+
+def _compile_once(dispatcher: Any, index_path: str) -> None:
+    """Make ``dispatcher`` compile each signature under a lock shared by all processes.
+
+    A render kernel takes a minute to compile. Processes that start at once (the test suite's
+    workers, a Dask cluster's workers, two viewers) often need the same kernel at about the
+    same time and each compiled it: two cores busy for one result. Under the lock, the second
+    process waits and then finds the first one's code in the disk cache (numba looks there
+    before compiling). The lock is taken inside numba's own compiler lock, so threads of one
+    process never wait for each other on it; nested compiles take locks in the order of the
+    call graph, which has no cycles, so two processes cannot wait for each other.
+    """
+    original = dispatcher.compile
+
+    def compile(sig: Any) -> Any:  # noqa: A001 - the dispatcher's own method name
+        args, _ = sigutils.normalize_signature(sig)
+        if tuple(args) in dispatcher.overloads:
+            return original(sig)
+        path = _compile_lock_path(index_path, tuple(args))
+        with global_compiler_lock, contextlib.ExitStack() as stack:
+            if path not in _HELD:
+                try:
+                    stack.enter_context(_locked(path))
+                except OSError:  # a cache folder we cannot write to: no saving either
+                    return original(sig)
+                stack.callback(_HELD.discard, path)
+                _HELD.add(path)
+            return original(sig)
+
+    dispatcher.compile = compile
+
+
 def _lock_cache(dispatcher: Any) -> Any:
     cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
     if _LockedIndexFile is not None and type(cache_file) is IndexDataCacheFile:
@@ -165,6 +212,8 @@ def _lock_cache(dispatcher: Any) -> Any:
         if not _PACKAGE_STAMP:
             _PACKAGE_STAMP.append(package_stamp(os.path.dirname(os.path.abspath(__file__))))
         cache_file._source_stamp = (cache_file._source_stamp, _PACKAGE_STAMP[0])
+    if fcntl is not None and cache_file is not None and hasattr(cache_file, "_index_path"):
+        _compile_once(dispatcher, cache_file._index_path)
     return dispatcher
 
 
