@@ -166,3 +166,29 @@ def test_a_process_waits_for_the_same_compile_in_another_and_loads_its_code(
     out, err = waiter.communicate(timeout=300)
     assert waiter.returncode == 0, err[-2000:]
     assert out.split() == ["1", "0"]  # loaded the holder's code, compiled nothing
+
+
+def test_compiler_flags_hash_and_compare_as_numba_defines_them() -> None:
+    """splinecast replaces numba's flag hashing and comparison with cheaper code
+    (``_compare_flags_cheaply``); both must give what numba's definition gives: the hash of
+    the sorted option names, equality of every option's value (defaults included)."""
+    import itertools
+
+    from numba.core.compiler import Flags
+
+    import splinecast._jit  # noqa: F401 - installs the replacement
+
+    assert "_compare_flags_cheaply" in Flags.__eq__.__qualname__  # the replacement is in use
+
+    def make(**options: object) -> Flags:
+        flags = Flags()
+        for name, value in options.items():
+            setattr(flags, name, value)
+        return flags
+
+    variants = [make(), make(nrt=True), make(nrt=False), make(boundscheck=False),
+                make(nrt=True, boundscheck=True), make(nrt=True, error_model="numpy"),
+                make(error_model="python"), make(fastmath=True), make(nrt=True)]
+    for a, b in itertools.product(variants, repeat=2):
+        assert hash(a) == hash(tuple(sorted(a.values())))
+        assert (a == b) == (a.values() == b.values()), (a, b)
