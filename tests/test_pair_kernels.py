@@ -1,9 +1,10 @@
 """The per-(model, mode) kernels of the render driver: hooks inlined into copies of the one loop.
 
-* The specialized kernel renders exactly what the generic loop (every hook a call through its
+* The specialized band renders exactly what the generic loop (every hook a call through its
   overload) renders: same hits, depths, normals, colours and per-ray counters.
-* A second process loads the pair's kernels from numba's on-disk cache instead of compiling them,
-  and their index files are saved under splinecast's lock (``_LockedIndexFile``).
+* A second process loads the pair's band and the image loop that calls it (one for every pair,
+  taking the band as a first-class function) from numba's on-disk cache instead of compiling
+  them, and their index files are saved under splinecast's lock (``_LockedIndexFile``).
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ def test_pair_kernel_equals_generic_loop(monkeypatch):
     scene = sc.Scene(vol, model="trilinear")
     fast = scene.render(cam, iso=0.5)
     assert (type(scene.model.kernel_grid()), sc.render.iso.IsoMode) in driver._KERNELS
-    monkeypatch.setattr(driver, "_pair_kernel", lambda grid_class, mode_class:
-                        driver._trace_image)
+    monkeypatch.setattr(driver, "_pair_band", lambda grid_class, mode_class:
+                        driver._trace_band)
     slow = scene.render(cam, iso=0.5)
     assert np.isfinite(slow.depth).sum() > 50  # the surface is in view
     np.testing.assert_array_equal(fast.depth, slow.depth)
@@ -46,7 +47,8 @@ _RENDER = textwrap.dedent("""
     cam = sc.Camera.orbit(vol, azimuth=31, elevation=17, size=(37, 29))
     sc.Scene(vol, model="trilinear").render(cam, iso=0.5)
     report = {}
-    for (g, m), (band, kernel) in driver._KERNELS.items():
+    kernel = driver._trace_image
+    for (g, m), band in driver._KERNELS.items():
         report[g.__name__ + "/" + m.__name__] = {
             "misses": sum(kernel.stats.cache_misses.values())
                       + sum(band.stats.cache_misses.values()),
@@ -74,4 +76,4 @@ def test_second_process_loads_pair_kernels_from_cache():
     assert second["index"] == "_LockedIndexFile"
     names = {p.name for p in Path(second["path"]).glob("*.nbi")}
     assert any(n.startswith("driver._trace_band__TrilinearGrid_IsoMode") for n in names), names
-    assert any(n.startswith("driver._trace_image__TrilinearGrid_IsoMode") for n in names), names
+    assert any(n.startswith("driver._trace_image-") for n in names), names

@@ -29,7 +29,9 @@ independently (on other workers) give partial states that the mode's ``combine``
 order. Models and modes are resolved from the grid's and the mode's tuple classes: the one loop
 written here is copied once per (model, mode) pair with the pair's hooks inlined into it at
 Numba's IR level (no call, no reference counting per hook), compiled once and cached on disk
-under its own name (:func:`_pair_kernel`).
+under its own name (:func:`_pair_band`). The parallel image loop around it is one function for
+every pair: it takes the pair's band as a first-class function
+(:func:`splinecast._jit.call_with_first_class`).
 
 Work is spread over threads in bands of ``band_rows`` rows, in the order ``bands`` (a
 permutation that mixes busy and empty parts of the image), each band traversed in tiles of
@@ -41,10 +43,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numba
 import numpy as np
 from numba import prange
 
-from .._jit import inlined, jit, rebound
+from .._jit import call_with_first_class, inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
@@ -69,8 +72,8 @@ from .sampler import sample_pixel
 
 __all__ = ["trace", "pair_band", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
 
-#: (grid class, mode class) -> the pair's (:func:`_trace_band`, :func:`_trace_image`).
-_KERNELS: dict[tuple[type, type], tuple[Any, Any]] = {}
+#: (grid class, mode class) -> the pair's :func:`_trace_band`.
+_KERNELS: dict[tuple[type, type], Any] = {}
 
 #: Length of the ``geom`` array.
 GEOM_SIZE = 19
@@ -227,15 +230,37 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
     """
-    kernel = _pair_kernel(type(grid), type(mode))
-    kernel(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
-           load, store, final, count, visited, tested, skipped)
+    args = (grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
+            load, store, final, count, visited, tested, skipped)
+    call_with_first_class(_trace_image, _pair_band(type(grid), type(mode)), _band_types, args)
+
+
+def _band_types(kinds: tuple) -> tuple:
+    """The argument types of the band :func:`_trace_image` calls, from the Numba types ``kinds``
+    of its own arguments (after the band)."""
+    scratch = _scratch_probe.overloads.get(kinds[:2])
+    if scratch is None:
+        _scratch_probe.compile(kinds[:2])
+        scratch = _scratch_probe.overloads[kinds[:2]]
+    scr, mscr = scratch.signature.return_type
+    index = numba.int64  # the rectangle's rows and columns, computed in the loop
+    return (*kinds[:9], index, index, index, index, kinds[11], *kinds[12:16], *kinds[16:19],
+            scr, mscr, numba.float64[::1], numba.int64[::1])
+
+
+@jit(no_cpython_wrapper=True)
+def _scratch_probe(grid, mode):
+    """Never called: compiled only for the types of the band's per-thread scratch buffers."""
+    return new_scratch(grid), mode_scratch(mode)
 
 
 @jit(parallel=True)
-def _trace_image(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows,
-                 tile, load, store, final, count, visited, tested, skipped):
-    """:func:`trace` compiled (the hooks resolved through the overloads of the hook stubs)."""
+def _trace_image(band, grid, mode, blocks, state, out, basis, geom, planes, t_range, bands,
+                 band_rows, tile, load, store, final, count, visited, tested, skipped):
+    """:func:`trace` compiled: ``band`` is the pair's :func:`_trace_band` as a first-class
+    function (:func:`splinecast._jit.call_with_first_class`), so this one function serves every
+    pair and compiles without the band's code (the parallel loop's library would link and
+    optimize it again)."""
     # The parallel loop only hands out bands: its body stays a single call, which keeps
     # Numba's parallel passes (and the compile time) small.
     height, width = visited.shape
@@ -244,10 +269,10 @@ def _trace_image(grid, mode, blocks, state, out, basis, geom, planes, t_range, b
     first = width - width
     for b in prange(bands.shape[0]):
         r0 = bands[b] * band_rows
-        _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0,
-                    min(height, r0 + band_rows), first, width, tile, load, store, final, count,
-                    visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
-                    np.empty(8), np.empty(8, np.int64))
+        band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0,
+             min(height, r0 + band_rows), first, width, tile, load, store, final, count,
+             visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
+             np.empty(8), np.empty(8, np.int64))
 
 
 @jit(parallel=True)
@@ -270,8 +295,8 @@ def reset_state(mode, state, height, width):
             state_store(mode, state, row, col, state_new(mode))
 
 
-def _pair_kernel(grid_class: type, mode_class: type) -> Any:
-    """:func:`_trace_image` for one (model, mode) pair, its hooks inlined (made once per pair).
+def _pair_band(grid_class: type, mode_class: type) -> Any:
+    """:func:`_trace_band` for one (model, mode) pair, its hooks inlined (made once per pair).
 
     The generic loop calls each hook through an overload: a real call that LLVM does not inline
     (its tuple arguments expand to a hundred values or more) and that increments and decrements
@@ -284,25 +309,13 @@ def _pair_kernel(grid_class: type, mode_class: type) -> Any:
     counts every array of the tuples it is passed). Pairs the registries do not know (no such
     model or mode) keep the generic loop and its error.
     """
-    return _pair(grid_class, mode_class)[1]
-
-
-def pair_band(grid_class: type, mode_class: type) -> Any:
-    """The compiled band (:func:`_trace_band`) of one (model, mode) pair, hooks inlined: the
-    unit the one-launch cut renderer calls per piece and tile (the generic band for pairs the
-    registries do not know)."""
-    return _pair(grid_class, mode_class)[0]
-
-
-def _pair(grid_class: type, mode_class: type) -> tuple[Any, Any]:
-    """``(band, image kernel)`` of a pair, made once (:func:`_pair_kernel`)."""
     key = (grid_class, mode_class)
-    kernels = _KERNELS.get(key)
-    if kernels is None:
+    band = _KERNELS.get(key)
+    if band is None:
         model_hooks = model_api.hooks_of(grid_class)
         mode_hooks = mode_api.hooks_of(mode_class)
         if model_hooks is None or mode_hooks is None:
-            kernels = (_trace_band, _trace_image)
+            band = _trace_band
         else:
             called = model_api.called_of(grid_class)
             bind = {name: f if name in called else inlined(f)
@@ -311,6 +324,12 @@ def _pair(grid_class: type, mode_class: type) -> tuple[Any, Any]:
             loop = sample_pixel if mode_api.sampled_of(mode_class) else _trace_pixel
             pixel = rebound(loop, bind, suffix)
             band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
-            kernels = (band, rebound(_trace_image, {"_trace_band": band}, suffix))
-        _KERNELS[key] = kernels
-    return kernels
+        _KERNELS[key] = band
+    return band
+
+
+def pair_band(grid_class: type, mode_class: type) -> Any:
+    """The compiled band (:func:`_trace_band`) of one (model, mode) pair, hooks inlined: the
+    unit the one-launch cut renderer calls per piece and tile and the in-memory renderer's
+    image loop per band of rows (the generic band for pairs the registries do not know)."""
+    return _pair_band(grid_class, mode_class)

@@ -33,10 +33,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numba
 import numpy as np
 from numba import prange
 
-from .._jit import jit, overload_jit, rebound
+from .._jit import call_with_first_class, jit, overload_jit, rebound
 from ..models.pieces import new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
 from .driver import _trace_band, pair_band
@@ -356,19 +357,20 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
 
 
 @jit(parallel=True)
-def _launch(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
-            levels, origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh,
-            final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
-    """:func:`trace_pieces` compiled (generic: the band named by the module's globals; per pair
-    copies call the pair's band, see :func:`_pair_launch`)."""
+def _launch(tile_fn, grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed,
+            rects, levels, origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces,
+            fresh, final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
+    """:func:`trace_pieces` compiled: ``tile_fn`` is the pair's :func:`_trace_tile` as a
+    first-class function, so this one function serves every pair and compiles without the
+    tile's code (the parallel loop's library would link and optimize it all again)."""
     hits = np.zeros(tiles.shape[0], np.int64)
     # The parallel loop only hands out tiles: its body stays a single call (small parallel
     # passes and compile time, as in the driver).
     for n in prange(tiles.shape[0]):
-        hits[n] = _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
-                              closed, rects, levels, origin0, spacing0, planes, t_range,
-                              tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
-                              close, exit_t, exit_piece, exit_level, visited, tested, skipped)
+        hits[n] = tile_fn(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
+                          closed, rects, levels, origin0, spacing0, planes, t_range,
+                          tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
+                          close, exit_t, exit_piece, exit_level, visited, tested, skipped)
     return hits.sum()
 
 
@@ -431,34 +433,39 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
         Rays the closure ended on a face.
     """
     grid_class = grids_a._list_type.item_type[0].instance_class
-    return _pair_launch(grid_class, type(mode))(
-        grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects, levels,
-        origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh, final, close,
-        exit_t, exit_piece, exit_level, visited, tested, skipped)
+    args = (grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects, levels,
+            origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh, final,
+            close, exit_t, exit_piece, exit_level, visited, tested, skipped)
+    return call_with_first_class(_launch, _pair_tile(grid_class, type(mode)), _tile_types, args)
 
 
-#: (grid class, mode class) -> the launch (:func:`_launch`) whose pieces call the pair's band.
-_LAUNCHES: dict[tuple[type, type], Any] = {}
+def _tile_types(kinds: tuple) -> tuple:
+    """The argument types of :func:`_trace_tile` from those of :func:`trace_pieces`: the
+    tile's first row and column in place of ``tiles``."""
+    return (*kinds[:16], *kinds[17:19], numba.int64, numba.int64, *kinds[19:])
 
 
-def _pair_launch(grid_class: type, mode_class: type) -> Any:
-    """:func:`_launch` for one (model, mode) pair: its functions copied down to
+#: (grid class, mode class) -> the pair's :func:`_trace_tile`, calling the pair's band.
+_TILES: dict[tuple[type, type], Any] = {}
+
+
+def _pair_tile(grid_class: type, mode_class: type) -> Any:
+    """:func:`_trace_tile` for one (model, mode) pair: its functions copied down to
     :func:`_piece_pixels` with ``_trace_band`` bound to the pair's compiled band
     (:func:`.driver.pair_band`), each copy cached on disk under its own name. The band is a
     real call, once per piece and tile, and its compiled code is the in-memory renderer's: the
     launch no longer compiles its own copy of the per-pixel loop for each of its grid types
     (that copy made it the test suite's costliest compile, 50-150 s per pair)."""
     key = (grid_class, mode_class)
-    launch = _LAUNCHES.get(key)
-    if launch is None:
+    tile = _TILES.get(key)
+    if tile is None:
         band = pair_band(grid_class, mode_class)
         if band is _trace_band:  # a pair the registries do not know: the generic loop
-            launch = _launch
+            tile = _trace_tile
         else:
             suffix = f"{grid_class.__name__}_{mode_class.__name__}"
             pixels = rebound(_piece_pixels, {"_trace_band": band}, suffix)
             piece = rebound(_piece_tile, {"_piece_pixels": pixels}, suffix)
             tile = rebound(_trace_tile, {"_piece_tile": piece}, suffix)
-            launch = rebound(_launch, {"_trace_tile": tile}, suffix)
-        _LAUNCHES[key] = launch
-    return launch
+        _TILES[key] = tile
+    return tile
