@@ -22,11 +22,13 @@ from __future__ import annotations
 import math
 
 import mpmath
+import numba
 import numpy as np
 import pytest
 from reference import mp_cubic_first_root, mp_cubic_real_roots, mp_quadratic_roots
 
 from splinecast.roots.cubic import cubic_first_root, quadratic_roots
+from splinecast.roots.pieces import PowerCubic, poly_first_root
 
 U = 2.0**-53
 
@@ -313,3 +315,54 @@ def test_quadratic_degenerate():
     check_quadratic(1.0, 0.0, -4.0)
     check_quadratic(2.0, 0.0, 0.0)  # double root at 0
     check_quadratic(1.0, 3.0, 0.0)  # roots 0 and -3
+
+
+# Not cached on disk: numba would not see a change of the overload in another file.
+@numba.njit
+def _first_roots_of_pieces(coeffs, values):  # pragma: no cover - compiled
+    out = np.empty(coeffs.shape[0])
+    for n in range(coeffs.shape[0]):
+        c = coeffs[n]
+        out[n] = poly_first_root(PowerCubic(c[0], c[1], c[2], c[3]), values[n])
+    return out
+
+
+def _hull_decides(coeffs, values):
+    """Cases the convex hull of the Bernstein coefficients settles (no root), in exact-enough
+    numpy arithmetic: the shortcut of ``poly_first_root`` answers those without the solver."""
+    c0 = coeffs[:, 0] - values
+    b = np.stack([c0, c0 + coeffs[:, 1] / 3, c0 + (2 * coeffs[:, 1] + coeffs[:, 2]) / 3,
+                  c0 + coeffs[:, 1:].sum(axis=1)], axis=1)
+    return np.all(b > 1e-9, axis=1) | np.all(b < -1e-9, axis=1)
+
+
+def test_the_power_cubic_first_root_is_the_solvers_answer():
+    """``poly_first_root`` of a :class:`PowerCubic` tries the convex hull of its Bernstein
+    coefficients before the solver; its answer must be the solver's, bit for bit: on random
+    cubics, on trilinear ray cubics (the trilinear model's pieces) and on cubics that touch or
+    nearly touch the value (where a shortcut taken too eagerly would lose a root)."""
+    rng = np.random.default_rng(7)
+    cases = [rng.normal(size=(4000, 4)) * rng.choice([1e-6, 1.0, 1e6], size=(4000, 1))]
+    # Trilinear: corner values and rays through a cell, coefficients as the model forms them.
+    corners = rng.uniform(-1.0, 1.0, size=(4000, 8))
+    a = rng.uniform(0.0, 1.0, size=(4000, 3))
+    d = rng.uniform(0.0, 1.0, size=(4000, 3)) - a
+    s = np.linspace(0.0, 1.0, 4)
+    p = a[:, None, :] + s[None, :, None] * d[:, None, :]
+    x, y, z = p[..., 0], p[..., 1], p[..., 2]
+    v = sum(corners[:, [4 * i + 2 * j + k]] * (x if i else 1 - x) * (y if j else 1 - y)
+            * (z if k else 1 - z) for i in (0, 1) for j in (0, 1) for k in (0, 1))
+    cases.append(np.linalg.solve(np.vander(s, 4, increasing=True), v.T).T)
+    # Touching: (s - r)^2 (s - q) shifted by tiny offsets around the value.
+    r = rng.uniform(-0.2, 1.2, size=4000)
+    q = rng.uniform(-3.0, 3.0, size=4000)
+    eps = rng.choice([0.0, 1e-16, -1e-16, 1e-13, -1e-13, 1e-10, -1e-10], size=4000)
+    cases.append(np.stack([-r * r * q + eps, r * r + 2 * r * q, -(2 * r + q),
+                           np.ones(4000)], axis=1))
+    for coeffs in cases:
+        values = rng.choice([0.0, 0.3, -0.3], size=len(coeffs))
+        got = _first_roots_of_pieces(coeffs, values)
+        want = np.array([cubic_first_root(c[3], c[2], c[1], c[0] - val, 0.0, 1.0)
+                         for c, val in zip(coeffs, values, strict=True)])
+        np.testing.assert_array_equal(got, want)
+        assert _hull_decides(coeffs, values).mean() > 0.05  # the shortcut is exercised

@@ -238,7 +238,23 @@ def poly_first_root(p, value):
 @overload_jit(poly_first_root)
 def _poly_first_root(p, value):
     if _is(p, PowerCubic):
-        return lambda p, value: cubic_first_root(p.c3, p.c2, p.c1, p.c0 - value, 0.0, 1.0)
+        def first_power3(p, value):
+            c0 = p.c0 - value
+            # Convex hull of the Bernstein coefficients on [0, 1]: no root when they all lie on
+            # one side of zero, decided with a few additions instead of the derivative's roots
+            # and up to three evaluations (most pieces a ray tests hold the value in their
+            # range but not on the ray). The margin, far above the rounding of these sums and of
+            # the solver's evaluations, leaves every case the solver could decide otherwise to
+            # the solver, so the result is the solver's.
+            b1 = c0 + p.c1 / 3.0
+            b2 = b1 + (p.c1 + p.c2) / 3.0
+            b3 = c0 + p.c1 + p.c2 + p.c3
+            margin = 1e-12 * (abs(c0) + abs(p.c1) + abs(p.c2) + abs(p.c3))
+            if (c0 > margin and b1 > margin and b2 > margin and b3 > margin) or (
+                    c0 < -margin and b1 < -margin and b2 < -margin and b3 < -margin):
+                return math.nan
+            return cubic_first_root(p.c3, p.c2, p.c1, c0, 0.0, 1.0)
+        return first_power3
     if _is(p, Bernstein2):
         return lambda p, value: bernstein_quadratic_first_root(p.b0 - value, p.b1 - value,
                                                               p.b2 - value)
