@@ -377,15 +377,13 @@ def _compile_taking_first_class(dispatcher: Any, argtypes: tuple) -> None:
 
 
 def _fingerprint(value: Any) -> Any:
-    """Numba's own key of a value's type (what its dispatcher looks compiled code up by); typed
-    containers, which have none, give their Numba type."""
+    """Numba's own key of a value's type (what its dispatcher looks compiled code up by); values
+    it has none for (typed containers, strings) give their Numba type."""
     try:
         return compute_fingerprint(value)
     except NotImplementedError:
         numba_type = getattr(value, "_numba_type_", None)
-        if numba_type is None:
-            raise
-        return numba_type
+        return numba_type if numba_type is not None else numba.typeof(value)
 
 
 #: (kernel, callee, argument fingerprints) -> (the callee's first-class value, the kernel's
