@@ -27,7 +27,7 @@ def test_pair_kernel_equals_generic_loop(monkeypatch):
     scene = sc.Scene(vol, model="trilinear")
     fast = scene.render(cam, iso=0.5)
     assert (type(scene.model.kernel_grid()), sc.render.iso.IsoMode) in driver._KERNELS
-    monkeypatch.setattr(driver, "_pair_band", lambda grid_class, mode_class:
+    monkeypatch.setattr(driver, "pair_band", lambda grid_class, mode_class:
                         driver._trace_band)
     slow = scene.render(cam, iso=0.5)
     assert np.isfinite(slow.depth).sum() > 50  # the surface is in view

@@ -29,7 +29,7 @@ independently (on other workers) give partial states that the mode's ``combine``
 order. Models and modes are resolved from the grid's and the mode's tuple classes: the one loop
 written here is copied once per (model, mode) pair with the pair's hooks inlined into it at
 Numba's IR level (no call, no reference counting per hook), compiled once and cached on disk
-under its own name (:func:`_pair_band`). The parallel image loop around it is one function for
+under its own name (:func:`pair_band`). The parallel image loop around it is one function for
 every pair: it takes the pair's band as a first-class function
 (:func:`splinecast._jit.call_with_first_class`).
 
@@ -232,7 +232,7 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
     """
     args = (grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
             load, store, final, count, visited, tested, skipped)
-    call_with_first_class(_trace_image, _pair_band(type(grid), type(mode)), _band_types, args)
+    call_with_first_class(_trace_image, pair_band(type(grid), type(mode)), _band_types, args)
 
 
 def _band_types(kinds: tuple) -> tuple:
@@ -295,8 +295,10 @@ def reset_state(mode, state, height, width):
             state_store(mode, state, row, col, state_new(mode))
 
 
-def _pair_band(grid_class: type, mode_class: type) -> Any:
-    """:func:`_trace_band` for one (model, mode) pair, its hooks inlined (made once per pair).
+def pair_band(grid_class: type, mode_class: type) -> Any:
+    """:func:`_trace_band` for one (model, mode) pair, its hooks inlined (made once per pair):
+    the unit the in-memory renderer's image loop calls per band of rows and the one-launch cut
+    renderer per piece and tile.
 
     The generic loop calls each hook through an overload: a real call that LLVM does not inline
     (its tuple arguments expand to a hundred values or more) and that increments and decrements
@@ -327,9 +329,3 @@ def _pair_band(grid_class: type, mode_class: type) -> Any:
         _KERNELS[key] = band
     return band
 
-
-def pair_band(grid_class: type, mode_class: type) -> Any:
-    """The compiled band (:func:`_trace_band`) of one (model, mode) pair, hooks inlined: the
-    unit the one-launch cut renderer calls per piece and tile and the in-memory renderer's
-    image loop per band of rows (the generic band for pairs the registries do not know)."""
-    return _pair_band(grid_class, mode_class)
