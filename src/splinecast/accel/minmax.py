@@ -62,11 +62,14 @@ def inactive_block_size(
     The flags are :attr:`MinMaxHierarchy.active`, finest level first; the shifts are
     :data:`BLOCK_SHIFTS` (checked coarse to fine so the biggest leap is taken).
     """
-    if act2[i >> 6, j >> 6, k >> 6] == 0:
+    # Unsigned indices: cells are never negative, and numba then leaves out the negative-index
+    # wrap-around it adds to every read with a signed index (this runs for every cell visited).
+    ui, uj, uk = np.uint64(i), np.uint64(j), np.uint64(k)
+    if act2[ui >> np.uint64(6), uj >> np.uint64(6), uk >> np.uint64(6)] == 0:
         return 64
-    if act1[i >> 4, j >> 4, k >> 4] == 0:
+    if act1[ui >> np.uint64(4), uj >> np.uint64(4), uk >> np.uint64(4)] == 0:
         return 16
-    if act0[i >> 2, j >> 2, k >> 2] == 0:
+    if act0[ui >> np.uint64(2), uj >> np.uint64(2), uk >> np.uint64(2)] == 0:
         return 4
     return 0
 

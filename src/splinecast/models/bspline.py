@@ -135,7 +135,7 @@ def cell_transform(
             for r in range(n):
                 tmp[a, b, r] = 0.0
             for c in range(n):
-                v = float(coeffs[i + a, j + b, k + c])
+                v = float(coeffs[np.uint64(i + a), np.uint64(j + b), np.uint64(k + c)])
                 vmin = min(vmin, v)
                 vmax = max(vmax, v)
                 for r in range(n):
@@ -216,7 +216,7 @@ def local_value_gradient(
     for a in range(d + 1):
         for b in range(d + 1):
             for c in range(d + 1):
-                v = float(coeffs[i + a, j + b, k + c])
+                v = float(coeffs[np.uint64(i + a), np.uint64(j + b), np.uint64(k + c)])
                 f += wx[a] * wy[b] * wz[c] * v
                 fx += gx[a] * wy[b] * wz[c] * v
                 fy += wx[a] * gy[b] * wz[c] * v

@@ -260,7 +260,7 @@ def _ic_range(coeffs, i, j, k, d):
     for a in range(d + 1):
         for b in range(d + 1):
             for c in range(d + 1):
-                v = float(coeffs[i + a, j + b, k + c])
+                v = float(coeffs[np.uint64(i + a), np.uint64(j + b), np.uint64(k + c)])
                 vmin = min(vmin, v)
                 vmax = max(vmax, v)
     return vmin, vmax

@@ -118,6 +118,7 @@ def _new_scratch(grid):
 @jit()
 def _cell_load(grid, scratch, i, j, k):
     """``(lo, hi, slot, tetrahedron mask)`` of cube ``(i, j, k)``."""
+    i, j, k = np.uint64(i), np.uint64(j), np.uint64(k)  # see trilinear.cell_monomials
     if grid.slot.shape[0] > 0:
         s = np.int64(grid.slot[i, j, k])
         if s < 0:

@@ -94,8 +94,9 @@ def _ray_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     ta = tb = t0
     inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
     while inside:
-        lower = max(lower, g1_min[ci >> 4, cj >> 4, ck >> 4])
-        block_top = g1_max[ci >> 4, cj >> 4, ck >> 4]
+        bi, bj, bk = np.uint64(ci >> 4), np.uint64(cj >> 4), np.uint64(ck >> 4)
+        lower = max(lower, g1_min[bi, bj, bk])
+        block_top = g1_max[bi, bj, bk]
         t_end, inside, ci, cj, ck, t_next = walk_step(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz,
                                                       ci, cj, ck, t, t_far, 16)
         if block_top > top:
@@ -120,13 +121,14 @@ def _skip_size(mode, blocks, i, j, k, st):
     its maximum does not beat the running one (ties keep the earlier position) or lies
     strictly below the lower bound."""
     best, lower = st[0], st[2]
-    v = blocks[2][i >> 6, j >> 6, k >> 6]
+    ui, uj, uk = np.uint64(i), np.uint64(j), np.uint64(k)  # see inactive_block_size
+    v = blocks[2][ui >> np.uint64(6), uj >> np.uint64(6), uk >> np.uint64(6)]
     if v <= best or v < lower:
         return 64
-    v = blocks[1][i >> 4, j >> 4, k >> 4]
+    v = blocks[1][ui >> np.uint64(4), uj >> np.uint64(4), uk >> np.uint64(4)]
     if v <= best or v < lower:
         return 16
-    v = blocks[0][i >> 2, j >> 2, k >> 2]
+    v = blocks[0][ui >> np.uint64(2), uj >> np.uint64(2), uk >> np.uint64(2)]
     if v <= best or v < lower:
         return 4
     return 0
