@@ -38,7 +38,8 @@ MRI = REPO.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 #: (label, demo name or file, size): the comparison suite's scenes.
 SCENES = (("marschner-lobb 128^3", "marschner-lobb", 128), ("sphere SDF 128^3", "sphere", 128),
           ("torus SDF 128^3", "torus", 128), ("marschner-lobb 256^3", "marschner-lobb", 256),
-          ("noise 256^3", "noise", 256), ("MNI152 T1 MRI", str(MRI), 0))
+          ("noise 256^3", "noise", 256), ("MNI152 T1 MRI", str(MRI), 0),
+          ("marschner-lobb 64^3", "marschner-lobb", 64))
 
 
 def _worker(outdir: str) -> None:
@@ -129,7 +130,7 @@ def main() -> None:
     ap.add_argument("--old", required=True, help="checkout of the baseline build")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--models", default="trilinear,bspline1,bspline2,bspline3")
-    ap.add_argument("--scenes", default=",".join(s[0] for s in SCENES[:2] + SCENES[3:]),
+    ap.add_argument("--scenes", default=",".join(s[0] for s in SCENES[:2] + SCENES[3:6]),
                     help="comma-separated scene labels")
     ap.add_argument("--mode", default="iso", choices=("iso", "mip", "dvr"))
     ap.add_argument("--dvr-sampling", default=",",

@@ -357,15 +357,19 @@ def table_cell(table: np.ndarray, u_f: float, u_b: float) -> tuple:
     j0 = min(int(u_b), n - 2)
     fx = u_f - i0
     fy = u_b - j0
-    return i0, j0, (1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy
+    # Unsigned indices (never negative): numba then leaves out the negative-index wrap-around
+    # it adds to every read with a signed index (sixteen reads per segment).
+    return (np.uint64(i0), np.uint64(j0), (1.0 - fx) * (1.0 - fy), fx * (1.0 - fy),
+            (1.0 - fx) * fy, fx * fy)
 
 
 @jit(inline="always")
 def table_channel(table: np.ndarray, k: int, cell: tuple, c: int) -> float:
     """Channel ``c`` of table ``k``, interpolated in the :func:`table_cell` ``cell``."""
     i0, j0, w00, w10, w01, w11 = cell
-    return (w00 * table[k, i0, j0, c] + w10 * table[k, i0 + 1, j0, c]
-            + w01 * table[k, i0, j0 + 1, c] + w11 * table[k, i0 + 1, j0 + 1, c])
+    i1, j1, kk = i0 + np.uint64(1), j0 + np.uint64(1), np.uint64(k)
+    return (w00 * table[kk, i0, j0, c] + w10 * table[kk, i1, j0, c]
+            + w01 * table[kk, i0, j1, c] + w11 * table[kk, i1, j1, c])
 
 
 @jit(inline="always")

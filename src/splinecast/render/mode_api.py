@@ -13,6 +13,9 @@ arrays*. The driver (:mod:`.driver`) calls, per ray:
     block ranges and a few values of the model along the ray).
 ``skip_size(mode, blocks, i, j, k, st)`` -> ``int``
     Edge in cells of the block around cell ``(i, j, k)`` to leap over, 0 to process the cell.
+    A 0 is taken for the cell's whole finest block (4 cells per axis): the driver processes
+    the ray's next cells in that block without asking again, so a mode whose answer may change
+    along the ray (MIP's running maximum) must also refuse cells through ``wants``.
 ``wants(mode, st, lo, hi)`` -> ``bool``
     Whether a cell or piece whose values lie in ``[lo, hi]`` can change the result.
 ``on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi)`` -> ``st``
