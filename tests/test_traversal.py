@@ -255,3 +255,15 @@ def test_no_zero_length_first_cell_when_starting_on_a_plane():
     check((2.0, 0.5, 0.5), (-1.0, 0.0, 0.0), n)
     # starts on a grid corner going diagonally down in y
     check((2.0, 2.0, 2.0), (1.0, -1.0, 1.0), n)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_subnormal_direction_components_walk_like_the_exact_ray(sign):
+    # The walk enters the grid multiplying by 1/d, which overflows for a subnormal d (a NaN
+    # entry point where the ray starts on a face). The cells must still be those of the exact
+    # ray, which starts on a grid plane here and leaves it to the side its tiny slope points
+    # to: out of the grid when that plane is the grid's face on that side.
+    for origin in ([-0.5, 2.0, 1.5], [-0.5, 0.0, 1.5], [-0.5, 3.0, 1.5]):
+        got = check(origin, [1.0, sign * 5e-310, 0.0], [4, 3, 3])
+        leaves = (sign < 0 and origin[1] == 0.0) or (sign > 0 and origin[1] == 3.0)
+        assert (len(got) == 0) == leaves

@@ -8,6 +8,13 @@ axes whose plane is nearest (several at once when the ray passes exactly through
 corner). No floating-point quantity is updated incrementally, so rounding errors never accumulate:
 a ray crossing a thousand cells is exactly as accurate at the end as at the start.
 
+The step divides by ``d_a`` rather than multiplying by ``1 / d_a``, although divisions are a
+tenth of a small volume's isosurface frame: the product rounds twice, the point ``o + t d`` of a
+plane crossing then lands further from the plane, and crossings lying exactly on a grid plane
+were lost (``tests/test_multi_iso.py``'s nested spheres, whose surfaces pass through voxels).
+Clipping to the grid's box (:func:`clip_to_box`) multiplies: it decides where a ray starts, not
+where a cell ends.
+
 The same step also works for aligned blocks of ``size`` cells (a power of two), which is how the
 renderer leaps over empty space: leaving a block, the cell index on the crossed axes is exact and
 on the other axes is the floor of the exit point, clamped into the block so the walk stays
@@ -33,14 +40,23 @@ __all__ = [
 ]
 
 
+#: Below this, a direction component's reciprocal could overflow: the slab tests divide.
+_TINY = 1e-300
+
+
 @jit(inline="always")
 def _slab(o: float, d: float, hi: float, t0: float, t1: float) -> tuple[float, float]:
     if d == 0.0:
         if o < 0.0 or o > hi:
             return math.inf, -math.inf
         return t0, t1
-    ta = (0.0 - o) / d
-    tb = (hi - o) / d
+    if abs(d) < _TINY:  # 1 / d would overflow
+        ta = (0.0 - o) / d
+        tb = (hi - o) / d
+    else:  # one division and two products (see splinecast.render.rays)
+        inv = 1.0 / d
+        ta = (0.0 - o) * inv
+        tb = (hi - o) * inv
     if ta > tb:
         ta, tb = tb, ta
     return max(t0, ta), min(t1, tb)

@@ -19,7 +19,7 @@ from numba import prange
 from .._jit import jit
 from ..models.pieces import new_scratch, value_gradient_at
 from ..render.pieces_driver import box_interval
-from ..render.rays import pixel_ray
+from ..render.rays import grid_point
 
 __all__ = ["box_ranges", "sample_grid", "grid_values_at"]
 
@@ -95,18 +95,6 @@ def sample_grid(grid, points: np.ndarray, out: np.ndarray) -> None:
     for n in range(points.shape[0]):
         v, _, _, _ = value_gradient_at(grid, scratch, points[n, 0], points[n, 1], points[n, 2])
         out[n] = v
-
-
-@jit(inline="always")
-def grid_point(geom: np.ndarray, basis: np.ndarray, row: int, col: int, width: int, height: int,
-               t: float) -> tuple[float, float, float]:
-    """The point at parameter ``t`` of pixel ``(row, col)``'s ray, in the traversal space of the
-    grid placed by ``geom`` (the driver's formula, :mod:`splinecast.render.driver`)."""
-    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-    x = (wx - geom[0]) / geom[3] + geom[6] - geom[7] + t * (ux / geom[3])
-    y = (wy - geom[1]) / geom[4] + geom[6] - geom[8] + t * (uy / geom[4])
-    z = (wz - geom[2]) / geom[5] + geom[6] - geom[9] + t * (uz / geom[5])
-    return x, y, z
 
 
 @jit()

@@ -43,7 +43,7 @@ from .clipping import box_slab, clip_interval
 from .driver import _trace_band, pair_band
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
-from .rays import pixel_ray
+from .rays import grid_point, index_axis, pixel_ray
 
 __all__ = ["trace_pieces", "tile_lists", "box_interval", "TILE"]
 
@@ -99,23 +99,20 @@ def box_interval(basis, origin, spacing, lo, hi, closed, planes, row, col, width
     when the ray misses it (also what :func:`splinecast.multires.probe.box_ranges` computes)."""
     wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
     t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
-    t0, t1 = box_slab((wx - origin[0]) / spacing[0], ux / spacing[0], lo[0], hi[0], closed[0],
-                      t0, t1)
-    t0, t1 = box_slab((wy - origin[1]) / spacing[1], uy / spacing[1], lo[1], hi[1], closed[1],
-                      t0, t1)
-    t0, t1 = box_slab((wz - origin[2]) / spacing[2], uz / spacing[2], lo[2], hi[2], closed[2],
-                      t0, t1)
+    vx, dx = index_axis(wx, ux, origin[0], spacing[0])  # the index ray as grid_ray makes it
+    vy, dy = index_axis(wy, uy, origin[1], spacing[1])
+    vz, dz = index_axis(wz, uz, origin[2], spacing[2])
+    t0, t1 = box_slab(vx, dx, lo[0], hi[0], closed[0], t0, t1)
+    t0, t1 = box_slab(vy, dy, lo[1], hi[1], closed[1], t0, t1)
+    t0, t1 = box_slab(vz, dz, lo[2], hi[2], closed[2], t0, t1)
     return t0, t1
 
 
 @jit(inline="always")
 def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
     """Value and world gradient of the grid's reconstruction at parameter ``t`` of the ray
-    (the point as :func:`splinecast.multires.probe.grid_point` computes it)."""
-    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-    x = (wx - geom[0]) / geom[3] + geom[6] - geom[7] + t * (ux / geom[3])
-    y = (wy - geom[1]) / geom[4] + geom[6] - geom[8] + t * (uy / geom[4])
-    z = (wz - geom[2]) / geom[5] + geom[6] - geom[9] + t * (uz / geom[5])
+    (the point as :func:`.rays.grid_point` computes it)."""
+    x, y, z = grid_point(geom, basis, row, col, width, height, t)
     v, gx, gy, gz = value_gradient_at(kernel, scr, x, y, z)
     return v, gx / geom[3], gy / geom[4], gz / geom[5]
 
