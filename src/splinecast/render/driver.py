@@ -14,13 +14,15 @@ layers, placed in the volume by ``geom``:
 ``geom[16:19]``       the level's cells per axis (a grid that ends before them has neighbours)
 ====================  ========================================================================
 
-Each ray is clipped by the clip ``planes``, the domain and, when ``t_range`` is not empty, its
-own parameter interval ``t_range[row, col]``; the ray parameter is always the world distance
-along the unit ray, so depths agree between grids and levels. The mode's per-ray state comes in
-and goes out through the mode's state arrays (``load`` / ``store``), so a ray can be traced
-through several grids in turn, front to back, exactly as through one: the sample positions of
-the sampled methods and of DVR are anchored at the ray's entry into the domain, not into the
-grid. With ``final`` the mode writes the pixel's outputs at the end.
+Each ray is clipped by the clip ``planes``, the domain, when ``t_range`` is not empty, its
+own parameter interval ``t_range[row, col]``, and when ``footprint`` is not empty, the interval
+of its ``8 x 8`` pixel tile in which the blocks the mode can see lie (:mod:`.footprint`; the
+pixels of a tile without one are finished without a ray); the ray parameter is always the
+world distance along the unit ray, so depths agree between grids and levels. The mode's
+per-ray state comes in and goes out through the mode's state arrays (``load`` / ``store``), so
+a ray can be traced through several grids in turn, front to back, exactly as through one: the
+sample positions of the sampled methods and of DVR are anchored at the ray's entry into the
+domain, not into the grid. With ``final`` the mode writes the pixel's outputs at the end.
 
 Rendering a whole volume is one call (``load=False, store=False, final=True``). Rendering it
 brick by brick: reset the state arrays (:func:`reset_state`), call :func:`trace` for the bricks
@@ -53,6 +55,7 @@ from ..accel.traversal import walk_begin, walk_step
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
 from . import mode_api
+from .footprint import FOOTPRINT_SHIFT
 from .mode_api import (
     consume,
     done,
@@ -95,10 +98,13 @@ def band_order(n_bands: int) -> np.ndarray:
 
 
 @jit(inline="always")
-def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store, final,
-                 scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
-    """Trace one pixel's ray; returns (cells visited, cells tested, blocks skipped)."""
+def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi, load,
+                 store, final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
+    """Trace one pixel's ray inside ``[t_lo, t_hi]``; returns (cells visited, cells tested,
+    blocks skipped)."""
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
+    t0 = max(t0, t_lo)
+    t1 = min(t1, t_hi)
     ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
     st = state_load(mode, state, row, col) if load else state_new(mode)
     visited = 0
@@ -181,8 +187,9 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, l
 # counts. Functions it calls inherit that (numba passes ``nrt`` on to callees that do not set it),
 # so one that allocates must be compiled with ``_nrt=True`` (none of the band's does).
 @jit(_nrt=False)
-def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0, r1, c0, c1,
-                tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts, tags):
+def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0, r1,
+                c0, c1, tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts,
+                tags):
     """Trace the pixels of rows ``[r0, r1)`` x columns ``[c0, c1)``, ``tile`` columns at a time
     (one thread's work item); ``scr``, ``mscr``, ``cuts`` and ``tags`` are the thread's scratch
     buffers.
@@ -192,20 +199,43 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0
     renderers then share one compiled loop per (model, mode, argument types). Without
     ``final``, a pixel whose ``t_range`` is empty (``t0 > t1``) is left alone, state included:
     the cut renderer marks so the pixels a piece does not cover (tracing them would load their
-    state and store it unchanged).
+    state and store it unchanged). A non-empty ``footprint`` (:mod:`.footprint`) limits the
+    rays of each of its tiles to the tile's interval; the pixels of a tile it leaves empty are
+    not traced (their states are passed on, and finished with ``final``).
     """
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(grid)
     ranged = t_range.shape[0] > 0 and not final
+    footed = footprint.shape[0] > 0
+    t_lo, t_hi = -math.inf, math.inf
+    # The footprint's tiles are the full image's (a tile camera's pixels start at col0, row0).
+    col0, row0 = int(basis[16]), int(basis[17])
+    tx0, ty0 = col0 >> FOOTPRINT_SHIFT, row0 >> FOOTPRINT_SHIFT
     for tc0 in range(c0, c1, tile):
         tc1 = min(c1, tc0 + tile)
         for row in range(r0, r1):
             for col in range(tc0, tc1):
                 if ranged and t_range[row, col, 0] > t_range[row, col, 1]:
                     continue
+                if footed:
+                    ty = ((row + row0) >> FOOTPRINT_SHIFT) - ty0
+                    tx = ((col + col0) >> FOOTPRINT_SHIFT) - tx0
+                    t_lo = footprint[ty, tx, 0]
+                    t_hi = footprint[ty, tx, 1]
+                    if t_lo > t_hi:
+                        # Nothing the mode can see projects here: no ray to set up.
+                        if store or final:
+                            st = state_load(mode, state, row, col) if load else state_new(mode)
+                            if store:
+                                state_store(mode, state, row, col, st)
+                            if final:
+                                finish(mode, out, row, col, st,
+                                       _bare_ray(basis, row, col, width, height))
+                        continue
                 nv, nt, ns = _trace_pixel(
-                    grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
-                    final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz,
+                    grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi,
+                    load, store, final, scr, mscr, cuts, tags, row, col, width, height, ncx,
+                    ncy, ncz,
                 )
                 if count:
                     visited[row, col] += nv
@@ -213,8 +243,8 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0
                     skipped[row, col] += ns
 
 
-def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
-          load, store, final, count, visited, tested, skipped):
+def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,
+          band_rows, tile, load, store, final, count, visited, tested, skipped):
     """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
 
     Parameters (all prepared by the host side, :mod:`.segment`)
@@ -235,6 +265,10 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
         Clip planes.
     t_range : ndarray, shape (height, width, 2) or (0, 0, 2)
         Per-ray parameter interval, or none.
+    footprint : ndarray, shape (tiles_y, tiles_x, 2) or (0, 0, 2)
+        Per-tile parameter interval of the blocks the mode can see, over the tiles of the full
+        image the camera's pixels overlap (:func:`.footprint.block_footprint`), or none; rays
+        of a tile it leaves empty are not traced.
     bands : ndarray of int64
         Order of the bands of ``band_rows`` rows; ``tile`` columns per tile.
     load, store, final : bool
@@ -245,8 +279,8 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, b
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
     """
-    args = (grid, mode, blocks, state, out, basis, geom, planes, t_range, bands, band_rows, tile,
-            load, store, final, count, visited, tested, skipped)
+    args = (grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,
+            band_rows, tile, load, store, final, count, visited, tested, skipped)
     call_with_first_class(_trace_image, pair_band(type(grid), type(mode)), _band_types, args)
 
 
@@ -259,7 +293,7 @@ def _band_types(kinds: tuple) -> tuple:
         scratch = _scratch_probe.overloads[kinds[:2]]
     scr, mscr = scratch.signature.return_type
     index = numba.int64  # the rectangle's rows and columns, computed in the loop
-    return (*kinds[:9], index, index, index, index, kinds[11], *kinds[12:16], *kinds[16:19],
+    return (*kinds[:10], index, index, index, index, kinds[12], *kinds[13:17], *kinds[17:20],
             scr, mscr, numba.float64[::1], numba.int64[::1])
 
 
@@ -270,8 +304,8 @@ def _scratch_probe(grid, mode):
 
 
 @jit(parallel=True)
-def _trace_image(band, grid, mode, blocks, state, out, basis, geom, planes, t_range, bands,
-                 band_rows, tile, load, store, final, count, visited, tested, skipped):
+def _trace_image(band, grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint,
+                 bands, band_rows, tile, load, store, final, count, visited, tested, skipped):
     """:func:`trace` compiled: ``band`` is the pair's :func:`_trace_band` as a first-class
     function (:func:`splinecast._jit.call_with_first_class`), so this one function serves every
     pair and compiles without the band's code (the parallel loop's library would link and
@@ -284,7 +318,7 @@ def _trace_image(band, grid, mode, blocks, state, out, basis, geom, planes, t_ra
     first = width - width
     for b in prange(bands.shape[0]):
         r0 = bands[b] * band_rows
-        band(grid, mode, blocks, state, out, basis, geom, planes, t_range, r0,
+        band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0,
              min(height, r0 + band_rows), first, width, tile, load, store, final, count,
              visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
              np.empty(8), np.empty(8, np.int64))
@@ -297,9 +331,15 @@ def finalize(mode, state, out, basis):
     width = out[0].shape[1]
     for row in prange(height):
         for col in range(width):
-            wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-            ray = (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
-            finish(mode, out, row, col, state_load(mode, state, row, col), ray)
+            finish(mode, out, row, col, state_load(mode, state, row, col),
+                   _bare_ray(basis, row, col, width, height))
+
+
+@jit(inline="always")
+def _bare_ray(basis, row, col, width, height):
+    """The mode API's ray tuple with only the world ray set: what ``finish`` reads."""
+    wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
+    return (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
 
 
 @jit(parallel=True)

@@ -279,6 +279,12 @@ class Iso:
             flags = hierarchy.classify(self.params.iso)
         return (*flags, np.zeros(0))
 
+    def footprint_flags(self, blocks: tuple) -> tuple | None:
+        """The block flags whose screen footprint bounds where rays can hit (:mod:`.footprint`):
+        the exact method's; none for the sampled method, whose samples in front of an active
+        block take part in finding a crossing."""
+        return blocks[:3] if self.method == "exact" else None
+
     @staticmethod
     def state(height: int, width: int) -> tuple:
         """Per-pixel state arrays (contents undefined until reset)."""

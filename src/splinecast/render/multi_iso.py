@@ -296,6 +296,12 @@ class MultiIso:
         return (*hierarchy.flags_for([(v, v) for v in self.isos]), np.zeros(0))
 
     @staticmethod
+    def footprint_flags(blocks: tuple) -> tuple:
+        """The block flags whose screen footprint bounds where rays can meet a surface
+        (:mod:`.footprint`)."""
+        return blocks[:3]
+
+    @staticmethod
     def state(height: int, width: int) -> tuple:
         """Per-pixel state arrays."""
         return (np.empty((height, width, 4)), np.empty((height, width)),

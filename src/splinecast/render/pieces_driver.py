@@ -273,8 +273,11 @@ def _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, b
     # Flags as values of the launch's own arguments, not constants: a constant argument would
     # be typed as a literal and compile the band again instead of sharing the in-memory one.
     yes = tr0 >= 0
-    _trace_band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, r0, r1, c0, c1,
-                c1 - c0, yes, yes, not yes, yes, visited, tested, skipped, scr, mscr, cuts, tags)
+    # No footprint (an empty view of t_range: a C array like the in-memory renderer's, so the
+    # band compiled for it serves here too).
+    _trace_band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, t_range[:0], r0,
+                r1, c0, c1, c1 - c0, yes, yes, not yes, yes, visited, tested, skipped, scr, mscr,
+                cuts, tags)
     n_ended = 0
     for row in range(r0, r1):
         for col in range(c0, c1):

@@ -60,12 +60,14 @@ def _cells(ox, oy, oz, dx, dy, dz, t, ncx, ncy, ncz):
 
 
 @jit(inline="always")
-def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, load, store,
-                 final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
+def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi, load,
+                 store, final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
     """Sample one pixel's ray through ``grid`` (the driver's per-ray unit for sampled modes;
     same arguments as :func:`.driver._trace_pixel`). Returns (samples evaluated, segments
     taken, blocks leapt)."""
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
+    t0 = max(t0, t_lo)
+    t1 = min(t1, t_hi)
     ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
     st = state_load(mode, state, row, col) if load else state_new(mode)
     evaluated = 0

@@ -1,0 +1,190 @@
+"""Screen footprint of the blocks a mode can see: where and how deep a ray can find anything.
+
+A first-hit isosurface can only lie in an active block. Projecting the active blocks' boxes
+onto the screen gives, per tile of ``8 x 8`` pixels of the full image, the interval of ray
+parameters inside which every ray of the tile that meets an active block meets it: from the
+smallest distance of a covering block to the eye to the largest distance of one of its
+corners. The driver
+(:mod:`.driver`) writes the pixels of a tile that no active block covers without tracing
+them (the rays of an object that fills a small part of the screen cost a ray set-up and a
+box clip each, a third of a frame on a 128^3 sphere), and starts the others at the tile's
+interval, past the empty space in front of the object.
+
+The footprint is conservative, so the image is the one without it: a block's screen box is
+the bounding box of its corners' projections widened by a pixel, the interval is widened by
+a relative ``1e-9``, and a block with a corner at or behind the eye's plane covers the whole
+screen. A ray starting at the interval's start begins in empty space (no covering block is
+nearer), and the cell walk then crosses the same cell faces at the same parameters as a ray
+started at the volume box; ``tests/test_footprint.py`` checks the images are identical.
+
+Only modes whose result comes from the active blocks alone use it (the exact isosurface
+methods; not the sampled ones, whose samples in front of a block take part in finding a
+crossing, nor MIP or DVR).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .._jit import jit
+
+__all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "block_footprint", "footprint_level"]
+
+#: log2 of the edge in pixels of the footprint's tiles.
+FOOTPRINT_SHIFT = 3
+
+#: The driver's ``footprint`` argument when there is none (every ray is traced whole).
+NO_FOOTPRINT = np.zeros((0, 0, 2))
+
+#: Above this many active blocks at a level, the next coarser level is projected instead
+#: (its boxes are larger but fewer; projecting costs about 50 ns per block).
+MAX_PROJECTED_BLOCKS = 20000
+
+#: Relative widening of a block's parameter interval (the walk's parameters are rounded).
+_T_MARGIN = 1e-9
+
+
+def footprint_level(flags: tuple, shifts: tuple) -> int:
+    """The finest level of ``flags`` (finest first, block edges ``1 << shifts[level]``) with at
+    most :data:`MAX_PROJECTED_BLOCKS` active blocks (the coarsest if none is)."""
+    for level, act in enumerate(flags):
+        if level == len(flags) - 1 or np.count_nonzero(act) <= MAX_PROJECTED_BLOCKS:
+            return level
+    return len(flags) - 1
+
+
+def block_footprint(basis: np.ndarray, geom: np.ndarray, n_cells: Any, active: np.ndarray,
+                    shift: int, width: int, height: int) -> np.ndarray:
+    """Per-tile ray parameter interval covered by the active blocks of one level.
+
+    Parameters
+    ----------
+    basis : ndarray
+        :meth:`splinecast.Camera.pixel_basis` of the image (or tile) rendered.
+    geom : ndarray, shape (19,)
+        Placement of the grid (:mod:`.driver`).
+    n_cells : 3 ints
+        The grid's cells per axis.
+    active : ndarray of uint8, shape (bx, by, bz)
+        Non-zero for the blocks that can contribute; block ``b`` holds cells
+        ``[b << shift, (b + 1) << shift)`` per axis.
+    shift : int
+        log2 of the block edge in cells.
+    width, height : int
+        The image's size in pixels.
+
+    Returns
+    -------
+    ndarray, shape (tiles_y, tiles_x, 2)
+        ``[t_start, t_end]`` per tile, empty (``t_start > t_end``) where no active block
+        projects. The tiles are those of the full image (:meth:`splinecast.Camera.tile`) that
+        the camera's pixels overlap: pixel ``(row, col)`` of the camera lies in tile
+        ``((row + row0) >> 3 - (row0 >> 3), (col + col0) >> 3 - (col0 >> 3))``, so an image
+        rendered in tiles (a distributed render) traces every ray as the whole image does.
+    """
+    ncx, ncy, ncz = (int(n) for n in n_cells)
+    return _project(basis, geom, np.ascontiguousarray(active), shift, ncx, ncy, ncz,
+                    width, height)
+
+
+@jit
+def _project(basis, geom, active, shift, ncx, ncy, ncz, width, height):
+    col0, row0 = int(basis[16]), int(basis[17])
+    tiles_x = ((col0 + width - 1) >> FOOTPRINT_SHIFT) - (col0 >> FOOTPRINT_SHIFT) + 1
+    tiles_y = ((row0 + height - 1) >> FOOTPRINT_SHIFT) - (row0 >> FOOTPRINT_SHIFT) + 1
+    out = np.empty((tiles_y, tiles_x, 2))
+    out[:, :, 0] = math.inf
+    out[:, :, 1] = -math.inf
+    edge = 1 << shift
+    ortho = basis[14] != 0.0
+    lo = np.empty(3)
+    hi = np.empty(3)
+    cells = (ncx, ncy, ncz)
+    nbx, nby, nbz = active.shape
+    for bi in range(nbx):
+        for bj in range(nby):
+            for bk in range(nbz):
+                if active[bi, bj, bk] == 0:
+                    continue
+                index = (bi, bj, bk)
+                for a in range(3):
+                    # The block's cells in the traversal space, then in the world.
+                    x0 = index[a] * edge
+                    x1 = min(x0 + edge, cells[a])
+                    w0 = geom[a] + (x0 - geom[6] + geom[7 + a]) * geom[3 + a]
+                    w1 = geom[a] + (x1 - geom[6] + geom[7 + a]) * geom[3 + a]
+                    lo[a] = min(w0, w1)
+                    hi[a] = max(w0, w1)
+                _cover(out, basis, ortho, lo, hi, width, height)
+    return out
+
+
+@jit(inline="always")
+def _cover(out, basis, ortho, lo, hi, width, height):
+    """Widen the intervals of the tiles box ``[lo, hi]`` (world) projects onto (pixels and
+    tiles counted in the full image, the camera's window of it kept)."""
+    ex, ey, ez = basis[0], basis[1], basis[2]
+    sx_lo = sy_lo = math.inf
+    sx_hi = sy_hi = -math.inf
+    t_near = math.inf
+    t_far = -math.inf
+    whole_screen = False
+    for c in range(8):
+        qx = (hi[0] if c & 1 else lo[0]) - ex
+        qy = (hi[1] if c & 2 else lo[1]) - ey
+        qz = (hi[2] if c & 4 else lo[2]) - ez
+        depth = qx * basis[3] + qy * basis[4] + qz * basis[5]
+        across = qx * basis[6] + qy * basis[7] + qz * basis[8]
+        above = qx * basis[9] + qy * basis[10] + qz * basis[11]
+        if ortho:
+            # Parallel rays: the parameter is the depth below the image plane.
+            sx, sy = across, above
+            t_near = min(t_near, depth)
+            t_far = max(t_far, depth)
+        else:
+            # The ray parameter is the distance to the eye; a corner at or behind the eye's
+            # plane has no projection (the block may then cover any pixel).
+            t_far = max(t_far, math.sqrt(qx * qx + qy * qy + qz * qz))
+            if depth <= 0.0:
+                whole_screen = True
+                continue
+            sx, sy = across / depth, above / depth
+        sx_lo, sx_hi = min(sx_lo, sx), max(sx_hi, sx)
+        sy_lo, sy_hi = min(sy_lo, sy), max(sy_hi, sy)
+    if not ortho:
+        # Distance from the eye to the nearest point of the box.
+        gx = max(lo[0] - ex, 0.0, ex - hi[0])
+        gy = max(lo[1] - ey, 0.0, ey - hi[1])
+        gz = max(lo[2] - ez, 0.0, ez - hi[2])
+        t_near = math.sqrt(gx * gx + gy * gy + gz * gz)
+    # The full image's tiles the camera's window overlaps. A block widens every one of them
+    # its screen box meets, also where the box misses the window's own pixels, so a tile
+    # camera gets the full image's intervals.
+    col0, row0 = int(basis[16]), int(basis[17])
+    tx0, tx1 = col0 >> FOOTPRINT_SHIFT, (col0 + width - 1) >> FOOTPRINT_SHIFT
+    ty0, ty1 = row0 >> FOOTPRINT_SHIFT, (row0 + height - 1) >> FOOTPRINT_SHIFT
+    if not whole_screen:
+        # Screen coordinates to pixel columns and rows of the full image (Camera.pixel_basis's
+        # formula inverted), widened by a pixel, then to tiles.
+        half_w, half_h, full_w, full_h = basis[12], basis[13], basis[18], basis[19]
+        col_lo = (sx_lo / half_w + 1.0) * 0.5 * full_w - 0.5 - 1.0
+        col_hi = (sx_hi / half_w + 1.0) * 0.5 * full_w - 0.5 + 1.0
+        row_lo = (1.0 - sy_hi / half_h) * 0.5 * full_h - 0.5 - 1.0
+        row_hi = (1.0 - sy_lo / half_h) * 0.5 * full_h - 0.5 + 1.0
+        if col_hi < 0.0 or row_hi < 0.0 or col_lo > full_w or row_lo > full_h:
+            return
+        tx0 = max(tx0, int(math.floor(max(col_lo, 0.0))) >> FOOTPRINT_SHIFT)
+        tx1 = min(tx1, int(math.ceil(min(col_hi, full_w))) >> FOOTPRINT_SHIFT)
+        ty0 = max(ty0, int(math.floor(max(row_lo, 0.0))) >> FOOTPRINT_SHIFT)
+        ty1 = min(ty1, int(math.ceil(min(row_hi, full_h))) >> FOOTPRINT_SHIFT)
+    t_start = t_near - _T_MARGIN * (1.0 + abs(t_near))
+    t_end = t_far + _T_MARGIN * (1.0 + abs(t_far))
+    first_tx, first_ty = col0 >> FOOTPRINT_SHIFT, row0 >> FOOTPRINT_SHIFT
+    for ty in range(ty0, ty1 + 1):
+        for tx in range(tx0, tx1 + 1):
+            a, b = ty - first_ty, tx - first_tx
+            out[a, b, 0] = min(out[a, b, 0], t_start)
+            out[a, b, 1] = max(out[a, b, 1], t_end)

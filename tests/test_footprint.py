@@ -1,0 +1,131 @@
+"""The screen footprint of the active blocks (render/footprint.py).
+
+Two checks against independent references: every pixel ray that meets an active block's box
+(a slab test in numpy, on the rays of ``Camera.rays``) meets it inside its tile's interval; and
+frames rendered with the footprint are bit-identical to frames rendered without it, for every
+exact isosurface model, perspective and orthographic cameras, an eye inside the volume, an
+image tile and several translucent isosurfaces.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+import splinecast as sc
+import splinecast.scene as scene_module
+from splinecast.render import segment
+from splinecast.render.footprint import FOOTPRINT_SHIFT, block_footprint
+from splinecast.render.iso import Iso
+
+SHIFT = 2  # blocks of 4 cells
+
+
+def _cameras(vol):
+    origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
+    centre = origin + 0.5 * (np.asarray(vol.shape) - 1) * spacing
+    return {
+        "perspective": sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(72, 56)),
+        "orthographic": sc.Camera.orbit(vol, azimuth=-60, elevation=40, size=(72, 56),
+                                        ortho=True),
+        "eye inside": sc.Camera(centre + 0.1 * spacing * np.asarray(vol.shape),
+                                centre + (5.0, 3.0, 1.0), size=(64, 48), fov=70),
+        "tile": sc.Camera.orbit(vol, azimuth=200, elevation=-30, size=(96, 80),
+                                zoom=1.6).tile(13, 21, 50, 37),
+    }
+
+
+def _box_interval(origins, directions, lo, hi):
+    """Parameter interval of each ray inside the box ``[lo, hi]`` (empty: t0 > t1)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta = (lo - origins) / directions
+        tb = (hi - origins) / directions
+    t0 = np.nanmax(np.minimum(ta, tb), axis=-1)
+    t1 = np.nanmin(np.maximum(ta, tb), axis=-1)
+    return np.maximum(t0, 0.0), t1
+
+
+@pytest.mark.parametrize("view", ["perspective", "orthographic", "eye inside", "tile"])
+def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(view):
+    vol = sc.Volume(np.zeros((25, 21, 17), np.float32), spacing=(0.7, 1.0, 1.3),
+                    origin=(-3.0, 2.0, 0.5))
+    cam = _cameras(vol)[view]
+    n_cells = (24, 20, 16)
+    rng = np.random.default_rng(7)
+    active = (rng.random((6, 5, 4)) < 0.2).astype(np.uint8)
+    geom = np.zeros(19)
+    geom[0:3], geom[3:6] = vol.origin, vol.spacing
+    fp = block_footprint(cam.pixel_basis(), geom, n_cells, active, SHIFT, cam.width, cam.height)
+    origins, directions = cam.rays()
+    col0, row0 = (int(v) for v in cam.pixel_basis()[16:18])  # a tile's place in the image
+    rows = ((np.arange(cam.height) + row0) >> FOOTPRINT_SHIFT) - (row0 >> FOOTPRINT_SHIFT)
+    cols = ((np.arange(cam.width) + col0) >> FOOTPRINT_SHIFT) - (col0 >> FOOTPRINT_SHIFT)
+    tiles = fp[rows[:, None], cols[None, :]]
+    met = 0
+    origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
+    for b in np.argwhere(active):
+        lo = origin + b * 4 * spacing
+        hi = origin + np.minimum((b + 1) * 4, n_cells) * spacing
+        t0, t1 = _box_interval(origins, directions, lo, hi)
+        hit = t0 <= t1
+        met += int(hit.sum())
+        assert np.all(tiles[hit, 0] <= t0[hit]), f"block {b} entered before its tile's interval"
+        assert np.all(tiles[hit, 1] >= t1[hit]), f"block {b} left after its tile's interval"
+    assert met > 50  # the check saw rays meeting blocks
+    if view == "tile":  # the same intervals as the full image's tiles: tiles render alike
+        full = _cameras(vol)["tile"]
+        whole = sc.Camera.orbit(vol, azimuth=200, elevation=-30, size=(96, 80), zoom=1.6)
+        fp_whole = block_footprint(whole.pixel_basis(), geom, n_cells, active, SHIFT,
+                                   whole.width, whole.height)
+        ty0, tx0 = row0 >> FOOTPRINT_SHIFT, col0 >> FOOTPRINT_SHIFT
+        assert np.array_equal(fp, fp_whole[ty0:ty0 + fp.shape[0], tx0:tx0 + fp.shape[1]])
+        assert full.width == cam.width
+    empty = fp[..., 0] > fp[..., 1]
+    if view in ("perspective", "orthographic"):  # the whole volume in view
+        assert empty.any(), "a few active blocks should leave some tiles empty"
+
+
+def _without_footprint(monkeypatch):
+    monkeypatch.setattr(scene_module, "render_grid",
+                        functools.partial(segment.render_grid, footprint=False))
+
+
+@pytest.mark.parametrize("model", ["trilinear", "s31", "bspline3"])
+def test_frames_are_identical_with_and_without_the_footprint(model, monkeypatch):
+    vol = sc.demo("torus", size=33)
+    iso = vol.metadata["default_iso"]
+    scene = sc.Scene(vol, model=model)
+    outputs = ("rgba", "depth", "position", "normal", "face")
+    with_fp = {v: scene.render(c, iso=iso, outputs=outputs)
+               for v, c in _cameras(vol).items()}
+    _without_footprint(monkeypatch)
+    for view, cam in _cameras(vol).items():
+        plain = scene.render(cam, iso=iso, outputs=outputs)
+        assert np.isfinite(plain.depth).sum() > 20, view
+        for name in outputs:
+            a, b = getattr(plain, name), getattr(with_fp[view], name)
+            assert np.array_equal(a, b, equal_nan=True), f"{view}: {name} differs"
+
+
+def test_translucent_isosurfaces_are_identical_with_and_without_the_footprint(monkeypatch):
+    vol = sc.demo("sphere", size=41)
+    cams = _cameras(vol)
+    options = {"iso": [-0.4, -0.2, 0.0], "opacity": [0.6, 0.4, 0.3]}
+    with_fp = {v: scene_module.Scene(vol).render(c, **options) for v, c in cams.items()}
+    _without_footprint(monkeypatch)
+    for view, cam in cams.items():
+        plain = scene_module.Scene(vol).render(cam, **options)
+        assert np.array_equal(plain.rgba, with_fp[view].rgba), view
+        assert np.array_equal(plain.depth, with_fp[view].depth, equal_nan=True), view
+
+
+def test_only_the_exact_isosurface_methods_have_a_footprint():
+    vol = sc.demo("sphere", size=17)
+    scene = sc.Scene(vol)
+    cam = sc.Camera.orbit(vol, size=(40, 30))
+    exact, sampled = Iso(0.0), Iso(0.0, method="sampled")
+    blocks = exact.blocks(scene.grid.hierarchy)
+    assert segment.screen_footprint(scene.grid, exact, cam, blocks).shape == (4, 5, 2)
+    assert segment.screen_footprint(scene.grid, sampled, cam, blocks).shape[0] == 0
