@@ -41,7 +41,7 @@ NO_FOOTPRINT = np.zeros((0, 0, 2))
 
 #: Above this many active blocks at a level, the next coarser level is projected instead
 #: (its boxes are larger but fewer; projecting costs about 50 ns per block).
-MAX_PROJECTED_BLOCKS = 20000
+MAX_PROJECTED_BLOCKS = 1 << 17
 
 #: Relative widening of a block's parameter interval (the walk's parameters are rounded).
 _T_MARGIN = 1e-9
