@@ -229,8 +229,11 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
                             if store:
                                 state_store(mode, state, row, col, st)
                             if final:
-                                finish(mode, out, row, col, st,
-                                       _bare_ray(basis, row, col, width, height))
+                                # A state from an earlier grid may need the ray; a fresh one
+                                # does not (the mode API's contract for finish).
+                                ray = (_bare_ray(basis, row, col, width, height) if load
+                                       else _NO_RAY)
+                                finish(mode, out, row, col, st, ray)
                         continue
                 nv, nt, ns = _trace_pixel(
                     grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi,
@@ -333,6 +336,10 @@ def finalize(mode, state, out, basis):
         for col in range(width):
             finish(mode, out, row, col, state_load(mode, state, row, col),
                    _bare_ray(basis, row, col, width, height))
+
+
+#: The ray passed to ``finish`` for a pixel never traced whose state is fresh.
+_NO_RAY = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
 
 
 @jit(inline="always")

@@ -35,7 +35,9 @@ bx, by, bz, ray, st)`` -> ``st``
     them only then: a call that passes the ray and state tuples costs more than the cheap cells
     it follows, and LLVM does not inline a function with that many arguments.
 ``finish(mode, out, row, col, st, ray)``
-    Writes the pixel's outputs (colour, depth, ...).
+    Writes the pixel's outputs (colour, depth, ...). A fresh state (``state_new``: the ray met
+    nothing) is finished without reading ``ray``: the driver passes zeros for the pixels it
+    does not trace (:mod:`.footprint`), where the ray would cost a square root and a division.
 ``state_store(mode, state, row, col, st)``
     Keeps the state for the ray's next segment.
 
