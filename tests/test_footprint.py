@@ -13,6 +13,7 @@ import functools
 
 import numpy as np
 import pytest
+from reference import box_interval
 
 import splinecast as sc
 import splinecast.scene as scene_module
@@ -37,16 +38,6 @@ def _cameras(vol):
     }
 
 
-def _box_interval(origins, directions, lo, hi):
-    """Parameter interval of each ray inside the box ``[lo, hi]`` (empty: t0 > t1)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ta = (lo - origins) / directions
-        tb = (hi - origins) / directions
-    t0 = np.nanmax(np.minimum(ta, tb), axis=-1)
-    t1 = np.nanmin(np.maximum(ta, tb), axis=-1)
-    return np.maximum(t0, 0.0), t1
-
-
 @pytest.mark.parametrize("view", ["perspective", "orthographic", "eye inside", "tile"])
 def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(view):
     vol = sc.Volume(np.zeros((25, 21, 17), np.float32), spacing=(0.7, 1.0, 1.3),
@@ -68,7 +59,8 @@ def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(vi
     for b in np.argwhere(active):
         lo = origin + b * 4 * spacing
         hi = origin + np.minimum((b + 1) * 4, n_cells) * spacing
-        t0, t1 = _box_interval(origins, directions, lo, hi)
+        t0, t1 = (a.reshape(cam.height, cam.width) for a in
+                  box_interval(origins.reshape(-1, 3), directions.reshape(-1, 3), lo, hi))
         hit = t0 <= t1
         met += int(hit.sum())
         assert np.all(tiles[hit, 0] <= t0[hit]), f"block {b} entered before its tile's interval"
