@@ -113,7 +113,23 @@ def test_translucent_isosurfaces_are_identical_with_and_without_the_footprint(mo
         assert np.array_equal(plain.depth, with_fp[view].depth, equal_nan=True), view
 
 
-def test_only_the_exact_isosurface_methods_have_a_footprint():
+@pytest.mark.parametrize("sampling", ["grid", "pieces"])
+def test_dvr_frames_are_identical_with_and_without_the_footprint(sampling, monkeypatch):
+    vol = sc.demo("sphere", size=33)
+    # Visible only near the sphere's surface: most of the volume is transparent.
+    tf = sc.TransferFunction([(-0.1, 0.0), (0.0, 0.8), (0.1, 0.0)], vol.value_range, "gray")
+    dvr = sc.DVRSettings(step=0.5, sampling=sampling)
+    cams = _cameras(vol)
+    with_fp = {v: sc.Scene(vol).render(c, mode="dvr", tf=tf, dvr=dvr) for v, c in cams.items()}
+    _without_footprint(monkeypatch)
+    for view, cam in cams.items():
+        plain = sc.Scene(vol).render(cam, mode="dvr", tf=tf, dvr=dvr)
+        assert plain.rgba[..., 3].max() > 0.5, view
+        assert np.array_equal(plain.rgba, with_fp[view].rgba), view
+        assert np.array_equal(plain.depth, with_fp[view].depth, equal_nan=True), view
+
+
+def test_the_sampled_isosurface_method_has_no_footprint():
     vol = sc.demo("sphere", size=17)
     scene = sc.Scene(vol)
     cam = sc.Camera.orbit(vol, size=(40, 30))

@@ -697,6 +697,13 @@ class Dvr:
         return (*hierarchy.flags_for(self.tf.visible_ranges()), hierarchy.lows[0],
                 hierarchy.highs[0])
 
+    def footprint_flags(self, blocks: tuple) -> tuple | None:
+        """The visible blocks' flags, whose screen footprint bounds where a ray can gather
+        colour (:mod:`.footprint`), for the cell walk's samplings ("grid", "pieces"), which
+        skip every cell of an invisible block. None for the fixed-step "ray" sampling: a
+        segment between samples in two invisible blocks can still cross visible values."""
+        return None if self.settings.sampling == "ray" else blocks[:3]
+
     @staticmethod
     def state(height: int, width: int) -> tuple:
         """Per-pixel state arrays."""

@@ -17,9 +17,10 @@ screen. A ray starting at the interval's start begins in empty space (no coverin
 nearer), and the cell walk then crosses the same cell faces at the same parameters as a ray
 started at the volume box; ``tests/test_footprint.py`` checks the images are identical.
 
-Only modes whose result comes from the active blocks alone use it (the exact isosurface
-methods; not the sampled ones, whose samples in front of a block take part in finding a
-crossing, nor MIP or DVR).
+Only modes whose result comes from the active blocks alone use it: the exact isosurface
+methods and DVR's cell-walk samplings ("grid", "pieces"); not the sampled isosurface method,
+whose samples in front of a block take part in finding a crossing, DVR's fixed-step "ray"
+sampling, whose segments between two invisible blocks can cross visible values, or MIP.
 """
 
 from __future__ import annotations
