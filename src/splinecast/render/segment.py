@@ -176,8 +176,8 @@ def _run(grid: Grid, mode: Any, camera: Any, blocks: tuple, state: tuple, out: t
 def screen_footprint(grid: Grid, mode: Any, camera: Any, blocks: tuple) -> np.ndarray:
     """The per-tile footprint of the blocks ``mode`` can see (:mod:`.footprint`), or
     :data:`~.footprint.NO_FOOTPRINT` for a mode that does not name them."""
-    seen = getattr(mode, "footprint_flags", None)
-    flags = seen(blocks) if seen is not None else None
+    flags_of = getattr(mode, "footprint_flags", None)
+    flags = flags_of(blocks) if flags_of is not None else None
     if flags is None:
         return NO_FOOTPRINT
     level = footprint_level(flags, BLOCK_SHIFTS)
@@ -204,9 +204,9 @@ def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLAN
         unused = np.empty((h, w), np.int32)
         stats = (unused, unused, unused)
     blocks = mode.blocks(grid.hierarchy, flags)
-    seen = screen_footprint(grid, mode, camera, blocks) if footprint else NO_FOOTPRINT
+    tiles = screen_footprint(grid, mode, camera, blocks) if footprint else NO_FOOTPRINT
     _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, _NO_RANGE, False, False, True,
-         stats, count, seen)
+         stats, count, tiles)
     return out, stats
 
 
