@@ -113,7 +113,7 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
     if t0 <= t1 and not done(mode, st):
         inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
         if inside:
-            st = ray_begin(mode, grid, scr, blocks, st, ray, ncx, ncy, ncz, t, t_far)
+            st = ray_begin(mode, grid, scr, mscr, blocks, st, ray, ncx, ncy, ncz, t, t_far)
         # The finest block the mode last asked to process: its other cells are processed
         # without asking again (skip_size's contract), which saves the hierarchy's lookups
         # for most cells near a surface.

@@ -8,9 +8,12 @@ arrays*. The driver (:mod:`.driver`) calls, per ray:
 
 ``state_new(mode)`` or ``state_load(mode, state, row, col)`` -> ``st``
     A fresh state, or the one left by an earlier segment of the same ray.
-``ray_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1)`` -> ``st``
+``ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0, t1)`` -> ``st``
     Once per ray and grid, before the walk (MIP takes a lower bound of its answer here, from
-    block ranges and a few values of the model along the ray).
+    the model's value where the thread's previous ray found its maximum, or from block ranges
+    and a few values along the ray). ``mscratch`` is the thread's ``mode_scratch``: it lives
+    from ray to ray of one band, so a mode may keep what one ray learnt for the next (the
+    result must not depend on it: the order and grouping of rays are the driver's).
 ``skip_size(mode, blocks, i, j, k, st)`` -> ``int``
     Edge in cells of the block around cell ``(i, j, k)`` to leap over, 0 to process the cell.
     A 0 is taken for the cell's whole finest block (4 cells per axis): the driver processes
@@ -54,14 +57,15 @@ whether a stretch between two leapt blocks can be left out):
     grid's interval), the model's values ``va`` and ``vb`` there, its length in voxels, and
     ``(x, y, z)``, the point at ``tb`` in the grid's traversal space (for a gradient).
 
-plus ``mode_scratch(mode)`` (per-thread buffers). ``ray`` is the tuple ``(wx, wy, wz, ux, uy,
-uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)``: world origin and unit direction, the same ray in
-the grid's traversal space (``o + t d``, the parameter ``t`` staying the world distance), the
-spacing of the grid's level (index-space gradients are divided by it for world units) and the
-parameter where the ray enters the volume (the sampled methods' and DVR's sample grid starts
-there, so every brick samples at the same places). A mode module registers its functions with
-:func:`register`; each mode also states how two partial results of one ray combine (its
-``combine`` kernel), which is what brick-parallel and distributed compositing use.
+plus ``mode_scratch(mode)`` (per-thread buffers, made once per band of rays). ``ray`` is the
+tuple ``(wx, wy, wz, ux, uy, uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)``: world origin
+and unit direction, the same ray in the grid's traversal space (``o + t d``, the parameter
+``t`` staying the world distance), the spacing of the grid's level (index-space gradients are
+divided by it for world units) and the parameter where the ray enters the volume (the sampled
+methods' and DVR's sample grid starts there, so every brick samples at the same places).
+A mode module registers its functions with :func:`register`; each mode also states how two
+partial results of one ray combine (its ``combine`` kernel), which is what brick-parallel and
+distributed compositing use.
 """
 
 from __future__ import annotations
@@ -162,13 +166,13 @@ def _mode_scratch(mode):
     return None if f is None else f.py_func
 
 
-def ray_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+def ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     """Per-ray set-up before the walk through one grid (compiled code only)."""
     raise NotImplementedError
 
 
 @overload_jit(ray_begin, inline="never")
-def _ray_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+def _ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     f = _impl(mode, "ray_begin")
     return None if f is None else f.py_func
 
@@ -301,7 +305,7 @@ def no_scratch(mode):
 
 
 @jit()
-def unchanged_begin(mode, grid, scratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
+def unchanged_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     """``ray_begin`` with nothing to prepare."""
     return st
 
