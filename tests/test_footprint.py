@@ -4,7 +4,7 @@ Two checks against independent references: every pixel ray that meets an active 
 (a slab test in numpy, on the rays of ``Camera.rays``) meets it inside its tile's interval; and
 frames rendered with the footprint are bit-identical to frames rendered without it, for every
 exact isosurface model, perspective and orthographic cameras, an eye inside the volume, an
-image tile and several translucent isosurfaces.
+image tile, several translucent isosurfaces and DVR's three samplings.
 """
 
 from __future__ import annotations
@@ -127,6 +127,77 @@ def test_dvr_frames_are_identical_with_and_without_the_footprint(sampling, monke
         assert plain.rgba[..., 3].max() > 0.5, view
         assert np.array_equal(plain.rgba, with_fp[view].rgba), view
         assert np.array_equal(plain.depth, with_fp[view].depth, equal_nan=True), view
+
+
+def _binary_ball(n: int) -> sc.Volume:
+    """0 outside a ball, 1 inside: every finest block holds one value or both."""
+    x = np.arange(n) - (n - 1) / 2
+    r = np.sqrt(x[:, None, None] ** 2 + x[None, :, None] ** 2 + x[None, None, :] ** 2)
+    return sc.Volume((r < 0.3 * n).astype(np.float32))
+
+
+@pytest.mark.parametrize("step", [1.0, 2.5, 4.0])
+@pytest.mark.parametrize("volume", ["shell", "edge"])
+def test_fixed_step_dvr_frames_are_identical_with_and_without_the_footprint(volume, step,
+                                                                            monkeypatch):
+    """DVR's default fixed-step sampling, whose segments reach from a visible block into its
+    neighbours: a transfer function visible near the sphere's surface, and a ball of ones in
+    zeros with a transfer function visible only around 0.5 (the visible blocks are a thin
+    shell, and most of the colour comes from segments between a sample inside and one
+    outside)."""
+    if volume == "shell":
+        vol = sc.demo("sphere", size=33)
+        tf = sc.TransferFunction([(-0.1, 0.0), (0.0, 0.8), (0.1, 0.0)], vol.value_range,
+                                 "gray")
+    else:
+        vol = _binary_ball(36)
+        tf = sc.TransferFunction([(0.4, 0.0), (0.5, 0.9), (0.6, 0.0)], (0.0, 1.0), "gray")
+    dvr = sc.DVRSettings(step=step, sampling="ray")
+    shading = sc.Shading(background=(0.0, 0.0, 0.0, 1.0))
+    cams = _cameras(vol)
+    with_fp = {v: sc.Scene(vol).render(c, mode="dvr", tf=tf, dvr=dvr, shading=shading)
+               for v, c in cams.items()}
+    _without_footprint(monkeypatch)
+    for view, cam in cams.items():
+        plain = sc.Scene(vol).render(cam, mode="dvr", tf=tf, dvr=dvr, shading=shading)
+        assert (plain.rgba[..., :3].max(axis=-1) > 0.05).sum() > 50, view  # colour to compare
+        assert np.array_equal(plain.rgba, with_fp[view].rgba), view
+        assert np.array_equal(plain.depth, with_fp[view].depth, equal_nan=True), view
+
+
+def test_fixed_step_dvr_flags_hold_the_neighbours_of_visible_blocks_and_visible_pairs():
+    """The finest flags on hand-made ranges: a visible block and its 26 neighbours; two
+    neighbours whose ranges, each invisible, together span the visible values; nothing else.
+    The coarser levels hold any flagged finer block; a step longer than a finest block's edge
+    gets no footprint."""
+    from splinecast.render.dvr import Dvr, _segment_blocks
+
+    tf = sc.TransferFunction([(0.4, 0.0), (0.5, 0.9), (0.6, 0.0)], (0.0, 1.0), "gray")
+    mode = Dvr(tf, sc.DVRSettings(step=2.0, sampling="ray"))
+    shape = (9, 8, 7)
+    lows, highs = np.zeros(shape), np.full(shape, 0.1)
+    visible = np.zeros(shape, np.uint8)
+    visible[2, 2, 2] = 1
+    lows[6, 5, 4], highs[6, 5, 4] = 0.8, 1.0  # with its neighbour (6, 5, 5): 0..1
+    got = _segment_blocks(mode.params, visible, lows, highs)
+    want = np.zeros(shape, bool)
+    want[1:4, 1:4, 1:4] = True
+    want[5:8, 4:7, 3:6] = True  # every neighbour of (6, 5, 4) pairs with it
+    np.testing.assert_array_equal(got.astype(bool), want)
+
+    vol = _binary_ball(36)
+    scene = sc.Scene(vol)
+    blocks = mode.blocks(scene.grid.hierarchy)
+    flags = mode.footprint_flags(blocks)
+    for level in (1, 2):
+        factor = 4 ** level
+        expect = np.zeros(blocks[level].shape, bool)
+        for i, j, k in zip(*np.nonzero(flags[0]), strict=True):
+            expect[i // factor, j // factor, k // factor] = True
+        np.testing.assert_array_equal(flags[level].astype(bool), expect)
+    long_step = Dvr(tf, sc.DVRSettings(step=4.5, sampling="ray"))
+    cam = sc.Camera.orbit(vol, size=(64, 48))
+    assert segment.screen_footprint(scene.grid, long_step, cam, blocks).shape[0] == 0
 
 
 def test_the_sampled_isosurface_method_has_no_footprint():

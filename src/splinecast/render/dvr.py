@@ -66,6 +66,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
+from ..accel.minmax import BLOCK_SHIFTS
 from ..errors import ParameterError, limits
 from ..models.pieces import gradient, value_gradient_at
 from ..preintegration import (
@@ -609,6 +610,40 @@ register(DvrMode, **_HOOKS)
 register(DvrRayMode, sample_step=_sample_step, segment=_segment, **_HOOKS)
 
 
+#: Key of the "ray" sampling's footprint flags in the render cache (see Dvr.footprint_flags).
+_SEGMENT_BLOCKS = "segment blocks"
+
+
+@jit()
+def _segment_blocks(mode, visible, lows, highs):
+    """Finest blocks a taken segment of the fixed-step loop can touch: a visible block's
+    neighbours (26 and itself), and blocks whose joint value range with a neighbour (or whose
+    own) the mode wants (the loop's test for a segment between two leapt blocks)."""
+    nx, ny, nz = visible.shape
+    out = np.zeros(visible.shape, np.uint8)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                lo, hi = lows[i, j, k], highs[i, j, k]
+                hit = False
+                for a in range(max(i - 1, 0), min(i + 2, nx)):
+                    for b in range(max(j - 1, 0), min(j + 2, ny)):
+                        for c in range(max(k - 1, 0), min(k + 2, nz)):
+                            if not hit and (visible[a, b, c] or _wants(
+                                    mode, 0.0, min(lo, lows[a, b, c]), max(hi, highs[a, b, c]))):
+                                hit = True
+                out[i, j, k] = hit
+    return out
+
+
+def _any_in_blocks(flags: np.ndarray, factor: int, shape: tuple) -> np.ndarray:
+    """Flags of blocks of ``factor`` finer blocks per axis: set where any finer one is."""
+    padded = np.zeros(tuple(n * factor for n in shape), np.uint8)
+    padded[:flags.shape[0], :flags.shape[1], :flags.shape[2]] = flags
+    grouped = padded.reshape(shape[0], factor, shape[1], factor, shape[2], factor)
+    return grouped.any(axis=(1, 3, 5)).view(np.uint8)
+
+
 @jit(parallel=True)
 def combine_dvr(front: tuple, back: tuple, out: tuple) -> None:
     """``out`` = ``front`` over ``back`` (premultiplied colour and opacity).
@@ -664,6 +699,7 @@ class Dvr:
         self.tf = tf
         self.settings = settings
         cache = {} if cache is None else cache
+        self._cache = cache
         start = time.perf_counter()
         pi_mode = settings.pi_mode
         if pi_mode:
@@ -698,11 +734,33 @@ class Dvr:
                 hierarchy.highs[0])
 
     def footprint_flags(self, blocks: tuple) -> tuple | None:
-        """The visible blocks' flags, whose screen footprint bounds where a ray can gather
-        colour (:mod:`.footprint`), for the cell walk's samplings ("grid", "pieces"), which
-        skip every cell of an invisible block. None for the fixed-step "ray" sampling: a
-        segment between samples in two invisible blocks can still cross visible values."""
-        return None if self.settings.sampling == "ray" else blocks[:3]
+        """Flags of the blocks whose screen footprint bounds where a ray can gather colour
+        (:mod:`.footprint`).
+
+        The cell walk's samplings ("grid", "pieces") skip every cell of an invisible block:
+        the visible blocks' flags. The fixed-step "ray" sampling takes a segment between two
+        samples, in neighbouring finest blocks when the step is at most their edge; it takes
+        one whose samples lie in two invisible blocks when the two blocks' joint value range
+        is visible (:mod:`.sampler`). Its flags are therefore the finest blocks next to a
+        visible one (or visible) and those whose joint range with a neighbour is visible, and
+        the coarser levels' flags hold any such block (:func:`_segment_blocks`). None for a
+        step longer than the finest blocks' edge.
+        """
+        if self.settings.sampling != "ray":
+            return blocks[:3]
+        if self.settings.step > 1 << BLOCK_SHIFTS[0]:
+            return None
+        prefix = self.params.prefix
+        found = self._cache.get(_SEGMENT_BLOCKS)
+        if found is not None and found[0] is blocks[3] and np.array_equal(found[1], prefix):
+            return found[2]
+        finest = _segment_blocks(self.params, blocks[0], blocks[3], blocks[4])
+        flags = [finest]
+        for level in range(1, 3):
+            factor = 1 << (BLOCK_SHIFTS[level] - BLOCK_SHIFTS[0])
+            flags.append(_any_in_blocks(finest, factor, blocks[level].shape))
+        self._cache[_SEGMENT_BLOCKS] = (blocks[3], prefix, tuple(flags))
+        return tuple(flags)
 
     @staticmethod
     def state(height: int, width: int) -> tuple:

@@ -17,10 +17,13 @@ screen. A ray starting at the interval's start begins in empty space (no coverin
 nearer), and the cell walk then crosses the same cell faces at the same parameters as a ray
 started at the volume box; ``tests/test_footprint.py`` checks the images are identical.
 
-Only modes whose result comes from the active blocks alone use it: the exact isosurface
-methods and DVR's cell-walk samplings ("grid", "pieces"); not the sampled isosurface method,
-whose samples in front of a block take part in finding a crossing, DVR's fixed-step "ray"
-sampling, whose segments between two invisible blocks can cross visible values, or MIP.
+Only modes whose result comes from the blocks they name use it: the exact isosurface
+methods, DVR's cell-walk samplings ("grid", "pieces") with the visible blocks, and DVR's
+fixed-step "ray" sampling with the blocks its segments can take colour from (a visible
+block's neighbours, into which a segment from inside it reaches, and pairs of blocks whose
+joint value range is visible; the loop widens the interval to the samples around it). Not
+the sampled isosurface method, whose samples in front of a block take part in finding a
+crossing, nor MIP, whose answer every block the ray crosses may hold.
 """
 
 from __future__ import annotations

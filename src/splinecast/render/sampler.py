@@ -17,7 +17,9 @@ model (the value is the model's ``value_at``, inlined into the pair's kernel):
   ``skip_size`` depends on the position only); the loop moves to the last sample inside that
   block, without evaluating the ones in between, whose segments lie wholly in the block and
   add nothing;
-* early termination by the mode's ``done``.
+* early termination by the mode's ``done``;
+* a footprint interval (:mod:`.footprint`) is widened to the samples on either side of it,
+  so a ray started or ended by it takes the segments of the whole ray.
 
 It returns the driver's three per-ray counters with this meaning: samples evaluated, segments
 handed to the mode, blocks leapt.
@@ -66,9 +68,17 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
     same arguments as :func:`.driver._trace_pixel`). Returns (samples evaluated, segments
     taken, blocks leapt)."""
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
-    t0 = max(t0, t_lo)
-    t1 = min(t1, t_hi)
     ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    if t_lo > t0 or t_hi < t1:
+        # The footprint's interval, widened to the samples around it (the loop's own sample
+        # positions): the segments are then the whole ray's, and none outside the interval
+        # is one the loop would take (the footprint's blocks hold both ends of every such).
+        dt = sample_step(mode) / math.sqrt(dx * dx + dy * dy + dz * dz)
+        anchor = ray[15]
+        if t_lo > t0:
+            t0 = max(t0, anchor + math.floor((t_lo - anchor) / dt) * dt)
+        if t_hi < t1:
+            t1 = min(t1, anchor + math.ceil((t_hi - anchor) / dt) * dt)
     st = state_load(mode, state, row, col) if load else state_new(mode)
     evaluated = 0
     taken = 0
