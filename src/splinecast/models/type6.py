@@ -66,6 +66,7 @@ __all__ = [
     "ray_bernstein2",
     "gather27_lane",
     "rounding_tolerance",
+    "RELATIVE_ROUNDING",
     "evaluate_in_tets",
     "evaluate_points",
 ]
@@ -423,25 +424,31 @@ def cube_bounds(
     """Exact per-cube range of all Bernstein–Bézier coefficients, as float32 bounds.
 
     Every cube's coefficients are computed once (by the model's program, parallel over slices,
-    vectorised along rows); the range is widened by ``tol`` (the rounding error of the
-    coefficient sums) and rounded outward to float32, so it stays conservative. By the convex
-    hull property the cube's patches lie in this range, which is iso-independent: an isovalue
-    change then only compares.
+    vectorised along rows); the range is widened by ``tol`` times the largest magnitude of the
+    cube's 27 data points (the rounding error of the coefficient sums, which are sums of
+    products of those points: see :data:`RELATIVE_ROUNDING`) and rounded outward to float32,
+    so it stays conservative. By the convex hull property the cube's patches lie in this
+    range, which is iso-independent: an isovalue change then only compares. A cube of equal
+    data points has the exact range of that value (a MIP over a constant background then leaps
+    it as soon as it has met the value, as over the trilinear model's).
     """
     nx, ny, nz = pad.shape[0] - 2, pad.shape[1] - 2, pad.shape[2] - 2
     lo = np.empty((nx, ny, nz), np.float32)
     hi = np.empty((nx, ny, nz), np.float32)
     for i in prange(nx):
         buf = np.empty((n_slots, _LANES))
+        size = np.empty(_LANES)
         for j in range(ny):
             for k0 in range(0, nz, _LANES):
                 n = min(_LANES, nz - k0)
+                size[:] = 0.0
                 for a in range(3):
                     for b in range(3):
                         for c in range(3):
                             row = buf[9 * a + 3 * b + c]
                             for m in range(n):
                                 row[m] = float(pad[i + a, j + b, k0 + m + c])
+                                size[m] = max(size[m], abs(row[m]))
                 run_program(buf, n, targets, ptr, sources, weights)
                 vmin = buf[27].copy()
                 vmax = buf[27].copy()
@@ -451,8 +458,8 @@ def cube_bounds(
                         vmin[m] = min(vmin[m], row[m])
                         vmax[m] = max(vmax[m], row[m])
                 for m in range(n):
-                    lo[i, j, k0 + m] = _round_down32(vmin[m] - tol)
-                    hi[i, j, k0 + m] = _round_up32(vmax[m] + tol)
+                    lo[i, j, k0 + m] = _round_down32(vmin[m] - tol * size[m])
+                    hi[i, j, k0 + m] = _round_up32(vmax[m] + tol * size[m])
     return lo, hi
 
 
@@ -531,15 +538,17 @@ def store_coefficients(
     return out
 
 
-def rounding_tolerance(pad: np.ndarray, program) -> float:
-    """Bound on the difference between two ways of rounding a coefficient's sum.
+#: Bound on the difference between two ways of rounding a coefficient's sum, relative to the
+#: largest magnitude of the data points it is made of: each coefficient is a sum of at most a
+#: few hundred products of those points and weights whose absolute row sums are at most 9/8
+#: (the schemes here); 1e-12 is far above that error and far below anything visible.
+RELATIVE_ROUNDING = 1e-12
 
-    Each coefficient is a sum of at most a few hundred products of numbers no larger than
-    ``|pad|max`` times the largest absolute row sum (<= 9/8 for the schemes here); 1e-12
-    relative is far above that error and far below anything visible.
-    """
+
+def rounding_tolerance(pad: np.ndarray, program) -> float:
+    """:data:`RELATIVE_ROUNDING` of the largest magnitude of ``pad``: a bound for every cube."""
     scale = max(abs(float(pad.min())), abs(float(pad.max()))) if pad.size else 0.0
-    return 1e-12 * max(scale, 1e-300)
+    return RELATIVE_ROUNDING * max(scale, 1e-300)
 
 
 def _pad_dtype(dtype: np.dtype) -> np.dtype:
@@ -620,7 +629,7 @@ class Type6Model:
         self.tolerance = rounding_tolerance(self.pad, self.program)
         self.cube_lo, self.cube_hi = cube_bounds(
             self.pad, *self.program.arrays, self.program.n_slots, tables.n_points,
-            self.tolerance,
+            RELATIVE_ROUNDING,
         )
 
     # --------------------------------------------------------------------- model interface
@@ -652,7 +661,7 @@ class Type6Model:
         if pad is self.pad:
             return self.cube_lo, self.cube_hi
         return cube_bounds(np.ascontiguousarray(pad, dtype=self.pad.dtype), *self.program.arrays,
-                           self.program.n_slots, self.tables.n_points, self.tolerance)
+                           self.program.n_slots, self.tables.n_points, RELATIVE_ROUNDING)
 
     def kernel_grid(self, array: np.ndarray | None = None, active: Any = None) -> tuple:
         """The kernel grid (:data:`~.type6_ray.S31Grid` or :data:`~.type6_ray.QSSGrid`) of
