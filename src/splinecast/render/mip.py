@@ -12,8 +12,8 @@ method takes a lower bound of the answer: blocks (cells, pieces) whose maximum l
 below it are left out from the start, so a bright structure far behind dim ones is reached
 without testing the dim ones first. Neighbouring rays of an image find their maxima at nearly
 the same depth, so the bound is the model's value on this ray at the depth where the thread's
-previous ray found its maximum: a value the ray does meet, usually within a rounding of its
-answer (MRI frames 1.4x faster than with the bound below: ``benchmarks/results/
+previous ray found its maximum: a value the ray does meet, usually close to its answer
+(frames 1.5-1.8x faster than with the bound below: ``benchmarks/results/
 mip_builds_coherent.md``). A thread's first ray has no predecessor; it walks the 16-cell blocks
 instead, taking the largest block minimum (every value the ray meets inside a block is at least
 the block's minimum) and the model's values at a few points inside the block with the largest
