@@ -614,26 +614,36 @@ register(DvrRayMode, sample_step=_sample_step, segment=_segment, **_HOOKS)
 _SEGMENT_BLOCKS = "segment blocks"
 
 
-@jit()
-def _segment_blocks(mode, visible, lows, highs):
-    """Finest blocks a taken segment of the fixed-step loop can touch: a visible block's
-    neighbours (26 and itself), and blocks whose joint value range with a neighbour (or whose
-    own) the mode wants (the loop's test for a segment between two leapt blocks)."""
-    nx, ny, nz = visible.shape
-    out = np.zeros(visible.shape, np.uint8)
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                lo, hi = lows[i, j, k], highs[i, j, k]
-                hit = False
-                for a in range(max(i - 1, 0), min(i + 2, nx)):
-                    for b in range(max(j - 1, 0), min(j + 2, ny)):
-                        for c in range(max(k - 1, 0), min(k + 2, nz)):
-                            if not hit and (visible[a, b, c] or _wants(
-                                    mode, 0.0, min(lo, lows[a, b, c]), max(hi, highs[a, b, c]))):
-                                hit = True
-                out[i, j, k] = hit
-    return out
+def _segment_blocks(mode: Any, visible: np.ndarray, lows: np.ndarray,
+                    highs: np.ndarray) -> np.ndarray:
+    """Finest blocks a taken segment of the fixed-step loop can touch: a visible block and its
+    26 neighbours, and a block whose value range joined with its neighbours' is one the mode
+    wants (the loop's test for a segment between two leapt blocks takes two of them, so this is
+    conservative). Whole-array operations, once per transfer function: about 5 ms for a 256^3
+    volume (64^3 blocks), 80 ms for 512^3."""
+    near = _around(visible, np.maximum)
+    lo, hi = _around(lows, np.minimum), _around(highs, np.maximum)
+    # The kernel's test (``_wants``): the opacity prefix differs over the bins of [lo, hi].
+    nbins = mode.prefix.shape[0] - 1
+    b0 = np.clip((lo - mode.p_lo) * mode.p_scale, 0, nbins - 1).astype(np.int64)
+    b1 = np.clip((hi - mode.p_lo) * mode.p_scale, 0, nbins - 1).astype(np.int64)
+    wanted = (lo <= hi) & (mode.prefix[b1 + 1] != mode.prefix[b0])
+    return ((near != 0) | wanted).view(np.uint8)
+
+
+def _around(values: np.ndarray, reduce: Any) -> np.ndarray:
+    """``reduce`` (``np.minimum`` or ``np.maximum``) of every block's value and its 26
+    neighbours' (those inside the array), one axis at a time."""
+    for axis in range(values.ndim):
+        pad = [(1, 1) if d == axis else (0, 0) for d in range(values.ndim)]
+        edged = np.pad(values, pad, mode="edge")
+        n = values.shape[axis]
+        part = [[slice(None)] * values.ndim for _ in range(3)]
+        for shift in range(3):
+            part[shift][axis] = slice(shift, shift + n)
+        values = reduce(reduce(edged[tuple(part[0])], edged[tuple(part[1])]),
+                        edged[tuple(part[2])])
+    return values
 
 
 def _any_in_blocks(flags: np.ndarray, factor: int, shape: tuple) -> np.ndarray:
