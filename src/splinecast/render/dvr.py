@@ -752,9 +752,9 @@ class Dvr:
         samples, in neighbouring finest blocks when the step is at most their edge; it takes
         one whose samples lie in two invisible blocks when the two blocks' joint value range
         is visible (:mod:`.sampler`). Its flags are therefore the finest blocks next to a
-        visible one (or visible) and those whose joint range with a neighbour is visible, and
-        the coarser levels' flags hold any such block (:func:`_segment_blocks`). None for a
-        step longer than the finest blocks' edge.
+        visible one (or visible) and those whose range joined with their neighbours' ranges
+        is visible (a superset of the pairs), and the coarser levels' flags hold any such
+        block (:func:`_segment_blocks`). None for a step longer than the finest blocks' edge.
         """
         if self.settings.sampling != "ray":
             return blocks[:3]
