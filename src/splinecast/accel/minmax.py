@@ -10,12 +10,14 @@ contain the isovalue?", which takes a few milliseconds even for 512^3 volumes.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import prange
 
 from .._jit import jit
 
-__all__ = ["BLOCK_SHIFTS", "MinMaxHierarchy", "inactive_block_size"]
+__all__ = ["BLOCK_SHIFTS", "MinMaxHierarchy", "inactive_block_size", "neighbourhood"]
 
 #: log2 of the block edge (in cells) of each level, finest first.
 BLOCK_SHIFTS = (2, 4, 6)
@@ -174,3 +176,19 @@ class MinMaxHierarchy:
     def nbytes(self) -> int:
         """Memory held by the ranges and flags."""
         return sum(a.nbytes for a in (*self.lows, *self.highs, *self.active))
+
+
+def neighbourhood(values: np.ndarray, reduce: Any) -> np.ndarray:
+    """``reduce`` (``np.minimum``, ``np.maximum``, ``np.logical_or``) of every entry of a 3D
+    array and its 26 neighbours (those inside the array), one axis at a time: a block's range
+    joined with its neighbours', or flags grown by one block."""
+    for axis in range(values.ndim):
+        pad = [(1, 1) if d == axis else (0, 0) for d in range(values.ndim)]
+        edged = np.pad(values, pad, mode="edge")  # the edge repeats itself: no new values
+        n = values.shape[axis]
+        part = [[slice(None)] * values.ndim for _ in range(3)]
+        for shift in range(3):
+            part[shift][axis] = slice(shift, shift + n)
+        values = reduce(reduce(edged[tuple(part[0])], edged[tuple(part[1])]),
+                        edged[tuple(part[2])])
+    return values

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..accel.minmax import neighbourhood
 from ..errors import ParameterError
 from .wavelet_layout import WaveletLayout
 
@@ -137,18 +138,7 @@ def _parents(table: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
 
 def _dilate(table: np.ndarray) -> np.ndarray:
     """True where the entry or one of its 26 neighbours is True."""
-    out = table.copy()
-    for a in range(3):
-        grown = out.copy()
-        n = out.shape[a]
-        if n > 1:
-            lo = [slice(None)] * 3
-            hi = [slice(None)] * 3
-            lo[a], hi[a] = slice(0, n - 1), slice(1, n)
-            grown[tuple(lo)] |= out[tuple(hi)]
-            grown[tuple(hi)] |= out[tuple(lo)]
-        out = grown
-    return out
+    return neighbourhood(table, np.logical_or)
 
 
 def select(

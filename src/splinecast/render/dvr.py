@@ -66,7 +66,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..accel.minmax import BLOCK_SHIFTS
+from ..accel.minmax import BLOCK_SHIFTS, neighbourhood
 from ..errors import ParameterError, limits
 from ..models.pieces import gradient, value_gradient_at
 from ..preintegration import (
@@ -621,29 +621,14 @@ def _segment_blocks(mode: Any, visible: np.ndarray, lows: np.ndarray,
     wants (the loop's test for a segment between two leapt blocks takes two of them, so this is
     conservative). Whole-array operations, once per transfer function: about 5 ms for a 256^3
     volume (64^3 blocks), 80 ms for 512^3."""
-    near = _around(visible, np.maximum)
-    lo, hi = _around(lows, np.minimum), _around(highs, np.maximum)
+    near = neighbourhood(visible, np.maximum)
+    lo, hi = neighbourhood(lows, np.minimum), neighbourhood(highs, np.maximum)
     # The kernel's test (``_wants``): the opacity prefix differs over the bins of [lo, hi].
     nbins = mode.prefix.shape[0] - 1
     b0 = np.clip((lo - mode.p_lo) * mode.p_scale, 0, nbins - 1).astype(np.int64)
     b1 = np.clip((hi - mode.p_lo) * mode.p_scale, 0, nbins - 1).astype(np.int64)
     wanted = (lo <= hi) & (mode.prefix[b1 + 1] != mode.prefix[b0])
     return ((near != 0) | wanted).view(np.uint8)
-
-
-def _around(values: np.ndarray, reduce: Any) -> np.ndarray:
-    """``reduce`` (``np.minimum`` or ``np.maximum``) of every block's value and its 26
-    neighbours' (those inside the array), one axis at a time."""
-    for axis in range(values.ndim):
-        pad = [(1, 1) if d == axis else (0, 0) for d in range(values.ndim)]
-        edged = np.pad(values, pad, mode="edge")
-        n = values.shape[axis]
-        part = [[slice(None)] * values.ndim for _ in range(3)]
-        for shift in range(3):
-            part[shift][axis] = slice(shift, shift + n)
-        values = reduce(reduce(edged[tuple(part[0])], edged[tuple(part[1])]),
-                        edged[tuple(part[2])])
-    return values
 
 
 def _any_in_blocks(flags: np.ndarray, factor: int, shape: tuple) -> np.ndarray:
