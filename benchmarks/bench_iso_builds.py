@@ -10,7 +10,7 @@ parent reports whether the two builds' are bit-identical
 and their largest difference.
 
     python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip|dvr]
-        [--dvr-sampling OLD,NEW] [--models trilinear,bspline1,bspline2,bspline3]
+        [--dvr-sampling OLD,NEW] [--dvr-step VOXELS] [--models trilinear,bspline1,bspline2,bspline3]
         [--scenes LABELS] [--stem iso_builds]
 
 Results go to ``benchmarks/results/<stem>.md`` and ``.json``.
@@ -50,7 +50,7 @@ def _worker(outdir: str) -> None:
     print(json.dumps({"ready": sc.__file__}), flush=True)
     for line in sys.stdin:
         req = json.loads(line)
-        key = (req["scene"], req["model"], req["mode"], req.get("sampling"))
+        key = (req["scene"], req["model"], req["mode"], req.get("sampling"), req.get("step"))
         if key not in scenes:
             _, name, size = next(s for s in SCENES if s[0] == req["scene"])
             if size:
@@ -62,7 +62,8 @@ def _worker(outdir: str) -> None:
             scene = sc.Scene(vol, model=req["model"])
             options = {"iso": iso} if req["mode"] == "iso" else {"mode": req["mode"]}
             if req["mode"] == "dvr":
-                options.update(_dvr_options(vol, iso, req.get("sampling") or None))
+                options.update(_dvr_options(vol, iso, req.get("sampling") or None,
+                                            req.get("step")))
             scene.render(cam, **options, outputs=("rgba",))  # compile and prepare
             scenes[key] = (scene, cam, options)
         scene, cam, options = scenes[key]
@@ -78,9 +79,9 @@ def _worker(outdir: str) -> None:
         print(json.dumps({"ms": (time.process_time() - start) * 1e3}), flush=True)
 
 
-def _dvr_options(vol, iso: float, sampling: str | None) -> dict:
+def _dvr_options(vol, iso: float, sampling: str | None, step: float | None = None) -> dict:
     """The comparison suite's DVR: its transfer function over black, the build's default
-    settings (with another ``sampling`` when given)."""
+    settings (with another ``sampling`` or ``step`` in voxels when given)."""
     import dataclasses
 
     import splinecast as sc
@@ -92,8 +93,11 @@ def _dvr_options(vol, iso: float, sampling: str | None) -> dict:
 
     options = {"tf": TransferFunction(dvr_transfer(vol, iso), vol.value_range, "gray"),
                "shading": sc.Shading(background=(0.0, 0.0, 0.0, 1.0))}
-    if sampling:
-        options["dvr"] = dataclasses.replace(dvr.DEFAULT_SETTINGS, sampling=sampling)
+    changes = {"sampling": sampling} if sampling else {}
+    if step:
+        changes["step"] = float(step)
+    if changes:
+        options["dvr"] = dataclasses.replace(dvr.DEFAULT_SETTINGS, **changes)
     return options
 
 
@@ -136,6 +140,8 @@ def main() -> None:
     ap.add_argument("--dvr-sampling", default=",",
                     help="DVR: the sampling of the old and the new build, 'OLD,NEW' (empty: the "
                          "build's default settings)")
+    ap.add_argument("--dvr-step", type=float, default=0.0,
+                    help="DVR: the sample step in voxels of both builds (0: the build's default)")
     ap.add_argument("--stem", default="iso_builds")
     args = ap.parse_args()
     os.environ["NUMBA_NUM_THREADS"] = "1"  # what the workers run with, for the description
@@ -147,7 +153,8 @@ def main() -> None:
         builds = {"old": _Build(Path(args.old).resolve(), outdir), "new": _Build(REPO, outdir)}
         for label in args.scenes.split(","):
             for model in args.models.split(","):
-                req = {"scene": label, "model": model, "mode": args.mode}
+                req = {"scene": label, "model": model, "mode": args.mode,
+                       "step": args.dvr_step or None}
                 samplings = dict(zip(builds, args.dvr_sampling.split(","), strict=True))
                 depths = {k: np.load(b.ask(**req, depth=True, sampling=samplings[k])["depth"])
                           for k, b in builds.items()}
@@ -183,6 +190,7 @@ def main() -> None:
              f"Machine: {machine}. Command: `python benchmarks/bench_iso_builds.py --old <checkout>"
              f" --rounds {args.rounds} --mode {args.mode}"
              + (f" --dvr-sampling {args.dvr_sampling}" if args.mode == "dvr" else "")
+             + (f" --dvr-step {args.dvr_step:g}" if args.dvr_step else "")
              + f"`. Builds: old `{sources['old']}`, new "
              f"`{sources['new']}`. 1024x768, colour only, one Numba thread, process CPU time, "
              "median of the rounds after a warm-up, the builds alternating within every round; "

@@ -195,3 +195,39 @@ def test_trilinear_value_at_equals_value_gradient_at(dtype):
     values = _values(scene.grid.kernel, points)
     assert np.ptp(values[:, 1]) > 100  # the points see the data's range
     np.testing.assert_allclose(values[:, 0], values[:, 1], rtol=1e-12, atol=1e-9)
+
+
+def test_taking_values_one_sample_early_changes_nothing():
+    """The trilinear model's values are taken one sample early (``look_ahead``): the same
+    hooks registered for a twin grid class without it run the plain loop, and the two give
+    bit-identical colours and depths, with leaps, early termination and a step that does not
+    divide the volume (a ray's last segment cut at its exit)."""
+    from collections import namedtuple
+
+    from splinecast.models import pieces
+    from splinecast.models.trilinear import TrilinearGrid
+
+    plain_class = namedtuple("TrilinearGridNoLookAhead", TrilinearGrid._fields)
+    hooks = {k: v for k, v in pieces.hooks_of(TrilinearGrid).items() if k != "look_ahead"}
+    assert len(hooks) < len(pieces.hooks_of(TrilinearGrid))
+    pieces.register(plain_class, **hooks)
+    vol = sc.demo("marschner-lobb", size=40)
+    grid = sc.Scene(vol).grid
+    plain = grid.with_kernel(plain_class(*grid.kernel))
+    lo, hi = vol.value_range
+    tf = sc.TransferFunction([(lo, 0.0), (lo + 0.45 * (hi - lo), 0.0),
+                              (lo + 0.55 * (hi - lo), 0.3), (hi, 0.9)], domain=(lo, hi))
+    cams = [sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(48, 36)),
+            sc.Camera.orbit(vol, azimuth=-70, elevation=50, size=(40, 30), zoom=1.6)]
+    for step, termination in ((1.0, 1.0 - 2.0**-10), (0.7, None), (2.5, 0.9)):
+        setup = Dvr(tf, sc.DVRSettings(step=step, sampling="ray", termination=termination))
+        for cam in cams:
+            (rgba, depth, *_), counts = render_grid(grid, setup, cam)
+            (rgba_p, depth_p, *_), counts_p = render_grid(plain, setup, cam)
+            assert rgba[..., 3].max() > 0.5
+            np.testing.assert_array_equal(rgba, rgba_p)
+            np.testing.assert_array_equal(depth, depth_p)
+            # The early values: more evaluated (a ray that stops leaves one unused), never
+            # fewer, and the same segments.
+            np.testing.assert_array_equal(counts[1], counts_p[1])
+            assert (counts[0] >= counts_p[0]).all() and counts[0].sum() > counts_p[0].sum()

@@ -18,6 +18,10 @@ model (the value is the model's ``value_at``, inlined into the pair's kernel):
   block, without evaluating the ones in between, whose segments lie wholly in the block and
   add nothing;
 * early termination by the mode's ``done``;
+* for a model whose value is a few loads (``look_ahead``, :mod:`splinecast.models.pieces`),
+  each sample's value is taken one sample early, before the table reads of the segment in
+  front of it, so the voxel reads of the one overlap the table reads of the other (both wait
+  on memory; 1.1-1.4x on the trilinear DVR); the value is the same, as its position is;
 * a footprint interval (:mod:`.footprint`) is widened to the samples on either side of it,
   so a ray started or ended by it takes the segments of the whole ray.
 
@@ -31,7 +35,7 @@ import math
 
 from .._jit import jit
 from ..accel.traversal import axis_exit, clip_to_box
-from ..models.pieces import value_at
+from ..models.pieces import look_ahead, value_at
 from .mode_api import (
     done,
     finish,
@@ -92,6 +96,9 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
             m = math.floor((ta - anchor) / dt) + 1.0
             va = 0.0
             known = False  # whether va holds the value at ta (taken when first needed)
+            ahead_of_model = look_ahead(grid)
+            ahead = 0.0  # the value at sample number ahead_m (taken early; see below)
+            ahead_m = -1.0
             lows, highs = blocks[3], blocks[4]
             while True:
                 ci, cj, ck = _cells(ox, oy, oz, dx, dy, dz, ta, ncx, ncy, ncz)
@@ -141,8 +148,19 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                 if end:
                     tb = t_far
                 bx, by, bz = ox + tb * dx, oy + tb * dy, oz + tb * dz
-                vb = value_at(grid, scr, bx, by, bz)
-                evaluated += 1
+                if ahead_m == m and not end:
+                    vb = ahead
+                else:
+                    vb = value_at(grid, scr, bx, by, bz)
+                    evaluated += 1
+                # The next sample's value, before this segment's table reads, for a model
+                # whose value is cheap: its voxel loads then overlap them (both wait on memory).
+                # The same expression as its tb on the next round, so the same value.
+                tc = anchor + (m + 1.0) * dt
+                if ahead_of_model and not end and tc < t_far:
+                    ahead = value_at(grid, scr, ox + tc * dx, oy + tc * dy, oz + tc * dz)
+                    ahead_m = m + 1.0
+                    evaluated += 1
                 length = (tb - ta) * speed
                 if length > 0.0:
                     st = segment(mode, grid, scr, st, ray, ta, tb, va, vb, length, bx, by, bz)
