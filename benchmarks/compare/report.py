@@ -108,8 +108,9 @@ def markdown(results: dict[str, Any]) -> str:
                   "the error of splinecast at its default settings (DVR: "
                   "splinecast.render.dvr.DEFAULT_SETTINGS), at least 1/255. Each method (VTK's "
                   "casters; for DVR also splinecast, its other settings the defaults) runs at "
-                  "the coarsest step of 2, 1, 1/2, 1/4, 1/8 voxel within the tolerance; one that "
-                  "never reaches it runs at 1/8 (\"finest step tried\").",
+                  "the coarsest step of 4, 3, 2, 1, 1/2, 1/4, 1/8 voxel within the tolerance; one "
+                  "that never reaches it runs at 1/8 (\"finest step tried\"). Timed frames: "
+                  "the colour image (splinecast: outputs=(\"rgba\",)).",
                   "",
                   "| scene | mode | image | method | step (voxels) | error vs reference "
                   "| ms/frame | ratio to the floor |", "|---|---|---|---|---|---|---|---|"]
