@@ -147,3 +147,32 @@ def test_apply_colormap_window_and_background():
     np.testing.assert_allclose(rgba[0, 1, :3], 0.0)
     np.testing.assert_allclose(rgba[0, 2, :3], 0.5, atol=1e-3)
     np.testing.assert_allclose(rgba[0, 3, :3], 1.0)
+
+
+def _colormap_reference(values, window, colormap, background):
+    """The colormapped image by whole-array numpy operations in float64 (nearest of 1024 table
+    entries, NaN to the background)."""
+    lo, hi = window
+    table = colormap_table(colormap, 1024)
+    v = np.asarray(values, np.float64)
+    u = np.clip((np.nan_to_num(v, nan=lo) - lo) / (hi - lo), 0.0, 1.0)
+    rgba = np.empty((*v.shape, 4), np.float32)
+    rgba[..., :3] = table[np.rint(u * 1023).astype(np.int64)]
+    rgba[..., 3] = 1.0
+    rgba[np.isnan(v)] = np.asarray(background, np.float32)
+    return rgba
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("colormap", ["viridis", "hot"])
+def test_apply_colormap_matches_the_whole_array_formula(dtype, colormap):
+    rng = np.random.default_rng(7)
+    values = rng.uniform(-3.0, 13.0, (37, 53)).astype(dtype)
+    values[rng.random(values.shape) < 0.1] = np.nan
+    values[0, :3] = (np.inf, -np.inf, 2.0 + 1.5 * 10 / 1023)  # a tie of the nearest entry
+    strided = values[:, ::2]  # not contiguous
+    background = (0.1, 0.2, 0.3, 0.4)
+    got = apply_colormap(strided, (2.0, 12.0), colormap, background)
+    assert got.dtype == np.float32 and got.shape == (*strided.shape, 4)
+    np.testing.assert_array_equal(got, _colormap_reference(strided, (2.0, 12.0), colormap,
+                                                           background))

@@ -32,7 +32,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import prange
 
+from ._jit import jit
 from .errors import ParameterError, ReadError, limits
 
 __all__ = ["COLORMAPS", "TransferFunction", "colormap_table", "apply_colormap"]
@@ -118,17 +120,38 @@ def apply_colormap(values: np.ndarray, window: tuple[float, float], colormap: An
     """RGBA float32 image of ``values`` through a window/level and a colormap.
 
     Values at or below ``window[0]`` get the colormap's first colour, at or above ``window[1]`` its
-    last; NaN (rays that miss the volume) gets ``background``.
+    last (the nearest of 1024 entries sampled over the window); NaN (rays that miss the volume)
+    gets ``background``.
     """
     lo, hi = float(window[0]), float(window[1])
     table = colormap_table(colormap, 1024)
     span = hi - lo if hi > lo else 1.0
-    u = np.clip((np.nan_to_num(values, nan=lo) - lo) / span, 0.0, 1.0)
+    values = np.asarray(values)
     rgba = np.empty((*values.shape, 4), np.float32)
-    rgba[..., :3] = table[np.rint(u * 1023).astype(np.int64)]
-    rgba[..., 3] = 1.0
-    rgba[np.isnan(values)] = np.asarray(background, np.float32)
+    # One pass over the pixels on every thread: the whole-array numpy form took 57 ms of a
+    # 1024x768 MIP frame on one core (six temporaries the image's size).
+    _colormap_pixels(values.reshape(-1), lo, span, table, np.asarray(background, np.float32),
+                     rgba.reshape(-1, 4))
     return rgba
+
+
+@jit(parallel=True)
+def _colormap_pixels(values, lo, span, table, background, out):  # pragma: no cover - compiled
+    """``out[i]``: the ``table`` colour nearest ``(values[i] - lo) / span`` (clamped to [0, 1])
+    with alpha 1, or ``background`` where the value is NaN."""
+    top = table.shape[0] - 1
+    for i in prange(values.shape[0]):
+        v = np.float64(values[i])
+        if math.isnan(v):
+            for c in range(4):
+                out[i, c] = background[c]
+            continue
+        u = min(max((v - lo) / span, 0.0), 1.0)
+        # rint: round half to even, like numpy's.
+        entry = int(np.rint(u * top))
+        for c in range(3):
+            out[i, c] = table[entry, c]
+        out[i, 3] = 1.0
 
 
 class TransferFunction:
