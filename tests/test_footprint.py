@@ -208,3 +208,24 @@ def test_the_sampled_isosurface_method_has_no_footprint():
     blocks = exact.blocks(scene.grid.hierarchy)
     assert segment.screen_footprint(scene.grid, exact, cam, blocks).shape == (4, 5, 2)
     assert segment.screen_footprint(scene.grid, sampled, cam, blocks).shape[0] == 0
+
+
+@pytest.mark.parametrize("mode", ["iso", "dvr"])
+def test_pixels_of_empty_tiles_are_finished_as_the_traced_ones_would_be(mode, monkeypatch):
+    """The band finishes the pixels of tiles the footprint leaves empty in a loop of its own;
+    an image tile whose pixel rows and columns start off the footprint's 8-pixel grid makes
+    the band's tiles straddle empty and non-empty footprint tiles."""
+    vol = sc.demo("sphere", size=25)
+    cam = sc.Camera.orbit(vol, azimuth=20, elevation=10, size=(120, 96),
+                          zoom=0.7).tile(5, 3, 101, 83)
+    options = {"iso": vol.metadata["default_iso"]} if mode == "iso" else {"mode": "dvr"}
+    outputs = ("rgba", "depth")
+    scene = sc.Scene(vol)
+    with_fp = scene.render(cam, **options, outputs=outputs)
+    _without_footprint(monkeypatch)
+    plain = scene.render(cam, **options, outputs=outputs)
+    # The sphere in the middle, rows and columns of pixels that see nothing around it.
+    hit = np.isfinite(plain.depth)
+    assert hit.any() and not hit[:8].any() and not hit[:, :8].any() and not hit[-8:].any()
+    for name in outputs:
+        assert np.array_equal(getattr(plain, name), getattr(with_fp, name), equal_nan=True), name
