@@ -31,7 +31,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numba
 import numpy as np
+from numba import prange
 
 from .._jit import jit
 
@@ -91,38 +93,50 @@ def block_footprint(basis: np.ndarray, geom: np.ndarray, n_cells: Any, active: n
     """
     ncx, ncy, ncz = (int(n) for n in n_cells)
     return _project(basis, geom, np.ascontiguousarray(active), shift, ncx, ncy, ncz,
-                    width, height)
+                    width, height, numba.get_num_threads())
 
 
-@jit
-def _project(basis, geom, active, shift, ncx, ncy, ncz, width, height):
+@jit(parallel=True)
+def _project(basis, geom, active, shift, ncx, ncy, ncz, width, height, parts):
     col0, row0 = int(basis[16]), int(basis[17])
     tiles_x = ((col0 + width - 1) >> FOOTPRINT_SHIFT) - (col0 >> FOOTPRINT_SHIFT) + 1
     tiles_y = ((row0 + height - 1) >> FOOTPRINT_SHIFT) - (row0 >> FOOTPRINT_SHIFT) + 1
-    out = np.empty((tiles_y, tiles_x, 2))
-    out[:, :, 0] = math.inf
-    out[:, :, 1] = -math.inf
+    # The blocks are projected in ``parts`` slabs of block rows, one interval image each,
+    # merged at the end (a frame of the fixed-step DVR projects some 30 000 blocks: 2.3 ms on
+    # one core).
+    slabs = np.empty((parts, tiles_y, tiles_x, 2))
+    slabs[:, :, :, 0] = math.inf
+    slabs[:, :, :, 1] = -math.inf
     edge = 1 << shift
     ortho = basis[14] != 0.0
-    lo = np.empty(3)
-    hi = np.empty(3)
     cells = (ncx, ncy, ncz)
     nbx, nby, nbz = active.shape
-    for bi in range(nbx):
-        for bj in range(nby):
-            for bk in range(nbz):
-                if active[bi, bj, bk] == 0:
-                    continue
-                index = (bi, bj, bk)
-                for a in range(3):
-                    # The block's cells in the traversal space, then in the world.
-                    x0 = index[a] * edge
-                    x1 = min(x0 + edge, cells[a])
-                    w0 = geom[a] + (x0 - geom[6] + geom[7 + a]) * geom[3 + a]
-                    w1 = geom[a] + (x1 - geom[6] + geom[7 + a]) * geom[3 + a]
-                    lo[a] = min(w0, w1)
-                    hi[a] = max(w0, w1)
-                _cover(out, basis, ortho, lo, hi, width, height)
+    per_part = (nbx + parts - 1) // parts
+    for part in prange(parts):
+        slab = slabs[part]
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for bi in range(part * per_part, min(nbx, (part + 1) * per_part)):
+            for bj in range(nby):
+                for bk in range(nbz):
+                    if active[bi, bj, bk] == 0:
+                        continue
+                    index = (bi, bj, bk)
+                    for a in range(3):
+                        # The block's cells in the traversal space, then in the world.
+                        x0 = index[a] * edge
+                        x1 = min(x0 + edge, cells[a])
+                        w0 = geom[a] + (x0 - geom[6] + geom[7 + a]) * geom[3 + a]
+                        w1 = geom[a] + (x1 - geom[6] + geom[7 + a]) * geom[3 + a]
+                        lo[a] = min(w0, w1)
+                        hi[a] = max(w0, w1)
+                    _cover(slab, basis, ortho, lo, hi, width, height)
+    out = slabs[0].copy()
+    for ty in prange(tiles_y):
+        for p in range(1, parts):
+            for tx in range(tiles_x):
+                out[ty, tx, 0] = min(out[ty, tx, 0], slabs[p, ty, tx, 0])
+                out[ty, tx, 1] = max(out[ty, tx, 1], slabs[p, ty, tx, 1])
     return out
 
 
