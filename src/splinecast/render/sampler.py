@@ -11,12 +11,12 @@ model (the value is the model's ``value_at``, inlined into the pair's kernel):
   same for every grid), so bricks sample at the same places as the whole volume; a grid's
   first and last segments are cut at its interval's ends, so bricks traced one after another
   composite the same stretches as one grid (cut in two at each brick face);
-* empty-space leaping: at each sample in another 4-cell block than the last one found
-  visible, the mode's ``skip_size`` names the largest block around the sample's cell that
-  cannot contribute (DVR: the transfer function is zero over its value range; a sampled mode's
-  ``skip_size`` depends on the position only); the loop moves to the last sample inside that
-  block, without evaluating the ones in between, whose segments lie wholly in the block and
-  add nothing;
+* empty-space leaping: at each sample the mode's ``skip_size`` names the largest block around
+  the sample's cell that cannot contribute (DVR: the transfer function is zero over its value
+  range; a sampled mode's ``skip_size`` depends on the position only); the loop moves to the
+  last sample inside that block, without evaluating the ones in between, whose segments lie
+  wholly in the block and add nothing. It asks at every sample: remembering the last 4-cell
+  block found visible and not asking again inside it measured 0.94-1.04x;
 * early termination by the mode's ``done``;
 * for a model whose value is a few loads (``look_ahead``, :mod:`splinecast.models.pieces`),
   each sample's value is taken one sample early, before the table reads of the segment in
