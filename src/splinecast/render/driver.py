@@ -35,9 +35,10 @@ under its own name (:func:`pair_band`). The parallel image loop around it is one
 every pair: it takes the pair's band as a first-class function
 (:func:`splinecast._jit.call_with_first_class`).
 
-Work is spread over threads in bands of ``band_rows`` rows, in the order ``bands`` (a
-permutation that mixes busy and empty parts of the image), each band traversed in tiles of
-``tile`` columns so neighbouring rays reuse the model's per-thread caches.
+Work is spread over threads in bands of ``band_rows`` rows: each thread takes the next band of
+the order ``bands`` (a permutation that mixes busy and empty parts of the image) when it is free
+(:mod:`.work_queue`), and traverses it in tiles of ``tile`` columns so neighbouring rays reuse
+the model's per-thread caches.
 """
 
 from __future__ import annotations
@@ -73,6 +74,7 @@ from .mode_api import (
 )
 from .rays import grid_ray, pixel_ray
 from .sampler import sample_pixel
+from .work_queue import take
 
 __all__ = ["trace", "pair_band", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
 
@@ -89,9 +91,10 @@ FINEST_SHIFT = BLOCK_SHIFTS[0]
 def band_order(n_bands: int) -> np.ndarray:
     """A permutation of bands in which every contiguous run is spread over the whole image.
 
-    Numba hands each thread a contiguous range of the parallel loop; ordering bands by the
-    fractional part of ``band * golden ratio`` gives every thread a similar mix of busy and
-    empty bands.
+    Ordering bands by the fractional part of ``band * golden ratio`` gives a thread that takes
+    a contiguous range of them (the brick renderer's parallel loop, :mod:`splinecast.multires`)
+    a similar mix of busy and empty bands, and threads taking bands one at a time
+    (:func:`trace`) busy bands from the start.
     """
     key = (np.arange(n_bands) * 0.6180339887498949) % 1.0
     return np.argsort(key, kind="stable").astype(np.int64)
@@ -305,7 +308,8 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
         Per-ray statistics, incremented.
     """
     args = (grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,
-            band_rows, tile, load, store, final, count, visited, tested, skipped)
+            band_rows, tile, load, store, final, count, visited, tested, skipped,
+            max(1, min(numba.get_num_threads(), len(bands))))
     call_with_first_class(_trace_image, pair_band(type(grid), type(mode)), _band_types, args)
 
 
@@ -330,23 +334,30 @@ def _scratch_probe(grid, mode):
 
 @jit(parallel=True)
 def _trace_image(band, grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint,
-                 bands, band_rows, tile, load, store, final, count, visited, tested, skipped):
+                 bands, band_rows, tile, load, store, final, count, visited, tested, skipped,
+                 threads):
     """:func:`trace` compiled: ``band`` is the pair's :func:`_trace_band` as a first-class
     function (:func:`splinecast._jit.call_with_first_class`), so this one function serves every
     pair and compiles without the band's code (the parallel loop's library would link and
     optimize it again)."""
-    # The parallel loop only hands out bands: its body stays a single call, which keeps
-    # Numba's parallel passes (and the compile time) small.
     height, width = visited.shape
     # The first column as a variable: a constant argument is typed as a literal, which would
     # compile a band of its own instead of the one the cut renderer shares (.pieces_driver).
     first = width - width
-    for b in prange(bands.shape[0]):
-        r0 = bands[b] * band_rows
-        band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0,
-             min(height, r0 + band_rows), first, width, tile, load, store, final, count,
-             visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
-             np.empty(8), np.empty(8, np.int64))
+    # Each of the ``threads`` takes the next band in the order ``bands`` when it is free
+    # (:mod:`.work_queue`): bands differ in cost by orders of magnitude, and a split fixed in
+    # advance left one thread waiting for the other.
+    next_band = np.zeros(1, np.int64)
+    for _ in prange(threads):
+        while True:
+            b = take(next_band)
+            if b >= bands.shape[0]:
+                break
+            r0 = bands[b] * band_rows
+            band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0,
+                 min(height, r0 + band_rows), first, width, tile, load, store, final, count,
+                 visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
+                 np.empty(8), np.empty(8, np.int64))
 
 
 @jit(parallel=True)
