@@ -58,6 +58,7 @@ from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, pie
 from . import mode_api
 from .footprint import FOOTPRINT_SHIFT
 from .mode_api import (
+    asks_again,
     consume,
     done,
     finish,
@@ -131,7 +132,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
             st = ray_begin(mode, grid, scr, mscr, blocks, st, ray, ncx, ncy, ncz, t, t_far)
         # The finest block the mode last asked to process: its other cells are processed
         # without asking again (skip_size's contract), which saves the hierarchy's lookups
-        # for most cells near a surface.
+        # for most cells near a surface; a mode that ``asks_again`` is asked after each cell
+        # it tested.
         open_i = open_j = open_k = -1
         while inside:
             if (ci >> FINEST_SHIFT) == open_i and (cj >> FINEST_SHIFT) == open_j and (
@@ -180,6 +182,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                                      tp0, tp1, pax, pay, paz, pbx, pby, pbz, ray, st)
                         if done(mode, st):
                             break
+                    if asks_again(mode):
+                        open_i = -1
                 elif watches_skips(mode):
                     st = on_skip(mode, grid, scr, st, ray, t, t_end, ctx[0], ctx[1])
                 if done(mode, st):

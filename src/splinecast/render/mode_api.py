@@ -33,6 +33,11 @@ bx, by, bz, ray, st)`` -> ``st``
     Early termination.
 ``ray_end(mode, grid, scratch, st, ray, t_far)`` -> ``st``
     After the walk of the ray's last segment.
+``asks_again(mode)`` -> ``bool``
+    Whether the driver asks ``skip_size`` again after a cell the mode processed, instead of
+    taking the 0 for the rest of the finest block (optional; default: no). MIP's running
+    maximum may have risen past the block's maximum in that cell, and the rest of the block is
+    then leapt over.
 ``watches_skips(mode)`` -> ``bool``
     Whether ``on_skip`` and ``ray_end`` do anything (optional; default: no). The driver calls
     them only then: a call that passes the ray and state tuples costs more than the cheap cells
@@ -81,7 +86,7 @@ __all__ = [
     "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
-    "never", "hooks_of", "sampled_of", "sample_step", "segment",
+    "never", "hooks_of", "sampled_of", "sample_step", "segment", "asks_again",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
@@ -93,14 +98,14 @@ _SAMPLED = ("sample_step", "segment")
 
 def register(mode_class: type, **hooks: Any) -> None:
     """Register a mode's compiled functions for its parameter tuple class (all of
-    :data:`_NAMES`; ``watches_skips`` defaults to :func:`never`)."""
+    :data:`_NAMES`; ``watches_skips`` and ``asks_again`` default to :func:`never`)."""
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
     if 0 < len(set(_SAMPLED) & set(hooks)) < len(_SAMPLED):
         raise TypeError(f"{mode_class.__name__}: a sampled mode registers all of "
                         f"{', '.join(_SAMPLED)}")
-    _HOOKS[mode_class] = {"watches_skips": never, **hooks}
+    _HOOKS[mode_class] = {"watches_skips": never, "asks_again": never, **hooks}
 
 
 def sampled_of(mode_class: type) -> bool:
@@ -267,6 +272,17 @@ def _watches_skips(mode):
     return None if f is None else f.py_func
 
 
+def asks_again(mode):
+    """Whether the driver asks ``skip_size`` again after a processed cell (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(asks_again, inline="never")
+def _asks_again(mode):
+    f = _impl(mode, "asks_again")
+    return None if f is None else f.py_func
+
+
 def sample_step(mode):
     """Distance between the samples of a sampled mode, in voxels (compiled code only)."""
     raise NotImplementedError
@@ -294,7 +310,8 @@ def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
 
 @jit()
 def never(mode):
-    """``watches_skips`` of a mode whose ``on_skip`` and ``ray_end`` leave the state alone."""
+    """``watches_skips`` of a mode whose ``on_skip`` and ``ray_end`` leave the state alone, and
+    ``asks_again`` of one whose refusals do not change along the ray."""
     return False
 
 
