@@ -151,16 +151,26 @@ def test_a_constant_field_keeps_its_first_position():
 
 
 
-def _without_previous_ray(mp):
-    """Exact MIP whose lower bound never starts from the thread's previous ray (the coarse
-    block walk for every ray): the slower path the previous-ray bound must agree with."""
+def _fast_and_slow(vol, model, kind, **slower):
+    """Frames of the default exact method and of the same with the kernel parameters
+    ``slower`` replaced (a slower path it must agree with), checked bit-identical in value,
+    depth and position; returns both and the mask of rays with a value."""
+    cam = sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(48, 36))
+    fast = sc.Scene(vol, model=model).render(cam, mode=kind)
     original = mip_module.Mip.__init__
 
     def init(self, *args, **kwargs):
         original(self, *args, **kwargs)
-        self.params = self.params._replace(coherent=0.0)
+        self.params = self.params._replace(**slower)
 
-    mp.setattr(mip_module.Mip, "__init__", init)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(mip_module.Mip, "__init__", init)
+        slow = sc.Scene(vol, model=model).render(cam, mode=kind)
+    for name in ("value", "depth", "position"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
+    hit = np.isfinite(fast.value)
+    assert hit.sum() > 500
+    return fast, slow, hit
 
 
 @pytest.mark.parametrize(("model", "kind"), [("trilinear", "mip"), ("trilinear", "minip"),
@@ -168,34 +178,15 @@ def _without_previous_ray(mp):
 @pytest.mark.parametrize("smooth", [True, False], ids=["smooth", "noise"])
 def test_the_previous_rays_bound_changes_no_value_or_position(model, kind, smooth):
     """The bound taken where the previous ray found its maximum only leaves out cells: values,
-    depths and positions are bit-identical to the block-walk bound's, on a smooth volume (the
-    bound is then nearly the answer) and on noise (neighbouring maxima at unrelated depths)."""
+    depths and positions are bit-identical to the block-walk bound's (``coherent = 0``: the
+    coarse block walk for every ray), on a smooth volume (the bound is then nearly the answer)
+    and on noise (neighbouring maxima at unrelated depths)."""
     vol = sc.demo("marschner-lobb", size=40) if smooth else sc.demo("noise", size=24)
-    cam = sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(48, 36))
-    fast = sc.Scene(vol, model=model).render(cam, mode=kind)
-    with pytest.MonkeyPatch.context() as mp:
-        _without_previous_ray(mp)
-        slow = sc.Scene(vol, model=model).render(cam, mode=kind)
-    for name in ("value", "depth", "position"):
-        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
-    hit = np.isfinite(fast.value)
-    assert hit.sum() > 500
+    fast, slow, hit = _fast_and_slow(vol, model, kind, coherent=0.0)
     if smooth and kind == "mip":
         # The bound is exercised: it leaves out cells the block walk's bound lets through
         # (the minimum of this volume is not as coherent: there both test as many).
         assert fast.cells_tested[hit].sum() < 0.95 * slow.cells_tested[hit].sum()  # 0.90
-
-
-def _without_pruning(mp):
-    """Exact MIP that takes every tested piece's derivative roots and asks the block hierarchy
-    only once per finest block (no control-point pruning, no asking again): the slower path."""
-    original = mip_module.Mip.__init__
-
-    def init(self, *args, **kwargs):
-        original(self, *args, **kwargs)
-        self.params = self.params._replace(prune=0.0)
-
-    mp.setattr(mip_module.Mip, "__init__", init)
 
 
 def _quantized_marschner_lobb(n):
@@ -211,19 +202,12 @@ def _quantized_marschner_lobb(n):
 def test_pruned_pieces_and_blocks_change_no_value_or_position(model, kind, volume):
     """Pieces whose control points cannot beat the running maximum are left out, and the rest
     of a block is leapt once the maximum reaches the block's: values, depths and positions are
-    bit-identical to the exact method's without either."""
+    bit-identical to the exact method's without either (``prune = 0``: every tested piece's
+    derivative roots, the hierarchy asked once per finest block)."""
     vol = {"smooth": lambda: sc.demo("marschner-lobb", size=40),
            "noise": lambda: sc.demo("noise", size=24),
            "plateaus": lambda: _quantized_marschner_lobb(40)}[volume]()
-    cam = sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(48, 36))
-    fast = sc.Scene(vol, model=model).render(cam, mode=kind)
-    with pytest.MonkeyPatch.context() as mp:
-        _without_pruning(mp)
-        slow = sc.Scene(vol, model=model).render(cam, mode=kind)
-    for name in ("value", "depth", "position"):
-        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
-    hit = np.isfinite(fast.value)
-    assert hit.sum() > 500
+    fast, slow, hit = _fast_and_slow(vol, model, kind, prune=0.0)
     if volume == "plateaus" and model == "trilinear":
         # Asking again is exercised: rays leap the rest of blocks they would have walked.
         assert fast.cells_visited[hit].sum() < 0.98 * slow.cells_visited[hit].sum()  # 0.96
