@@ -34,8 +34,9 @@ bx, by, bz, ray, st)`` -> ``st``
 ``ray_end(mode, grid, scratch, st, ray, t_far)`` -> ``st``
     After the walk of the ray's last segment.
 ``asks_again(mode)`` -> ``bool``
-    Whether the driver asks ``skip_size`` again after a cell the mode processed, instead of
-    taking the 0 for the rest of the finest block (optional; default: no). MIP's running
+    Whether the driver asks ``skip_size`` again after each cell the mode tested (its range
+    was wanted), instead of taking the 0 for the rest of the finest block (optional; default:
+    no). MIP's running
     maximum may have risen past the block's maximum in that cell, and the rest of the block is
     then leapt over.
 ``watches_skips(mode)`` -> ``bool``
