@@ -51,13 +51,13 @@ import numpy as np
 from numba import prange
 
 from .._jit import call_with_first_class, inlined, jit, rebound
-from ..accel.minmax import BLOCK_SHIFTS
 from ..accel.traversal import walk_begin, walk_step
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
 from . import mode_api
 from .footprint import FOOTPRINT_SHIFT
 from .mode_api import (
+    answer_shift,
     asks_again,
     consume,
     done,
@@ -84,9 +84,6 @@ _KERNELS: dict[tuple[type, type], Any] = {}
 
 #: Length of the ``geom`` array.
 GEOM_SIZE = 19
-
-#: log2 of the edge of the hierarchy's finest blocks (the unit of ``skip_size``'s answers).
-FINEST_SHIFT = BLOCK_SHIFTS[0]
 
 
 def band_order(n_bands: int) -> np.ndarray:
@@ -130,20 +127,21 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
         inside, ci, cj, ck, t, t_far = walk_begin(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
         if inside:
             st = ray_begin(mode, grid, scr, mscr, blocks, st, ray, ncx, ncy, ncz, t, t_far)
-        # The finest block the mode last asked to process: its other cells are processed
-        # without asking again (skip_size's contract), which saves the hierarchy's lookups
-        # for most cells near a surface; a mode that ``asks_again`` is asked after each cell
-        # it tested.
+        # The smallest block the mode answers for (answer_shift) that it last asked to
+        # process: its other cells are processed without asking again (skip_size's
+        # contract), which saves the hierarchy's lookups for most cells near a surface; a
+        # mode that ``asks_again`` is asked after each cell it tested.
+        shift = answer_shift(mode)
         open_i = open_j = open_k = -1
         while inside:
-            if (ci >> FINEST_SHIFT) == open_i and (cj >> FINEST_SHIFT) == open_j and (
-                    ck >> FINEST_SHIFT) == open_k:
+            if (ci >> shift) == open_i and (cj >> shift) == open_j and (
+                    ck >> shift) == open_k:
                 size = 0
             else:
                 size = skip_size(mode, blocks, ci, cj, ck, st)
                 if size == 0:
-                    open_i, open_j = ci >> FINEST_SHIFT, cj >> FINEST_SHIFT
-                    open_k = ck >> FINEST_SHIFT
+                    open_i, open_j = ci >> shift, cj >> shift
+                    open_k = ck >> shift
             t_end, inside, ni, nj, nk, t_next = walk_step(
                 ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, max(size, 1)
             )

@@ -23,11 +23,12 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
+from ..accel.minmax import PAIR_SHIFT, inactive_pair_size
 from ..errors import ParameterError, limits
 from ..models.pieces import gradient, value_gradient_at
 from ..roots.pieces import poly_first_root, poly_value
 from .frame import Frame
-from .mode_api import flagged_block_size, no_scratch, register, unchanged_begin
+from .mode_api import no_scratch, register, unchanged_begin
 from .outputs import ALL_OUTPUTS, buffer
 from .pixels import store_hit, store_miss
 from .shading import Shading
@@ -65,6 +66,18 @@ def _state_store(mode, state, row, col, st):
     grad[row, col, 2] = st[3]
     prev[row, col, 0] = st[4]
     prev[row, col, 1] = st[5]
+
+
+@jit()
+def _skip_size(mode, blocks, i, j, k, st):
+    return inactive_pair_size(blocks[0], blocks[1], blocks[2], blocks[3], i, j, k)
+
+
+@jit()
+def _answer_shift(mode):
+    # A constant (LLVM folds it into the driver's shifts); the sampled method's blocks carry no
+    # pair level (Iso.blocks), so its answers are the 4-cell blocks', only asked for more often.
+    return PAIR_SHIFT
 
 
 @jit()
@@ -212,7 +225,8 @@ register(IsoMode,
          state_store=_state_store,
          mode_scratch=no_scratch,
          ray_begin=unchanged_begin,
-         skip_size=flagged_block_size,
+         skip_size=_skip_size,
+         answer_shift=_answer_shift,
          wants=_wants,
          on_skip=_on_skip,
          consume=_consume,
@@ -274,10 +288,14 @@ class Iso:
                               self.shading.as_array())
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
-        """Block flags for the isovalue (``flags`` overrides, e.g. a model's own)."""
+        """Block flags for the isovalue (``flags`` overrides, e.g. a model's own), and, for
+        the exact method, the 2-cell blocks' flags when ``flags`` has them (the sampled
+        method leaps the 4-cell blocks only, so its samples stay where they were)."""
         if flags is None:
             flags = hierarchy.classify(self.params.iso)
-        return (*flags, np.zeros(0))
+        no_pairs = np.zeros((0, 0, 0), np.uint8)
+        pairs = flags[3] if len(flags) > 3 and self.method == "exact" else no_pairs
+        return (*flags[:3], pairs)
 
     def footprint_flags(self, blocks: tuple) -> tuple | None:
         """The block flags whose screen footprint bounds where rays can hit (:mod:`.footprint`):

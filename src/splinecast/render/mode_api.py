@@ -16,8 +16,9 @@ arrays*. The driver (:mod:`.driver`) calls, per ray:
     result must not depend on it: the order and grouping of rays are the driver's).
 ``skip_size(mode, blocks, i, j, k, st)`` -> ``int``
     Edge in cells of the block around cell ``(i, j, k)`` to leap over, 0 to process the cell.
-    A 0 is taken for the cell's whole finest block (4 cells per axis): the driver processes
-    the ray's next cells in that block without asking again, so a mode whose answer may change
+    A 0 is taken for the cell's whole block of the smallest edge the mode answers for
+    (``answer_shift``; 4 cells per axis unless it says otherwise): the driver processes the
+    ray's next cells in that block without asking again, so a mode whose answer may change
     along the ray (MIP's running maximum) must also refuse cells through ``wants``.
 ``wants(mode, st, lo, hi)`` -> ``bool``
     Whether a cell or piece whose values lie in ``[lo, hi]`` can change the result.
@@ -35,10 +36,14 @@ bx, by, bz, ray, st)`` -> ``st``
     After the walk of the ray's last segment.
 ``asks_again(mode)`` -> ``bool``
     Whether the driver asks ``skip_size`` again after each cell the mode tested (its range
-    was wanted), instead of taking the 0 for the rest of the finest block (optional; default:
+    was wanted), instead of taking the 0 for the rest of the block (optional; default:
     no). MIP's running
     maximum may have risen past the block's maximum in that cell, and the rest of the block is
     then leapt over.
+``answer_shift(mode)`` -> ``int``
+    log2 of the edge, in cells, of the smallest block ``skip_size`` answers for (optional;
+    default: the hierarchy's finest level, 4-cell blocks). The exact isosurface also answers
+    for 2-cell blocks (:data:`splinecast.accel.minmax.PAIR_SHIFT`).
 ``watches_skips(mode)`` -> ``bool``
     Whether ``on_skip`` and ``ray_end`` do anything (optional; default: no). The driver calls
     them only then: a call that passes the ray and state tuples costs more than the cheap cells
@@ -81,13 +86,14 @@ from typing import Any
 import numpy as np
 
 from .._jit import jit, overload_jit
-from ..accel.minmax import inactive_block_size
+from ..accel.minmax import BLOCK_SHIFTS, inactive_block_size
 
 __all__ = [
     "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
-    "never", "hooks_of", "sampled_of", "sample_step", "segment", "asks_again",
+    "never", "hooks_of", "sampled_of", "sample_step", "segment", "asks_again", "answer_shift",
+    "finest_blocks",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
@@ -99,14 +105,16 @@ _SAMPLED = ("sample_step", "segment")
 
 def register(mode_class: type, **hooks: Any) -> None:
     """Register a mode's compiled functions for its parameter tuple class (all of
-    :data:`_NAMES`; ``watches_skips`` and ``asks_again`` default to :func:`never`)."""
+    :data:`_NAMES`; ``watches_skips`` and ``asks_again`` default to :func:`never`,
+    ``answer_shift`` to :func:`finest_blocks`)."""
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
     if 0 < len(set(_SAMPLED) & set(hooks)) < len(_SAMPLED):
         raise TypeError(f"{mode_class.__name__}: a sampled mode registers all of "
                         f"{', '.join(_SAMPLED)}")
-    _HOOKS[mode_class] = {"watches_skips": never, "asks_again": never, **hooks}
+    _HOOKS[mode_class] = {"watches_skips": never, "asks_again": never,
+                          "answer_shift": finest_blocks, **hooks}
 
 
 def sampled_of(mode_class: type) -> bool:
@@ -284,6 +292,17 @@ def _asks_again(mode):
     return None if f is None else f.py_func
 
 
+def answer_shift(mode):
+    """log2 of the edge of the smallest block ``skip_size`` answers for (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(answer_shift, inline="never")
+def _answer_shift(mode):
+    f = _impl(mode, "answer_shift")
+    return None if f is None else f.py_func
+
+
 def sample_step(mode):
     """Distance between the samples of a sampled mode, in voxels (compiled code only)."""
     raise NotImplementedError
@@ -314,6 +333,12 @@ def never(mode):
     """``watches_skips`` of a mode whose ``on_skip`` and ``ray_end`` leave the state alone, and
     ``asks_again`` of one whose refusals do not change along the ray."""
     return False
+
+
+@jit()
+def finest_blocks(mode):
+    """``answer_shift`` of a mode that answers for the hierarchy's finest blocks."""
+    return BLOCK_SHIFTS[0]
 
 
 @jit()
