@@ -46,7 +46,7 @@ def volumes(rng: np.random.Generator) -> list[tuple[str, np.ndarray]]:
     steps = np.round(rng.random((17, 9, 14)) * 4) / 4  # ties between many values and the iso
     flat = np.full((9, 9, 9), 0.25)
     flat[6:, 6:, 6:] = 0.75  # blocks of one value, and a block with two
-    huge = rng.standard_normal((11, 7, 12)) * 1e300  # range wider than a float64 can hold
+    huge = rng.uniform(-1.0, 1.0, (11, 7, 12)) * 1.7e308  # a width beyond float64: overflows
     return [("noise", noise), ("noise f32", noise.astype(np.float32)), ("steps", steps),
             ("uint8", (rng.random((10, 13, 9)) * 255).astype(np.uint8)), ("flat", flat),
             ("huge", huge), ("tiny", rng.random((3, 4, 5)))]
@@ -65,7 +65,8 @@ def test_pair_flags_hold_every_block_that_can_hold_the_isovalue(support):
         np.testing.assert_array_equal(h.lows[0], lo, err_msg=name)
         np.testing.assert_array_equal(h.highs[0], hi, err_msg=name)
         values = coeffs.astype(np.float64).ravel()
-        isos = [*rng.choice(values, 12), *rng.uniform(values.min(), values.max(), 4)]
+        u = rng.random(4)  # between the extremes, without their difference (it may overflow)
+        isos = [*rng.choice(values, 12), *(values.min() * (1 - u) + values.max() * u)]
         for iso in isos:
             flags = h.classify(float(iso))
             assert len(flags) == 4
