@@ -46,20 +46,6 @@ def _level_scale(vmin: float, vmax: float) -> float:
     return scale if scale < np.inf else 0.0
 
 
-@jit(inline="always")
-def _window_range(coeffs: np.ndarray, i0: int, i1: int, j0: int, j1: int, k0: int, k1: int
-                  ) -> tuple[float, float]:
-    vmin = np.inf
-    vmax = -np.inf
-    for i in range(i0, i1):
-        for j in range(j0, j1):
-            for k in range(k0, k1):
-                v = float(coeffs[i, j, k])
-                vmin = min(vmin, v)
-                vmax = max(vmax, v)
-    return vmin, vmax
-
-
 @jit(parallel=True)
 def _finest_ranges(
     coeffs: np.ndarray, support: int, n_cells: np.ndarray
@@ -80,24 +66,51 @@ def _finest_ranges(
     hi = np.empty((nbx, nby, nbz), dtype=np.float64)
     pairs = np.zeros((nbx, nby, nbz, 16), dtype=np.uint8)
     sx, sy, sz = coeffs.shape
+    edge = block + support  # values per axis a block reads
     for bi in prange(nbx):
         plo = np.empty(8)
         phi = np.empty(8)
+        # The range of each of the block's value columns along k over each half of the block
+        # (cells 2 pk, 2 pk + 1): every value is read once per half instead of once per pair.
+        col_lo = np.empty((edge, edge, 2))
+        col_hi = np.empty((edge, edge, 2))
+        i0 = block * bi
+        ni = min(edge, sx - i0)
         for bj in range(nby):
+            j0 = block * bj
+            nj = min(edge, sy - j0)
             for bk in range(nbz):
+                k0 = block * bk
+                for c in range(2):
+                    if 2 * bk + c >= npz:
+                        continue
+                    ka, kb = k0 + 2 * c, min(k0 + 2 * c + 2 + support, sz)
+                    for a in range(ni):
+                        for b in range(nj):
+                            cmin = np.inf
+                            cmax = -np.inf
+                            for k in range(ka, kb):
+                                v = float(coeffs[i0 + a, j0 + b, k])
+                                cmin = min(cmin, v)
+                                cmax = max(cmax, v)
+                            col_lo[a, b, c] = cmin
+                            col_hi[a, b, c] = cmax
                 vmin = np.inf
                 vmax = -np.inf
                 for p in range(8):
-                    pi, pj, pk = 2 * bi + (p >> 2), 2 * bj + ((p >> 1) & 1), 2 * bk + (p & 1)
-                    if pi >= npx or pj >= npy or pk >= npz:
+                    pa, pb, pc = p >> 2, (p >> 1) & 1, p & 1
+                    if 2 * bi + pa >= npx or 2 * bj + pb >= npy or 2 * bk + pc >= npz:
                         plo[p], phi[p] = np.inf, -np.inf
                         continue
-                    a, b = _window_range(coeffs, 2 * pi, min(2 * pi + 2 + support, sx),
-                                         2 * pj, min(2 * pj + 2 + support, sy),
-                                         2 * pk, min(2 * pk + 2 + support, sz))
-                    plo[p], phi[p] = a, b
-                    vmin = min(vmin, a)
-                    vmax = max(vmax, b)
+                    a_lo = np.inf
+                    b_hi = -np.inf
+                    for a in range(2 * pa, min(2 * pa + 2 + support, ni)):
+                        for b in range(2 * pb, min(2 * pb + 2 + support, nj)):
+                            a_lo = min(a_lo, col_lo[a, b, pc])
+                            b_hi = max(b_hi, col_hi[a, b, pc])
+                    plo[p], phi[p] = a_lo, b_hi
+                    vmin = min(vmin, a_lo)
+                    vmax = max(vmax, b_hi)
                 lo[bi, bj, bk] = vmin
                 hi[bi, bj, bk] = vmax
                 scale = _level_scale(vmin, vmax)
