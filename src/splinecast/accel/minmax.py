@@ -29,6 +29,8 @@ BLOCK_SHIFTS = (2, 4, 6)
 #: a cell, more than a float32 volume), and an isovalue's flags of them are computed inside the
 #: active finest blocks only (:meth:`MinMaxHierarchy.classify`). Isosurfaces use them.
 PAIR_SHIFT = 1
+# The pair kernels below split each finest block into 2 x 2 x 2 pairs.
+assert BLOCK_SHIFTS[0] == PAIR_SHIFT + 1
 
 
 #: Levels of the pairs' quantized ranges: 0 .. PAIR_LEVELS within their 4-cell block's range.
@@ -57,7 +59,7 @@ def _finest_ranges(
     (rounded outwards, so the levels bound the values; :func:`_pair_flags` explains why the
     test of an isovalue against them never misses one inside). A block's range is the union
     of its pairs' (their value windows cover its own)."""
-    block = 4
+    block = 1 << BLOCK_SHIFTS[0]
     nbx = (n_cells[0] + block - 1) // block
     nby = (n_cells[1] + block - 1) // block
     nbz = (n_cells[2] + block - 1) // block
