@@ -13,7 +13,9 @@ tenth of a small volume's isosurface frame: the product rounds twice, the point 
 plane crossing then lands further from the plane, and crossings lying exactly on a grid plane
 were lost (``tests/test_multi_iso.py``'s nested spheres, whose surfaces pass through voxels).
 Clipping to the grid's box (:func:`clip_to_box`) multiplies: it decides where a ray starts, not
-where a cell ends.
+where a cell ends. The renderer's walk (:func:`walk_step_cached`) keeps each axis's last plane
+and its parameter, so it divides only for the axes whose plane changed: the same divisions of
+the same numbers, one instead of three on most cell steps.
 
 The same step also works for aligned blocks of ``size`` cells (a power of two), which is how the
 renderer leaps over empty space: leaving a block, the cell index on the crossed axes is exact and
@@ -36,7 +38,7 @@ from .._jit import jit
 
 __all__ = [
     "clip_to_box", "start_cell", "axis_exit", "axis_advance", "walk_begin", "walk_step",
-    "walk_cells",
+    "walk_cells", "walk_step_cached",
 ]
 
 
@@ -185,20 +187,56 @@ def walk_step(
             <process the segment [t, t_end] of cell or block (i, j, k)>
             i, j, k, t = ni, nj, nk, t_next
     """
-    px, tx = axis_exit(ci, ox, dx, size)
-    py, ty = axis_exit(cj, oy, dy, size)
-    pz, tz = axis_exit(ck, oz, dz, size)
+    return walk_step_cached(ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, size,
+                            _NO_CROSSINGS)[:6]
+
+
+#: The cached step's ``crossings`` before a walk's first step: planes no walk produces.
+_NO_CROSSINGS = (-2, 0.0, -2, 0.0, -2, 0.0)
+
+
+@jit(inline="always")
+def _axis_exit_cached(c: int, o: float, d: float, size: int, plane_c: int,
+                      t_c: float) -> tuple[int, float]:
+    """:func:`axis_exit`, reusing ``t_c`` when the plane is ``plane_c`` (the same division)."""
+    start = c & -size
+    if d > 0.0:
+        plane = start + size
+    elif d < 0.0:
+        plane = start
+    else:
+        return start, math.inf
+    if plane == plane_c:
+        return plane, t_c
+    return plane, (plane - o) / d
+
+
+@jit(inline="always")
+def walk_step_cached(
+    ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, nx: int, ny: int, nz: int,
+    ci: int, cj: int, ck: int, t: float, t_far: float, size: int, crossings: tuple,
+) -> tuple:
+    """:func:`walk_step` with each axis's last plane and its parameter carried from step to
+    step (``crossings``: ``(px, tx, py, ty, pz, tz)``; a walk starts with planes that never
+    occur, ``-2``): an axis the ray did not cross keeps its plane, and its division is not
+    repeated. The parameters are the same divisions of the same numbers, so the walk is
+    identical (``tests/test_walk_cached.py``). Returns :func:`walk_step`'s tuple and the
+    updated ``crossings``."""
+    px, tx = _axis_exit_cached(ci, ox, dx, size, crossings[0], crossings[1])
+    py, ty = _axis_exit_cached(cj, oy, dy, size, crossings[2], crossings[3])
+    pz, tz = _axis_exit_cached(ck, oz, dz, size, crossings[4], crossings[5])
+    crossings = (px, tx, py, ty, pz, tz)
     t_exit = min(tx, ty, tz)
     t_end = min(t_exit, t_far)
     if t_exit >= t_far:
-        return t_end, False, ci, cj, ck, t
+        return t_end, False, ci, cj, ck, t, crossings
     ni = axis_advance(ci, px, tx, t_exit, ox, dx, size, nx)
     nj = axis_advance(cj, py, ty, t_exit, oy, dy, size, ny)
     nk = axis_advance(ck, pz, tz, t_exit, oz, dz, size, nz)
     if ni < 0 or ni >= nx or nj < 0 or nj >= ny or nk < 0 or nk >= nz:
-        return t_end, False, ci, cj, ck, t
+        return t_end, False, ci, cj, ck, t, crossings
     # A block exit can lie a rounding error before t on a non-crossing axis; never go back.
-    return t_end, True, ni, nj, nk, max(t, t_exit)
+    return t_end, True, ni, nj, nk, max(t, t_exit), crossings
 
 
 @jit()
@@ -229,12 +267,14 @@ def walk_cells(
     if not t < t_far:
         return out[:0]
     count = 0
+    crossings = _NO_CROSSINGS
     while inside and count < max_cells:
         out[count, 0] = ci
         out[count, 1] = cj
         out[count, 2] = ck
         count += 1
-        _, inside, ci, cj, ck, t = walk_step(
-            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, 1
+        # The renderer's step (tests/test_traversal.py checks it against exact crossings).
+        _, inside, ci, cj, ck, t, crossings = walk_step_cached(
+            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, 1, crossings
         )
     return out[:count]

@@ -148,21 +148,59 @@ def _new_scratch(grid):
     return np.empty(0)
 
 
+@jit(inline="always")
+def cell_corners(data: np.ndarray, i: int, j: int, k: int) -> tuple:
+    """Corner range and the eight corner values of cell ``(i, j, k)`` as float64.
+
+    Returns ``(vmin, vmax, c000, c100, c010, c110, c001, c101, c011, c111)``.
+    """
+    ui0, uj0, uk0 = np.uint64(i), np.uint64(j), np.uint64(k)  # see cell_monomials
+    ui1, uj1, uk1 = ui0 + np.uint64(1), uj0 + np.uint64(1), uk0 + np.uint64(1)
+    c000 = np.float64(data[ui0, uj0, uk0])
+    c100 = np.float64(data[ui1, uj0, uk0])
+    c010 = np.float64(data[ui0, uj1, uk0])
+    c110 = np.float64(data[ui1, uj1, uk0])
+    c001 = np.float64(data[ui0, uj0, uk1])
+    c101 = np.float64(data[ui1, uj0, uk1])
+    c011 = np.float64(data[ui0, uj1, uk1])
+    c111 = np.float64(data[ui1, uj1, uk1])
+    vmin = min(min(min(c000, c100), min(c010, c110)), min(min(c001, c101), min(c011, c111)))
+    vmax = max(max(max(c000, c100), max(c010, c110)), max(max(c001, c101), max(c011, c111)))
+    return vmin, vmax, c000, c100, c010, c110, c001, c101, c011, c111
+
+
+@jit(inline="always")
+def _monomials(ctx: tuple) -> tuple:
+    c000, c100, c010, c110 = ctx[2], ctx[3], ctx[4], ctx[5]
+    c001, c101, c011, c111 = ctx[6], ctx[7], ctx[8], ctx[9]
+    k1 = c100 - c000
+    k2 = c010 - c000
+    k3 = c001 - c000
+    k4 = c110 - c100 - c010 + c000
+    k5 = c101 - c100 - c001 + c000
+    k6 = c011 - c010 - c001 + c000
+    k7 = c111 - c110 - c101 - c011 + c100 + c010 + c001 - c000
+    return c000, k1, k2, k3, k4, k5, k6, k7
+
+
 @jit()
 def _cell_load(grid, scratch, i, j, k):
-    return cell_monomials(grid.data, i, j, k)
+    # The corners only: most cells a ray visits are not tested, and need no monomials.
+    return cell_corners(grid.data, i, j, k)
 
 
 @jit()
 def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    c3, c2, c1, c0 = ray_cubic(ctx[2], ctx[3], ctx[4], ctx[5], ctx[6], ctx[7], ctx[8], ctx[9],
+    k0, k1, k2, k3, k4, k5, k6, k7 = _monomials(ctx)
+    c3, c2, c1, c0 = ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7,
                                ax, ay, az, bx - ax, by - ay, bz - az)
     return PowerCubic(c0, c1, c2, c3)
 
 
 @jit()
 def _gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
-    return local_gradient(ctx[3], ctx[4], ctx[5], ctx[6], ctx[7], ctx[8], ctx[9], x, y, z)
+    _, k1, k2, k3, k4, k5, k6, k7 = _monomials(ctx)
+    return local_gradient(k1, k2, k3, k4, k5, k6, k7, x, y, z)
 
 
 @jit()

@@ -51,7 +51,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import call_with_first_class, inlined, jit, rebound
-from ..accel.traversal import walk_begin, walk_step
+from ..accel.traversal import walk_begin, walk_step_cached
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
 from . import mode_api
@@ -133,6 +133,9 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
         # mode that ``asks_again`` is asked after each cell it tested.
         shift = answer_shift(mode)
         open_i = open_j = open_k = -1
+        # Each axis's last plane and its crossing parameter (walk_step_cached): the walk
+        # divides only for an axis whose plane changed.
+        crossings = (-2, 0.0, -2, 0.0, -2, 0.0)
         while inside:
             if (ci >> shift) == open_i and (cj >> shift) == open_j and (
                     ck >> shift) == open_k:
@@ -142,9 +145,9 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                 if size == 0:
                     open_i, open_j = ci >> shift, cj >> shift
                     open_k = ck >> shift
-            t_end, inside, ni, nj, nk, t_next = walk_step(
-                ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, max(size, 1)
-            )
+            t_end, inside, ni, nj, nk, t_next, crossings = walk_step_cached(
+                ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, max(size, 1),
+                crossings)
             if size > 0:
                 skipped += 1
                 if watches_skips(mode):
