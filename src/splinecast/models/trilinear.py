@@ -28,6 +28,8 @@ from .validation import require_renderable
 __all__ = [
     "TrilinearModel",
     "TrilinearGrid",
+    "cell_corners",
+    "corner_monomials",
     "cell_monomials",
     "ray_cubic",
     "local_value",
@@ -38,10 +40,10 @@ __all__ = [
 
 
 @jit(inline="always")
-def cell_monomials(data: np.ndarray, i: int, j: int, k: int) -> tuple:
-    """Corner range and monomial coefficients ``k0..k7`` of cell ``(i, j, k)``.
+def cell_corners(data: np.ndarray, i: int, j: int, k: int) -> tuple:
+    """Corner range and the eight corner values of cell ``(i, j, k)``, as float64.
 
-    Returns ``(vmin, vmax, k0, k1, k2, k3, k4, k5, k6, k7)``.
+    Returns ``(vmin, vmax, c000, c100, c010, c110, c001, c101, c011, c111)``.
     """
     # Unsigned indices (cells are never negative): with signed ones numba adds a negative-index
     # wrap-around to each of the eight reads, which cost 6-9% of a trilinear isosurface frame
@@ -58,6 +60,14 @@ def cell_monomials(data: np.ndarray, i: int, j: int, k: int) -> tuple:
     c111 = np.float64(data[ui1, uj1, uk1])
     vmin = min(min(min(c000, c100), min(c010, c110)), min(min(c001, c101), min(c011, c111)))
     vmax = max(max(max(c000, c100), max(c010, c110)), max(max(c001, c101), max(c011, c111)))
+    return vmin, vmax, c000, c100, c010, c110, c001, c101, c011, c111
+
+
+@jit(inline="always")
+def corner_monomials(corners: tuple) -> tuple:
+    """Monomial coefficients ``k0..k7`` from :func:`cell_corners`' tuple."""
+    c000, c100, c010, c110 = corners[2], corners[3], corners[4], corners[5]
+    c001, c101, c011, c111 = corners[6], corners[7], corners[8], corners[9]
     k1 = c100 - c000
     k2 = c010 - c000
     k3 = c001 - c000
@@ -65,7 +75,18 @@ def cell_monomials(data: np.ndarray, i: int, j: int, k: int) -> tuple:
     k5 = c101 - c100 - c001 + c000
     k6 = c011 - c010 - c001 + c000
     k7 = c111 - c110 - c101 - c011 + c100 + c010 + c001 - c000
-    return vmin, vmax, c000, k1, k2, k3, k4, k5, k6, k7
+    return c000, k1, k2, k3, k4, k5, k6, k7
+
+
+@jit(inline="always")
+def cell_monomials(data: np.ndarray, i: int, j: int, k: int) -> tuple:
+    """Corner range and monomial coefficients ``k0..k7`` of cell ``(i, j, k)``.
+
+    Returns ``(vmin, vmax, k0, k1, k2, k3, k4, k5, k6, k7)``.
+    """
+    corners = cell_corners(data, i, j, k)
+    k0, k1, k2, k3, k4, k5, k6, k7 = corner_monomials(corners)
+    return corners[0], corners[1], k0, k1, k2, k3, k4, k5, k6, k7
 
 
 @jit(inline="always")
@@ -148,41 +169,6 @@ def _new_scratch(grid):
     return np.empty(0)
 
 
-@jit(inline="always")
-def cell_corners(data: np.ndarray, i: int, j: int, k: int) -> tuple:
-    """Corner range and the eight corner values of cell ``(i, j, k)`` as float64.
-
-    Returns ``(vmin, vmax, c000, c100, c010, c110, c001, c101, c011, c111)``.
-    """
-    ui0, uj0, uk0 = np.uint64(i), np.uint64(j), np.uint64(k)  # see cell_monomials
-    ui1, uj1, uk1 = ui0 + np.uint64(1), uj0 + np.uint64(1), uk0 + np.uint64(1)
-    c000 = np.float64(data[ui0, uj0, uk0])
-    c100 = np.float64(data[ui1, uj0, uk0])
-    c010 = np.float64(data[ui0, uj1, uk0])
-    c110 = np.float64(data[ui1, uj1, uk0])
-    c001 = np.float64(data[ui0, uj0, uk1])
-    c101 = np.float64(data[ui1, uj0, uk1])
-    c011 = np.float64(data[ui0, uj1, uk1])
-    c111 = np.float64(data[ui1, uj1, uk1])
-    vmin = min(min(min(c000, c100), min(c010, c110)), min(min(c001, c101), min(c011, c111)))
-    vmax = max(max(max(c000, c100), max(c010, c110)), max(max(c001, c101), max(c011, c111)))
-    return vmin, vmax, c000, c100, c010, c110, c001, c101, c011, c111
-
-
-@jit(inline="always")
-def _monomials(ctx: tuple) -> tuple:
-    c000, c100, c010, c110 = ctx[2], ctx[3], ctx[4], ctx[5]
-    c001, c101, c011, c111 = ctx[6], ctx[7], ctx[8], ctx[9]
-    k1 = c100 - c000
-    k2 = c010 - c000
-    k3 = c001 - c000
-    k4 = c110 - c100 - c010 + c000
-    k5 = c101 - c100 - c001 + c000
-    k6 = c011 - c010 - c001 + c000
-    k7 = c111 - c110 - c101 - c011 + c100 + c010 + c001 - c000
-    return c000, k1, k2, k3, k4, k5, k6, k7
-
-
 @jit()
 def _cell_load(grid, scratch, i, j, k):
     # The corners only: most cells a ray visits are not tested, and need no monomials.
@@ -191,7 +177,7 @@ def _cell_load(grid, scratch, i, j, k):
 
 @jit()
 def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    k0, k1, k2, k3, k4, k5, k6, k7 = _monomials(ctx)
+    k0, k1, k2, k3, k4, k5, k6, k7 = corner_monomials(ctx)
     c3, c2, c1, c0 = ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7,
                                ax, ay, az, bx - ax, by - ay, bz - az)
     return PowerCubic(c0, c1, c2, c3)
@@ -199,7 +185,7 @@ def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
 
 @jit()
 def _gradient(grid, scratch, ctx, i, j, k, tag, x, y, z):
-    _, k1, k2, k3, k4, k5, k6, k7 = _monomials(ctx)
+    _, k1, k2, k3, k4, k5, k6, k7 = corner_monomials(ctx)
     return local_gradient(k1, k2, k3, k4, k5, k6, k7, x, y, z)
 
 
