@@ -119,14 +119,18 @@ def axis_exit(c: int, o: float, d: float, size: int) -> tuple[int, float]:
     Returns the plane's integer coordinate and the ray parameter where it is crossed
     (``inf`` when the ray is parallel to the axis).
     """
-    start = c & -size  # size is a power of two and c >= 0: clear the low bits
-    if d > 0.0:
-        plane = start + size
-    elif d < 0.0:
-        plane = start
-    else:
-        return start, math.inf
+    plane = _axis_plane(c, d, size)
+    if not (d > 0.0 or d < 0.0):  # parallel to the axis (or NaN): never crossed
+        return plane, math.inf
     return plane, (plane - o) / d
+
+
+@jit(inline="always")
+def _axis_plane(c: int, d: float, size: int) -> int:
+    """The plane a ray moving with slope ``d`` leaves the block of ``size`` cells around ``c``
+    through (the block's lower plane when ``d`` is 0)."""
+    start = c & -size  # size is a power of two and c >= 0: clear the low bits
+    return start + size if d > 0.0 else start
 
 
 @jit(inline="always")
@@ -199,13 +203,9 @@ _NO_CROSSINGS = (-2, 0.0, -2, 0.0, -2, 0.0)
 def _axis_exit_cached(c: int, o: float, d: float, size: int, plane_c: int,
                       t_c: float) -> tuple[int, float]:
     """:func:`axis_exit`, reusing ``t_c`` when the plane is ``plane_c`` (the same division)."""
-    start = c & -size
-    if d > 0.0:
-        plane = start + size
-    elif d < 0.0:
-        plane = start
-    else:
-        return start, math.inf
+    plane = _axis_plane(c, d, size)
+    if not (d > 0.0 or d < 0.0):  # parallel to the axis (or NaN): never crossed
+        return plane, math.inf
     if plane == plane_c:
         return plane, t_c
     return plane, (plane - o) / d
