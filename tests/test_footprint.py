@@ -17,6 +17,8 @@ from reference import box_interval
 
 import splinecast as sc
 import splinecast.scene as scene_module
+from splinecast.accel.minmax import BLOCK_SHIFTS, PAIR_SHIFT
+from splinecast.render import footprint as footprint_module
 from splinecast.render import segment
 from splinecast.render.footprint import FOOTPRINT_SHIFT, block_footprint
 from splinecast.render.iso import Iso
@@ -38,17 +40,21 @@ def _cameras(vol):
     }
 
 
+@pytest.mark.parametrize("shift", [SHIFT, PAIR_SHIFT])
 @pytest.mark.parametrize("view", ["perspective", "orthographic", "eye inside", "tile"])
-def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(view):
+def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(view, shift):
     vol = sc.Volume(np.zeros((25, 21, 17), np.float32), spacing=(0.7, 1.0, 1.3),
                     origin=(-3.0, 2.0, 0.5))
     cam = _cameras(vol)[view]
     n_cells = (24, 20, 16)
+    edge = 1 << shift
     rng = np.random.default_rng(7)
-    active = (rng.random((6, 5, 4)) < 0.2).astype(np.uint8)
+    blocks = tuple(-(-n // edge) for n in n_cells)
+    # About as many active boxes at either size (a fifth of the 4-cell blocks).
+    active = (rng.random(blocks) < 0.2 * (edge / 4) ** 3).astype(np.uint8)
     geom = np.zeros(19)
     geom[0:3], geom[3:6] = vol.origin, vol.spacing
-    fp = block_footprint(cam.pixel_basis(), geom, n_cells, active, SHIFT, cam.width, cam.height)
+    fp = block_footprint(cam.pixel_basis(), geom, n_cells, active, shift, cam.width, cam.height)
     origins, directions = cam.rays()
     col0, row0 = (int(v) for v in cam.pixel_basis()[16:18])  # a tile's place in the image
     rows = ((np.arange(cam.height) + row0) >> FOOTPRINT_SHIFT) - (row0 >> FOOTPRINT_SHIFT)
@@ -57,8 +63,8 @@ def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(vi
     met = 0
     origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
     for b in np.argwhere(active):
-        lo = origin + b * 4 * spacing
-        hi = origin + np.minimum((b + 1) * 4, n_cells) * spacing
+        lo = origin + b * edge * spacing
+        hi = origin + np.minimum((b + 1) * edge, n_cells) * spacing
         t0, t1 = (a.reshape(cam.height, cam.width) for a in
                   box_interval(origins.reshape(-1, 3), directions.reshape(-1, 3), lo, hi))
         hit = t0 <= t1
@@ -69,7 +75,7 @@ def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(vi
     if view == "tile":  # the same intervals as the full image's tiles: tiles render alike
         full = _cameras(vol)["tile"]
         whole = sc.Camera.orbit(vol, azimuth=200, elevation=-30, size=(96, 80), zoom=1.6)
-        fp_whole = block_footprint(whole.pixel_basis(), geom, n_cells, active, SHIFT,
+        fp_whole = block_footprint(whole.pixel_basis(), geom, n_cells, active, shift,
                                    whole.width, whole.height)
         ty0, tx0 = row0 >> FOOTPRINT_SHIFT, col0 >> FOOTPRINT_SHIFT
         assert np.array_equal(fp, fp_whole[ty0:ty0 + fp.shape[0], tx0:tx0 + fp.shape[1]])
@@ -198,6 +204,42 @@ def test_fixed_step_dvr_flags_hold_the_neighbours_of_visible_blocks_and_visible_
     long_step = Dvr(tf, sc.DVRSettings(step=4.5, sampling="ray"))
     cam = sc.Camera.orbit(vol, size=(64, 48))
     assert segment.screen_footprint(scene.grid, long_step, cam, blocks).shape[0] == 0
+
+
+@pytest.mark.parametrize("pairs", [True, False])
+def test_the_exact_isosurface_projects_its_2_cell_blocks_while_they_are_few(pairs,
+                                                                          monkeypatch):
+    """The pairs' footprint is the one of their own flags at their size (and hugs the surface
+    closer than the 4-cell blocks'); above :data:`MAX_PROJECTED_PAIRS` the 4-cell blocks are
+    projected. Frames are identical with and without the footprint either way."""
+    vol = sc.demo("torus", size=41)
+    iso = vol.metadata["default_iso"]
+    scene = sc.Scene(vol)
+    cam = sc.Camera.orbit(vol, azimuth=25, elevation=30, size=(96, 72))
+    mode = Iso(iso)
+    blocks = mode.blocks(scene.grid.hierarchy)
+    n_pairs, n_blocks = np.count_nonzero(blocks[3]), np.count_nonzero(blocks[0])
+    assert 0 < n_blocks < n_pairs <= footprint_module.MAX_PROJECTED_PAIRS
+    if not pairs:
+        monkeypatch.setattr(footprint_module, "MAX_PROJECTED_PAIRS", n_pairs - 1)
+        monkeypatch.setattr(segment, "MAX_PROJECTED_PAIRS", n_pairs - 1)
+    fp = segment.screen_footprint(scene.grid, mode, cam, blocks)
+    basis, n_cells = cam.pixel_basis(), scene.grid.n_cells
+    of_pairs = block_footprint(basis, scene.grid.geom, n_cells, blocks[3], PAIR_SHIFT,
+                               cam.width, cam.height)
+    of_blocks = block_footprint(basis, scene.grid.geom, n_cells, blocks[0], BLOCK_SHIFTS[0],
+                                cam.width, cam.height)
+    assert np.array_equal(fp, of_pairs if pairs else of_blocks)
+    traced_pairs = np.count_nonzero(of_pairs[..., 0] <= of_pairs[..., 1])
+    traced_blocks = np.count_nonzero(of_blocks[..., 0] <= of_blocks[..., 1])
+    assert traced_pairs < traced_blocks
+    outputs = ("rgba", "depth", "normal")
+    with_fp = scene.render(cam, iso=iso, outputs=outputs)
+    _without_footprint(monkeypatch)
+    plain = scene.render(cam, iso=iso, outputs=outputs)
+    assert np.isfinite(plain.depth).sum() > 500
+    for name in outputs:
+        assert np.array_equal(getattr(plain, name), getattr(with_fp, name), equal_nan=True), name
 
 
 def test_the_sampled_isosurface_method_has_no_footprint():

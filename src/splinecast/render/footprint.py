@@ -37,7 +37,8 @@ from numba import prange
 
 from .._jit import jit
 
-__all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "block_footprint", "footprint_level"]
+__all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "MAX_PROJECTED_BLOCKS", "MAX_PROJECTED_PAIRS",
+           "block_footprint", "footprint_level"]
 
 #: log2 of the edge in pixels of the footprint's tiles.
 FOOTPRINT_SHIFT = 3
@@ -49,15 +50,22 @@ NO_FOOTPRINT = np.zeros((0, 0, 2))
 #: (its boxes are larger but fewer; projecting costs about 50 ns per block).
 MAX_PROJECTED_BLOCKS = 1 << 17
 
+#: A mode that names the 2-cell blocks (the exact isosurface) has them projected when at most
+#: this many are active: their boxes hug the surface, so fewer rays that miss it are traced and
+#: the rest start nearer to it (sphere 128^3, 6 900 pairs: 1.08x; torus, 8 700: 1.08x;
+#: ``benchmarks/results/iso_builds_pairfoot.md``). Projecting 28 000 (Marschner-Lobb 128^3) or
+#: 123 000 (256^3) cost more than it saved (0.97x, 0.92x; ``iso_builds_pairfoot_all.md``).
+MAX_PROJECTED_PAIRS = 1 << 14
+
 #: Relative widening of a block's parameter interval (the walk's parameters are rounded).
 _T_MARGIN = 1e-9
 
 
-def footprint_level(flags: tuple, shifts: tuple) -> int:
-    """The finest level of ``flags`` (finest first, block edges ``1 << shifts[level]``) with at
-    most :data:`MAX_PROJECTED_BLOCKS` active blocks (the coarsest if none is)."""
+def footprint_level(flags: tuple, limits: tuple) -> int:
+    """The finest level of ``flags`` (finest first) with at most ``limits[level]`` active blocks
+    (the coarsest if none is)."""
     for level, act in enumerate(flags):
-        if level == len(flags) - 1 or np.count_nonzero(act) <= MAX_PROJECTED_BLOCKS:
+        if level == len(flags) - 1 or np.count_nonzero(act) <= limits[level]:
             return level
     return len(flags) - 1
 

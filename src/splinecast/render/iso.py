@@ -299,9 +299,12 @@ class Iso:
 
     def footprint_flags(self, blocks: tuple) -> tuple | None:
         """The block flags whose screen footprint bounds where rays can hit (:mod:`.footprint`):
-        the exact method's; none for the sampled method, whose samples in front of an active
-        block take part in finding a crossing."""
-        return blocks[:3] if self.method == "exact" else None
+        the exact method's, its 2-cell blocks' first when it has them (a hit lies in a cell
+        whose range holds the isovalue, so in a flagged pair); none for the sampled method,
+        whose samples in front of an active block take part in finding a crossing."""
+        if self.method != "exact":
+            return None
+        return (blocks[3], *blocks[:3]) if blocks[3].shape[0] else blocks[:3]
 
     @staticmethod
     def state(height: int, width: int) -> tuple:

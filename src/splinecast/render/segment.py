@@ -24,11 +24,17 @@ from typing import Any
 import numpy as np
 
 from ..accel.active_cells import CubeBoundHierarchy, block_ranges
-from ..accel.minmax import BLOCK_SHIFTS, MinMaxHierarchy
+from ..accel.minmax import BLOCK_SHIFTS, PAIR_SHIFT, MinMaxHierarchy
 from ..errors import ParameterError
 from .clipping import NO_PLANES
 from .driver import GEOM_SIZE, band_order, finalize, reset_state, trace
-from .footprint import NO_FOOTPRINT, block_footprint, footprint_level
+from .footprint import (
+    MAX_PROJECTED_BLOCKS,
+    MAX_PROJECTED_PAIRS,
+    NO_FOOTPRINT,
+    block_footprint,
+    footprint_level,
+)
 
 __all__ = ["Grid", "make_grid", "brick_grid", "render_grid", "new_state", "trace_segment",
            "finish_state", "combine_states", "counters", "screen_footprint"]
@@ -175,14 +181,26 @@ def _run(grid: Grid, mode: Any, camera: Any, blocks: tuple, state: tuple, out: t
 
 def screen_footprint(grid: Grid, mode: Any, camera: Any, blocks: tuple) -> np.ndarray:
     """The per-tile footprint of the blocks ``mode`` can see (:mod:`.footprint`), or
-    :data:`~.footprint.NO_FOOTPRINT` for a mode that does not name them."""
+    :data:`~.footprint.NO_FOOTPRINT` for a mode that does not name them.
+
+    A mode's ``footprint_flags`` are the hierarchy's levels, finest first, or one more before
+    them, its 2-cell blocks (:data:`~splinecast.accel.minmax.PAIR_SHIFT`): the finest level
+    with few enough active blocks is projected."""
     flags_of = getattr(mode, "footprint_flags", None)
     flags = flags_of(blocks) if flags_of is not None else None
     if flags is None:
         return NO_FOOTPRINT
-    level = footprint_level(flags, BLOCK_SHIFTS)
+    shifts, limits = BLOCK_SHIFTS, (MAX_PROJECTED_BLOCKS,) * len(BLOCK_SHIFTS)
+    if len(flags) > len(BLOCK_SHIFTS):  # the 2-cell blocks first
+        # Every active 4-cell block holds an active pair: more blocks than the pairs' limit
+        # need not count the pairs.
+        if np.count_nonzero(flags[1]) > MAX_PROJECTED_PAIRS:
+            flags = flags[1:]
+        else:
+            shifts, limits = (PAIR_SHIFT, *shifts), (MAX_PROJECTED_PAIRS, *limits)
+    level = footprint_level(flags, limits)
     return block_footprint(camera.pixel_basis(), grid.geom, grid.n_cells, flags[level],
-                           BLOCK_SHIFTS[level], camera.width, camera.height)
+                           shifts[level], camera.width, camera.height)
 
 
 def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLANES,
