@@ -252,16 +252,29 @@ def test_the_sampled_isosurface_method_has_no_footprint():
     assert segment.screen_footprint(scene.grid, sampled, cam, blocks).shape[0] == 0
 
 
-@pytest.mark.parametrize("mode", ["iso", "dvr"])
-def test_pixels_of_empty_tiles_are_finished_as_the_traced_ones_would_be(mode, monkeypatch):
-    """The band finishes the pixels of tiles the footprint leaves empty in a loop of its own;
-    an image tile whose pixel rows and columns start off the footprint's 8-pixel grid makes
-    the band's tiles straddle empty and non-empty footprint tiles."""
+#: Every output buffer of the modes with a footprint.
+_EVERY_OUTPUT = {"iso": ("rgba", "depth", "position", "normal", "face"),
+                 "multi-iso": ("rgba", "depth", "position", "normal", "face"),
+                 "dvr": ("rgba", "depth", "position")}
+
+
+@pytest.mark.parametrize("mode", ["iso", "multi-iso", "dvr"])
+@pytest.mark.parametrize("whole", [True, False])
+def test_pixels_of_empty_tiles_are_finished_as_the_traced_ones_would_be(mode, whole,
+                                                                        monkeypatch):
+    """The band finishes one pixel of a run of tiles the footprint leaves empty and copies it
+    over the run (every buffer: float32 colour and normals, float64 depth and positions, the
+    int8 face); an image tile whose pixel rows and columns start off the footprint's 8-pixel
+    grid makes the band's tiles straddle empty and non-empty footprint tiles."""
     vol = sc.demo("sphere", size=25)
-    cam = sc.Camera.orbit(vol, azimuth=20, elevation=10, size=(120, 96),
-                          zoom=0.7).tile(5, 3, 101, 83)
-    options = {"iso": vol.metadata["default_iso"]} if mode == "iso" else {"mode": "dvr"}
-    outputs = ("rgba", "depth")
+    cam = sc.Camera.orbit(vol, azimuth=20, elevation=10, size=(120, 96), zoom=0.7)
+    if not whole:
+        cam = cam.tile(5, 3, 101, 83)
+    iso = vol.metadata["default_iso"]
+    options = {"iso": iso} if mode == "iso" else (
+        {"iso": [iso - 0.1, iso], "opacity": [0.5, 0.7]} if mode == "multi-iso"
+        else {"mode": "dvr"})
+    outputs = _EVERY_OUTPUT[mode]
     scene = sc.Scene(vol)
     with_fp = scene.render(cam, **options, outputs=outputs)
     _without_footprint(monkeypatch)

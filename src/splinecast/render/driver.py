@@ -73,6 +73,7 @@ from .mode_api import (
     wants,
     watches_skips,
 )
+from .outputs import copy_pixel
 from .rays import grid_ray, pixel_ray
 from .sampler import sample_pixel
 from .work_queue import take
@@ -231,17 +232,21 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
     # The footprint's tiles are the full image's (a tile camera's pixels start at col0, row0).
     col0, row0 = int(basis[16]), int(basis[17])
     tx0, ty0 = col0 >> FOOTPRINT_SHIFT, row0 >> FOOTPRINT_SHIFT
-    # A whole image's fresh pixels where nothing projects are finished in a loop of their own:
-    # the pixel loop below, which the traced ray's code is inlined into, spends about three
-    # times as long on each of them.
+    # A whole image's fresh pixels where nothing projects get the outputs of one of them: the
+    # mode finishes a fresh state there without a ray, and the pixel is copied over the run
+    # of such tiles (a fresh state's outputs do not depend on the pixel; .outputs.copy_pixel).
     fresh = footed and final and not load and not store
-    for tc0 in range(c0, c1, tile):
+    tc0 = c0
+    while tc0 < c1:
         tc1 = min(c1, tc0 + tile)
         if fresh and _unseen(footprint, r0 + row0, r1 + row0, tc0 + col0, tc1 + col0, ty0, tx0):
-            st = state_new(mode)
-            for row in range(r0, r1):
-                for col in range(tc0, tc1):
-                    finish(mode, out, row, col, st, _NO_RAY)
+            end = tc1
+            while end < c1 and _unseen(footprint, r0 + row0, r1 + row0, end + col0,
+                                       min(c1, end + tile) + col0, ty0, tx0):
+                end = min(c1, end + tile)
+            finish(mode, out, r0, tc0, state_new(mode), _NO_RAY)
+            copy_pixel(out, r0, tc0, r0, r1, tc0, end)
+            tc0 = end
             continue
         for row in range(r0, r1):
             for col in range(tc0, tc1):
@@ -274,6 +279,7 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
                     visited[row, col] += nv
                     tested[row, col] += nt
                     skipped[row, col] += ns
+        tc0 = tc1
 
 
 def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,

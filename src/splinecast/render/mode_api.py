@@ -52,6 +52,8 @@ bx, by, bz, ray, st)`` -> ``st``
     Writes the pixel's outputs (colour, depth, ...). A fresh state (``state_new``: the ray met
     nothing) is finished without reading ``ray``: the driver passes zeros for the pixels it
     does not trace (:mod:`.footprint`), where the ray would cost a square root and a division.
+    Its outputs must not depend on the pixel either: over a run of tiles with nothing to
+    trace, the driver finishes one pixel and copies it (:func:`.outputs.copy_pixel`).
 ``state_store(mode, state, row, col, st)``
     Keeps the state for the ray's next segment.
 
