@@ -95,8 +95,9 @@ def _fill_plane(a, row, col, r0, r1, c0, c1):
     if a.shape[0] == 0:  # not asked for
         return
     v = a[row, col]
-    for r in range(r0, r1):
-        for c in range(c0, c1):
+    # Unsigned indices: no negative-index wrap-around, so the stores can be vectorized.
+    for r in range(np.uint64(r0), np.uint64(r1)):
+        for c in range(np.uint64(c0), np.uint64(c1)):
             a[r, c] = v
 
 
@@ -107,14 +108,15 @@ def _fill_channels(a, row, col, r0, r1, c0, c1):
     n = a.shape[2]
     if n == 4:  # colour: the four values held in registers, stored together
         v0, v1, v2, v3 = a[row, col, 0], a[row, col, 1], a[row, col, 2], a[row, col, 3]
-        for r in range(r0, r1):
-            for c in range(c0, c1):
-                a[r, c, 0] = v0
-                a[r, c, 1] = v1
-                a[r, c, 2] = v2
-                a[r, c, 3] = v3
+        # Unsigned indices: no negative-index wrap-around, so the stores can be vectorized.
+        for r in range(np.uint64(r0), np.uint64(r1)):
+            for c in range(np.uint64(c0), np.uint64(c1)):
+                a[r, c, np.uint64(0)] = v0
+                a[r, c, np.uint64(1)] = v1
+                a[r, c, np.uint64(2)] = v2
+                a[r, c, np.uint64(3)] = v3
         return
-    for r in range(r0, r1):
-        for c in range(c0, c1):
-            for k in range(n):
+    for r in range(np.uint64(r0), np.uint64(r1)):
+        for c in range(np.uint64(c0), np.uint64(c1)):
+            for k in range(np.uint64(n)):
                 a[r, c, k] = a[row, col, k]
