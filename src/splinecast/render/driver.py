@@ -138,22 +138,29 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
         # divides only for an axis whose plane changed.
         crossings = (-2, 0.0, -2, 0.0, -2, 0.0)
         while inside:
-            if (ci >> shift) == open_i and (cj >> shift) == open_j and (
-                    ck >> shift) == open_k:
-                size = 0
-            else:
+            if (ci >> shift) != open_i or (cj >> shift) != open_j or (
+                    ck >> shift) != open_k:
                 size = skip_size(mode, blocks, ci, cj, ck, st)
-                if size == 0:
-                    open_i, open_j = ci >> shift, cj >> shift
-                    open_k = ck >> shift
+                # Leaps follow one another until a block must be entered: a loop of its own,
+                # with only the walk's state live in it.
+                while size > 0:
+                    t_end, inside, ci, cj, ck, t_next, crossings = walk_step_cached(
+                        ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, size,
+                        crossings)
+                    skipped += 1
+                    if watches_skips(mode):
+                        st = on_skip(mode, grid, scr, st, ray, t, t_end, math.nan, math.nan)
+                    t = t_next
+                    if not inside:
+                        break
+                    size = skip_size(mode, blocks, ci, cj, ck, st)
+                if not inside:
+                    break
+                open_i, open_j = ci >> shift, cj >> shift
+                open_k = ck >> shift
             t_end, inside, ni, nj, nk, t_next, crossings = walk_step_cached(
-                ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, max(size, 1),
-                crossings)
-            if size > 0:
-                skipped += 1
-                if watches_skips(mode):
-                    st = on_skip(mode, grid, scr, st, ray, t, t_end, math.nan, math.nan)
-            elif t_end >= t:
+                ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, 1, crossings)
+            if t_end >= t:
                 visited += 1
                 ctx = cell_load(grid, scr, ci, cj, ck)
                 if wants(mode, st, ctx[0], ctx[1]):
