@@ -12,7 +12,7 @@ and their largest difference.
 
     python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip|dvr]
         [--dvr-sampling OLD,NEW] [--dvr-step VOXELS] [--models trilinear,bspline1,bspline2,bspline3]
-        [--scenes LABELS] [--stem iso_builds]
+        [--scenes LABELS] [--view orbit|far|away|inside] [--stem iso_builds]
 
 Results go to ``benchmarks/results/<stem>.md`` and ``.json``.
 """
@@ -51,7 +51,8 @@ def _worker(outdir: str) -> None:
     print(json.dumps({"ready": sc.__file__}), flush=True)
     for line in sys.stdin:
         req = json.loads(line)
-        key = (req["scene"], req["model"], req["mode"], req.get("sampling"), req.get("step"))
+        key = (req["scene"], req["model"], req["mode"], req.get("sampling"), req.get("step"),
+               req.get("view", "orbit"))
         if key not in scenes:
             _, name, size = next(s for s in SCENES if s[0] == req["scene"])
             if size:
@@ -59,7 +60,7 @@ def _worker(outdir: str) -> None:
                 iso = vol.metadata["default_iso"]
             else:
                 vol, iso = sc.read(name), 80.0
-            cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=SIZE)
+            cam = _view(sc, vol, req.get("view", "orbit"))
             scene = sc.Scene(vol, model=req["model"])
             options = {"iso": iso} if req["mode"] == "iso" else {"mode": req["mode"]}
             if req["mode"] == "dvr":
@@ -81,6 +82,24 @@ def _worker(outdir: str) -> None:
         start = clock()
         scene.render(cam, **options, outputs=("rgba",))
         print(json.dumps({"ms": (clock() - start) * 1e3}), flush=True)
+
+
+#: Cameras of ``--view``: the comparison's orbit; the same zoomed out (the volume a small
+#: part of the screen); the orbit's eye turned round, looking away from the volume; an eye at
+#: the volume's centre looking the orbit's way (a fly-through).
+VIEWS = ("orbit", "far", "away", "inside")
+
+
+def _view(sc, vol, view: str):
+    orbit = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=SIZE)
+    if view == "orbit":
+        return orbit
+    if view == "far":
+        return sc.Camera.orbit(vol, azimuth=30, elevation=20, size=SIZE, zoom=0.35)
+    eye, centre = orbit.position, orbit.look_at
+    if view == "away":
+        return sc.Camera(eye, 2.0 * eye - centre, up=orbit.up, fov=orbit.fov, size=SIZE)
+    return sc.Camera(centre, 2.0 * centre - eye, up=orbit.up, fov=60.0, size=SIZE)
 
 
 def _dvr_options(vol, iso: float, sampling: str | None, step: float | None = None) -> dict:
@@ -149,6 +168,9 @@ def main() -> None:
                     help="DVR: the sample step in voxels of both builds (0: the build's default)")
     ap.add_argument("--threads", type=int, default=1,
                     help="Numba threads of each build (more than one: timed by the wall clock)")
+    ap.add_argument("--view", default="orbit", choices=VIEWS,
+                    help="camera: the comparison's orbit, zoomed out, the orbit's eye looking "
+                         "away from the volume, or an eye inside it at its centre")
     ap.add_argument("--stem", default="iso_builds")
     args = ap.parse_args()
     os.environ["NUMBA_NUM_THREADS"] = str(args.threads)  # the workers', for the description
@@ -162,7 +184,7 @@ def main() -> None:
         for label in args.scenes.split(","):
             for model in args.models.split(","):
                 req = {"scene": label, "model": model, "mode": args.mode,
-                       "step": args.dvr_step or None}
+                       "step": args.dvr_step or None, "view": args.view}
                 samplings = dict(zip(builds, args.dvr_sampling.split(","), strict=True))
                 depths = {k: np.load(b.ask(**req, depth=True, sampling=samplings[k])["depth"])
                           for k, b in builds.items()}
@@ -200,6 +222,7 @@ def main() -> None:
              + (f" --dvr-sampling {args.dvr_sampling}" if args.mode == "dvr" else "")
              + (f" --dvr-step {args.dvr_step:g}" if args.dvr_step else "")
              + (f" --threads {args.threads}" if args.threads > 1 else "")
+             + (f" --view {args.view}" if args.view != "orbit" else "")
              + f"`. Builds: old `{sources['old']}`, new "
              f"`{sources['new']}`. 1024x768, colour only, "
              + ("one Numba thread, process CPU time, " if args.threads == 1 else

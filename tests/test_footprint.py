@@ -22,6 +22,7 @@ from splinecast.render import footprint as footprint_module
 from splinecast.render import segment
 from splinecast.render.footprint import FOOTPRINT_SHIFT, block_footprint
 from splinecast.render.iso import Iso
+from splinecast.render.mip import Mip
 
 SHIFT = 2  # blocks of 4 cells
 
@@ -102,6 +103,60 @@ def test_frames_are_identical_with_and_without_the_footprint(model, monkeypatch)
     for view, cam in _cameras(vol).items():
         plain = scene.render(cam, iso=iso, outputs=outputs)
         assert np.isfinite(plain.depth).sum() > 20, view
+        for name in outputs:
+            a, b = getattr(plain, name), getattr(with_fp[view], name)
+            assert np.array_equal(a, b, equal_nan=True), f"{view}: {name} differs"
+
+
+def test_blocks_behind_the_eye_cover_no_tile():
+    """A camera looking away from the volume: every block lies behind the eye's plane, and no
+    ray (``t >= 0``) meets one, so no tile gets an interval (such blocks used to cover the
+    whole screen, and every ray was traced). Reference: slab tests of the rays against every
+    block box find no intersection either."""
+    vol = sc.Volume(np.zeros((25, 21, 17), np.float32), spacing=(0.7, 1.0, 1.3),
+                    origin=(-3.0, 2.0, 0.5))
+    n_cells = (24, 20, 16)
+    origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
+    centre = origin + 0.5 * np.asarray(n_cells) * spacing
+    eye = centre + (0.0, 0.0, -30.0)
+    geom = np.zeros(19)
+    geom[0:3], geom[3:6] = vol.origin, vol.spacing
+    active = np.ones(tuple(-(-n // 4) for n in n_cells), np.uint8)
+    for ortho in (False, True):
+        cam = sc.Camera(eye, eye + (0.3, -0.2, -1.0), size=(40, 32), fov=70, ortho=ortho,
+                        ortho_height=20.0)
+        origins, directions = cam.rays()
+        t0, t1 = box_interval(origins.reshape(-1, 3), directions.reshape(-1, 3), origin,
+                              origin + np.asarray(n_cells) * spacing)
+        assert not np.any(t0 <= t1)  # no ray meets the volume's box
+        fp = block_footprint(cam.pixel_basis(), geom, n_cells, active, SHIFT, cam.width,
+                             cam.height)
+        assert np.all(fp[..., 0] > fp[..., 1]), f"ortho={ortho}: a tile got an interval"
+        # The eye turned round towards the volume: the blocks cover tiles again.
+        back = sc.Camera(eye, centre, size=(40, 32), fov=70, ortho=ortho, ortho_height=20.0)
+        fp = block_footprint(back.pixel_basis(), geom, n_cells, active, SHIFT, back.width,
+                             back.height)
+        assert np.any(fp[..., 0] <= fp[..., 1])
+
+
+@pytest.mark.parametrize("kind", ["mip", "minip"])
+def test_mip_frames_are_identical_with_and_without_the_footprint(kind, monkeypatch):
+    """MIP's footprint is the volume's box (every block, coarsest level): values, depths and
+    positions are the ones without it, for every view, and a zoomed-out view leaves tiles
+    untraced (the footprint is in use)."""
+    vol = sc.demo("marschner-lobb", size=30)
+    scene = sc.Scene(vol)
+    cams = {**_cameras(vol),
+            "far": sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(72, 56), zoom=0.3)}
+    outputs = ("value", "depth", "position")
+    with_fp = {v: scene.render(c, mode=kind, outputs=outputs) for v, c in cams.items()}
+    blocks = Mip(kind=kind).blocks(scene.grid.hierarchy)
+    tiles = segment.screen_footprint(scene.grid, Mip(kind=kind), cams["far"], blocks)
+    assert tiles.shape[0] > 0 and np.any(tiles[..., 0] > tiles[..., 1])
+    _without_footprint(monkeypatch)
+    for view, cam in cams.items():
+        plain = scene.render(cam, mode=kind, outputs=outputs)
+        assert np.isfinite(plain.value).sum() > 20, view
         for name in outputs:
             a, b = getattr(plain, name), getattr(with_fp[view], name)
             assert np.array_equal(a, b, equal_nan=True), f"{view}: {name} differs"

@@ -12,10 +12,11 @@ interval, past the empty space in front of the object.
 
 The footprint is conservative, so the image is the one without it: a block's screen box is
 the bounding box of its corners' projections widened by a pixel, the interval is widened by
-a relative ``1e-9``, and a block with a corner at or behind the eye's plane covers the whole
-screen. A ray starting at the interval's start begins in empty space (no covering block is
-nearer), and the cell walk then crosses the same cell faces at the same parameters as a ray
-started at the volume box; ``tests/test_footprint.py`` checks the images are identical.
+a relative ``1e-9``, a block with a corner at or behind the eye's plane covers the whole
+screen, and one wholly behind that plane covers nothing (rays start at the eye). A ray
+starting at the interval's start begins in empty space (no covering block is nearer), and
+the cell walk then crosses the same cell faces at the same parameters as a ray started at
+the volume box; ``tests/test_footprint.py`` checks the images are identical.
 
 Only modes whose result comes from the blocks they name use it: the exact isosurface
 methods, DVR's cell-walk samplings ("grid", "pieces") with the visible blocks, and DVR's
@@ -23,7 +24,9 @@ fixed-step "ray" sampling with the blocks its segments can take colour from (a v
 block's neighbours, into which a segment from inside it reaches, and pairs of blocks whose
 joint value range is visible; the loop widens the interval to the samples around it). Not
 the sampled isosurface method, whose samples in front of a block take part in finding a
-crossing, nor MIP, whose answer every block the ray crosses may hold.
+crossing. MIP's answer may lie in any block the ray crosses: it names all of them at the
+coarsest level, so its footprint is the volume's box, and rays that miss the box (60% of a
+1024x768 orbit view of the comparison's volumes) are not set up one by one.
 """
 
 from __future__ import annotations
@@ -63,8 +66,11 @@ _T_MARGIN = 1e-9
 
 def footprint_level(flags: tuple, limits: tuple) -> int:
     """The finest level of ``flags`` (finest first) with at most ``limits[level]`` active blocks
-    (the coarsest if none is)."""
+    (the coarsest if none is); a level given as ``None`` is never chosen (the coarsest level
+    must be given)."""
     for level, act in enumerate(flags):
+        if act is None:
+            continue
         if level == len(flags) - 1 or np.count_nonzero(act) <= limits[level]:
             return level
     return len(flags) - 1
@@ -158,6 +164,7 @@ def _cover(out, basis, ortho, lo, hi, width, height):
     t_near = math.inf
     t_far = -math.inf
     whole_screen = False
+    behind = 0
     for c in range(8):
         qx = (hi[0] if c & 1 else lo[0]) - ex
         qy = (hi[1] if c & 2 else lo[1]) - ey
@@ -165,6 +172,8 @@ def _cover(out, basis, ortho, lo, hi, width, height):
         depth = qx * basis[3] + qy * basis[4] + qz * basis[5]
         across = qx * basis[6] + qy * basis[7] + qz * basis[8]
         above = qx * basis[9] + qy * basis[10] + qz * basis[11]
+        if depth < 0.0:
+            behind += 1
         if ortho:
             # Parallel rays: the parameter is the depth below the image plane.
             sx, sy = across, above
@@ -180,6 +189,12 @@ def _cover(out, basis, ortho, lo, hi, width, height):
             sx, sy = across / depth, above / depth
         sx_lo, sx_hi = min(sx_lo, sx), max(sx_hi, sx)
         sy_lo, sy_hi = min(sy_lo, sy), max(sy_hi, sy)
+    if behind == 8:
+        # The box lies wholly behind the eye's plane (the image plane of parallel rays): rays
+        # start there (t >= 0) and move away from it, so none meets the box. Such boxes would
+        # otherwise cover the whole screen: a camera looking away from the volume, or inside
+        # it, traced every ray, and projecting 16 000 of them over every tile took 50 ms.
+        return
     if not ortho:
         # Distance from the eye to the nearest point of the box.
         gx = max(lo[0] - ex, 0.0, ex - hi[0])

@@ -335,6 +335,13 @@ class Mip:
         return (*(-a for a in hierarchy.lows), -hierarchy.highs[1])
 
     @staticmethod
+    def footprint_flags(blocks: tuple) -> tuple:
+        """Every block, at the coarsest level only (:mod:`.footprint`): the maximum may lie in
+        any block a ray crosses, so the footprint is the volume's box, a few blocks to
+        project, and the pixels whose rays miss it are written without a ray."""
+        return (None, None, np.ones(blocks[2].shape, np.uint8))
+
+    @staticmethod
     def state(height: int, width: int) -> tuple:
         """Per-pixel state arrays: best value (times the sign) and where."""
         return np.empty((height, width)), np.empty((height, width))
