@@ -15,9 +15,10 @@ counters. The three counter buffers then hold cycles instead of counts, in two p
   ``finish``, and the whole ray.
 
 The rest of a ray, whole minus the four phases, is the walk from cell to cell: each visited
-cell's step, load and range test (a tested cell's as well), and the loop's own bookkeeping. Rays are split into those that produced a result (a
-hit, a maximum, some opacity) and those traced without one; the events per ray (cells visited,
-cells tested, blocks leapt) come from a frame of the real kernel.
+cell's step, load and range test (a tested cell's as well), and the loop's own bookkeeping.
+Rays are split into those that produced a result (a hit, a maximum, some opacity) and those
+traced without one; the events per ray (cells visited, cells tested, blocks leapt) come from
+a frame of the real kernel.
 
 Each counter read costs about 20 cycles and orders the instructions around it, so the
 instrumented frame is slower than the real one (both are reported); the counts are for
