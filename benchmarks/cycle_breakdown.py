@@ -45,6 +45,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _kernel_args import MODE_CLASSES, add_scene_arguments  # noqa: E402
 
 #: Text inserted into ``_trace_pixel``'s source: (anchor, text, where), ``where`` being
 #: "before" or "after" the anchor. Each anchor must occur exactly once.
@@ -231,10 +233,7 @@ def report(summary: dict[str, dict[str, float]], info: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scene", default="sphere SDF 128^3", help="a comparison scene label")
-    parser.add_argument("--mode", choices=("iso", "mip", "dvr"), default="iso")
-    parser.add_argument("--model", default="trilinear")
-    parser.add_argument("--size", default="1024x768")
+    add_scene_arguments(parser)
     parser.add_argument("--dvr-sampling", default="grid",
                         help="DVR's sampling ('grid' or 'pieces': the cell walk; 'ray' is "
                              "not instrumented)")
@@ -271,7 +270,7 @@ def main() -> None:
     real, frame_ms = timed()
     counts = {"visited": real.cells_visited, "tested": real.cells_tested,
               "leapt": real.blocks_skipped}
-    wanted = {"iso": "IsoMode", "mip": "MipMode", "dvr": "DvrMode"}[args.mode]
+    wanted = MODE_CLASSES[args.mode]
     key = next(k for k in driver._KERNELS if k[1].__name__ == wanted)
     cycles, frame_pass_ms = {}, {}
     for pass_name, names in PASSES.items():

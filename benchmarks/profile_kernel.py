@@ -42,6 +42,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _kernel_args import MODE_CLASSES, add_scene_arguments  # noqa: E402
 
 #: Largest stretch of code copied from the process, from the band's entry point (the band
 #: and the functions compiled with it; the copy stops earlier at the end of the mapping).
@@ -63,7 +65,7 @@ def _worker(args: argparse.Namespace) -> None:
     cams = [_camera(vol, size, a) for a in (40.0, 50.0, 60.0, 70.0)]
     for cam in cams:
         scene.render(cam, **kwargs, outputs=("rgba",))
-    wanted = {"iso": "IsoMode", "mip": "MipMode", "dvr": "DvrMode"}[args.mode]
+    wanted = MODE_CLASSES[args.mode]
     found = [(key, disp) for key, disp in driver._KERNELS.items() if key[1].__name__ == wanted]
     if not found:
         raise SystemExit(f"profile_kernel: no compiled band for mode {args.mode!r}")
@@ -147,11 +149,8 @@ def _report(info: dict, rows: list[tuple[int, int, str]], args: argparse.Namespa
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scene", default="sphere SDF 128^3", help="a comparison scene label")
-    parser.add_argument("--mode", choices=("iso", "mip", "dvr"), default="iso")
-    parser.add_argument("--model", default="trilinear")
+    add_scene_arguments(parser)
     parser.add_argument("--frames", type=int, default=200)
-    parser.add_argument("--size", default="1024x768")
     parser.add_argument("--out", default=None,
                         help="output stem (default: benchmarks/results/profile_<mode>_<scene>)")
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
