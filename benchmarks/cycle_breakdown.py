@@ -111,8 +111,7 @@ def _rdtsc_intrinsic() -> Any:
 def install_instrumented_band(grid_class: type, mode_class: type, pass_name: str) -> None:
     """Compile the (model, mode) band with pass ``pass_name``'s instrumented pixel loop and
     make the renderer use it (:func:`splinecast.render.driver.pair_band`'s table)."""
-    from splinecast._jit import inlined, jit, rebound
-    from splinecast.models import pieces as model_api
+    from splinecast._jit import jit, rebound
     from splinecast.render import driver, mode_api
 
     if mode_api.sampled_of(mode_class):
@@ -124,9 +123,7 @@ def install_instrumented_band(grid_class: type, mode_class: type, pass_name: str
                  "jit": functools.partial(jit, cache=False)}
     exec(compile(instrumented_source(source, pass_name), "<cycle_breakdown>", "exec"),
          namespace)
-    called = model_api.called_of(grid_class)
-    hooks = {**model_api.hooks_of(grid_class), **mode_api.hooks_of(mode_class)}
-    bind = {name: f if name in called else inlined(f) for name, f in hooks.items()}
+    bind = driver.pair_bindings(grid_class, mode_class)
     suffix = f"{grid_class.__name__}_{mode_class.__name__}_cycles{pass_name}"
     pixel = rebound(namespace["_trace_pixel"], bind, suffix, cache=False)
     band = rebound(driver._trace_band, {**bind, "_trace_pixel": pixel}, suffix, cache=False)

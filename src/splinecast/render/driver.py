@@ -78,7 +78,8 @@ from .rays import grid_ray, pixel_ray
 from .sampler import sample_pixel
 from .work_queue import take
 
-__all__ = ["trace", "pair_band", "finalize", "reset_state", "band_order", "GEOM_SIZE"]
+__all__ = ["trace", "pair_band", "pair_bindings", "finalize", "reset_state", "band_order",
+           "GEOM_SIZE"]
 
 #: (grid class, mode class) -> the pair's :func:`_trace_band`.
 _KERNELS: dict[tuple[type, type], Any] = {}
@@ -408,6 +409,19 @@ def reset_state(mode, state, height, width):
             state_store(mode, state, row, col, state_new(mode))
 
 
+def pair_bindings(grid_class: type, mode_class: type) -> dict[str, Any] | None:
+    """The hook names of the pixel loop bound to the pair's registered functions, inlined
+    unless the model keeps them as calls (None: a model or mode the registries do not know);
+    what :func:`pair_band` compiles its copies of the loop with."""
+    model_hooks = model_api.hooks_of(grid_class)
+    mode_hooks = mode_api.hooks_of(mode_class)
+    if model_hooks is None or mode_hooks is None:
+        return None
+    called = model_api.called_of(grid_class)
+    return {name: f if name in called else inlined(f)
+            for name, f in {**model_hooks, **mode_hooks}.items()}
+
+
 def pair_band(grid_class: type, mode_class: type) -> Any:
     """:func:`_trace_band` for one (model, mode) pair, its hooks inlined (made once per pair):
     the unit the in-memory renderer's image loop calls per band of rows and the one-launch cut
@@ -427,14 +441,10 @@ def pair_band(grid_class: type, mode_class: type) -> Any:
     key = (grid_class, mode_class)
     band = _KERNELS.get(key)
     if band is None:
-        model_hooks = model_api.hooks_of(grid_class)
-        mode_hooks = mode_api.hooks_of(mode_class)
-        if model_hooks is None or mode_hooks is None:
+        bind = pair_bindings(grid_class, mode_class)
+        if bind is None:
             band = _trace_band
         else:
-            called = model_api.called_of(grid_class)
-            bind = {name: f if name in called else inlined(f)
-                    for name, f in {**model_hooks, **mode_hooks}.items()}
             suffix = f"{grid_class.__name__}_{mode_class.__name__}"
             loop = sample_pixel if mode_api.sampled_of(mode_class) else _trace_pixel
             pixel = rebound(loop, bind, suffix)
