@@ -11,7 +11,8 @@ parent reports whether the two builds' are bit-identical
 and their largest difference.
 
     python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip|dvr]
-        [--dvr-sampling OLD,NEW] [--dvr-step VOXELS] [--models trilinear,bspline1,bspline2,bspline3]
+        [--dvr-sampling OLD,NEW] [--dvr-step VOXELS] [--mip-step VOXELS]
+        [--models trilinear,bspline1,bspline2,bspline3]
         [--scenes LABELS] [--view orbit|far|away|inside] [--stem iso_builds]
 
 Results go to ``benchmarks/results/<stem>.md`` and ``.json``.
@@ -66,6 +67,8 @@ def _worker(outdir: str) -> None:
             if req["mode"] == "dvr":
                 options.update(_dvr_options(vol, iso, req.get("sampling") or None,
                                             req.get("step")))
+            if req["mode"] == "mip" and req.get("step"):
+                options.update(method="sampled", step=float(req["step"]))
             scene.render(cam, **options, outputs=("rgba",))  # compile and prepare
             scenes[key] = (scene, cam, options)
         scene, cam, options = scenes[key]
@@ -166,6 +169,9 @@ def main() -> None:
                          "build's default settings)")
     ap.add_argument("--dvr-step", type=float, default=0.0,
                     help="DVR: the sample step in voxels of both builds (0: the build's default)")
+    ap.add_argument("--mip-step", type=float, default=0.0,
+                    help="MIP: the sampled method at this step in voxels in both builds (0: the "
+                         "exact method)")
     ap.add_argument("--threads", type=int, default=1,
                     help="Numba threads of each build (more than one: timed by the wall clock)")
     ap.add_argument("--view", default="orbit", choices=VIEWS,
@@ -184,7 +190,8 @@ def main() -> None:
         for label in args.scenes.split(","):
             for model in args.models.split(","):
                 req = {"scene": label, "model": model, "mode": args.mode,
-                       "step": args.dvr_step or None, "view": args.view}
+                       "step": (args.mip_step if args.mode == "mip" else args.dvr_step) or None,
+                       "view": args.view}
                 samplings = dict(zip(builds, args.dvr_sampling.split(","), strict=True))
                 depths = {k: np.load(b.ask(**req, depth=True, sampling=samplings[k])["depth"])
                           for k, b in builds.items()}
@@ -221,6 +228,7 @@ def main() -> None:
              f" --rounds {args.rounds} --mode {args.mode}"
              + (f" --dvr-sampling {args.dvr_sampling}" if args.mode == "dvr" else "")
              + (f" --dvr-step {args.dvr_step:g}" if args.dvr_step else "")
+             + (f" --mip-step {args.mip_step:g}" if args.mip_step and args.mode == "mip" else "")
              + (f" --threads {args.threads}" if args.threads > 1 else "")
              + (f" --view {args.view}" if args.view != "orbit" else "")
              + f"`. Builds: old `{sources['old']}`, new "

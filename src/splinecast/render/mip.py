@@ -27,8 +27,15 @@ derivative are solved for, and after a tested cell the driver asks for the skip 
 (``asks_again``), so a ray whose maximum reached its block's (plateaus of equal values, as in CT
 and MRI) leaps the rest of the block (``benchmarks/results/mip_builds_prune.md``).
 
-The sampled method takes samples every ``step`` voxels from the ray's entry (the reference common
-viewers use); it can only report values the field takes, so it never exceeds the exact MIP.
+The sampled method (the reference common viewers use) runs the fixed-step loop of
+:mod:`.sampler`, with no cell walk: the model's values at the ray's entry into the grid, every
+``step`` voxels from the ray's entry into the volume, and at its exit. The loop leaps a block
+whose maximum does not beat the running one, as the exact walk does. It can only report values
+the field takes, so it never exceeds the exact MIP. A ray traced brick by brick also takes the
+values where it crosses the brick faces, so its maximum may be a little larger than through the
+whole volume, never larger than the exact one. It used to take its samples inside the exact
+method's cell walk, 1.1-6.4x slower (``benchmarks/results/mip_builds_sampled_step2.md``,
+``mip_builds_sampled_step4.md``).
 
 Partial results of two segments of a ray combine by taking the larger value (the front one on a
 tie, as the walk keeps the first position of a maximum).
@@ -47,21 +54,26 @@ from .._jit import jit
 from ..accel.traversal import walk_begin, walk_step
 from ..errors import ParameterError, limits
 from ..models.pieces import value_at, value_gradient_at
-from ..roots.pieces import poly_bounds, poly_max, poly_value
+from ..roots.pieces import poly_bounds, poly_max
 from ..transfer import apply_colormap, colormap_table
 from .frame import Frame
 from .mode_api import register, unchanged_end, unchanged_skip
 from .outputs import ALL_OUTPUTS, buffer
 
-__all__ = ["MipMode", "Mip", "combine_mip"]
+__all__ = ["MipMode", "MipRayMode", "Mip", "combine_mip"]
 
 _METHODS = {"exact": 0, "sampled": 1}
 
-#: Kernel parameters: +1 (MIP) or -1 (minIP), method code, sampling step (voxels), whether
-#: the exact method's lower bound starts from the previous ray's maximum, and whether it prunes
-#: pieces by their control points and leaps the rest of a block once the running maximum has
-#: reached its maximum (1.0; 0.0 only to test the exact method without them).
+#: Kernel parameters of the exact method: +1 (MIP) or -1 (minIP), method code, sampling step
+#: (voxels; the sampled method's), whether the lower bound starts from the previous ray's
+#: maximum, and whether it prunes pieces by their control points and leaps the rest of a block
+#: once the running maximum has reached its maximum (1.0; 0.0 only to test the exact method
+#: without them).
 MipMode = namedtuple("MipMode", ["sign", "method", "step", "coherent", "prune"])
+
+#: The same parameters for the sampled method: another class, so the driver runs the
+#: fixed-step loop of :mod:`.sampler` for it (no cell walk).
+MipRayMode = namedtuple("MipRayMode", MipMode._fields)
 
 
 @jit()
@@ -105,8 +117,6 @@ def _ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0
     ray does meet, so the largest of them bounds the answer from below as well. On an MRI the
     block minima are background and bound little; a value taken where the maximum may be lets
     the walk leap most blocks in front of it."""
-    if mode.method != 0:
-        return st
     ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
     lower = st[2]
     t_previous = mscratch[0]
@@ -175,34 +185,21 @@ def _wants(mode, st, lo, hi):
 def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
              ax, ay, az, bx, by, bz, ray, st):
     best, where = st[0], st[1]
-    if mode.method == 0:
-        # The convex hull of the piece's control points bounds it: a piece that cannot beat
-        # the running maximum needs no roots of its derivative (most tested cells of a bright
-        # volume). The margin, far above the rounding of the hull and of poly_max's values,
-        # leaves every piece poly_max could find better to poly_max, so the answer is its.
-        if mode.prune != 0.0:
-            lo_p, hi_p = poly_bounds(poly)
-            top = hi_p if mode.sign > 0.0 else -lo_p
-            if top + 1e-11 * max(abs(lo_p), abs(hi_p)) <= best:
-                return st
-        v, s = poly_max(poly, mode.sign)
-        if v > best:
-            where = t0 + s * (t1 - t0)
-            mscratch[0] = where  # for the thread's next ray (_ray_begin)
-            return v, where, st[2]
-        return st
-    anchor = ray[15]
-    dt = mode.step / math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
-    m = math.ceil((t0 - anchor) / dt)
-    ts = anchor + m * dt
-    while ts <= t1:
-        s = (ts - t0) / (t1 - t0) if t1 > t0 else 0.0
-        v = mode.sign * poly_value(poly, s)
-        if v > best:
-            best, where = v, ts
-        m += 1
-        ts = anchor + m * dt
-    return best, where, st[2]
+    # The convex hull of the piece's control points bounds it: a piece that cannot beat the
+    # running maximum needs no roots of its derivative (most tested cells of a bright volume).
+    # The margin, far above the rounding of the hull and of poly_max's values, leaves every
+    # piece poly_max could find better to poly_max, so the answer is its.
+    if mode.prune != 0.0:
+        lo_p, hi_p = poly_bounds(poly)
+        top = hi_p if mode.sign > 0.0 else -lo_p
+        if top + 1e-11 * max(abs(lo_p), abs(hi_p)) <= best:
+            return st
+    v, s = poly_max(poly, mode.sign)
+    if v > best:
+        where = t0 + s * (t1 - t0)
+        mscratch[0] = where  # for the thread's next ray (_ray_begin)
+        return v, where, st[2]
+    return st
 
 
 @jit()
@@ -215,7 +212,7 @@ def _asks_again(mode):
     # A tested cell may raise the running maximum to its block's maximum (the ray meets the
     # block's brightest value, common on plateaus of equal values): the rest of the block is
     # then leapt over (MRI 12.8 -> 10.8 cells visited per ray; results/mip_builds_prune.md).
-    return mode.method == 0 and mode.prune != 0.0
+    return mode.prune != 0.0
 
 
 @jit()
@@ -242,20 +239,30 @@ def _finish(mode, out, row, col, st, ray):
             position[row, col, 2] = ray[2] + t * ray[5]
 
 
-register(MipMode,
-         state_new=_state_new,
-         state_load=_state_load,
-         state_store=_state_store,
-         mode_scratch=_mode_scratch,
-         ray_begin=_ray_begin,
-         skip_size=_skip_size,
-         wants=_wants,
-         on_skip=unchanged_skip,
-         consume=_consume,
-         done=_done,
-         ray_end=unchanged_end,
-         asks_again=_asks_again,
-         finish=_finish)
+@jit()
+def _sample_step(mode):
+    return mode.step
+
+
+@jit()
+def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
+    """The sampled method: the stretch between two samples; its values there."""
+    best, where = st[0], st[1]
+    a = mode.sign * va
+    if a > best:
+        best, where = a, ta
+    b = mode.sign * vb
+    if b > best:
+        best, where = b, tb
+    return best, where, st[2]
+
+
+_HOOKS = dict(state_new=_state_new, state_load=_state_load, state_store=_state_store,
+              mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size,
+              wants=_wants, on_skip=unchanged_skip, consume=_consume, done=_done,
+              ray_end=unchanged_end, asks_again=_asks_again, finish=_finish)
+register(MipMode, **_HOOKS)
+register(MipRayMode, sample_step=_sample_step, segment=_segment, **_HOOKS)
 
 
 @jit(parallel=True)
@@ -325,11 +332,17 @@ class Mip:
         colormap_table(colormap, 2)  # validates the name before any work
         self.colormap = colormap
         self.background = background
-        self.params = MipMode(1.0 if kind == "mip" else -1.0, _METHODS[method], float(step), 1.0,
-                              1.0)
+        params_class = MipRayMode if method == "sampled" else MipMode
+        self.params = params_class(1.0 if kind == "mip" else -1.0, _METHODS[method],
+                                   float(step), 1.0, 1.0)
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
-        """Block maxima (times the sign) per level, and the 16-cell block minima."""
+        """Block maxima (times the sign) per level, then the 16-cell block minima (exact
+        method) or the finest blocks' plain minima and maxima (sampled: :mod:`.sampler` reads
+        them at ``blocks[3]`` and ``blocks[4]``)."""
+        if self.method == "sampled":
+            signed = hierarchy.highs if self.params.sign > 0 else [-a for a in hierarchy.lows]
+            return (*signed, hierarchy.lows[0], hierarchy.highs[0])
         if self.params.sign > 0:
             return (*hierarchy.highs, hierarchy.lows[1])
         return (*(-a for a in hierarchy.lows), -hierarchy.highs[1])

@@ -59,9 +59,11 @@ bx, by, bz, ray, st)`` -> ``st``
 
 A mode may instead be *sampled*: it registers ``sample_step`` and ``segment`` as well, and the
 driver then runs the fixed-step loop of :mod:`.sampler` for it (no cell walk, so no
-``ray_begin``, ``on_skip`` or ``consume``; ``skip_size`` must depend on the position only, and
-``wants`` and ``blocks[3]``, ``blocks[4]``, the value ranges of the 4-cell blocks, decide
-whether a stretch between two leapt blocks can be left out):
+``ray_begin``, ``on_skip`` or ``consume``; a block ``skip_size`` names must add nothing to the
+result whatever its samples, so it depends on the position (DVR: a transparent block) or on a
+state that only grows along the ray (sampled MIP: a block whose maximum does not beat the
+running one); ``wants`` and ``blocks[3]``, ``blocks[4]``, the value ranges of the 4-cell
+blocks, decide whether a stretch between two leapt blocks can be left out):
 
 ``sample_step(mode)`` -> ``float``
     Distance between samples, in voxels.

@@ -13,7 +13,7 @@ model (the value is the model's ``value_at``, inlined into the pair's kernel):
   composite the same stretches as one grid (cut in two at each brick face);
 * empty-space leaping: at each sample the mode's ``skip_size`` names the largest block around
   the sample's cell that cannot contribute (DVR: the transfer function is zero over its value
-  range; a sampled mode's ``skip_size`` depends on the position only); the loop moves to the
+  range; sampled MIP: its maximum does not beat the running one); the loop moves to the
   last sample inside that block, without evaluating the ones in between, whose segments lie
   wholly in the block and add nothing. It asks at every sample: remembering the last 4-cell
   block found visible and not asking again inside it measured 0.94-1.04x;
