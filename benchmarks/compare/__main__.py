@@ -16,7 +16,6 @@ from . import report, runner, scenes
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE.parent / "results"
 ISO_KEYS = list(M.ISO_METHODS)
-VOLUME_KEYS = list(M.VOLUME_METHODS)
 
 
 def machine() -> dict[str, Any]:
@@ -105,7 +104,7 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
                 for r in results["volume"]:
                     if r["scene"] == spec.label:
                         jobs += [("volume", k, r["mode"], r["steps"].get(k, 0.0))
-                                 for k in VOLUME_KEYS if k not in r["skipped"]]
+                                 for k in M.volume_keys(r["mode"]) if k not in r["skipped"]]
                 results["memory"][spec.label] = runner.measure_memory(spec, jobs, size, log)
     results["machine"] = machine()  # the threading layer is known after the first kernel ran
     results["elapsed_s"] = time.perf_counter() - start
@@ -120,7 +119,7 @@ def run_volume(volume_scenes, size: tuple[int, int], repeats: int, results: dict
     for spec in volume_scenes:
         for mode in ("mip", "dvr"):
             log(f"{mode}: {spec.label}")
-            r = runner.run_volume_scene(spec, mode, [size], VOLUME_KEYS, repeats, log)
+            r = runner.run_volume_scene(spec, mode, [size], M.volume_keys(mode), repeats, log)
             results["volume"].append(r)
             for k, t in r["threads"].items():
                 results["threads"][f"{k} {mode}"] = t

@@ -544,14 +544,20 @@ class VolumeMethod:
 
 
 class SplinecastVolume(VolumeMethod):
-    """splinecast's own MIP / DVR (used only when ``splinecast.scene.MODES`` has the mode)."""
+    """splinecast's own MIP / DVR (used only when ``splinecast.scene.MODES`` has the mode).
 
-    def __init__(self, volume, size, mode, iso, step) -> None:
+    MIP is the exact method unless ``sampled``: then ``method="sampled"`` at ``step`` voxels,
+    the fixed-step sampling VTK's casters do, so it can be matched to the tolerance like them.
+    """
+
+    def __init__(self, volume, size, mode, iso, step, sampled: bool = False) -> None:
         super().__init__(volume, size, mode, iso, step)
-        self.name = f"splinecast {mode}"
+        self.name = f"splinecast {'sampled ' if sampled else ''}{mode}"
         self.scene = sc.Scene(volume)
         params = inspect.signature(self.scene.render).parameters
         self.kwargs: dict[str, Any] = {"mode": mode}
+        if sampled and mode == "mip":
+            self.kwargs.update(method="sampled", step=step)
         if mode == "dvr":
             from splinecast.transfer import TransferFunction
 
@@ -684,6 +690,8 @@ class VtkVolume(VolumeMethod):
 
 VOLUME_METHODS = {
     "splinecast": lambda vol, size, mode, iso, step: SplinecastVolume(vol, size, mode, iso, step),
+    "splinecast-sampled": lambda vol, size, mode, iso, step:
+        SplinecastVolume(vol, size, mode, iso, step, sampled=True),
     "vtk-fixed-point": lambda vol, size, mode, iso, step:
         VtkVolume(vol, size, mode, iso, step, "fixed-point"),
     "vtk-gpu": lambda vol, size, mode, iso, step: VtkVolume(vol, size, mode, iso, step, "gpu"),
@@ -691,14 +699,25 @@ VOLUME_METHODS = {
 
 VOLUME_LABELS = {
     "splinecast": "splinecast",
+    "splinecast-sampled": "splinecast sampled",
     "vtk-fixed-point": "VTK fixed-point CPU ray caster",
     "vtk-gpu": "VTK OpenGL ray caster on llvmpipe",
 }
 
 
+#: Modes each volume method takes part in (every mode when not listed). splinecast's DVR is
+#: sampled already, so its ``splinecast`` row is the sampled one.
+VOLUME_METHOD_MODES = {"splinecast-sampled": ("mip",)}
+
+
+def volume_keys(mode: str) -> list[str]:
+    """The volume methods that render ``mode`` ("mip" or "dvr")."""
+    return [k for k in VOLUME_METHODS if mode in VOLUME_METHOD_MODES.get(k, (mode,))]
+
+
 def volume_requirements(key: str, mode: str) -> str | None:
     """Why a MIP/DVR method cannot run here, or None when it can."""
-    if key == "splinecast":
+    if key in ("splinecast", "splinecast-sampled"):
         if mode not in splinecast_modes():
             return (f"splinecast has no mode {mode!r} yet (splinecast.scene.MODES = "
                     f"{splinecast_modes()})")
