@@ -26,7 +26,7 @@ test: $(STAMP) $(BENCH_STAMP) $(BROWSER_STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
 
-# Comparison suite against VTK and scikit-image (benchmarks/compare.py, issue 6).
+# Comparison suite against VTK and scikit-image (the benchmarks/compare package, issue 6).
 # Optional for `make test`: system libraries for offscreen OpenGL (scripts/install_bench.sh) and the
 # `bench` extra from PyPI (~10 s of wheels); if either fails the VTK tests skip with the reason.
 # The stamp is written only when both succeed, so a failure is retried by the next `make test`
@@ -54,10 +54,10 @@ bench-deps: $(STAMP)
 	touch $(BENCH_STAMP)
 
 compare: bench-deps
-	$(PY) benchmarks/compare.py
+	$(PY) -m benchmarks.compare
 
 compare-quick: bench-deps
-	$(PY) benchmarks/compare.py --quick
+	$(PY) -m benchmarks.compare --quick
 
 # Documentation site into docs/_build/html (offline; runs every gallery example for its pictures).
 docs: $(STAMP)
