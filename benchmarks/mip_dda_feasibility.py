@@ -14,8 +14,9 @@ ways (its derivative roots come from the plain quadratic formula, which loses di
 cubic term is nearly zero, and its plane crossings are accumulated; not investigated further,
 the timing is what it is for).
 
-Session 49: the lean walk was no faster (``results/mip_dda_feasibility.md``: 0.94-1.20x the
-renderer's time), so the generic driver is not what separates exact MIP from VTK's casters.
+Session 49: the lean walk was no faster (``results/mip_dda_feasibility.md``: 0.97-1.22x the
+renderer's time; 0.94-1.20x in an earlier run), so the generic driver is not what separates
+exact MIP from VTK's casters.
 
     python benchmarks/mip_dda_feasibility.py
 """
@@ -24,9 +25,7 @@ from __future__ import annotations
 
 import json
 import math
-import statistics
 import sys
-import time
 from functools import partial
 from pathlib import Path
 
@@ -36,7 +35,7 @@ from numba import njit, prange
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
+from _machine import describe, median_ms  # noqa: E402
 
 import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
@@ -48,19 +47,20 @@ def corner(v, i, j, k):
 
 
 @njit(inline="always")
+def corners(v, i, j, k):
+    """The eight values of cell (i, j, k), as c000, c001, c010, c011, c100, ..., c111."""
+    return (corner(v, i, j, k), corner(v, i, j, k + 1), corner(v, i, j + 1, k),
+            corner(v, i, j + 1, k + 1), corner(v, i + 1, j, k), corner(v, i + 1, j, k + 1),
+            corner(v, i + 1, j + 1, k), corner(v, i + 1, j + 1, k + 1))
+
+
+@njit(inline="always")
 def tri(v, x, y, z, nx, ny, nz):
     i = min(max(int(math.floor(x)), 0), nx - 1)
     j = min(max(int(math.floor(y)), 0), ny - 1)
     k = min(max(int(math.floor(z)), 0), nz - 1)
     fx, fy, fz = x - i, y - j, z - k
-    c000 = corner(v, i, j, k)
-    c001 = corner(v, i, j, k + 1)
-    c010 = corner(v, i, j + 1, k)
-    c011 = corner(v, i, j + 1, k + 1)
-    c100 = corner(v, i + 1, j, k)
-    c101 = corner(v, i + 1, j, k + 1)
-    c110 = corner(v, i + 1, j + 1, k)
-    c111 = corner(v, i + 1, j + 1, k + 1)
+    c000, c001, c010, c011, c100, c101, c110, c111 = corners(v, i, j, k)
     c00 = c000 + fz * (c001 - c000)
     c01 = c010 + fz * (c011 - c010)
     c10 = c100 + fz * (c101 - c100)
@@ -73,14 +73,7 @@ def tri(v, x, y, z, nx, ny, nz):
 @njit(inline="always")
 def cubic_max(v, i, j, k, ax, ay, az, ex, ey, ez):
     """Largest value of the cell's trilinear on p(s) = a + s e, s in [0, 1]; and its s."""
-    c000 = corner(v, i, j, k)
-    c001 = corner(v, i, j, k + 1)
-    c010 = corner(v, i, j + 1, k)
-    c011 = corner(v, i, j + 1, k + 1)
-    c100 = corner(v, i + 1, j, k)
-    c101 = corner(v, i + 1, j, k + 1)
-    c110 = corner(v, i + 1, j + 1, k)
-    c111 = corner(v, i + 1, j + 1, k + 1)
+    c000, c001, c010, c011, c100, c101, c110, c111 = corners(v, i, j, k)
     # f = b0 + bx x + by y + bz z + bxy xy + bxz xz + byz yz + bxyz xyz
     b0 = c000
     bx = c100 - c000
@@ -276,13 +269,8 @@ def dda_mip(v, h0, h1, h2, O, D, out, visits):
 
 
 def _median_ms(fn, repeats: int = 9) -> float:
-    fn()
-    runs = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        runs.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(runs)
+    fn()  # compilation and warm-up
+    return median_ms(fn, repeats)
 
 
 def main() -> None:
