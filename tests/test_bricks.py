@@ -143,13 +143,16 @@ def _assert_same(mode, whole, bricks, what):
 
 
 @pytest.mark.parametrize("kind", ["mip", "minip"])
-def test_sampled_projection_in_bricks_lies_between_the_whole_volume_and_the_exact(volume, kind):
+@pytest.mark.parametrize("method, step", [("sampled", 1.5), ("slices", 3.0)])
+def test_sampled_projection_in_bricks_lies_between_the_whole_volume_and_the_exact(volume, kind,
+                                                                                method, step):
     """The sampled MIP traced brick by brick (chained and combined) also takes the values where
     the ray crosses brick faces: never below the whole-volume sampled projection (its samples
-    are all taken too), never above the exact one (every value is one the ray meets), and
-    strictly above the whole-volume one somewhere (the face values are new samples)."""
+    are all taken too: the slices method's planes are the volume's, not the brick's), never
+    above the exact one (every value is one the ray meets), and strictly above the
+    whole-volume one somewhere (the face values are new samples)."""
     scene = sc.Scene(volume)
-    sampled = Mip(kind, method="sampled", step=1.5, value_range=volume.value_range)
+    sampled = Mip(kind, method=method, step=step, value_range=volume.value_range)
     sign = 1.0 if kind == "mip" else -1.0
     raised = 0
     for cam in _cameras(0.0):

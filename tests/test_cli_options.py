@@ -136,6 +136,9 @@ CASES = [
          {"mode": "mip", "window": (0.4, 0.7)}, {"mode": "mip"}),
     Case("mip-sampled", ["--mode", "mip", "--method", "sampled", "--step", "1.5"],
          {"mode": "mip", "method": "sampled", "step": 1.5}, {"mode": "mip"}),
+    Case("mip-slices", ["--mode", "mip", "--method", "slices", "--step", "2"],
+         {"mode": "mip", "method": "slices", "step": 2.0},
+         {"mode": "mip", "method": "sampled", "step": 2.0}),
     Case("mip-clip", ["--mode", "minip", "--clip", "0,1,0,0"],
          {"mode": "minip", "clip": [(0.0, 1.0, 0.0, 0.0)]}, {"mode": "minip"}),
     # --- DVR ----------------------------------------------------------------------------
@@ -260,6 +263,7 @@ def test_version_prints_the_package_version(capsys):
     (["--iso", "0.5", "--termination", "0.9"], "--termination"),
     (["--iso", "0.3,0.6", "--method", "sampled"], "--method sampled"),
     (["--iso", "0.5", "--opacity", "0.5", "--method", "sampled"], "--method sampled"),
+    (["--iso", "0.5", "--method", "slices"], "--method slices applies to --mode mip/minip"),
     (["--iso", "0.5", "--step", "0.1"], "--step"),
     (["--mode", "mip", "--step", "0.1"], "--step"),
     (["--iso", "0.5", "--texture-scale", "0.3"], "--texture-scale"),

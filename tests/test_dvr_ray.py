@@ -22,7 +22,7 @@ from test_dvr import BLACK, TARGET, _ml_ramp, _noise_ramp
 
 import splinecast as sc
 from splinecast._jit import jit
-from splinecast.models.pieces import value_at, value_gradient_at
+from splinecast.models.pieces import value_at, value_gradient_at, value_on_plane
 from splinecast.render.dvr import Dvr
 from splinecast.render.segment import render_grid
 
@@ -195,6 +195,42 @@ def test_trilinear_value_at_equals_value_gradient_at(dtype):
     values = _values(scene.grid.kernel, points)
     assert np.ptp(values[:, 1]) > 100  # the points see the data's range
     np.testing.assert_allclose(values[:, 0], values[:, 1], rtol=1e-12, atol=1e-9)
+
+
+@jit()
+def _plane_values(grid, axis, planes, points):
+    out = np.empty((points.shape[0], 2))
+    scratch = np.empty(0)
+    for n in range(points.shape[0]):
+        p, a, b = planes[n], points[n, 0], points[n, 1]
+        x, y, z = (p, a, b) if axis == 0 else ((a, p, b) if axis == 1 else (a, b, p))
+        out[n, 0] = value_on_plane(grid, scratch, axis, p, a, b)
+        out[n, 1] = value_at(grid, scratch, x, y, z)
+    return out
+
+
+@pytest.mark.parametrize("model", ["trilinear", "bspline3"])
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_value_on_a_voxel_plane_is_the_value_at_that_point(model, axis):
+    """The slices method's plane reads (the trilinear's bilinear of one slice, 4 voxels; the
+    default for other models) give the model's value at the point to the last bit on every
+    plane but the last (to rounding there), with in-plane points inside, on cell faces and
+    outside (clamped)."""
+    rng = np.random.default_rng(3)
+    data = rng.integers(0, 250, size=(9, 8, 10)).astype(np.uint8)
+    scene = sc.Scene(sc.Volume(data), model=model)
+    n = data.shape[axis] - 1
+    planes = rng.integers(0, n + 1, size=300).astype(np.float64)
+    planes[:2] = (0.0, n)
+    points = rng.uniform(-1.5, 10.5, size=(300, 2))
+    points[:30] = np.round(points[:30])
+    values = _plane_values(scene.grid.kernel, axis, planes, points)
+    assert np.ptp(values[:, 1]) > 100
+    inner = planes < n
+    np.testing.assert_array_equal(values[inner, 0], values[inner, 1])
+    # On the last plane value_at interpolates toward it from the cell before (weight 1),
+    # which rounds; the plane read is that slice's own bilinear.
+    np.testing.assert_allclose(values[~inner, 0], values[~inner, 1], rtol=1e-14)
 
 
 def test_taking_values_one_sample_early_changes_nothing():

@@ -252,7 +252,9 @@ class Scene:
         method : str
             ``"exact"`` (analytic first root per cell, the default) or ``"sampled"`` (fixed step
             plus bisection, the reference common viewers use). For MIP: analytic extrema per
-            cell, or samples every ``step`` voxels.
+            cell, samples every ``step`` voxels, or ``"slices"``: samples where the ray crosses
+            every ``step``-th plane of voxels across its dominant axis (the fastest; see
+            :class:`splinecast.render.mip.Mip`).
         step : float
             Sampling step of the sampled method, in voxels (index units).
         shading : Shading, optional
@@ -374,8 +376,11 @@ def prepare_render(
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
     if mode not in MODES:
         raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
-    if method not in METHODS:
-        raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if method not in METHODS and not (method == "slices" and mode in ("mip", "minip")):
+        extra = ", or slices for mip and minip" if method != "slices" else (
+            f"; slices is for mip and minip, not {mode}")
+        raise ParameterError(f"method must be one of {', '.join(METHODS)}{extra}, "
+                             f"got {method!r}")
     limits.check_render(volume, camera, mode=mode, method=method, step=step, dvr=dvr)
     inside = inside or volume.metadata.get("inside", "high")
     if inside not in ("high", "low"):

@@ -106,11 +106,14 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--fov", type=finite, default=30.0, help="vertical field of view, degrees")
     render.add_argument("--zoom", type=finite, default=1.0, help="magnification (default 1)")
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
-    render.add_argument("--method", default="exact", choices=("exact", "sampled"),
-                        help="exact analytic roots (default) or fixed-step sampling")
+    render.add_argument("--method", default="exact", choices=("exact", "sampled", "slices"),
+                        help="exact analytic roots (default) or fixed-step sampling; for "
+                             "--mode mip/minip also slices: samples on every STEP-th plane of "
+                             "voxels across the ray (the fastest)")
     render.add_argument("--step", type=finite,
-                        help="sampling step in voxels for --method sampled (default 0.25) and "
-                             "--mode dvr (default 0.25 when another DVR option is given)")
+                        help="sampling step in voxels for --method sampled/slices (default "
+                             "0.25) and --mode dvr (default 0.25 when another DVR option is "
+                             "given)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default from the data)")
     _add_mode_options(render)
@@ -161,11 +164,14 @@ def _refuse_ignored_options(args: argparse.Namespace) -> None:
             raise sc.ParameterError(f"{flag} does not apply to --mode {args.mode} "
                                     f"(only to --mode {'/'.join(modes)})")
     several = args.mode == "iso" and (args.opacity or (args.iso and "," in args.iso))
+    if args.method == "slices" and args.mode not in ("mip", "minip"):
+        raise sc.ParameterError(f"--method slices applies to --mode mip/minip only, "
+                                f"not --mode {args.mode}")
     if several and args.method != "exact":
         raise sc.ParameterError("--method sampled takes a single --iso value "
                                 "(several isosurfaces are always exact)")
-    if given("step") and args.mode != "dvr" and (args.method != "sampled" or several):
-        raise sc.ParameterError("--step applies to --method sampled and --mode dvr only")
+    if given("step") and args.mode != "dvr" and (args.method == "exact" or several):
+        raise sc.ParameterError("--step applies to --method sampled/slices and --mode dvr only")
     if given("texture_scale") and not args.texture:
         raise sc.ParameterError("--texture-scale needs --texture")
     if given("table_layout") and not args.adaptive:
@@ -275,7 +281,7 @@ def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
     limits.check_finite_number(args.zoom, "--zoom", lo=1e-6, hi=1e6)
     if args.distance is not None:
         limits.check_finite_number(args.distance, "--distance", lo=0, lo_open=True)
-    if args.step is not None and (args.method == "sampled" or args.mode == "dvr"):
+    if args.step is not None and (args.method != "exact" or args.mode == "dvr"):
         limits.check_finite_number(args.step, "--step (voxels)", lo=limits.MIN_STEP)
     if args.iterations is not None:
         limits.check_count(args.iterations, "--iterations", hi=limits.MAX_ROOT_ITERATIONS)
@@ -361,7 +367,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model is None and wavelet:
         args.model = f"bspline{vol.degree}"
     _refuse_multiscale_options(args, multiscale, wavelet)
-    if args.method == "sampled" or (args.mode == "dvr" and args.step is not None):
+    if args.method != "exact" or (args.mode == "dvr" and args.step is not None):
         limits.check_step(sampled_step(args), "--step", vol.shape)
     with contextlib.ExitStack() as stack:
         options = model_options(args)

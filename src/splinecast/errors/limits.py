@@ -347,14 +347,14 @@ def check_render(
 
     An in-memory volume's data holds no NaN or infinity (the policy of :mod:`splinecast.volume`;
     a lazy multiscale volume, which has no ``require_finite``, is not scanned here), the image
-    fits in memory, and the sampling step (``method="sampled"``, or DVR's) is within the bounds
-    of :func:`check_step` for this volume.
+    fits in memory, and the sampling step (``method="sampled"`` or ``"slices"``, or DVR's) is
+    within the bounds of :func:`check_step` for this volume.
     """
     require_finite = getattr(volume, "require_finite", None)
     if require_finite is not None:
         require_finite()
     check_image(camera.width, camera.height, "camera size")
-    if method == "sampled" and mode != "dvr":
+    if method in ("sampled", "slices") and mode != "dvr":
         check_step(step, "step", volume.shape)
     if mode == "dvr" and dvr is not None and hasattr(dvr, "step"):
         check_step(dvr.step, "DVRSettings.step", volume.shape)

@@ -33,6 +33,11 @@ Per cell, in the order a driver uses them:
 ``value_at(grid, scratch, x, y, z) -> v`` (optional)
     The value alone, for the fixed-step loop (:mod:`splinecast.render.sampler`), which takes
     one per sample; a model that does not register it gets ``value_gradient_at``'s value.
+``value_on_plane(grid, scratch, axis, p, a, b) -> v`` (optional)
+    The value on plane ``p`` (a whole number) of the grid's voxels across ``axis`` (0, 1, 2),
+    at ``(a, b)`` on the two other axes in order, where a model can read fewer voxels
+    (trilinear: the bilinear of one slice, 4 reads instead of 8); the fixed-step loop's plane
+    samples use it. The default is ``value_at`` at that point.
 ``look_ahead(grid) -> bool`` (optional, a constant)
     Whether the fixed-step loop takes each sample's value one sample early, before the table
     reads of the segment in front of it, so the two memory-bound reads overlap. Worth it for a
@@ -53,7 +58,7 @@ from .._jit import jit, overload_jit
 __all__ = [
     "register", "hooks_of", "called_of", "cell_count", "new_scratch", "cell_load", "cell_pieces",
     "piece_range", "piece_poly", "gradient", "value_gradient_at", "value_at", "whole_cell",
-    "cell_range", "look_ahead",
+    "cell_range", "look_ahead", "value_on_plane",
 ]
 
 #: Kernel grid class -> {hook name: compiled function}.
@@ -63,7 +68,7 @@ _CALLED: dict[type, frozenset[str]] = {}
 _NAMES = ("cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range", "piece_poly",
           "gradient", "value_gradient_at")
 #: Hooks a model may leave out (the stub then derives them from the others).
-_OPTIONAL = ("value_at", "look_ahead")
+_OPTIONAL = ("value_at", "look_ahead", "value_on_plane")
 
 
 def register(grid_class: type, called: tuple[str, ...] = (), **hooks: Any) -> None:
@@ -206,6 +211,27 @@ def _value_at(grid, scratch, x, y, z):
         return None
     f = _impl(grid, "value_at")
     return _value_of_value_gradient if f is None else f.py_func
+
+
+def value_on_plane(grid, scratch, axis, p, a, b):
+    """Value on a plane of voxels across ``axis`` (compiled code only)."""
+    raise NotImplementedError
+
+
+def _value_anywhere(grid, scratch, axis, p, a, b):
+    if axis == 0:
+        return value_at(grid, scratch, p, a, b)
+    if axis == 1:
+        return value_at(grid, scratch, a, p, b)
+    return value_at(grid, scratch, a, b, p)
+
+
+@overload_jit(value_on_plane, inline="never")
+def _value_on_plane(grid, scratch, axis, p, a, b):
+    if getattr(grid, "instance_class", None) not in _HOOKS:
+        return None
+    f = _impl(grid, "value_on_plane")
+    return _value_anywhere if f is None else f.py_func
 
 
 def look_ahead(grid):

@@ -75,7 +75,7 @@ from .mode_api import (
 )
 from .outputs import copy_pixel
 from .rays import grid_ray, pixel_ray
-from .sampler import sample_pixel
+from .sampler import bound_sample_pixel
 from .work_queue import take
 
 __all__ = ["trace", "pair_band", "pair_bindings", "finalize", "reset_state", "band_order",
@@ -446,8 +446,10 @@ def pair_band(grid_class: type, mode_class: type) -> Any:
             band = _trace_band
         else:
             suffix = f"{grid_class.__name__}_{mode_class.__name__}"
-            loop = sample_pixel if mode_api.sampled_of(mode_class) else _trace_pixel
-            pixel = rebound(loop, bind, suffix)
+            if mode_api.sampled_of(mode_class):
+                pixel = bound_sample_pixel(bind, suffix)
+            else:
+                pixel = rebound(_trace_pixel, bind, suffix)
             band = rebound(_trace_band, {**bind, "_trace_pixel": pixel}, suffix)
         _KERNELS[key] = band
     return band

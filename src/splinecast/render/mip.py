@@ -61,9 +61,11 @@ from .frame import Frame
 from .mode_api import register, unchanged_end, unchanged_skip
 from .outputs import ALL_OUTPUTS, buffer
 
-__all__ = ["MipMode", "MipRayMode", "Mip", "combine_mip"]
+__all__ = ["MipMode", "MipRayMode", "Mip", "combine_mip", "SAMPLED_METHODS"]
 
-_METHODS = {"exact": 0, "sampled": 1}
+_METHODS = {"exact": 0, "sampled": 1, "slices": 2}
+#: The methods that run the fixed-step loop of :mod:`.sampler`.
+SAMPLED_METHODS = ("sampled", "slices")
 
 #: Kernel parameters of the exact method: +1 (MIP) or -1 (minIP), method code, sampling step
 #: (voxels; the sampled method's), whether the lower bound starts from the previous ray's
@@ -246,6 +248,11 @@ def _sample_step(mode):
 
 
 @jit()
+def _sample_planes(mode):
+    return mode.method == 2  # "slices"
+
+
+@jit()
 def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
     """The sampled method: the stretch between two samples; its values there."""
     best, where = st[0], st[1]
@@ -263,7 +270,8 @@ _HOOKS = dict(state_new=_state_new, state_load=_state_load, state_store=_state_s
               wants=_wants, on_skip=unchanged_skip, consume=_consume, done=_done,
               ray_end=unchanged_end, asks_again=_asks_again, finish=_finish)
 register(MipMode, **_HOOKS)
-register(MipRayMode, sample_step=_sample_step, segment=_segment, **_HOOKS)
+register(MipRayMode, sample_step=_sample_step, sample_planes=_sample_planes, segment=_segment,
+         **_HOOKS)
 
 
 @jit(parallel=True)
@@ -301,9 +309,15 @@ class Mip:
     Parameters
     ----------
     kind : {"mip", "minip"}
-    method : {"exact", "sampled"}
+    method : {"exact", "sampled", "slices"}
+        ``"exact"``: the largest value of the model along the ray. ``"sampled"``: the largest
+        of its values every ``step`` voxels along the ray (and at the ray's ends).
+        ``"slices"``: the largest of its values where the ray crosses every ``step``-th plane
+        of voxels across its dominant axis (and at its ends), as slice-based renderers
+        sample; the samples lie ``step`` to ``step * sqrt(3)`` voxels apart, and on the
+        trilinear model each reads 4 voxels instead of 8 when ``step`` is a whole number.
     step : float
-        Sampling step of the sampled method, in voxels.
+        Sampling step of the sampled methods, in voxels.
     window : (lo, hi), optional
         Values mapped to the ends of the colormap (default: the data range).
     colormap : str or control points
@@ -325,7 +339,7 @@ class Mip:
         self.outputs = outputs
         if method not in _METHODS:
             raise ParameterError(f"method must be one of {', '.join(_METHODS)}, got {method!r}")
-        if method == "sampled":  # against the volume's size too: limits.check_render
+        if method in SAMPLED_METHODS:  # against the volume's size too: limits.check_render
             limits.check_finite_number(step, "step", lo=limits.MIN_STEP)
         self.name = kind
         self.method = method
@@ -333,7 +347,7 @@ class Mip:
         colormap_table(colormap, 2)  # validates the name before any work
         self.colormap = colormap
         self.background = background
-        params_class = MipRayMode if method == "sampled" else MipMode
+        params_class = MipRayMode if method in SAMPLED_METHODS else MipMode
         self.params = params_class(1.0 if kind == "mip" else -1.0, _METHODS[method],
                                    float(step), 1.0, 1.0)
 
@@ -341,7 +355,7 @@ class Mip:
         """Block maxima (times the sign) per level, then the 16-cell block minima (exact
         method) or the finest blocks' plain minima and maxima (sampled: :mod:`.sampler` reads
         them at ``blocks[3]`` and ``blocks[4]``)."""
-        if self.method == "sampled":
+        if self.method in SAMPLED_METHODS:
             signed = hierarchy.highs if self.params.sign > 0 else [-a for a in hierarchy.lows]
             return (*signed, hierarchy.lows[0], hierarchy.highs[0])
         if self.params.sign > 0:
@@ -377,7 +391,7 @@ class Mip:
         normal = np.full((h, w, 3), np.nan, np.float32) if "normal" in o else None
         face = np.zeros((h, w), np.int8) if "face" in o else None
         stats.update(window=self.window)
-        if self.method == "sampled":
+        if self.method in SAMPLED_METHODS:
             stats["step"] = self.params.step
         return Frame(rgba, depth if "depth" in o else None,
                      position if "position" in o else None, normal, face, *counters, stats,

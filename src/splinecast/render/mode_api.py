@@ -67,6 +67,12 @@ blocks, decide whether a stretch between two leapt blocks can be left out):
 
 ``sample_step(mode)`` -> ``float``
     Distance between samples, in voxels.
+``sample_planes(mode)`` -> ``bool`` (optional, default :func:`never`)
+    Whether the samples lie on planes of voxels rather than every ``sample_step`` voxels along
+    the ray: where the ray crosses every ``sample_step``-th voxel plane across its dominant
+    axis (the index axis along which it moves fastest), as slice-based renderers sample. On a
+    plane through voxels the trilinear model reads 4 voxels instead of 8
+    (:func:`splinecast.models.pieces.value_on_plane`).
 ``segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z)`` -> ``st``
     The stretch ``[ta, tb]`` of the ray between two samples (or a sample and an end of the
     grid's interval), the model's values ``va`` and ``vb`` there, its length in voxels, and
@@ -96,8 +102,8 @@ __all__ = [
     "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
-    "never", "hooks_of", "sampled_of", "sample_step", "segment", "asks_again", "answer_shift",
-    "finest_blocks",
+    "never", "hooks_of", "sampled_of", "sample_step", "sample_planes", "segment", "asks_again",
+    "answer_shift", "finest_blocks",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
@@ -110,7 +116,7 @@ _SAMPLED = ("sample_step", "segment")
 def register(mode_class: type, **hooks: Any) -> None:
     """Register a mode's compiled functions for its parameter tuple class (all of
     :data:`_NAMES`; ``watches_skips`` and ``asks_again`` default to :func:`never`,
-    ``answer_shift`` to :func:`finest_blocks`)."""
+    ``answer_shift`` to :func:`finest_blocks`, ``sample_planes`` to :func:`never`)."""
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
@@ -118,7 +124,7 @@ def register(mode_class: type, **hooks: Any) -> None:
         raise TypeError(f"{mode_class.__name__}: a sampled mode registers all of "
                         f"{', '.join(_SAMPLED)}")
     _HOOKS[mode_class] = {"watches_skips": never, "asks_again": never,
-                          "answer_shift": finest_blocks, **hooks}
+                          "answer_shift": finest_blocks, "sample_planes": never, **hooks}
 
 
 def sampled_of(mode_class: type) -> bool:
@@ -315,6 +321,17 @@ def sample_step(mode):
 @overload_jit(sample_step, inline="never")
 def _sample_step(mode):
     f = _impl(mode, "sample_step")
+    return None if f is None else f.py_func
+
+
+def sample_planes(mode):
+    """Whether a sampled mode samples on voxel planes across the ray (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(sample_planes, inline="never")
+def _sample_planes(mode):
+    f = _impl(mode, "sample_planes")
     return None if f is None else f.py_func
 
 
