@@ -546,18 +546,19 @@ class VolumeMethod:
 class SplinecastVolume(VolumeMethod):
     """splinecast's own MIP / DVR (used only when ``splinecast.scene.MODES`` has the mode).
 
-    MIP is the exact method unless ``sampled``: then ``method="sampled"`` at ``step`` voxels,
-    the fixed-step sampling VTK's casters do, so it can be matched to the tolerance like them.
+    MIP is the exact method unless ``method`` names a sampled one: ``"sampled"`` (every
+    ``step`` voxels along the ray, the fixed-step sampling VTK's casters do) or ``"slices"``
+    (on every ``step``-th voxel plane across the ray), matched to the tolerance like them.
     """
 
-    def __init__(self, volume, size, mode, iso, step, sampled: bool = False) -> None:
+    def __init__(self, volume, size, mode, iso, step, method: str = "exact") -> None:
         super().__init__(volume, size, mode, iso, step)
-        self.name = f"splinecast {'sampled ' if sampled else ''}{mode}"
+        self.name = f"splinecast {'' if method == 'exact' else method + ' '}{mode}"
         self.scene = sc.Scene(volume)
         params = inspect.signature(self.scene.render).parameters
         self.kwargs: dict[str, Any] = {"mode": mode}
-        if sampled and mode == "mip":
-            self.kwargs.update(method="sampled", step=step)
+        if method != "exact" and mode == "mip":
+            self.kwargs.update(method=method, step=step)
         if mode == "dvr":
             from splinecast.transfer import TransferFunction
 
@@ -691,7 +692,9 @@ class VtkVolume(VolumeMethod):
 VOLUME_METHODS = {
     "splinecast": lambda vol, size, mode, iso, step: SplinecastVolume(vol, size, mode, iso, step),
     "splinecast-sampled": lambda vol, size, mode, iso, step:
-        SplinecastVolume(vol, size, mode, iso, step, sampled=True),
+        SplinecastVolume(vol, size, mode, iso, step, method="sampled"),
+    "splinecast-slices": lambda vol, size, mode, iso, step:
+        SplinecastVolume(vol, size, mode, iso, step, method="slices"),
     "vtk-fixed-point": lambda vol, size, mode, iso, step:
         VtkVolume(vol, size, mode, iso, step, "fixed-point"),
     "vtk-gpu": lambda vol, size, mode, iso, step: VtkVolume(vol, size, mode, iso, step, "gpu"),
@@ -700,6 +703,7 @@ VOLUME_METHODS = {
 VOLUME_LABELS = {
     "splinecast": "splinecast",
     "splinecast-sampled": "splinecast sampled",
+    "splinecast-slices": "splinecast slices",
     "vtk-fixed-point": "VTK fixed-point CPU ray caster",
     "vtk-gpu": "VTK OpenGL ray caster on llvmpipe",
 }
@@ -707,7 +711,7 @@ VOLUME_LABELS = {
 
 #: Modes each volume method takes part in (every mode when not listed). splinecast's DVR is
 #: sampled already, so its ``splinecast`` row is the sampled one.
-VOLUME_METHOD_MODES = {"splinecast-sampled": ("mip",)}
+VOLUME_METHOD_MODES = {"splinecast-sampled": ("mip",), "splinecast-slices": ("mip",)}
 
 
 def volume_keys(mode: str) -> list[str]:
@@ -717,7 +721,7 @@ def volume_keys(mode: str) -> list[str]:
 
 def volume_requirements(key: str, mode: str) -> str | None:
     """Why a MIP/DVR method cannot run here, or None when it can."""
-    if key in ("splinecast", "splinecast-sampled"):
+    if key in ("splinecast", "splinecast-sampled", "splinecast-slices"):
         if mode not in splinecast_modes():
             return (f"splinecast has no mode {mode!r} yet (splinecast.scene.MODES = "
                     f"{splinecast_modes()})")
