@@ -318,6 +318,14 @@ def test_slices_projection_of_the_smooth_models_lies_below_the_exact_one(model):
     assert 0.0 < gap.mean() < 0.02
 
 
+@pytest.mark.parametrize("options", [{"iso": 0.5}, {"mode": "dvr"}])
+def test_slices_is_refused_outside_mip_with_a_clear_message(options):
+    vol = sc.Volume(np.zeros((8, 8, 8), np.float32))
+    cam = sc.Camera.orbit(vol, size=(8, 8))
+    with pytest.raises(sc.ParameterError, match="slices is for mip and minip, not"):
+        sc.Scene(vol).render(cam, method="slices", **options)
+
+
 def test_slices_views_have_each_axis_dominant():
     """The three views of the slices test above make x, y and z the dominant axis in turn."""
     vol = sc.Volume(np.zeros((24, 28, 21), np.float32), spacing=(0.5, 0.4, 0.6))

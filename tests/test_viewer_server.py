@@ -468,6 +468,38 @@ def test_striped_render_equals_whole_render_and_can_be_abandoned(vol):
     assert len(calls) == 1  # asked after the first stripe, then stopped
 
 
+def test_mip_previews_sample_on_planes_and_full_frames_are_exact(vol):
+    """A drag's reduced MIP / minIP frames and the coarse frame before a slow full one sample on
+    every second voxel plane (``method="slices"``, faster); full frames, refreshes and
+    screenshots are the exact projection. Reference: ``Scene.render`` with the request's
+    options and that method. The cost model keeps the two kinds apart."""
+    defaults = default_state(vol)
+    renderer = FrameRenderer(vol)
+    for mode in ("mip", "minip"):
+        request = parse_state({"mode": mode, "size": [256, 160]}, vol, defaults)
+        images = {}
+        for step in ("interactive", "coarse", "full", "refresh", "screenshot"):
+            image = renderer.render(request, step=step)
+            preview = step in ("interactive", "coarse")
+            assert image.stats["method"] == ("slices" if preview else "exact"), step
+            extra = {"method": "slices", "step": 2.0} if preview else {}
+            expected = sc.Scene(vol).render(request.camera, **request.options, **extra)
+            np.testing.assert_array_equal(image.rgba, expected.to_uint8(), err_msg=step)
+            images[step] = image.rgba
+        assert not np.array_equal(images["interactive"], images["full"])
+        assert renderer.estimate_ms(request, step="interactive") is not None
+        assert renderer.estimate_ms(request, step="full") is not None
+    # An isosurface's previews are the request's own method.
+    request = parse_state({"iso": 0.4, "size": [40, 30]}, vol, defaults)
+    assert renderer.render(request, step="interactive").stats["method"] == "exact"
+    fresh = FrameRenderer(vol)
+    fresh.render(parse_state({"mode": "mip", "size": [256, 160]}, vol, defaults),
+                 step="interactive")
+    mip = parse_state({"mode": "mip", "size": [256, 160]}, vol, defaults)
+    assert fresh.estimate_ms(mip, step="coarse") is not None
+    assert fresh.estimate_ms(mip, step="full") is None
+
+
 def test_screenshot_is_full_png_and_not_superseded(vol):
     async def check():
         async with ViewerServer(vol) as server, ViewerClient(server.url) as client:

@@ -37,6 +37,14 @@ _FIRST_STRIPE_ROWS = 128
 _MIN_STRIPE_ROWS = 32
 #: Smaller images are dominated by fixed costs per call and teach the cost model nothing.
 _MIN_LEARN_PIXELS = 32_768
+#: The passes shown only until the full frame replaces them (a drag's reduced frames, the coarse
+#: frame before a slow full one).
+PREVIEW_PASSES = ("interactive", "coarse")
+#: How MIP / minIP previews are rendered: samples on every second plane of voxels across the ray
+#: (``method="slices"``), 2.5-4x faster than the exact projection at the comparison's tolerance
+#: (``benchmarks/results/compare.md``), so a drag shows more pixels in the same time. Full
+#: frames and screenshots stay exact.
+PREVIEW_MIP = {"method": "slices", "step": 2.0}
 
 
 @dataclass
@@ -134,21 +142,30 @@ class FrameRenderer:
 
     # ------------------------------------------------------------------------- cost model
     @staticmethod
-    def _cost_key(request: RenderRequest) -> tuple[str, str, bool]:
-        return request.model, request.mode, isinstance(request.options.get("iso"), list)
+    def _pass_options(request: RenderRequest, step: str) -> dict[str, Any]:
+        """What a pass renders differently from the request: previews of MIP and minIP sample
+        on planes (:data:`PREVIEW_MIP`)."""
+        if step in PREVIEW_PASSES and request.mode in ("mip", "minip"):
+            return dict(PREVIEW_MIP)
+        return {}
 
-    def estimate_ms(self, request: RenderRequest, scale: float = 1.0) -> float | None:
-        """Expected render time at ``scale`` from recent renders of the same kind (None if
-        there were none)."""
-        per_pixel = self._cost.get(self._cost_key(request))
+    def _cost_key(self, request: RenderRequest, step: str) -> tuple:
+        return (request.model, request.mode, isinstance(request.options.get("iso"), list),
+                bool(self._pass_options(request, step)))
+
+    def estimate_ms(self, request: RenderRequest, scale: float = 1.0,
+                    step: str = "full") -> float | None:
+        """Expected render time of pass ``step`` at ``scale`` from recent renders of the same
+        kind (None if there were none)."""
+        per_pixel = self._cost.get(self._cost_key(request, step))
         if per_pixel is None:
             return None
         return per_pixel * request.camera.width * request.camera.height * scale * scale
 
-    def _learn(self, request: RenderRequest, pixels: int, ms: float) -> None:
+    def _learn(self, request: RenderRequest, step: str, pixels: int, ms: float) -> None:
         if pixels < _MIN_LEARN_PIXELS:
             return
-        key = self._cost_key(request)
+        key = self._cost_key(request, step)
         measured = ms / max(pixels, 1)
         previous = self._cost.get(key)
         if previous is None or measured < previous / 4:  # first runs include compilation
@@ -164,7 +181,8 @@ class FrameRenderer:
 
         ``abort`` is asked between stripes. ``step`` names the pass (``interactive``,
         ``coarse``, ``full``, ``refresh``, ``screenshot``): how long a pyramid's frame waits for
-        bricks (:meth:`.data.Shown.render_options`). Errors of the request (a combination of
+        bricks (:meth:`.data.Shown.render_options`), and for MIP / minIP whether it is a preview
+        sampled on planes (:data:`PREVIEW_MIP`). Errors of the request (a combination of
         model and mode the library refuses, an isovalue outside the range) raise ParameterError.
         """
         start = time.perf_counter()
@@ -174,9 +192,10 @@ class FrameRenderer:
             width = max(1, round(camera.width * scale))
             height = max(1, round(camera.height * scale))
             camera = resized_camera(camera, width, height)
-        rows = self._stripe_rows(request, camera.width, camera.height)
+        rows = self._stripe_rows(request, step, camera.width, camera.height)
         # The viewer shows colour only: no depth, position, normal or per-ray counters.
-        options = {"outputs": ("rgba",), **request.options, **self.shown.render_options(step)}
+        options = {"outputs": ("rgba",), **request.options, **self._pass_options(request, step),
+                   **self.shown.render_options(step)}
         image = np.empty((camera.height, camera.width, 4), np.uint8)
         parts: list[tuple[int, dict[str, Any]]] = []
         for row0 in range(0, camera.height, rows):
@@ -189,16 +208,16 @@ class FrameRenderer:
             image[row0:row0 + height] = frame.to_uint8()
             parts.append((height, frame.stats))
         render_ms = (time.perf_counter() - start) * 1e3
-        self._learn(request, camera.width * camera.height, render_ms)
+        self._learn(request, step, camera.width * camera.height, render_ms)
         stats = _merge_stats(parts, camera.width, camera.height)
         return RenderedImage(image, stats, render_ms, camera.height / request.camera.height)
 
-    def _stripe_rows(self, request: RenderRequest, width: int, height: int) -> int:
+    def _stripe_rows(self, request: RenderRequest, step: str, width: int, height: int) -> int:
         if self.shown.multiresolution:
             return height
         if self._stripe_rows_fixed is not None:
             return max(1, min(height, self._stripe_rows_fixed))
-        per_pixel = self._cost.get(self._cost_key(request))
+        per_pixel = self._cost.get(self._cost_key(request, step))
         if per_pixel is None:
             return min(height, _FIRST_STRIPE_ROWS)
         rows = int(STRIPE_MS / max(per_pixel * width, 1e-9))

@@ -229,7 +229,7 @@ class Session:
         if job.kind == "screenshot":
             return [_Pass("screenshot", 1.0, "png", True)]
         if job.kind == "interactive":
-            divisor = self._divisor(job.request, self.interactive_ms, default=2)
+            divisor = self._divisor(job.request, self.interactive_ms, 2, "interactive")
             return [_Pass("interactive", 1.0 / divisor, "jpeg", False)]
         passes = []
         estimate = self.renderer.estimate_ms(job.request)
@@ -237,14 +237,16 @@ class Session:
         # A coarse frame helps after a jump (a new mode, a click); coming from a drag, the
         # client already shows a reduced frame close to this state.
         if job.kind == "final" and slow and self._shown_final:
-            divisor = self._divisor(job.request, self.interactive_ms, default=4)
+            divisor = self._divisor(job.request, self.interactive_ms, 4, "coarse")
             passes.append(_Pass("coarse", 1.0 / max(divisor, 2), "jpeg", False))
         passes.append(_Pass("full", 1.0, "png", True))
         return passes
 
-    def _divisor(self, request: RenderRequest, target_ms: float, default: int) -> int:
-        """``k`` such that a frame at ``1/k`` of the full size takes about ``target_ms``."""
-        estimate = self.renderer.estimate_ms(request)
+    def _divisor(self, request: RenderRequest, target_ms: float, default: int,
+                 step: str) -> int:
+        """``k`` such that pass ``step`` at ``1/k`` of the full size takes about
+        ``target_ms``."""
+        estimate = self.renderer.estimate_ms(request, step=step)
         if estimate is None:
             return default
         return min(_MAX_DIVISOR, max(1, math.ceil(math.sqrt(estimate / target_ms))))
