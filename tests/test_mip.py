@@ -247,6 +247,20 @@ def test_the_smooth_models_leap_a_constant_background_once_they_have_met_its_val
     assert frame.cells_tested[background].mean() < 4  # about 40 per ray before
 
 
+def _rays_through_the_box(vol, cam, frame):
+    """``(row, col, o, u, t0, t1)`` of every pixel whose ray crosses the volume's box (world
+    origin, direction and interval); the others must have no value."""
+    origins, dirs = cam.rays()
+    for row in range(cam.height):
+        for col in range(cam.width):
+            o, u = origins[row, col], dirs[row, col]
+            t0, t1 = _box_interval(vol, o, u)
+            if not t0 < t1:
+                assert np.isnan(frame.value[row, col])
+                continue
+            yield row, col, o, u, t0, t1
+
+
 def _plane_samples(vol, o, u, t0, t1, step):
     """Where the ray ``o + t u`` (world) crosses the voxel planes ``m * step`` across its
     dominant index axis inside ``[t0, t1]``, with the two ends: the slices method's samples."""
@@ -276,21 +290,14 @@ def test_slices_projection_is_the_extremum_of_the_samples_on_voxel_planes(kind, 
     azimuth, elevation = view
     cam = sc.Camera.orbit(vol, azimuth=azimuth, elevation=elevation, size=(30, 24))
     frame = sc.Scene(vol).render(cam, mode=kind, method="slices", step=step)
-    origins, dirs = cam.rays()
     sign = 1.0 if kind == "mip" else -1.0
     checked = 0
-    for row in range(cam.height):
-        for col in range(cam.width):
-            o, u = origins[row, col], dirs[row, col]
-            t0, t1 = _box_interval(vol, o, u)
-            if not t0 < t1:
-                assert np.isnan(frame.value[row, col])
-                continue
-            ts = _plane_samples(vol, o, u, t0, t1, step)
-            values = sign * _ray_profile(vol, o, u, t0, t1)(ts)
-            got = sign * frame.value[row, col]
-            assert got == pytest.approx(values.max(), abs=1e-6), (row, col)
-            checked += 1
+    for row, col, o, u, t0, t1 in _rays_through_the_box(vol, cam, frame):
+        ts = _plane_samples(vol, o, u, t0, t1, step)
+        values = sign * _ray_profile(vol, o, u, t0, t1)(ts)
+        got = sign * frame.value[row, col]
+        assert got == pytest.approx(values.max(), abs=1e-6), (row, col)
+        checked += 1
     assert checked > 200
     # Sampled along the ray at the same step, the samples differ: so do the values somewhere.
     other = sc.Scene(vol).render(cam, mode=kind, method="sampled", step=step)
@@ -355,26 +362,19 @@ def test_sampled_projection_is_the_extremum_of_the_trilinear_samples(kind, step)
     vol = sc.Volume(data, spacing=(0.5, 0.5, 0.5), origin=(1.0, -2.0, 0.5))
     cam = sc.Camera.orbit(vol, azimuth=30.0, elevation=15.0, size=(40, 30))
     frame = sc.Scene(vol).render(cam, mode=kind, method="sampled", step=step)
-    origins, dirs = cam.rays()
     sign = 1.0 if kind == "mip" else -1.0
     dt = step * 0.5  # voxels to world units along a unit direction (isotropic spacing)
     checked = 0
-    for row in range(cam.height):
-        for col in range(cam.width):
-            o, u = origins[row, col], dirs[row, col]
-            t0, t1 = _box_interval(vol, o, u)
-            if not t0 < t1:
-                assert np.isnan(frame.value[row, col])
-                continue
-            ts = np.concatenate([[t0], t0 + dt * np.arange(1, int((t1 - t0) / dt) + 2), [t1]])
-            ts = np.append(ts[ts < t1], t1)
-            values = sign * _ray_profile(vol, o, u, t0, t1)(ts)
-            got = sign * frame.value[row, col]
-            assert got == pytest.approx(values.max(), abs=1e-6)
-            # The depth is where the value was taken.
-            assert sign * _ray_profile(vol, o, u, t0, t1)(frame.depth[row, col])[0] == \
-                pytest.approx(got, abs=1e-6)
-            checked += 1
+    for row, col, o, u, t0, t1 in _rays_through_the_box(vol, cam, frame):
+        ts = np.concatenate([[t0], t0 + dt * np.arange(1, int((t1 - t0) / dt) + 2), [t1]])
+        ts = np.append(ts[ts < t1], t1)
+        values = sign * _ray_profile(vol, o, u, t0, t1)(ts)
+        got = sign * frame.value[row, col]
+        assert got == pytest.approx(values.max(), abs=1e-6)
+        # The depth is where the value was taken.
+        assert sign * _ray_profile(vol, o, u, t0, t1)(frame.depth[row, col])[0] == \
+            pytest.approx(got, abs=1e-6)
+        checked += 1
     assert checked > 400
     # Blocks that cannot beat the running value were leapt.
     assert frame.blocks_skipped.sum() > 0
