@@ -31,7 +31,7 @@ are the level's, so bricks sample where the whole volume does; a model reads few
 such a plane (:func:`splinecast.models.pieces.value_on_plane`: 4 instead of 8 for the trilinear).
 Its loop (:func:`_plane_samples`) takes every sample, with no leaping: on Marschner-Lobb 128^3,
 the MRI and noise 256^3 (MIP, steps 2-4) every way of leaping tried cost more than it saved
-(asking at every sample 1.4-1.7x slower; at every 4th 1.2-1.3x; every 16th, 64-cell blocks
+(asking at every sample 1.5-1.75x slower; at every 4th 1.2-1.3x; every 16th, 64-cell blocks
 only, 1.1-1.15x), as each question puts the running value and a branch on the path of samples
 that otherwise overlap in the processor.
 
