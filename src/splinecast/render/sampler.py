@@ -274,8 +274,8 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
 def bound_sample_pixel(bindings: dict, suffix: str) -> Any:
     """:func:`sample_pixel` for one (model, mode) pair: a copy with the pair's hooks bound in it
     and in its helpers that call hooks (:func:`splinecast._jit.rebound` binds the names of one
-    function only; a helper left unbound would call each hook through its stub, a real call:
-    3-4x slower plane samples)."""
+    function only; a helper left unbound would call each hook through its stub, a real call
+    rather than inlined code)."""
     where = rebound(_sample_grid, bindings, suffix)
     on_plane = rebound(_on_plane, bindings, suffix)
     planes = rebound(_plane_samples, {**bindings, "_on_plane": on_plane}, suffix)
