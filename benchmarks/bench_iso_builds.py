@@ -11,7 +11,7 @@ parent reports whether the two builds' are bit-identical
 and their largest difference.
 
     python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip|dvr]
-        [--dvr-sampling OLD,NEW] [--dvr-step VOXELS] [--mip-step VOXELS]
+        [--dvr-sampling OLD,NEW] [--dvr-step VOXELS] [--mip-step VOXELS] [--mip-method M]
         [--models trilinear,bspline1,bspline2,bspline3]
         [--scenes LABELS] [--view orbit|far|away|inside] [--stem iso_builds]
 
@@ -68,7 +68,7 @@ def _worker(outdir: str) -> None:
                 options.update(_dvr_options(vol, iso, req.get("sampling") or None,
                                             req.get("step")))
             if req["mode"] == "mip" and req.get("step"):
-                options.update(method="sampled", step=float(req["step"]))
+                options.update(method=req.get("method") or "sampled", step=float(req["step"]))
             scene.render(cam, **options, outputs=("rgba",))  # compile and prepare
             scenes[key] = (scene, cam, options)
         scene, cam, options = scenes[key]
@@ -172,6 +172,8 @@ def main() -> None:
     ap.add_argument("--mip-step", type=float, default=0.0,
                     help="MIP: the sampled method at this step in voxels in both builds (0: the "
                          "exact method)")
+    ap.add_argument("--mip-method", default="sampled", choices=("sampled", "slices"),
+                    help="MIP with --mip-step: the sampled method of both builds")
     ap.add_argument("--threads", type=int, default=1,
                     help="Numba threads of each build (more than one: timed by the wall clock)")
     ap.add_argument("--view", default="orbit", choices=VIEWS,
@@ -191,7 +193,7 @@ def main() -> None:
             for model in args.models.split(","):
                 req = {"scene": label, "model": model, "mode": args.mode,
                        "step": (args.mip_step if args.mode == "mip" else args.dvr_step) or None,
-                       "view": args.view}
+                       "view": args.view, "method": args.mip_method}
                 samplings = dict(zip(builds, args.dvr_sampling.split(","), strict=True))
                 depths = {k: np.load(b.ask(**req, depth=True, sampling=samplings[k])["depth"])
                           for k, b in builds.items()}
@@ -228,7 +230,8 @@ def main() -> None:
              f" --rounds {args.rounds} --mode {args.mode}"
              + (f" --dvr-sampling {args.dvr_sampling}" if args.mode == "dvr" else "")
              + (f" --dvr-step {args.dvr_step:g}" if args.dvr_step else "")
-             + (f" --mip-step {args.mip_step:g}" if args.mip_step and args.mode == "mip" else "")
+             + (f" --mip-step {args.mip_step:g} --mip-method {args.mip_method}"
+                if args.mip_step and args.mode == "mip" else "")
              + (f" --threads {args.threads}" if args.threads > 1 else "")
              + (f" --view {args.view}" if args.view != "orbit" else "")
              + f"`. Builds: old `{sources['old']}`, new "

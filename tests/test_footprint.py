@@ -162,6 +162,82 @@ def test_mip_frames_are_identical_with_and_without_the_footprint(kind, monkeypat
             assert np.array_equal(a, b, equal_nan=True), f"{view}: {name} differs"
 
 
+def _blob_in_air(floor: float, sign: float, dtype: str) -> sc.Volume:
+    """A lumpy blob in the middle of a box whose outer layers all hold ``floor`` (air, as
+    around a head in an MRI): brighter than the air for MIP (``sign`` 1), darker for minIP."""
+    n = (44, 38, 36)
+    x, y, z = np.meshgrid(*(np.linspace(-1.0, 1.0, m) for m in n), indexing="ij")
+    r = np.sqrt((x / 0.55) ** 2 + (y / 0.5) ** 2 + (z / 0.45) ** 2)
+    blob = np.clip(1.0 - r, 0.0, None) * (1.0 + 0.4 * np.sin(9.0 * x) * np.cos(7.0 * y + z))
+    data = floor + sign * 180.0 * blob / blob.max()
+    return sc.Volume(np.round(data).astype(dtype), spacing=(0.9, 1.0, 1.2),
+                     origin=(-2.0, 1.0, 0.5))
+
+
+_AIR_CASES = [(kind, dtype, floor, "trilinear", method)
+              for kind, dtype, floor in [("mip", "uint8", 0.0), ("mip", "float32", -1024.0),
+                                         ("minip", "uint8", 255.0)]
+              for method in ("exact", "sampled", "slices")]
+_AIR_CASES += [("mip", "uint8", 0.0, "bspline3", "exact")]
+
+
+@pytest.mark.parametrize("kind, dtype, floor, model, method", _AIR_CASES)
+def test_mip_rays_through_air_start_at_the_blocks_above_it(kind, dtype, floor, model, method,
+                                                           monkeypatch):
+    """MIP's footprint names the blocks holding a value above the grid's smallest (below its
+    largest, minIP): rays start and end there, and rays crossing only air get the air's value
+    at their entry. Values, depths and positions are the ones without a footprint, for every
+    view; the footprint does cut the rays' fronts and leaves tiles to their entry only; and
+    the pixels that see only air are there to compare (their value is the floor, not a miss).
+    The cubic B-spline's values are sums of the voxels' (zeros in the air); the ranges of the
+    s31 model's blocks round 4e-11 below the air, so nothing is left out there."""
+    sign = 1.0 if kind == "mip" else -1.0
+    vol = _blob_in_air(floor, sign, dtype)
+    scene = sc.Scene(vol, model=model)
+    cams = {**_cameras(vol),
+            "far": sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(72, 56), zoom=0.6)}
+    options = {"mode": kind, "method": method, "outputs": ("value", "depth", "position")}
+    if method != "exact":
+        options["step"] = 1.5
+    with_fp = {v: scene.render(c, **options) for v, c in cams.items()}
+    mode = Mip(kind=kind, method=method, step=1.5)
+    blocks = mode.blocks(scene.grid.hierarchy)
+    cam = cams["perspective"]
+    tiles = segment.screen_footprint(scene.grid, mode, cam, blocks)
+    box = block_footprint(cam.pixel_basis(), scene.grid.geom, scene.grid.n_cells,
+                          np.ones(blocks[2].shape, np.uint8), BLOCK_SHIFTS[-1], cam.width,
+                          cam.height)
+    seen = box[..., 0] <= box[..., 1]
+    assert np.any(tiles[seen, 0] == footprint_module.ENTRY_ONLY), "no tile of air only"
+    cut = seen & (tiles[..., 0] != footprint_module.ENTRY_ONLY)
+    assert np.any(tiles[cut, 0] > box[cut, 0] + 1.0), "no ray starts past the air"
+    _without_footprint(monkeypatch)
+    air = 0
+    for view, cam in cams.items():
+        plain = scene.render(cam, **options)
+        air += int(np.sum(plain.value == floor))
+        assert np.sum(np.isfinite(plain.value) & (plain.value != floor)) > 20, view
+        for name in options["outputs"]:
+            a, b = getattr(plain, name), getattr(with_fp[view], name)
+            assert np.array_equal(a, b, equal_nan=True), f"{view}: {name} differs"
+    assert air > 200
+
+
+def test_mip_footprint_is_the_box_without_air():
+    """A smooth field with no 16-cell block of its smallest value: every block is named at the
+    coarsest level (a few boxes to project), as before there was air to leave out."""
+    vol = sc.demo("marschner-lobb", size=30)
+    scene = sc.Scene(vol)
+    for method in ("exact", "slices"):
+        mode = Mip(method=method, step=2.0)
+        flags = mode.footprint_flags(mode.blocks(scene.grid.hierarchy))
+        assert flags[0] is None and flags[1] is None and flags[2].all()
+    vol = _blob_in_air(0.0, 1.0, "uint8")
+    mode = Mip(method="slices", step=2.0)
+    flags = mode.footprint_flags(mode.blocks(sc.Scene(vol).grid.hierarchy))
+    assert 0 < flags[1].sum() < flags[1].size
+
+
 def test_translucent_isosurfaces_are_identical_with_and_without_the_footprint(monkeypatch):
     vol = sc.demo("sphere", size=41)
     cams = _cameras(vol)

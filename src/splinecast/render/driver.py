@@ -17,7 +17,8 @@ layers, placed in the volume by ``geom``:
 Each ray is clipped by the clip ``planes``, the domain, when ``t_range`` is not empty, its
 own parameter interval ``t_range[row, col]``, and when ``footprint`` is not empty, the interval
 of its ``8 x 8`` pixel tile in which the blocks the mode can see lie (:mod:`.footprint`; the
-pixels of a tile without one are finished without a ray); the ray parameter is always the
+pixels of a tile without one are finished without a ray, and a mode's ``entry_left_out``
+sees a ray whose entry the footprint leaves out); the ray parameter is always the
 world distance along the unit ray, so depths agree between grids and levels. The mode's
 per-ray state comes in and goes out through the mode's state arrays (``load`` / ``store``), so
 a ray can be traced through several grids in turn, front to back, exactly as through one: the
@@ -61,6 +62,7 @@ from .mode_api import (
     asks_again,
     consume,
     done,
+    entry_left_out,
     finish,
     mode_scratch,
     on_skip,
@@ -118,10 +120,12 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
     """Trace one pixel's ray inside ``[t_lo, t_hi]``; returns (cells visited, cells tested,
     blocks skipped)."""
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
+    st = state_load(mode, state, row, col) if load else state_new(mode)
+    if (t_lo > t0 or t_hi < t0) and t0 <= t1 and not done(mode, st):
+        st = entry_left_out(mode, grid, scr, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz)
     t0 = max(t0, t_lo)
     t1 = min(t1, t_hi)
     ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
-    st = state_load(mode, state, row, col) if load else state_new(mode)
     visited = 0
     tested = 0
     skipped = 0

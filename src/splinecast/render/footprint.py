@@ -24,9 +24,15 @@ fixed-step "ray" sampling with the blocks its segments can take colour from (a v
 block's neighbours, into which a segment from inside it reaches, and pairs of blocks whose
 joint value range is visible; the loop widens the interval to the samples around it). Not
 the sampled isosurface method, whose samples in front of a block take part in finding a
-crossing. MIP's answer may lie in any block the ray crosses: it names all of them at the
-coarsest level, so its footprint is the volume's box, and rays that miss the box (60% of a
-1024x768 orbit view of the comparison's volumes) are not set up one by one.
+crossing.
+
+MIP names the blocks holding a value above the grid's smallest: every value elsewhere is that
+smallest one, which a ray meets first at its entry into the grid. Its rays are therefore still
+traced where the grid's box projects but no named block does, from their entry only
+(:data:`ENTRY_ONLY`, see :func:`fill_box`), and the mode's ``entry_left_out`` takes the value
+at the entry of every ray whose entry the footprint leaves out (MRI, slices at step 4:
+frames 1.9x faster; exact: 1.2x). Rays that miss the box (60% of a 1024x768 orbit view of
+the comparison's volumes) are not set up one by one.
 """
 
 from __future__ import annotations
@@ -40,14 +46,18 @@ from numba import prange
 
 from .._jit import jit
 
-__all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "MAX_PROJECTED_BLOCKS", "MAX_PROJECTED_PAIRS",
-           "block_footprint", "footprint_level"]
+__all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "ENTRY_ONLY", "MAX_PROJECTED_BLOCKS",
+           "MAX_PROJECTED_PAIRS", "block_footprint", "fill_box", "footprint_level"]
 
 #: log2 of the edge in pixels of the footprint's tiles.
 FOOTPRINT_SHIFT = 3
 
 #: The driver's ``footprint`` argument when there is none (every ray is traced whole).
 NO_FOOTPRINT = np.zeros((0, 0, 2))
+
+#: Both ends of the interval of a tile whose rays are traced from their entry only (an interval
+#: that starts behind every ray's end, yet is not empty: the driver sets its rays up).
+ENTRY_ONLY = math.inf
 
 #: Above this many active blocks at a level, the next coarser level is projected instead
 #: (its boxes are larger but fewer; projecting costs about 50 ns per block).
@@ -108,6 +118,14 @@ def block_footprint(basis: np.ndarray, geom: np.ndarray, n_cells: Any, active: n
     ncx, ncy, ncz = (int(n) for n in n_cells)
     return _project(basis, geom, np.ascontiguousarray(active), shift, ncx, ncy, ncz,
                     width, height, numba.get_num_threads())
+
+
+def fill_box(tiles: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """``tiles`` with the tiles that ``box`` (the footprint of the grid's whole box) covers but
+    ``tiles`` leaves empty marked :data:`ENTRY_ONLY` (in place; returned)."""
+    entry_only = (tiles[..., 0] > tiles[..., 1]) & (box[..., 0] <= box[..., 1])
+    tiles[entry_only] = ENTRY_ONLY
+    return tiles
 
 
 @jit(parallel=True)

@@ -38,6 +38,12 @@ the volume's range at a 1.5-voxel step). It used to take its samples inside the 
 method's cell walk, 1.1-6.4x slower (``benchmarks/results/mip_builds_sampled_step2.md``,
 ``mip_builds_sampled_step4.md``).
 
+Both methods start and end rays at the blocks holding a value above the volume's smallest
+(:meth:`Mip.footprint_flags`, :mod:`.footprint`): every other value equals the smallest, which a
+ray meets first where it enters the volume, so that value is taken there and the air around
+an object (78% of the MRI's voxels are 0) is neither walked nor sampled. The answer, its depth
+and its position are the ones of the whole ray (``tests/test_footprint.py``).
+
 Partial results of two segments of a ray combine by taking the larger value (the front one on a
 tie, as the walk keeps the first position of a maximum).
 """
@@ -52,7 +58,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..accel.traversal import walk_begin, walk_step
+from ..accel.traversal import clip_to_box, walk_begin, walk_step
 from ..errors import ParameterError, limits
 from ..models.pieces import value_at, value_gradient_at
 from ..roots.pieces import poly_bounds, poly_max
@@ -157,6 +163,22 @@ def _ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0
             v *= mode.sign
             lower = max(lower, v - 1e-6 * (abs(v) + abs(top)) - 1e-12)
     return st[0], st[1], lower
+
+
+@jit()
+def _entry_left_out(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz):
+    """The footprint keeps ``[t_lo, t_hi]`` of the ray: outside it, the ray crosses only
+    blocks whose values all equal the grid's smallest (``Mip.footprint_flags``). When the ray's
+    entry into the grid lies outside, the value there is the first of the largest values left
+    out, the one the walk or the samples would have kept (they keep the first of equal
+    values)."""
+    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    ta, tb = clip_to_box(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
+    if ta <= tb and (ta < t_lo or ta > t_hi):
+        v = mode.sign * value_at(grid, scratch, ox + ta * dx, oy + ta * dy, oz + ta * dz)
+        if v > st[0]:
+            return v, ta, st[2]
+    return st
 
 
 @jit()
@@ -268,7 +290,8 @@ def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
 _HOOKS = dict(state_new=_state_new, state_load=_state_load, state_store=_state_store,
               mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size,
               wants=_wants, on_skip=unchanged_skip, consume=_consume, done=_done,
-              ray_end=unchanged_end, asks_again=_asks_again, finish=_finish)
+              ray_end=unchanged_end, asks_again=_asks_again, finish=_finish,
+              entry_left_out=_entry_left_out)
 register(MipMode, **_HOOKS)
 register(MipRayMode, sample_step=_sample_step, sample_planes=_sample_planes, segment=_segment,
          **_HOOKS)
@@ -362,12 +385,31 @@ class Mip:
             return (*hierarchy.highs, hierarchy.lows[1])
         return (*(-a for a in hierarchy.lows), -hierarchy.highs[1])
 
-    @staticmethod
-    def footprint_flags(blocks: tuple) -> tuple:
-        """Every block, at the coarsest level only (:mod:`.footprint`): the maximum may lie in
-        any block a ray crosses, so the footprint is the volume's box, a few blocks to
-        project, and the pixels whose rays miss it are written without a ray."""
-        return (None, None, np.ones(blocks[2].shape, np.uint8))
+    #: Rays that cross the grid's box outside the footprint of the blocks named by
+    #: :meth:`footprint_flags` are still traced, from their entry only (:mod:`.footprint`):
+    #: their value is the grid's smallest, not a miss.
+    footprint_fills_box = True
+
+    def footprint_flags(self, blocks: tuple) -> tuple:
+        """The blocks holding a value above the grid's smallest (the largest, for minIP), per
+        level (:mod:`.footprint`).
+
+        Every value in another block equals the grid's smallest, so a ray's answer comes from
+        these blocks unless it crosses none of them; then it is that smallest value, first met
+        at the ray's entry into the grid, where ``_entry_left_out`` takes it. Air around a
+        head (78% of the MRI's voxels are 0) is so never sampled or walked. Without a 16-cell
+        block of that value (smooth fields), every block is named, at the coarsest level only:
+        the volume's box, a few blocks to project, and the pixels whose rays miss it are
+        written without a ray."""
+        highs = blocks[:3]
+        if self.method in SAMPLED_METHODS:
+            lows, top = blocks[3], blocks[4]  # the 4-cell blocks' plain ranges
+            floor = lows.min() if self.params.sign > 0 else -top.max()
+        else:
+            floor = blocks[3].min()  # the 16-cell blocks' minima, times the sign
+        if not np.any(highs[1] <= floor):
+            return (None, None, np.ones(highs[2].shape, np.uint8))
+        return tuple((h > floor).view(np.uint8) for h in highs)
 
     @staticmethod
     def state(height: int, width: int) -> tuple:

@@ -48,6 +48,13 @@ bx, by, bz, ray, st)`` -> ``st``
     Whether ``on_skip`` and ``ray_end`` do anything (optional; default: no). The driver calls
     them only then: a call that passes the ray and state tuples costs more than the cheap cells
     it follows, and LLVM does not inline a function with that many arguments.
+``entry_left_out(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz)`` -> ``st``
+    The footprint (:mod:`.footprint`) keeps ``[t_lo, t_hi]`` of the ray's interval
+    ``[t0, t1]`` in the grid, and ``t0`` lies outside it (optional; default:
+    :func:`unchanged_entry`). Called before the walk or the samples. What the footprint leaves
+    out crosses no block the mode named for it. MIP named the blocks holding anything above
+    the grid's smallest value, so every value left out is that value; when the ray's entry
+    into the grid is left out, it takes the value there, which the ray would have met first.
 ``finish(mode, out, row, col, st, ray)``
     Writes the pixel's outputs (colour, depth, ...). A fresh state (``state_new``: the ray met
     nothing) is finished without reading ``ray``: the driver passes zeros for the pixels it
@@ -103,7 +110,7 @@ __all__ = [
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
     "never", "hooks_of", "sampled_of", "sample_step", "sample_planes", "segment", "asks_again",
-    "answer_shift", "finest_blocks",
+    "answer_shift", "finest_blocks", "entry_left_out", "unchanged_entry",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
@@ -116,7 +123,8 @@ _SAMPLED = ("sample_step", "segment")
 def register(mode_class: type, **hooks: Any) -> None:
     """Register a mode's compiled functions for its parameter tuple class (all of
     :data:`_NAMES`; ``watches_skips`` and ``asks_again`` default to :func:`never`,
-    ``answer_shift`` to :func:`finest_blocks`, ``sample_planes`` to :func:`never`)."""
+    ``answer_shift`` to :func:`finest_blocks`, ``sample_planes`` to :func:`never`,
+    ``entry_left_out`` to :func:`unchanged_entry`)."""
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
@@ -124,7 +132,8 @@ def register(mode_class: type, **hooks: Any) -> None:
         raise TypeError(f"{mode_class.__name__}: a sampled mode registers all of "
                         f"{', '.join(_SAMPLED)}")
     _HOOKS[mode_class] = {"watches_skips": never, "asks_again": never,
-                          "answer_shift": finest_blocks, "sample_planes": never, **hooks}
+                          "answer_shift": finest_blocks, "sample_planes": never,
+                          "entry_left_out": unchanged_entry, **hooks}
 
 
 def sampled_of(mode_class: type) -> bool:
@@ -269,6 +278,18 @@ def _ray_end(mode, grid, scratch, st, ray, t_far):
     return None if f is None else f.py_func
 
 
+def entry_left_out(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz):
+    """Take what the footprint leaves out of a ray, its entry into the grid included, into the
+    state (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(entry_left_out, inline="never")
+def _entry_left_out(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz):
+    f = _impl(mode, "entry_left_out")
+    return None if f is None else f.py_func
+
+
 def finish(mode, out, row, col, st, ray):
     """Write pixel ``(row, col)``'s outputs from its final state (compiled code only)."""
     raise NotImplementedError
@@ -377,6 +398,13 @@ def unchanged_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, nc
 @jit()
 def unchanged_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     """``on_skip`` of a mode that ignores what it leaves out."""
+    return st
+
+
+@jit()
+def unchanged_entry(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz):
+    """``entry_left_out`` of a mode for which what the footprint leaves out is empty space
+    (the isosurfaces, DVR)."""
     return st
 
 

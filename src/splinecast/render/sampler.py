@@ -49,6 +49,7 @@ from ..accel.traversal import axis_exit, clip_to_box
 from ..models.pieces import look_ahead, value_at, value_on_plane
 from .mode_api import (
     done,
+    entry_left_out,
     finish,
     sample_planes,
     sample_step,
@@ -166,7 +167,12 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
     ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
     anchor, dt, axis, plane0, plane_step = _sample_grid(mode, geom, ray)
-    if t_lo > t0 or t_hi < t1:
+    st = state_load(mode, state, row, col) if load else state_new(mode)
+    if (t_lo > t0 or t_hi < t0) and t0 <= t1 and not done(mode, st):
+        st = entry_left_out(mode, grid, scr, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz)
+    if t_lo > t1:
+        t0 = t_lo  # nothing of the ray in the footprint (its interval may be infinite)
+    elif t_lo > t0 or t_hi < t1:
         # The footprint's interval, widened to the samples around it (the loop's own sample
         # positions): the segments are then the whole ray's, and none outside the interval
         # is one the loop would take (the footprint's blocks hold both ends of every such).
@@ -174,7 +180,6 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
             t0 = max(t0, anchor + math.floor((t_lo - anchor) / dt) * dt)
         if t_hi < t1:
             t1 = min(t1, anchor + math.ceil((t_hi - anchor) / dt) * dt)
-    st = state_load(mode, state, row, col) if load else state_new(mode)
     evaluated = 0
     taken = 0
     leaps = 0

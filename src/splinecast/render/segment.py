@@ -33,6 +33,7 @@ from .footprint import (
     MAX_PROJECTED_PAIRS,
     NO_FOOTPRINT,
     block_footprint,
+    fill_box,
     footprint_level,
 )
 
@@ -185,7 +186,9 @@ def screen_footprint(grid: Grid, mode: Any, camera: Any, blocks: tuple) -> np.nd
 
     A mode's ``footprint_flags`` are the hierarchy's levels, finest first, or one more before
     them, its 2-cell blocks (:data:`~splinecast.accel.minmax.PAIR_SHIFT`): the finest level
-    with few enough active blocks is projected."""
+    with few enough active blocks is projected. A mode with ``footprint_fills_box`` has the
+    rays of the tiles that the grid's box covers, and those blocks do not, traced from their
+    entry only (:func:`~.footprint.fill_box`)."""
     flags_of = getattr(mode, "footprint_flags", None)
     flags = flags_of(blocks) if flags_of is not None else None
     if flags is None:
@@ -199,8 +202,17 @@ def screen_footprint(grid: Grid, mode: Any, camera: Any, blocks: tuple) -> np.nd
         else:
             shifts, limits = (PAIR_SHIFT, *shifts), (MAX_PROJECTED_PAIRS, *limits)
     level = footprint_level(flags, limits)
-    return block_footprint(camera.pixel_basis(), grid.geom, grid.n_cells, flags[level],
-                           shifts[level], camera.width, camera.height)
+    basis = camera.pixel_basis()
+    tiles = block_footprint(basis, grid.geom, grid.n_cells, flags[level], shifts[level],
+                            camera.width, camera.height)
+    coarsest = level == len(flags) - 1
+    if getattr(mode, "footprint_fills_box", False) and not (coarsest and flags[level].all()):
+        # Rays crossing the box outside the named blocks still have a value (MIP's floor).
+        whole = np.ones(flags[-1].shape, np.uint8)
+        box = block_footprint(basis, grid.geom, grid.n_cells, whole, shifts[-1],
+                              camera.width, camera.height)
+        fill_box(tiles, box)
+    return tiles
 
 
 def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLANES,
