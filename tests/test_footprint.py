@@ -187,8 +187,9 @@ def test_mip_rays_through_air_start_at_the_blocks_above_it(kind, dtype, floor, m
     """MIP's footprint names the blocks holding a value above the grid's smallest (below its
     largest, minIP): rays start and end there, and rays crossing only air get the air's value
     at their entry. Values, depths and positions are the ones without a footprint, for every
-    view; the footprint does cut the rays' fronts and leaves tiles to their entry only; and
-    the pixels that see only air are there to compare (their value is the floor, not a miss).
+    view (a clip plane through the blob among them); the footprint does cut the rays' fronts
+    and leaves tiles to their entry only; and the pixels that see only air are there to
+    compare (their value is the floor, not a miss).
     The cubic B-spline's values are sums of the voxels' (zeros in the air); the ranges of the
     s31 model's blocks round 4e-11 below the air, so nothing is left out there."""
     sign = 1.0 if kind == "mip" else -1.0
@@ -199,7 +200,12 @@ def test_mip_rays_through_air_start_at_the_blocks_above_it(kind, dtype, floor, m
     options = {"mode": kind, "method": method, "outputs": ("value", "depth", "position")}
     if method != "exact":
         options["step"] = 1.5
-    with_fp = {v: scene.render(c, **options) for v, c in cams.items()}
+    # A clip plane through the blob: rays enter the volume inside it or in the air.
+    centre = np.asarray(vol.origin) + 0.5 * (np.asarray(vol.shape) - 1) * np.asarray(vol.spacing)
+    normal = np.array([1.0, 0.4, -0.3])
+    clip = {"clip": [(*normal, -float(normal @ centre))]}
+    views = {**{v: (c, {}) for v, c in cams.items()}, "clipped": (cams["perspective"], clip)}
+    with_fp = {v: scene.render(c, **options, **extra) for v, (c, extra) in views.items()}
     mode = Mip(kind=kind, method=method, step=1.5)
     blocks = mode.blocks(scene.grid.hierarchy)
     cam = cams["perspective"]
@@ -213,8 +219,8 @@ def test_mip_rays_through_air_start_at_the_blocks_above_it(kind, dtype, floor, m
     assert np.any(tiles[cut, 0] > box[cut, 0] + 1.0), "no ray starts past the air"
     _without_footprint(monkeypatch)
     air = 0
-    for view, cam in cams.items():
-        plain = scene.render(cam, **options)
+    for view, (cam, extra) in views.items():
+        plain = scene.render(cam, **options, **extra)
         air += int(np.sum(plain.value == floor))
         assert np.sum(np.isfinite(plain.value) & (plain.value != floor)) > 20, view
         for name in options["outputs"]:
