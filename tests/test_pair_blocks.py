@@ -14,7 +14,7 @@ import pytest
 from reference import marschner_lobb, smooth_noise, sphere_distance
 
 import splinecast as sc
-from splinecast.accel.minmax import MinMaxHierarchy
+from splinecast.accel.minmax import MinMaxHierarchy, inactive_pair_size
 
 
 def reference_pair_flags(coeffs: np.ndarray, support: int, n_cells: tuple, iso: float
@@ -84,6 +84,42 @@ def test_pair_flags_hold_every_block_that_can_hold_the_isovalue(support):
     # The 8-bit levels flag a few blocks more than the exact ranges would (the level of a
     # value rounds outwards), and no more than a few.
     assert extra <= 0.05 * total, (extra, total)
+
+
+def _packed_in_numpy(pairs: np.ndarray, shape: tuple) -> np.ndarray:
+    """One byte per 4-cell block, bit 4 * (pi % 2) + 2 * (pj % 2) + pk % 2 for pair (pi, pj, pk)."""
+    out = np.zeros(shape, np.uint8)
+    for pi, pj, pk in np.argwhere(pairs != 0):
+        out[pi // 2, pj // 2, pk // 2] |= 1 << (4 * (pi % 2) + 2 * (pj % 2) + pk % 2)
+    return out
+
+
+def test_packed_pair_flags_hold_the_pairs_bit_by_bit():
+    """The walk reads the pair flags packed per 4-cell block: those made with the flags, and
+    those packed later (flags from elsewhere), equal a packing in numpy; and the walk's block
+    question (``inactive_pair_size``) answers 2 exactly for the cells of unflagged pairs in
+    active blocks."""
+    rng = np.random.default_rng(11)
+    for name, coeffs in volumes(rng):
+        n_cells = tuple(s - 1 for s in coeffs.shape)
+        if min(n_cells) < 1:
+            continue
+        h = MinMaxHierarchy(coeffs, n_cells, 1)
+        iso = float(np.median(coeffs))
+        flags = h.classify(iso)
+        want = _packed_in_numpy(flags[3], flags[0].shape)
+        assert np.array_equal(h.packed_pairs(flags[3], flags[0]), want), name
+        other = (rng.random(flags[3].shape) < 0.4).astype(np.uint8)
+        assert np.array_equal(h.packed_pairs(other, flags[0]),
+                              _packed_in_numpy(other, flags[0].shape)), name
+        packed = h.packed_pairs(flags[3], flags[0])
+        for i, j, k in rng.integers(0, n_cells, size=(200, 3)):
+            size = inactive_pair_size(*flags[:3], packed, int(i), int(j), int(k))
+            if size in (0, 2):
+                assert size == (0 if flags[3][i // 2, j // 2, k // 2] else 2), name
+            else:  # a leap: no pair of the cell's 4-cell block is flagged
+                a, b, c = 2 * (i // 4), 2 * (j // 4), 2 * (k // 4)
+                assert not flags[3][a:a + 2, b:b + 2, c:c + 2].any(), name
 
 
 def test_pair_flags_are_kept_for_the_same_isovalue():

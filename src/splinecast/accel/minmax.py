@@ -19,7 +19,7 @@ from numba import prange
 from .._jit import jit
 
 __all__ = ["BLOCK_SHIFTS", "PAIR_SHIFT", "MinMaxHierarchy", "inactive_block_size",
-           "inactive_pair_size", "neighbourhood"]
+           "packed_pair_flags", "inactive_pair_size", "neighbourhood"]
 
 #: log2 of the block edge (in cells) of each level, finest first.
 BLOCK_SHIFTS = (2, 4, 6)
@@ -137,9 +137,13 @@ def _pair_flags(lo: np.ndarray, hi: np.ndarray, pairs: np.ndarray, act0: np.ndar
     floating point, so ``v <= iso`` gives ``level(v) <= level(iso)`` exactly, and the stored
     levels, rounded outwards, bound ``level(v)``: a pair holding the isovalue is never missed.
     The top level also stands for anything above it (rounding can lift ``level(hi)`` above
-    ``PAIR_LEVELS``). Blocks whose range is one value or not finite flag every pair."""
+    ``PAIR_LEVELS``). Blocks whose range is one value or not finite flag every pair.
+
+    Returns the flags, one byte per 2-cell block, and the same packed into one byte per 4-cell
+    block (:func:`packed_pair_flags`)."""
     npx, npy, npz = (n_cells[0] + 1) // 2, (n_cells[1] + 1) // 2, (n_cells[2] + 1) // 2
     out = np.zeros((npx, npy, npz), dtype=np.uint8)
+    packed = np.zeros(act0.shape, dtype=np.uint8)
     for bi in prange(act0.shape[0]):
         for bj in range(act0.shape[1]):
             for bk in range(act0.shape[2]):
@@ -157,6 +161,26 @@ def _pair_flags(lo: np.ndarray, hi: np.ndarray, pairs: np.ndarray, act0: np.ndar
                     q_hi = float(pairs[bi, bj, bk, 2 * p + 1])
                     if every or (q_lo <= level and (q_hi >= level or q_hi == PAIR_LEVELS)):
                         out[pi, pj, pk] = 1
+                        packed[bi, bj, bk] |= np.uint8(1 << p)
+    return out, packed
+
+
+@jit
+def packed_pair_flags(pairs: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """The 2-cell blocks' flags packed into their 4-cell block's byte (bit
+    ``((i >> 1) & 1) << 2 | ((j >> 1) & 1) << 1 | ((k >> 1) & 1)`` of block ``(i, j, k) >> 2``
+    for cell ``(i, j, k)``), ``shape`` being the 4-cell blocks' counts: what
+    :func:`inactive_pair_size` reads. One byte per 4-cell block stays in the L1 cache where one
+    per pair does not: steady isosurface frames 1.01-1.12x faster
+    (``benchmarks/results/iso_builds_packedpairs.md``)."""
+    out = np.zeros((shape[0], shape[1], shape[2]), np.uint8)
+    npx, npy, npz = pairs.shape
+    for pi in range(npx):
+        for pj in range(npy):
+            for pk in range(npz):
+                if pairs[pi, pj, pk] != 0:
+                    bit = ((pi & 1) << 2) | ((pj & 1) << 1) | (pk & 1)
+                    out[pi >> 1, pj >> 1, pk >> 1] |= np.uint8(1 << bit)
     return out
 
 
@@ -187,18 +211,27 @@ def inactive_pair_size(
     k: int
 ) -> int:
     """:func:`inactive_block_size`, then 2 if the cell's 2-cell block is flagged inactive in
-    ``pairs`` (the last array of :meth:`MinMaxHierarchy.classify`; an empty array has no such
-    level)."""
+    ``pairs``, the 2-cell flags packed per 4-cell block (:func:`packed_pair_flags`; an empty
+    array has no such level, and the 4-cell flags ``act0`` are read instead). A 4-cell block
+    with no flagged pair is leapt whole."""
     # Coarse to fine, the 2-cell blocks last: reading the pair first (one read for an active
     # pair instead of four) made steady isosurface frames 2-8% slower on every scene
     # (``benchmarks/results/iso_builds_pairfirst.md``): the coarse levels are small and stay
     # in the L1 cache, and most questions end at one of them.
-    size = inactive_block_size(act0, act1, act2, i, j, k)
-    if size == 0 and pairs.shape[0] > 0:
-        one = np.uint64(PAIR_SHIFT)
-        if pairs[np.uint64(i) >> one, np.uint64(j) >> one, np.uint64(k) >> one] == 0:
-            return 2
-    return size
+    if pairs.shape[0] == 0:
+        return inactive_block_size(act0, act1, act2, i, j, k)
+    ui, uj, uk = np.uint64(i), np.uint64(j), np.uint64(k)
+    if act2[ui >> np.uint64(6), uj >> np.uint64(6), uk >> np.uint64(6)] == 0:
+        return 64
+    if act1[ui >> np.uint64(4), uj >> np.uint64(4), uk >> np.uint64(4)] == 0:
+        return 16
+    bits = pairs[ui >> np.uint64(2), uj >> np.uint64(2), uk >> np.uint64(2)]
+    if bits == 0:
+        return 4
+    one = np.uint64(1)
+    bit = (((ui >> one) & one) << np.uint64(2)) | (((uj >> one) & one) << one) | (
+        (uk >> one) & one)
+    return 0 if (np.uint64(bits) >> bit) & one else 2
 
 
 @jit
@@ -305,8 +338,8 @@ class MinMaxHierarchy:
 
     #: The 2-cell blocks' quantized ranges (:func:`_finest_ranges`; None: no pair level).
     _pair_levels: np.ndarray | None = None
-    #: (isovalue, its pair flags) of the last :meth:`_pair_flags_for` call.
-    _pairs: tuple[float, np.ndarray] | None = None
+    #: (isovalue, its pair flags, packed) of the last :meth:`_pair_flags_for` call.
+    _pairs: tuple[float, np.ndarray, np.ndarray] | None = None
 
     def _pair_flags_for(self, iso: float, act0: np.ndarray) -> np.ndarray:
         """Flags (uint8) of the 2-cell blocks that can hold ``iso`` inside the active 4-cell
@@ -324,10 +357,18 @@ class MinMaxHierarchy:
             return np.zeros((0, 0, 0), np.uint8)
         if self._pairs is not None and self._pairs[0] == iso:
             return self._pairs[1]
-        pairs = _pair_flags(self.lows[0], self.highs[0], self._pair_levels, act0, float(iso),
-                            np.asarray(self.n_cells, np.int64))
-        self._pairs = (float(iso), pairs)
+        pairs, packed = _pair_flags(self.lows[0], self.highs[0], self._pair_levels, act0,
+                                    float(iso), np.asarray(self.n_cells, np.int64))
+        self._pairs = (float(iso), pairs, packed)
         return pairs
+
+    def packed_pairs(self, pairs: np.ndarray, act0: np.ndarray) -> np.ndarray:
+        """``pairs`` (2-cell flags) packed per 4-cell block for :func:`inactive_pair_size`:
+        made with the flags by :meth:`classify`, packed here for other flags (``act0``: the
+        4-cell flags, for their shape)."""
+        if self._pairs is not None and self._pairs[1] is pairs:
+            return self._pairs[2]
+        return packed_pair_flags(pairs, np.asarray(act0.shape, np.int64))
 
     @property
     def nbytes(self) -> int:

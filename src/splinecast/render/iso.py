@@ -23,7 +23,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from ..accel.minmax import PAIR_SHIFT, inactive_pair_size
+from ..accel.minmax import PAIR_SHIFT, inactive_pair_size, packed_pair_flags
 from ..errors import ParameterError, limits
 from ..models.pieces import gradient, value_gradient_at
 from ..roots.pieces import poly_first_root, poly_value
@@ -290,12 +290,20 @@ class Iso:
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Block flags for the isovalue (``flags`` overrides, e.g. a model's own), and, for
         the exact method, the 2-cell blocks' flags when ``flags`` has them (the sampled
-        method leaps the 4-cell blocks only, so its samples stay where they were)."""
+        method leaps the 4-cell blocks only, so its samples stay where they were): packed per
+        4-cell block for the walk (``blocks[3]``), and one byte each for the footprint
+        (``blocks[4]``)."""
         if flags is None:
             flags = hierarchy.classify(self.params.iso)
         no_pairs = np.zeros((0, 0, 0), np.uint8)
         pairs = flags[3] if len(flags) > 3 and self.method == "exact" else no_pairs
-        return (*flags[:3], pairs)
+        if pairs.shape[0] == 0:
+            return (*flags[:3], no_pairs, no_pairs)
+        # The kernel reads the pairs packed per 4-cell block; the footprint projects them.
+        pack = getattr(hierarchy, "packed_pairs", None)
+        packed = (pack(pairs, flags[0]) if pack is not None else
+                  packed_pair_flags(pairs, np.asarray(flags[0].shape, np.int64)))
+        return (*flags[:3], packed, pairs)
 
     def footprint_flags(self, blocks: tuple) -> tuple | None:
         """The block flags whose screen footprint bounds where rays can hit (:mod:`.footprint`):
@@ -304,7 +312,7 @@ class Iso:
         whose samples in front of an active block take part in finding a crossing."""
         if self.method != "exact":
             return None
-        return (blocks[3], *blocks[:3]) if blocks[3].shape[0] else blocks[:3]
+        return (blocks[4], *blocks[:3]) if blocks[4].shape[0] else blocks[:3]
 
     @staticmethod
     def state(height: int, width: int) -> tuple:
