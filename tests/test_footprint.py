@@ -355,14 +355,15 @@ def test_the_exact_isosurface_projects_its_2_cell_blocks_while_they_are_few(pair
     cam = sc.Camera.orbit(vol, azimuth=25, elevation=30, size=(96, 72))
     mode = Iso(iso)
     blocks = mode.blocks(scene.grid.hierarchy)
-    n_pairs, n_blocks = np.count_nonzero(blocks[3]), np.count_nonzero(blocks[0])
+    pair_flags = blocks[4]  # one byte per 2-cell block (blocks[3] packs them for the walk)
+    n_pairs, n_blocks = np.count_nonzero(pair_flags), np.count_nonzero(blocks[0])
     assert 0 < n_blocks < n_pairs <= footprint_module.MAX_PROJECTED_PAIRS
     if not pairs:
         monkeypatch.setattr(footprint_module, "MAX_PROJECTED_PAIRS", n_pairs - 1)
         monkeypatch.setattr(segment, "MAX_PROJECTED_PAIRS", n_pairs - 1)
     fp = segment.screen_footprint(scene.grid, mode, cam, blocks)
     basis, n_cells = cam.pixel_basis(), scene.grid.n_cells
-    of_pairs = block_footprint(basis, scene.grid.geom, n_cells, blocks[3], PAIR_SHIFT,
+    of_pairs = block_footprint(basis, scene.grid.geom, n_cells, pair_flags, PAIR_SHIFT,
                                cam.width, cam.height)
     of_blocks = block_footprint(basis, scene.grid.geom, n_cells, blocks[0], BLOCK_SHIFTS[0],
                                 cam.width, cam.height)
