@@ -188,13 +188,14 @@ def test_exact_sphere_mesh_from_vtk_gives_near_zero_error_and_a_shift_gives_the_
 
 def test_splinecast_mip_rows_meet_the_dense_reference():
     """The exact MIP within 1e-3 of the reference (itself dense sampling), the sampled methods
-    coarser but converging to it; the sampled rows take part in MIP only."""
+    and the exact one with a tolerance coarser but converging to it; those rows take part in
+    MIP only."""
     vol = sc.demo("marschner-lobb", size=32)
     cam = sc.Camera.orbit(vol, size=(64, 48))
     ref = runner.reference_mip(vol, cam)
     exact = M.SplinecastVolume(vol, (64, 48), "mip", 0.5, 0.0).image(cam)
     assert reference.image_error(exact, ref) < 1e-3
-    for key in ("splinecast-sampled", "splinecast-slices"):
+    for key in ("splinecast-sampled", "splinecast-slices", "splinecast-tolerance"):
         errors = [reference.image_error(M.VOLUME_METHODS[key](
             vol, (64, 48), "mip", 0.5, step).image(cam), ref) for step in (4.0, 1.0, 0.125)]
         assert errors[0] > errors[1] > errors[2] and errors[2] < 2e-3, key

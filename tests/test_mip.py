@@ -378,3 +378,128 @@ def test_sampled_projection_is_the_extremum_of_the_trilinear_samples(kind, step)
     assert checked > 400
     # Blocks that cannot beat the running value were leapt.
     assert frame.blocks_skipped.sum() > 0
+
+
+def _shortfall(exact, frame, kind, window):
+    """How far each pixel of ``frame`` lies below ``exact`` (above, for minIP), as a fraction
+    of the window's width."""
+    sign = 1.0 if kind == "mip" else -1.0
+    return sign * (exact.value - frame.value) / (window[1] - window[0])
+
+
+@pytest.mark.parametrize(("model", "kind"), [("trilinear", "mip"), ("trilinear", "minip"),
+                                              ("s31", "mip"), ("bspline3", "minip")])
+@pytest.mark.parametrize("volume", ["smooth", "noise", "plateaus"])
+@pytest.mark.parametrize("tolerance", [1 / 255, 0.05])
+def test_a_tolerance_keeps_every_pixel_within_it_of_the_exact_projection(model, kind, volume,
+                                                                          tolerance):
+    """``tolerance=e`` may leave a pixel at most ``e`` (of the window) below the exact
+    projection, never above it, and misses stay misses; it must really leave cells out and
+    change some pixel (``test_a_tolerance_twice_as_wide_breaks_the_bound`` shows that this
+    check catches a rule that leaves out too much)."""
+    vol = {"smooth": lambda: sc.demo("marschner-lobb", size=40),
+           "noise": lambda: sc.demo("noise", size=24),
+           "plateaus": lambda: _quantized_marschner_lobb(40)}[volume]()
+    scene = sc.Scene(vol, model=model)
+    cam = sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(48, 36))
+    exact = scene.render(cam, mode=kind)
+    fast = scene.render(cam, mode=kind, tolerance=tolerance)
+    window = exact.stats["window"]
+    assert fast.stats["tolerance"] == tolerance and fast.stats["window"] == window
+    hit = np.isfinite(exact.value)
+    np.testing.assert_array_equal(np.isfinite(fast.value), hit)
+    assert hit.sum() > 500
+    short = _shortfall(exact, fast, kind, window)[hit]
+    assert short.min() >= -1e-9  # a value the ray meets: never beyond the exact one
+    assert short.max() <= tolerance * (1 + 1e-9)
+    assert short.max() > 0.0
+    assert fast.cells_tested[hit].sum() < exact.cells_tested[hit].sum()
+
+
+def test_a_tolerance_twice_as_wide_breaks_the_bound():
+    """The bound is used to its edge (pixels fall nearly the whole tolerance short), so a rule
+    that left out cells by twice the tolerance would break it: the check above can fail."""
+    vol = sc.demo("marschner-lobb", size=40)
+    cam = sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(48, 36))
+    tolerance = 0.05
+    exact = sc.Scene(vol).render(cam, mode="mip")
+    window = exact.stats["window"]
+    fast = sc.Scene(vol).render(cam, mode="mip", tolerance=tolerance)
+    hit = np.isfinite(exact.value)
+    assert _shortfall(exact, fast, "mip", window)[hit].max() > 0.8 * tolerance
+    original = mip_module.Mip.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        self.params = self.params._replace(tolerance=2.0 * self.params.tolerance)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(mip_module.Mip, "__init__", init)
+        wide = sc.Scene(vol).render(cam, mode="mip", tolerance=tolerance)
+    assert _shortfall(exact, wide, "mip", window)[hit].max() > tolerance * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("kind", ["mip", "minip"])
+def test_a_tolerant_projection_is_the_fields_value_at_its_depth(setup, kind):
+    """The value reported with a tolerance is the trilinear field's (the independent reference's)
+    at the depth reported: the value of a point the ray meets, not a bound."""
+    vol, scene, cam = setup
+    frame = scene.render(cam, mode=kind, tolerance=0.05)
+    exact = scene.render(cam, mode=kind)
+    origins, dirs = cam.rays()
+    hit = np.isfinite(frame.value)
+    assert hit.sum() > 100
+    rows, cols = np.nonzero(hit)
+    for row, col in zip(rows, cols, strict=True):
+        f = _ray_profile(vol, origins[row, col], dirs[row, col], 0.0, 0.0)
+        assert f(frame.depth[row, col])[0] == pytest.approx(frame.value[row, col], abs=1e-9)
+    assert np.any(frame.value[hit] != exact.value[hit])
+
+
+def test_a_tolerance_holds_brick_by_brick():
+    """Bricks traced into fresh states and merged (the distributed renderer's compositing) keep
+    the bound: each brick's part is within the tolerance of its own exact part."""
+    from splinecast.render.segment import (
+        brick_grid,
+        combine_states,
+        counters,
+        finish_state,
+        new_state,
+        trace_segment,
+    )
+
+    vol = sc.demo("marschner-lobb", size=33)
+    scene = sc.Scene(vol)
+    cam = sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(40, 30))
+    tolerance = 0.05
+    setup_ = mip_module.Mip("mip", value_range=vol.value_range, tolerance=tolerance)
+    state = None
+    for lo in ((0, 0, 0), (16, 0, 0), (0, 16, 0), (16, 16, 0), (0, 0, 16), (16, 0, 16),
+               (0, 16, 16), (16, 16, 16)):
+        hi = tuple(min(a + 16, n) for a, n in zip(lo, scene.grid.n_cells, strict=True))
+        part = new_state(setup_, cam)
+        trace_segment(brick_grid(scene.model, lo, hi), setup_, cam, part,
+                      counters(cam.height, cam.width))
+        state = part if state is None else combine_states(setup_, state, part)
+    value = finish_state(setup_, state, cam)[0]
+    exact = scene.render(cam, mode="mip", window=vol.value_range)
+    hit = np.isfinite(exact.value)
+    short = (exact.value - value)[hit] / (vol.value_range[1] - vol.value_range[0])
+    assert short.min() >= -1e-9 and short.max() <= tolerance * (1 + 1e-9)
+    assert short.max() > 0.1 * tolerance
+
+
+@pytest.mark.parametrize(("options", "needle"), [
+    ({"mode": "mip", "tolerance": -0.1}, "tolerance must be a fraction"),
+    ({"mode": "mip", "tolerance": float("nan")}, "tolerance must be a fraction"),
+    ({"mode": "mip", "tolerance": 2.0}, "tolerance must be a fraction"),
+    ({"mode": "mip", "tolerance": "a"}, "tolerance must be a number"),
+    ({"mode": "mip", "method": "slices", "step": 2.0, "tolerance": 0.01}, "no bound"),
+    ({"mode": "minip", "method": "sampled", "step": 1.0, "tolerance": 0.01}, "no bound"),
+    ({"iso": 0.5, "tolerance": 0.01}, "tolerance is for mode='mip'"),
+    ({"mode": "dvr", "tolerance": 0.01}, "tolerance is for mode='mip'"),
+])
+def test_a_bad_tolerance_is_refused_with_a_clear_message(setup, options, needle):
+    vol, scene, cam = setup
+    with pytest.raises(sc.ParameterError, match=needle):
+        scene.render(cam, **options)

@@ -548,7 +548,9 @@ class SplinecastVolume(VolumeMethod):
 
     MIP is the exact method unless ``method`` names a sampled one: ``"sampled"`` (every
     ``step`` voxels along the ray, the fixed-step sampling VTK's casters do) or ``"slices"``
-    (on every ``step``-th voxel plane across the ray), matched to the tolerance like them.
+    (on every ``step``-th voxel plane across the ray), matched to the tolerance like them; or
+    ``"tolerance"``: the exact method with ``tolerance=step / 255`` (of the window), matched
+    the same way (a larger "step", a larger tolerance, a faster frame).
     """
 
     def __init__(self, volume, size, mode, iso, step, method: str = "exact") -> None:
@@ -557,7 +559,9 @@ class SplinecastVolume(VolumeMethod):
         self.scene = sc.Scene(volume)
         params = inspect.signature(self.scene.render).parameters
         self.kwargs: dict[str, Any] = {"mode": mode}
-        if method != "exact" and mode == "mip":
+        if method == "tolerance" and mode == "mip":
+            self.kwargs.update(tolerance=step / 255.0)
+        elif method != "exact" and mode == "mip":
             self.kwargs.update(method=method, step=step)
         if mode == "dvr":
             from splinecast.transfer import TransferFunction
@@ -695,6 +699,8 @@ VOLUME_METHODS = {
         SplinecastVolume(vol, size, mode, iso, step, method="sampled"),
     "splinecast-slices": lambda vol, size, mode, iso, step:
         SplinecastVolume(vol, size, mode, iso, step, method="slices"),
+    "splinecast-tolerance": lambda vol, size, mode, iso, step:
+        SplinecastVolume(vol, size, mode, iso, step, method="tolerance"),
     "vtk-fixed-point": lambda vol, size, mode, iso, step:
         VtkVolume(vol, size, mode, iso, step, "fixed-point"),
     "vtk-gpu": lambda vol, size, mode, iso, step: VtkVolume(vol, size, mode, iso, step, "gpu"),
@@ -704,6 +710,7 @@ VOLUME_LABELS = {
     "splinecast": "splinecast",
     "splinecast-sampled": "splinecast sampled",
     "splinecast-slices": "splinecast slices",
+    "splinecast-tolerance": "splinecast exact within k/255 of the window (k: the step column)",
     "vtk-fixed-point": "VTK fixed-point CPU ray caster",
     "vtk-gpu": "VTK OpenGL ray caster on llvmpipe",
 }
@@ -711,7 +718,8 @@ VOLUME_LABELS = {
 
 #: Modes each volume method takes part in (every mode when not listed). splinecast's DVR is
 #: sampled already, so its ``splinecast`` row is the sampled one.
-VOLUME_METHOD_MODES = {"splinecast-sampled": ("mip",), "splinecast-slices": ("mip",)}
+VOLUME_METHOD_MODES = {"splinecast-sampled": ("mip",), "splinecast-slices": ("mip",),
+                       "splinecast-tolerance": ("mip",)}
 
 
 def volume_keys(mode: str) -> list[str]:
@@ -721,7 +729,7 @@ def volume_keys(mode: str) -> list[str]:
 
 def volume_requirements(key: str, mode: str) -> str | None:
     """Why a MIP/DVR method cannot run here, or None when it can."""
-    if key in ("splinecast", "splinecast-sampled", "splinecast-slices"):
+    if key in ("splinecast", "splinecast-sampled", "splinecast-slices", "splinecast-tolerance"):
         if mode not in splinecast_modes():
             return (f"splinecast has no mode {mode!r} yet (splinecast.scene.MODES = "
                     f"{splinecast_modes()})")

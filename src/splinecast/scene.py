@@ -230,6 +230,7 @@ class Scene:
         effects: SurfaceEffects | None = None,
         window: Any = None,
         colormap: Any = "gray",
+        tolerance: float = 0.0,
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
         outputs: Any = None,
@@ -275,6 +276,11 @@ class Scene:
         window, colormap : optional
             MIP/minIP display: value window ``(lo, hi)`` (default :func:`~splinecast.auto_window`:
             percentiles of the non-background values) and colormap.
+        tolerance : float
+            MIP/minIP with the exact method: how far below the exact projection a pixel may
+            fall, as a fraction of the window's width (``1 / 255``: one level of an 8-bit
+            image), for faster frames. Every pixel keeps that bound and a value its ray meets;
+            0 (the default) is exact. See :class:`splinecast.render.mip.Mip`.
         tf : TransferFunction, optional
             Transfer function of ``mode="dvr"`` (default
             :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).
@@ -308,7 +314,8 @@ class Scene:
             self.volume, camera, mode, iso, method, step, shading, inside, clip=clip,
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name, outputs=outputs)
+            check_iso=self._check_iso, model=self.model.name, outputs=outputs,
+            tolerance=tolerance)
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:
             classify_ms = 0.0
@@ -363,14 +370,15 @@ def prepare_render(
     shading: Shading | None, inside: str | None, *, clip: Any, crop: Any, colors: Any,
     opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
     tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
-    check_iso: Any, model: str, outputs: Any = None,
+    check_iso: Any, model: str, outputs: Any = None, tolerance: float = 0.0,
 ) -> RenderRequest:
     """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
     type: in memory, multiresolution).
 
     ``volume`` supplies the automatic choices (:mod:`splinecast.render.defaults`), the metadata
     and the value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
-    ``outputs`` names the Frame's buffers (``None``: all).
+    ``outputs`` names the Frame's buffers (``None``: all); ``tolerance`` is MIP's
+    (:class:`~splinecast.render.mip.Mip`).
     """
     if not isinstance(camera, Camera):
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
@@ -382,6 +390,8 @@ def prepare_render(
         raise ParameterError(f"method must be one of {', '.join(METHODS)}{extra}, "
                              f"got {method!r}")
     limits.check_render(volume, camera, mode=mode, method=method, step=step, dvr=dvr)
+    if mode not in ("mip", "minip") and tolerance != 0.0:
+        raise ParameterError(f"tolerance is for mode='mip' and 'minip', not {mode!r}")
     inside = inside or volume.metadata.get("inside", "high")
     if inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
@@ -398,7 +408,7 @@ def prepare_render(
     if mode in ("mip", "minip"):
         window = auto_window(volume) if window is None else window
         setup: Any = Mip(mode, method, step, window, colormap, shading.background,
-                         volume.value_range, outputs=filled)
+                         volume.value_range, outputs=filled, tolerance=tolerance)
         stats["method"] = method
     elif mode == "dvr":
         tf = auto_transfer_function(volume) if tf is None else tf

@@ -327,6 +327,7 @@ class MultiscaleScene:
         effects: SurfaceEffects | None = None,
         window: Any = None,
         colormap: Any = "gray",
+        tolerance: float = 0.0,
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
         outputs: Any = None,
@@ -367,7 +368,8 @@ class MultiscaleScene:
             self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name, outputs=outputs)
+            check_iso=self._check_iso, model=self.model.name, outputs=outputs,
+            tolerance=tolerance)
         # A frame drawn at once (the viewer's interactive passes, the first image) has the
         # cores to itself: no read starts from its start to the end of its trace
         # (BrickCache.drawing). Frames that wait for bricks share them with the loader's

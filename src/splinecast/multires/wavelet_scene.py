@@ -304,6 +304,7 @@ class WaveletScene:
         effects: SurfaceEffects | None = None,
         window: Any = None,
         colormap: Any = "gray",
+        tolerance: float = 0.0,
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
         outputs: Any = None,
@@ -326,7 +327,8 @@ class WaveletScene:
             self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name, outputs=outputs)
+            check_iso=self._check_iso, model=self.model.name, outputs=outputs,
+            tolerance=tolerance)
         eps = self.epsilon(camera, lod)
         setup = request.setup
         isos: Any = None
