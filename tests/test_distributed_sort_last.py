@@ -178,6 +178,22 @@ def test_sort_last_equals_the_in_memory_render_of_the_level(scenes, levels, mode
         assert refined > 0
 
 
+def test_a_mip_tolerance_holds_across_the_shares(scenes, levels):
+    """``tolerance=`` reaches the workers: each pixel of the composited MIP lies within it below
+    the in-memory exact projection of the level, never above it."""
+    tolerance = 0.05
+    largest = 0.0
+    for cam in (_camera(levels[0]), _camera(levels[0], azimuth=215, elevation=-40)):
+        want = sc.Scene(levels[0]).render(cam, **MODE_OPTIONS["mip"])
+        got = scenes["trilinear", 0].render(cam, **MODE_OPTIONS["mip"], tolerance=tolerance)
+        hit = np.isfinite(want.value)
+        np.testing.assert_array_equal(np.isfinite(got.value), hit)
+        short = (want.value - got.value)[hit]  # the window is (0, 1)
+        assert short.min() >= -1e-9 and short.max() <= tolerance * (1 + 1e-9)
+        largest = max(largest, float(short.max()))
+    assert largest > 0.0  # the tolerance was used
+
+
 @pytest.mark.parametrize(("model", "mode"), CASES)
 def test_sort_last_equals_the_single_process_brick_render(scenes, store, levels, model, mode):
     """Level 0 bricks traced front to back in one process: the same image, bit for bit for

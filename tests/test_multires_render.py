@@ -491,3 +491,24 @@ def test_cli_renders_a_pyramid(shapes, tmp_path, capsys):
     assert not (tmp_path / "x.png").exists()
     assert main(["render", "demo:sphere?size=16", "--lod", "2", "-o", str(out)]) == 2
     assert "--lod applies to multiscale" in capsys.readouterr().err
+
+
+def test_a_mip_tolerance_holds_over_the_bricks_of_the_cut(noise):
+    """``tolerance=`` on a multiresolution scene (the cut's bricks traced one after another):
+    every pixel within the tolerance below the in-memory exact projection, never above it."""
+    vol, path = noise
+    reference = sc.Scene(vol)
+    options = _options("mip", vol)
+    tolerance = 0.05
+    width = vol.value_range[1] - vol.value_range[0]
+    largest = 0.0
+    with sc.Scene(sc.read(path), budget="64MiB", lod=1e-6) as scene:
+        for cam in _cameras(vol):
+            exact = reference.render(cam, **options)
+            frame = scene.render(cam, **options, tolerance=tolerance)
+            hit = np.isfinite(exact.value)
+            np.testing.assert_array_equal(np.isfinite(frame.value), hit)
+            short = (exact.value - frame.value)[hit] / width
+            assert short.min() >= -1e-9 and short.max() <= tolerance * (1 + 1e-9)
+            largest = max(largest, float(short.max()))
+    assert largest > 0.0  # the tolerance was used
