@@ -277,8 +277,8 @@ class Scene:
             MIP/minIP display: value window ``(lo, hi)`` (default :func:`~splinecast.auto_window`:
             percentiles of the non-background values) and colormap.
         tolerance : float
-            MIP/minIP with the exact method: how far below the exact projection a pixel may
-            fall, as a fraction of the window's width (``1 / 255``: one level of an 8-bit
+            MIP/minIP with the exact method: how far a pixel may fall short of the exact
+            projection (below it for MIP, above for minIP), as a fraction of the window's width (``1 / 255``: one level of an 8-bit
             image), for faster frames. Every pixel keeps that bound and a value its ray meets;
             0 (the default) is exact. See :class:`splinecast.render.mip.Mip`.
         tf : TransferFunction, optional
