@@ -716,6 +716,11 @@ VOLUME_LABELS = {
 }
 
 
+#: Settings tried when matching a method's quality, coarsest first, where they are not
+#: ``runner.VOLUME_STEPS``: the tolerance row's k (k/255 of the window) has no voxel step's
+#: limits, and its mean error is a fraction of k, so the ladder goes further.
+VOLUME_METHOD_STEPS = {"splinecast-tolerance": (16.0, 12.0, 8.0, 6.0, 4.0, 3.0, 2.0, 1.0, 0.5)}
+
 #: Modes each volume method takes part in (every mode when not listed). splinecast's DVR is
 #: sampled already, so its ``splinecast`` row is the sampled one.
 VOLUME_METHOD_MODES = {"splinecast-sampled": ("mip",), "splinecast-slices": ("mip",),

@@ -146,7 +146,8 @@ def run_volume_scene(spec: SceneSpec, mode: str, sizes: list[tuple[int, int]], k
     trilinear field (premultiplied RGB over black; see ``reference_dvr``). The tolerance is the
     error of splinecast at its default settings, at least 1/255 (the 8-bit output of VTK).
     MIP: splinecast's is exact (no step); each VTK ray caster runs at the coarsest step of
-    ``VOLUME_STEPS`` within the tolerance. DVR: splinecast and each VTK caster run at the
+    ``VOLUME_STEPS`` (or the method's own ladder, ``methods.VOLUME_METHOD_STEPS``) within the
+    tolerance. DVR: splinecast and each VTK caster run at the
     coarsest step within the tolerance. A method that never reaches it runs at the finest step.
     """
     volume = spec.make()
@@ -180,8 +181,9 @@ def run_volume_scene(spec: SceneSpec, mode: str, sizes: list[tuple[int, int]], k
     for key in keys:
         if key in result["skipped"] or key in active:
             continue
-        chosen, errors = VOLUME_STEPS[-1], {}
-        for step in VOLUME_STEPS:
+        ladder = M.VOLUME_METHOD_STEPS.get(key, VOLUME_STEPS)
+        chosen, errors = ladder[-1], {}
+        for step in ladder:
             probe = M.VOLUME_METHODS[key](volume, QUALITY_SIZE, mode, iso, step)
             errors[step] = image_error(probe.image(qcam), reference)
             probe.close()
