@@ -278,9 +278,10 @@ class Scene:
             percentiles of the non-background values) and colormap.
         tolerance : float
             MIP/minIP with the exact method: how far a pixel may fall short of the exact
-            projection (below it for MIP, above for minIP), as a fraction of the window's width (``1 / 255``: one level of an 8-bit
-            image), for faster frames. Every pixel keeps that bound and a value its ray meets;
-            0 (the default) is exact. See :class:`splinecast.render.mip.Mip`.
+            projection (below it for MIP, above for minIP), as a fraction of the window's
+            width (``1 / 255``: one level of an 8-bit image), for faster frames. Every pixel
+            keeps that bound and a value its ray meets; 0 (the default) is exact. See
+            :class:`splinecast.render.mip.Mip`.
         tf : TransferFunction, optional
             Transfer function of ``mode="dvr"`` (default
             :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).

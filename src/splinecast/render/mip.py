@@ -380,8 +380,9 @@ class Mip:
     tolerance : float
         Exact method only: how far a pixel's value may fall short of the exact projection
         (below it for MIP, above it for minIP), as a fraction of the window's width
-        (``1 / 255``: one level of an 8-bit image). 0, the default, is the exact projection. The value is still one the ray meets, at the depth
-        reported, and the bound holds for every pixel.
+        (``1 / 255``: one level of an 8-bit image). 0, the default, is the exact projection.
+        The value is still one the ray meets, at the depth reported, and the bound holds for
+        every pixel.
     window : (lo, hi), optional
         Values mapped to the ends of the colormap (default: the data range).
     colormap : str or control points
