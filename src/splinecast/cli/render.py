@@ -130,7 +130,7 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="colormap of --mode mip/minip (default gray)")
     render.add_argument("--window", help="LO,HI value window of --mode mip/minip")
     render.add_argument("--tolerance", type=finite, default=0.0,
-                        help="--mode mip/minip, exact method: how far below the exact "
+                        help="--mode mip/minip, exact method: how far short of the exact "
                              "projection a pixel may fall, as a fraction of the window "
                              "(e.g. 0.004 for one 8-bit level; default 0, exact), for faster "
                              "frames")
