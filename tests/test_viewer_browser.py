@@ -110,7 +110,8 @@ def expected(vol, state: dict, size: tuple[int, int]) -> np.ndarray:
         if isinstance(state["iso"], list):
             options["opacity"] = state["opacity"]
     elif mode in ("mip", "minip"):
-        options.update(window=state["window"], colormap=state["colormap"])
+        options.update(window=state["window"], colormap=state["colormap"],
+                       tolerance=state["tolerance"])
     else:
         dvr, light = state["dvr"], state["lighting"]
         options.update(tf=sc.TransferFunction.from_dict(state["tf"]),
@@ -278,6 +279,30 @@ def test_switching_the_mode(page, vol, mode):
     assert page.is_visible("#section-mip") == (mode == "mip")
     assert page.is_visible("#section-dvr") == (mode == "dvr")
     assert_page_shows(page, vol)
+
+
+def test_the_mip_tolerance_slider_renders_within_it(page, vol):
+    """The slider sets the tolerance in levels of 255 on release; the settled frame is
+    Scene.render with it (and differs from the exact one)."""
+    if page.evaluate("window.splinecastViewer.state.mode") != "mip":
+        after_id = last_id(page)
+        page.select_option("#mode", "mip")
+        wait_final(page, after_id)
+    exact = assert_page_shows(page, vol)
+    after_id = last_id(page)
+    page.eval_on_selector("#mip-tolerance", "(e) => { e.value = '16';"
+                          " e.dispatchEvent(new Event('input'));"
+                          " e.dispatchEvent(new Event('change')); }")
+    wait_final(page, after_id)
+    assert page.evaluate("window.splinecastViewer.state.tolerance") == 16 / 255
+    assert "16/255" in page.inner_text("#tolerance-label")
+    assert not np.array_equal(assert_page_shows(page, vol), exact)
+    after_id = last_id(page)
+    page.eval_on_selector("#mip-tolerance", "(e) => { e.value = '0';"
+                          " e.dispatchEvent(new Event('change')); }")
+    wait_final(page, after_id)
+    assert page.inner_text("#tolerance-label") == "exact projection"
+    np.testing.assert_array_equal(assert_page_shows(page, vol), exact)
 
 
 def test_transfer_function_editor_adds_a_point(page, vol):

@@ -489,6 +489,16 @@ def test_mip_previews_sample_on_planes_and_full_frames_are_exact(vol):
         assert not np.array_equal(images["interactive"], images["full"])
         assert renderer.estimate_ms(request, step="interactive") is not None
         assert renderer.estimate_ms(request, step="full") is not None
+    # With a tolerance, full frames are the exact projection within it; previews still
+    # sample (without the tolerance, which the samples could not honour).
+    request = parse_state({"mode": "mip", "size": [256, 160], "tolerance": 6 / 255}, vol,
+                          defaults)
+    for step in ("interactive", "full", "screenshot"):
+        preview = step == "interactive"
+        extra = {"method": "slices", "step": 2.0, "tolerance": 0.0} if preview else {}
+        expected = sc.Scene(vol).render(request.camera, **{**request.options, **extra})
+        np.testing.assert_array_equal(renderer.render(request, step=step).rgba,
+                                      expected.to_uint8(), err_msg=step)
     # An isosurface's previews are the request's own method.
     request = parse_state({"iso": 0.4, "size": [40, 30]}, vol, defaults)
     assert renderer.render(request, step="interactive").stats["method"] == "exact"

@@ -117,6 +117,10 @@ def test_resized_camera_keeps_the_view(vol):
     ({"iso": [0.2, 0.4], "opacity": [1]}, "opacity must hold 2 numbers"),
     ({"mode": "mip", "window": [1]}, "window must hold 2 numbers"),
     ({"mode": "mip", "colormap": "jet"}, "colormap must be one of gray"),
+    ({"mode": "mip", "tolerance": "1/255"}, "tolerance must be a number"),
+    ({"mode": "minip", "tolerance": True}, "tolerance must be a number"),
+    ({"mode": "mip", "tolerance": 1.5}, "tolerance must be a fraction of the window in [0, 1]"),
+    ({"mode": "mip", "tolerance": -0.01}, "tolerance must be a fraction of the window"),
     ({"mode": "dvr", "tf": {"domain": [0, 1]}}, "tf needs 'domain' and 'opacity'"),
     ({"mode": "dvr", "tf": {"domain": [0, 1], "opacity": [[0.5, 2]]}}, "opacity values"),
     ({"mode": "dvr", "tf": {"domain": [1, 0], "opacity": [[0.5, 1]]}}, "lo < hi"),
@@ -153,6 +157,26 @@ def test_mode_options_are_what_scene_render_takes(vol, defaults):
     assert multi["iso"] == [0.2, 0.6] and multi["opacity"] == [0.3, 1.0]
     # Omitted fields are the defaults: the complete state is the same either way.
     assert parse({}, vol, defaults).state == parse({"mode": "iso"}, vol, defaults).state == defaults
+
+
+def test_mip_tolerance_is_passed_to_scene_render_and_left_out_of_other_modes(vol, defaults):
+    """Untouched, MIP is the exact projection (tolerance 0, as Scene.render without
+    tolerance=); a client's tolerance reaches Scene.render, whose frame it changes; modes
+    without one never see it (a client keeps the field when it switches modes)."""
+    assert defaults["tolerance"] == 0.0
+    assert parse({"mode": "mip"}, vol, defaults).options["tolerance"] == 0.0
+    state = {"mode": "mip", "tolerance": 8 / 255, "size": [48, 36]}
+    request = parse(state, vol, defaults)
+    assert request.options["tolerance"] == 8 / 255
+    scene = sc.Scene(vol)
+    within = scene.render(request.camera, **request.options)
+    exact = scene.render(request.camera, **parse({**state, "tolerance": 0}, vol,
+                                                   defaults).options)
+    lo, hi = within.stats["window"]
+    shortfall = (exact.value - within.value)[np.isfinite(exact.value)] / (hi - lo)
+    assert 0.0 < shortfall.max() <= 8 / 255 + 1e-12 and shortfall.min() >= -1e-12
+    for mode in ("iso", "dvr"):
+        assert "tolerance" not in parse({**state, "mode": mode}, vol, defaults).options
 
 
 def test_default_dvr_state_is_the_library_default_and_fields_change_one_thing(vol, defaults):

@@ -20,6 +20,7 @@ The fields (see ``docs/viewer-protocol.md`` for the full table)::
     iso                            a number, or a list of numbers (several translucent surfaces)
     opacity                        one opacity per isovalue of a list (optional)
     window [lo, hi] | null, colormap          MIP / minIP display
+    tolerance                      MIP / minIP: largest shortfall, a fraction of the window
     tf {domain, opacity, colormap}            DVR transfer function (TransferFunction.to_dict)
     dvr {step, shade, preintegration, termination, sampling}
     lighting {ambient, diffuse, specular, shininess}
@@ -41,6 +42,7 @@ from ..models import MODELS
 from ..render.clipping import make_planes
 from ..render.defaults import auto_iso, auto_transfer_function, auto_window
 from ..render.dvr import DEFAULT_SETTINGS, DVRSettings
+from ..render.mip import check_tolerance
 from ..render.shading import Shading
 from ..scene import MODES, check_iso
 from ..transfer import COLORMAPS, TransferFunction
@@ -66,8 +68,8 @@ MAX_TF_POINTS = 256
 _ZOOM_RANGE = (1e-3, 1e3)
 _PAN_LIMIT = 100.0
 
-_TOP_FIELDS = ("model", "mode", "camera", "size", "iso", "opacity", "window", "colormap", "tf",
-               "dvr", "lighting", "clip", "crop")
+_TOP_FIELDS = ("model", "mode", "camera", "size", "iso", "opacity", "window", "colormap",
+               "tolerance", "tf", "dvr", "lighting", "clip", "crop")
 _CAMERA_FIELDS = ("azimuth", "elevation", "zoom", "pan", "fov", "ortho")
 _LIGHTING_FIELDS = ("ambient", "diffuse", "specular", "shininess")
 _DVR_FIELDS = ("step", "shade", "preintegration", "termination", "sampling")
@@ -145,6 +147,8 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "opacity": None,
         "window": [float(v) for v in auto_window(volume)],
         "colormap": "gray",
+        # The exact projection, as Scene.render gives it without tolerance=.
+        "tolerance": 0.0,
         "tf": _default_tf(volume),
         # What Scene.render(mode="dvr") uses without dvr= (DEFAULT_SETTINGS): segments per ray
         # piece at most a voxel long, rays stopped once what they can still add is below 2^-10
@@ -352,6 +356,7 @@ def _mode_options(state: dict[str, Any], volume: Any) -> dict[str, Any]:
             window = _numbers(window, "window", 2)
         options["window"] = window
         options["colormap"] = _check_choice(state["colormap"], COLORMAPS, "colormap")
+        options["tolerance"] = check_tolerance(_number(state["tolerance"], "tolerance"), "exact")
     elif mode == "dvr":
         options["tf"] = _transfer_function(state["tf"])
         options["dvr"] = _dvr_settings(state["dvr"], lighting)

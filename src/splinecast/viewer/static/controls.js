@@ -199,6 +199,21 @@
         this._drawWindow();
         this.onChange(false);
       });
+      // The tolerance in levels of an 8-bit image (k / 255 of the window): the slider's frame
+      // is the settled one, so only its release asks for a frame (previews leave it out).
+      const tolerance = $("mip-tolerance");
+      tolerance.addEventListener("input", () => this._drawTolerance(Number(tolerance.value)));
+      tolerance.addEventListener("change", () => {
+        this.state.tolerance = Number(tolerance.value) / 255;
+        this._drawTolerance(Number(tolerance.value));
+        this.onChange(false);
+      });
+    }
+
+    _drawTolerance(levels) {
+      $("tolerance-label").textContent = levels === 0
+        ? "exact projection"
+        : `each pixel within ${levels}/255 of the window below the exact one`;
     }
 
     _drawWindow() {
@@ -334,6 +349,9 @@
       $("window-high").value = this.toSlider(w[1]);
       $("mip-colormap").value = s.colormap;
       this._drawWindow();
+      const levels = Math.round((s.tolerance || 0) * 255);
+      $("mip-tolerance").value = levels;
+      this._drawTolerance(levels);
       $("tf-colormap").value = s.tf.colormap || "viridis";
       $("dvr-step").value = s.dvr.step;
       $("dvr-shade").checked = s.dvr.shade;
