@@ -213,7 +213,7 @@
     _drawTolerance(levels) {
       $("tolerance-label").textContent = levels === 0
         ? "exact projection"
-        : `each pixel within ${levels}/255 of the window below the exact one`;
+        : `each pixel at most ${levels}/255 of the window from the exact projection`;
     }
 
     _drawWindow() {
