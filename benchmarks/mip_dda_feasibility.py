@@ -55,6 +55,15 @@ def corners(v, i, j, k):
 
 
 @njit(inline="always")
+def cell_top(v, i, j, k):
+    """The largest of the eight values of cell (i, j, k)."""
+    return max(max(max(corner(v, i, j, k), corner(v, i, j, k + 1)),
+                   max(corner(v, i, j + 1, k), corner(v, i, j + 1, k + 1))),
+               max(max(corner(v, i + 1, j, k), corner(v, i + 1, j, k + 1)),
+                   max(corner(v, i + 1, j + 1, k), corner(v, i + 1, j + 1, k + 1))))
+
+
+@njit(inline="always")
 def tri(v, x, y, z, nx, ny, nz):
     i = min(max(int(math.floor(x)), 0), nx - 1)
     j = min(max(int(math.floor(y)), 0), ny - 1)
@@ -143,7 +152,16 @@ def cell_at(p, d, n):
 
 
 @njit(parallel=True, fastmath=False)
-def dda_mip(v, h0, h1, h2, O, D, out, visits):
+def dda_mip(v, h0, h1, h2, O, D, out, visits, cellmax, loads, sink):
+    """Exact trilinear MIP of rays ``O + t D`` (index space) into ``out``; cells visited per
+    ray into ``visits``.
+
+    ``loads`` = -1 is the plain walk (``cellmax`` and ``sink`` are not read). ``loads`` >= 0 is
+    the memory experiment of ``mip_memory_limits.py``: each visited cell's range test reads
+    ``cellmax`` (the cell's largest corner) instead of the eight corners, so the walk is the
+    same whatever the corners cost, and the eight corners are read anyway into ``sink`` (0: not
+    at all; 1: the cell's own, from ``v``; 2: the same instructions at indices masked to the
+    grid's first 16^3 cells, which stay in the L1 cache)."""
     h, w = out.shape
     nx, ny, nz = v.shape[0] - 1, v.shape[1] - 1, v.shape[2] - 1  # cells
     for r in prange(h):
@@ -179,6 +197,7 @@ def dda_mip(v, h0, h1, h2, O, D, out, visits):
             ob = -1  # open 4-block key
             where = math.inf
             nv = 0
+            spent = 0.0
             while True:
                 key = ((i >> 2) * 4096 + (j >> 2)) * 4096 + (k >> 2)
                 if key != ob:
@@ -228,10 +247,14 @@ def dda_mip(v, h0, h1, h2, O, D, out, visits):
                 # the cell [t, t_out]
                 t_out = min(tmx, tmy, tmz, t1)
                 nv += 1
-                cmax = max(max(max(corner(v, i, j, k), corner(v, i, j, k + 1)),
-                               max(corner(v, i, j + 1, k), corner(v, i, j + 1, k + 1))),
-                           max(max(corner(v, i + 1, j, k), corner(v, i + 1, j, k + 1)),
-                               max(corner(v, i + 1, j + 1, k), corner(v, i + 1, j + 1, k + 1))))
+                if loads < 0:
+                    cmax = cell_top(v, i, j, k)
+                else:
+                    cmax = float(cellmax[i, j, k])
+                    if loads == 1:
+                        spent += cell_top(v, i, j, k)
+                    elif loads == 2:
+                        spent += cell_top(v, i & 15, j & 15, k & 15)
                 if cmax > best and cmax >= lower and t_out > t:
                     ax = ox + t * dx - i
                     ay = oy + t * dy - j
@@ -263,6 +286,8 @@ def dda_mip(v, h0, h1, h2, O, D, out, visits):
                         break
             out[r, c] = best
             visits[r, c] = nv
+            if loads > 0:
+                sink[r, c] = spent
             if where < math.inf:
                 t_prev = where
 
@@ -290,8 +315,9 @@ def main() -> None:
         d_index = np.ascontiguousarray(dirs / spacing)
         out = np.empty(size[::-1])
         visits = np.zeros(size[::-1], np.int64)
+        unused = np.zeros((1, 1, 1), data.dtype)
         dda_ms = _median_ms(partial(dda_mip, data, h.highs[0], h.highs[1], h.highs[2], o_index,
-                                    d_index, out, visits))
+                                    d_index, out, visits, unused, -1, out))
         render_ms = _median_ms(partial(scene.render, cam, mode="mip", outputs=("value",)))
         ref = scene.render(cam, mode="mip", outputs=("value",)).value
         both = np.isfinite(ref) & np.isfinite(out)
