@@ -1,13 +1,16 @@
-"""Machine description saved with every benchmark result, and the shared timing helper."""
+"""Machine description saved with every benchmark result, the shared timing helper, and the
+writer of a result's JSON and markdown table."""
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 
@@ -58,3 +61,34 @@ def median_ms(fn: Callable[[], object], repeats: int) -> float:
         fn()
         times.append((time.perf_counter() - start) * 1e3)
     return statistics.median(times)
+
+
+def write_results(path: Path, title: str, description: str, header: Sequence[str],
+                  rows: list[dict[str, Any]], cells: Callable[[dict[str, Any]], Sequence[str]],
+                  machine: dict[str, Any] | None = None) -> None:
+    """Write ``path.json`` (the machine and the rows) and ``path.md``: a title, the machine,
+    the description and a table, one line per row.
+
+    Parameters
+    ----------
+    path : Path
+        The results' path without a suffix, e.g. ``results/mip_exact_limits``.
+    title, description : str
+        The markdown's heading and the paragraph under it (how the numbers were taken, the
+        command); the machine goes first in that paragraph.
+    header : sequence of str
+        The table's column titles.
+    rows : list of dict
+        One result per line, saved as they are in the JSON.
+    cells : callable
+        The formatted cells of one row, as many as ``header`` has titles.
+    machine : dict, optional
+        The machine description (default: :func:`describe` now).
+    """
+    machine = describe() if machine is None else machine
+    path.with_suffix(".json").write_text(json.dumps({"machine": machine, "rows": rows},
+                                                    indent=1))
+    lines = [f"# {title}", "", f"Machine: {machine}. {description}", "",
+             "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(cells(row)) + " |" for row in rows]
+    path.with_suffix(".md").write_text("\n".join(lines) + "\n")

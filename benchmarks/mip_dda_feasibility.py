@@ -23,7 +23,6 @@ exact MIP from VTK's casters.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from functools import partial
@@ -35,7 +34,7 @@ from numba import njit, prange
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
-from _machine import describe, median_ms  # noqa: E402
+from _machine import median_ms, write_results  # noqa: E402
 
 import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
@@ -329,24 +328,19 @@ def main() -> None:
                "cells_per_traced_ray": float(visits[both].mean())}
         rows.append(row)
         print(row, flush=True)
-    machine = describe()
-    out_dir = HERE / "results"
-    (out_dir / "mip_dda_feasibility.json").write_text(
-        json.dumps({"machine": machine, "rows": rows}, indent=1))
-    lines = ["# Exact MIP: a lean stand-alone DDA walk against the renderer", "",
-             f"Machine: {machine}. Command: `python benchmarks/mip_dda_feasibility.py`. "
-             "1024x768, the comparison's orbit camera at azimuth 40, numba's default threads, "
-             "median of 9 frames after a warm-up; the renderer fills `value` only.", "",
-             "| scene | lean DDA ms | renderer ms | DDA / renderer | DDA's largest shortfall / "
-             "excess (of the data range) | cells visited per traced ray (DDA) |",
-             "|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['scene']} | {r['dda_ms']:.1f} | {r['renderer_ms']:.1f} | "
-                     f"{r['dda_ms'] / r['renderer_ms']:.2f} | "
-                     f"{r['largest_shortfall']:.1e} / {r['largest_excess']:.1e} | "
-                     f"{r['cells_per_traced_ray']:.2f} |")
-    (out_dir / "mip_dda_feasibility.md").write_text("\n".join(lines) + "\n")
-
+    write_results(
+        HERE / "results" / "mip_dda_feasibility",
+        "Exact MIP: a lean stand-alone DDA walk against the renderer",
+        "Command: `python benchmarks/mip_dda_feasibility.py`. 1024x768, the comparison's orbit "
+        "camera at azimuth 40, numba's default threads, median of 9 frames after a warm-up; the "
+        "renderer fills `value` only.",
+        ["scene", "lean DDA ms", "renderer ms", "DDA / renderer",
+         "DDA's largest shortfall / excess (of the data range)",
+         "cells visited per traced ray (DDA)"],
+        rows, lambda r: [r["scene"], f"{r['dda_ms']:.1f}", f"{r['renderer_ms']:.1f}",
+                         f"{r['dda_ms'] / r['renderer_ms']:.2f}",
+                         f"{r['largest_shortfall']:.1e} / {r['largest_excess']:.1e}",
+                         f"{r['cells_per_traced_ray']:.2f}"])
 
 if __name__ == "__main__":
     main()

@@ -22,7 +22,6 @@ medians of ``ROUNDS`` rounds after a warm-up.
 
 from __future__ import annotations
 
-import json
 import statistics
 import sys
 import time
@@ -34,7 +33,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
+from _machine import write_results  # noqa: E402
 
 import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
@@ -131,36 +130,31 @@ def measure(spec) -> dict:
 
 def main() -> None:
     rows = [measure(spec) for spec in (ml(128), ml(256), mri(), noise(256)) if spec is not None]
-    machine = describe()
-    out = HERE / "results"
-    (out / "mip_exact_limits.json").write_text(json.dumps({"machine": machine, "rows": rows},
-                                                          indent=1))
-    lines = [
-        "# Exact MIP: the most a better visiting order could gain, and thread scaling", "",
-        f"Machine: {machine}. Command: `python benchmarks/mip_exact_limits.py`. 1024x768, "
-        f"four orbit views (azimuth 40-70, elevation 20), medians of {ROUNDS} rounds after a "
-        "warm-up. *Ordinary* and *perfect bound* run the exact walk through "
-        "`trace_segment` (no screen footprint): from nothing, and with each ray's running "
-        "maximum started just below its own answer (the best start any visiting order or lower "
-        "bound could give). Cells and leaps are means over the rays that visited a cell. "
-        "*Frame* is `scene.render(mode=\"mip\")` as a user calls it (footprint included), on "
-        "all threads and on one.", "",
-        "| scene | frame ms | one thread ms | thread scaling | ordinary ms | perfect bound "
-        "ms | most a better order gains | cells visited / tested / leaps per ray, ordinary "
-        "-> perfect | answers identical | slices step 4 ms |",
-        "|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
+    def cells(r: dict) -> list[str]:
         a, b = r["segment"], r["perfect_bound"]
-        lines.append(
-            f"| {r['scene']} | {r['exact_ms']:.1f} | {r['exact_one_thread_ms']:.1f} | "
-            f"{r['exact_one_thread_ms'] / r['exact_ms']:.2f}x on {r['threads']} | "
-            f"{a['ms']:.1f} | {b['ms']:.1f} | {a['ms'] / b['ms']:.2f}x | "
-            f"{a['visited_per_ray']:.1f} / {a['tested_per_ray']:.1f} / {a['leapt_per_ray']:.1f}"
-            f" -> {b['visited_per_ray']:.1f} / {b['tested_per_ray']:.1f} / "
-            f"{b['leapt_per_ray']:.1f} | {'yes' if a['identical'] and b['identical'] else 'NO'}"
-            f" | {r['slices4_ms']:.1f} |")
-    (out / "mip_exact_limits.md").write_text("\n".join(lines) + "\n")
+        return [r["scene"], f"{r['exact_ms']:.1f}", f"{r['exact_one_thread_ms']:.1f}",
+                f"{r['exact_one_thread_ms'] / r['exact_ms']:.2f}x on {r['threads']}",
+                f"{a['ms']:.1f}", f"{b['ms']:.1f}", f"{a['ms'] / b['ms']:.2f}x",
+                f"{a['visited_per_ray']:.1f} / {a['tested_per_ray']:.1f} / "
+                f"{a['leapt_per_ray']:.1f} -> {b['visited_per_ray']:.1f} / "
+                f"{b['tested_per_ray']:.1f} / {b['leapt_per_ray']:.1f}",
+                "yes" if a["identical"] and b["identical"] else "NO", f"{r['slices4_ms']:.1f}"]
 
+    write_results(
+        HERE / "results" / "mip_exact_limits",
+        "Exact MIP: the most a better visiting order could gain, and thread scaling",
+        "Command: `python benchmarks/mip_exact_limits.py`. 1024x768, four orbit views (azimuth "
+        f"40-70, elevation 20), medians of {ROUNDS} rounds after a warm-up. *Ordinary* and "
+        "*perfect bound* run the exact walk through `trace_segment` (no screen footprint): from "
+        "nothing, and with each ray's running maximum started just below its own answer (the "
+        "best start any visiting order or lower bound could give). Cells and leaps are means "
+        "over the rays that visited a cell. *Frame* is `scene.render(mode=\"mip\")` as a user "
+        "calls it (footprint included), on all threads and on one.",
+        ["scene", "frame ms", "one thread ms", "thread scaling", "ordinary ms",
+         "perfect bound ms", "most a better order gains",
+         "cells visited / tested / leaps per ray, ordinary -> perfect", "answers identical",
+         "slices step 4 ms"],
+        rows, cells)
 
 if __name__ == "__main__":
     main()

@@ -22,7 +22,6 @@ divides by those. The plain walk (the eight corners as its range test) is timed 
 
 from __future__ import annotations
 
-import json
 import statistics
 import sys
 import time
@@ -33,7 +32,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
+from _machine import write_results  # noqa: E402
 from mip_dda_feasibility import dda_mip  # noqa: E402
 
 import splinecast as sc  # noqa: E402
@@ -120,30 +119,26 @@ def main() -> None:
         row = measure(spec)
         rows.append(row)
         print(row, flush=True)
-    machine = describe()
-    out_dir = HERE / "results"
-    (out_dir / "mip_memory_limits.json").write_text(
-        json.dumps({"machine": machine, "rows": rows}, indent=1))
     labels = [label for label, _ in VARIANTS]
-    lines = ["# Exact MIP: what the walk's corner reads cost (cache misses by elimination)", "",
-             f"Machine: {machine}. Command: `python benchmarks/mip_memory_limits.py`. "
-             f"{SIZE[0]}x{SIZE[1]}, the comparison's orbit camera at azimuth 40, "
-             f"numba's default threads, median of {ROUNDS} rounds after a warm-up, the "
-             "variants interleaved in each round. All variants return the same values and "
-             "visit the same cells (checked).", "",
-             "| scene | volume | " + " ms | ".join(labels) + " ms | misses: ms per frame "
-             f"(ns, cycles at {GHZ} GHz per untested visited cell) | hits: ms per frame (ns "
-             "per cell) | cells visited / tested per traced ray |",
-             "|---|---|" + "---|" * len(labels) + "---|---|---|"]
-    for r in rows:
-        cells = " | ".join(f"{r['ms'][label]:.1f}" for label in labels)
-        lines.append(
-            f"| {r['scene']} | {r['volume_mb']:.0f} MB, {r['bytes_per_voxel']} B/voxel | "
-            f"{cells} | {r['miss_ms']:.1f} ({r['miss_ns']:.1f} ns, "
-            f"{r['miss_ns'] * GHZ:.0f}) | {r['hit_ms']:.1f} ({r['hit_ns']:.1f} ns) | "
-            f"{r['visited_per_ray']:.1f} / {r['tested_per_ray']:.1f} |")
-    (out_dir / "mip_memory_limits.md").write_text("\n".join(lines) + "\n")
 
+    def cells(r: dict) -> list[str]:
+        return [r["scene"], f"{r['volume_mb']:.0f} MB, {r['bytes_per_voxel']} B/voxel",
+                *(f"{r['ms'][label]:.1f}" for label in labels),
+                f"{r['miss_ms']:.1f} ({r['miss_ns']:.1f} ns, {r['miss_ns'] * GHZ:.0f})",
+                f"{r['hit_ms']:.1f} ({r['hit_ns']:.1f} ns)",
+                f"{r['visited_per_ray']:.1f} / {r['tested_per_ray']:.1f}"]
+
+    write_results(
+        HERE / "results" / "mip_memory_limits",
+        "Exact MIP: what the walk's corner reads cost (cache misses by elimination)",
+        f"Command: `python benchmarks/mip_memory_limits.py`. {SIZE[0]}x{SIZE[1]}, the "
+        f"comparison's orbit camera at azimuth 40, numba's default threads, median of {ROUNDS} "
+        "rounds after a warm-up, the variants interleaved in each round. All variants return "
+        "the same values and visit the same cells (checked).",
+        ["scene", "volume", *(f"{label} ms" for label in labels),
+         f"misses: ms per frame (ns, cycles at {GHZ} GHz per untested visited cell)",
+         "hits: ms per frame (ns per cell)", "cells visited / tested per traced ray"],
+        rows, cells)
 
 if __name__ == "__main__":
     main()

@@ -24,7 +24,6 @@ kernel serves bricks, clipping, every model and every camera, so the renderer ke
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 import sys
@@ -38,7 +37,7 @@ from numba import njit, prange
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
+from _machine import write_results  # noqa: E402
 
 import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
@@ -345,29 +344,23 @@ def measure(spec) -> dict:
 
 def main() -> None:
     rows = [measure(spec) for spec in (ml(128), ml(256), mri(), noise(256)) if spec is not None]
-    machine = describe()
-    out = HERE / "results"
-    (out / "mip_object_order_feasibility.json").write_text(
-        json.dumps({"machine": machine, "rows": rows}, indent=1))
-    lines = [
-        "# Exact MIP: an object-order projection against the renderer's ray walk", "",
-        f"Machine: {machine}. Command: `python benchmarks/mip_object_order_feasibility.py`. "
-        f"{SIZE[0]}x{SIZE[1]}, four orbit views (azimuth 40-70, elevation 20), medians of "
-        f"{ROUNDS} rounds after a warm-up, run side by side in the same rounds. *Object order*: "
-        "the stand-alone trilinear kernel of the script (ray set-up included, the sort of the "
-        "blocks by maximum, done once per volume, not); *walk*: `scene.render(mode=\"mip\")`, "
-        "outputs value only. *Difference*: the largest between the two answers, of the data "
-        "range. *Cubics per ray*: (pixel, cell) pairs whose cubic the object order formed, per "
-        "ray that hits (the walk tests 9.3-10.9 cells per ray, `mip_exact_limits.md`).", "",
-        "| scene | walk ms | object order ms | speed-up | difference | cubics per ray | "
-        "sort once ms |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(
-            f"| {r['scene']} | {r['walk_ms']:.1f} | {r['object_order_ms']:.1f} | "
-            f"{r['walk_ms'] / r['object_order_ms']:.2f}x | {r['largest_difference']:.1e} | "
-            f"{r['cubics_per_ray']:.1f} | {r['prepare_ms']:.0f} |")
-    (out / "mip_object_order_feasibility.md").write_text("\n".join(lines) + "\n")
-
+    write_results(
+        HERE / "results" / "mip_object_order_feasibility",
+        "Exact MIP: an object-order projection against the renderer's ray walk",
+        f"Command: `python benchmarks/mip_object_order_feasibility.py`. {SIZE[0]}x{SIZE[1]}, "
+        f"four orbit views (azimuth 40-70, elevation 20), medians of {ROUNDS} rounds after a "
+        "warm-up, run side by side in the same rounds. *Object order*: the stand-alone "
+        "trilinear kernel of the script (ray set-up included, the sort of the blocks by "
+        "maximum, done once per volume, not); *walk*: `scene.render(mode=\"mip\")`, outputs "
+        "value only. *Difference*: the largest between the two answers, of the data range. "
+        "*Cubics per ray*: (pixel, cell) pairs whose cubic the object order formed, per ray "
+        "that hits (the walk tests 9.3-10.9 cells per ray, `mip_exact_limits.md`).",
+        ["scene", "walk ms", "object order ms", "speed-up", "difference", "cubics per ray",
+         "sort once ms"],
+        rows, lambda r: [r["scene"], f"{r['walk_ms']:.1f}", f"{r['object_order_ms']:.1f}",
+                         f"{r['walk_ms'] / r['object_order_ms']:.2f}x",
+                         f"{r['largest_difference']:.1e}", f"{r['cubics_per_ray']:.1f}",
+                         f"{r['prepare_ms']:.0f}"])
 
 if __name__ == "__main__":
     main()
