@@ -65,7 +65,8 @@ def median_ms(fn: Callable[[], object], repeats: int) -> float:
 
 def write_results(path: Path, title: str, description: str, header: Sequence[str],
                   rows: list[dict[str, Any]], cells: Callable[[dict[str, Any]], Sequence[str]],
-                  machine: dict[str, Any] | None = None) -> None:
+                  machine: dict[str, Any] | None = None, before_table: Sequence[str] = ()
+                  ) -> None:
     """Write ``path.json`` (the machine and the rows) and ``path.md``: a title, the machine,
     the description and a table, one line per row.
 
@@ -84,11 +85,15 @@ def write_results(path: Path, title: str, description: str, header: Sequence[str
         The formatted cells of one row, as many as ``header`` has titles.
     machine : dict, optional
         The machine description (default: :func:`describe` now).
+    before_table : sequence of str
+        Markdown paragraphs between the description and the table (a figure, say).
     """
     machine = describe() if machine is None else machine
     path.with_suffix(".json").write_text(json.dumps({"machine": machine, "rows": rows},
                                                     indent=1))
-    lines = [f"# {title}", "", f"Machine: {machine}. {description}", "",
-             "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines = [f"# {title}", "", f"Machine: {machine}. {description}", ""]
+    for paragraph in before_table:
+        lines += [paragraph, ""]
+    lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(cells(row)) + " |" for row in rows]
     path.with_suffix(".md").write_text("\n".join(lines) + "\n")

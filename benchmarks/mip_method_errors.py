@@ -13,7 +13,6 @@ below the exact value. It is the measurement behind keeping the exact method as 
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
+from _machine import write_results  # noqa: E402
 
 import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
@@ -51,21 +50,16 @@ def main() -> None:
                    "max": float(short.max()), "above_1_255": float((short > 1 / 255).mean())}
             rows.append(row)
             print(row, flush=True)
-    machine = describe()
-    out = HERE / "results"
-    (out / "mip_method_errors.json").write_text(json.dumps({"machine": machine, "rows": rows},
-                                                           indent=1))
-    lines = ["# Sampled MIP methods: shortfall below the exact projection per pixel", "",
-             f"Machine: {machine}. Command: `python benchmarks/mip_method_errors.py`. 1024x768, "
-             "orbit view at azimuth 40, elevation 20; shortfall = (exact - sampled) / data "
-             "range over the pixels whose ray meets the volume.", "",
-             "| scene | method | step (voxels) | mean | 99th percentile | largest | pixels "
-             "more than 1/255 below |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['scene']} | {r['method']} | {r['step']:g} | {r['mean']:.4f} | "
-                     f"{r['p99']:.3f} | {r['max']:.3f} | {r['above_1_255']:.1%} |")
-    (out / "mip_method_errors.md").write_text("\n".join(lines) + "\n")
-
+    write_results(
+        HERE / "results" / "mip_method_errors",
+        "Sampled MIP methods: shortfall below the exact projection per pixel",
+        "Command: `python benchmarks/mip_method_errors.py`. 1024x768, orbit view at azimuth "
+        "40, elevation 20; shortfall = (exact - sampled) / data range over the pixels whose "
+        "ray meets the volume.",
+        ["scene", "method", "step (voxels)", "mean", "99th percentile", "largest",
+         "pixels more than 1/255 below"],
+        rows, lambda r: [r["scene"], r["method"], f"{r['step']:g}", f"{r['mean']:.4f}",
+                         f"{r['p99']:.3f}", f"{r['max']:.3f}", f"{r['above_1_255']:.1%}"])
 
 if __name__ == "__main__":
     main()

@@ -22,7 +22,6 @@ fractions of the window (the automatic one, :func:`splinecast.auto_window`). It 
 
 from __future__ import annotations
 
-import json
 import statistics
 import sys
 import time
@@ -33,7 +32,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
+from _machine import write_results  # noqa: E402
 
 import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
@@ -121,28 +120,21 @@ def plot(rows: list[dict], path: Path) -> bool:
 def main() -> None:
     rows = [r for spec in (ml(128), ml(256), mri(), noise(256)) if spec is not None
             for r in measure(spec)]
-    machine = describe()
-    out = HERE / "results"
-    (out / "mip_tolerance.json").write_text(json.dumps({"machine": machine, "rows": rows},
-                                                       indent=1))
-    plotted = plot(rows, out / "mip_tolerance.png")
-    lines = [
-        "# MIP with a tolerance: frame time and shortfall below the exact projection", "",
-        f"Machine: {machine}. Command: `python benchmarks/mip_tolerance.py`. 1024x768, colour "
-        f"only, four orbit views (azimuth 40-70, elevation 20), medians of {ROUNDS} rounds "
-        "after a warm-up; speed-up over the exact frame of the same run. Shortfall: (exact - "
-        "value) / window width over the pixels with a value (first view), the window being "
-        "`sc.auto_window`'s. A tolerance bounds the largest shortfall; the sampled methods' "
-        "is unbounded.", ""]
-    if plotted:
-        lines += ["![frame time against largest shortfall](mip_tolerance.png)", ""]
-    lines += ["| scene | method | setting | ms | speed-up over exact | mean shortfall | largest "
-              "shortfall |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['scene']} | {r['method']} | {r['setting']} | {r['ms']:.1f} | "
-                     f"{r['speedup']:.2f}x | {r['mean']:.4f} | {r['max']:.4f} |")
-    (out / "mip_tolerance.md").write_text("\n".join(lines) + "\n")
-
+    plotted = plot(rows, HERE / "results" / "mip_tolerance.png")
+    write_results(
+        HERE / "results" / "mip_tolerance",
+        "MIP with a tolerance: frame time and shortfall below the exact projection",
+        "Command: `python benchmarks/mip_tolerance.py`. 1024x768, colour only, four orbit "
+        f"views (azimuth 40-70, elevation 20), medians of {ROUNDS} rounds after a warm-up; "
+        "speed-up over the exact frame of the same run. Shortfall: (exact - value) / window "
+        "width over the pixels with a value (first view), the window being `sc.auto_window`'s. "
+        "A tolerance bounds the largest shortfall; the sampled methods' is unbounded.",
+        ["scene", "method", "setting", "ms", "speed-up over exact", "mean shortfall",
+         "largest shortfall"],
+        rows, lambda r: [r["scene"], r["method"], r["setting"], f"{r['ms']:.1f}",
+                         f"{r['speedup']:.2f}x", f"{r['mean']:.4f}", f"{r['max']:.4f}"],
+        before_table=["![frame time against largest shortfall](mip_tolerance.png)"]
+        if plotted else ())
 
 if __name__ == "__main__":
     main()
