@@ -292,6 +292,23 @@ def dda_mip(v, h0, h1, h2, O, D, out, visits, cellmax, loads, sink):
 
 
 
+def walk_inputs(spec, size: tuple[int, int]) -> tuple:
+    """What the stand-alone walks take for one comparison scene: ``(volume, scene, camera,
+    data, (h0, h1, h2), origins, directions)``. The camera is the orbit view at azimuth 40,
+    elevation 20; origins and directions are its rays in index space; ``h0..h2`` are the 4-,
+    16- and 64-cell block maxima."""
+    vol = spec.make()
+    scene = sc.Scene(vol)
+    h = scene.grid.hierarchy
+    data = np.asarray(scene.grid.kernel.data)
+    cam = sc.Camera.orbit(vol, azimuth=40.0, elevation=20.0, size=size)
+    origins, dirs = cam.rays()
+    origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
+    o_index = np.ascontiguousarray((origins - origin) / spacing)
+    d_index = np.ascontiguousarray(dirs / spacing)
+    return vol, scene, cam, data, (h.highs[0], h.highs[1], h.highs[2]), o_index, d_index
+
+
 def _median_ms(fn, repeats: int = 9) -> float:
     fn()  # compilation and warm-up
     return median_ms(fn, repeats)
@@ -303,19 +320,11 @@ def main() -> None:
     for spec in (mri(), ml(128), noise(256)):
         if spec is None:
             continue
-        vol = spec.make()
-        scene = sc.Scene(vol)
-        h = scene.grid.hierarchy
-        data = np.asarray(scene.grid.kernel.data)
-        cam = sc.Camera.orbit(vol, azimuth=40.0, elevation=20.0, size=size)
-        origins, dirs = cam.rays()
-        origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
-        o_index = np.ascontiguousarray((origins - origin) / spacing)
-        d_index = np.ascontiguousarray(dirs / spacing)
+        vol, scene, cam, data, (h0, h1, h2), o_index, d_index = walk_inputs(spec, size)
         out = np.empty(size[::-1])
         visits = np.zeros(size[::-1], np.int64)
         unused = np.zeros((1, 1, 1), data.dtype)
-        dda_ms = _median_ms(partial(dda_mip, data, h.highs[0], h.highs[1], h.highs[2], o_index,
+        dda_ms = _median_ms(partial(dda_mip, data, h0, h1, h2, o_index,
                                     d_index, out, visits, unused, -1, out))
         render_ms = _median_ms(partial(scene.render, cam, mode="mip", outputs=("value",)))
         ref = scene.render(cam, mode="mip", outputs=("value",)).value

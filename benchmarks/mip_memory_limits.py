@@ -33,9 +33,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 from _machine import write_results  # noqa: E402
-from mip_dda_feasibility import dda_mip  # noqa: E402
+from mip_dda_feasibility import dda_mip, walk_inputs  # noqa: E402
 
-import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
 
 #: (label, ``loads`` argument of dda_mip); -1 is the plain walk.
@@ -63,16 +62,8 @@ def measure(spec) -> dict:
     """Median frame time of each variant on one scene, the variants interleaved per round."""
     import numba
 
-    vol = spec.make()
-    scene = sc.Scene(vol)
-    h = scene.grid.hierarchy
-    data = np.asarray(scene.grid.kernel.data)
+    vol, scene, cam, data, (h0, h1, h2), o_index, d_index = walk_inputs(spec, SIZE)
     cellmax = _cell_maxima(data)
-    cam = sc.Camera.orbit(vol, azimuth=40.0, elevation=20.0, size=SIZE)
-    origins, dirs = cam.rays()
-    origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
-    o_index = np.ascontiguousarray((origins - origin) / spacing)
-    d_index = np.ascontiguousarray(dirs / spacing)
     shape = SIZE[::-1]
     outs = {loads: np.empty(shape) for _, loads in VARIANTS}
     visits = {loads: np.zeros(shape, np.int64) for _, loads in VARIANTS}
@@ -81,7 +72,7 @@ def measure(spec) -> dict:
     for round_ in range(ROUNDS + 1):  # round 0 compiles and warms up
         for _, loads in VARIANTS:
             start = time.perf_counter()
-            dda_mip(data, h.highs[0], h.highs[1], h.highs[2], o_index, d_index, outs[loads],
+            dda_mip(data, h0, h1, h2, o_index, d_index, outs[loads],
                     visits[loads], cellmax, loads, sink)
             if round_ > 0:
                 times[loads].append((time.perf_counter() - start) * 1e3)

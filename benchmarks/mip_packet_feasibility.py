@@ -21,7 +21,7 @@ answers are compared. The machine code of ``step_lanes`` is then searched for pa
 double-precision instructions and gathers: the signs that LLVM vectorized it.
 
 Session 54: it did not. The hot loop's machine code holds no packed operation and no gather,
-only scalar ones, and the packets run 2.6-4.7x slower than the scalar walk: without vectors,
+only scalar ones, and the packets run 2.5-4.8x slower than the scalar walk: without vectors,
 the branch-free body makes every lane pay for a cell's cubic at every event, leaps included
 (``results/mip_packet_feasibility.md``). SIMD over rays would need vector code written
 explicitly (LLVM vector types through ``numba.extending.intrinsic``, or a compiled extension).
@@ -45,10 +45,10 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 from _machine import write_results  # noqa: E402
-from mip_dda_feasibility import cell_at, clip, dda_mip, tri  # noqa: E402
+from mip_dda_feasibility import cell_at, clip, dda_mip, tri, walk_inputs  # noqa: E402
 
-import splinecast as sc  # noqa: E402
 from benchmarks.compare.scenes import ml, mri, noise  # noqa: E402
+from splinecast.models.trilinear import cell_corners, corner_monomials, ray_cubic  # noqa: E402
 
 #: Rays per packet (AVX-512 holds 8 doubles).
 L = 8
@@ -127,37 +127,16 @@ def step_lanes(v, h0, h1, h2, nx, ny, nz, ox, oy, oz, dx, dy, dz, ix, iy, iz, tt
         t0 = tt[l]
         t1 = t1a[l]
         tend = min(te, t1)
-        # the cell's cubic on [t0, tend]
-        one = np.uint64(1)
-        c000 = float(v[ui, uj, uk])
-        c001 = float(v[ui, uj, uk + one])
-        c010 = float(v[ui, uj + one, uk])
-        c011 = float(v[ui, uj + one, uk + one])
-        c100 = float(v[ui + one, uj, uk])
-        c101 = float(v[ui + one, uj, uk + one])
-        c110 = float(v[ui + one, uj + one, uk])
-        c111 = float(v[ui + one, uj + one, uk + one])
-        kx = c100 - c000
-        ky = c010 - c000
-        kz = c001 - c000
-        kxy = c110 - c100 - c010 + c000
-        kxz = c101 - c100 - c001 + c000
-        kyz = c011 - c010 - c001 + c000
-        kxyz = c111 - c110 - c101 - c011 + c100 + c010 + c001 - c000
+        # The cell's cubic along the ray on [t0, tend], as the renderer's trilinear model
+        # forms it.
+        k0, k1, k2, k3, k4, k5, k6, k7 = corner_monomials(cell_corners(v, i, j, k))
         ax = ox[l] + t0 * dx[l] - i
         ay = oy[l] + t0 * dy[l] - j
         az = oz[l] + t0 * dz[l] - k
         ex = ox[l] + tend * dx[l] - i - ax
         ey = oy[l] + tend * dy[l] - j - ay
         ez = oz[l] + tend * dz[l] - k - az
-        q0 = (c000 + kx * ax + ky * ay + kz * az + kxy * ax * ay + kxz * ax * az + kyz * ay * az
-              + kxyz * ax * ay * az)
-        gx = kx + kxy * ay + kxz * az + kxyz * ay * az
-        gy = ky + kxy * ax + kyz * az + kxyz * ax * az
-        gz = kz + kxz * ax + kyz * ay + kxyz * ax * ay
-        q1 = gx * ex + gy * ey + gz * ez
-        q2 = ex * ey * (kxy + kxyz * az) + ex * ez * (kxz + kxyz * ay) + ey * ez * (kyz + kxyz * ax)
-        q3 = kxyz * ex * ey * ez
+        q3, q2, q1, q0 = ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7, ax, ay, az, ex, ey, ez)
         f1 = q0 + q1 + q2 + q3
         cb = q0
         cs = 0.0
@@ -260,23 +239,15 @@ def vector_signs() -> dict[str, int]:
 
 def measure(spec) -> dict:
     """Packet and scalar walks on one scene, interleaved; their answers compared."""
-    vol = spec.make()
-    scene = sc.Scene(vol)
-    h = scene.grid.hierarchy
-    data = np.asarray(scene.grid.kernel.data)
-    cam = sc.Camera.orbit(vol, azimuth=40.0, elevation=20.0, size=SIZE)
-    origins, dirs = cam.rays()
-    origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
-    o_index = np.ascontiguousarray((origins - origin) / spacing)
-    d_index = np.ascontiguousarray(dirs / spacing)
+    vol, _, _, data, (h0, h1, h2), o_index, d_index = walk_inputs(spec, SIZE)
     packet = np.empty(SIZE[::-1])
     scalar = np.empty(SIZE[::-1])
     visits = np.zeros(SIZE[::-1], np.int64)
     unused = np.zeros((1, 1, 1), data.dtype)
     runs = {
-        "packet": lambda: packet_mip(data, h.highs[0], h.highs[1], h.highs[2], o_index,
+        "packet": lambda: packet_mip(data, h0, h1, h2, o_index,
                                      d_index, packet),
-        "scalar": lambda: dda_mip(data, h.highs[0], h.highs[1], h.highs[2], o_index, d_index,
+        "scalar": lambda: dda_mip(data, h0, h1, h2, o_index, d_index,
                                   scalar, visits, unused, -1, scalar),
     }
     times: dict[str, list[float]] = {name: [] for name in runs}
