@@ -32,6 +32,8 @@ MODE_OPTIONS = {
     "iso": {"iso": 0.5},
     "multi-iso": {"iso": [0.3, 0.6]},
     "mip": {"mode": "mip"},
+    # A value within the tolerance, chosen by what earlier rays of the pixel's tile found.
+    "mip-tolerance": {"mode": "mip", "tolerance": 0.05},
     "dvr": {"mode": "dvr", "tf": TF, "dvr": sc.DVRSettings(step=0.5)},
 }
 #: (model, mode) pairs rendered on the cluster and locally. s31 MIP/DVR join here (one line
@@ -40,6 +42,7 @@ CASES = [
     ("trilinear", "iso"),
     ("trilinear", "multi-iso"),
     ("trilinear", "mip"),
+    ("trilinear", "mip-tolerance"),
     ("trilinear", "dvr"),
     ("s31", "iso"),
 ]
@@ -100,19 +103,18 @@ def test_tiled_render_equals_the_local_render(scenes, volume, model, mode):
     options = MODE_OPTIONS[mode]
     local = sc.Scene(volume, model=model).render(cam, **options)
     frame = scenes[model].render(cam, tile_size=24, **options)
-    coherent = mode in ("mip", "minip")  # work per ray depends on the thread's previous ray
-    assert_frames_equal(frame, local, rgba_atol=1e-6 if mode == "dvr" else 0.0,
-                        work=not coherent)
+    # Tiles on the scene's tile grid: every ray follows the same rays of its tile as in the
+    # local render, so even the per-ray work of MIP (which starts from the previous ray's
+    # answer) is the same.
+    assert 24 % sc.Scene(volume).tile_shape[0] == 0
+    assert_frames_equal(frame, local, rgba_atol=1e-6 if mode == "dvr" else 0.0)
     assert local.hit.any() and not local.hit.all()  # the comparison covers hits and misses
     st = frame.stats
     assert st["tiles"] == 3 * 2 and st["wall_ms"] > 0
     for key in ("mode", "model", "width", "height", "rays", "hits"):
         assert st[key] == local.stats[key], key
-    for key, name in (("mean_cells_visited", "cells_visited"),
-                      ("mean_cells_tested", "cells_tested"),
-                      ("mean_blocks_skipped", "blocks_skipped")):
-        want = getattr(frame, name).mean() if coherent else local.stats[key]
-        assert st[key] == pytest.approx(want, rel=1e-12), key
+    for key in ("mean_cells_visited", "mean_cells_tested", "mean_blocks_skipped"):
+        assert st[key] == pytest.approx(local.stats[key], rel=1e-12), key
     if mode == "dvr":  # per-ray count not kept in the frame: a ray-weighted mean of the tiles
         assert st["mean_samples"] == pytest.approx(local.stats["mean_samples"], rel=1e-12)
 

@@ -225,6 +225,32 @@ def test_tiles_of_an_image_have_the_whole_images_projection():
     np.testing.assert_array_equal(part.depth, whole.depth[7:36, 13:44])
 
 
+@pytest.mark.parametrize("kind", ["mip", "minip"])
+def test_a_tolerance_gives_the_whole_images_pixels_in_windows_on_the_tile_grid(kind):
+    """With a tolerance, a ray starts from what the previous ray of its tile found, and that
+    decides which value within the tolerance it reports. Windows whose edges lie on the scene's
+    grid of tiles (the viewer's stripes, Dask's tiles) must still give exactly the whole
+    image's pixels: stripes of whole rows, and windows that start inside a band of rows."""
+    vol = sc.demo("marschner-lobb", size=40)
+    scene = sc.Scene(vol)
+    width, height = 100, 76
+    cam = sc.Camera.orbit(vol, azimuth=35, elevation=25, size=(width, height))
+    whole = scene.render(cam, mode=kind, tolerance=0.05)
+    exact = scene.render(cam, mode=kind)
+    hit = np.isfinite(exact.value)
+    assert np.any(whole.value[hit] != exact.value[hit])  # the tolerance changes pixels
+    cols, rows = scene.tile_shape
+    assert cols > 0 and rows > 0
+    for tw, th in ((width, 3 * rows), (3 * cols, 2 * rows), (cols, height)):
+        for r0 in range(0, height, th):
+            for c0 in range(0, width, tw):
+                window = cam.tile(c0, r0, min(tw, width - c0), min(th, height - r0))
+                part = scene.render(window, mode=kind, tolerance=0.05)
+                where = (slice(r0, r0 + th), slice(c0, c0 + tw))
+                np.testing.assert_array_equal(part.value, whole.value[where])
+                np.testing.assert_array_equal(part.depth, whole.depth[where])
+
+
 @pytest.mark.parametrize("model", ["s31", "qss"])
 def test_the_smooth_models_leap_a_constant_background_once_they_have_met_its_value(model):
     """The type-6 models' cube ranges are widened for rounding by the magnitude of the cube's

@@ -70,10 +70,15 @@ def page(vol, tmp_path_factory):
 
 
 def wait_final(page, after: int) -> dict:
-    """Wait for the page to draw a final frame of a request newer than ``after``."""
+    """Wait for the page to show the final frame of its newest request, which must be newer
+    than ``after``.
+
+    A final frame of *some* request newer than ``after`` is not enough: when an earlier
+    action's frame was still on its way, it would be taken for the frame of the action just
+    made, and the canvas compared with a state it does not show."""
     page.wait_for_function(
         "(after) => { const v = window.splinecastViewer;"
-        " return v && v.lastFrame && v.lastFrame.final && v.lastFrame.id > after; }",
+        " return v && v.settled && v.lastFrame.id > after; }",
         arg=after, timeout=TIMEOUT_MS)
     return page.evaluate("window.splinecastViewer.lastFrame")
 

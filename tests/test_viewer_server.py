@@ -458,14 +458,29 @@ def test_progressive_coarse_frame_before_a_slow_full_frame(vol):
 def test_striped_render_equals_whole_render_and_can_be_abandoned(vol):
     defaults = default_state(vol)
     request = parse_state({"size": [37, 29], "camera": {"elevation": 60.0}}, vol, defaults)
-    renderer = FrameRenderer(vol, stripe_rows=4)
+    renderer = FrameRenderer(vol, stripe_rows=8)
     image = renderer.render(request)
-    assert image.stats["stripes"] == 8
+    assert image.stats["stripes"] == 4
     np.testing.assert_array_equal(image.rgba, reference(vol, {"elevation": 60.0},
                                                         size=(37, 29), iso=0.5))
     calls = []
     assert renderer.render(request, abort=lambda: calls.append(1) or True) is None
     assert len(calls) == 1  # asked after the first stripe, then stopped
+
+
+@pytest.mark.parametrize("rows", [5, 12, 37])
+def test_striped_mip_with_a_tolerance_equals_the_whole_render(vol, rows):
+    """A MIP with a tolerance reports, per pixel, one of the values within it, chosen by what
+    the earlier rays of the pixel's tile found: stripes must start on the scene's grid of
+    tiles, whatever height the cost model asks for, or the page shows another image than
+    ``Scene.render`` (and than the screenshot)."""
+    defaults = default_state(vol)
+    request = parse_state({"mode": "mip", "tolerance": 16 / 255, "size": [96, 90]}, vol,
+                          defaults)
+    image = FrameRenderer(vol, stripe_rows=rows).render(request)
+    assert image.stats["stripes"] > 1
+    expected = sc.Scene(vol).render(request.camera, **request.options)
+    np.testing.assert_array_equal(image.rgba, expected.to_uint8())
 
 
 def test_mip_previews_sample_on_planes_and_full_frames_are_exact(vol):

@@ -146,6 +146,17 @@ class Scene:
         """World-space corners of the volume (so a camera can frame a Scene)."""
         return self.volume.bounds
 
+    @property
+    def tile_shape(self) -> tuple[int, int]:
+        """Columns and rows of the tiles the renderer traces as units, on the image's own grid.
+
+        A window of an image (:meth:`Camera.tile`) whose first column and first row are
+        multiples of these renders exactly the whole image's pixels, in every mode (MIP with
+        a ``tolerance`` lets each ray start from what the previous ray of its tile found).
+        Columns 0: a tile spans whole rows.
+        """
+        return (max(0, int(self.grid.tile)), max(1, int(self.grid.band_rows)))
+
     def content_box(self, iso: Any = None, tf: TransferFunction | None = None,
                     ) -> tuple[np.ndarray, np.ndarray]:
         """World box of what an isovalue or a transfer function shows (see

@@ -201,7 +201,11 @@ class DistributedScene:
             Everything else :meth:`Scene.render` takes (``mode``, ``iso``, ``tf``, ...).
         tile_size : int or "auto"
             Tile edge in pixels; ``"auto"`` gives every worker thread about four tiles
-            (see :func:`~splinecast.distributed.tiles.auto_tile_size`).
+            (see :func:`~splinecast.distributed.tiles.auto_tile_size`, a multiple of 16).
+            With a multiple of :attr:`splinecast.Scene.tile_shape` (8 pixels for every
+            model) the image equals the local render pixel for pixel in every mode; with
+            other sizes a MIP with a ``tolerance`` may report another value within the
+            tolerance at some pixels.
         image_only : bool
             Return only the 8-bit RGBA image (``Frame.to_uint8()`` of the full render): the
             workers then send 4 bytes per pixel instead of the Frame's 73.

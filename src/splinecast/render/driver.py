@@ -72,6 +72,7 @@ from .mode_api import (
     state_load,
     state_new,
     state_store,
+    tile_begin,
     wants,
     watches_skips,
 )
@@ -81,7 +82,7 @@ from .sampler import bound_sample_pixel
 from .work_queue import take
 
 __all__ = ["trace", "pair_band", "pair_bindings", "finalize", "reset_state", "band_order",
-           "GEOM_SIZE"]
+           "scratch_types", "GEOM_SIZE"]
 
 #: (grid class, mode class) -> the pair's :func:`_trace_band`.
 _KERNELS: dict[tuple[type, type], Any] = {}
@@ -251,6 +252,12 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
     tc0 = c0
     while tc0 < c1:
         tc1 = min(c1, tc0 + tile)
+        # Each tile's rays start from a fresh mode scratch (what a mode carries from one ray to
+        # the next, such as MIP's depth of the previous maximum): a pixel's result then depends
+        # only on the rays of its own tile, so any window of the image whose edges lie on tile
+        # and band boundaries (Camera.tile, the viewer's stripes, Dask's tiles) renders the
+        # same pixels as the whole image, whatever a mode does with its scratch.
+        tile_begin(mode, mscr)
         if fresh and _unseen(footprint, r0 + row0, r1 + row0, tc0 + col0, tc1 + col0, ty0, tx0):
             end = tc1
             while end < c1 and _unseen(footprint, r0 + row0, r1 + row0, end + col0,
@@ -336,14 +343,21 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
     call_with_first_class(_trace_image, pair_band(type(grid), type(mode)), _band_types, args)
 
 
+def scratch_types(grid_kind: Any, mode_kind: Any) -> tuple[Any, Any]:
+    """The Numba types of the band's per-thread scratch buffers (the model's and the mode's)
+    for a grid and a mode of the Numba types ``grid_kind`` and ``mode_kind``."""
+    key = (grid_kind, mode_kind)
+    scratch = _scratch_probe.overloads.get(key)
+    if scratch is None:
+        _scratch_probe.compile(key)
+        scratch = _scratch_probe.overloads[key]
+    return tuple(scratch.signature.return_type)
+
+
 def _band_types(kinds: tuple) -> tuple:
     """The argument types of the band :func:`_trace_image` calls, from the Numba types ``kinds``
     of its own arguments (after the band)."""
-    scratch = _scratch_probe.overloads.get(kinds[:2])
-    if scratch is None:
-        _scratch_probe.compile(kinds[:2])
-        scratch = _scratch_probe.overloads[kinds[:2]]
-    scr, mscr = scratch.signature.return_type
+    scr, mscr = scratch_types(kinds[0], kinds[1])
     index = numba.int64  # the rectangle's rows and columns, computed in the loop
     return (*kinds[:10], index, index, index, index, kinds[12], *kinds[13:17], *kinds[17:20],
             scr, mscr, numba.float64[::1], numba.int64[::1])

@@ -125,6 +125,12 @@ def _mode_scratch(mode):
 
 
 @jit()
+def _tile_begin(mode, mscratch):
+    """A tile's first ray has no previous ray: it seeds its bound from the blocks."""
+    mscratch[0] = np.nan
+
+
+@jit()
 def _ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0, t1):
     """A lower bound of the ray's maximum before the walk (exact method only).
 
@@ -309,8 +315,9 @@ def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
 
 
 _HOOKS = dict(state_new=_state_new, state_load=_state_load, state_store=_state_store,
-              mode_scratch=_mode_scratch, ray_begin=_ray_begin, skip_size=_skip_size,
-              wants=_wants, on_skip=unchanged_skip, consume=_consume, done=_done,
+              mode_scratch=_mode_scratch, tile_begin=_tile_begin, ray_begin=_ray_begin,
+              skip_size=_skip_size, wants=_wants, on_skip=unchanged_skip, consume=_consume,
+              done=_done,
               ray_end=unchanged_end, asks_again=_asks_again, finish=_finish,
               entry_left_out=_entry_left_out)
 register(MipMode, **_HOOKS)

@@ -12,8 +12,13 @@ arrays*. The driver (:mod:`.driver`) calls, per ray:
     Once per ray and grid, before the walk (MIP takes a lower bound of its answer here, from
     the model's value where the thread's previous ray found its maximum, or from block ranges
     and a few values along the ray). ``mscratch`` is the thread's ``mode_scratch``: it lives
-    from ray to ray of one band, so a mode may keep what one ray learnt for the next (the
-    result must not depend on it: the order and grouping of rays are the driver's).
+    from ray to ray of one tile, so a mode may keep what one ray learnt for the next.
+``tile_begin(mode, mscratch)``
+    Before the first ray of each tile of the image (``tile`` columns by ``band_rows`` rows, on
+    the image's own grid of tiles; optional, default: nothing). The driver traces a tile's rays
+    in a fixed order, so a result that depends on what earlier rays left in ``mscratch`` (MIP
+    with a tolerance) depends only on the rays of its own tile, and any window of the image
+    whose edges lie on that grid of tiles renders the same pixels as the whole image.
 ``skip_size(mode, blocks, i, j, k, st)`` -> ``int``
     Edge in cells of the block around cell ``(i, j, k)`` to leap over, 0 to process the cell.
     A 0 is taken for the cell's whole block of the smallest edge the mode answers for
@@ -110,7 +115,8 @@ __all__ = [
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
     "never", "hooks_of", "sampled_of", "sample_step", "sample_planes", "segment", "asks_again",
-    "answer_shift", "finest_blocks", "entry_left_out", "unchanged_entry",
+    "answer_shift", "finest_blocks", "entry_left_out", "unchanged_entry", "tile_begin",
+    "unchanged_tile",
 ]
 
 _HOOKS: dict[type, dict[str, Any]] = {}
@@ -124,7 +130,7 @@ def register(mode_class: type, **hooks: Any) -> None:
     """Register a mode's compiled functions for its parameter tuple class (all of
     :data:`_NAMES`; ``watches_skips`` and ``asks_again`` default to :func:`never`,
     ``answer_shift`` to :func:`finest_blocks`, ``sample_planes`` to :func:`never`,
-    ``entry_left_out`` to :func:`unchanged_entry`)."""
+    ``entry_left_out`` to :func:`unchanged_entry`, ``tile_begin`` to :func:`unchanged_tile`)."""
     missing = set(_NAMES) - set(hooks)
     if missing:
         raise TypeError(f"{mode_class.__name__} is missing {', '.join(sorted(missing))}")
@@ -133,7 +139,8 @@ def register(mode_class: type, **hooks: Any) -> None:
                         f"{', '.join(_SAMPLED)}")
     _HOOKS[mode_class] = {"watches_skips": never, "asks_again": never,
                           "answer_shift": finest_blocks, "sample_planes": never,
-                          "entry_left_out": unchanged_entry, **hooks}
+                          "entry_left_out": unchanged_entry, "tile_begin": unchanged_tile,
+                          **hooks}
 
 
 def sampled_of(mode_class: type) -> bool:
@@ -290,6 +297,17 @@ def _entry_left_out(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, 
     return None if f is None else f.py_func
 
 
+def tile_begin(mode, mscratch):
+    """Prepare the thread's mode scratch for the first ray of a tile (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(tile_begin, inline="never")
+def _tile_begin(mode, mscratch):
+    f = _impl(mode, "tile_begin")
+    return None if f is None else f.py_func
+
+
 def finish(mode, out, row, col, st, ray):
     """Write pixel ``(row, col)``'s outputs from its final state (compiled code only)."""
     raise NotImplementedError
@@ -406,6 +424,12 @@ def unchanged_entry(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, 
     """``entry_left_out`` of a mode for which what the footprint leaves out is empty space
     (the isosurfaces, DVR)."""
     return st
+
+
+@jit()
+def unchanged_tile(mode, mscratch):
+    """``tile_begin`` of a mode whose rays learn nothing from one another."""
+    return None
 
 
 @jit()

@@ -193,7 +193,10 @@ class FrameRenderer:
             width = max(1, round(camera.width * scale))
             height = max(1, round(camera.height * scale))
             camera = resized_camera(camera, width, height)
-        rows = self._stripe_rows(request, step, camera.width, camera.height)
+        # Stripes start on the scene's grid of tiles, so they assemble into exactly the
+        # whole image's pixels (Scene.tile_shape).
+        align = getattr(scene, "tile_shape", (0, 1))[1]
+        rows = self._stripe_rows(request, step, camera.width, camera.height, align)
         # The viewer shows colour only: no depth, position, normal or per-ray counters.
         options = {"outputs": ("rgba",), **request.options, **self._pass_options(request, step),
                    **self.shown.render_options(step)}
@@ -213,16 +216,22 @@ class FrameRenderer:
         stats = _merge_stats(parts, camera.width, camera.height)
         return RenderedImage(image, stats, render_ms, camera.height / request.camera.height)
 
-    def _stripe_rows(self, request: RenderRequest, step: str, width: int, height: int) -> int:
+    def _stripe_rows(self, request: RenderRequest, step: str, width: int, height: int,
+                     align: int = 1) -> int:
+        """Rows per stripe: about :data:`STRIPE_MS` of work, a multiple of ``align``."""
         if self.shown.multiresolution:
             return height
         if self._stripe_rows_fixed is not None:
-            return max(1, min(height, self._stripe_rows_fixed))
-        per_pixel = self._cost.get(self._cost_key(request, step))
-        if per_pixel is None:
-            return min(height, _FIRST_STRIPE_ROWS)
-        rows = int(STRIPE_MS / max(per_pixel * width, 1e-9))
-        return min(height, max(_MIN_STRIPE_ROWS, rows))
+            rows = self._stripe_rows_fixed
+        else:
+            per_pixel = self._cost.get(self._cost_key(request, step))
+            if per_pixel is None:
+                rows = _FIRST_STRIPE_ROWS
+            else:
+                rows = max(_MIN_STRIPE_ROWS, int(STRIPE_MS / max(per_pixel * width, 1e-9)))
+        align = max(1, int(align))
+        rows = max(align, rows - rows % align)
+        return max(1, min(height, rows))
 
 
 def _merge_stats(parts: list[tuple[int, dict[str, Any]]], width: int,

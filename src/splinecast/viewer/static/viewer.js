@@ -22,6 +22,7 @@
   let drawnSeq = 0; // frames are decoded asynchronously: never draw an older one over a newer
   let frameSeq = 0;
   let errorId = -1;
+  let lastViewId = 0; // id of the newest render request sent (screenshots not included)
   const sentAt = new Map(); // request id -> time sent (for the latency in the status line)
   const interactiveTimes = []; // arrival times of recent reduced frames (frames per second)
 
@@ -34,6 +35,13 @@
     lastError: null,
     get state() { return state; },
     get hello() { return hello; },
+    // Whether the canvas shows the full frame of the newest request, nothing being waited for:
+    // what a script waits for before it compares the canvas with the state.
+    get settled() {
+      return !scheduled && lastViewId > 0 && api.lastFrame !== null && api.lastFrame.final &&
+        api.lastFrame.id === lastViewId;
+    },
+    get lastViewId() { return lastViewId; },
     request: (interactive) => request(interactive),
   });
 
@@ -107,6 +115,7 @@
   function send(type, interactive) {
     if (!ws || ws.readyState !== WebSocket.OPEN) return -1;
     const id = nextId++;
+    if (type === "render") lastViewId = id;
     sentAt.set(id, performance.now());
     if (sentAt.size > 256) sentAt.delete(sentAt.keys().next().value);
     ws.send(JSON.stringify({ v: PROTOCOL_VERSION, type, id, interactive, state: wireState() }));
