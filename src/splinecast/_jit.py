@@ -53,7 +53,7 @@ except ImportError:  # pragma: no cover - a numba without this class: keep its b
     IndexDataCacheFile = None  # type: ignore[assignment,misc]
 
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
-           "package_stamp"]
+           "call_with_first_classes", "package_stamp"]
 
 
 class _CopyModuleSharingScopes:
@@ -358,7 +358,7 @@ def first_class(dispatcher: Any, argtypes: tuple) -> Any:
     key = (dispatcher, argtypes)
     value = _FIRST_CLASS.get(key)
     if value is None:
-        dispatcher.compile(argtypes)
+        _compile_taking_first_class(dispatcher, argtypes)  # it may take some itself
         result = dispatcher.overloads[argtypes]
         address = result.library.get_pointer_to_function(result.fndesc.llvm_cfunc_wrapper_name)
         value = _FIRST_CLASS[key] = _FirstClass(address, result.signature)
@@ -412,3 +412,25 @@ def call_with_first_class(kernel: Any, callee: Any, callee_types: Callable[[tupl
         entry = _CALLS[key] = (value, kernel.overloads[argtypes].entry_point)
     value, compiled = entry
     return compiled(value, *args)
+
+
+def call_with_first_classes(kernel: Any, make_values: Callable[[tuple], tuple],
+                            args: tuple) -> Any:
+    """``kernel(*values, *args)`` with ``values = make_values(kinds)``, first-class functions
+    (:func:`first_class`) made from the Numba types ``kinds`` of ``args``.
+
+    As :func:`call_with_first_class`, for a kernel that takes several functions whose types
+    depend on one another (a tile function taking the bands it calls); ``make_values`` must be
+    one function for every call (a module-level one), as it is part of the key the values and
+    the kernel's compiled entry point are found again by.
+    """
+    key = (kernel, make_values, tuple(_fingerprint(a) for a in args))
+    entry = _CALLS.get(key)
+    if entry is None:
+        kinds = tuple(numba.typeof(a) for a in args)
+        values = tuple(make_values(kinds))
+        argtypes = (*(numba.typeof(v) for v in values), *kinds)
+        _compile_taking_first_class(kernel, argtypes)
+        entry = _CALLS[key] = (values, kernel.overloads[argtypes].entry_point)
+    values, compiled = entry
+    return compiled(*values, *args)

@@ -37,10 +37,10 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import call_with_first_class, jit, overload_jit, rebound
+from .._jit import call_with_first_classes, first_class, jit, overload_jit
 from ..models.pieces import new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
-from .driver import _trace_band, pair_band
+from .driver import pair_band, scratch_types
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import grid_point, index_axis, pixel_ray
@@ -210,7 +210,7 @@ def _closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exi
 
 
 @jit()
-def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
+def _piece_tile(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
                 origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
                 grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0, tc0,
                 visited, tested, skipped):
@@ -221,7 +221,7 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
     scr = new_scratch(kernel)
     cuts = np.empty(8)
     tags = np.empty(8, np.int64)
-    return _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi,
+    return _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi,
                          closed, origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece,
                          level, close, grids_a, grids_b, which, geoms, exit_t, exit_piece,
                          exit_level, ended, tr0, tc0, visited, tested, skipped, scr, cuts, tags)
@@ -233,7 +233,7 @@ def _piece_tile(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box
 # compiled with counting (:func:`_exit_value`). No Python entry: unboxing the typed lists of
 # its arguments needs counting.
 @jit(_nrt=False, no_cpython_wrapper=True)
-def _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
+def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
                   origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
                   grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
                   tc0, visited, tested, skipped, scr, cuts, tags):
@@ -275,9 +275,8 @@ def _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, b
     yes = tr0 >= 0
     # No footprint (an empty view of t_range: a C array like the in-memory renderer's, so the
     # band compiled for it serves here too).
-    _trace_band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, t_range[:0], r0,
-                r1, c0, c1, c1 - c0, yes, yes, not yes, yes, visited, tested, skipped, scr, mscr,
-                cuts, tags)
+    band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, t_range[:0], r0, r1, c0,
+         c1, c1 - c0, yes, yes, not yes, yes, visited, tested, skipped, scr, mscr, cuts, tags)
     n_ended = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
@@ -295,7 +294,8 @@ def _piece_pixels(kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, b
 
 
 @jit()
-def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
+def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
+                closed, rects,
                 levels, origin0, spacing0, planes, t_range, tile_start, tile_pieces, tr0, tc0,
                 fresh, final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
     """One thread's work item: the pieces overlapping one tile, in order (the tile's states
@@ -331,17 +331,17 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
             continue
         if which[p, 0] == 0:
             pair_a = grids_a[which[p, 1]]
-            h, e = _piece_tile(pair_a[0], pair_a[1], mode, mscr, state, out, basis, geoms[p],
-                               boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
-                               t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
+            h, e = _piece_tile(band_a, pair_a[0], pair_a[1], mode, mscr, state, out, basis,
+                               geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0,
+                               planes, t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
                                grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
                                tr0, tc0, visited, tested, skipped)
         else:
             # Another name than above: the two lists may hold different types.
             pair_b = grids_b[which[p, 1]]
-            h, e = _piece_tile(pair_b[0], pair_b[1], mode, mscr, state, out, basis, geoms[p],
-                               boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0, planes,
-                               t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
+            h, e = _piece_tile(band_b, pair_b[0], pair_b[1], mode, mscr, state, out, basis,
+                               geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0,
+                               planes, t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
                                grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
                                tr0, tc0, visited, tested, skipped)
         hits += h
@@ -357,9 +357,10 @@ def _trace_tile(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, 
 
 
 @jit(parallel=True)
-def _launch(tile_fn, grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed,
-            rects, levels, origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces,
-            fresh, final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
+def _launch(tile_fn, band_a, band_b, grids_a, grids_b, which, mode, state, out, basis, geoms,
+            boxes, closed, rects, levels, origin0, spacing0, planes, t_range, tiles, tile_start,
+            tile_pieces, fresh, final, close, exit_t, exit_piece, exit_level, visited, tested,
+            skipped):
     """:func:`trace_pieces` compiled: ``tile_fn`` is the pair's :func:`_trace_tile` as a
     first-class function, so this one function serves every pair and compiles without the
     tile's code (the parallel loop's library would link and optimize it all again)."""
@@ -367,8 +368,8 @@ def _launch(tile_fn, grids_a, grids_b, which, mode, state, out, basis, geoms, bo
     # The parallel loop only hands out tiles: its body stays a single call (small parallel
     # passes and compile time, as in the driver).
     for n in prange(tiles.shape[0]):
-        hits[n] = tile_fn(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
-                          closed, rects, levels, origin0, spacing0, planes, t_range,
+        hits[n] = tile_fn(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis,
+                          geoms, boxes, closed, rects, levels, origin0, spacing0, planes, t_range,
                           tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
                           close, exit_t, exit_piece, exit_level, visited, tested, skipped)
     return hits.sum()
@@ -432,40 +433,42 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     int
         Rays the closure ended on a face.
     """
-    grid_class = grids_a._list_type.item_type[0].instance_class
     args = (grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects, levels,
             origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh, final,
             close, exit_t, exit_piece, exit_level, visited, tested, skipped)
-    return call_with_first_class(_launch, _pair_tile(grid_class, type(mode)), _tile_types, args)
+    return call_with_first_classes(_launch, _launch_functions, args)
 
 
-def _tile_types(kinds: tuple) -> tuple:
-    """The argument types of :func:`_trace_tile` from those of :func:`trace_pieces`: the
-    tile's first row and column in place of ``tiles``."""
-    return (*kinds[:16], *kinds[17:19], numba.int64, numba.int64, *kinds[19:])
+def _launch_functions(kinds: tuple) -> tuple:
+    """The functions :func:`_launch` calls, as first-class values, from the Numba types
+    ``kinds`` of :func:`trace_pieces`' arguments: the tile function, then the pair's band
+    (:func:`.driver.pair_band`) for the kernel grids of each of the two lists.
+
+    Passed as values, neither is linked into its caller: the band is the in-memory renderer's
+    compiled code, called once per piece and tile, and the tile function compiles without it
+    (linked in, its library was optimized and translated again with the whole band in it, for
+    every pair and grid type: the costliest compiles of a pyramid's first frame). One tile
+    function serves every pair; its compiled code differs by the argument types only."""
+    grids_a, grids_b, _, mode = kinds[:4]
+    grid_class = grids_a.item_type[0].instance_class
+    band = pair_band(grid_class, mode.instance_class)
+    bands = tuple(first_class(band, _band_types(grids.item_type, kinds)) for grids in
+                  (grids_a, grids_b))
+    tile_types = (*(numba.typeof(b) for b in bands), *kinds[:16], *kinds[17:19], numba.int64,
+                  numba.int64, *kinds[19:])
+    return (first_class(_trace_tile, tile_types), *bands)
 
 
-#: (grid class, mode class) -> the pair's :func:`_trace_tile`, calling the pair's band.
-_TILES: dict[tuple[type, type], Any] = {}
-
-
-def _pair_tile(grid_class: type, mode_class: type) -> Any:
-    """:func:`_trace_tile` for one (model, mode) pair: its functions copied down to
-    :func:`_piece_pixels` with ``_trace_band`` bound to the pair's compiled band
-    (:func:`.driver.pair_band`), each copy cached on disk under its own name. The band is a
-    real call, once per piece and tile, and its compiled code is the in-memory renderer's: the
-    launch no longer compiles its own copy of the per-pixel loop for each of its grid types
-    (that copy made it the test suite's costliest compile, 50-150 s per pair)."""
-    key = (grid_class, mode_class)
-    tile = _TILES.get(key)
-    if tile is None:
-        band = pair_band(grid_class, mode_class)
-        if band is _trace_band:  # a pair the registries do not know: the generic loop
-            tile = _trace_tile
-        else:
-            suffix = f"{grid_class.__name__}_{mode_class.__name__}"
-            pixels = rebound(_piece_pixels, {"_trace_band": band}, suffix)
-            piece = rebound(_piece_tile, {"_piece_pixels": pixels}, suffix)
-            tile = rebound(_trace_tile, {"_piece_tile": piece}, suffix)
-        _TILES[key] = tile
-    return tile
+def _band_types(pair: Any, kinds: tuple) -> tuple:
+    """The argument types of the band :func:`_piece_pixels` calls for the grids of a list
+    whose items (``(kernel, blocks)``) have the Numba type ``pair``, from the types ``kinds``
+    of :func:`trace_pieces`' arguments."""
+    kernel, blocks = pair[0], pair[1]
+    mode, state, out, basis, geoms = kinds[3], kinds[4], kinds[5], kinds[6], kinds[7]
+    planes, t_range, visited, tested, skipped = kinds[14], kinds[15], *kinds[25:28]
+    scr, mscr = scratch_types(kernel, mode)
+    index, flag = numba.int64, numba.boolean
+    geom = geoms.copy(ndim=1, layout="C")  # a row of the pieces' placements
+    return (kernel, mode, blocks, state, out, basis, geom, planes, t_range, t_range,
+            index, index, index, index, index, flag, flag, flag, flag, visited, tested, skipped,
+            scr, mscr, numba.float64[::1], numba.int64[::1])
