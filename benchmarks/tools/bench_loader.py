@@ -1,6 +1,6 @@
 """Loading one view's cut to completion from a pyramid store (issue 10).
 
-    python benchmarks/bench_loader.py STORE.zarr [--budget 256MiB] [--src DIR]
+    python benchmarks/tools/bench_loader.py STORE.zarr [--budget 256MiB] [--src DIR]
 
 A :class:`~splinecast.multires.stream.BrickStream` at lod 1, 1024x768, zoom 2, load budget 64,
 isosurface filter at 128 (the synthetic volume of ``bench_multires.py``): frames until the cut

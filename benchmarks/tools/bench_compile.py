@@ -6,7 +6,7 @@ first render at 128x128 (process CPU time: compilation of the pair's kernel, plu
 and the mode's preparation kernels, the same in both builds), then the median of 3 renders
 after it (steady). The builds take turns, run by run, so both see the same machine load.
 
-    NUMBA_NUM_THREADS=1 taskset -c 1 python benchmarks/bench_compile.py --old /tmp/dvr-old2 \\
+    NUMBA_NUM_THREADS=1 taskset -c 1 python benchmarks/tools/bench_compile.py --old /tmp/dvr-old2 \\
         --pairs trilinear:dvr --rounds 2
 """
 
@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 REPO = HERE.parent
 
 

@@ -10,7 +10,7 @@ builds see the same machine load, round by round. Each worker also saves the fra
 parent reports whether the two builds' are bit-identical
 and their largest difference.
 
-    python benchmarks/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip|dvr]
+    python benchmarks/tools/bench_iso_builds.py --old /tmp/iso-old [--rounds 5] [--mode iso|mip|dvr]
         [--dvr-sampling OLD,NEW] [--dvr-step VOXELS] [--mip-step VOXELS] [--mip-method M]
         [--models trilinear,bspline1,bspline2,bspline3]
         [--scenes LABELS] [--view orbit|far|away|inside] [--stem iso_builds]
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 REPO = HERE.parent
 SIZE = (1024, 768)
 #: The comparison suite's MRI (isovalue 80), read from the shared data folder.
@@ -226,7 +226,8 @@ def main() -> None:
     what = {"iso": "Isosurface", "mip": "MIP", "dvr": "DVR"}[args.mode]
     kept = {"iso": "depths", "mip": "values", "dvr": "colours"}[args.mode]
     lines = [f"# {what} frames, two builds side by side ({args.stem})", "",
-             f"Machine: {machine}. Command: `python benchmarks/bench_iso_builds.py --old <checkout>"
+             f"Machine: {machine}. Command: `python benchmarks/tools/bench_iso_builds.py"
+             " --old <checkout>"
              f" --rounds {args.rounds} --mode {args.mode}"
              + (f" --dvr-sampling {args.dvr_sampling}" if args.mode == "dvr" else "")
              + (f" --dvr-step {args.dvr_step:g}" if args.dvr_step else "")

@@ -25,7 +25,8 @@ instrumented frame is slower than the real one (both are reported); the counts a
 comparing phases, not for adding up to the frame time. The time-stamp counter's rate is
 measured against the wall clock. Example (one thread: the counts are per ray anyway)::
 
-    NUMBA_NUM_THREADS=1 python benchmarks/cycle_breakdown.py --scene "sphere SDF 128^3" --mode iso
+    NUMBA_NUM_THREADS=1 python benchmarks/tools/cycle_breakdown.py \\
+        --scene "sphere SDF 128^3" --mode iso
 """
 
 from __future__ import annotations
@@ -43,9 +44,10 @@ from typing import Any
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
+sys.path.insert(0, str(REPO / "benchmarks" / "tools"))
 from _kernel_args import MODE_CLASSES, add_scene_arguments  # noqa: E402
 
 #: Text inserted into ``_trace_pixel``'s source: (anchor, text, where), ``where`` being
@@ -281,7 +283,7 @@ def main() -> None:
                                          "without": traced & ~produced, "all traced": traced})
     slug = re.sub(r"[^a-z0-9]+", "_", args.scene.lower()).strip("_")
     out = Path(args.out or REPO / "benchmarks" / "results" / f"cycles_{args.mode}_{slug}")
-    command = " ".join(["python benchmarks/cycle_breakdown.py", f'--scene "{args.scene}"',
+    command = " ".join(["python benchmarks/tools/cycle_breakdown.py", f'--scene "{args.scene}"',
                         f"--mode {args.mode}", f"--model {args.model}", f"--size {args.size}"])
     info = {"scene": args.scene, "mode": args.mode, "model": args.model, "size": args.size,
             "command": command, "machine": describe()["cpu"], "threads": numba.get_num_threads(),

@@ -7,12 +7,12 @@ the nesting depth (a compile inside another one has depth > 0). Each pytest proc
 own file; run as a script it sums them up by function, by test file and by signature.
 
     mkdir -p /tmp/cprof
-    COMPILE_PROFILE_DIR=/tmp/cprof PYTHONPATH=benchmarks python -m pytest -p compile_profile
-    python benchmarks/compile_profile.py /tmp/cprof
+    COMPILE_PROFILE_DIR=/tmp/cprof PYTHONPATH=benchmarks/tools python -m pytest -p compile_profile
+    python benchmarks/tools/compile_profile.py /tmp/cprof
 
-Session 25 found with it that the cut launch was compiled for both (float32, float32) and
-(float32, float64) grid lists and that one test file used float64 stores where every other
-used float32: one specialisation per pair became two or three.
+It found, for example, a kernel compiled for both (float32, float32) and (float32, float64) grid
+lists because one test file used float64 stores where every other used float32: one
+specialisation per pair had become two or three.
 """
 
 from __future__ import annotations

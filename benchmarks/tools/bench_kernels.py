@@ -7,7 +7,7 @@ machine conditions, and reports medians after JIT warm-up and the ratio new / ba
 the baseline cannot render (modes it did not support for a model) are measured for the new
 build only.
 
-    python benchmarks/bench_kernels.py --baseline /tmp/old/src [--quick] [--json PATH]
+    python benchmarks/tools/bench_kernels.py --baseline /tmp/old/src [--quick] [--json PATH]
         [--only MODEL:MODE,...] [--volumes ml,mri] [--combo-repeats N] [--resume LOG]
         [--clock wall|cpu]
 
@@ -29,7 +29,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 sys.path.insert(0, str(HERE))
 from _machine import describe  # noqa: E402
 

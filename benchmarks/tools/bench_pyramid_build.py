@@ -11,7 +11,7 @@ jobs wall times move with the load; CPU time is the steadier number.
 
 Usage::
 
-    python benchmarks/bench_pyramid_build.py --sizes 512,1024 --baseline main --workdir /tmp/b
+    python benchmarks/tools/bench_pyramid_build.py --sizes 512,1024 --baseline main --workdir /tmp/b
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import tempfile
 import textwrap
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 from _machine import describe  # noqa: E402
@@ -150,7 +150,7 @@ def main() -> None:
     # Sizes measured by earlier runs (e.g. a large one with fewer repeats) are kept.
     kept = json.loads(previous.read_text())["sizes"] if previous.exists() else {}
     results: dict = {"machine": describe(), "baseline": args.baseline,
-                     "command": "python benchmarks/bench_pyramid_build.py --sizes "
+                     "command": "python benchmarks/tools/bench_pyramid_build.py --sizes "
                                 f"{args.sizes} --baseline {args.baseline} --repeats "
                                 f"{args.repeats}", "sizes": kept}
     try:

@@ -10,7 +10,7 @@ steady frame (bricks reused; 64x48 pixels, so the trace is small next to the ove
 pixels (tens of thousands of pieces down to a few hundred): the median steady frame and its
 trace.
 
-Run ``python benchmarks/bench_wavelet_pieces.py --label NAME --json OUT.json [--large]`` once
+Run ``python benchmarks/tools/bench_wavelet_pieces.py --label NAME --json OUT.json [--large]`` once
 per code version, e.g. with ``PYTHONPATH=<old checkout>/src`` for the baseline (the results file
 keeps every label's rows side by side).
 """
@@ -31,7 +31,7 @@ from splinecast.multires.wavelet_lod import select
 from splinecast.multires.wavelet_scene import wavelet_pieces
 from splinecast.multires.wavelet_store import build_wavelet_pyramid
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _machine import describe, median_ms  # noqa: E402
 
 

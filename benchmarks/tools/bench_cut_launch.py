@@ -18,8 +18,8 @@ same cut, after warm-up:
 Medians of wall time and of process CPU time (all threads; on a shared machine the CPU time is
 the steadier of the two, and a parallel region's idle threads count in it).
 
-    python benchmarks/bench_cut_launch.py plain --n 192 --size 256x192 --budget 4MiB
-    python benchmarks/bench_cut_launch.py wavelet --n 128 --size 1024x768 --eps 100,200
+    python benchmarks/tools/bench_cut_launch.py plain --n 192 --size 256x192 --budget 4MiB
+    python benchmarks/tools/bench_cut_launch.py wavelet --n 128 --size 1024x768 --eps 100,200
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 sys.path.insert(0, str(HERE))
 from _machine import describe  # noqa: E402
 
@@ -195,7 +195,8 @@ def main() -> None:
     result = run_plain(args) if args.kind == "plain" else run_wavelet(args)
     result["load_average"] = {"before": list(load_before), "after": list(os.getloadavg())}
     result.update({"machine": describe(), "repeats": args.repeats, "note": args.note,
-                   "command": "python benchmarks/bench_cut_launch.py " + " ".join(sys.argv[1:])})
+                   "command": ("python benchmarks/tools/bench_cut_launch.py "
+                               + " ".join(sys.argv[1:]))})
     out = Path(args.out)
     out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
     out.with_suffix(".md").write_text(markdown(result, result["command"], args.note))

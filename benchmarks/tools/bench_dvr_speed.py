@@ -11,8 +11,8 @@ absolute error against the comparison suite's dense emission-absorption referenc
 (``benchmarks.compare.reference.reference_dvr``, suite transfer function only), the number the
 suite matches quality by (tolerance 1/255).
 
-    NUMBA_NUM_THREADS=1 taskset -c 1 python benchmarks/bench_dvr_speed.py --old /tmp/dvr-old \\
-        --rounds 3
+    NUMBA_NUM_THREADS=1 taskset -c 1 python benchmarks/tools/bench_dvr_speed.py \\
+        --old /tmp/dvr-old --rounds 3
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 REPO = HERE.parent
 
 #: (label, old build's settings, new build's settings); a settings spec is a dict of

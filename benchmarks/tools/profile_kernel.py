@@ -22,7 +22,7 @@ and a kernel that lets perf sample (``perf_event_paranoid`` at most 2 for one's 
 The frame time it reports is inflated by perf's sampling (about 1.5x at 20 kHz here); the
 shares are what to read. Example (one thread, so the samples are the frame's own work)::
 
-    python benchmarks/profile_kernel.py --scene "sphere SDF 128^3" --mode iso --frames 200
+    python benchmarks/tools/profile_kernel.py --scene "sphere SDF 128^3" --mode iso --frames 200
 """
 
 from __future__ import annotations
@@ -40,9 +40,10 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
+sys.path.insert(0, str(REPO / "benchmarks" / "tools"))
 from _kernel_args import MODE_CLASSES, add_scene_arguments  # noqa: E402
 
 #: Largest stretch of code copied from the process, from the band's entry point (the band
@@ -119,7 +120,7 @@ def _report(info: dict, rows: list[tuple[int, int, str]], args: argparse.Namespa
     in_code = sum(c for c, _, _ in rows)
     share = (lambda n: f"{100.0 * n / in_code:.1f}%") if in_code else (lambda n: "-")
     lines = [f"# Instruction-level profile: {args.scene}, {args.mode}, {args.model}", "",
-             f"Command: `python benchmarks/profile_kernel.py --scene \"{args.scene}\" --mode "
+             f"Command: `python benchmarks/tools/profile_kernel.py --scene \"{args.scene}\" --mode "
              f"{args.mode} --model {args.model} --frames {args.frames} --size {args.size}`; "
              f"band of {' x '.join(info['pair'])}, {info['threads']} Numba thread(s), "
              f"{info['frame_ms']:.1f} ms per frame under perf.", "",

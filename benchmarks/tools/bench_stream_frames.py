@@ -1,6 +1,6 @@
 """Frames of a multiresolution scene until its cut is complete, and where each frame's time goes.
 
-    python benchmarks/bench_stream_frames.py STORE.zarr [--budget 256MiB] [--mode iso]
+    python benchmarks/tools/bench_stream_frames.py STORE.zarr [--budget 256MiB] [--mode iso]
         [--frames N] [--src DIR] [--baseline DIR --save NAME]
 
 ``Scene(store, budget=..., lod=1)`` renders one view (the view and modes of
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 
 
 def main() -> None:
@@ -101,7 +101,7 @@ def compare(args: argparse.Namespace) -> None:
     m = result["machine"]
     lines = [f"# Multiresolution frames until the cut is complete ({args.mode}, {args.budget})",
              "", f"Machine: {m['cpu']}, {m['cores']} cores. Store `{args.store}`. Command: "
-             f"`python benchmarks/bench_stream_frames.py STORE --budget {args.budget} --mode "
+             f"`python benchmarks/tools/bench_stream_frames.py STORE --budget {args.budget} --mode "
              f"{args.mode} --baseline OLD/src --save {args.save}` (one run each, one after the "
              "other, warm Numba cache).", "",
              "| source | frames | to complete s | first frame ms | median frame ms | "

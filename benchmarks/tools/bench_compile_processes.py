@@ -7,7 +7,7 @@ reports its first render's wall time. The result is the wall time until all have
 build (``--old``: another checkout, e.g. ``git worktree add --detach /tmp/old <commit>``); the
 builds run one after the other.
 
-    python benchmarks/bench_compile_processes.py --old /tmp/old --processes 4
+    python benchmarks/tools/bench_compile_processes.py --old /tmp/old --processes 4
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 _CHILD = """
 import time
