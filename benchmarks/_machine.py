@@ -73,7 +73,7 @@ def write_results(path: Path, title: str, description: str, header: Sequence[str
     Parameters
     ----------
     path : Path
-        The results' path without a suffix, e.g. ``results/mip_exact_limits``.
+        The results' path without a suffix, e.g. ``results/mip_tolerance``.
     title, description : str
         The markdown's heading and the paragraph under it (how the numbers were taken, the
         command); the machine goes first in that paragraph.

@@ -54,7 +54,7 @@ def _volumes(quick: bool, which: set[str]) -> list[tuple[str, sc.Volume, float, 
 
 def _cases(iso: float, spread: float) -> list[tuple[str, str, dict]]:
     """(model, mode, render keyword arguments): every mode with trilinear, the isosurface of
-    the higher-order models (their MIP and DVR take minutes per frame, results/kernels.md)."""
+    the higher-order models (their MIP and DVR take minutes per frame)."""
     cases = [("trilinear", "iso", {"iso": iso}),
              ("trilinear", "multi-iso", {"iso": [iso - spread, iso, iso + spread]}),
              ("trilinear", "mip", {"mode": "mip"}),
