@@ -175,9 +175,8 @@ class Scene:
         (``None`` if none can).
 
         The box is padded outwards by a millionth of a voxel so rounding can never cut a hit.
-        Rays are clipped to it as to the volume's box (:meth:`Grid.with_domain`); as six clip
-        planes per ray it cost 13-16% of a steady isosurface frame's CPU time
-        (``benchmarks/bench_iso_clip.py``).
+        Rays are clipped to it as to the volume's box (:meth:`Grid.with_domain`), which the slab
+        test does anyway; six clip planes per ray would add their tests to every ray.
         """
         act = flags[0].view(bool)
         if not act.any():

@@ -83,7 +83,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "resolution; default one pixel's angle)")
     render.add_argument("--cut", help="multiscale volumes: which bricks to draw, 'lod' (screen-"
                         "space level of detail, default) or 'error' (transfer-function distortion "
-                        "times importance under the budget, reference 002; dvr and mip)")
+                        "times importance under the budget, Carmona & Froehlich 2011; dvr and mip)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
     add_input_options(render)
@@ -121,7 +121,7 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
 
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
-    """Options of the render modes beyond the single isosurface (issue 5)."""
+    """Options of the render modes beyond the single isosurface."""
     render.add_argument("--mode", default="iso", choices=("iso", "mip", "minip", "dvr"),
                         help="isosurface (default), max/min intensity projection, or DVR")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")

@@ -1,9 +1,10 @@
 """The brick tree a cut is chosen from: flat arrays a pyramid store can fill.
 
-A multiresolution volume is a tree of bricks (reference 002, section 3.1): the leaves are bricks of
-the finest level (level 0, the source data), every inner node is a brick of a coarser level that
-approximates the source region of its children. Every brick has the same voxel count, so any GPU or
-RAM slot holds any brick; the tree is an octree, incomplete at borders (a node has 1 to 8 children).
+A multiresolution volume is a tree of bricks (Carmona & Froehlich 2011, section 3.1): the leaves are
+bricks of the finest level (level 0, the source data), every inner node is a brick of a coarser
+level that approximates the source region of its children. Every brick has the same voxel count, so
+any GPU or RAM slot holds any brick; the tree is an octree, incomplete at borders (a node has 1 to 8
+children).
 
 :class:`BrickTree` describes such a tree with flat numpy arrays and nothing else (no voxels, no
 file handles), so the cut algorithms run on it without a store, a renderer or a transfer function:

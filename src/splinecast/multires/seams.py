@@ -48,7 +48,7 @@ Cost while a cut refines
     to it, and the grid the renderer built from it, stay valid). The pieces within reach come
     from a k-d tree per class of box sizes, and nested models subdivide once per source array
     with per-axis matrices. The plan's work is then proportional to the bricks that arrived,
-    not to the cut (``benchmarks/bench_stream_frames.py``).
+    not to the cut (``benchmarks/tools/bench_stream_frames.py`` times it frame by frame).
 """
 
 from __future__ import annotations

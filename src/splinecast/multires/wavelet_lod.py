@@ -1,4 +1,4 @@
-"""View-dependent selection of wavelet chunks (reference 000, §4.2 and §4.4, Algorithm 1).
+"""View-dependent selection of wavelet chunks (Steinberger 2010, §4.2 and §4.4, Algorithm 1).
 
 Per chunk ``(j, idx)`` of ``k^3`` level-``j`` nodes (:mod:`.wavelet_layout`), three conditions
 decide whether its details (the level-``j + 1`` details it owns) are added — the chunk is

@@ -1,4 +1,4 @@
-"""A scene of a spline-wavelet store: view-dependent chunks rendered exactly (reference 000, §4).
+"""A scene of a spline-wavelet store: view-dependent chunks rendered exactly (Steinberger 2010, §4).
 
 ``sc.Scene(sc.read("x.zarr"), lod=ε)`` of a store written with ``kind="wavelet"`` returns a
 :class:`WaveletScene` (registered in ``splinecast/__init__.py``). Per frame it

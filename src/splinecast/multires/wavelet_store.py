@@ -1,4 +1,4 @@
-"""Spline-wavelet pyramids in a Zarr store: written streamed, read lazily (reference 000, §4).
+"""Spline-wavelet pyramids in a Zarr store: written streamed, read lazily (Steinberger 2010, §4).
 
 ``sc.build_pyramid(src, "x.zarr", kind="wavelet", degree=3)`` (``splinecast pyramid SRC -o
 x.zarr --wavelet 3``) runs :func:`.wavelet_transform.decompose` block by block with a
