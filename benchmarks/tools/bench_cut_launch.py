@@ -1,6 +1,6 @@
 """Per-piece overhead of the cut renderer: one launch per frame against one call per piece.
 
-Issues 10 and 12: a multiresolution frame is traced through many bricks (pieces). The cut
+A multiresolution frame is traced through many bricks (pieces), pyramid or wavelet. The cut
 renderer used to call the segment entry point once per piece (screen rectangle, tile camera,
 state copied out and back, a parallel launch); it now traces all pieces in one compiled launch
 (:mod:`splinecast.render.pieces_driver`). Both paths are still in the code

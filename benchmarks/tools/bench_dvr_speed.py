@@ -37,7 +37,7 @@ CASES = [
     ("no settings (the default)", None, None),
     ("step 1 (what the suite picks)", {"step": 1.0}, {"step": 1.0}),
     # The per-piece default against the fixed-step ("ray") default, both at two voxels (the
-    # suite's coarsest step since issue 15).
+    # comparison suite tries).
     ("pieces against ray, step 2, termination",
      {"step": 2.0, "sampling": "pieces", "termination": 1.0 - 2.0**-10},
      {"step": 2.0, "sampling": "ray", "termination": 1.0 - 2.0**-10}),
@@ -175,7 +175,7 @@ def _write(rows, args, builds, uptimes) -> None:
            "clock": "process CPU time (one Numba thread when NUMBA_NUM_THREADS=1)"}
     path = HERE / "results" / f"{args.stem}.json"
     path.write_text(json.dumps(out, indent=1))
-    lines = [f"# DVR before/after, side by side ({args.stem}; issue 15, item 4)", "",
+    lines = [f"# DVR before/after, side by side ({args.stem})", "",
              f"Machine: {out['machine']}", "",
              f"Old: {old_head} (`{args.old}`); new: {head} (this checkout, uncommitted changes "
              f"included if any). {args.size}, `Camera.orbit(azimuth=30, elevation=20)`, colour "

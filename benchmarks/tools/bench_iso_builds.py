@@ -36,7 +36,9 @@ HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 REPO = HERE.parent
 SIZE = (1024, 768)
 #: The comparison suite's MRI (isovalue 80), read from the shared data folder.
-MRI = REPO.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
+sys.path.insert(0, str(HERE))
+from _machine import MRI  # noqa: E402
+
 #: (label, demo name or file, size): the comparison suite's scenes.
 SCENES = (("marschner-lobb 128^3", "marschner-lobb", 128), ("sphere SDF 128^3", "sphere", 128),
           ("torus SDF 128^3", "torus", 128), ("marschner-lobb 256^3", "marschner-lobb", 256),

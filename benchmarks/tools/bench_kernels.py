@@ -1,4 +1,4 @@
-"""Frame times of every model in every mode, side by side with an earlier build (issue 9).
+"""Frame times of every model in every mode, side by side with an earlier build.
 
 Two worker processes, one importing this checkout's splinecast and one importing a baseline
 source tree (``--baseline DIR/src``, e.g. a ``git worktree`` of an earlier commit), prepare the
@@ -15,7 +15,7 @@ build only.
 instead of measuring those cases again; the slow combinations (B-spline and type-6 MIP and DVR
 take minutes per 1024x768 frame on one core) can run with fewer repeats (``--combo-repeats``).
 
-Volumes: Marschner-Lobb 256^3 (iso 0.5) and the MNI152 MRI from ../shared/data (iso 80) when
+Volumes: Marschner-Lobb 256^3 (iso 0.5) and the MNI152 MRI (``_machine.MRI``; iso 80) when
 present; images 1024x768 (``--quick``: 64^3 and 256x192).
 """
 
@@ -31,9 +31,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]  # benchmarks/
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
-
-MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
+from _machine import MRI, describe  # noqa: E402
 
 # The worker: reads one JSON request per line, answers with the times in ms. It uses only the
 # public API that both builds share.

@@ -1,4 +1,4 @@
-"""Loading one view's cut to completion from a pyramid store (issue 10).
+"""Loading one view's cut to completion from a pyramid store.
 
     python benchmarks/tools/bench_loader.py STORE.zarr [--budget 256MiB] [--src DIR]
 

@@ -91,7 +91,7 @@ def markdown(r: dict) -> str:
     m = r["machine"]
     mib = 2**20
     lines = [
-        "# Pyramid build: raw memory-mapped uint8 -> OME-Zarr pyramid (issue 14)",
+        "# Pyramid build: raw memory-mapped uint8 -> OME-Zarr pyramid",
         "",
         f"Machine: {m['cpu']}, {m['cores']} cores; shared with other jobs (load average "
         f"{r['load_before'][0]:.1f} before / {r['load_after'][0]:.1f} after), so wall times are "

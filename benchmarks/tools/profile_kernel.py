@@ -15,7 +15,7 @@ disassembles it with ``objdump`` and writes:
   kB, machine-specific: git ignores it).
 
 Reading the hot windows against the source is manual (the code has no line table), but the
-shares answer the questions issue 15 asks of a missed target: how much is the walk, the root
+shares answer the questions a missed speed target raises: how much is the walk, the root
 refinement, the background writes. Needs ``perf`` and ``objdump`` (``scripts/install_profiling.sh``)
 and a kernel that lets perf sample (``perf_event_paranoid`` at most 2 for one's own process).
 
