@@ -286,8 +286,9 @@ class Scene:
             :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).
         dvr : DVRSettings, optional
             Step, pre-integration, adaptive step, early termination, shading of ``mode="dvr"``
-            (default :data:`splinecast.render.dvr.DEFAULT_SETTINGS`: segments per ray piece up
-            to one voxel long, rays stopped at opacity 1 - 2^-10).
+            (default :data:`splinecast.render.dvr.DEFAULT_SETTINGS`: a sample every voxel from
+            the ray's entry, pre-integrated segments between them, rays stopped at opacity
+            1 - 2^-10).
         outputs : list of str, optional
             The Frame's buffers to fill, from ``"rgba"``, ``"depth"``, ``"position"``,
             ``"normal"``, ``"face"``, ``"value"`` (MIP/minIP) and ``"stats"`` (the per-ray

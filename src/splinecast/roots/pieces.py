@@ -72,7 +72,7 @@ PolyN = namedtuple("PolyN", ["coeffs", "n", "power", "finder", "iterations", "to
 _MAX_DEGREE = 9
 #: A product instead of a division by 3 in the Bernstein coefficients of a power-form cubic:
 #: LLVM keeps a division by a constant that is not a power of two, and its latency stood out
-#: in isosurface profiles (2% of a sphere's frame). The coefficients only bound the cubic,
+#: in isosurface profiles. The coefficients only bound the cubic,
 #: with margins far above the one rounding this changes.
 _THIRD = 1.0 / 3.0
 _STACK = 48          # subdivision depth-first stack: depth + 2 entries suffice
