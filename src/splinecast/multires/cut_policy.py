@@ -15,7 +15,7 @@ the screen-space level-of-detail cut of :mod:`.lod`. This module only connects t
    the children of a brick own exactly its voxels; its approximation is the edge-clamped trilinear
    reconstruction of its level at the source voxel centres, through the level's own index map
    (:meth:`~.octree.BrickOctree.level_map`: the vertex-centred binomial pyramid of
-   :mod:`.pyramid` or another store's translation);
+   :mod:`~splinecast.multires.pyramid` or another store's translation);
 3. :class:`ErrorCut`: per frame, the metric's view (eye = the camera position, the optional point of
    interest) and transfer function are set (a new transfer function recomputes the hull's D from the
    histograms and repairs the cut), the updater makes one step, and the new cut becomes a

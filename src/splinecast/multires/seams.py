@@ -27,8 +27,7 @@ Exact where the finer level can represent the coarser function (*nested* models)
     rounding): no crack in any mode. Several levels meeting at an edge or a corner are handled
     by the coarse-to-fine order (the finer coarse piece was itself restricted to the coarsest).
 
-Approximate for the others (``bspline2``, ``qss``, ``s31``) and for pyramids not built by
-splinecast (levels offset by half a voxel)
+Approximate for ``bspline2``, ``qss`` and ``s31``, and for pyramids offset by half a voxel
     Their coarse function is not in the finer level's space (even-degree knots and type-6 cubes
     lie between voxel centres, so the levels' pieces do not nest). The elements near the face get
     the coarse function's *values* there; the two sides then differ on the face by the fine
