@@ -92,9 +92,9 @@ def test_default_settings_meet_the_suites_tolerance(cases, scenes, name):
     """``mode="dvr"`` without settings: within 1/255 of the dense integral in mean absolute
     error (the comparison suite's quality criterion), and within 10/255 at every visible pixel
     (the fixed-step default on these small volumes, whose field bends within a voxel, measured
-    5.4/255 and 9.3/255; the per-piece sampling it replaced, 5.0/255 and 4.1/255:
-    docs/accuracy.rst); early termination changes no pixel by more than the transparency it leaves.
-    """
+    5.4/255 and 9.3/255; the per-piece sampling it replaced, 5.0/255 and 4.1/255: README, "Use it
+    from Python"); early termination changes no pixel by more than the transparency it
+    leaves."""
     case, scene = cases[name], scenes[name]
     frame = scene.render(case.camera, mode="dvr", tf=case.tf, shading=BLACK)
     assert frame.stats["sampling"] == DEFAULT_SETTINGS.sampling
