@@ -26,7 +26,7 @@ test: $(STAMP) $(BENCH_STAMP) $(BROWSER_STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
 
-# Comparison suite against VTK and scikit-image (the benchmarks/compare package, issue 6).
+# Comparison suite against VTK and scikit-image (the benchmarks/compare package).
 # Optional for `make test`: system libraries for offscreen OpenGL (scripts/install_bench.sh) and the
 # `bench` extra from PyPI (~10 s of wheels); if either fails the VTK tests skip with the reason.
 # The stamp is written only when both succeed, so a failure is retried by the next `make test`
@@ -39,7 +39,7 @@ $(BENCH_STAMP): pyproject.toml scripts/install_bench.sh scripts/apt_install.sh $
 		echo "optional comparison set-up incomplete: the VTK/scikit-image tests will skip" \
 			"with the reason; the next 'make test' tries again"; fi
 
-# Headless Chromium for the viewer's browser tests (issue 13), optional for `make test`: Debian's
+# Headless Chromium for the viewer's browser tests, optional for `make test`: Debian's
 # chromium via apt (scripts/install_browser.sh); if it cannot be installed those tests skip with
 # the reason. As for the bench stamp, only success is remembered: a failure is retried next time.
 $(BROWSER_STAMP): scripts/install_browser.sh scripts/apt_install.sh $(STAMP)
@@ -60,11 +60,13 @@ compare-quick: bench-deps
 	$(PY) -m benchmarks.compare --quick
 
 # Documentation site into docs/_build/html (offline; runs every gallery example for its pictures).
+# Warnings are errors and every cross-reference must resolve (-W -n); tests/test_docs.py builds
+# the same site without running the gallery.
 docs: $(STAMP)
-	$(PY) -m sphinx -b html -q docs docs/_build/html
+	$(PY) -m sphinx -b html -W -n --keep-going -q docs docs/_build/html
 	@echo "docs: $(CURDIR)/docs/_build/html/index.html"
 
-# Long fuzzing run (issue 17): hostile files of every format and render options at their edges,
+# Long fuzzing run: hostile files of every format and render options at their edges,
 # each in a forked child under memory, address-space and time caps; new kernels may compile.
 # The short run (300 cases) is part of `make test` (tests/fuzz/test_short_run.py).
 FUZZ_CASES ?= 20000
@@ -76,7 +78,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 
 clean:
-	rm -rf $(VENV) build src/*.egg-info docs/_build docs/generated docs/gallery
+	rm -rf $(VENV) build src/*.egg-info docs/_build docs/generated docs/gallery docs/sg_execution_times.rst
 
 # Numba's on-disk cache misses changes in functions inlined from other modules: drop it after edits.
 clean-cache:

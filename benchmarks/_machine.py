@@ -13,6 +13,13 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+#: The real volume of the benchmarks' MRI rows: the MNI152 T1 1 mm template
+#: (``mni152_t1_1mm.nii.gz``). ``SPLINECAST_BENCH_MRI`` names the file; without it, the
+#: ``mni152_t1_1mm.nii.gz`` of the ``shared/data`` folder beside the checkout is used when it
+#: exists. Benchmarks leave the MRI rows out when the file is missing.
+MRI = Path(os.environ.get("SPLINECAST_BENCH_MRI")
+           or Path(__file__).resolve().parents[2] / "shared" / "data" / "mni152_t1_1mm.nii.gz")
+
 
 def describe() -> dict[str, Any]:
     """CPU model, core count and library versions of this run."""
@@ -73,7 +80,7 @@ def write_results(path: Path, title: str, description: str, header: Sequence[str
     Parameters
     ----------
     path : Path
-        The results' path without a suffix, e.g. ``results/mip_exact_limits``.
+        The results' path without a suffix, e.g. ``results/mip_tolerance``.
     title, description : str
         The markdown's heading and the paragraph under it (how the numbers were taken, the
         command); the machine goes first in that paragraph.

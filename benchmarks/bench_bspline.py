@@ -1,4 +1,4 @@
-"""B-spline isosurface benchmark (issue 4): reference 000's tables 3.1, 3.2 and 6.2 on the CPU.
+"""B-spline isosurface benchmark: Steinberger 2010's tables 3.1, 3.2 and 6.2 on the CPU.
 
 1. Composition (table 3.1): tri-cubic cell polynomial composed with random ray segments in
    scaled Bernstein form, power form and term-by-term ("naive"); time per composition (including
@@ -39,10 +39,9 @@ from splinecast.roots.bernstein import bernstein_to_power
 from splinecast.roots.first_root import DEFAULT_ITERATIONS, ROOT_FINDERS, first_root_by_id
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe, median_ms  # noqa: E402
+from _machine import MRI, describe, median_ms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 THESIS_FPS = {1: 4.6, 2: 2.8, 3: 1.5}
 
 
@@ -212,7 +211,7 @@ def bench_fps(cases, size: tuple[int, int], repeats: int) -> list[dict]:
 def markdown(res: dict) -> str:
     m = res["machine"]
     lines = [
-        "# B-spline isosurfaces (issue 4): reference 000 tables 3.1, 3.2, 6.2 on the CPU", "",
+        "# B-spline isosurfaces: Steinberger 2010 tables 3.1, 3.2, 6.2 on the CPU", "",
         f"Machine: {m['cpu']}, {m['cores']} cores, numba {m['versions']['numba']} "
         f"({m['numba_threads']} threads). Command: `{res['command']}`. Medians after warm-up; "
         "the machine is shared, so timings are noisy.", "",

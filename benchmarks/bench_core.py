@@ -1,7 +1,7 @@
-"""Core trilinear isosurface benchmark (issue 2).
+"""Core trilinear isosurface benchmark.
 
-For Marschner–Lobb 128^3, the MNI152 MRI in ../shared/data (when present) and a 256^3 seeded noise
-volume, at 512x512 and 1024x768, measures after JIT warm-up:
+For Marschner–Lobb 128^3, the MNI152 MRI (when present, see ``_machine.MRI``) and a 256^3 seeded
+noise volume, at 512x512 and 1024x768, measures after JIT warm-up:
 
 * median ms per frame (wall time of ``Scene.render``) and rays per second;
 * ms per isovalue change (block classification) and ms from a new isovalue to the finished image;
@@ -29,10 +29,9 @@ import numpy as np
 import splinecast as sc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
+from _machine import MRI, describe  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 STEPS = (2.0, 1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125, 0.015625)
 
 
@@ -133,7 +132,7 @@ def bench_volume(label: str, volume: sc.Volume, isos: list[float], sizes: list[t
 def markdown(results: dict) -> str:
     m = results["machine"]
     lines = [
-        "# Core benchmark: exact trilinear isosurface (issue 2)",
+        "# Core benchmark: exact trilinear isosurface",
         "",
         f"Machine: {m['cpu']}, {m['cores']} cores, numba {m['versions']['numba']} "
         f"({m['numba_threads']} threads, {m['numba_threading_layer']}), "

@@ -1,8 +1,8 @@
-"""Cut-selection benchmark (issue 11, reference 002 tables 1-3): no rendering involved.
+"""Cut-selection benchmark (Carmona & Froehlich 2011 tables 1-3): no rendering involved.
 
-For the MNI152 MRI in ../shared/data (when present) and synthetic 512^3 and 1024^3 uint8 volumes,
-with bricks of 16^3 and 32^3, on a 2x2x2 mean pyramid computed here slab by slab (the 1024^3
-source lives in a temporary memory-mapped file; the real store comes from issue 10):
+For the MNI152 MRI (when present, see ``_machine.MRI``) and synthetic 512^3 and 1024^3 uint8
+volumes, with bricks of 16^3 and 32^3, on a 2x2x2 mean pyramid computed here slab by slab (the
+1024^3 source lives in a temporary memory-mapped file, not an OME-Zarr store):
 
 * **Table 1**: pyramid and histogram build times, histogram bytes and their overhead over the
   source bytes (paper: 4-5%);
@@ -63,10 +63,9 @@ from splinecast.multires.cut_update import CutUpdater
 from splinecast.multires.mean_pyramid import mean_downsample
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
+from _machine import MRI, describe  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 MRI_TF = HERE.parent / "examples" / "tf-mri.json"
 SYNTH_TF = sc.TransferFunction([(70, 0.0), (110, 0.25), (150, 0.02), (190, 0.7), (255, 0.9)],
                                domain=(0, 255), colormap="viridis")
@@ -388,7 +387,7 @@ def prepare(name: str, tmp: Path) -> dict:
 def markdown(results: dict) -> str:
     m = results["machine"]
     lines = [
-        "# Cut selection and updates (reference 002)", "",
+        "# Cut selection and updates (Carmona & Froehlich 2011)", "",
         f"Machine: {m['cpu']}, {m['cores']} logical cores (shared with other jobs: timings are "
         f"noisy). Command: `{results['command']}`. {results['frames']} frames per tree "
         f"(half moving the interest point, half editing the transfer function); Table 2 and 3 "
@@ -731,7 +730,7 @@ def _image_figure(name: str, reference: np.ndarray, panels: list, png: Path) -> 
 def images_markdown(results: dict) -> str:
     m = results["machine"]
     lines = ["# Images at the same memory budget: naive and improved error cuts vs the "
-             "level-of-detail cut (reference 002, Fig. 9)", "",
+             "level-of-detail cut (Carmona & Froehlich 2011, Fig. 9)", "",
              f"Machine: {m['cpu']}, {m['cores']} logical cores (shared with other jobs: times "
              f"are noisy). Command: `{results['command']}`.", "",
              "DVR (trilinear, step 0.5 voxel) of the multiresolution renderer, 16^3 bricks, "

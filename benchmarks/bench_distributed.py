@@ -1,4 +1,4 @@
-"""Sort-first scale-out on Dask (issue 14): scaling from 1 to 2 single-threaded workers, overhead
+"""Sort-first scale-out on Dask: scaling from 1 to 2 single-threaded workers, overhead
 against the local 2-thread render, and a projection to a 64-worker cluster.
 
 On a LocalCluster of single-threaded worker processes (``splinecast.distributed.local_cluster``,
@@ -428,7 +428,7 @@ def markdown_sort_last(r: dict) -> str:
     mib = 2 ** 20
     bytes_read = sum(x["bytes_read"] for x in r["loads"])
     lines = [
-        "# Distributed benchmark: sort-last on Dask (issue 14)",
+        "# Distributed benchmark: sort-last on Dask",
         "",
         f"Machine: {m['cpu']}, {m['cores']} cores, numba {m['versions']['numba']}, load "
         f"average {r['load_average_before'][0]:.1f} before / {r['load_average_after'][0]:.1f} "
@@ -487,7 +487,7 @@ def markdown(r: dict) -> str:
     m, med, mo = r["machine"], r["median_s"], r["model"]
     (mw, mh), (fw, fh) = r["movie_size"], r["frame_size"]
     lines = [
-        "# Distributed benchmark: sort-first on Dask (issue 14)",
+        "# Distributed benchmark: sort-first on Dask",
         "",
         f"Machine: {m['cpu']}, {m['cores']} cores, numba {m['versions']['numba']}, load "
         f"average {r['load_average_before'][0]:.1f} before / {r['load_average_after'][0]:.1f} "

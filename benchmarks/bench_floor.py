@@ -1,9 +1,9 @@
-"""Time per ray above the floor, and bytes written per pixel, of every mode (issue 15).
+"""Time per ray above the floor, and bytes written per pixel, of every mode.
 
 The floor (:mod:`floor_kernel`) generates each pixel's ray, clips it to the volume's box and
-writes one colour: what any ray caster pays before it does anything with the ray. For every
-mode (iso, multi-iso, MIP, DVR) and a few models, at 1024x768 on Marschner-Lobb 256^3 and the
-MNI152 MRI (../shared/data, when present), this measures after JIT warm-up the median frame time
+writes one colour: what any ray caster pays before it does anything with the ray. For every mode
+(iso, multi-iso, MIP, DVR) and a few models, at 1024x768 on Marschner-Lobb 256^3 and the MNI152 MRI
+(when present, see ``_machine.MRI``), this measures after JIT warm-up the median frame time
 
 * with every output (the default ``Scene.render``), and
 * with colour only (``outputs=("rgba",)``: what the viewer and the movie writer ask for),
@@ -32,10 +32,9 @@ import splinecast as sc
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _machine import describe  # noqa: E402
+from _machine import MRI, describe  # noqa: E402
 from floor_kernel import floor_render  # noqa: E402
 
-MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 COLOUR = ("rgba",)
 BUFFERS = ("rgba", "depth", "position", "normal", "face", "cells_visited", "cells_tested",
            "blocks_skipped", "value")
@@ -54,7 +53,7 @@ def _volumes(quick: bool, which: set[str]) -> list[tuple[str, sc.Volume, float, 
 
 def _cases(iso: float, spread: float) -> list[tuple[str, str, dict]]:
     """(model, mode, render keyword arguments): every mode with trilinear, the isosurface of
-    the higher-order models (their MIP and DVR take minutes per frame, results/kernels.md)."""
+    the higher-order models (their MIP and DVR take minutes per frame)."""
     cases = [("trilinear", "iso", {"iso": iso}),
              ("trilinear", "multi-iso", {"iso": [iso - spread, iso, iso + spread]}),
              ("trilinear", "mip", {"mode": "mip"}),

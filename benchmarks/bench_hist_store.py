@@ -1,8 +1,8 @@
-"""Cost of storing the error cut's brick histograms with the pyramid (issue 11, item 1).
+"""Cost of storing the error cut's brick histograms with the pyramid.
 
-For the MNI152 MRI in ../shared/data (when present) and a synthetic 256^3 uint8 volume (the one of
-``bench_cut.py``), builds the 16^3-brick pyramid without and with ``histograms=True`` side by side
-(alternating, after a warm-up build that compiles the kernels), ``--repeat`` times each, and
+For the MNI152 MRI (when present, see ``_machine.MRI``) and a synthetic 256^3 uint8 volume (the one
+of ``bench_cut.py``), builds the 16^3-brick pyramid without and with ``histograms=True`` side by
+side (alternating, after a warm-up build that compiles the kernels), ``--repeat`` times each, and
 reports the median build times, their ratio, the histogram bytes (raw and on disk) against the
 source and against the pyramid's level files, and the time ``ErrorCut`` takes to open the store
 with stored histograms against building them from the levels (a store without the group).

@@ -1,19 +1,19 @@
-"""Render-mode benchmark (issue 5): MIP, DVR and the 3D pre-integration table.
+"""Render-mode benchmark: MIP, DVR and the 3D pre-integration table.
 
-For the MNI152 MRI in ../shared/data (when present) and a 256^3 seeded noise volume at 1024x768,
+For the MNI152 MRI (when present, see ``_machine.MRI``) and a 256^3 seeded noise volume at 1024x768,
 measures after JIT warm-up (median of repeated runs):
 
 * analytic MIP against sampled MIP at the coarsest step (halving from 2 voxels) whose image agrees
   with the analytic one to 1e-3 of the data range, with the time ratio in the same process;
 * DVR (2D/3D pre-integration, 0.5-voxel step) with a constant step and with the opacity-adaptive
   step (h_max = 8 h_min, n = 3), each without and with early ray termination at 0.99
-  (the layout of reference 002, table 4), each walking every cell of the visible blocks
+  (the layout of Carmona & Froehlich 2011, table 4), each walking every cell of the visible blocks
   (``leap=False``) and leaping over cells that hold no sample (``leap=True``), with the
   leap/walk time ratio measured in the same process;
 * the time to build the 3D pre-integration table for n = 64..1024, building every diagonal
-  directly ("naive") and with the reuse recurrences (reference 002, table 5 layout): uniform
-  lengths k = 1..8 (eq. 14) and exponential lengths 2^j, j = 0..K-1, for K = 4 (the same range
-  1..8) and K = 7 (eq. 13).
+  directly ("naive") and with the reuse recurrences (Carmona & Froehlich 2011, table 5 layout):
+  uniform lengths k = 1..8 (eq. 14) and exponential lengths 2^j, j = 0..K-1, for K = 4 (the same
+  range 1..8) and K = 7 (eq. 13).
 
 Run ``python benchmarks/bench_modes.py [--quick] [--parts mip,dvr,tables]``; results go to
 ``benchmarks/results/modes[_quick].json`` and ``.md``. Parts not run keep their previous results
@@ -33,10 +33,9 @@ import numpy as np
 import splinecast as sc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe, median_ms  # noqa: E402
+from _machine import MRI, describe, median_ms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 
 
 def bench_mip(scene: sc.Scene, cam: sc.Camera, repeats: int) -> dict:

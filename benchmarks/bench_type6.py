@@ -1,6 +1,6 @@
-"""Type-6 spline benchmark (issue 3): isovalue change and frame times of s31 and qss.
+"""Type-6 spline benchmark: isovalue change and frame times of s31 and qss.
 
-For Marschner–Lobb 64^3/128^3/256^3, the MNI152 MRI in ../shared/data (when present) and a 256^3
+For Marschner–Lobb 64^3/128^3/256^3, the MNI152 MRI (when present, see ``_machine.MRI``) and a 256^3
 noise volume, measures after JIT warm-up (medians):
 
 * isovalue change split into cube classification, tetrahedron classification, compaction and (for
@@ -31,10 +31,9 @@ import splinecast as sc
 from splinecast.io.synthetic import marschner_lobb_gradient
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe, median_ms  # noqa: E402
+from _machine import MRI, describe, median_ms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-MRI = HERE.parent.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 VARIANTS = [("trilinear", {}), ("qss", {}), ("s31", {}), ("s31", {"precompute": True})]
 
 

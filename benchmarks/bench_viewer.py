@@ -1,4 +1,4 @@
-"""Viewer benchmark (issue 13): interaction latency of `splinecast view`, driven like a user.
+"""Viewer benchmark: interaction latency of `splinecast view`, driven like a user.
 
 For each scene the server runs as its own process (`splinecast view FILE --no-browser`) and a
 WebSocket client (`splinecast.viewer.client.ViewerClient`) drives it:
@@ -15,7 +15,7 @@ frame in this process (median after warm-up), so ``release / direct`` is the vie
 in headless Chromium (Playwright), from the page's own frame log.
 
 Scenes: Marschner-Lobb 256^3 (trilinear and s31 isosurfaces) and the MNI152 MRI from
-../shared/data in DVR (``examples/tf-mri.json``), at 1024x768. ``--quick``: Marschner-Lobb 64^3,
+``_machine.MRI`` in DVR (``examples/tf-mri.json``), at 1024x768. ``--quick``: Marschner-Lobb 64^3,
 512x384, shorter drags (what to run on a busy machine).
 
 Pyramid case (``--only pyramid`` runs just this one): Marschner-Lobb (256^3; ``--quick``
@@ -54,11 +54,10 @@ import splinecast as sc
 from splinecast.viewer.client import ViewerClient
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import describe  # noqa: E402
+from _machine import MRI, describe  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-MRI = ROOT.parent / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 TF_MRI = ROOT / "examples" / "tf-mri.json"
 POINTER_HZ = 60.0
 DEGREES_PER_EVENT = 1.5

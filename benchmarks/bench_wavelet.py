@@ -1,4 +1,4 @@
-"""Spline-wavelet multiresolution benchmark (issue 12): reference 000's Table 6.4 on the CPU.
+"""Spline-wavelet multiresolution benchmark: Steinberger 2010's Table 6.4 on the CPU.
 
 1. Decomposition: time and peak traced memory (``tracemalloc``: numpy's allocations) of the
    in-memory decomposition and of the block-streamed one (memory-mapped source and sink).
@@ -195,7 +195,7 @@ def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
 def markdown(results: dict) -> str:
     m = results["machine"]
     lines = [
-        "# Spline-wavelet LOD (issue 12, reference 000 Table 6.4)",
+        "# Spline-wavelet LOD (Steinberger 2010 Table 6.4)",
         "",
         f"`{results['command']}` — {m['cpu']}, {m['cores']} cores, numba "
         f"{m['versions']['numba']}, {m['numba_threads']} threads. {results['note']}",

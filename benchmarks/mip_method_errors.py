@@ -62,4 +62,7 @@ def main() -> None:
                          f"{r['p99']:.3f}", f"{r['max']:.3f}", f"{r['above_1_255']:.1%}"])
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     main()

@@ -137,4 +137,7 @@ def main() -> None:
         if plotted else ())
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     main()

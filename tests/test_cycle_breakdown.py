@@ -1,4 +1,4 @@
-"""``benchmarks/cycle_breakdown.py``: its probes fit the driver's current source, the
+"""``benchmarks/tools/cycle_breakdown.py``: its probes fit the driver's current source, the
 instrumented band renders the same image as the real one with sensible cycle counts, and its
 summary's arithmetic (checked on made-up counters with hand-computed means)."""
 
@@ -15,7 +15,7 @@ import pytest
 import splinecast as sc
 from splinecast.render import driver
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "tools"))
 import cycle_breakdown as cb  # noqa: E402
 
 

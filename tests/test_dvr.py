@@ -6,12 +6,12 @@ rule; the transfer function is evaluated there from the control points written i
 ``np.interp``, not through ``TransferFunction``, its tables or the renderer's sampling code.
 
 Metric: the largest error over the visible pixels (reference opacity >= 1/255), per RGB channel,
-premultiplied over black -- the README's "within 1/255". Tolerance: 1/255 minus the reference's
+premultiplied over black -- the docs' "within 1/255". Tolerance: 1/255 minus the reference's
 own error bound ``ref_err``, the largest change of the reference when its step is doubled (the
 trapezoid rule is second order, so its error is about a third of that change); ``ref_err`` is
 asserted to stay below 0.1/255.
 
-What holds (README, "Use it from Python"): with 2D pre-integration the largest error is within
+What holds (docs/accuracy.rst): with 2D pre-integration the largest error is within
 1/255 at ``step=0.25`` voxels for transfer functions whose opacity changes gradually over the
 data, and at ``step=0.0625, table_size=1024`` for a thin band of high opacity; the default
 ``step=0.5`` does not reach 1/255 everywhere.
@@ -116,7 +116,7 @@ def test_reference_is_converged_and_sees_the_volume(cases):
         assert case.visible.mean() > 0.25, name
 
 
-# The README's accuracy statement: (case, settings) where the largest error is within 1/255.
+# The docs' accuracy statement: (case, settings) where the largest error is within 1/255.
 MEETS_TARGET = [
     ("ml-ramp", {"step": 0.25}),
     ("noise-ramp", {"step": 0.25}),
@@ -132,8 +132,8 @@ def test_largest_error_is_within_1_255(cases, scenes, name, settings):
 
 
 def test_default_step_does_not_reach_1_255_everywhere(cases, scenes):
-    """Keeps the README honest: it says the default step (0.5) can miss 1/255. If this fails,
-    the default became more accurate: update the README's DVR accuracy sentence."""
+    """Keeps the docs honest: it says the default step (0.5) can miss 1/255. If this fails,
+    the default became more accurate: update docs/accuracy.rst's DVR sentence."""
     errors = {name: case.error(case.render(scenes[name])) for name, case in cases.items()
               if name != "noise-band"}
     assert max(errors.values()) > TARGET, {k: v * 255 for k, v in errors.items()}

@@ -39,7 +39,7 @@ def scenes(cases):
 
 @pytest.mark.parametrize("name", ["ml-ramp", "noise-ramp"])
 def test_ray_sampling_meets_1_255_where_the_grid_does(cases, scenes, name):
-    """The README's accuracy statement (step 0.25 within 1/255) holds for the ray sampling."""
+    """The docs' accuracy statement (step 0.25 within 1/255) holds for the ray sampling."""
     case = cases[name]
     err = case.error(case.render(scenes[name], step=0.25, sampling="ray"))
     assert err <= TARGET - case.ref_err, f"{name}: {err * 255:.3f}/255"

@@ -94,7 +94,7 @@ def test_dvr_converges_to_the_emission_absorption_integral(scene, volume, camera
         return float(np.abs(frame.rgba.reshape(-1, 4)[:, :3] - ref)[visible].max())
     errs = [error(sc.DVRSettings(step=s, table_size=1024)) for s in (1.0, 0.25, 0.0625)]
     assert errs[0] > errs[2] and errs[2] < 0.2 * errs[0] + 1e-4, errs
-    # The largest error at a quarter-voxel step (the README's accuracy statement; the default
+    # The largest error at a quarter-voxel step (the docs' accuracy statement; the default
     # half-voxel step can miss 1/255, see test_dvr.py).
     assert error(sc.DVRSettings(step=0.25)) < 1.0 / 255.0
 

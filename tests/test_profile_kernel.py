@@ -1,5 +1,5 @@
-"""The report of ``benchmarks/profile_kernel.py`` (its perf run is a developer tool; the report's
-arithmetic is checked here on a made-up disassembly with known counts)."""
+"""The report of ``benchmarks/tools/profile_kernel.py`` (its perf run is a developer tool; the
+report's arithmetic is checked here on a made-up disassembly with known counts)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "tools"))
 from profile_kernel import _report  # noqa: E402
 
 

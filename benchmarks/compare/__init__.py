@@ -1,4 +1,4 @@
-"""Side-by-side comparison of splinecast with VTK and scikit-image (issue 6).
+"""Side-by-side comparison of splinecast with VTK and scikit-image.
 
 Run from the repository root::
 

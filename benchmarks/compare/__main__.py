@@ -179,7 +179,7 @@ ISO_LABELS_SHORT = {"splinecast": "splinecast", "splinecast-s31": "splinecast s3
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.compare",
-        description="splinecast vs VTK and scikit-image: speed and image quality (issue 6).")
+        description="splinecast vs VTK and scikit-image: speed and image quality.")
     parser.add_argument("--quick", action="store_true",
                         help="64^3 volumes at 128x128 (the test suite's version)")
     parser.add_argument("--repeats", type=int, default=7, help="timed runs per measurement")

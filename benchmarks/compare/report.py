@@ -23,7 +23,7 @@ def markdown(results: dict[str, Any]) -> str:
     m = results["machine"]
     v = m["versions"]
     lines = [
-        "# How splinecast compares (issue 6)",
+        "# How splinecast compares",
         "",
         f"Machine: {m['cpu']}, {m['cores']} cores; splinecast {v.get('splinecast')}, "
         f"numba {v.get('numba')}, VTK {v.get('vtk')}, scikit-image {v.get('scikit-image')}; "

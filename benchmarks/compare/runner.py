@@ -29,13 +29,11 @@ from floor_kernel import floor_render  # noqa: E402
 
 #: Azimuths of the steady-frame cameras: every timed frame follows a camera rotation.
 ROTATIONS = (40.0, 50.0, 60.0, 70.0)
-#: Sample steps (voxels) tried when matching MIP / DVR quality (coarsest first). Two voxels since
-#: issue 15: pre-integrated segments reach the tolerance there on the suite's volumes, and a
-#: method whose error allows it should be timed at the step a user would pick for that quality.
-#: Three and four since session 41: the pre-integrated segments meet the tolerance at four
-#: voxels on three of the four volumes, and VTK's casters at three on the MRI (every method
-#: gets the same ladder). Four is the longest step the fixed-step loop's screen footprint
-#: takes (a finest block's edge).
+#: Sample steps (voxels) tried when matching MIP / DVR quality (coarsest first): a method whose
+#: error allows a long step should be timed at the step a user would pick for that quality.
+#: Pre-integrated segments meet the tolerance at four voxels on most of the suite's volumes, and
+#: VTK's casters at three on the MRI (every method gets the same ladder). Four is the longest step
+#: the fixed-step loop's screen footprint takes (a finest block's edge).
 VOLUME_STEPS = (4.0, 3.0, 2.0, 1.0, 0.5, 0.25, 0.125)
 #: Image size of the MIP / DVR quality match (the dense reference is costly at full size): the
 #: timing camera at 1/16 of the pixels; the methods render this size directly for the match.

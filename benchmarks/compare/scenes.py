@@ -4,15 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 import splinecast as sc
 from splinecast.io import synthetic
 
-#: The MRI of the shared data folder (``../shared/data`` relative to the repository).
-MRI = Path(__file__).resolve().parents[3] / "shared" / "data" / "mni152_t1_1mm.nii.gz"
+from .._machine import MRI  # the MRI rows' volume (``SPLINECAST_BENCH_MRI``)
 
 
 @dataclass(frozen=True)

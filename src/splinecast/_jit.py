@@ -107,8 +107,8 @@ def _compare_flags_cheaply() -> None:
 
     Numba keys its cache of overload implementations by the current compiler flags and looks
     it up at every overload call it types; the flags' ``__hash__`` and ``__eq__`` each build a
-    dictionary of all fifty-odd options (130,000 dictionaries, 8% of the cut renderer's launch
-    compile under cProfile). Numba's hash is of the option names only (the sorted keys of that
+    dictionary of all fifty-odd options, which showed in profiles of the cut renderer's launch
+    compile. Numba's hash is of the option names only (the sorted keys of that
     dictionary), fixed per class: here it is computed from the names directly. Two flags of one
     class with equal explicitly set options are equal without building the dictionaries; any
     other pair is compared as numba does. Installed only if this numba's hash is the one

@@ -1,7 +1,8 @@
 """Pre-integrated classification: tables of the emission-absorption integral per ray segment.
 
 A ray segment of length ``h`` (voxel units) on which the data value goes linearly from ``s_f``
-(front) to ``s_b`` (back) contributes the premultiplied colour and opacity (reference 002, eq. 11)
+(front) to ``s_b`` (back) contributes the premultiplied colour and opacity (Carmona & Froehlich
+2011, eq. 11)
 
     alpha = 1 - exp(-int_0^h tau(s(x)) dx)
     rgb   = int_0^h C(s(x)) tau(s(x)) exp(-int_0^x tau(s(y)) dy) dx
@@ -12,7 +13,7 @@ function. A table stores this for ``n`` values spanning the transfer function's 
 those ``n`` values and interpolated linearly between them) and, for a 3D table, for the lengths
 ``h = k * h0``, ``k = 1..K``.
 
-How a table is built (our formulation; the reuse follows reference 002, eqs. 12-14):
+How a table is built (our formulation; the reuse follows Carmona & Froehlich 2011, eqs. 12-14):
 
 * **elementary pieces**: a segment from value index ``f`` to ``f + l`` crosses the ``l`` bins
   ``f .. f + l - 1`` one after the other, each over the length ``h / l``. Inside one bin ``tau``

@@ -186,9 +186,8 @@ class Scene:
         (``None`` if none can).
 
         The box is padded outwards by a millionth of a voxel so rounding can never cut a hit.
-        Rays are clipped to it as to the volume's box (:meth:`Grid.with_domain`); as six clip
-        planes per ray it cost 13-16% of a steady isosurface frame's CPU time
-        (``benchmarks/bench_iso_clip.py``).
+        Rays are clipped to it as to the volume's box (:meth:`Grid.with_domain`), which the slab
+        test does anyway; six clip planes per ray would add their tests to every ray.
         """
         act = flags[0].view(bool)
         if not act.any():
@@ -298,8 +297,9 @@ class Scene:
             :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).
         dvr : DVRSettings, optional
             Step, pre-integration, adaptive step, early termination, shading of ``mode="dvr"``
-            (default :data:`splinecast.render.dvr.DEFAULT_SETTINGS`: segments per ray piece up
-            to one voxel long, rays stopped at opacity 1 - 2^-10).
+            (default :data:`splinecast.render.dvr.DEFAULT_SETTINGS`: a sample every voxel from
+            the ray's entry, pre-integrated segments between them, rays stopped at opacity
+            1 - 2^-10).
         outputs : list of str, optional
             The Frame's buffers to fill, from ``"rgba"``, ``"depth"``, ``"position"``,
             ``"normal"``, ``"face"``, ``"value"`` (MIP/minIP) and ``"stats"`` (the per-ray

@@ -18,9 +18,9 @@ bit-for-bit). Transfer functions round-trip through JSON (:meth:`TransferFunctio
 
 For empty-space skipping, :meth:`TransferFunction.visible_ranges` gives the value intervals with
 non-zero opacity (exact, from the control points), and :meth:`TransferFunction.transparency_prefix`
-the prefix-sum table of reference 002 (section 1.5): with ``t(i) = 1`` when table bin ``i`` is not
-fully transparent and ``T(i) = T(i-1) + t(i)``, a cell whose values lie in bins ``a..b`` is fully
-transparent exactly when ``T(b + 1) == T(a)``.
+the prefix-sum table of Carmona & Froehlich 2011 (section 1.5): with ``t(i) = 1`` when table bin
+``i`` is not fully transparent and ``T(i) = T(i-1) + t(i)``, a cell whose values lie in bins
+``a..b`` is fully transparent exactly when ``T(b + 1) == T(a)``.
 """
 
 from __future__ import annotations

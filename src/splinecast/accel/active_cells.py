@@ -1,7 +1,8 @@
 """Isovalue change for the type-6 splines: classify and compact active cubes and tetrahedra.
 
-References 003/004 (section 4.1) prepare every frame's work list once per isovalue: cubes whose
-patches may contain the isovalue, then, inside them, the tetrahedra whose patch may. Here:
+Kalbe et al. 2009 and Koch 2009 (section 4.1) prepare every frame's work list once per isovalue:
+cubes whose patches may contain the isovalue, then, inside them, the tetrahedra whose patch may.
+Here:
 
 1. **Cube classification** (compiled parallel scan and two-pass compaction): a cube is active
    when the isovalue lies in the exact range of its coefficients (the model's ``cube_lo`` /

@@ -171,8 +171,7 @@ def packed_pair_flags(pairs: np.ndarray, shape: np.ndarray) -> np.ndarray:
     ``((i >> 1) & 1) << 2 | ((j >> 1) & 1) << 1 | ((k >> 1) & 1)`` of block ``(i, j, k) >> 2``
     for cell ``(i, j, k)``), ``shape`` being the 4-cell blocks' counts: what
     :func:`inactive_pair_size` reads. One byte per 4-cell block stays in the L1 cache where one
-    per pair does not: steady isosurface frames 1.01-1.12x faster
-    (``benchmarks/results/iso_builds_packedpairs.md``)."""
+    per pair does not, and the 4-cell flags need no read of their own."""
     out = np.zeros((shape[0], shape[1], shape[2]), np.uint8)
     npx, npy, npz = pairs.shape
     for pi in range(npx):
@@ -215,9 +214,8 @@ def inactive_pair_size(
     array has no such level, and the 4-cell flags ``act0`` are read instead). A 4-cell block
     with no flagged pair is leapt whole."""
     # Coarse to fine, the 2-cell blocks last: reading the pair first (one read for an active
-    # pair instead of four) made steady isosurface frames 2-8% slower on every scene
-    # (``benchmarks/results/iso_builds_pairfirst.md``): the coarse levels are small and stay
-    # in the L1 cache, and most questions end at one of them.
+    # pair instead of four) was measured slower on every scene: the coarse levels are small
+    # and stay in the L1 cache, and most questions end at one of them.
     if pairs.shape[0] == 0:
         return inactive_block_size(act0, act1, act2, i, j, k)
     ui, uj, uk = np.uint64(i), np.uint64(j), np.uint64(k)

@@ -1,4 +1,4 @@
-"""Integer-state ray traversal of a cell grid (reference 001, section 7).
+"""Integer-state ray traversal of a cell grid (Józsa et al. 2014, section 7).
 
 A ray ``p(t) = o + t d`` is given in *index space* (cell ``(i, j, k)`` spans ``[i, i+1] x [j, j+1] x
 [k, k+1]``; voxel centres sit at integer coordinates). The only state carried from step to step is

@@ -81,9 +81,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "covers more than this many pixels (default 1); wavelet stores: the "
                         "angle ε in radians below which cells are not refined (0: full "
                         "resolution; default one pixel's angle)")
-    render.add_argument("--cut", help="multiscale volumes: which bricks to draw, 'lod' (screen-"
-                        "space level of detail, default) or 'error' (transfer-function distortion "
-                        "times importance under the budget, reference 002; dvr and mip)")
+    render.add_argument("--cut", help="multiscale volumes: which bricks to draw, lod (screen-"
+                        "space level of detail) or error (transfer-function distortion times "
+                        "importance under the budget; dvr and mip) (default lod)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
     add_input_options(render)
@@ -121,7 +121,7 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
 
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
-    """Options of the render modes beyond the single isosurface (issue 5)."""
+    """Options of the render modes beyond the single isosurface."""
     render.add_argument("--mode", default="iso", choices=("iso", "mip", "minip", "dvr"),
                         help="isosurface (default), max/min intensity projection, or DVR")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")

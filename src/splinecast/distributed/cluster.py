@@ -7,8 +7,8 @@ and every process polls its CPU, memory, network and disk counters twice a secon
 project's 2-core test machine that came to about 0.15 of a core for an idle 2-worker cluster
 (client and scheduler 55 ms/s, each worker 45 ms/s), and more while tasks run (the profiler then
 walks the rendering thread's stack). With one worker there is a spare core to absorb it; with as
-many workers as cores it comes straight out of the renders, and it was most of the gap between
-the measured 1.70x and the 2x a 120-frame movie on 2 workers could give.
+many workers as cores it comes straight out of the renders, and it was most of what kept a
+movie on 2 workers from being twice as fast as on one.
 
 :func:`local_cluster` starts the cluster with :data:`QUIET_CONFIG` instead, which brings the idle
 cost to about 0.02 of a core. What it gives up: the dashboard's profile page stays empty, a blocked

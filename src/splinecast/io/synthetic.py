@@ -10,7 +10,7 @@ object is) and ``domain``.
 name              domain          default_iso  inside  function
 ================  ==============  ===========  ======  ===========================================
 marschner-lobb    [-1, 1]^3       0.5          high    Marschner & Lobb (1994) test signal
-sphere            [-1, 1]^3       0.0          low     |p| - 0.6 (signed distance)
+sphere            [-1, 1]^3       0.0          low     ``|p| - 0.6`` (signed distance)
 torus             [-1, 1]^3       0.0          low     signed distance, R = 0.6, r = 0.25, axis z
 chmutov           [-1.2, 1.2]^3   0.0          low     x^16 + y^16 + z^16 - cos 7x - cos 7y - cos 7z
 noise             [0, 1]^3        0.5          high    seeded smooth random field, ~8 lobes per axis

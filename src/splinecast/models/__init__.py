@@ -14,6 +14,8 @@ from .s31 import S31Model
 from .trilinear import TrilinearModel
 
 #: Models by the name users pass as ``Scene(volume, model=...)``.
+#:
+#: :meta hide-value:
 MODELS = {"trilinear": TrilinearModel, "s31": S31Model, "qss": QSSModel}
 MODELS.update(bspline1=BSpline1Model, bspline2=BSpline2Model, bspline3=BSpline3Model)
 

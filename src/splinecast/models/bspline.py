@@ -1,4 +1,4 @@
-"""Tensor-product B-splines of degree 1, 2 and 3 (reference 000): the model and its cell functions.
+"""Tensor-product B-splines of degree 1, 2 and 3 (Steinberger 2010): the model, its cell functions.
 
 The reconstruction is ``f(x) = sum_m a_m B_d(x - m)`` per axis (tensor product in 3D), with ``B_d``
 the centred uniform B-spline of degree ``d`` and ``x`` the voxel index (voxel ``v`` at ``x = v``,
@@ -75,8 +75,8 @@ BSplineGrid = namedtuple("BSplineGrid", ["coeffs", "degree", "power", "finder", 
                                          "tol"])
 
 # Rows: scaled Bernstein basis u^r (1-u)^(d-r); columns: the d+1 B-spline pieces on the cell
-# (times SCALE[d]). Derived from the uniform B-spline segment polynomials; reference 000 prints
-# the quadratic one with an error (its digest notes the correction), this is the corrected one.
+# (times SCALE[d]). Derived from the uniform B-spline segment polynomials; Steinberger 2010
+# prints the quadratic one with an error, this is the corrected one (tests/test_bspline.py).
 _SB = {
     1: [[1, 0], [0, 1]],
     2: [[1, 1, 0], [0, 4, 0], [0, 1, 1]],
@@ -387,10 +387,8 @@ class BSpline1Model(BSplineModel):
     degree = 1
     support = 1
     #: Rays are traced in tiles of 8 x 8 pixels, as the trilinear model's: neighbouring rays
-    #: read the same coefficients while they are in the cache. ML 256^3 / MRI iso at
-    #: 1024x768 on one core took 0.91x / 0.93x the time of whole rows (bspline2: 0.94x /
-    #: 0.98x; benchmarks/results/bspline_tiles.md). Degree 3 keeps rows: its cells cost root
-    #: finding rather than loads, and tiles measured 1.02x / 1.05x.
+    #: read the same coefficients while they are in the cache. Degree 3 keeps rows: its cells
+    #: cost root finding rather than loads, and tiles measured slower there.
     band_rows = 8
     tile = 8
 
@@ -401,7 +399,7 @@ class BSpline2Model(BSplineModel):
     name = "bspline2"
     degree = 2
     support = 2
-    #: Tiles of 8 x 8 pixels, as :class:`BSpline1Model` (0.94x / 0.98x the time of rows).
+    #: Tiles of 8 x 8 pixels, as :class:`BSpline1Model`.
     band_rows = 8
     tile = 8
 

@@ -7,7 +7,7 @@ with ``s in [0, 1]``. The cell polynomial ``F(u) = sum_{pqr} T_pqr X_p(u_x) Y_q(
     ``g(s) = sum_p X_p(s) * ( sum_q Y_q(s) * ( sum_r T_pqr Z_r(s) ) )``
 
 where ``*`` is polynomial multiplication, evaluated inside out so only one inner sum of degree
-``d`` and one middle sum of degree ``2d`` are live (reference 000, section 3.3.2):
+``d`` and one middle sum of degree ``2d`` are live (Steinberger 2010, section 3.3.2):
 
 * **scaled Bernstein** (the stable default): ``X_p(u) = u^p (1 - u)^(d - p)``; along the segment
   ``u`` and ``1 - u`` are linear with scaled Bernstein coefficients ``(a, b)`` and
@@ -127,7 +127,7 @@ def compose_naive(
     term: np.ndarray, out: np.ndarray,
 ) -> None:
     """Power form of the segment polynomial with each term ``T_pqr u_x^p u_y^q u_z^r`` expanded
-    separately (the reference 000 "naive" baseline; ``tensor`` in power form)."""
+    separately (the "naive" baseline of Steinberger 2010; ``tensor`` in power form)."""
     ex, ey, ez = bx - ax, by - ay, bz - az
     for k in range(3 * d + 1):
         out[k] = 0.0

@@ -41,7 +41,7 @@ Per cell, in the order a driver uses them:
 ``look_ahead(grid) -> bool`` (optional, a constant)
     Whether the fixed-step loop takes each sample's value one sample early, before the table
     reads of the segment in front of it, so the two memory-bound reads overlap. Worth it for a
-    model whose ``value_at`` is a few loads and little arithmetic (trilinear: 1.1-1.4x on DVR);
+    model whose ``value_at`` is a few loads and little arithmetic (trilinear);
     one whose value is costly loses the early value a ray that stops never uses. Default False.
 
 And once per grid: ``cell_count(grid) -> (nx, ny, nz)`` and ``new_scratch(grid)`` (per-thread

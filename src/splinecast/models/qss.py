@@ -1,8 +1,10 @@
-"""Quadratic super splines on the type-6 partition (QSS): references 003/004, note's QSS-B and -A.
+"""Quadratic super splines on the type-6 partition (QSS) of Rössl et al. 2004, as rendered by
+Kalbe et al. 2009 and Koch 2009, in two variants.
 
 Each cube carries 65 distinct Bernstein–Bézier coefficients (10 per tetrahedron). The boundary
-rules (cube corners, cube-edge midpoints, face points) are those of the references; the interior
-rules come in two symmetric variants (``shared/notes/type6_coefficients.md``):
+rules (cube corners, cube-edge midpoints, face points) are those of the papers; the interior
+rules come in two symmetric variants (derived for this project in exact arithmetic and checked
+by ``tests/test_type6_coefficients.py``):
 
 ``"qss-b"`` (default)
     The super-spline definition: C1 across cube faces, at cube corners and at face centres, C0
@@ -58,7 +60,7 @@ QSS_A_RULES = {
     (2, 0, 0, 0): [(F(1, 4), "i"), (F(1, 8), "f b l r t d")],
 }
 
-#: Local averaging chains (the note's "local form"), verified by ``derive_program``.
+#: Local averaging chains (the rules' "local form"), verified by ``derive_program``.
 QSS_BOUNDARY_CHAIN = [
     ("-1/2 1/2 1/2", [(F(1, 8), "i f l t fl lt ft flt")]),  # b0020 corner
     ("0 1/2 1/2", [(F(1, 4), "i f t ft")]),  # b0011 cube-edge midpoint

@@ -1,9 +1,11 @@
-"""Cubic C1 splines on the type-6 partition (S31): the quasi-interpolant of references 003/004.
+"""Cubic C1 splines on the type-6 partition (S31): the quasi-interpolant of Sorokina &
+Zeilfelder 2007 as rendered by Kalbe et al. 2009 and Koch 2009.
 
 Each cube carries 175 distinct Bernstein–Bézier coefficients (20 per tetrahedron), each a fixed
-average of the 27 data values around the cube. The rules below are the note
-``shared/notes/type6_coefficients.md`` for the 13 domain-point classes of the reference
-tetrahedron T0 (see :mod:`.type6_geometry` for T0 and the letter names of the data offsets); the
+average of the 27 data values around the cube. The rules below give the 13 domain-point classes
+of the reference tetrahedron T0 (derived for this project from the C1 conditions in exact
+arithmetic and checked by ``tests/test_type6_coefficients.py``; see :mod:`.type6_geometry` for
+T0 and the letter names of the data offsets); the
 other 162 coefficients follow by the cube's symmetries in :func:`~.type6_geometry.derive_tables`.
 Every weight is non-negative and every rule sums to 1, so the patch lies in the range of the 27
 data values. The spline is C1 everywhere, reproduces linear functions and gives

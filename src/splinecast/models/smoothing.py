@@ -1,4 +1,4 @@
-"""Gaussian pre-smoothing of a volume before reconstruction (reference 004, section 4).
+"""Gaussian pre-smoothing of a volume before reconstruction (Koch 2009, section 4).
 
 A separable, truncated Gaussian of ``size`` 3 or 5 voxels per axis: the kernel has radius
 ``r = (size - 1) / 2`` voxels and standard deviation ``sigma = r / 2`` voxels (0.5 for 3^3, 1.0 for

@@ -8,7 +8,7 @@ written in the monomial form::
 On a ray segment ``(x, y, z) = a + s e`` (``a`` the entry point, ``e`` the entry-to-exit vector,
 ``s`` in ``[0, 1]``) it is the exact cubic ``c3 s^3 + c2 s^2 + c1 s + c0`` with ``c0 = f(a)``,
 ``c1 = grad f(a) . e``, ``c2`` the mixed second derivatives contracted with ``e`` and
-``c3 = k7 ex ey ez`` (reference 001, section 5; we expand the polynomial directly instead of
+``c3 = k7 ex ey ez`` (Józsa et al. 2014, section 5; we expand the polynomial directly instead of
 fitting it to four samples, which avoids the cancellation of that fit). All arithmetic is float64;
 voxels stay in their stored dtype and are converted on load.
 """
@@ -46,8 +46,7 @@ def cell_corners(data: np.ndarray, i: int, j: int, k: int) -> tuple:
     Returns ``(vmin, vmax, c000, c100, c010, c110, c001, c101, c011, c111)``.
     """
     # Unsigned indices (cells are never negative): with signed ones numba adds a negative-index
-    # wrap-around to each of the eight reads, which cost 6-9% of a trilinear isosurface frame
-    # (benchmarks/results/iso_builds_unsigned.md).
+    # wrap-around to each of the eight reads, a measurable share of a trilinear frame.
     ui0, uj0, uk0 = np.uint64(i), np.uint64(j), np.uint64(k)
     ui1, uj1, uk1 = ui0 + np.uint64(1), uj0 + np.uint64(1), uk0 + np.uint64(1)
     c000 = np.float64(data[ui0, uj0, uk0])
@@ -310,8 +309,7 @@ class TrilinearModel:
     #: The traversal walks cells in ``voxel index + shift`` (cell ``c`` is ``[c, c + 1]`` there).
     shift = 0.0
     #: Rays are traced in tiles of 8 x 8 pixels: neighbouring rays read the same voxels while
-    #: they are in the cache (whole rows left them to fall out: ML 256^3 at 1024x768, one core,
-    #: DVR 2074 -> 1599 ms, iso 190 -> 147, MIP 4200 -> 3080; benchmarks/results/dvr_issue15e.md).
+    #: they are in the cache (whole rows let them fall out before the next row needs them).
     band_rows = 8
     tile = 8
 

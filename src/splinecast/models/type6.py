@@ -559,7 +559,7 @@ def _pad_dtype(dtype: np.dtype) -> np.dtype:
 def laplacian_prefilter(pad: np.ndarray) -> np.ndarray:
     """``f - (1/8) Delta_h f`` with the 7-point Laplacian in index units, on the padded grid.
 
-    Makes the S31 scheme exact on quadratics (the note's prefilter). The input is the
+    Makes the S31 scheme exact on quadratics (it removes the ``Delta q / 8`` term). The input is the
     clamp-padded data; the output is re-padded by clamping so the border rule stays the same.
     """
     f = pad.astype(np.float64)

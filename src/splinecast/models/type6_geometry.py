@@ -1,6 +1,6 @@
 """Geometry of the type-6 tetrahedral partition and the derivation of its coefficient tables.
 
-The trivariate splines of references 003/004 (:mod:`~splinecast.models.s31`,
+The trivariate splines of Kalbe et al. 2009 and Koch 2009 (:mod:`~splinecast.models.s31`,
 :mod:`~splinecast.models.qss`) live on the *dual* grid: the data value of voxel ``(i, j, k)`` sits
 at the centre of cube ``(i, j, k)``, which spans ``[i - 1/2, i + 1/2] x ...`` in index space. Each
 cube is cut by the six planes ``x = +-y``, ``x = +-z``, ``y = +-z`` through its centre into 24
@@ -188,7 +188,7 @@ def parse_rules(
     """Turn rules written as ``{multi-index: [(weight, "i f fl"), ...]}`` into offset weights.
 
     Each ``(weight, names)`` term gives ``weight`` to every data value named in ``names``
-    (space-separated letter codes of the note: ``i`` centre, ``r``/``l`` = +x/-x, ``f``/``b`` =
+    (space-separated letter codes: ``i`` centre, ``r``/``l`` = +x/-x, ``f``/``b`` =
     +y/-y, ``t``/``d`` = +z/-z). Every rule must sum to 1 (checked).
     """
     out = {}

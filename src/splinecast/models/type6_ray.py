@@ -1,6 +1,6 @@
 """Ray pieces of the type-6 splines (models ``s31`` and ``qss``): cubes cut into tetrahedra.
 
-What is particular to these models (the interface is :mod:`.pieces`):
+What is particular to these models (the interface is :mod:`splinecast.models.pieces`):
 
 * **Dual grid.** Cube ``(i, j, k)`` is centred on voxel ``(i, j, k)``. The traversal space is
   voxel index + 1/2, where cube ``i`` spans ``[i, i + 1]``, so the shared integer traversal walks

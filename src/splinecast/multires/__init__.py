@@ -1,5 +1,5 @@
 """Multiresolution: OME-Zarr brick pyramids, the brick octree, level of detail, the brick cache
-and its loader thread, cut selection, spline wavelets (see DESIGN.md).
+and its loader thread, cut selection, spline wavelets (see ``docs/architecture.rst``).
 
 Nothing here is imported by ``import splinecast``; the names below load their module (and
 zarr/dask) on first use::

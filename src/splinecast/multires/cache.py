@@ -58,7 +58,7 @@ RESERVE_STEP = 1 / 32
 #: Most of the budget :meth:`BrickCache.reserve` holds back. The reservation shrinks the next
 #: cut, whose seams it was measured on; held without limit, small budgets with small bricks
 #: (whole copies at 8 bytes per voxel) gave so little to the cut that it fell to the coarsest
-#: level (measured: ``bench_multires.py --quick``, 62 bricks to 1).
+#: level.
 RESERVE_MAX = 1 / 2
 
 #: Most bytes of decoded store chunks a brick cache keeps besides its budget.

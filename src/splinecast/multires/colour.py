@@ -1,8 +1,8 @@
 """CIELUV colours of transfer-function-classified values: the distance behind D(b) (eq. 2).
 
-Reference 002 measures the distortion of a brick in CIELUV, the colour space in which Euclidean
-distance follows perceived difference (a distance below about 6 is not noticeable). Eq. (2)
-compares ``L(rgb(f) alpha(f))`` for a source value ``f`` with ``L(rgb(b) alpha(b))`` for its
+Carmona & Froehlich 2011 measure the distortion of a brick in CIELUV, the colour space in which
+Euclidean distance follows perceived difference (a distance below about 6 is not noticeable). Eq.
+(2) compares ``L(rgb(f) alpha(f))`` for a source value ``f`` with ``L(rgb(b) alpha(b))`` for its
 approximation ``b``: the transfer function's colour premultiplied by its opacity, i.e. the colour a
 one-voxel slab of that material shows over black.
 

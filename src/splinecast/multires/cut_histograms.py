@@ -1,8 +1,8 @@
 """Sparse 2D histograms per brick: what a transfer-function edit needs to recompute D(b).
 
-Eq. (1) of reference 002 sums, over the source voxels ``f_i`` a brick approximates, the CIELUV
-distance between the classified colours of ``f_i`` and of its approximation ``b_i``. The distance
-depends on the pair of values only, so a brick's distortion under any transfer function is
+Eq. (1) of Carmona & Froehlich 2011 sums, over the source voxels ``f_i`` a brick approximates, the
+CIELUV distance between the classified colours of ``f_i`` and of its approximation ``b_i``. The
+distance depends on the pair of values only, so a brick's distortion under any transfer function is
 ``D(b) = sum over (u, v) of H_b(u, v) * D(u, v)`` where ``H_b`` counts the (quantized source value
 ``u``, quantized approximating value ``v``) pairs of the brick: the "summary tables" the paper
 stores sparsely next to the pyramid. A transfer-function edit then costs one pass over the non-zero

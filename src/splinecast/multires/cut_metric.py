@@ -1,4 +1,4 @@
-"""The error of a brick and the priority of splitting it (reference 002, eqs. 1-9).
+"""The error of a brick and the priority of splitting it (Carmona & Froehlich 2011, eqs. 1-9).
 
 * **Distortion** ``D(b)`` (eqs. 1-2): the CIELUV distance between the transfer-function-classified
   colours of the source voxels and of the brick's approximation, summed over the voxels, read from
@@ -22,9 +22,10 @@
 
 Priorities. ``P = E`` ("naive") or ``P = ER`` ("improved") for nodes that can be split; a node
 without visible children cannot, its priority is ``-inf``. Split-and-collapse converges to the
-greedy cut only for a *monotonic* priority (reference 002 citing ROAM [19]): a child never ranks
-above its parent. ``E`` is monotonic, ``ER`` is not always (on the MNI152 tree about 1% of the
-nodes out-rank their parent), so a node's priority is capped at its parent's:
+greedy cut only for a *monotonic* priority (Carmona & Froehlich 2011, after the ROAM terrain
+algorithm of Duchaineau et al. 1997): a child never ranks above its parent. ``E`` is monotonic,
+``ER`` is not always (on the MNI152 tree about 1% of the nodes out-rank their parent), so a node's
+priority is capped at its parent's:
 ``P(b) = min(P_raw(b), P(parent))``. The greedy selection from the root pops the same nodes in
 the same order except within a group capped to one value (a node enters the queue only after its
 parent was popped, when the parent held the highest priority), and the update's fixed point becomes

@@ -1,4 +1,5 @@
-"""The extended cut S+ that decides what the RAM brick cache loads next (ref. 002, section 4).
+"""The extended cut S+ that decides what the RAM brick cache loads next (Carmona & Froehlich 2011,
+section 4).
 
 RAM holds the rendering cut S and all its ancestors (about N/7 more bricks for a full octree), so a
 collapse never page-faults. The rest of the cache holds finer bricks, chosen by the same

@@ -1,4 +1,4 @@
-"""The error-metric cut of reference 002 as the cut policy of a multiscale scene.
+"""The error-metric cut of Carmona & Froehlich 2011 as the cut policy of a multiscale scene.
 
 ``Scene(pyramid, cut="error")`` draws, in DVR and MIP/minIP, the cut that
 :class:`~.cut_update.CutUpdater` keeps up to date frame after frame (transfer-function distortion
@@ -15,7 +15,7 @@ the screen-space level-of-detail cut of :mod:`.lod`. This module only connects t
    the children of a brick own exactly its voxels; its approximation is the edge-clamped trilinear
    reconstruction of its level at the source voxel centres, through the level's own index map
    (:meth:`~.octree.BrickOctree.level_map`: the vertex-centred binomial pyramid of
-   :mod:`.pyramid` or another store's translation);
+   :mod:`~splinecast.multires.pyramid` or another store's translation);
 3. :class:`ErrorCut`: per frame, the metric's view (eye = the camera position, the optional point of
    interest) and transfer function are set (a new transfer function recomputes the hull's D from the
    histograms and repairs the cut), the updater makes one step, and the new cut becomes a
@@ -38,8 +38,8 @@ Choices
 * **Fill**: a split that does not fit N or M is set aside and the next one tried
   (``CutUpdater(fill=True)``), so a small budget is used up by smaller splits (borders,
   transparent children) instead of being left unused behind a full octree split; the cut settles
-  close to the greedy cut with ``fill=True``, which Table 2 of ``benchmarks/results/cut.md``
-  finds within 0.1% of the optimum.
+  close to the greedy cut with ``fill=True``, which ``benchmarks/bench_cut.py`` compares with
+  the optimum.
 * **Prefetch** (what the loader reads when idle): the visible children of the cut's bricks of
   highest split priority, i.e. the next splits of the split queue S in order (the head of the
   extended cut S+ of section 4).

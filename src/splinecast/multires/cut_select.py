@@ -1,4 +1,5 @@
-"""Cut selection from scratch: greedy by priority, and the exact optimum (reference 002, 3.3-3.5).
+"""Cut selection from scratch: greedy by priority, and the exact optimum (Carmona & Froehlich
+2011, sections 3.3-3.5).
 
 A **cut** is a set of nodes that covers every visible (non-transparent) region of the volume
 exactly once: no node of the cut is an ancestor of another, every visible leaf has exactly one cut

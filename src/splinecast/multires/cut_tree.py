@@ -1,27 +1,28 @@
 """The brick tree a cut is chosen from: flat arrays a pyramid store can fill.
 
-A multiresolution volume is a tree of bricks (reference 002, section 3.1): the leaves are bricks of
-the finest level (level 0, the source data), every inner node is a brick of a coarser level that
-approximates the source region of its children. Every brick has the same voxel count, so any GPU or
-RAM slot holds any brick; the tree is an octree, incomplete at borders (a node has 1 to 8 children).
+A multiresolution volume is a tree of bricks (Carmona & Froehlich 2011, section 3.1): the leaves are
+bricks of the finest level (level 0, the source data), every inner node is a brick of a coarser
+level that approximates the source region of its children. Every brick has the same voxel count, so
+any GPU or RAM slot holds any brick; the tree is an octree, incomplete at borders (a node has 1 to 8
+children).
 
 :class:`BrickTree` describes such a tree with flat numpy arrays and nothing else (no voxels, no
 file handles), so the cut algorithms run on it without a store, a renderer or a transfer function:
 
-=============================  ==========  =====================================================
-array                          dtype       meaning
-=============================  ==========  =====================================================
-``parent``                     int32 (K,)  parent node id, -1 for the root (exactly one root)
-``child_start``, ``children``  int64/int32 children of node ``b`` are ``children[child_start[b]:
-                                           child_start[b + 1]]`` (CSR, ascending ids)
-``level``                      int16 (K,)  pyramid level, 0 = finest (the NGFF dataset index)
-``box_min``, ``box_max``       float64     world-space box of the source region the brick
-                               (K, 3)      covers (importance, eq. 5)
-``voxels``                     int64 (K,)  n(b): source voxels the brick approximates (eq. 1, 8)
-``value_min``, ``value_max``   float64     range of the source values below the brick, made
-                               (K,)        hierarchical (a parent's range holds its children's):
-                                           what the transparency test of section 3.6 reads
-=============================  ==========  =====================================================
+=============================  ===========  =====================================================
+array                          dtype        meaning
+=============================  ===========  =====================================================
+``parent``                     int32 (K,)   parent node id, -1 for the root (exactly one root)
+``child_start``, ``children``  int64/int32  children of node ``b`` are ``children[child_start[b]:
+                                            child_start[b + 1]]`` (CSR, ascending ids)
+``level``                      int16 (K,)   pyramid level, 0 = finest (the NGFF dataset index)
+``box_min``, ``box_max``       float64      world-space box of the source region the brick
+                               (K, 3)       covers (importance, eq. 5)
+``voxels``                     int64 (K,)   n(b): source voxels the brick approximates (eq. 1, 8)
+``value_min``, ``value_max``   float64      range of the source values below the brick, made
+                               (K,)         hierarchical (a parent's range holds its children's):
+                                            what the transparency test of section 3.6 reads
+=============================  ===========  =====================================================
 
 :func:`regular_brick_tree` builds the tree of a 2x2x2 pyramid over a grid: level ``l`` has
 ``ceil(n_{l-1} / 2)`` voxels per axis, bricks of ``brick`` voxels per axis, node ids level by level

@@ -1,4 +1,5 @@
-"""Greedy split-and-collapse cut updates under a brick budget N and a load budget M (ref. 002).
+"""Greedy split-and-collapse cut updates under a brick budget N and a load budget M (Carmona &
+Froehlich 2011).
 
 Each frame starts from the previous cut instead of the root (section 3.5):
 
@@ -20,8 +21,8 @@ Each frame starts from the previous cut instead of the root (section 3.5):
   visible children (borders, transparent children), which matter when N and M are small against
   the 7 bricks and 8 downloads of a full octree split (with M = 8 the paper's rule cannot even
   pair a collapse with a split). The fixed point is then close to the greedy cut with
-  ``fill=True`` (:func:`~.cut_select.greedy_cut`), which Table 2 of ``benchmarks/results/cut.md``
-  finds within 0.1% of the optimum where the paper's rule is up to 6.6% off.
+  ``fill=True`` (:func:`~.cut_select.greedy_cut`), which ``benchmarks/bench_cut.py`` finds
+  closer to the optimum than the paper's rule.
 * Downloads count the bricks of the new cut that were not resident (not in the previous frame's
   cut): a split downloads its non-resident children, a collapse its parent if not resident, and a
   brick downloaded earlier this frame and removed again is not downloaded.

@@ -8,8 +8,8 @@ Pieces
     element and a key naming its contents. A brick drawn in place of a missing descendant (a
     substitution) is a piece whose level is coarser than the cut's brick; several pieces may
     share one array. Anything that produces pieces can be rendered: the brick stream of an
-    OME-Zarr pyramid (:mod:`.scene`), spline-wavelet reconstructions, a distributed worker's
-    share of the bricks.
+    OME-Zarr pyramid (:mod:`~splinecast.multires.scene`), spline-wavelet reconstructions, a
+    distributed worker's share of the bricks.
 
 Grids
     A piece's array becomes the model's kernel grid (:func:`splinecast.render.segment.make_grid`)
@@ -417,15 +417,16 @@ class CutRenderer:
               stats: tuple, planes: np.ndarray = NO_PLANES) -> None:
         """Carry the per-pixel ``state`` of ``setup`` through the pieces, front to back.
 
-        ``state`` and ``stats`` are full-image arrays (:func:`~splinecast.render.segment.
-        new_state`, :func:`~splinecast.render.segment.counters`), updated in place; a renderer
+        ``state`` and ``stats`` are full-image arrays
+        (:func:`~splinecast.render.segment.new_state`,
+        :func:`~splinecast.render.segment.counters`), updated in place; a renderer
         that splits a cut (a distributed worker) traces its share into its own state and
         merges the states with the mode's ``combine`` in depth order.
 
-        One compiled launch traces all pieces (:func:`~splinecast.render.pieces_driver.
-        trace_pieces`); with :attr:`batched` off, or for a cut whose grids have more than two
-        Numba types, each piece is traced by its own call of the segment entry point (the
-        reference the batched launch is tested against).
+        One compiled launch traces all pieces
+        (:func:`~splinecast.render.pieces_driver.trace_pieces`); with :attr:`batched` off, or for a
+        cut whose grids have more than two Numba types, each piece is traced by its own call of the
+        segment entry point (the reference the batched launch is tested against).
         """
         self._trace(pieces, setup, camera, state, stats, planes, None)
 

@@ -1,4 +1,4 @@
-"""The brick histograms of reference 002 stored with a pyramid (the ``hist2d`` group).
+"""The brick histograms of Carmona & Froehlich 2011 stored with a pyramid (the ``hist2d`` group).
 
 :mod:`.cut_histograms` defines the sparse (source value, approximating value) histogram of a
 brick; :mod:`.cut_policy` turns them into the distortion D(b) of every brick for any transfer

@@ -7,7 +7,7 @@ pixels on screen, as seen from the camera:
     pixels = voxel size / (window height / image height)  (orthographic)
 
 with the voxel size the largest world size of the level's voxels and the distance the Euclidean
-distance from the eye to the brick's box (0 inside: always refined), as in reference 000's
+distance from the eye to the brick's box (0 inside: always refined), as in Steinberger 2010's
 "collapse when diameter / distance < epsilon". Bricks outside the camera's view (a tile's view
 for :meth:`Camera.tile <splinecast.camera.Camera.tile>` cameras) and bricks whose value range
 cannot contribute (:class:`.relevance.ValueFilter`) are left out and never refined.

@@ -2,13 +2,13 @@
 
 Bricks and keys
     A brick is identified by its key ``(level, i, j, k)``: pyramid level (0 finest) and brick index
-    along x, y, z. On level ``L`` with per-axis factor ``f_L`` (the power of two by which that
-    axis was halved, see :mod:`.pyramid`), brick ``b`` covers the level-0 index box
+    along x, y, z. On level ``L`` with per-axis factor ``f_L`` (the power of two by which that axis
+    was halved, see :mod:`~splinecast.multires.pyramid`), brick ``b`` covers the level-0 index box
     ``[b B f_L, (b + 1) B f_L]`` per axis, clipped to the volume ``[0, n - 1]``: ``B`` cells of its
     own level. Every level has the same ``B`` cells per brick, so a brick's children on the next
-    finer level are the 2 (or 1, along an axis that was not halved) bricks per axis inside it:
-    up to 8. Trees are incomplete at the far borders (sizes that are not powers of two) and may
-    have several roots (the coarsest level's bricks).
+    finer level are the 2 (or 1, along an axis that was not halved) bricks per axis inside it: up to
+    eight. Trees are incomplete at the far borders (sizes that are not powers of two) and may have
+    several roots (the coarsest level's bricks).
 
 Ghosts (one rule for every model)
     A brick's array holds its level's voxels ``[b B - G, (b + 1) B + G]`` per axis: the ``B + 1``

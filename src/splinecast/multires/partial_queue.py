@@ -1,4 +1,4 @@
-"""A priority queue that sorts only what a frame can use (reference 002, section 3.5).
+"""A priority queue that sorts only what a frame can use (Carmona & Froehlich 2011, section 3.5).
 
 Split-and-collapse performs at most O(M) operations per frame on queues of N nodes, so sorting
 all N after every priority change (O(N log N)) would dominate. The paper keeps each queue as two

@@ -4,7 +4,7 @@
   ray a brick of a cut owns), clipped by the clip planes;
 - :func:`sample_grid`: a kernel grid's reconstruction at points (seams, tests);
 - :func:`grid_values_at`: the reconstruction at one parameter per ray (the isosurface's seam
-  closure, :mod:`.seam_closure`).
+  closure, :class:`.seams.IsoClosure`).
 
 They use the models' own compiled hooks (:func:`splinecast.models.pieces.value_gradient_at`) and
 the driver's ray formula (:func:`splinecast.render.rays.pixel_ray`), so the values and ray

@@ -217,7 +217,7 @@ def _downsample_task(fine: Any, halve: tuple[bool, bool, bool], shape: tuple[int
         read_lo, read_hi = fine_range(np.array([r0, ext_lo[1], ext_lo[2]]),
                                       np.array([r1, ext_hi[1], ext_hi[2]]), halve, fine_shape)
         # C order and native bytes: the filter's loops run along the last axis (a raw source
-        # memory-mapped x fastest reads as a Fortran-ordered block, 2.5x slower to filter).
+        # memory-mapped x fastest reads as a Fortran-ordered block, several times slower to filter).
         block = fine.read(read_lo, read_hi)
         block = np.ascontiguousarray(block, dtype=block.dtype.newbyteorder("="))
         for s0 in range(r0, r1, _SLAB):

@@ -7,9 +7,9 @@ frame it
 1. asks its :class:`~.stream.BrickStream` for the cut of the camera (bricks that cannot
    contribute to the mode left out, at most ``load_budget`` bricks read while the frame waits; a
    brick not yet resident is drawn from its finest resident ancestor). The cut policy ``cut``:
-   ``"lod"`` (default) refines while a voxel covers more than ``lod`` pixels; ``"error"`` keeps
-   the cut of reference 002 (transfer-function distortion times importance from the eye and an
-   optional point of ``interest``, split-and-collapse under the brick budget and ``load_budget``,
+   ``"lod"`` (default) refines while a voxel covers more than ``lod`` pixels; ``"error"`` keeps the
+   cut of Carmona & Froehlich 2011 (transfer-function distortion times importance from the eye and
+   an optional point of ``interest``, split-and-collapse under the brick budget and ``load_budget``,
    updated from the previous frame's cut; :mod:`.cut_policy`) in DVR and MIP/minIP, and the
    level-of-detail cut in the isosurface modes;
 2. turns the cut into :class:`~.draw.Piece` s and fixes the seams between levels (:mod:`.seams`);
@@ -83,11 +83,9 @@ def render_brick(volume: MultiscaleVolume) -> int:
 
     A brick of the cut costs per ray that crosses it (entering its grid and hierarchy) and per
     frame (a grid, seams, a piece of the launch); the pyramid's bricks are its storage chunks,
-    kept small so that reads are fine-grained. At 2048^3 with 32^3 chunks and a 1 GiB budget,
-    bricks of 64^3 (2 614 instead of 16 958 in the cut) refined a view to its complete cut in
-    118 s instead of 306 s and drew its steady isosurface frame in 511 ms instead of 553 ms
-    (session 28, before the seam copies counted against the budget; ``benchmarks/results/
-    multires.md``'s history). Small volumes keep their bricks: their cuts are small anyway.
+    kept small so that reads are fine-grained. Rendering bricks of several chunks makes a cut of
+    a large volume several times smaller, so it completes sooner and draws faster. Small
+    volumes keep their bricks: their cuts are small anyway.
     """
     brick = int(volume.brick or DEFAULT_BRICK)
     shortest = int(min(volume.levels[0].shape))
@@ -201,8 +199,8 @@ class MultiscaleScene:
         build them (``prepare_ms`` includes it; a warning says so).
     cut_priority : {"improved", "naive"}
         Split priority of the ``"error"`` cut: ``"improved"`` (default) orders splits by the
-        error reduction per child brick, ``P = ER`` (eq. 9 of reference 002); ``"naive"`` by the
-        brick's error, ``P = E`` (the classic greedy rule the paper compares against).
+        error reduction per child brick, ``P = ER`` (eq. 9 of Carmona & Froehlich 2011); ``"naive"``
+        by the brick's error, ``P = E`` (the classic greedy rule the paper compares against).
     interest : 3 floats, optional
         Point of interest (world coordinates) of the ``"error"`` cut; without one its importance
         is the distance to the eye alone. :meth:`render` can move it per frame.
@@ -220,7 +218,7 @@ class MultiscaleScene:
         The seam copies' bytes (``frame.stats["seam_copy_bytes"]``) are held back from the
         bricks' share of the budget, from the frame after they appear (default). ``False``
         leaves them beside the budget, so that the cut's brick count follows from the budget
-        alone (the error cut's ``N`` of reference 002, for comparing cut algorithms).
+        alone (the error cut's ``N`` of Carmona & Froehlich 2011, for comparing cut algorithms).
 
     Raises
     ------

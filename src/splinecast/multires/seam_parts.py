@@ -4,8 +4,7 @@
 lie within the model's radius ``r`` of a coarser piece. Those elements all lie near the brick's
 faces, yet a grid needs one dense array, so the changed brick used to be drawn from a float64
 copy of its whole array: 8 bytes per voxel for every brick at a level boundary, 2 MiB per 64^3
-brick, about 1 GiB beside a 1 GiB budget when a 2048^3 view refined
-(``benchmarks/results/multires.md``).
+brick, as much again as the budget itself when a large view refined.
 
 The box of such a brick is split instead, like a k-d tree, into up to six *shells* (a slab
 along each face near which elements changed: x first, over the whole box; then y over what is

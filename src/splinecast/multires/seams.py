@@ -27,8 +27,7 @@ Exact where the finer level can represent the coarser function (*nested* models)
     rounding): no crack in any mode. Several levels meeting at an edge or a corner are handled
     by the coarse-to-fine order (the finer coarse piece was itself restricted to the coarsest).
 
-Approximate for the others (``bspline2``, ``qss``, ``s31``) and for pyramids not built by
-splinecast (levels offset by half a voxel)
+Approximate for ``bspline2``, ``qss`` and ``s31``, and for pyramids offset by half a voxel
     Their coarse function is not in the finer level's space (even-degree knots and type-6 cubes
     lie between voxel centres, so the levels' pieces do not nest). The elements near the face get
     the coarse function's *values* there; the two sides then differ on the face by the fine
@@ -48,7 +47,7 @@ Cost while a cut refines
     to it, and the grid the renderer built from it, stay valid). The pieces within reach come
     from a k-d tree per class of box sizes, and nested models subdivide once per source array
     with per-axis matrices. The plan's work is then proportional to the bricks that arrived,
-    not to the cut (``benchmarks/bench_stream_frames.py``).
+    not to the cut (``benchmarks/tools/bench_stream_frames.py`` times it frame by frame).
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
-"""CDF biorthogonal spline wavelets for B-spline degree 1, 2 and 3 (reference 000, §4.1).
+"""CDF biorthogonal spline wavelets for B-spline degree 1, 2 and 3 (Steinberger 2010, §4.1).
 
 The synthesis scaling function is the centred uniform B-spline of degree ``d`` — the basis the
 ``bspline1/2/3`` models render — so every approximation level is again a B-spline coefficient grid.
-For each degree we take the member of the Cohen–Daubechies–Feauveau family [CDF92] with the fewest
-vanishing moments of the synthesis wavelet, as the thesis does (Table 4.1): ψ2,2 (linear), ψ3,1
-(quadratic), ψ4,2 (cubic); ``ψN,Ñ`` has B-spline order ``N = d + 1``.
+For each degree we take the member of the Cohen–Daubechies–Feauveau family (Cohen et al. 1992) with
+the fewest vanishing moments of the synthesis wavelet, as the thesis does (Table 4.1): ψ2,2
+(linear), ψ3,1 (quadratic), ψ4,2 (cubic); ``ψN,Ñ`` has B-spline order ``N = d + 1``.
 
 Construction (exact, in rational arithmetic)
     With ``C(z) = (z^-1 + 2 + z) / 4`` (``cos²(ξ/2)``) and ``S(z) = (2 - z - z^-1) / 4``
@@ -14,7 +14,7 @@ Construction (exact, in rational arithmetic)
       B-spline two-scale mask ``B_d(x) = Σ_k p_k B_d(2x - k)`` (shifted so it is centred);
     * analysis low-pass ``P̃(z) = ((1 + z) / 2)^Ñ Σ_{k<ℓ} binom(ℓ-1+k, k) S(z)^k`` with
       ``ℓ = (N + Ñ) / 2`` — Daubechies' identity ``(1-y)^ℓ P_ℓ(y) + y^ℓ P_ℓ(1-y) = 1`` makes the
-      pair biorthogonal (Daubechies, *Ten Lectures*, §8.3.4; [CDF92] §6.A);
+      pair biorthogonal (Daubechies, *Ten Lectures*, §8.3.4; Cohen et al. 1992, §6.A);
     * high-passes by the alternating flip ``g_k = (-1)^(k+1) p̃_(1-k)``,
       ``g̃_k = (-1)^(k+1) p_(1-k)``, which turns biorthogonality of the low-passes into perfect
       reconstruction of the two-channel bank.
@@ -49,7 +49,7 @@ from ..errors import ParameterError
 __all__ = ["Filter", "SplineWavelet", "spline_wavelet", "DUAL_MOMENTS"]
 
 #: Vanishing moments Ñ of the synthesis wavelet per B-spline degree: the fewest the CDF family
-#: allows (Ñ has the parity of N = d + 1), as chosen in reference 000, Table 4.1.
+#: allows (Ñ has the parity of N = d + 1), as chosen in Steinberger 2010, Table 4.1.
 DUAL_MOMENTS = {1: 2, 2: 1, 3: 2}
 
 Laurent = dict[int, Fraction]

@@ -34,7 +34,7 @@ Windows and boundary rule (why the volume is padded)
     The padding costs at most ``2^J - 1`` voxels per axis (none for ``n = 2^J q + 1``, one for
     ``n = 2^J q`` at odd degree); chunks that lie entirely in it are never selected.
 
-Chunks (reference 000, §4.4)
+Chunks (Steinberger 2010, §4.4)
     A chunk ``(j, idx)`` is ``k`` nodes per axis of level ``j``: nodes ``k idx .. k idx + k - 1``.
     Its *region* is the ``k`` cells those nodes own, voxels
     ``[b + 2^j k idx, b + 2^j k (idx + 1)]`` with ``b = 0`` (odd) or ``-3/2`` (even degree): chunk

@@ -1,19 +1,19 @@
-"""View-dependent selection of wavelet chunks (reference 000, §4.2 and §4.4, Algorithm 1).
+"""View-dependent selection of wavelet chunks (Steinberger 2010, §4.2 and §4.4, Algorithm 1).
 
 Per chunk ``(j, idx)`` of ``k^3`` level-``j`` nodes (:mod:`.wavelet_layout`), three conditions
 decide whether its details (the level-``j + 1`` details it owns) are added — the chunk is
 *active* and level ``j`` is shown on its region:
 
-c0  the parent chunk ``(j + 1, idx // 2)`` is active (the roots, level J, always are);
-c1  ``s / c >= ε``: ``s`` is the world diameter of one level-``j + 1`` cell (the resolution the
-    details would refine, ``2^(j+1) |spacing|``) and ``c`` the distance from the eye to the
-    nearest point of the chunk's region (0 inside it). So ε is an angle in radians: cells that
-    look smaller than ε are not refined. ε = 0 refines everywhere; a value near the angle of one
-    pixel (``fov / image height``) keeps cells about a pixel wide;
-c2  the isovalue (any of several) lies in the chunk's selection range
-    (:func:`.wavelet_ranges.selection_ranges`); skipped when no isovalue is given (DVR, MIP).
+* c0: the parent chunk ``(j + 1, idx // 2)`` is active (the roots, level J, always are);
+* c1: ``s / c >= ε``: ``s`` is the world diameter of one level-``j + 1`` cell (the resolution
+  the details would refine, ``2^(j+1) |spacing|``) and ``c`` the distance from the eye to the
+  nearest point of the chunk's region (0 inside it). So ε is an angle in radians: cells that
+  look smaller than ε are not refined. ε = 0 refines everywhere; a value near the angle of one
+  pixel (``fov / image height``) keeps cells about a pixel wide;
+* c2: the isovalue (any of several) lies in the chunk's selection range
+  (:func:`.wavelet_ranges.selection_ranges`); skipped when no isovalue is given (DVR, MIP).
 
-Neighbours (the thesis' Fig. 4.8, whose content is missing from the text; derived here)
+Neighbours (the thesis' Fig. 4.8, derived here)
     A chunk's wavelets reach beyond its region — measured in level-``j`` cells, at most
     ``-g_start + before`` cells to the left and ``g_stop + after - 1`` to the right (2/2, 2/2 and
     4/4 cells for degree 1, 2, 3), always less than one chunk since ``k >= 4``. Every neighbour

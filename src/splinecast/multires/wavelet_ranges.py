@@ -1,4 +1,4 @@
-"""Conservative per-chunk value ranges of a spline-wavelet pyramid (reference 000, §3.3.3, §4.4).
+"""Conservative per-chunk value ranges of a spline-wavelet pyramid (Steinberger 2010, §3.3.3, §4.4).
 
 Two tables, both computed from coefficients, never by sampling:
 

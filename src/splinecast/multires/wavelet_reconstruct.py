@@ -1,4 +1,5 @@
-"""Gather-based reconstruction of selected chunks into B-spline coefficient bricks (000, §4.4).
+"""Gather-based reconstruction of selected chunks into B-spline coefficient bricks (Steinberger
+2010, §4.4).
 
 For a chunk ``(j, idx)`` the brick is the ``(k + d)^3`` level-``j`` nodes
 ``k idx - pad .. k idx - pad + k + d - 1`` per axis (:mod:`.wavelet_layout`). Each node is

@@ -1,13 +1,13 @@
-"""A scene of a spline-wavelet store: view-dependent chunks rendered exactly (reference 000, §4).
+"""A scene of a spline-wavelet store: view-dependent chunks rendered exactly (Steinberger 2010, §4).
 
 ``sc.Scene(sc.read("x.zarr"), lod=ε)`` of a store written with ``kind="wavelet"`` returns a
 :class:`WaveletScene` (registered in ``splinecast/__init__.py``). Per frame it
 
 1. selects the chunks for the camera (:func:`.wavelet_lod.select`: refine while a level's cell
    looks larger than ``ε`` radians from the eye and the isovalue lies in the chunk's range);
-2. reconstructs the selected chunks' B-spline coefficient bricks (:class:`.wavelet_reconstruct.
-   ChunkReconstructor`, reusing unchanged bricks across frames; the details of a chunk are read
-   from the store the first time it is refined);
+2. reconstructs the selected chunks' B-spline coefficient bricks
+   (:class:`.wavelet_reconstruct.ChunkReconstructor`, reusing unchanged bricks across frames; the
+   details of a chunk are read from the store the first time it is refined);
 3. draws every region the selection shows from its brick with the ``bspline<degree>`` model
    through the cut renderer (:class:`.draw.CutRenderer`, the segment entry point, front to back
    per ray), in any mode of :meth:`splinecast.Scene.render`.

@@ -1,4 +1,4 @@
-"""Spline-wavelet pyramids in a Zarr store: written streamed, read lazily (reference 000, §4).
+"""Spline-wavelet pyramids in a Zarr store: written streamed, read lazily (Steinberger 2010, §4).
 
 ``sc.build_pyramid(src, "x.zarr", kind="wavelet", degree=3)`` (``splinecast pyramid SRC -o
 x.zarr --wavelet 3``) runs :func:`.wavelet_transform.decompose` block by block with a
@@ -31,12 +31,12 @@ Layout of the store (a Zarr v3 group)
     sequences for odd degree, half-sample symmetric / antisymmetric for even degree).
 
 Lazy details
-    The reconstructor (:class:`.wavelet_reconstruct.ChunkReconstructor`) asks for the details
-    one block of :data:`STORE_CHUNK` nodes per axis at a time (:meth:`WaveletVolume.
-    read_detail_block`: one store chunk of each of the seven subbands), the first time a chunk
-    whose details are active needs them, and keeps them within its byte budget (least recently
-    used blocks go first). A frame therefore reads only the details of the chunks it refines;
-    ``details_read`` counts the blocks read so far.
+    The reconstructor (:class:`.wavelet_reconstruct.ChunkReconstructor`) asks for the details one
+    block of :data:`STORE_CHUNK` nodes per axis at a time (:meth:`WaveletVolume.read_detail_block`:
+    one store chunk of each of the seven subbands), the first time a chunk whose details are active
+    needs them, and keeps them within its byte budget (least recently used blocks go first). A frame
+    therefore reads only the details of the chunks it refines; ``details_read`` counts the blocks
+    read so far.
 """
 
 from __future__ import annotations
@@ -348,8 +348,8 @@ class WaveletVolume(GridGeometry):
         return WaveletPyramid(lay, coarse, {}, self.hull_lo, self.hull_hi, self.dtype)
 
     def load(self) -> WaveletPyramid:
-        """Everything read into memory: an in-memory :class:`~.wavelet_transform.
-        WaveletPyramid` (every coarse level and detail subband)."""
+        """Everything read into memory: an in-memory
+        :class:`~.wavelet_transform.WaveletPyramid` (every coarse level and detail subband)."""
         lay = self.layout
         coarse = {j: self.coarse(j) for j in range(1, lay.levels + 1)}
         details = {j: {b: self._read(f"detail/{j}/{b}") for b in DETAIL_BANDS}

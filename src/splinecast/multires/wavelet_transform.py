@@ -1,4 +1,5 @@
-"""Non-standard separable 3D spline-wavelet transform (reference 000, §4.1; [SDS96] §4.3).
+"""Non-standard separable 3D spline-wavelet transform (Steinberger 2010, §4.1; Stollnitz et al.
+1996, §4.3).
 
 One step filters the level-``j`` coefficients along x, y and z with the analysis low- and
 high-pass of :mod:`.wavelet_filters` and keeps every other output: one scaling subband ``LLL``

@@ -305,7 +305,9 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
           band_rows, tile, load, store, final, count, visited, tested, skipped):
     """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
 
-    Parameters (all prepared by the host side, :mod:`.segment`)
+    All parameters are prepared by the host side (:mod:`.segment`).
+
+    Parameters
     ----------
     grid : named tuple
         The model's kernel grid.

@@ -21,11 +21,9 @@ into ``ceil(L / step)`` equal segments (``L`` its length in voxels), so a cell s
 ``step`` along the ray is a single segment and a single table lookup, and segments of a length
 the table does not hold take their opacity from the table's optical depth (a fifth channel,
 ``-ln(1 - alpha)``, scaled by the length ratio: one ``exp``). This is what ``mode="dvr"`` uses
-without settings (:data:`DEFAULT_SETTINGS`, with early termination at ``1 - 2^-10``): measured
-on Marschner-Lobb 256^3 at 1024x768, the cost was in the calls per cell (the walk about 85 ns per
-cell, the consume call about 100 ns more whatever the number of samples in it), not in the
-samples, so a per-piece integration and termination are what pay (benchmarks/results/
-dvr_profile.md, dvr_speed.md).
+without settings (:data:`DEFAULT_SETTINGS`, with early termination at ``1 - 2^-10``): the cost
+of a cell walk is in the calls per cell (the walk's step and the consume call), not in the
+samples inside a cell, so a per-piece integration and termination are what pay.
 
 With ``sampling="ray"`` there is no cell walk: the fixed-step loop of :mod:`.sampler` takes
 the model's value every ``step`` voxels from the ray's entry, and the stretch between two
@@ -39,13 +37,13 @@ Otherwise segments end at every piece boundary, so no segment spans two cells: a
 brick by brick meets exactly the same segments as through the whole volume, and bricks traced
 independently combine with "over" into the same image (fixed step; the adaptive step depends
 on the opacity in front). Cells whose value range is fully transparent (the transfer function's
-prefix-sum table, reference 002, section 1.5) and blocks the hierarchy marks invisible
+prefix-sum table, Carmona & Froehlich 2011, section 1.5) and blocks the hierarchy marks invisible
 contribute nothing and are left out.
 
-Opacity-adaptive step (reference 002, eq. 10): ``h = h_min + (h_max - h_min) A^n`` with ``A`` the
-accumulated opacity, so the step grows where little of what follows can still be seen. Early ray
-termination stops a ray once ``A`` reaches a threshold ``A_max``: what it leaves out is at most
-``(1 - A_max)`` per channel.
+Opacity-adaptive step (Carmona & Froehlich 2011, eq. 10): ``h = h_min + (h_max - h_min) A^n`` with
+``A`` the accumulated opacity, so the step grows where little of what follows can still be seen.
+Early ray termination stops a ray once ``A`` reaches a threshold ``A_max``: what it leaves out is at
+most ``(1 - A_max)`` per channel.
 
 Optional gradient shading multiplies each segment's colour by ``ambient + diffuse |n . u|``
 (headlight, ``n`` the normalized gradient of the model at the segment's back end).
@@ -123,8 +121,8 @@ class DVRSettings:
     adaptive : bool
         Opacity-adaptive step ``h = step + (h_max - step) * A^exponent``.
     h_max, exponent : float
-        Largest step (voxels) and exponent of the adaptive step (reference 002: 8 and 3, with
-        ``h_min = 1``).
+        Largest step (voxels) and exponent of the adaptive step (Carmona & Froehlich 2011: 8 and
+        3, with ``h_min = 1``).
     termination : float or None
         Stop a ray when its accumulated opacity reaches this value (``None``: never).
     shade : bool
@@ -222,14 +220,12 @@ class DVRSettings:
 #: What ``mode="dvr"`` uses when no :class:`DVRSettings` are given: the fixed-step loop
 #: (``sampling="ray"``) with a sample every voxel and the segments between samples
 #: pre-integrated, and rays stopped once what remains visible behind them is below 2^-10 per
-#: channel (a quarter of the 8-bit step), which no 8-bit image can show. Measured against the
-#: comparison suite's dense reference, this meets its tolerance (mean absolute error 1/255) with a
-#: wide margin: 0.0002-0.0006 on its volumes, 2.1-2.4x faster than the per-piece sampling
-#: it replaces (``sampling="pieces"``, whose error is about half) on the synthetic ones and 1.1x
-#: on the MRI, then 1.19x more there from the stretches left out between transparent blocks
-#: (benchmarks/results/dvr_ray.md, dvr_chain.md); ``tests/test_dvr_pieces.py`` checks it. On small
-#: volumes whose field bends within a voxel the per-piece sampling is the more accurate (largest
-#: pixel error 4/255 against 9/255 on a 16^3 noise volume). Bricks rendered independently and
+#: channel (a quarter of the 8-bit step), which no 8-bit image can show. Against the comparison
+#: suite's dense reference it stays well within that suite's tolerance (mean absolute error
+#: 1/255; ``docs/accuracy.rst``), and it walks no cells, so it is faster than the per-piece
+#: sampling (``sampling="pieces"``, whose error is about half); ``tests/test_dvr_pieces.py``
+#: checks it. On small volumes whose field bends within a voxel the per-piece sampling is the
+#: more accurate (``tests/test_dvr_pieces.py`` bounds both). Bricks rendered independently and
 #: merged with "over" (sort-last) can differ from the whole-volume image by up to the same
 #: 2^-10, because a back brick cannot know the opacity in front of it, and by a segment cut in
 #: two at each brick face (second order in the step); pass ``DVRSettings(sampling="pieces")``

@@ -12,7 +12,7 @@ surface parametrization and stay put on the object when the isovalue changes:
 
 Cel shading replaces the smooth diffuse term ``|n . l|`` of the headlight by ``bands`` flat levels
 (``floor(|n . l| * bands) / (bands - 1)``, capped at 1) and the specular term by an on/off
-highlight, giving the banded look of reference 004 (section 4, "N.L looked up in a 1D texture").
+highlight, giving the banded look of Koch 2009 (section 4, "N.L looked up in a 1D texture").
 
 Effects for single-isosurface images are applied after tracing, from the Frame's exact hit
 positions and normals (:func:`apply_effects`), so they work for every model's iso kernel; the

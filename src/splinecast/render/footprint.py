@@ -30,9 +30,9 @@ MIP names the blocks holding a value above the grid's smallest: every value else
 smallest one, which a ray meets first at its entry into the grid. Its rays are therefore still
 traced where the grid's box projects but no named block does, from their entry only
 (:data:`ENTRY_ONLY`, see :func:`fill_box`), and the mode's ``entry_left_out`` takes the value
-at the entry of every ray whose entry the footprint leaves out (MRI, slices at step 4:
-frames 1.9x faster; exact: 1.2x). Rays that miss the box (60% of a 1024x768 orbit view of
-the comparison's volumes) are not set up one by one.
+at the entry of every ray whose entry the footprint leaves out, so the air around an object
+is neither walked nor sampled. Rays that miss the box (most of the pixels of a view of the
+whole volume) are not set up one by one.
 """
 
 from __future__ import annotations
@@ -49,9 +49,8 @@ from .._jit import jit
 __all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "ENTRY_ONLY", "MAX_PROJECTED_BLOCKS",
            "MAX_PROJECTED_PAIRS", "block_footprint", "fill_box", "footprint_level"]
 
-#: log2 of the edge in pixels of the footprint's tiles. Tiles of 4 pixels measured no better
-#: (steady isosurface frames, two threads: sphere 0.99x, Marschner-Lobb 128^3 0.97x, noise
-#: 256^3 1.05x, MRI 1.06x; MRI slices MIP 1.00x; ``benchmarks/results/iso_builds_tile4.md``).
+#: log2 of the edge in pixels of the footprint's tiles. Tiles of 4 pixels measured no better:
+#: the finer intervals save little and the projection writes four times as many tiles.
 FOOTPRINT_SHIFT = 3
 
 #: The driver's ``footprint`` argument when there is none (every ray is traced whole).
@@ -67,9 +66,8 @@ MAX_PROJECTED_BLOCKS = 1 << 17
 
 #: A mode that names the 2-cell blocks (the exact isosurface) has them projected when at most
 #: this many are active: their boxes hug the surface, so fewer rays that miss it are traced and
-#: the rest start nearer to it (sphere 128^3, 6 900 pairs: 1.08x; torus, 8 700: 1.08x;
-#: ``benchmarks/results/iso_builds_pairfoot.md``). Projecting 28 000 (Marschner-Lobb 128^3) or
-#: 123 000 (256^3) cost more than it saved (0.97x, 0.92x; ``iso_builds_pairfoot_all.md``).
+#: the rest start nearer to it. Projecting tens of thousands of them (a large or busy surface)
+#: costs more than it saves, and the 4-cell blocks are projected instead.
 MAX_PROJECTED_PAIRS = 1 << 14
 
 #: Relative widening of a block's parameter interval (the walk's parameters are rounded).

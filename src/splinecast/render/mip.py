@@ -1,23 +1,21 @@
 """Maximum (and minimum) intensity projection, exactly or sampled, for every model.
 
-Exact MIP (reference 001, section 9): along a ray the reconstruction is, piece by piece, a
+Exact MIP (Józsa et al. 2014, section 9): along a ray the reconstruction is, piece by piece, a
 polynomial; its largest value on a piece is at an end or at a root of its derivative
 (:func:`splinecast.roots.pieces.poly_max`), so the maximum along the whole ray is found with no
 step size at all.
 
-Empty-space skipping uses the block maxima of the min/max hierarchy: a block whose largest
-possible value does not exceed the running maximum cannot change the result and is leapt over,
-which, once a bright structure has been met, removes most of the ray. Before that walk, the exact
-method takes a lower bound of the answer: blocks (cells, pieces) whose maximum lies strictly
-below it are left out from the start, so a bright structure far behind dim ones is reached
-without testing the dim ones first. Neighbouring rays of an image find their maxima at nearly
-the same depth, so the bound is the model's value on this ray at the depth where the thread's
-previous ray found its maximum: a value the ray does meet, usually close to its answer
-(frames 1.5-1.8x faster than with the bound below: ``benchmarks/results/
-mip_builds_coherent.md``). A thread's first ray has no predecessor; it walks the 16-cell blocks
-instead, taking the largest block minimum (every value the ray meets inside a block is at least
-the block's minimum) and the model's values at a few points inside the block with the largest
-maximum (``benchmarks/results/mip_builds_seed.md``). The bound only decides what is left out,
+Empty-space skipping uses the block maxima of the min/max hierarchy: a block whose largest possible
+value does not exceed the running maximum cannot change the result and is leapt over, which, once a
+bright structure has been met, removes most of the ray. Before that walk, the exact method takes a
+lower bound of the answer: blocks (cells, pieces) whose maximum lies strictly below it are left out
+from the start, so a bright structure far behind dim ones is reached without testing the dim ones
+first. Neighbouring rays of an image find their maxima at nearly the same depth, so the bound is the
+model's value on this ray at the depth where the thread's previous ray found its maximum: a value
+the ray does meet, usually close to its answer, and tighter than the block bound below. A thread's
+first ray has no predecessor; it walks the 16-cell blocks instead, taking the largest block minimum
+(every value the ray meets inside a block is at least the block's minimum) and the model's values at
+a few points inside the block with the largest maximum. The bound only decides what is left out,
 never the answer, which is therefore the same whatever the order of the rays. Minimum intensity
 projection is the same computation on the negated field.
 
@@ -25,17 +23,16 @@ Two more prunings leave the answer bit-identical (``tests/test_mip.py``): a test
 Bernstein control points cannot beat the running maximum is dropped before the roots of its
 derivative are solved for, and after a tested cell the driver asks for the skip size again
 (``asks_again``), so a ray whose maximum reached its block's (plateaus of equal values, as in CT
-and MRI) leaps the rest of the block (``benchmarks/results/mip_builds_prune.md``).
+and MRI) leaps the rest of the block.
 
 With a tolerance ``e`` (``Mip(tolerance=...)``, a fraction of the display window), the exact
 method leaves out every block, cell and piece whose maximum does not beat the running maximum
 by more than ``e``, and the lower bound's value becomes the running maximum itself. The running
 maximum only grows, so everything left out lies at most ``e`` above the final answer: that
 answer is a value the ray meets (at the depth reported) and at most ``e`` below the exact one,
-for every pixel (``tests/test_mip.py``). On the comparison's volumes at 1024x768 a tolerance
-of 1/255 of the window makes frames 1.16-1.37x faster, 4/255 1.47-1.99x and 10/255
-1.92-3.09x (``benchmarks/results/mip_tolerance.md``). The sampled methods have no such bound:
-``"slices"`` at a step of 2 leaves a pixel of the MRI 39% of the window below the exact value.
+for every pixel (``tests/test_mip.py``). The larger the tolerance, the more of each ray is left
+out (``benchmarks/mip_tolerance.py`` measures the trade). The sampled methods have no such
+bound: a thin bright structure between two samples is missed whole.
 
 The sampled method (the reference common viewers use) runs the fixed-step loop of
 :mod:`.sampler`, with no cell walk: the model's values at the ray's entry into the grid, every
@@ -44,9 +41,8 @@ whose maximum does not beat the running one, as the exact walk does. It can only
 the field takes, so it never exceeds the exact MIP. A ray traced brick by brick also takes the
 values where it crosses the brick faces, so its maximum may be larger than through the whole
 volume (closer to the exact one, never above it; on 8^3 bricks of smooth noise, by up to 2% of
-the volume's range at a 1.5-voxel step). It used to take its samples inside the exact
-method's cell walk, 1.1-6.4x slower (``benchmarks/results/mip_builds_sampled_step2.md``,
-``mip_builds_sampled_step4.md``).
+the volume's range at a 1.5-voxel step). It takes no cell walk: samples inside the exact
+method's cell walk paid for every cell between them.
 
 Both methods start and end rays at the blocks holding a value above the volume's smallest
 (:meth:`Mip.footprint_flags`, :mod:`.footprint`): every other value equals the smallest, which a
@@ -209,10 +205,9 @@ def _skip_size(mode, blocks, i, j, k, st):
     its maximum does not beat the running one (ties keep the earlier position) by more than
     the tolerance, or lies strictly below the lower bound."""
     # Asking for the 2-cell blocks as well (their ranges as the isosurface keeps them,
-    # quantized within the 4-cell block's) halved the cells visited per ray on Marschner-Lobb
-    # 128^3 and the MRI (28 -> 16, 31 -> 18) and made frames 0.91-0.99x as fast
-    # (results/mip_builds_pairs.md): a leap costs about what a visited cell does, and the
-    # driver then asks once per 2-cell block instead of once per 4-cell block.
+    # quantized within the 4-cell block's) about halves the cells visited per ray but was
+    # measured slower: a leap costs about what a visited cell does, and the driver then asks
+    # once per 2-cell block instead of once per 4-cell block.
     best, lower = st[0] + mode.tolerance, st[2]
     ui, uj, uk = np.uint64(i), np.uint64(j), np.uint64(k)  # see inactive_block_size
     v = blocks[2][ui >> np.uint64(6), uj >> np.uint64(6), uk >> np.uint64(6)]
@@ -263,7 +258,7 @@ def _done(mode, st):
 def _asks_again(mode):
     # A tested cell may raise the running maximum to its block's maximum (the ray meets the
     # block's brightest value, common on plateaus of equal values): the rest of the block is
-    # then leapt over (MRI 12.8 -> 10.8 cells visited per ray; results/mip_builds_prune.md).
+    # then leapt over, which saves cells on data with plateaus (CT, MRI).
     return mode.prune != 0.0
 
 

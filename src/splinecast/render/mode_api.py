@@ -30,11 +30,11 @@ arrays*. The driver (:mod:`.driver`) calls, per ray:
 ``on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi)`` -> ``st``
     A stretch of the ray left out (a leapt block, ``lo`` NaN; or a cell or piece with range
     ``[lo, hi]`` that ``wants`` refused); only the sampled methods take notice.
-``consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1, ax, ay, az,
-bx, by, bz, ray, st)`` -> ``st``
-    A piece: ray parameters ``[t0, t1]``, the model's polynomial ``poly`` in ``s in [0, 1]``,
-    local cell points ``a`` (entry) and ``b`` (exit). Gradients come from
-    :func:`splinecast.models.pieces.gradient` (resolved for the grid's model at compile time).
+``consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1, ...)`` -> ``st``
+    (the arguments end with ``ax, ay, az, bx, by, bz, ray, st``). A piece: ray parameters
+    ``[t0, t1]``, the model's polynomial ``poly`` in ``s in [0, 1]``, local cell points ``a``
+    (entry) and ``b`` (exit). Gradients come from :func:`splinecast.models.pieces.gradient`
+    (resolved for the grid's model at compile time).
 ``done(mode, st)`` -> ``bool``
     Early termination.
 ``ray_end(mode, grid, scratch, st, ray, t_far)`` -> ``st``

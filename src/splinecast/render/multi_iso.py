@@ -4,7 +4,7 @@ Along each ray every crossing of every isovalue is found exactly and in depth or
 the roots of its polynomial minus each isovalue inside the piece's range
 (:func:`splinecast.roots.pieces.poly_roots`), sorted by ray parameter and composited with the
 "under" operator, each surface with its own colour and opacity, so a translucent skin shows the
-bone beneath (reference 004, "Blending kubischer C1-Splines"). A ray stops once its opacity
+bone beneath (Koch 2009, "Blending kubischer C1-Splines"). A ray stops once its opacity
 reaches ``1 - 1e-4``.
 
 Front and back faces of a surface get the same colour (a translucent shell is seen from both

@@ -67,8 +67,8 @@ def copy_pixel(out, row, col, r0, r1, c0, c1):
     The driver finishes one pixel of a run of tiles where no ray is traced and copies it to the
     rest: every pixel there is a fresh state finished without a ray, so its outputs do not
     depend on where it is. Writing the colour through the mode's ``finish`` pixel by pixel
-    took about 2 ns a pixel (the buffers' checks and the conversions to float32 each time), 6%
-    of a sphere's isosurface frame on 720 000 such pixels (``benchmarks/profile_kernel.py``).
+    repeats the buffers' checks and the conversions to float32 for every pixel, a visible share
+    of a frame where most of the image is background.
     """
     raise NotImplementedError
 

@@ -380,7 +380,9 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
                  final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
     """Trace every pixel through the pieces of a cut, front to back, in one launch.
 
-    Parameters (prepared by :class:`splinecast.multires.draw.CutRenderer`)
+    All parameters are prepared by :class:`splinecast.multires.draw.CutRenderer`.
+
+    Parameters
     ----------
     grids_a, grids_b : typed List of (kernel, blocks)
         The pieces' kernel grids and the mode's view of their block hierarchies, one Numba

@@ -6,8 +6,8 @@ paths give the same rays.
 
 A ray's set-up divides once per quantity and multiplies after: the direction by the reciprocal
 of its length, coordinates by the reciprocal of the spacing, slab bounds by the reciprocal of
-the direction (it ran at up to fifteen divisions per pixel, about a fifth of a trilinear
-isosurface frame on a small volume; frames 1.03-1.08x faster, ``results/iso_builds_reciprocal.md``).
+the direction (up to fifteen divisions per pixel otherwise, a large share of a trilinear
+isosurface frame on a small volume).
 The results differ from the divisions' by rounding only. The cell walk keeps dividing
 (:mod:`splinecast.accel.traversal` says why).
 """

@@ -16,12 +16,12 @@ model (the value is the model's ``value_at``, inlined into the pair's kernel):
   range; sampled MIP: its maximum does not beat the running one); the loop moves to the
   last sample inside that block, without evaluating the ones in between, whose segments lie
   wholly in the block and add nothing. It asks at every sample: remembering the last 4-cell
-  block found visible and not asking again inside it measured 0.94-1.04x;
+  block found visible and not asking again inside it gained nothing measurable;
 * early termination by the mode's ``done``;
 * for a model whose value is a few loads (``look_ahead``, :mod:`splinecast.models.pieces`),
   each sample's value is taken one sample early, before the table reads of the segment in
   front of it, so the voxel reads of the one overlap the table reads of the other (both wait
-  on memory; 1.1-1.4x on the trilinear DVR); the value is the same, as its position is;
+  on memory); the value is the same, as its position is;
 * a footprint interval (:mod:`.footprint`) is widened to the samples on either side of it,
   so a ray started or ended by it takes the segments of the whole ray.
 
@@ -29,11 +29,10 @@ A mode may instead sample on planes (``sample_planes``): where the ray crosses e
 ``step``-th plane of voxels across its dominant axis, as slice-based renderers do. The planes
 are the level's, so bricks sample where the whole volume does; a model reads fewer voxels on
 such a plane (:func:`splinecast.models.pieces.value_on_plane`: 4 instead of 8 for the trilinear).
-Its loop (:func:`_plane_samples`) takes every sample, with no leaping: on Marschner-Lobb 128^3,
-the MRI and noise 256^3 (MIP, steps 2-4) every way of leaping tried cost more than it saved
-(asking at every sample 1.5-1.75x slower; at every 4th 1.2-1.3x; every 16th, 64-cell blocks
-only, 1.1-1.15x), as each question puts the running value and a branch on the path of samples
-that otherwise overlap in the processor.
+Its loop (:func:`_plane_samples`) takes every sample, with no leaping: every way of leaping
+tried (asking at every sample, at every 4th, at every 16th for the 64-cell blocks only) cost
+more than it saved, as each question puts the running value and a branch on the path of
+samples that otherwise overlap in the processor.
 
 It returns the driver's three per-ray counters with this meaning: samples evaluated, segments
 handed to the mode, blocks leapt.

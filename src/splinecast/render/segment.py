@@ -9,7 +9,7 @@ its support needs) with its own block hierarchy and its placement (:mod:`.driver
   the state), then :func:`finish_state`; or trace bricks into separate states and merge them in
   depth order with the mode's ``combine`` (:func:`combine_states`).
 
-A brick of a model is a block of the model's :attr:`prepared` array: the brick owning cells
+A brick of a model is a block of the model's ``prepared`` array: the brick owning cells
 ``[a, b)`` per axis (of the grid's traversal space) is ``prepared[a : b + support]`` placed at
 ``offset = a`` (:func:`brick_grid`). Every model reconstructs inside it without reading its
 neighbours, and a ray traced through the bricks one after the other gives the same hits, values
@@ -128,7 +128,7 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
         model's volume).
     domain : (lo, hi), optional
         The rendered box in the level's voxel index space (default: the model's
-        :meth:`domain`); the same for every brick of a level.
+        ``domain()``); the same for every brick of a level.
     level_cells : 3 ints, optional
         The level's cells per axis (default: this grid's plus its offset).
     """

@@ -71,7 +71,7 @@ class Shading:
 @jit(inline="always")
 def _power(x: float, e: float) -> float:
     """``x ** e`` for ``x`` in [0, 1]: an integral exponent up to 1024 (the usual shininess)
-    by repeated squaring, a few multiplications where ``pow`` took 3% of an isosurface frame;
+    by repeated squaring, a few multiplications where ``pow`` is a costly library call per pixel;
     within a few units in the last place of ``pow``."""
     n = int(e)
     if n == e and 0 <= n <= 1024:

@@ -3,7 +3,7 @@
 =============  ======================================================  ===========  ==========
 name           method                                                  input form   budget
 =============  ======================================================  ===========  ==========
-``bernstein``  subdivision at the polygon crossing (LR81 style)         Bernstein    subdivisions
+``bernstein``  subdivision at the polygon crossing (Lane-Riesenfeld)    Bernstein    subdivisions
 ``rfbs``       de Casteljau isolation + regula falsi / bisection       Bernstein    per phase
 ``sturm``      Sturm sequence + bisection                              power        bisections
 ``newton``     Newton from the segment start (baseline, no guarantee)  power        Newton steps

@@ -72,7 +72,7 @@ PolyN = namedtuple("PolyN", ["coeffs", "n", "power", "finder", "iterations", "to
 _MAX_DEGREE = 9
 #: A product instead of a division by 3 in the Bernstein coefficients of a power-form cubic:
 #: LLVM keeps a division by a constant that is not a power of two, and its latency stood out
-#: in isosurface profiles (2% of a sphere's frame). The coefficients only bound the cubic,
+#: in isosurface profiles. The coefficients only bound the cubic,
 #: with margins far above the one rounding this changes.
 _THIRD = 1.0 / 3.0
 _STACK = 48          # subdivision depth-first stack: depth + 2 entries suffice
@@ -378,7 +378,7 @@ def poly_bounds(p):
     """Conservative ``(lo, hi)`` of ``p`` on ``[0, 1]``, cheap to take (compiled code only):
     the convex hull of the Bernstein coefficients of a cubic or quadratic, ``(-inf, inf)`` for
     :class:`PolyN` (converting its coefficients would double the work of :func:`poly_max`,
-    which MIP calls after it; measured 0.99x on tensor cubic B-splines)."""
+    which MIP calls after it, for a bound that rarely leaves a tensor-product piece out)."""
     raise NotImplementedError
 
 

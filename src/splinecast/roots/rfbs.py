@@ -1,6 +1,6 @@
 """First root by de Casteljau isolation, then alternating regula falsi and bisection ("aRFBS").
 
-Reference 000 (section 3.3, its fastest root finder on average), made exact about *first*:
+Steinberger 2010 (section 3.3: the fastest root finder on average), made exact about *first*:
 
 1. **Isolation.** While the control points on the current interval ``[lo, hi]`` have more than
    one sign change (or end in an exact zero after a sign change), split by de Casteljau halfway

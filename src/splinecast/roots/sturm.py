@@ -3,7 +3,7 @@
 The Sturm chain of ``p`` is ``p_0 = p``, ``p_1 = p'``, ``p_{k+1} = -rem(p_{k-1}, p_k)``. With
 ``V(x)`` the number of sign changes of ``p_0(x), p_1(x), ...`` (zeros skipped), ``V(a) - V(b)`` is
 the number of *distinct* real roots in ``(a, b]``. Bisection keeps the half whose left part still
-holds a root, so after ``k`` steps the first root is known within ``2^-k`` (reference 000,
+holds a root, so after ``k`` steps the first root is known within ``2^-k`` (Steinberger 2010,
 Listing A.4). Every chain element is rescaled to a largest coefficient of 1 (signs unchanged) to
 keep the division well scaled, and a remainder whose coefficients are all below ``1e-13`` relative
 to the dividend ends the chain (it is the rounding residue of an exact zero remainder, which is

@@ -1,6 +1,7 @@
-"""First root by Bernstein subdivision at the control polygon's zero crossing (after LR81).
+"""First root by Bernstein subdivision at the control polygon's zero crossing (after Lane &
+Riesenfeld 1981).
 
-The recommended root finder of reference 000 (section 3.3), written iteratively with constant
+The recommended root finder of Steinberger 2010 (section 3.3), written iteratively with constant
 memory. The state is an interval ``[lo, hi]`` of ``[0, 1]`` and the control points of the
 polynomial restricted to it; everything left of ``lo`` is proven root-free. One *iteration* is one
 de Casteljau subdivision:
@@ -18,7 +19,7 @@ below ``tol`` (converged), or when the iteration budget is spent. Bounds on the 
 
 * everything before the returned value was proven root-free, so it is never past the first root;
 * a budget too small to separate a control polygon from zero can return a *false* hit where the
-  polygon crosses but the polynomial does not (reference 000 notes the same risk).
+  polygon crosses but the polynomial does not (Steinberger 2010 notes the same risk).
 
 Degenerate cases, deterministically:
 
