@@ -30,7 +30,11 @@ method leaves out every block, cell and piece whose maximum does not beat the ru
 by more than ``e``, and the lower bound's value becomes the running maximum itself. The running
 maximum only grows, so everything left out lies at most ``e`` above the final answer: that
 answer is a value the ray meets (at the depth reported) and at most ``e`` below the exact one,
-for every pixel (``tests/test_mip.py``). The larger the tolerance, the more of each ray is left
+for every pixel (``tests/test_mip.py``). Here the bound also decides which value within the
+tolerance a pixel reports, so a ray may take it only from the previous ray of its own tile of the
+image (the driver's ``tile_begin`` clears it at each tile): a window of the image on that grid of
+tiles (:attr:`splinecast.Scene.tile_shape`: the viewer's stripes, Dask's tiles) shows the whole
+image's pixels. The larger the tolerance, the more of each ray is left
 out (``benchmarks/mip_tolerance.py`` measures the trade). The sampled methods have no such
 bound: a thin bright structure between two samples is missed whole.
 
