@@ -19,7 +19,16 @@ from .io.store_kinds import register_store_kind as _register_store_kind
 from .models import MODELS
 from .models.smoothing import smooth
 from .preintegration import preintegrate
-from .render.defaults import auto_iso, auto_transfer_function, auto_window, content_box
+from .render.defaults import (
+    auto_colormap,
+    auto_inside,
+    auto_iso,
+    auto_transfer_function,
+    auto_window,
+    background_value,
+    content_box,
+    is_signed,
+)
 from .render.dvr import DVRSettings
 from .render.effects import SurfaceEffects
 from .render.frame import Frame
@@ -99,13 +108,17 @@ __all__ = [
     "Volume",
     "WaveletScene",
     "WaveletVolume",
+    "auto_colormap",
+    "auto_inside",
     "auto_iso",
     "auto_transfer_function",
     "auto_window",
+    "background_value",
     "build_pyramid",
     "check_iso",
     "content_box",
     "demo",
+    "is_signed",
     "preintegrate",
     "read",
     "smooth",

@@ -21,7 +21,15 @@ from .camera import Camera
 from .errors import ParameterError, limits
 from .models import MODELS
 from .render.clipping import make_planes
-from .render.defaults import auto_iso, auto_transfer_function, auto_window, content_box
+from .render.defaults import (
+    auto_colormap,
+    auto_inside,
+    auto_iso,
+    auto_transfer_function,
+    auto_window,
+    background_value,
+    content_box,
+)
 from .render.dvr import Dvr, DVRSettings
 from .render.effects import SurfaceEffects, apply_effects
 from .render.frame import Frame
@@ -239,7 +247,7 @@ class Scene:
         opacity: Any = None,
         effects: SurfaceEffects | None = None,
         window: Any = None,
-        colormap: Any = "gray",
+        colormap: Any = None,
         tolerance: float = 0.0,
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
@@ -272,8 +280,10 @@ class Scene:
             Colours and lighting.
         inside : str, optional
             ``"high"`` or ``"low"``: which side of the isovalue is the object's inside (decides
-            front and back faces and the normals' orientation). Defaults to
-            ``volume.metadata["inside"]`` or ``"high"``.
+            front and back faces and the normals' orientation). Default
+            :func:`~splinecast.auto_inside`: ``volume.metadata["inside"]``, else ``"low"`` for
+            isovalues below the background value (a negative isovalue of a signed map), else
+            ``"high"``.
         clip : list of (nx, ny, nz, d), optional
             Clip planes in world coordinates, each keeping ``nx*x + ny*y + nz*z + d >= 0``;
             applied analytically to every ray (all modes, all models).
@@ -285,7 +295,11 @@ class Scene:
             Procedural texture and cel shading of isosurfaces.
         window, colormap : optional
             MIP/minIP display: value window ``(lo, hi)`` (default :func:`~splinecast.auto_window`:
-            percentiles of the non-background values) and colormap.
+            percentiles of the volume's axis-aligned projections, symmetric about 0 for signed
+            data) and colormap (a name of :mod:`splinecast.transfer`: any matplotlib or cmap
+            name; default :func:`~splinecast.auto_colormap`: ``"gray"``, a diverging map for
+            signed data). Pixels whose projected value is the background value
+            (:func:`~splinecast.background_value`) show the background colour.
         tolerance : float
             MIP/minIP with the exact method: how far a pixel may fall short of the exact
             projection (below it for MIP, above for minIP), as a fraction of the window's
@@ -404,8 +418,7 @@ def prepare_render(
     limits.check_render(volume, camera, mode=mode, method=method, step=step, dvr=dvr)
     if mode not in ("mip", "minip") and tolerance != 0.0:
         raise ParameterError(f"tolerance is for mode='mip' and 'minip', not {mode!r}")
-    inside = inside or volume.metadata.get("inside", "high")
-    if inside not in ("high", "low"):
+    if inside is not None and inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
     shading = shading or Shading()
     if effects is not None and not isinstance(effects, SurfaceEffects):
@@ -418,9 +431,11 @@ def prepare_render(
     stats: dict[str, Any] = {"mode": mode, "model": model}
     value = None
     if mode in ("mip", "minip"):
-        window = auto_window(volume) if window is None else window
+        window = auto_window(volume, mode) if window is None else window
+        colormap = auto_colormap(volume) if colormap is None else colormap
         setup: Any = Mip(mode, method, step, window, colormap, shading.background,
-                         volume.value_range, outputs=filled, tolerance=tolerance)
+                         volume.value_range, outputs=filled, tolerance=tolerance,
+                         empty=background_value(volume))
         stats["method"] = method
     elif mode == "dvr":
         tf = auto_transfer_function(volume) if tf is None else tf
@@ -428,11 +443,13 @@ def prepare_render(
     elif isinstance(iso, (list, tuple, np.ndarray)):
         if len(iso) == 0:
             raise ParameterError("iso must hold at least one isovalue")
-        setup = MultiIso([check_iso(v) for v in iso], colors, opacity, inside, shading, effects,
-                         outputs=filled)
+        isos = [check_iso(v) for v in iso]
+        inside = inside or auto_inside(volume, isos)
+        setup = MultiIso(isos, colors, opacity, inside, shading, effects, outputs=filled)
         stats["method"] = "exact"
     else:
         value = check_iso(iso)
+        inside = inside or auto_inside(volume, value)
         setup = Iso(value, method, step, inside, shading, outputs=filled)
         if len(planes):
             stats["planes"] = len(planes)

@@ -7,13 +7,15 @@ back) to an RGB colour and an opacity:
   the first and last point. ``alpha`` is the opacity of a slab **one voxel thick** (index units)
   of material with that value; the renderers turn it into the extinction coefficient
   ``tau = -ln(1 - alpha)`` per voxel length, so images do not change when the sampling step does;
-* the **colour** comes from a named colormap (``viridis``, ``gray``, ``bone``, ``hot``,
-  ``coolwarm``) stretched over the transfer function's ``domain``, or from explicit control points
-  ``(position in [0, 1], r, g, b)``.
+* the **colour** comes from a named colormap stretched over the transfer function's ``domain``,
+  or from explicit control points ``(position in [0, 1], r, g, b)``.
 
-The colormaps are a handful of control points interpolated linearly in RGB (written for
-splinecast; they follow the look of the usual maps closely enough for visualization, not
-bit-for-bit). Transfer functions round-trip through JSON (:meth:`TransferFunction.save`,
+Colormap names are those of the `cmap <https://cmap-docs.readthedocs.io>`_ catalog (the colormap
+library napari uses; pure Python, its only dependency is numpy): every matplotlib colormap by its
+matplotlib name, with the same colours, and the maps of colorcet, cmocean, Crameri, CET and
+others. :data:`MENU` lists the ones offered in menus; :data:`DIVERGING` is the default of signed
+data. A named map is read as 256 control points, interpolated linearly in RGB. Transfer
+functions round-trip through JSON (:meth:`TransferFunction.save`,
 :meth:`TransferFunction.load`).
 
 For empty-space skipping, :meth:`TransferFunction.visible_ranges` gives the value intervals with
@@ -25,9 +27,12 @@ the prefix-sum table of Carmona & Froehlich 2011 (section 1.5): with ``t(i) = 1`
 
 from __future__ import annotations
 
+import functools
 import json
+import logging
 import math
 import os
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -35,45 +40,161 @@ import numpy as np
 from numba import prange
 
 from ._jit import jit
-from .errors import ParameterError, ReadError, limits
+from .errors import ParameterError, ReadError, did_you_mean, limits
 
-__all__ = ["COLORMAPS", "TransferFunction", "colormap_table", "apply_colormap"]
+__all__ = ["COLORMAPS", "MENU", "DIVERGING", "TransferFunction", "colormap_table", "apply_colormap",
+           "check_colormap", "colormap_names", "parse_color"]
 
-#: Colormaps as control points ``(position, r, g, b)``, interpolated linearly in RGB.
-COLORMAPS: dict[str, tuple[tuple[float, float, float, float], ...]] = {
-    "gray": ((0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0, 1.0)),
-    "viridis": (
-        (0.00, 0.267, 0.005, 0.329),
-        (0.13, 0.283, 0.141, 0.458),
-        (0.25, 0.229, 0.322, 0.546),
-        (0.38, 0.172, 0.448, 0.558),
-        (0.50, 0.128, 0.567, 0.551),
-        (0.63, 0.153, 0.680, 0.504),
-        (0.75, 0.369, 0.789, 0.383),
-        (0.88, 0.678, 0.864, 0.190),
-        (1.00, 0.993, 0.906, 0.144),
-    ),
-    "bone": (
-        (0.000, 0.000, 0.000, 0.000),
-        (0.375, 0.326, 0.326, 0.451),
-        (0.750, 0.652, 0.777, 0.777),
-        (1.000, 1.000, 1.000, 1.000),
-    ),
-    "hot": (
-        (0.000, 0.040, 0.000, 0.000),
-        (0.375, 1.000, 0.000, 0.000),
-        (0.750, 1.000, 1.000, 0.000),
-        (1.000, 1.000, 1.000, 1.000),
-    ),
-    "coolwarm": (
-        (0.0, 0.230, 0.299, 0.754),
-        (0.5, 0.865, 0.865, 0.865),
-        (1.0, 0.706, 0.016, 0.150),
-    ),
-}
+#: The colormaps offered by name in menus (the viewer's list, ``--help``), in that order. Any
+#: other name of the `cmap <https://cmap-docs.readthedocs.io>`_ catalog works too: every
+#: matplotlib colormap by its matplotlib name (``"RdBu_r"``, ``"jet"``, ...; ``_r`` reverses a
+#: map), and the maps of colorcet, cmocean, Crameri, CET, ... (``"cmocean:thermal"``).
+MENU = ("gray", "bone", "hot", "viridis", "magma", "inferno", "cividis", "turbo", "coolwarm",
+        "RdBu_r", "berlin")
+#: The colormap of signed data (values on both sides of a background of 0): Crameri's
+#: ``berlin``, diverging through a dark centre, so that values near 0 fade into the dark
+#: background and both signs stand out (blue below 0, red above).
+DIVERGING = "berlin"
+
+#: Names the catalog lacks or spells differently: the British spelling of ``gray`` (cmap's
+#: ``grey`` is a single-colour map).
+_ALIASES = {"grey": "gray", "grey_r": "gray_r"}
+#: Colormap samples: a map is stored as this many control points (exact for the catalog's
+#: 256-entry tables).
+_SAMPLES = 256
+
+
+def colormap_names() -> list[str]:
+    """Every colormap name :func:`colormap_table` accepts (the short names of the cmap catalog;
+    namespaced names ``"namespace:name"`` and ``_r`` reversals are accepted as well)."""
+    import cmap
+
+    short = {n for n in cmap.Colormap.catalog() if ":" not in n}
+    return sorted(short | set(MENU) | set(_ALIASES))
+
+
+@functools.lru_cache(maxsize=64)
+def _catalog_points(name: str) -> np.ndarray:
+    """Control points ``(position, r, g, b)`` of a catalog colormap (read-only, cached)."""
+    import cmap
+
+    key = _ALIASES.get(name.lower(), name)
+    # cmap logs a warning when a short name exists in several namespaces; like matplotlib it
+    # takes the matplotlib (bids, matlab, ...) map first, which is what a user of that name
+    # expects, so the warning is noise here.
+    logger = logging.getLogger("cmap")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        cm = cmap.Colormap(key)
+    except (ValueError, KeyError, TypeError):
+        raise _unknown_colormap(name) from None
+    finally:
+        logger.setLevel(level)
+    x = np.linspace(0.0, 1.0, _SAMPLES)
+    rgb = np.asarray(cm(x), dtype=np.float64)[:, :3]
+    points = np.column_stack([x, np.clip(rgb, 0.0, 1.0)])
+    points.setflags(write=False)
+    return points
+
+
+def _unknown_colormap(name: str) -> ParameterError:
+    shown = limits.shorten(name)
+    hint = did_you_mean(name, [*MENU, *colormap_names()])
+    return ParameterError(
+        f"colormap {shown} is not a known colormap{hint} (accepted: {', '.join(MENU)}, or any "
+        "matplotlib or cmap catalog name)")
+
+
+class _Colormaps(Mapping):
+    """The :data:`MENU` colormaps by name -> control points ``(position, r, g, b)``."""
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in MENU:
+            raise KeyError(name)
+        return _catalog_points(name)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(MENU)
+
+    def __len__(self) -> int:
+        return len(MENU)
+
+
+#: The :data:`MENU` colormaps as control points ``(position, r, g, b)``, 256 each (read from
+#: the cmap catalog on first use).
+COLORMAPS: Mapping[str, np.ndarray] = _Colormaps()
+
+
+def check_colormap(colormap: Any, name: str = "colormap") -> Any:
+    """``colormap`` if it is a known colormap name or valid control points, else a
+    :class:`~splinecast.errors.ParameterError` naming ``name``, the accepted values and the
+    closest names."""
+    try:
+        _colormap_points(colormap)
+    except ParameterError as exc:
+        message = str(exc)
+        if message.startswith("colormap") and name != "colormap":
+            message = name + message[len("colormap"):]
+        raise ParameterError(message) from None
+    return colormap
+
 
 # Opacity is capped just below 1 so the extinction -ln(1 - alpha) stays finite.
 _ALPHA_CAP = 1.0 - 1e-6
+
+
+def parse_color(value: Any, name: str = "color", alpha: bool = False) -> tuple[float, ...]:
+    """A colour as RGB (``alpha=True``: RGBA) floats in [0, 1].
+
+    ``value`` is a CSS colour name (``"white"``, ``"steelblue"``), a hex code (``"#1a1a1a"``,
+    ``"#1a1a1a80"`` with alpha), ``"R,G,B"`` or ``"R,G,B,A"`` numbers in [0, 1], a sequence of
+    3 (or 4) such numbers, or ``"transparent"`` (``"none"``), which needs ``alpha=True``.
+    Without an alpha of its own a colour is opaque.
+
+    Raises
+    ------
+    ParameterError
+        One line naming ``name``, what was given, the accepted forms and the closest colour
+        names.
+    """
+    from PIL import ImageColor
+
+    width = 4 if alpha else 3
+    accepted = ("a colour name (white, black, steelblue, ...), #RRGGBB"
+                + (", #RRGGBBAA, transparent" if alpha else "")
+                + (" or R,G,B[,A] numbers in [0, 1]" if alpha else " or R,G,B numbers in [0, 1]"))
+    rgba: list[float] | None = None
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if alpha and text in ("transparent", "none"):
+            return (0.0, 0.0, 0.0, 0.0)
+        if "," in text and not text.startswith(("rgb", "hsl", "hsv")):
+            try:
+                rgba = [float(v) for v in text.split(",")]
+            except ValueError:
+                rgba = None
+        else:
+            try:
+                rgb8 = ImageColor.getrgb(text)
+                rgba = [c / 255.0 for c in rgb8]
+            except ValueError:
+                rgba = None
+    elif not isinstance(value, bool):
+        try:
+            rgba = [float(v) for v in value]
+        except (TypeError, ValueError):
+            rgba = None
+    if (rgba is None or not 3 <= len(rgba) <= width
+            or not all(math.isfinite(v) and 0.0 <= v <= 1.0 for v in rgba)):
+        hint = ""
+        if isinstance(value, str) and not any(c.isdigit() for c in value):
+            hint = did_you_mean(value.strip(), ImageColor.colormap)
+        raise ParameterError(f"{name} {limits.shorten(value)} is not a colour{hint} "
+                             f"(accepted: {accepted})")
+    if alpha and len(rgba) == 3:
+        rgba.append(1.0)
+    return tuple(float(v) for v in rgba)
 
 
 def _control_points(points: Any, width: int, name: str) -> np.ndarray:
@@ -94,11 +215,7 @@ def _control_points(points: Any, width: int, name: str) -> np.ndarray:
 
 def _colormap_points(colormap: Any) -> np.ndarray:
     if isinstance(colormap, str):
-        if colormap not in COLORMAPS:
-            raise ParameterError(
-                f"colormap must be one of {', '.join(COLORMAPS)}, got {limits.shorten(colormap)}"
-            )
-        return np.asarray(COLORMAPS[colormap], dtype=np.float64)
+        return _catalog_points(colormap)
     pts = _control_points(colormap, 4, "colormap")
     if np.any((pts < 0) | (pts > 1)):
         raise ParameterError("colormap points must be (position, r, g, b) numbers in [0, 1]")
@@ -108,7 +225,8 @@ def _colormap_points(colormap: Any) -> np.ndarray:
 def colormap_table(colormap: Any = "gray", n: int = 256) -> np.ndarray:
     """The colormap sampled at ``n`` evenly spaced positions of ``[0, 1]``: shape (n, 3).
 
-    ``colormap`` is a name of :data:`COLORMAPS` or control points ``(position, r, g, b)``.
+    ``colormap`` is a colormap name (:data:`MENU`, any matplotlib or cmap catalog name) or
+    control points ``(position, r, g, b)``.
     """
     pts = _colormap_points(colormap)
     x = np.linspace(0.0, 1.0, n)
@@ -165,8 +283,8 @@ class TransferFunction:
     domain : (lo, hi)
         The value interval the colormap spans and the pre-integration tables cover (data units).
     colormap : str or list of (position, r, g, b)
-        A name of :data:`COLORMAPS` or explicit colour control points over ``[0, 1]`` of the
-        domain.
+        A colormap name (:data:`MENU`, any matplotlib or cmap catalog name) or explicit colour
+        control points over ``[0, 1]`` of the domain.
 
     Examples
     --------

@@ -4,18 +4,20 @@ the capture of library output, progress output and output-path checks."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import logging
 import math
+import re
 import sys
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 from typing import NoReturn, TextIO
 
 import splinecast as sc
-from splinecast.errors import limits
+from splinecast.errors import did_you_mean, limits
 
 __all__ = [
     "Captured",
@@ -23,6 +25,8 @@ __all__ = [
     "add_input_options",
     "captured_output",
     "check_output",
+    "derived_output",
+    "IMAGE_SUFFIXES",
     "finite",
     "log",
     "numbers",
@@ -32,10 +36,48 @@ __all__ = [
 _PACKAGE_DIR = str(Path(sc.__file__).resolve().parent)
 
 
+#: What argparse takes for a value rather than an option although it starts with ``-``:
+#: negative numbers, also comma- or colon-separated lists of them (``--iso -3,3``,
+#: ``--window -5,5``, ``--iso -1:1``), where argparse's own rule knows single numbers only.
+_NEGATIVE_NUMBERS = re.compile(r"^-\.?\d[\d.,:eE+-]*$")
+_INVALID_CHOICE = re.compile(r"invalid choice: '(?P<value>.*)' \(choose from (?P<choices>.*)\)$")
+
+
 class Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line and exit status 2."""
+    """An argument parser whose errors are one line and exit status 2, with "did you mean"
+    suggestions for misspelt options and choices, and negative numbers (also lists such as
+    ``-3,3``) taken as values."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBERS
+
+    def parse_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                   namespace: argparse.Namespace | None = None) -> argparse.Namespace:
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            options = self._option_strings(parsed)
+            first = next((e for e in extras if e.startswith("-")), extras[0])
+            hint = did_you_mean(first.split("=", 1)[0], options) if first.startswith("-") else ""
+            self.error(f"unrecognized arguments: {' '.join(extras)}{hint}")
+        return parsed
+
+    def _option_strings(self, parsed: argparse.Namespace) -> list[str]:
+        """The long options of this parser and of the subcommand ``parsed`` chose."""
+        parsers = [self]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen = action.choices.get(getattr(parsed, action.dest or "", None) or "")
+                if chosen is not None:
+                    parsers.append(chosen)
+        return [o for p in parsers for a in p._actions for o in a.option_strings
+                if o.startswith("--")]
 
     def error(self, message: str) -> NoReturn:
+        match = _INVALID_CHOICE.search(message)
+        if match:
+            choices = re.findall(r"'([^']*)'", match["choices"])
+            message += did_you_mean(match["value"], choices)
         self.exit(2, f"splinecast: error: {message} (see --help)\n")
 
 
@@ -192,14 +234,52 @@ def uncaptured(args: argparse.Namespace) -> AbstractContextManager[None]:
     return captured.released() if captured is not None else nullcontext()
 
 
-def check_output(path: str, suffix: str, option: str) -> None:
-    """Refuse an output path with the wrong suffix, a missing folder, or that is a folder."""
+#: Image files ``render -o`` writes (through Pillow; see :meth:`splinecast.Frame.save`).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
+
+
+def check_output(path: str, suffix: str | tuple[str, ...], option: str) -> None:
+    """Refuse an output path with the wrong suffix (one of ``suffix`` when a tuple), a missing
+    folder, or that is a folder."""
     p = limits.check_path_text(path, option)
     if path.endswith(("/", "\\")):  # pathlib would drop the slash and write a file anyway
         raise sc.ParameterError(f"{option} {limits.shorten(path)}: names a folder, not a file")
-    if p.suffix.lower() != suffix:
-        raise sc.ParameterError(f"{option} {limits.shorten(path)}: must end in {suffix}")
+    suffixes = (suffix,) if isinstance(suffix, str) else suffix
+    if p.suffix.lower() not in suffixes:
+        accepted = suffixes[0] if len(suffixes) == 1 else (
+            ", ".join(suffixes[:-1]) + " or " + suffixes[-1])
+        raise sc.ParameterError(f"{option} {limits.shorten(path)}: must end in {accepted}")
     if not p.parent.exists():
         raise sc.ParameterError(f"{option} {path}: the folder {p.parent} does not exist")
     if p.is_dir():
         raise sc.ParameterError(f"{option} {path}: is a folder")
+
+
+#: Suffixes of compressed files, left out of a derived name with the suffix before them
+#: (``head.nii.gz`` -> ``head``).
+_COMPRESSED = (".gz", ".bz2", ".xz", ".zst")
+
+
+def derived_output(source: str, tag: str, suffix: str) -> Path:
+    """The output path when ``-o`` is not given: the input's name without its suffix, then
+    ``-TAG`` when ``tag`` is not empty, then ``suffix``, in the current folder
+    (``/data/head.nii.gz`` -> ``./head-mip.png``; ``demo:torus?size=64`` -> ``./torus.png``).
+    Never the input itself: a clash adds ``-render``."""
+    text = source.rstrip("/\\")
+    if text.startswith("demo:"):
+        name = text[len("demo:"):].split("?", 1)[0] or "demo"
+    else:
+        name = re.split(r"[/\\]", text.split("?", 1)[0])[-1] or "volume"
+        for compressed in _COMPRESSED:
+            if name.lower().endswith(compressed):
+                name = name[: -len(compressed)]
+        stem = Path(name).stem
+        name = stem if stem and not stem.startswith(".") else name
+        if name.lower().endswith(".ome"):  # OME-Zarr and OME-TIFF: image.ome.zarr
+            name = name[: -len(".ome")] or name
+    name = re.sub(r"[^\w.+-]", "_", name)
+    out = Path.cwd() / f"{name}{'-' + tag if tag else ''}{suffix}"
+    with contextlib.suppress(OSError):
+        if out.exists() and out.resolve() == Path(source).resolve():
+            out = out.with_name(f"{out.stem}-render{suffix}")
+    return out

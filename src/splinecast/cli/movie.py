@@ -28,7 +28,7 @@ from splinecast.distributed import (
 )
 from splinecast.io.omezarr import is_zarr
 
-from ._common import add_input_options, finite, log, numbers
+from ._common import add_input_options, derived_output, finite, log, numbers
 from ._progress import Progress
 from .render import (
     add_render_options,
@@ -52,8 +52,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Render a turntable (by default one full turn) or a sweep of the camera "
                     "angles or the isovalue, locally or on a Dask cluster.")
     movie.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
-    movie.add_argument("-o", "--output", required=True,
-                       help="OUT.mp4, OUT.gif, or a folder (OUT/) for frame_0000.png, ...")
+    movie.add_argument("-o", "--output",
+                       help="OUT.mp4, OUT.gif, or a folder (OUT/) for frame_0000.png, ... "
+                            "(default: NAME.mp4, or NAME-MODE.mp4 for another mode than iso, "
+                            "in the current folder, NAME from the input; printed)")
     movie.add_argument("--frames", type=int, required=True, help="number of frames")
     movie.add_argument("--azimuth", metavar="A0[:A1]",
                        help="degrees around z, fixed or from A0 to A1 (default: a full turn "
@@ -62,7 +64,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="degrees above xy, fixed or from E0 to E1 (default 20)")
     movie.add_argument("--iso", metavar="V0[:V1]",
                        help="isovalue in data units, fixed, a V0:V1 sweep, or comma-separated "
-                            "for several translucent surfaces (default: the demo's)")
+                            "for several translucent surfaces (default: the volume's, else "
+                            "Otsu's threshold of the non-background histogram, as render)")
     movie.add_argument("--fps", type=finite, default=24.0, help="frames per second (default 24)")
     movie.add_argument("--quality", type=finite, default=8.0,
                        help="MP4 quality from 1 to 10 (default 8)")
@@ -172,6 +175,9 @@ def _wavelet_store(args: argparse.Namespace) -> Any:
 def run(args: argparse.Namespace) -> int:
     """Render the movie ``args.output``."""
     # Validate every option and the output before any work, so a mistake writes nothing.
+    if args.output is None:
+        args.output = str(derived_output(args.file, "" if args.mode == "iso" else args.mode,
+                                         ".mp4"))
     width, height = check_render_args(args)
     if args.frames < 1:
         raise sc.ParameterError(f"--frames must be at least 1, got {args.frames}")

@@ -1,4 +1,4 @@
-"""``splinecast render FILE -o OUT.png``: one image of any model in any mode."""
+"""``splinecast render FILE [-o OUT.png]``: one image of any model in any mode."""
 
 from __future__ import annotations
 
@@ -10,10 +10,19 @@ import time
 from pathlib import Path
 
 import splinecast as sc
-from splinecast.errors import limits
+from splinecast.errors import did_you_mean, limits
 from splinecast.render.defaults import WINDOW_PERCENTILES
+from splinecast.transfer import DIVERGING, MENU
 
-from ._common import add_input_options, check_output, finite, log, numbers
+from ._common import (
+    IMAGE_SUFFIXES,
+    add_input_options,
+    check_output,
+    derived_output,
+    finite,
+    log,
+    numbers,
+)
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
            "mode_kwargs", "orbit_options", "sampled_step", "dvr_settings", "SAMPLED_STEP",
@@ -25,6 +34,7 @@ _MODE_ONLY = {
     "--iso": ("iso", ("iso",)),
     "--opacity": ("opacity", ("iso",)),
     "--inside": ("inside", ("iso",)),
+    "--color": ("color", ("iso",)),
     "--texture": ("texture", ("iso",)),
     "--texture-scale": ("texture_scale", ("iso",)),
     "--shading": ("shading", ("iso",)),
@@ -60,13 +70,19 @@ _DVR_UNSET: dict[str, object] = {"step": None, "preintegration": None, "table_la
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
-    render = sub.add_parser("render", help="render an isosurface, a MIP or a DVR image to a PNG")
+    render = sub.add_parser("render", help="render an isosurface, a MIP or a DVR image to a "
+                            "PNG, JPEG, TIFF or WebP file")
     render.add_argument("file", help="volume file, DICOM folder or demo:NAME?size=N")
-    render.add_argument("-o", "--output", required=True, help="output PNG path")
+    render.add_argument("-o", "--output",
+                        help="output image: .png, .jpg/.jpeg (composited on the background), "
+                             ".tif/.tiff or .webp (default: NAME.png, or NAME-MODE.png for "
+                             "another mode than iso, in the current folder, NAME from the "
+                             "input; printed)")
     render.add_argument("--array", help="data array of a VTK file holding several")
     render.add_argument("--iso", help="isovalue(s) in data units, comma-separated for several "
-                        "translucent surfaces (default: the demo's, else Otsu's threshold of "
-                        "the histogram; printed)")
+                        "translucent surfaces; negative values as --iso -3 or --iso -3,3 "
+                        "(default: the volume's, else Otsu's threshold of the non-background "
+                        "histogram, of the absolute values for signed data; printed)")
     render.add_argument("--azimuth", type=finite, default=30.0,
                         help="degrees around z (default 30)")
     render.add_argument("--elevation", type=finite, default=20.0,
@@ -116,7 +132,18 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
                              "0.25) and --mode dvr (default 0.25 when another DVR option is "
                              "given)")
     render.add_argument("--inside", choices=("high", "low"),
-                        help="which side of the isovalue is the object (default from the data)")
+                        help="which side of the isovalue is the object (default: the volume's, "
+                             "else low for isovalues below the background value, e.g. negative "
+                             "ones of a signed map, else high)")
+    render.add_argument("--background", metavar="COLOR",
+                        help="background colour: a name (white, black, ...), #RRGGBB[AA], "
+                             "R,G,B[,A] in [0, 1] or transparent (default 0.07,0.07,0.09, a "
+                             "dark grey)")
+    render.add_argument("--color", action="append", metavar="COLOR",
+                        help="surface colour (default 0.92,0.84,0.7, a light beige, for one "
+                             "surface; the bone colormap for several): a name, #RRGGBB or "
+                             "R,G,B in [0, 1]; repeat it once per --iso value, in the same "
+                             "order, for several surfaces")
     _add_mode_options(render)
 
 
@@ -126,9 +153,14 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="isosurface (default), max/min intensity projection, or DVR")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
     render.add_argument("--tf", help="transfer function JSON file (--mode dvr)")
-    render.add_argument("--colormap", default="gray",
-                        help="colormap of --mode mip/minip (default gray)")
-    render.add_argument("--window", help="LO,HI value window of --mode mip/minip")
+    render.add_argument("--colormap",
+                        help="colormap of --mode mip/minip, any matplotlib or cmap name "
+                             f"({', '.join(MENU)}, ...; default gray, {DIVERGING} for signed "
+                             "data)")
+    render.add_argument("--window", help="LO,HI value window of --mode mip/minip (default: "
+                        "the {:g}th-{:g}th percentiles of the volume's maximum projections along "
+                        "its axes, minIP: minimum projections, symmetric about 0 for signed "
+                        "data; printed)".format(*WINDOW_PERCENTILES))
     render.add_argument("--tolerance", type=finite, default=0.0,
                         help="--mode mip/minip, exact method: how far short of the exact "
                              "projection a pixel may fall, as a fraction of the window "
@@ -185,6 +217,29 @@ def _refuse_ignored_options(args: argparse.Namespace) -> None:
                                 "step's table lengths)")
 
 
+def _shading(args: argparse.Namespace, isos: list[float] | None) -> tuple[dict, list]:
+    """``shading`` (and ``colors`` for several surfaces) of ``--background`` and ``--color``."""
+    kwargs: dict = {}
+    shading: dict = {}
+    if args.background is not None:
+        shading["background"] = sc.transfer.parse_color(args.background, "--background",
+                                                         alpha=True)
+    colors = [sc.transfer.parse_color(c, "--color") for c in args.color or []]
+    if colors:
+        count = len(isos) if isos else 1
+        if len(colors) != count:
+            raise sc.ParameterError(
+                f"--color given {len(colors)} times for {count} isovalue"
+                f"{'s' if count > 1 else ''}: give one --color per --iso value")
+        if count > 1:
+            kwargs["colors"] = colors
+        else:
+            shading["front_color"] = colors[0]
+    if shading:
+        kwargs["shading"] = sc.Shading(**shading)
+    return kwargs, colors
+
+
 def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[str]]:
     """Scene.render keyword arguments of the mode options, validated before any rendering, and
     what was chosen automatically (printed once everything is known to be valid).
@@ -199,18 +254,27 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         kwargs["clip"] = clip
     if args.crop:
         kwargs["crop"] = numbers(args.crop, "--crop", 6)
+    isos = numbers(args.iso, "--iso") if args.mode == "iso" else None
+    shading, _ = _shading(args, isos)
+    kwargs.update(shading)
     if args.mode in ("mip", "minip"):
-        kwargs["colormap"] = args.colormap
-        sc.transfer.colormap_table(args.colormap, 2)  # a bad name fails before any work
+        if args.colormap is not None:
+            kwargs["colormap"] = sc.transfer.check_colormap(args.colormap, "--colormap")
+        else:
+            kwargs["colormap"] = sc.auto_colormap(vol)
+            if sc.is_signed(vol):
+                notes.append(f"colormap {kwargs['colormap']} (automatic: signed data, a "
+                             "background of 0 with values of both signs; set --colormap)")
         if args.tolerance:
             kwargs["tolerance"] = args.tolerance
         if args.window:
             kwargs["window"] = numbers(args.window, "--window", 2)
         else:
-            kwargs["window"] = sc.auto_window(vol)
-            notes.append("window {:g}..{:g} (automatic: {:g}th-{:g}th percentiles of the "
-                "non-background values; set --window LO,HI)".format(
-                    *kwargs["window"], *WINDOW_PERCENTILES))
+            kwargs["window"] = sc.auto_window(vol, args.mode)
+            how = ("symmetric about 0, signed data" if sc.is_signed(vol) else
+                   "percentiles of the volume's axis-aligned projections")
+            notes.append("window {:g}..{:g} (automatic: {}; set --window LO,HI)".format(
+                *kwargs["window"], how))
         kwargs["method"] = args.method
         kwargs["step"] = sampled_step(args)
         return kwargs, notes
@@ -227,7 +291,6 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         if settings is not None:  # else Scene.render's own default (dvr= not passed)
             kwargs["dvr"] = settings
         return kwargs, notes
-    isos = numbers(args.iso, "--iso")
     if isos is not None and (len(isos) > 1 or args.opacity):
         kwargs["iso"] = [sc.check_iso(vol, v) for v in isos]
         if args.opacity:
@@ -237,9 +300,19 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         if not isos:
             how = ("the volume's default" if vol.metadata.get("default_iso") is not None
                    else "automatic: Otsu's threshold of the non-background histogram")
+            if sc.is_signed(vol) and vol.metadata.get("default_iso") is None:
+                t = kwargs["iso"]
+                how = (f"automatic: Otsu's threshold of the absolute values of signed data; "
+                       f"--iso=-{t:g},{t:g} shows both signs")
             notes.append(f"iso {kwargs['iso']:g} ({how}; set --iso)")
         kwargs["method"] = args.method
         kwargs["step"] = sampled_step(args)
+    if args.inside is None and vol.metadata.get("inside") is None:
+        inside = sc.auto_inside(vol, kwargs["iso"])
+        if inside == "low":
+            notes.append(f"inside low (automatic: the isovalues lie below the background value "
+                         f"{sc.background_value(vol):g}, so the object is the values below "
+                         "them; set --inside)")
     if args.texture or args.shading == "cel":
         kwargs["effects"] = sc.SurfaceEffects(texture=args.texture, scale=args.texture_scale,
                                               cel_bands=4 if args.shading == "cel" else 0)
@@ -309,6 +382,7 @@ def model_options(args: argparse.Namespace) -> dict:
         valid = ", ".join(sc.MODELS)
         raise sc.ParameterError(
             f"--model must be one of {valid}, got {limits.shorten(args.model)}"
+            f"{did_you_mean(args.model, sc.MODELS)}"
         )
     options = {}
     accepted = inspect.signature(sc.MODELS[args.model]).parameters
@@ -362,7 +436,11 @@ def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool,
 def run(args: argparse.Namespace) -> int:
     """Render ``args.file`` to ``args.output``."""
     # Validate every option and output path before any work, so a mistake writes nothing.
-    check_output(args.output, ".png", "-o")
+    derived = args.output is None
+    if derived:
+        args.output = str(derived_output(args.file, "" if args.mode == "iso" else args.mode,
+                                         ".png"))
+    check_output(args.output, IMAGE_SUFFIXES, "-o")
     if args.depth:
         check_output(args.depth, ".npy", "--depth")
     width, height = check_render_args(args)
@@ -435,7 +513,9 @@ def run(args: argparse.Namespace) -> int:
                 policy += f", E(cut) {st['cut_error']:.4g}"
             log(args, f"cut ({policy}): {st['cut_bricks']} bricks ({levels}), {st['loaded']} "
                       f"read, {st['unavailable']} unreadable, {state}")
-        frame.save(args.output)
+        frame.save(args.output, background=kwargs.get("shading", sc.Shading()).background)
+        if derived:
+            log(args, f"wrote {args.output} (named after the input; set -o)")
         if args.depth:
             frame.save_depth(args.depth)
             log(args, f"wrote depth {args.depth}")

@@ -14,6 +14,7 @@ import time
 import webbrowser
 
 import splinecast as sc
+from splinecast.errors import did_you_mean
 
 from ._common import add_input_options, finite, log, numbers, uncaptured
 
@@ -31,7 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--mode", default="iso", choices=sc.scene.MODES,
                       help="initial render mode (default iso)")
     view.add_argument("--iso", help="initial isovalue(s) in data units, comma-separated "
-                      "(default: the volume's, else the middle of the data range)")
+                      "(default: the volume's, else Otsu's threshold of the non-background "
+                      "histogram, as render)")
     view.add_argument("--port", type=int, default=0,
                       help="port to listen on (default: any free port)")
     view.add_argument("--host", default="127.0.0.1",
@@ -77,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.model is not None and args.model not in sc.MODELS:
         raise sc.ParameterError(f"--model must be one of {', '.join(sc.MODELS)}, "
-                                f"got {args.model!r}")
+                                f"got {args.model!r}{did_you_mean(args.model, sc.MODELS)}")
     isos = numbers(args.iso, "--iso")
     start = time.perf_counter()
     vol = sc.read(args.file, allow_external=args.allow_external_data or None)

@@ -17,7 +17,14 @@ from ..errors import ParameterError
 from ..io import read
 from ..models import MODELS
 from ..models.smoothing import smooth as smooth_volume
-from ..render.defaults import auto_iso, auto_transfer_function, auto_window
+from ..render.defaults import (
+    auto_colormap,
+    auto_iso,
+    auto_transfer_function,
+    auto_window,
+    background_value,
+    is_signed,
+)
 from ..scene import Scene
 from ..volume import GridGeometry, Volume
 
@@ -115,7 +122,12 @@ class VolumeInfo(GridGeometry):
         (computed from the data, which the header does not hold) in its metadata."""
         metadata = dict(volume.metadata)
         metadata["default_iso"] = auto_iso(volume)
-        metadata.setdefault("default_window", auto_window(volume))
+        metadata.setdefault("background", background_value(volume))
+        metadata.setdefault("signed", is_signed(volume))
+        metadata.setdefault("default_colormap", auto_colormap(volume))
+        if metadata.get("default_window") is None:
+            metadata["default_window"] = auto_window(volume, "mip")
+            metadata["default_window_minip"] = auto_window(volume, "minip")
         metadata.setdefault("default_tf", auto_transfer_function(volume).to_dict())
         return cls(volume.name, volume.shape, str(volume.dtype), volume.spacing, volume.origin,
                    volume.value_range, metadata)

@@ -8,7 +8,23 @@ with status 2. Programming errors (bugs) are not wrapped and raise normally.
 
 from __future__ import annotations
 
-__all__ = ["SplinecastError", "ReadError", "ParameterError", "DataError"]
+import difflib
+from collections.abc import Iterable
+
+__all__ = ["SplinecastError", "ReadError", "ParameterError", "DataError", "did_you_mean"]
+
+
+def did_you_mean(value: object, choices: Iterable[str], n: int = 2) -> str:
+    """``"; did you mean X?"`` (or ``"X or Y"``) for the choices closest to a misspelt
+    ``value`` (:func:`difflib.get_close_matches`, case-insensitive), else ``""``: the tail of
+    a one-line error message."""
+    if not isinstance(value, str) or not value:
+        return ""
+    by_lower: dict[str, str] = {}
+    for choice in choices:
+        by_lower.setdefault(str(choice).lower(), str(choice))
+    close = difflib.get_close_matches(value.lower(), list(by_lower), n=n, cutoff=0.6)
+    return f"; did you mean {' or '.join(by_lower[c] for c in close)}?" if close else ""
 
 
 class SplinecastError(Exception):

@@ -303,7 +303,7 @@ class WaveletScene:
         opacity: Any = None,
         effects: SurfaceEffects | None = None,
         window: Any = None,
-        colormap: Any = "gray",
+        colormap: Any = None,
         tolerance: float = 0.0,
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,

@@ -96,16 +96,47 @@ class Frame:
         Image.fromarray(self.to_uint8(), mode="RGBA").save(buffer, format="PNG")
         return buffer.getvalue()
 
-    def save(self, path: str | os.PathLike) -> None:
-        """Write the colour buffer as a PNG (written to a temporary file, then moved)."""
+    def save(self, path: str | os.PathLike, background: Any = None, quality: int = 95) -> None:
+        """Write the colour buffer as an image (to a temporary file, then moved in place).
+
+        The format follows the suffix: ``.png``, ``.tif``/``.tiff`` and ``.webp`` keep the
+        alpha channel (WebP losslessly); ``.jpg``/``.jpeg`` has none, so the image is composited
+        on ``background`` first (an RGB or RGBA colour in [0, 1], its alpha ignored; default
+        black), which changes nothing where the image is opaque, as renders on an opaque
+        background (the default :class:`~splinecast.Shading`) are.
+
+        Parameters
+        ----------
+        path : str or path-like
+        background : 3 or 4 floats in [0, 1], optional
+            What JPEG composites translucent pixels on.
+        quality : int
+            JPEG quality, 1 to 95.
+        """
         from PIL import Image
 
-        if Path(path).suffix.lower() != ".png":
-            raise ParameterError(f"{path}: the image must be saved as .png")
-        self._needs("rgba")
-        image = Image.fromarray(self.to_uint8(), mode="RGBA")
+        suffix = Path(path).suffix.lower()
+        formats = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF",
+                   ".tiff": "TIFF", ".webp": "WEBP"}
+        if suffix not in formats:
+            raise ParameterError(f"{path}: the image must be saved as .png, .jpg, .jpeg, .tif, "
+                                 ".tiff or .webp")
+        rgba = self._needs("rgba")
+        options: dict[str, Any] = {}
+        if formats[suffix] == "JPEG":
+            bg = np.zeros(3) if background is None else np.asarray(background, np.float64)[:3]
+            alpha = np.clip(rgba[..., 3:4], 0.0, 1.0)
+            rgb = np.clip(rgba[..., :3], 0.0, 1.0) * alpha + bg * (1.0 - alpha)
+            image = Image.fromarray((np.clip(rgb, 0, 1) * 255.0 + 0.5).astype(np.uint8), "RGB")
+            options = {"quality": int(quality)}
+        else:
+            image = Image.fromarray(self.to_uint8(), mode="RGBA")
+            if formats[suffix] == "WEBP":
+                options = {"lossless": True}
+            elif formats[suffix] == "TIFF":
+                options = {"compression": "tiff_deflate"}
         with atomic_outputs(Path(path)) as (tmp,):
-            image.save(tmp, format="PNG")
+            image.save(tmp, format=formats[suffix], **options)
 
     def save_depth(self, path: str | os.PathLike) -> None:
         """Write the depth buffer as ``.npy`` (float64, ``inf`` on misses)."""

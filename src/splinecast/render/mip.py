@@ -397,6 +397,11 @@ class Mip:
         Colour of rays that miss the volume.
     value_range : (lo, hi)
         The data range (the default window).
+    empty : float, optional
+        The background value (:func:`splinecast.background_value`): pixels whose projected
+        value is this one (their ray meets only background) get ``background`` as rays that
+        miss the volume do, so the volume's box is not drawn. ``None``: every pixel whose ray
+        meets the volume is colormapped.
     outputs : set of str, optional
         The Frame's buffers to fill (:mod:`.outputs`; default all). The colour is mapped from
         the projected values, so ``"rgba"`` computes them even when ``"value"`` is not kept.
@@ -406,8 +411,11 @@ class Mip:
                  window: Any = None, colormap: Any = "gray",
                  background: Any = (0.0, 0.0, 0.0, 1.0),
                  value_range: tuple[float, float] = (0.0, 1.0),
-                 outputs: frozenset[str] = ALL_OUTPUTS, tolerance: float = 0.0) -> None:
+                 outputs: frozenset[str] = ALL_OUTPUTS, tolerance: float = 0.0,
+                 empty: float | None = None) -> None:
         self.outputs = outputs
+        self.empty = empty
+        self.value_range = value_range
         if method not in _METHODS:
             raise ParameterError(f"method must be one of {', '.join(_METHODS)}, got {method!r}")
         if method in SAMPLED_METHODS:  # against the volume's size too: limits.check_render
@@ -481,6 +489,12 @@ class Mip:
         h, w = counters[0].shape
         rgba = (apply_colormap(value, self.window, self.colormap, self.background)
                 if "rgba" in o else None)
+        if rgba is not None and self.empty is not None:
+            # Rays that meet only background: the background colour (their value is the
+            # background's up to rounding of a spline's partition of unity).
+            span = float(self.value_range[1]) - float(self.value_range[0])
+            rgba[np.abs(value - self.empty) <= 1e-9 * max(span, 1e-300)] = np.asarray(
+                self.background, np.float32)
         normal = np.full((h, w, 3), np.nan, np.float32) if "normal" in o else None
         face = np.zeros((h, w), np.int8) if "face" in o else None
         stats.update(window=self.window)

@@ -28,7 +28,7 @@ from .._jit import jit
 from ..errors import ParameterError
 from ..models.pieces import gradient
 from ..roots.pieces import poly_roots
-from ..transfer import COLORMAPS, colormap_table
+from ..transfer import colormap_table
 from .effects import NO_EFFECTS, SurfaceEffects, surface_rgb
 from .frame import Frame
 from .mode_api import flagged_block_size, register, unchanged_begin, unchanged_end, unchanged_skip
@@ -280,7 +280,7 @@ class MultiIso:
         count = len(isos)
         if colors is None:
             order = np.argsort(np.argsort(isos))
-            palette = colormap_table(COLORMAPS["bone"], 256)
+            palette = colormap_table("bone", 256)
             colors = palette[(64 + order * 191 // max(count - 1, 1)).clip(0, 255)]
         if opacity is None:
             opacity = [0.5] * (count - 1) + [1.0]

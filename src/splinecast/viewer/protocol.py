@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..models import MODELS
 from ..scene import MODES
-from ..transfer import COLORMAPS, colormap_table
+from ..transfer import MENU, colormap_table
 from ..volume import Volume
 
 __all__ = [
@@ -158,8 +158,11 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
         "multires": multires,
         "models": list(models),
         "modes": list(modes),
+        # The menu's colormaps, and those of the default state when they are not in it.
         "colormaps": {name: np.round(colormap_table(name, _COLORMAP_SAMPLES), 4).tolist()
-                      for name in COLORMAPS},
+                      for name in dict.fromkeys([*MENU, defaults["colormap"],
+                                                 defaults["tf"].get("colormap", "viridis")])
+                      if isinstance(name, str)},
         "defaults": defaults,
         "limits": limits,
     }

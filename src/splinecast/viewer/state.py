@@ -40,12 +40,12 @@ from ..camera import Camera, parse_size
 from ..errors import ParameterError
 from ..models import MODELS
 from ..render.clipping import make_planes
-from ..render.defaults import auto_iso, auto_transfer_function, auto_window
+from ..render.defaults import auto_colormap, auto_iso, auto_transfer_function, auto_window
 from ..render.dvr import DEFAULT_SETTINGS, DVRSettings
 from ..render.mip import check_tolerance
 from ..render.shading import Shading
 from ..scene import MODES, check_iso
-from ..transfer import COLORMAPS, TransferFunction
+from ..transfer import TransferFunction, check_colormap
 from ..volume import Volume
 
 __all__ = [
@@ -145,8 +145,10 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "size": [1024, 768],
         "iso": isos[0] if len(isos) == 1 else isos,
         "opacity": None,
-        "window": [float(v) for v in auto_window(volume)],
-        "colormap": "gray",
+        # The automatic window of the initial projection (minIP's when the viewer starts in
+        # minIP, else MIP's) and colormap (gray; diverging for signed data), as Scene.render.
+        "window": [float(v) for v in auto_window(volume, "minip" if mode == "minip" else "mip")],
+        "colormap": auto_colormap(volume),
         # The exact projection, as Scene.render gives it without tolerance=.
         "tolerance": 0.0,
         "tf": _default_tf(volume),
@@ -168,6 +170,14 @@ def _check_choice(value: Any, choices: Any, name: str) -> str:
     if not isinstance(value, str) or value not in choices:
         raise ParameterError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
     return value
+
+
+def _colormap_name(value: Any, name: str) -> str:
+    """A colormap name the library knows (any matplotlib or cmap catalog name, as
+    :meth:`Scene.render` accepts; the page's menu lists :data:`splinecast.transfer.MENU`)."""
+    if not isinstance(value, str):
+        raise ParameterError(f"{name} must be a colormap name, got {value!r}")
+    return check_colormap(value, name)
 
 
 def _check_fields(value: Any, fields: tuple[str, ...], name: str) -> dict[str, Any]:
@@ -313,7 +323,7 @@ def _transfer_function(tf: Any) -> TransferFunction:
     if not isinstance(points, list) or not 1 <= len(points) <= MAX_TF_POINTS:
         raise ParameterError(f"tf.opacity must be a list of 1 to {MAX_TF_POINTS} [value, alpha]")
     opacity = [_numbers(p, f"tf.opacity[{i}]", 2) for i, p in enumerate(points)]
-    colormap = _check_choice(tf.get("colormap", "viridis"), COLORMAPS, "tf.colormap")
+    colormap = _colormap_name(tf.get("colormap", "viridis"), "tf.colormap")
     return TransferFunction(opacity, domain, colormap)
 
 
@@ -355,7 +365,7 @@ def _mode_options(state: dict[str, Any], volume: Any) -> dict[str, Any]:
         if window is not None:
             window = _numbers(window, "window", 2)
         options["window"] = window
-        options["colormap"] = _check_choice(state["colormap"], COLORMAPS, "colormap")
+        options["colormap"] = _colormap_name(state["colormap"], "colormap")
         options["tolerance"] = check_tolerance(_number(state["tolerance"], "tolerance"), "exact")
     elif mode == "dvr":
         options["tf"] = _transfer_function(state["tf"])
