@@ -67,7 +67,7 @@ def test_info_reports_shape_dtype_spacing_and_range(tmp_path, capsys):
         (["render", "demo:sphere?size=16", "--iso", "9", "-o", "{tmp}/a.png"], "iso"),
         (["render", "demo:sphere?size=16", "--size", "0x4", "-o", "{tmp}/a.png"], "size"),
         (["render", "demo:sphere?size=16", "--size=-3x4", "-o", "{tmp}/a.png"], "size"),
-        (["render", "demo:sphere?size=16", "-o", "{tmp}/a.jpg"], "-o"),
+        (["render", "demo:sphere?size=16", "-o", "{tmp}/a.bmp"], "-o"),
         (["render", "demo:sphere?size=16", "-o", "{tmp}/nofolder/a.png"], "does not exist"),
         (["render", "demo:sphere?size=16", "--depth", "{tmp}/d.txt", "-o", "{tmp}/a.png"],
          "--depth"),

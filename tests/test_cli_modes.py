@@ -36,7 +36,8 @@ def test_mip_matches_the_api(tmp_path, capsys):
     (["--clip", "1,0,0"], "--clip"),
     (["--iso=0,-0.2", "--opacity", "0.5"], "--opacity"),
     (["--mode", "mip", "--window", "a,b"], "--window"),
-    (["--mode", "mip", "--colormap", "rainbow"], "colormap"),
+    (["--mode", "mip", "--colormap", "rainbo"], "--colormap 'rainbo' is not a known colormap; "
+                                                  "did you mean rainbow"),
 ])
 def test_bad_mode_options_are_one_line_errors(tmp_path, capsys, extra, word):
     png = tmp_path / "bad.png"

@@ -5,7 +5,8 @@ bit for bit with ``Scene(...).render(...)`` called with the settings the option'
 documents. A second API render *without* the option must differ from it, so an option that the
 command line dropped or mapped to something else could not pass. The API side is written out here
 from the documented defaults (azimuth 30, elevation 20, fov 30, model trilinear, step 0.25
-voxels, 2D pre-integration, colormap gray, ...), not taken from the CLI's code.
+voxels, 2D pre-integration, colormap gray, ...), not taken from the CLI's code. That the help
+texts state those defaults is checked in ``test_cli_help.py``.
 """
 
 from __future__ import annotations
@@ -88,6 +89,21 @@ CASES = [
          {**ISO, "method": "sampled", "step": 2.0}, ISO),
     Case("inside", ["--iso", "0", "--inside", "high"], {"iso": 0.0, "inside": "high"},
          {"iso": 0.0}, src=SPHERE),
+    # Negative isovalues in every form argparse could take for an option (issue: "--iso -3,3"
+    # was "expected one argument").
+    Case("iso-negative", ["--iso", "-0.2"], {"iso": -0.2}, {"iso": 0.0}, src=SPHERE),
+    Case("iso-negative-list", ["--iso", "-0.3,0"], {"iso": [-0.3, 0.0]}, {"iso": [-0.2, 0.0]},
+         src=SPHERE),
+    Case("iso-negative-equals", ["--iso=-0.3,0"], {"iso": [-0.3, 0.0]}, {"iso": [-0.2, 0.0]},
+         src=SPHERE),
+    Case("color", ["--iso", "0.5", "--color", "0.2,0.5,0.9"],
+         {**ISO, "shading": sc.Shading(front_color=(0.2, 0.5, 0.9))}, ISO),
+    Case("color-per-surface", ["--iso", "0.3,0.6", "--color", "red", "--color", "#0000ff"],
+         {**MULTI, "colors": [(1.0, 0.0, 0.0), (0.0, 0.0, 1.0)]}, MULTI),
+    Case("background", ["--iso", "0.5", "--background", "white"],
+         {**ISO, "shading": sc.Shading(background=(1.0, 1.0, 1.0, 1.0))}, ISO),
+    Case("background-transparent", ["--iso", "0.5", "--background", "transparent"],
+         {**ISO, "shading": sc.Shading(background=(0.0, 0.0, 0.0, 0.0))}, ISO),
     Case("opacity", ["--iso", "0.3,0.6", "--opacity", "0.3,0.9"],
          {**MULTI, "opacity": [0.3, 0.9]}, MULTI),
     Case("clip", ["--iso", "0.5", "--clip", "1,0.2,0,0.1"],
@@ -131,6 +147,12 @@ CASES = [
     Case("mode-mip", ["--mode", "mip"], {"mode": "mip"}, ISO),
     Case("mode-minip", ["--mode", "minip"], {"mode": "minip"}, {"mode": "mip"}),
     Case("colormap", ["--mode", "mip", "--colormap", "hot"], {"mode": "mip", "colormap": "hot"},
+         {"mode": "mip"}),
+    # Any matplotlib / cmap name, not only the menu's.
+    Case("colormap-catalog", ["--mode", "mip", "--colormap", "RdBu_r"],
+         {"mode": "mip", "colormap": "RdBu_r"}, {"mode": "mip"}),
+    Case("mip-background", ["--mode", "mip", "--background", "#336699"],
+         {"mode": "mip", "shading": sc.Shading(background=(0.2, 0.4, 0.6, 1.0))},
          {"mode": "mip"}),
     Case("window", ["--mode", "mip", "--window", "0.4,0.7"],
          {"mode": "mip", "window": (0.4, 0.7)}, {"mode": "mip"}),

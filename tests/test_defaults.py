@@ -107,14 +107,117 @@ def test_sampling_strides_big_volumes_evenly():
     assert np.array_equal(sample_values(vol), data.ravel()[1:])  # small: every voxel
 
 
-def test_auto_window_is_percentiles_of_the_non_background():
+def projections(data: np.ndarray, kind: str, background: float) -> np.ndarray:
+    """The pixels of the maximum (minimum) projections along the three axes that are not the
+    background value, by numpy."""
+    reduce = np.max if kind == "mip" else np.min
+    pixels = np.concatenate([reduce(data.astype(np.float64), axis=a).ravel() for a in range(3)])
+    return pixels[pixels != background]
+
+
+def test_auto_window_is_percentiles_of_the_projections():
     rng = np.random.default_rng(7)
     data = np.zeros((20, 20, 20), np.float32)
     data[5:15, 5:15, 5:15] = rng.gamma(2.0, 10.0, (10, 10, 10)) + 1
-    lo, hi = sc.auto_window(sc.Volume(data))
-    expected = np.percentile(data[data > 0].astype(np.float64), WINDOW_PERCENTILES)
-    np.testing.assert_allclose((lo, hi), expected, rtol=1e-12)
+    vol = sc.Volume(data)
+    expected = np.percentile(projections(data, "mip", 0.0), WINDOW_PERCENTILES)
+    np.testing.assert_allclose(sc.auto_window(vol), expected, rtol=1e-12)
+    np.testing.assert_allclose(sc.auto_window(vol, "mip"), expected, rtol=1e-12)
+    # minIP: the mirrored percentiles of the minimum projections (background left out).
+    data = rng.gamma(2.0, 10.0, (20, 20, 20)).astype(np.float32)  # no background region
+    vol = sc.Volume(data)
+    assert sc.background_value(vol) == data.min()
+    lo, hi = WINDOW_PERCENTILES
+    expected = np.percentile(projections(data, "minip", float(data.min())),
+                             (100 - hi, 100 - lo))
+    np.testing.assert_allclose(sc.auto_window(vol, "minip"), expected, rtol=1e-12)
     assert sc.auto_window(sc.Volume(np.full((3, 3, 3), 2, np.uint8))) == (2.0, 3.0)
+    with pytest.raises(sc.ParameterError, match="mode"):
+        sc.auto_window(vol, "dvr")
+
+
+def test_a_one_valued_projection_windows_from_the_background():
+    """A probability map's MIP is 1 almost everywhere: the window runs from the background."""
+    data = np.zeros((16, 16, 16), np.float32)
+    data[3:13, 3:13, 3:13] = 1.0
+    data[3, 3, 3:13] = 0.5  # a few dimmer voxels on an edge
+    projected = projections(data, "mip", 0.0)
+    assert np.percentile(projected, WINDOW_PERCENTILES[0]) == 1.0  # the percentiles coincide
+    assert sc.auto_window(sc.Volume(data)) == (0.0, 1.0)
+
+
+def signed_map(shape=(24, 24, 24)) -> np.ndarray:
+    """A statistical map: 0 outside a box, a negative and a positive blob inside."""
+    idx = np.indices(shape).transpose(1, 2, 3, 0).astype(np.float64)
+    neg = -6.0 * np.exp(-np.sum((idx - (8, 12, 12)) ** 2, axis=-1) / 30.0)
+    pos = 4.0 * np.exp(-np.sum((idx - (16, 12, 12)) ** 2, axis=-1) / 30.0)
+    data = np.zeros(shape, np.float32)
+    data[3:-3, 3:-3, 3:-3] = (neg + pos)[3:-3, 3:-3, 3:-3]
+    return data
+
+
+def test_background_is_the_minimum_or_zero_whichever_more_voxels_hold():
+    data = signed_map()
+    assert sc.background_value(sc.Volume(data)) == 0.0  # 0 inside the range [-6, 4]
+    ct = np.full((20, 20, 20), -1024, np.int16)  # air outside the field of view ...
+    ct[4:16, 4:16, 4:16] = np.random.default_rng(1).integers(-1000, 1500, (12, 12, 12))
+    ct[8, 8, 8] = 0
+    assert sc.background_value(sc.Volume(ct)) == -1024.0
+    # No value held by 1% of the voxels: the minimum (its few voxels are left out).
+    smooth = np.random.default_rng(2).normal(0, 1, (20, 20, 20)).astype(np.float32)
+    assert sc.background_value(sc.Volume(smooth)) == smooth.min()
+    # The statistics leave the background out: the signed map's zeros here.
+    np.testing.assert_array_equal(sample_values(sc.Volume(data)),
+                                  data[data != 0].astype(np.float64))
+
+
+def test_signed_data_gets_a_diverging_map_and_a_symmetric_window():
+    data = signed_map()
+    vol = sc.Volume(data)
+    assert sc.is_signed(vol) and sc.auto_colormap(vol) == sc.transfer.DIVERGING
+    both = np.concatenate([projections(data, "mip", 0.0), projections(data, "minip", 0.0)])
+    m = np.percentile(np.abs(both), WINDOW_PERCENTILES[1])
+    for mode in ("mip", "minip"):
+        np.testing.assert_allclose(sc.auto_window(vol, mode), (-m, m), rtol=1e-12)
+    # Not signed: a CT (background -1024), an MRI with a few negative voxels of ringing.
+    mri = np.zeros((20, 20, 20), np.float32)
+    mri[4:16, 4:16, 4:16] = 100.0
+    mri[4, 4:8, 4:8] = -3.0
+    for data in (mri, np.where(signed_map() == 0, -1024, signed_map()).astype(np.float32)):
+        assert not sc.is_signed(sc.Volume(data)) and sc.auto_colormap(sc.Volume(data)) == "gray"
+    # Otsu's threshold of the absolute values: a positive isovalue between the strong values.
+    data = signed_map()
+    assert 0 < sc.auto_iso(sc.Volume(data)) == otsu_threshold(np.abs(data[data != 0]))
+
+
+def test_projection_pixels_of_background_only_rays_show_the_background():
+    """No box: a MIP pixel whose ray meets only background has the background colour, every
+    other pixel the colormap's colour of its value."""
+    vol = small_object(shape=(40, 40, 40), center=(20, 20, 20), radius=10.0)
+    cam = sc.Camera.orbit(vol, size=(40, 32), fit="box")
+    shading = sc.Shading(background=(0.2, 0.4, 0.6, 1.0))
+    frame = sc.Scene(vol).render(cam, mode="mip", shading=shading, window=(10, 90))
+    value = frame.value
+    empty = value == 0  # the background value; NaN: rays that miss the volume
+    assert empty.sum() > 100 and (value > 0).sum() > 20
+    reference = sc.transfer.apply_colormap(value, (10, 90), "gray", shading.background)
+    reference[empty] = shading.background
+    np.testing.assert_array_equal(frame.rgba, reference)
+    assert np.all(frame.rgba[np.isnan(value) | empty] == np.float32((0.2, 0.4, 0.6, 1.0)))
+
+
+def test_a_negative_isovalue_of_a_signed_map_shows_front_faces():
+    """The object of an isovalue below the background is the values below it: rays come from
+    the background and meet front faces (inside "high" showed only back faces)."""
+    vol = sc.Volume(signed_map())
+    assert sc.auto_inside(vol, -3.0) == "low" and sc.auto_inside(vol, 2.0) == "high"
+    assert sc.auto_inside(vol, [-3.0, 2.0]) == "high"
+    cam = sc.Camera.orbit(vol, size=(32, 32), fit="box")
+    scene = sc.Scene(vol)
+    auto = scene.render(cam, iso=-3.0)
+    assert auto.hit.sum() > 20 and np.all(auto.face[auto.hit] == 1)
+    np.testing.assert_array_equal(auto.rgba, scene.render(cam, iso=-3.0, inside="low").rgba)
+    assert np.all(scene.render(cam, iso=-3.0, inside="high").face[auto.hit] == -1)
 
 
 def test_auto_transfer_function_ramps_from_the_iso():

@@ -176,3 +176,59 @@ def test_apply_colormap_matches_the_whole_array_formula(dtype, colormap):
     assert got.dtype == np.float32 and got.shape == (*strided.shape, 4)
     np.testing.assert_array_equal(got, _colormap_reference(strided, (2.0, 12.0), colormap,
                                                            background))
+
+
+@pytest.mark.parametrize("name", ["gray", "bone", "hot", "viridis", "coolwarm", "RdBu_r", "jet",
+                                  "magma_r", "Greys", "berlin", "turbo"])
+def test_named_colormaps_are_matplotlibs(name):
+    """Names resolve through the cmap catalog to matplotlib's colours (an independent library
+    holding the same tables)."""
+    matplotlib = pytest.importorskip("matplotlib")
+    if name not in matplotlib.colormaps:
+        pytest.skip(f"matplotlib {matplotlib.__version__} has no {name}")
+    x = np.linspace(0.0, 1.0, 256)
+    np.testing.assert_allclose(colormap_table(name, 256), matplotlib.colormaps[name](x)[:, :3],
+                               atol=1e-6)
+
+
+def test_menu_names_and_misspellings():
+    assert list(COLORMAPS) == list(sc.transfer.MENU) and sc.transfer.DIVERGING in COLORMAPS
+    assert COLORMAPS["gray"].shape == (256, 4)
+    np.testing.assert_array_equal(colormap_table("grey", 8), colormap_table("gray", 8))
+    assert "viridis" in sc.transfer.colormap_names()
+    with pytest.raises(sc.ParameterError, match=r"did you mean viridis"):
+        colormap_table("virdis")
+    with pytest.raises(sc.ParameterError, match=r"^--colormap 'x y' is not a known colormap "
+                                                r"\(accepted: gray, bone"):
+        sc.transfer.check_colormap("x y", "--colormap")
+    # A name stays a name through JSON; the colours are the catalog's.
+    tf = TransferFunction([(0, 0), (1, 1)], (0, 1), colormap="cmocean:thermal")
+    assert TransferFunction.from_dict(tf.to_dict()).colormap == "cmocean:thermal"
+
+
+@pytest.mark.parametrize("text, alpha, expected", [
+    ("white", False, (1.0, 1.0, 1.0)),
+    ("#336699", False, (0.2, 0.4, 0.6)),
+    ("0.1,0.2,0.3", False, (0.1, 0.2, 0.3)),
+    ([0.0, 1.0, 0.0], False, (0.0, 1.0, 0.0)),
+    ("black", True, (0.0, 0.0, 0.0, 1.0)),
+    ("#ff000080", True, (1.0, 0.0, 0.0, 128 / 255)),
+    ("0,0,0,0.5", True, (0.0, 0.0, 0.0, 0.5)),
+    ("transparent", True, (0.0, 0.0, 0.0, 0.0)),
+])
+def test_parse_color(text, alpha, expected):
+    assert sc.transfer.parse_color(text, alpha=alpha) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("text, alpha, needle", [
+    ("whit", False, "did you mean white"),
+    ("1,2,3", False, "accepted: a colour name"),
+    ("0,0,0,0.5", False, "R,G,B numbers"),
+    ("transparent", False, "is not a colour"),
+    ("#12", True, "#RRGGBBAA"),
+    (True, False, "is not a colour"),
+])
+def test_parse_color_refuses_with_the_accepted_forms(text, alpha, needle):
+    with pytest.raises(sc.ParameterError, match="^--background .* is not a colour") as info:
+        sc.transfer.parse_color(text, "--background", alpha=alpha)
+    assert needle in str(info.value) and "\n" not in str(info.value)

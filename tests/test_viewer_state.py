@@ -54,6 +54,23 @@ def test_defaults_without_metadata_are_those_of_splinecast_render():
     tf = sc.TransferFunction.from_dict(state["tf"])
     assert tf.to_dict() == sc.auto_transfer_function(vol).to_dict()
     assert 0.0 <= tf.domain[0] < tf.domain[1] <= 104.0  # within the data range
+    assert state["colormap"] == sc.auto_colormap(vol) == "gray"
+    assert default_state(vol, mode="minip")["window"] == list(sc.auto_window(vol, "minip"))
+
+
+def test_signed_data_opens_with_the_diverging_map_and_any_catalog_name_renders():
+    data = np.zeros((10, 10, 10), np.float32)
+    data[2:5, 2:8, 2:8], data[5:8, 2:8, 2:8] = -2.0, 3.0
+    vol = sc.Volume(data)
+    state = default_state(vol, mode="mip")
+    assert state["colormap"] == sc.transfer.DIVERGING
+    lo, hi = state["window"]
+    assert lo == -hi < 0
+    hello = protocol.hello_message(vol, state, {"max_pixels": 10})
+    assert sc.transfer.DIVERGING in hello["colormaps"]
+    # A name outside the menu: what Scene.render takes, the viewer takes.
+    request = parse({"colormap": "cmocean:thermal"}, vol, state)
+    assert request.options["colormap"] == "cmocean:thermal"
 
 
 def test_camera_equals_camera_orbit(vol, defaults):
@@ -116,7 +133,9 @@ def test_resized_camera_keeps_the_view(vol):
     ({"iso": []}, "iso must hold 1 to"),
     ({"iso": [0.2, 0.4], "opacity": [1]}, "opacity must hold 2 numbers"),
     ({"mode": "mip", "window": [1]}, "window must hold 2 numbers"),
-    ({"mode": "mip", "colormap": "jet"}, "colormap must be one of gray"),
+    ({"mode": "mip", "colormap": "jett"}, "colormap 'jett' is not a known colormap; did you "
+                                          "mean jet?"),
+    ({"mode": "mip", "colormap": 3}, "colormap must be a colormap name"),
     ({"mode": "mip", "tolerance": "1/255"}, "tolerance must be a number"),
     ({"mode": "minip", "tolerance": True}, "tolerance must be a number"),
     ({"mode": "mip", "tolerance": 1.5}, "tolerance must be a fraction of the window in [0, 1]"),

@@ -54,6 +54,11 @@ _DEFAULTS: dict[str, object] = {}
 
 #: The sampling step (voxels) of ``--method sampled`` when ``--step`` is not given.
 SAMPLED_STEP = 0.25
+#: Multiscale volumes: the brick budget, level of detail (pixels per voxel) and cut policy
+#: when ``--budget``, ``--lod`` and ``--cut`` are not given.
+DEFAULT_BUDGET = "2GiB"
+DEFAULT_LOD = 1.0
+DEFAULT_CUT = "lod"
 
 #: The DVR options. With none of them given, ``--mode dvr`` renders as ``Scene.render`` without
 #: ``dvr=`` does (the library's fast default, :data:`splinecast.render.dvr.DEFAULT_SETTINGS`);
@@ -88,8 +93,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--elevation", type=finite, default=20.0,
                         help="degrees above xy (default 20)")
     render.add_argument("--fit", default="content", choices=("content", "box"),
-                        help="frame what the isovalue or transfer function shows (default) or "
-                             "the whole grid")
+                        help="content: frame what the isovalue or transfer function shows; box: "
+                             "the whole grid (default content)")
     add_render_options(render)
     render.add_argument("--budget", help="multiscale (OME-Zarr) volumes and wavelet stores: RAM "
                         "for bricks (and wavelet details), e.g. 512MiB or 2GiB (default 2GiB)")
@@ -120,13 +125,14 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
                         help="B-spline models: interpolate the voxels instead of smoothing them")
     render.add_argument("--size", default="512x512", help="image WIDTHxHEIGHT (default 512x512)")
     render.add_argument("--distance", type=finite, help="camera distance from the volume centre")
-    render.add_argument("--fov", type=finite, default=30.0, help="vertical field of view, degrees")
+    render.add_argument("--fov", type=finite, default=30.0,
+                        help="vertical field of view, degrees (default 30)")
     render.add_argument("--zoom", type=finite, default=1.0, help="magnification (default 1)")
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
     render.add_argument("--method", default="exact", choices=("exact", "sampled", "slices"),
-                        help="exact analytic roots (default) or fixed-step sampling; for "
-                             "--mode mip/minip also slices: samples on every STEP-th plane of "
-                             "voxels across the ray (the fastest)")
+                        help="exact: analytic roots; sampled: fixed-step sampling; for --mode "
+                             "mip/minip also slices: samples on every STEP-th plane of voxels "
+                             "across the ray, the fastest (default exact)")
     render.add_argument("--step", type=finite,
                         help="sampling step in voxels for --method sampled/slices (default "
                              "0.25) and --mode dvr (default 0.25 when another DVR option is "
@@ -150,7 +156,8 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
     """Options of the render modes beyond the single isosurface."""
     render.add_argument("--mode", default="iso", choices=("iso", "mip", "minip", "dvr"),
-                        help="isosurface (default), max/min intensity projection, or DVR")
+                        help="iso: isosurface; mip/minip: maximum/minimum intensity projection; "
+                             "dvr: direct volume rendering (default iso)")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
     render.add_argument("--tf", help="transfer function JSON file (--mode dvr)")
     render.add_argument("--colormap",
@@ -173,7 +180,7 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--texture-scale", type=finite, default=0.1,
                         help="checker cube / noise feature size in world units (default 0.1)")
     render.add_argument("--shading", default="phong", choices=("phong", "cel"),
-                        help="smooth Blinn-Phong (default) or 4-band cel shading")
+                        help="phong: smooth Blinn-Phong; cel: 4-band cel shading (default phong)")
     render.add_argument("--smooth", type=int, choices=(3, 5),
                         help="Gaussian pre-smoothing kernel size")
     render.add_argument("--preintegration", choices=("none", "2d", "3d"),
@@ -183,8 +190,8 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                              "(splinecast.render.dvr.DEFAULT_SETTINGS, as Scene.render without "
                              "dvr=)")
     render.add_argument("--table-layout", choices=("uniform", "exponential"),
-                        help="DVR 3D pre-integration table lengths: k x step (default) or "
-                             "2^j x step")
+                        help="DVR 3D pre-integration table lengths: uniform, k x step, or "
+                             "exponential, 2^j x step (default uniform)")
     render.add_argument("--adaptive", action="store_true",
                         help="DVR opacity-adaptive step (up to 8 x --step; uses a 3D table)")
     render.add_argument("--termination", type=finite,
@@ -459,12 +466,13 @@ def run(args: argparse.Namespace) -> int:
         options = model_options(args)
         scene = None
         if wavelet:  # nothing but the coarsest level is read here
-            scene = sc.Scene(vol, model=args.model, lod=args.lod, budget=args.budget or "2GiB",
+            scene = sc.Scene(vol, model=args.model, lod=args.lod, budget=args.budget or DEFAULT_BUDGET,
                              **options)
         elif multiscale:  # nothing but the coarsest level is read here; the loader stops at the end
             scene = stack.enter_context(sc.Scene(
-                vol, model=args.model, budget=args.budget or "2GiB",
-                lod=1.0 if args.lod is None else args.lod, cut=args.cut or "lod", **options))
+                vol, model=args.model, budget=args.budget or DEFAULT_BUDGET,
+                lod=DEFAULT_LOD if args.lod is None else args.lod, cut=args.cut or DEFAULT_CUT,
+                **options))
         info = scene.preview if multiscale else vol
         kwargs, notes = mode_kwargs(args, info)
         camera = sc.Camera.orbit(vol, azimuth=args.azimuth, elevation=args.elevation,

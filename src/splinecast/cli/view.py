@@ -35,9 +35,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "(default: the volume's, else Otsu's threshold of the non-background "
                       "histogram, as render)")
     view.add_argument("--port", type=int, default=0,
-                      help="port to listen on (default: any free port)")
+                      help="port to listen on (default 0: any free port)")
     view.add_argument("--host", default="127.0.0.1",
-                      help="address to listen on (default 127.0.0.1, this machine only; "
+                      help="address to listen on (default 127.0.0.1: this machine only; "
                            "another address lets other machines in, protected by the token only)")
     view.add_argument("--no-browser", action="store_true",
                       help="do not open a web browser; just print the URL")
