@@ -9,6 +9,8 @@ import math
 import time
 from pathlib import Path
 
+import numpy as np
+
 import splinecast as sc
 from splinecast.errors import did_you_mean, limits
 from splinecast.render.defaults import WINDOW_PERCENTILES
@@ -466,8 +468,8 @@ def run(args: argparse.Namespace) -> int:
         options = model_options(args)
         scene = None
         if wavelet:  # nothing but the coarsest level is read here
-            scene = sc.Scene(vol, model=args.model, lod=args.lod, budget=args.budget or DEFAULT_BUDGET,
-                             **options)
+            scene = sc.Scene(vol, model=args.model, lod=args.lod,
+                             budget=args.budget or DEFAULT_BUDGET, **options)
         elif multiscale:  # nothing but the coarsest level is read here; the loader stops at the end
             scene = stack.enter_context(sc.Scene(
                 vol, model=args.model, budget=args.budget or DEFAULT_BUDGET,
@@ -521,7 +523,13 @@ def run(args: argparse.Namespace) -> int:
                 policy += f", E(cut) {st['cut_error']:.4g}"
             log(args, f"cut ({policy}): {st['cut_bricks']} bricks ({levels}), {st['loaded']} "
                       f"read, {st['unavailable']} unreadable, {state}")
-        frame.save(args.output, background=kwargs.get("shading", sc.Shading()).background)
+        background = kwargs.get("shading", sc.Shading()).background
+        if args.mode in ("mip", "minip") and np.all(frame.rgba == np.float32(background)):
+            what = "minimum" if args.mode == "minip" else "maximum"
+            log(args, f"nothing drawn: every ray's {what} is the background value "
+                      f"{sc.background_value(info):g} (a ray enters through the background; "
+                      "--crop or --clip can leave it out)")
+        frame.save(args.output, background=background)
         if derived:
             log(args, f"wrote {args.output} (named after the input; set -o)")
         if args.depth:
