@@ -92,10 +92,13 @@ CASES = [
     # Negative isovalues in every form argparse could take for an option (issue: "--iso -3,3"
     # was "expected one argument").
     Case("iso-negative", ["--iso", "-0.2"], {"iso": -0.2}, {"iso": 0.0}, src=SPHERE),
-    Case("iso-negative-list", ["--iso", "-0.3,0"], {"iso": [-0.3, 0.0]}, {"iso": [-0.2, 0.0]},
-         src=SPHERE),
-    Case("iso-negative-equals", ["--iso=-0.3,0"], {"iso": [-0.3, 0.0]}, {"iso": [-0.2, 0.0]},
-         src=SPHERE),
+    # (The outer surface, 0, translucent: the inner one shows through it.)
+    Case("iso-negative-list", ["--iso", "-0.3,0", "--opacity", "1,0.5"],
+         {"iso": [-0.3, 0.0], "opacity": [1.0, 0.5]},
+         {"iso": [-0.2, 0.0], "opacity": [1.0, 0.5]}, src=SPHERE),
+    Case("iso-negative-equals", ["--iso=-0.3,0", "--opacity=1,0.5"],
+         {"iso": [-0.3, 0.0], "opacity": [1.0, 0.5]},
+         {"iso": [-0.2, 0.0], "opacity": [1.0, 0.5]}, src=SPHERE),
     Case("color", ["--iso", "0.5", "--color", "0.2,0.5,0.9"],
          {**ISO, "shading": sc.Shading(front_color=(0.2, 0.5, 0.9))}, ISO),
     Case("color-per-surface", ["--iso", "0.3,0.6", "--color", "red", "--color", "#0000ff"],
