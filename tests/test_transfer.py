@@ -187,8 +187,9 @@ def test_named_colormaps_are_matplotlibs(name):
     if name not in matplotlib.colormaps:
         pytest.skip(f"matplotlib {matplotlib.__version__} has no {name}")
     x = np.linspace(0.0, 1.0, 256)
+    # (matplotlib's tables of the Crameri maps are rounded to 5 decimals, cmap's are not.)
     np.testing.assert_allclose(colormap_table(name, 256), matplotlib.colormaps[name](x)[:, :3],
-                               atol=1e-6)
+                               atol=1e-5)
 
 
 def test_menu_names_and_misspellings():
@@ -198,9 +199,9 @@ def test_menu_names_and_misspellings():
     assert "viridis" in sc.transfer.colormap_names()
     with pytest.raises(sc.ParameterError, match=r"did you mean viridis"):
         colormap_table("virdis")
-    with pytest.raises(sc.ParameterError, match=r"^--colormap 'x y' is not a known colormap "
-                                                r"\(accepted: gray, bone"):
-        sc.transfer.check_colormap("x y", "--colormap")
+    with pytest.raises(sc.ParameterError, match=r"^--colormap 'qqzzqq' is not a known "
+                                                r"colormap \(accepted: gray, bone"):
+        sc.transfer.check_colormap("qqzzqq", "--colormap")
     # A name stays a name through JSON; the colours are the catalog's.
     tf = TransferFunction([(0, 0), (1, 1)], (0, 1), colormap="cmocean:thermal")
     assert TransferFunction.from_dict(tf.to_dict()).colormap == "cmocean:thermal"
