@@ -438,10 +438,37 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     args = (grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects, levels,
             origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh, final,
             close, exit_t, exit_piece, exit_level, visited, tested, skipped)
-    return call_with_first_classes(_launch, _launch_functions, args)
+    # A list of grids that is empty (the float64 copies at level seams in most frames; the
+    # float32 list of a float64 store) calls no band: a stub of the band's signature stands in
+    # for it, compiled in a moment where the band would take as long as the other's.
+    if len(grids_b) == 0:
+        functions = _launch_functions_a
+    elif len(grids_a) == 0:
+        functions = _launch_functions_b
+    else:
+        functions = _launch_functions
+    return call_with_first_classes(_launch, functions, args)
 
 
-def _launch_functions(kinds: tuple) -> tuple:
+def _launch_functions_a(kinds: tuple) -> tuple:
+    """:func:`_launch_functions` for a cut whose second list of grids is empty."""
+    return _launch_functions(kinds, stub_b=True)
+
+
+def _launch_functions_b(kinds: tuple) -> tuple:
+    """:func:`_launch_functions` for a cut whose first list of grids is empty."""
+    return _launch_functions(kinds, stub_a=True)
+
+
+@jit()
+def _no_band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0, r1,
+             c0, c1, tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts,
+             tags):
+    """Stands for the band of an empty list of grids (never called)."""
+    return None
+
+
+def _launch_functions(kinds: tuple, stub_a: bool = False, stub_b: bool = False) -> tuple:
     """The functions :func:`_launch` calls, as first-class values, from the Numba types
     ``kinds`` of :func:`trace_pieces`' arguments: the tile function, then the pair's band
     (:func:`.driver.pair_band`) for the kernel grids of each of the two lists.
@@ -454,8 +481,8 @@ def _launch_functions(kinds: tuple) -> tuple:
     grids_a, grids_b, _, mode = kinds[:4]
     grid_class = grids_a.item_type[0].instance_class
     band = pair_band(grid_class, mode.instance_class)
-    bands = tuple(first_class(band, _band_types(grids.item_type, kinds)) for grids in
-                  (grids_a, grids_b))
+    bands = (first_class(_no_band if stub_a else band, _band_types(grids_a.item_type, kinds)),
+             first_class(_no_band if stub_b else band, _band_types(grids_b.item_type, kinds)))
     tile_types = (*(numba.typeof(b) for b in bands), *kinds[:16], *kinds[17:19], numba.int64,
                   numba.int64, *kinds[19:])
     return (first_class(_trace_tile, tile_types), *bands)
