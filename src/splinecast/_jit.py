@@ -28,6 +28,8 @@ import copy
 import functools
 import hashlib
 import os
+import threading
+import time
 import types
 import warnings
 from collections.abc import Callable, Iterator
@@ -36,6 +38,7 @@ from typing import Any
 import numba
 from numba import njit
 from numba._dispatcher import compute_fingerprint
+from numba.core import event as _event
 from numba.core import sigutils
 from numba.core.compiler_lock import global_compiler_lock
 from numba.core.errors import NumbaExperimentalFeatureWarning
@@ -53,7 +56,7 @@ except ImportError:  # pragma: no cover - a numba without this class: keep its b
     IndexDataCacheFile = None  # type: ignore[assignment,misc]
 
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
-           "call_with_first_classes", "package_stamp"]
+           "call_with_first_classes", "package_stamp", "reporting_compiles"]
 
 
 class _CopyModuleSharingScopes:
@@ -434,3 +437,53 @@ def call_with_first_classes(kernel: Any, make_values: Callable[[tuple], tuple],
         entry = _CALLS[key] = (values, kernel.overloads[argtypes].entry_point)
     values, compiled = entry
     return compiled(*values, *args)
+
+
+class _CompileReporter(_event.Listener):
+    """Numba's compile events of one thread, reduced to the outermost compiles."""
+
+    def __init__(self, thread: int, on_start: Callable[[str], None],
+                 on_end: Callable[[str, float], None]) -> None:
+        self.thread = thread
+        self._report_start, self._report_end = on_start, on_end
+        self.depth = 0
+        self.began = 0.0
+
+    @staticmethod
+    def _name(ev: Any) -> str:
+        dispatcher = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+        py_func = getattr(dispatcher, "py_func", None)
+        return getattr(py_func, "__qualname__", "kernel")
+
+    def on_start(self, ev: Any) -> None:  # type: ignore[override]
+        if threading.get_ident() != self.thread:
+            return
+        if self.depth == 0:
+            self.began = time.perf_counter()
+            self._report_start(self._name(ev))
+        self.depth += 1
+
+    def on_end(self, ev: Any) -> None:  # type: ignore[override]
+        if threading.get_ident() != self.thread:
+            return
+        self.depth -= 1
+        if self.depth == 0:
+            self._report_end(self._name(ev), time.perf_counter() - self.began)
+
+
+@contextlib.contextmanager
+def reporting_compiles(on_start: Callable[[str], None],
+                       on_end: Callable[[str, float], None]) -> Iterator[None]:
+    """Report the kernels this thread compiles while the block runs.
+
+    ``on_start(name)`` is called when an outermost compile begins (a kernel not in memory and
+    not in the on-disk cache; loading from the cache reports nothing) and ``on_end(name,
+    seconds)`` when it ends; compiles nested in it are part of it. Front ends use it to say
+    that a wait is a one-time compile, and only then.
+    """
+    reporter = _CompileReporter(threading.get_ident(), on_start, on_end)
+    _event.register("numba:compile", reporter)
+    try:
+        yield
+    finally:
+        _event.unregister("numba:compile", reporter)

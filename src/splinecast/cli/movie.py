@@ -17,6 +17,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 import splinecast as sc
 from splinecast.distributed import (
     MovieWriter,
@@ -29,6 +31,7 @@ from splinecast.distributed import (
 from splinecast.io.omezarr import is_zarr
 
 from ._common import add_input_options, derived_output, finite, log, numbers
+from ._compiling import CompileNotice
 from ._progress import Progress
 from .render import (
     add_render_options,
@@ -223,6 +226,11 @@ def run(args: argparse.Namespace) -> int:
         log(args, f"{volume.name}: {volume.shape} prepared ({args.model}) in "
                   f"{time.perf_counter() - start:.2f} s {where}")
         if wavelet is not None or (args.workers is None and args.scheduler is None):
+            # Said only when kernels really compile here (the first frame's, on first use).
+            model = args.model or "trilinear"
+            stack.enter_context(CompileNotice(
+                f"{model} / {args.mode}, {np.dtype(volume.dtype).name} data", model,
+                enabled=not args.quiet, stream=getattr(args, "stderr", None)))
             images = render_locally(scene, shots, image_only=True)
         else:
             images = dscene.render_many(shots, image_only=True)

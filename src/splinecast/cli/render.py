@@ -25,6 +25,7 @@ from ._common import (
     log,
     numbers,
 )
+from ._compiling import CompileNotice
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
            "mode_kwargs", "orbit_options", "sampled_step", "dvr_settings", "SAMPLED_STEP",
@@ -495,6 +496,12 @@ def run(args: argparse.Namespace) -> int:
                                 "--smooth")
             vol = sc.smooth(vol, args.smooth)
             log(args, f"smoothed with a {args.smooth}^3 Gaussian")
+        # Said only when kernels really compile (first use of a model, mode and voxel type).
+        model = args.model or "trilinear"
+        stack.enter_context(CompileNotice(
+            f"{model} / {args.mode}, {np.dtype(info.dtype).name} data", model,
+            enabled=not getattr(args, "quiet", False),
+            stream=getattr(args, "stderr", None)))
         start = time.perf_counter()
         if scene is None:
             scene = sc.Scene(vol, model=args.model, **options)
@@ -510,8 +517,7 @@ def run(args: argparse.Namespace) -> int:
         what = f"at iso {st['iso']}" if "iso" in st else st["mode"]
         log(args, f"rendered {width}x{height} {what} in "
                    f"{time.perf_counter() - start:.2f} s (trace {st['trace_ms']:.0f} ms, "
-                   f"{st['hits']} hits, {st['mean_cells_visited']:.1f} cells/ray; "
-                   "the first run includes compilation)")
+                   f"{st['hits']} hits, {st['mean_cells_visited']:.1f} cells/ray)")
         if wavelet:
             log(args, f"chunks: {st['chunks']} ({100 * st['chunk_share']:.1f}% of all, "
                       f"ε = {st['lod']:.3g} rad), reconstructed in {st['reconstruct_ms']:.0f} ms")
