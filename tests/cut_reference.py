@@ -7,6 +7,8 @@ voxel with scipy's interpolation.
 * :func:`random_parents` -- random trees (complete or with 1..k children per node).
 * :func:`block_monotone_errors`, :func:`hierarchical_visibility` -- per-node data.
 * :func:`all_cuts` -- every cut of a tree (exponential; small trees only).
+* :func:`cuts_within` -- every cut of at most ``budget`` bricks (enumeration pruned by size).
+* :func:`reference_greedy` -- greedy refinement from the root, step by step from the definition.
 * :func:`is_valid_cut` -- covers every visible leaf exactly once, holds no invisible node.
 * :func:`voxel_distortion` -- eq. (1)-(2) summed over the voxels of a brick.
 * :func:`smooth_volume` -- a smooth random field with some noise (test data).
@@ -26,6 +28,8 @@ __all__ = [
     "block_monotone_errors",
     "hierarchical_visibility",
     "all_cuts",
+    "cuts_within",
+    "reference_greedy",
     "is_valid_cut",
     "voxel_distortion",
     "smooth_volume",
@@ -105,6 +109,64 @@ def all_cuts(parent: list[int], visible: np.ndarray, node: int | None = None) ->
         return out
 
     return cuts(node)
+
+
+def cuts_within(parent: list[int], visible: np.ndarray, budget: int) -> list[tuple]:
+    """Every cut of at most ``budget`` bricks of the visible tree, by enumeration.
+
+    A node either is in the cut or is replaced by a cut of each of its visible children; a
+    partial product is dropped as soon as it cannot leave one brick for each child still to come,
+    so only cuts within the budget are ever built (still exponential in the tree: small trees).
+    """
+    kids = children_lists(parent)
+
+    def cuts(b: int, cap: int) -> list[tuple]:
+        out = [(b,)]
+        vis = [k for k in kids[b] if visible[k]]
+        if vis and len(vis) <= cap:
+            partial: list[tuple] = [()]
+            for i, k in enumerate(vis):
+                later = len(vis) - i - 1  # children still to come, one brick each at least
+                partial = [p + c for p in partial for c in cuts(k, cap - len(p) - later)]
+            out.extend(partial)
+        return out
+
+    return cuts(parent.index(-1), budget)
+
+
+def reference_greedy(parent: list[int], error: np.ndarray, visible: np.ndarray, budget: int,
+                     improved: bool = True, fill: bool = False) -> list[int]:
+    """Greedy refinement from the root under ``budget`` bricks, step by step (section 3.3).
+
+    The front starts as the root. Each step takes the front node of highest priority
+    (:func:`reference_priorities`; ties: the shallower node, then the smaller id) and stops when
+    that priority is not positive. The node is replaced by its visible children when the front
+    stays within ``budget``; otherwise the refinement stops (the paper's rule), or with ``fill``
+    the node is set aside unsplit and the next one is tried. Returns the sorted cut.
+    """
+    _, prio = reference_priorities(parent, error, visible, improved)
+    kids = children_lists(parent)
+    depth = [0] * len(parent)
+    for b in _postorder(parent)[::-1]:
+        depth[b] = depth[parent[b]] + 1 if parent[b] >= 0 else 0
+    root = parent.index(-1)
+    if not visible[root]:
+        return []
+    front, aside = [root], []
+    while front:
+        node = min(front, key=lambda b: (-prio[b], depth[b], b))
+        if not prio[node] > 0:
+            break
+        vis = [k for k in kids[node] if visible[k]]
+        front.remove(node)
+        if len(front) + len(aside) + len(vis) > budget:
+            if not fill:
+                front.append(node)
+                break
+            aside.append(node)
+            continue
+        front.extend(vis)
+    return sorted(front + aside)
 
 
 def is_valid_cut(parent: list[int], visible: np.ndarray, cut) -> bool:
