@@ -11,6 +11,7 @@ voxel with scipy's interpolation.
 * :func:`reference_greedy` -- greedy refinement from the root, step by step from the definition.
 * :func:`is_valid_cut` -- covers every visible leaf exactly once, holds no invisible node.
 * :func:`voxel_distortion` -- eq. (1)-(2) summed over the voxels of a brick.
+* :func:`srgb_luv` -- CIE L*u*v* of sRGB colours (D65), from the CIE and sRGB definitions.
 * :func:`smooth_volume` -- a smooth random field with some noise (test data).
 * :func:`reference_priorities` -- eq. (9) and the monotone clamp, node by node in Python.
 """
@@ -32,6 +33,7 @@ __all__ = [
     "reference_greedy",
     "is_valid_cut",
     "voxel_distortion",
+    "srgb_luv",
     "smooth_volume",
     "reference_priorities",
 ]
@@ -215,6 +217,26 @@ def voxel_distortion(source: np.ndarray, coarse: np.ndarray, level: int, lo, hi,
     a = luv_of_bins[bin_of(src)]
     b = luv_of_bins[bin_of(approx)]
     return float(np.sqrt(((a - b) ** 2).sum(axis=-1)).sum())
+
+
+def srgb_luv(rgb: np.ndarray) -> np.ndarray:
+    """CIE 1976 L*u*v* of sRGB colours in [0, 1] (..., 3): the sRGB decoding curve and matrix of
+    IEC 61966-2-1, white D65 (Xn, Yn, Zn = 0.95047, 1, 1.08883), black at (0, 0, 0)."""
+    c = np.clip(np.asarray(rgb, np.float64), 0.0, 1.0)
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    to_xyz = np.array([[0.4124564, 0.3575761, 0.1804375],
+                       [0.2126729, 0.7151522, 0.0721750],
+                       [0.0193339, 0.1191920, 0.9503041]])
+    x, y, z = np.moveaxis(linear @ to_xyz.T, -1, 0)
+    xn, yn, zn = 0.95047, 1.0, 1.08883
+    lightness = np.where(y / yn > (6 / 29) ** 3, 116 * np.cbrt(y / yn) - 16, (29 / 3) ** 3 * y / yn)
+    den = x + 15 * y + 3 * z
+    safe = np.where(den > 0, den, 1.0)
+    u = np.where(den > 0, 4 * x / safe, 0.0)
+    v = np.where(den > 0, 9 * y / safe, 0.0)
+    den_n = xn + 15 * yn + 3 * zn
+    return np.stack([lightness, 13 * lightness * (u - 4 * xn / den_n),
+                     13 * lightness * (v - 9 * yn / den_n)], axis=-1)
 
 
 def smooth_volume(shape, seed: int, dtype=np.uint8) -> np.ndarray:
