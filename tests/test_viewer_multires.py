@@ -310,9 +310,10 @@ def test_a_newer_state_cancels_the_refinement():
     frames = []
 
     async def check():
-        release = asyncio.Event()
+        release, waiting, done = asyncio.Event(), asyncio.Event(), asyncio.Event()
 
         async def run_in_thread(fn):
+            waiting.set()
             await release.wait()
             return fn()
 
@@ -321,21 +322,21 @@ def test_a_newer_state_cancels_the_refinement():
 
         async def send_bytes(data):
             from splinecast.viewer.protocol import unpack_frame
-            frames.append(unpack_frame(data)[0])
+            header = unpack_frame(data)[0]
+            frames.append(header)
+            if header["id"] == 2 and header["final"]:
+                done.set()
 
         session = Session(FrameRenderer(vol), run_in_thread, send_text, send_bytes,
                           default_state(vol), 10**6)
         task = asyncio.create_task(session.run())
         await session.handle_text(json.dumps({"type": "render", "id": 1,
                                               "state": {"size": [40, 32]}}))
-        await asyncio.sleep(0.05)  # request 1's coarse pass is waiting for the render thread
+        await asyncio.wait_for(waiting.wait(), 60)  # request 1's coarse pass waits to render
         await session.handle_text(json.dumps({"type": "render", "id": 2, "state": {
             "size": [40, 32], "camera": {"azimuth": 90.0}}}))
         release.set()
-        for _ in range(3000):
-            await asyncio.sleep(0.01)
-            if any(f["id"] == 2 and f["final"] for f in frames):
-                break
+        await asyncio.wait_for(done.wait(), 120)
         session.close()
         task.cancel()
 
