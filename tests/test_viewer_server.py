@@ -403,21 +403,27 @@ def test_a_waiting_request_is_replaced_by_a_newer_one(vol):
     rendered = []
 
     async def check():
-        release = asyncio.Event()
+        release, waiting, done = asyncio.Event(), asyncio.Event(), asyncio.Event()
         sent = []
         defaults = default_state(vol)
         renderer = FrameRenderer(vol)
 
         async def run_in_thread(fn):
+            waiting.set()
             await release.wait()
             rendered.append(fn.args[0].state["camera"]["azimuth"])
             return fn()
 
+        def record(item):
+            sent.append(item)
+            if rendered and rendered[-1] == 40.0 and len(sent) >= 3:
+                done.set()
+
         async def send_text(message):
-            sent.append(message)
+            record(message)
 
         async def send_bytes(data):
-            sent.append(data)
+            record(data)
 
         session = Session(renderer, run_in_thread, send_text, send_bytes, defaults, 10**6)
         task = asyncio.create_task(session.run())
@@ -425,12 +431,10 @@ def test_a_waiting_request_is_replaced_by_a_newer_one(vol):
             message = {"type": "render", "id": int(azimuth), "state": {
                 "size": [16, 12], "camera": {"azimuth": azimuth}}}
             await session.handle_text(json.dumps(message))
-            await asyncio.sleep(0.01)
+            if azimuth == 10.0:  # 10 waits for the render thread before the others arrive
+                await asyncio.wait_for(waiting.wait(), 60)
         release.set()
-        for _ in range(500):
-            await asyncio.sleep(0.01)
-            if rendered and rendered[-1] == 40.0 and len(sent) >= 3:
-                break
+        await asyncio.wait_for(done.wait(), 60)
         session.close()
         task.cancel()
         return sent
