@@ -338,6 +338,49 @@ def test_cli_pyramid_and_info(tmp_path, capsys):
     assert main(["pyramid", str(src), "-o", str(tmp_path / "x.raw"), "--quiet"]) == 2
 
 
+def _multiscales(store):
+    """The store's NGFF ``multiscales`` entry, read from its ``zarr.json`` as plain JSON."""
+    return json.loads((store / "zarr.json").read_text())["attributes"]["ome"]["multiscales"][0]
+
+
+def test_cli_pyramid_levels_unit_and_overwrite(tmp_path, capsys):
+    data = _volume(shape=(30, 20, 10), dtype=np.uint8).data
+    src = tmp_path / "v.npy"
+    np.save(src, data)
+    out = tmp_path / "v.zarr"
+    # --levels: at most that many (three without it, test_cli_pyramid_and_info).
+    assert main(["pyramid", str(src), "-o", str(out), "--brick", "8", "--levels", "2",
+                 "--unit", "mm", "--quiet"]) == 0
+    meta = _multiscales(out)
+    assert [d["path"] for d in meta["datasets"]] == ["0", "1"]
+    assert [a["unit"] for a in meta["axes"]] == ["millimeter"] * 3  # --unit, NGFF's name
+    mv = sc.read(out)
+    assert [lv.shape for lv in mv.levels] == [(30, 20, 10), (16, 11, 6)]
+    np.testing.assert_array_equal(mv.levels[0].read((0, 0, 0), mv.shape), data)
+    # --overwrite replaces the store: three levels in micrometres now, nothing of the old one.
+    other = data[::-1].copy()
+    np.save(src, other)
+    capsys.readouterr()
+    assert main(["pyramid", str(src), "-o", str(out), "--brick", "8", "--unit", "micrometer",
+                 "--overwrite", "--quiet"]) == 0
+    meta = _multiscales(out)
+    assert [d["path"] for d in meta["datasets"]] == ["0", "1", "2"]
+    assert [a["unit"] for a in meta["axes"]] == ["micrometer"] * 3
+    mv = sc.read(out)
+    np.testing.assert_array_equal(mv.levels[0].read((0, 0, 0), mv.shape), other)
+    # Going down to one level leaves no array of the old levels behind.
+    assert main(["pyramid", str(src), "-o", str(out), "--brick", "8", "--levels", "1",
+                 "--overwrite", "--quiet"]) == 0
+    assert [d["path"] for d in _multiscales(out)["datasets"]] == ["0"]
+    assert not (out / "1").exists() and not (out / "2").exists()
+    capsys.readouterr()
+    assert main(["pyramid", str(src), "-o", str(tmp_path / "w.zarr"), "--unit", "parsec",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "unit 'parsec' is not a length unit" in err and err.count("\n") == 1
+    assert not (tmp_path / "w.zarr").exists()
+
+
 @pytest.mark.skipif(not (DATA / "mni152_t1_1mm.nii.gz").is_file(),
                     reason="../shared/data/mni152_t1_1mm.nii.gz not present (real-data test)")
 def test_mni_pyramid_level0_equals_the_nifti(tmp_path):
