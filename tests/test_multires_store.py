@@ -255,6 +255,40 @@ def test_reads_plain_zarr_arrays(tmp_path):
                                   data.transpose(2, 1, 0))
 
 
+def test_channel_and_timepoint_select_their_own_voxels(tmp_path):
+    """A store written with zarr alone, axes (t, c, z, y, x), two levels, every (t, c) with its
+    own values: ``open_zarr(channel=, timepoint=)`` reads exactly that slice on every level
+    (in x, y, z order), and an index past the axis is refused naming it."""
+    rng = np.random.default_rng(4)
+    shapes = [(2, 3, 6, 5, 4), (2, 3, 3, 3, 2)]
+    group = zarr.open_group(str(tmp_path / "tc.zarr"), mode="w")
+    stored = []
+    for level, shape in enumerate(shapes):
+        values = rng.integers(0, 60000, shape).astype(np.uint16)
+        group.create_array(str(level), shape=shape, dtype="u2")[...] = values
+        stored.append(values)
+    group.attrs["ome"] = {"version": "0.5", "multiscales": [{
+        "axes": [{"name": "t", "type": "time"}, {"name": "c", "type": "channel"}]
+        + [{"name": a, "type": "space"} for a in "zyx"],
+        "datasets": [{"path": str(level), "coordinateTransformations": [
+            {"type": "scale", "scale": [1, 1, *(2.0**level,) * 3]}]} for level in (0, 1)]}]}
+    seen = set()
+    for t in range(2):
+        for c in range(3):
+            mv = open_zarr(tmp_path / "tc.zarr", channel=c, timepoint=t)
+            assert len(mv.levels) == 2
+            for level, values in enumerate(stored):
+                lv = mv.levels[level]
+                got = lv.read((0, 0, 0), lv.shape)
+                np.testing.assert_array_equal(got, values[t, c].transpose(2, 1, 0))
+            seen.add(mv.levels[0].read((0, 0, 0), mv.shape).tobytes())
+    assert len(seen) == 6  # six different volumes
+    with pytest.raises(sc.ParameterError, match="axis 'c' has 3 entries, asked for 3"):
+        open_zarr(tmp_path / "tc.zarr", channel=3, timepoint=0)
+    with pytest.raises(sc.ParameterError, match="axis 't' has 2 entries, asked for 2"):
+        open_zarr(tmp_path / "tc.zarr", channel=0, timepoint=2)
+
+
 def test_bad_stores_and_parameters_name_the_problem(tmp_path, built):
     vol, path = built
     group = zarr.open_group(str(tmp_path / "nometa.zarr"), mode="w")
