@@ -7,7 +7,7 @@ of index-space points, plus where its polynomial pieces meet and the box it cove
 * ``bspline1..3``: :func:`reference.bspline` (scipy's ``map_coordinates``), pieces the cells
   between knots (voxel centres for odd degree, half-way between them for even degree);
 * ``qss``, ``s31``: :class:`type6_reference.Type6Reference`, written in the tests from the
-  Bernstein-Bezier coefficient rules of the type-6 note (de Casteljau on the tetrahedron holding
+  Bernstein-Bezier coefficient rules of the two schemes (de Casteljau on the tetrahedron holding
   the point; nothing of the package), for the model's variant and prefilter; pieces the 24
   tetrahedra of each cube centred on a voxel.
 

@@ -203,13 +203,13 @@ def test_greedy_cut_is_near_the_brute_force_optimum():
     """How far the greedy cut (the oracle of the update and render tests) is from the optimum.
 
     The gap is the share of the best possible error reduction the greedy misses,
-    ``(E_greedy - E_opt) / (E_root - E_opt)`` (Table 3 of reference 002 reports its complement:
-    88.6-94.2% of the optimal reduction for the improved priority). The optimum comes from
-    enumerating every cut within the budget (:func:`cut_reference.cuts_within`), not from
-    :func:`optimal_cut`. The greedy has no worst-case guarantee (one large split that does not
-    fit stops it, or with ``fill`` blocks the smaller splits below it): single trees of the sample
-    miss up to half the reduction, so the bounds are on the sample's mean and on how many trees
-    reach the optimum exactly (see ``GAP_BOUNDS``)."""
+    ``(E_greedy - E_opt) / (E_root - E_opt)`` (Table 3 of Carmona & Froehlich 2011 reports its
+    complement: 88.6-94.2% of the optimal reduction for the improved priority). The optimum
+    comes from enumerating every cut within the budget (:func:`cut_reference.cuts_within`), not
+    from :func:`optimal_cut`. The greedy has no worst-case guarantee (one large split that does
+    not fit stops it, or with ``fill`` blocks the smaller splits below it): single trees of the
+    sample miss up to 73% of the reduction, so the bounds are on the sample's mean and on how many
+    trees reach the optimum exactly (see ``GAP_BOUNDS``)."""
     missed: dict[tuple[bool, bool], list[float]] = {key: [] for key in GAP_BOUNDS}
     for parent, error, visible, budget in _gap_sample():
         tree = BrickTree.from_parents(parent)

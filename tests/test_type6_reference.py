@@ -1,7 +1,7 @@
 """The tests' own type-6 evaluator (``type6_reference.py``), the reference of the type-6 models in
 ``evaluators.py``, checked against what it must reproduce without the package: its coefficient
 rules are symmetric and affine (weights summing to one); on quadratic data ``q`` both schemes
-give ``q + tr(M) / 4`` (``q + Delta q / 8``, the note's property) and S31 with the prefilter
+give ``q + tr(M) / 4`` (``q + Delta q / 8``, the schemes' property) and S31 with the prefilter
 ``q`` itself, at every point whose stencils see only real voxels; and it is continuous across
 the faces between tetrahedra and between cubes. It is then compared with the model's own point
 evaluation (a second code path: the package's derived tables and compiled de Casteljau).

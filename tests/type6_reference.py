@@ -1,19 +1,19 @@
 """An independent evaluator of the type-6 splines (S31 cubic C1, quadratic super splines QSS-A/B).
 
-Written from the coefficient rules of ``shared/notes/type6_coefficients.md`` and nothing of the
-package: the rules are given below for the class representatives on the reference tetrahedron
-``T0 = [v0, v1, v2, v3]`` (``v0`` the cube centre, ``v1`` the front face centre, ``v2, v3`` the ends
-of that face's top edge); every other Bernstein-Bezier coefficient follows by the 48 symmetries of
-the cube, which carry a rule's point and its data offsets alike. A point is evaluated in the
+Written from the Bernstein-Bezier coefficient rules of the two schemes (a table per scheme below)
+and nothing of the package: the rules are given for the class representatives on the reference
+tetrahedron ``T0 = [v0, v1, v2, v3]`` (``v0`` the cube centre, ``v1`` the front face centre,
+``v2, v3`` the ends of that face's top edge); every other coefficient follows by the 48 symmetries
+of the cube, which carry a rule's point and its data offsets alike. A point is evaluated in the
 tetrahedron of its cube that holds it: that tetrahedron is the image of ``T0`` under the cube
 symmetry that sorts the point's local coordinates into ``|x| <= z <= y``, its coefficients are the
 rules of ``T0``'s domain points applied to the data around the cube seen through that symmetry, and
 the value comes from de Casteljau's algorithm on them (barycentric coordinates in ``T0``).
 
-Conventions (the note's): cube ``c`` centred on voxel ``c`` (index units), side 1; data beyond the
-volume repeat the border voxel (the models' edge rule); points are clamped into the domain
+Conventions: cube ``c`` centred on voxel ``c`` (index units), side 1; data beyond the volume
+repeat the border voxel (the models' edge rule); points are clamped into the domain
 ``[-0.5, n - 0.5]`` per axis. ``prefilter`` (S31 only) replaces the data by ``f - Delta f / 8``
-with the 7-point Laplacian of the edge-extended data, as the note describes.
+with the 7-point Laplacian of the edge-extended data.
 
 :func:`check_rules` verifies the transcription: symmetric rules agree wherever two symmetries
 send representatives to one point, and each rule's weights sum to one.
