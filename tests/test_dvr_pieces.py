@@ -99,8 +99,8 @@ def test_default_settings_meet_the_suites_tolerance(cases, scenes, name):
     """``mode="dvr"`` without settings, against the dense integral within ``DEFAULT_BOUNDS``
     (well within the comparison suite's criterion, 1/255 in mean absolute error; the fixed-step
     default on these small volumes, whose field bends within a voxel, errs most at single
-    pixels; the per-piece sampling it replaced measured 5.0/255 and 4.1/255 there: README, "Use
-    it from Python"); early termination changes no pixel by more than the transparency it
+    pixels; the per-piece sampling it replaced measured 5.0/255 and 4.1/255 there:
+    ``docs/accuracy.rst``); early termination changes no pixel by more than the transparency it
     leaves."""
     case, scene = cases[name], scenes[name]
     largest, mean = (bound / 255 for bound in DEFAULT_BOUNDS[name])
