@@ -7,8 +7,11 @@ voxel with scipy's interpolation.
 * :func:`random_parents` -- random trees (complete or with 1..k children per node).
 * :func:`block_monotone_errors`, :func:`hierarchical_visibility` -- per-node data.
 * :func:`all_cuts` -- every cut of a tree (exponential; small trees only).
+* :func:`cuts_within` -- every cut of at most ``budget`` bricks (enumeration pruned by size).
+* :func:`reference_greedy` -- greedy refinement from the root, step by step from the definition.
 * :func:`is_valid_cut` -- covers every visible leaf exactly once, holds no invisible node.
 * :func:`voxel_distortion` -- eq. (1)-(2) summed over the voxels of a brick.
+* :func:`srgb_luv` -- CIE L*u*v* of sRGB colours (D65), from the CIE and sRGB definitions.
 * :func:`smooth_volume` -- a smooth random field with some noise (test data).
 * :func:`reference_priorities` -- eq. (9) and the monotone clamp, node by node in Python.
 """
@@ -26,8 +29,11 @@ __all__ = [
     "block_monotone_errors",
     "hierarchical_visibility",
     "all_cuts",
+    "cuts_within",
+    "reference_greedy",
     "is_valid_cut",
     "voxel_distortion",
+    "srgb_luv",
     "smooth_volume",
     "reference_priorities",
 ]
@@ -107,6 +113,64 @@ def all_cuts(parent: list[int], visible: np.ndarray, node: int | None = None) ->
     return cuts(node)
 
 
+def cuts_within(parent: list[int], visible: np.ndarray, budget: int) -> list[tuple]:
+    """Every cut of at most ``budget`` bricks of the visible tree, by enumeration.
+
+    A node either is in the cut or is replaced by a cut of each of its visible children; a
+    partial product is dropped as soon as it cannot leave one brick for each child still to come,
+    so only cuts within the budget are ever built (still exponential in the tree: small trees).
+    """
+    kids = children_lists(parent)
+
+    def cuts(b: int, cap: int) -> list[tuple]:
+        out = [(b,)]
+        vis = [k for k in kids[b] if visible[k]]
+        if vis and len(vis) <= cap:
+            partial: list[tuple] = [()]
+            for i, k in enumerate(vis):
+                later = len(vis) - i - 1  # children still to come, one brick each at least
+                partial = [p + c for p in partial for c in cuts(k, cap - len(p) - later)]
+            out.extend(partial)
+        return out
+
+    return cuts(parent.index(-1), budget)
+
+
+def reference_greedy(parent: list[int], error: np.ndarray, visible: np.ndarray, budget: int,
+                     improved: bool = True, fill: bool = False) -> list[int]:
+    """Greedy refinement from the root under ``budget`` bricks, step by step (section 3.3).
+
+    The front starts as the root. Each step takes the front node of highest priority
+    (:func:`reference_priorities`; ties: the shallower node, then the smaller id) and stops when
+    that priority is not positive. The node is replaced by its visible children when the front
+    stays within ``budget``; otherwise the refinement stops (the paper's rule), or with ``fill``
+    the node is set aside unsplit and the next one is tried. Returns the sorted cut.
+    """
+    _, prio = reference_priorities(parent, error, visible, improved)
+    kids = children_lists(parent)
+    depth = [0] * len(parent)
+    for b in _postorder(parent)[::-1]:
+        depth[b] = depth[parent[b]] + 1 if parent[b] >= 0 else 0
+    root = parent.index(-1)
+    if not visible[root]:
+        return []
+    front, aside = [root], []
+    while front:
+        node = min(front, key=lambda b: (-prio[b], depth[b], b))
+        if not prio[node] > 0:
+            break
+        vis = [k for k in kids[node] if visible[k]]
+        front.remove(node)
+        if len(front) + len(aside) + len(vis) > budget:
+            if not fill:
+                front.append(node)
+                break
+            aside.append(node)
+            continue
+        front.extend(vis)
+    return sorted(front + aside)
+
+
 def is_valid_cut(parent: list[int], visible: np.ndarray, cut) -> bool:
     """True when every visible leaf has exactly one cut node on its path to the root and the
     cut holds no invisible node (so no cut node is an ancestor of another, nothing is missed)."""
@@ -153,6 +217,26 @@ def voxel_distortion(source: np.ndarray, coarse: np.ndarray, level: int, lo, hi,
     a = luv_of_bins[bin_of(src)]
     b = luv_of_bins[bin_of(approx)]
     return float(np.sqrt(((a - b) ** 2).sum(axis=-1)).sum())
+
+
+def srgb_luv(rgb: np.ndarray) -> np.ndarray:
+    """CIE 1976 L*u*v* of sRGB colours in [0, 1] (..., 3): the sRGB decoding curve and matrix of
+    IEC 61966-2-1, white D65 (Xn, Yn, Zn = 0.95047, 1, 1.08883), black at (0, 0, 0)."""
+    c = np.clip(np.asarray(rgb, np.float64), 0.0, 1.0)
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    to_xyz = np.array([[0.4124564, 0.3575761, 0.1804375],
+                       [0.2126729, 0.7151522, 0.0721750],
+                       [0.0193339, 0.1191920, 0.9503041]])
+    x, y, z = np.moveaxis(linear @ to_xyz.T, -1, 0)
+    xn, yn, zn = 0.95047, 1.0, 1.08883
+    lightness = np.where(y / yn > (6 / 29) ** 3, 116 * np.cbrt(y / yn) - 16, (29 / 3) ** 3 * y / yn)
+    den = x + 15 * y + 3 * z
+    safe = np.where(den > 0, den, 1.0)
+    u = np.where(den > 0, 4 * x / safe, 0.0)
+    v = np.where(den > 0, 9 * y / safe, 0.0)
+    den_n = xn + 15 * yn + 3 * zn
+    return np.stack([lightness, 13 * lightness * (u - 4 * xn / den_n),
+                     13 * lightness * (v - 9 * yn / den_n)], axis=-1)
 
 
 def smooth_volume(shape, seed: int, dtype=np.uint8) -> np.ndarray:

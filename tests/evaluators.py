@@ -6,11 +6,14 @@ of index-space points, plus where its polynomial pieces meet and the box it cove
 * ``trilinear``: :func:`reference.trilinear` (lerp form), pieces the voxel cells;
 * ``bspline1..3``: :func:`reference.bspline` (scipy's ``map_coordinates``), pieces the cells
   between knots (voxel centres for odd degree, half-way between them for even degree);
-* ``qss``, ``s31``: the model's point evaluation ``model.evaluate`` (barycentric de Casteljau on
-  the tetrahedron holding the point: not the ray restriction and root finders of the kernel),
-  pieces the 24 tetrahedra of each cube centred on a voxel.
+* ``qss``, ``s31``: :class:`type6_reference.Type6Reference`, written in the tests from the
+  Bernstein-Bezier coefficient rules of the two schemes (de Casteljau on the tetrahedron holding
+  the point; nothing of the package), for the model's variant and prefilter; pieces the 24
+  tetrahedra of each cube centred on a voxel.
 
-(Type-6 hits are also checked without any of the model's arrays in ``test_type6_analytic.py``.)
+(Type-6 hits are also checked without any of the model's arrays in ``test_type6_analytic.py``,
+and ``test_type6_reference.py`` checks the reference on quadratics and against the model's own
+point evaluation.)
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from reference import bspline, trilinear
+from type6_reference import Type6Reference
 
 
 @dataclass
@@ -65,5 +69,7 @@ def model_evaluator(name: str, volume, scene) -> Evaluator:
         return Evaluator(lambda p: bspline(data, degree, p), lambda p: _to_planes(p, offset),
                          np.zeros(3), top)
     if name in ("qss", "s31"):
-        return Evaluator(scene.model.evaluate, _type6_boundary, np.full(3, -0.5), top + 0.5)
+        scheme = getattr(scene.model, "variant", "qss-b") if name == "qss" else "s31"
+        spline = Type6Reference(data, scheme, prefilter=getattr(scene.model, "prefilter", False))
+        return Evaluator(spline, _type6_boundary, np.full(3, -0.5), top + 0.5)
     raise KeyError(f"no evaluator for model {name!r}")

@@ -6,10 +6,12 @@ References, independent of the code under test:
   brick: the converged error cut is all of level 0, and the image must be the same);
 - D(b) summed voxel by voxel with scipy's interpolation (:func:`cut_reference.voxel_distortion`)
   over each brick's source voxels, from the definition of the store's bricks and levels;
-- the greedy cut from scratch and the dynamic-programming optimum (:mod:`.cut_select`, checked
-  against brute force in ``test_cut_select.py``) on a metric built apart from the scene's: the
-  scene's frame-to-frame updates must converge to the greedy cut, never beat the optimum, and
-  respect the budgets.
+- the error metric computed here from the voxels (:func:`_voxel_metric`: the brick tree from the
+  store's documented geometry, D(b) voxel by voxel, the fix-up, eqs. 5-7, visibility from the
+  transfer function's opacity over each brick's values), and the greedy refinement replayed on
+  it from its definition (:func:`cut_reference.reference_greedy`): the scene's frame-to-frame
+  updates must converge to that cut, carry the same errors, and respect the budgets;
+  ``test_cut_select.py`` measures the greedy cut's distance to the brute-force optimum.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cut_reference import voxel_distortion
+from cut_reference import reference_greedy, srgb_luv, voxel_distortion
 from reference import smooth_noise
 
 pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
@@ -27,10 +29,10 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 import splinecast as sc  # noqa: E402
 from splinecast.multires.colour import classified_luv, distortion_table  # noqa: E402
 from splinecast.multires.cut_histograms import Quantizer  # noqa: E402
-from splinecast.multires.cut_metric import CutMetric, cut_error, histogram_distortion  # noqa: E402
+from splinecast.multires.cut_metric import histogram_distortion  # noqa: E402
 from splinecast.multires.cut_policy import octree_histograms, octree_tree  # noqa: E402
-from splinecast.multires.cut_select import greedy_cut, optimal_cut  # noqa: E402
-from splinecast.multires.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut_select import optimal_cut  # noqa: E402
+from splinecast.multires.cut_tree import BrickTree  # noqa: E402
 from splinecast.multires.scene import MultiscaleScene  # noqa: E402
 
 B = 8
@@ -132,15 +134,99 @@ def test_histograms_of_the_store_bricks_match_their_voxels(noise):
 
 
 # ------------------------------------------------------------------------------ small budgets
-def _reference_metric(scene: MultiscaleScene, tf, value_filter, cam, interest=None) -> CutMetric:
-    """A metric built apart from the scene's: tree, histograms and visibility made again."""
-    octree = scene.stream.octree
+def _voxel_metric(vol: sc.Volume, levels: list[np.ndarray], tf, eye, interest=None,
+                  bins: int = 64, ghost: int = 2):
+    """The error metric of the store's brick tree, from the voxels (independent of the package).
+
+    Tree: level ``p`` (factor ``2^p``) has ``ceil((n - 1) / (B 2^p))`` bricks per axis (at least
+    one); node ids level by level, finest first, C order within a level; a brick's parent is the
+    brick ``index // 2`` of the next level. Brick ``index`` owns the source voxels
+    ``[index B 2^p, (index + 1) B 2^p)`` (the last one up to the end) and its box is the cell box
+    of those voxel centres, clamped to the volume. D(b): :func:`voxel_distortion` with 64 bins
+    over the data range, colours from :func:`srgb_luv`; D*(b) = max(D(b), sum of the visible
+    children's D); I(b) of eqs. 5-6 (t = 1/4); E = D* I. Visible: the transfer function's
+    opacity is positive somewhere in the values of the brick's window (its voxels and ``ghost``
+    level voxels around) or of its descendants'.
+
+    Returns ``(parent, keys, error, visible)``, keys as ``(level, i, j, k)``.
+    """
+    n0 = np.asarray(vol.shape)
+    data = np.asarray(vol.data)
+    lo_v, hi_v = float(data.min()), float(data.max())
+    scale = (bins - 1) / (hi_v - lo_v)
+    bin_values = lo_v + np.arange(bins) / scale
+
+    def bin_of(x):
+        return np.clip(np.floor((np.asarray(x, np.float64) - lo_v) * scale + 0.5), 0,
+                       bins - 1).astype(np.int64)
+
+    colours = srgb_luv(tf.color(bin_values) * tf.opacity(bin_values)[:, None])
+    keys: list[tuple[int, ...]] = []
+    for p in range(len(levels)):
+        keys += [(p, *idx) for idx in np.ndindex(*np.maximum(1, -(-(n0 - 1) // (B * 2**p))))]
+    node_of = {key: n for n, key in enumerate(keys)}
+    parent = [node_of.get((key[0] + 1, *(np.asarray(key[1:]) // 2).tolist()), -1)
+              for key in keys]
+    size = len(keys)
+    raw, imp = np.zeros(size), np.zeros(size)
+    vmin, vmax = np.full(size, np.inf), np.full(size, -np.inf)
+
+    def reach(box_lo, box_hi, diag, point):
+        d = np.linalg.norm(np.maximum(np.maximum(box_lo - point, point - box_hi), 0.0))
+        return diag / (diag + d)
+
+    for node, (p, *index) in enumerate(keys):
+        idx, f = np.asarray(index), 2**p
+        edge = B * f
+        last = np.maximum(1, -(-(n0 - 1) // edge)) - 1
+        lo, hi = idx * edge, np.where(idx == last, n0, (idx + 1) * edge)
+        if p > 0:
+            raw[node] = voxel_distortion(data, levels[p], p, lo, hi, bin_of, colours,
+                                         index_map=(1.0 / f, 0.0))
+        box_lo = np.minimum(lo, n0 - 1).astype(float)
+        box_hi = np.minimum((idx + 1) * edge, n0 - 1).astype(float)
+        diag = float(np.linalg.norm(box_hi - box_lo))
+        eye_term = reach(box_lo, box_hi, diag, np.asarray(eye, float))
+        imp[node] = eye_term if interest is None else (
+            0.75 * reach(box_lo, box_hi, diag, np.asarray(interest, float)) + 0.25 * eye_term)
+        level = levels[p]
+        first = np.clip(np.floor(box_lo / f + 1e-9).astype(int) - ghost, 0, level.shape)
+        stop = np.clip(np.ceil(box_hi / f - 1e-9).astype(int) + ghost + 1, 0, level.shape)
+        window = level[first[0]:stop[0], first[1]:stop[1], first[2]:stop[2]]
+        vmin[node], vmax[node] = float(window.min()), float(window.max())
+    for node in range(size):  # children (finer levels) come before their parents
+        if parent[node] >= 0:
+            vmin[parent[node]] = min(vmin[parent[node]], vmin[node])
+            vmax[parent[node]] = max(vmax[parent[node]], vmax[node])
+    visible = np.array([bool(np.any(tf.opacity(np.linspace(a, b, 4001)) > 0))
+                        for a, b in zip(vmin, vmax, strict=True)])
+    kids: list[list[int]] = [[] for _ in keys]
+    for node, up in enumerate(parent):
+        if up >= 0:
+            kids[up].append(node)
+    fixed = np.array([max(raw[b], sum(raw[k] for k in kids[b] if visible[k]))
+                      for b in range(size)])
+    return parent, keys, fixed * imp, visible
+
+
+def _reference(scene: MultiscaleScene, vol: sc.Volume, tf, cam, interest=None):
+    """:func:`_voxel_metric` of the scene's store; checks that the scene's metric holds the
+    same tree (as keys), visibility and errors. Returns ``(parent, keys, error, visible)``."""
     mv = scene.volume
-    tree, _, _ = octree_tree(octree)
-    hist = octree_histograms(octree, Quantizer.for_data(mv.dtype, mv.value_range))
-    metric = CutMetric(tree, hist, tf, interest=interest, eye=cam.position)
-    metric.visible[:] = value_filter.contributes(tree.value_min, tree.value_max)
-    return metric
+    levels = [mv.level(i).read((0, 0, 0), mv.level(i).shape) for i in range(len(mv.levels))]
+    parent, keys, error, visible = _voxel_metric(vol, levels, tf, cam.position, interest)
+    ec = scene.error_cut
+    scene_keys = [tuple(int(v) for v in key) for key in ec.keys]
+    assert sorted(scene_keys) == sorted(keys)
+    order = [scene_keys.index(key) for key in keys]
+    np.testing.assert_array_equal(ec.metric.visible[order], visible)
+    np.testing.assert_allclose(ec.metric.all_errors()[order], error, rtol=1e-9, atol=1e-9)
+    return parent, keys, error, visible
+
+
+def _scene_cut(scene: MultiscaleScene) -> list[tuple[int, ...]]:
+    keys = scene.error_cut.keys
+    return sorted(tuple(int(v) for v in keys[n]) for n in scene.error_cut.updater.cut)
 
 
 def _converge(scene, cam, options, limit=300, **extra):
@@ -174,20 +260,19 @@ def test_small_budget_cut_is_the_greedy_cut_within_budget_and_above_the_optimum(
         assert set(last["cut_levels"]) != {0}  # the budget forces coarser bricks
         errors = [f.stats["cut_error"] for f in frames]
         assert errors[-1] < errors[0]
-        # The reference: the same quantities built again, selected from scratch.
-        metric = _reference_metric(scene, TF, ValueFilter.transfer(TF), cam,
-                                   interest)
-        cut = np.sort(np.fromiter(scene.error_cut.updater.cut, np.int64))
-        greedy = greedy_cut(metric, n_bricks, fill=True)  # the scene sets aside what does not fit
-        np.testing.assert_array_equal(cut, greedy)
-        paper = greedy_cut(metric, n_bricks)  # the paper's rule stops at the first misfit
+        # The reference: the metric from the voxels, the greedy cut replayed on it (fill: the
+        # scene sets aside a split that does not fit).
+        parent, keys, error, visible = _reference(scene, vol, TF, cam, interest)
+        greedy = reference_greedy(parent, error, visible, n_bricks, fill=True)
+        assert _scene_cut(scene) == sorted(keys[n] for n in greedy)
+        paper = reference_greedy(parent, error, visible, n_bricks)  # stops at the first misfit
         assert len(greedy) >= len(paper)
-        e_all = metric.all_errors()
-        e_cut = cut_error(metric.tree, e_all, greedy, metric.visible)
-        assert last["cut_error"] == pytest.approx(e_cut, rel=1e-12)
-        best, total = optimal_cut(metric.tree, e_all, metric.visible, n_bricks)
+        # E(cut), eq. 8: per source voxel of the visible region (every brick is visible here).
+        assert visible.all()
+        assert last["cut_error"] == pytest.approx(error[greedy].sum() / vol.data.size, rel=1e-9)
+        best, total = optimal_cut(BrickTree.from_parents(parent), error, visible, n_bricks)
         assert len(best) <= n_bricks
-        assert total <= e_all[greedy].sum() * (1 + 1e-12)
+        assert total <= error[greedy].sum() * (1 + 1e-12)
         again = scene.render(cam, **DVR)  # converged: it stays
         np.testing.assert_array_equal(again.rgba, frames[-1].rgba)
 
@@ -248,8 +333,10 @@ def test_a_transfer_function_edit_coarsens_what_became_transparent(ramp):
         kept = np.flatnonzero(tree.is_leaf & ~gone)
         k0, k1 = covering_depth(cut_before)[kept], covering_depth(cut_after)[kept]
         assert k1.sum() > k0.sum()
-        metric = _reference_metric(scene, edited, ValueFilter.transfer(edited), cam)
-        np.testing.assert_array_equal(np.sort(cut_after), greedy_cut(metric, 20, fill=True))
+        parent, keys, error, visible = _reference(scene, vol, edited, cam)
+        assert not visible.all()
+        greedy = reference_greedy(parent, error, visible, 20, fill=True)
+        assert _scene_cut(scene) == sorted(keys[n] for n in greedy)
         assert not np.array_equal(after.rgba, before.rgba)
 
 

@@ -2,8 +2,9 @@
 
 References, independent of the code under test:
 
-- the greedy cut from scratch (:func:`.cut_select.greedy_cut`, checked against brute force in
-  ``test_cut_select.py``) on a metric built apart from the scene's with ``improved=False``;
+- the greedy cut from scratch (:func:`.cut_select.greedy_cut`; ``test_cut_select.py`` checks
+  it against the refinement replayed from its definition and measures its distance to the
+  brute-force optimum) on a metric built apart from the scene's with ``improved=False``;
 - which bricks are surely out of view, by projecting the corners of each box (grown by the
   culling margin) through the camera's pinhole (its ``forward``/``right``/``up`` axes and field of
   view): a box all of whose corners project beyond the same edge of the image, or lie behind the

@@ -36,8 +36,7 @@ MODE_OPTIONS = {
     "mip-tolerance": {"mode": "mip", "tolerance": 0.05},
     "dvr": {"mode": "dvr", "tf": TF, "dvr": sc.DVRSettings(step=0.5)},
 }
-#: (model, mode) pairs rendered on the cluster and locally. s31 MIP/DVR join here (one line
-#: each) once the kernels render every model in every mode.
+#: (model, mode) pairs rendered on the cluster and locally.
 CASES = [
     ("trilinear", "iso"),
     ("trilinear", "multi-iso"),
@@ -45,6 +44,8 @@ CASES = [
     ("trilinear", "mip-tolerance"),
     ("trilinear", "dvr"),
     ("s31", "iso"),
+    ("s31", "mip"),
+    ("s31", "dvr"),
 ]
 
 

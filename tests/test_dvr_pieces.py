@@ -87,20 +87,28 @@ def test_pieces_through_bricks_equal_the_whole_volume(model):
                                        err_msg=f"{model} {'chained' if chained else 'combined'}")
 
 
+# The default settings' errors against the dense integral, measured (premultiplied RGB over
+# black, /255): largest over the visible pixels 5.394 (ml-ramp) and 9.297 (noise-ramp), mean over
+# the image 0.479 and 0.522. Bounds: 1.2x, except noise-ramp's largest, which stays within the
+# 10/255 this suite held before it was measured (1.08x).
+DEFAULT_BOUNDS = {"ml-ramp": (6.5, 0.58), "noise-ramp": (10.0, 0.63)}
+
+
 @pytest.mark.parametrize("name", ["ml-ramp", "noise-ramp"])
 def test_default_settings_meet_the_suites_tolerance(cases, scenes, name):
-    """``mode="dvr"`` without settings: within 1/255 of the dense integral in mean absolute
-    error (the comparison suite's quality criterion), and within 10/255 at every visible pixel
-    (the fixed-step default on these small volumes, whose field bends within a voxel, measured
-    5.4/255 and 9.3/255; the per-piece sampling it replaced, 5.0/255 and 4.1/255: README, "Use it
-    from Python"); early termination changes no pixel by more than the transparency it
+    """``mode="dvr"`` without settings, against the dense integral within ``DEFAULT_BOUNDS``
+    (well within the comparison suite's criterion, 1/255 in mean absolute error; the fixed-step
+    default on these small volumes, whose field bends within a voxel, errs most at single
+    pixels; the per-piece sampling it replaced measured 5.0/255 and 4.1/255 there:
+    ``docs/accuracy.rst``); early termination changes no pixel by more than the transparency it
     leaves."""
     case, scene = cases[name], scenes[name]
+    largest, mean = (bound / 255 for bound in DEFAULT_BOUNDS[name])
     frame = scene.render(case.camera, mode="dvr", tf=case.tf, shading=BLACK)
     assert frame.stats["sampling"] == DEFAULT_SETTINGS.sampling
     diff = np.abs(frame.rgba[..., :3] - case.ref)
-    assert diff.mean() <= TARGET - case.ref_err, diff.mean() * 255
-    assert case.error(frame) <= 10 * TARGET - case.ref_err, case.error(frame) * 255
+    assert diff.mean() <= mean - case.ref_err, diff.mean() * 255
+    assert case.error(frame) <= largest - case.ref_err, case.error(frame) * 255
     endless = scene.render(case.camera, mode="dvr", tf=case.tf, shading=BLACK,
                            dvr=sc.DVRSettings(**{**DEFAULT_SETTINGS.__dict__,
                                                  "termination": None}))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import splinecast as sc
 from splinecast.cli import main
@@ -725,3 +726,70 @@ def test_output_path_with_a_trailing_slash_is_refused(tmp_path, capsys):
     assert code == 2
     one_error_line(err, "--depth", "names a folder")
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------- the limits at their edge
+def test_a_volume_axis_of_exactly_the_limit_is_read_and_one_more_is_refused(tmp_path):
+    """MAX_AXIS = 2^20 voxels along an axis: a 2^20 x 1 x 1 uint8 volume (1 MiB) is read; the
+    same header with one voxel more is refused before anything is read."""
+    n = limits.MAX_AXIS
+    assert n == 1 << 20
+    values = (np.arange(n) % 251).astype(np.uint8)
+    (tmp_path / "long.raw").write_bytes(values.tobytes())
+    header = tmp_path / "long.mhd"
+    header.write_text(f"ObjectType = Image\nNDims = 3\nDimSize = {n} 1 1\n"
+                      "ElementType = MET_UCHAR\nElementDataFile = long.raw\n")
+    vol = sc.read(header)
+    assert vol.shape == (n, 1, 1)
+    np.testing.assert_array_equal(vol.data[:, 0, 0], values)
+    header.write_text(f"ObjectType = Image\nNDims = 3\nDimSize = {n + 1} 1 1\n"
+                      "ElementType = MET_UCHAR\nElementDataFile = long.raw\n")
+    with pytest.raises(ReadError, match=rf"long\.mhd: DimSize must be 3 integers between 1 and "
+                                        rf"{n}, got {n + 1}"):
+        sc.read(header)
+
+
+def test_an_image_side_of_exactly_the_limit_renders_and_one_more_is_refused(tmp_path, capsys):
+    """MAX_IMAGE_SIDE = 32768 pixels: a 32768 x 1 image renders (command line and API, the same
+    pixels); 32769 is refused with one line naming the option."""
+    side = limits.MAX_IMAGE_SIDE
+    assert side == 1 << 15
+    out = tmp_path / "wide.png"
+    # A vertical field of view of 0.01 degrees spans +-70 degrees across 32768 pixels.
+    view = ["--azimuth", "30", "--elevation", "20", "--distance", "30", "--fov", "0.01",
+            "--fit", "box"]
+    code, _, err = cli(["render", "demo:sphere?size=10", "--iso", "0", "--size", f"{side}x1",
+                        *view, "--quiet", "-o", str(out)], capsys)
+    assert code == 0, err
+    with Image.open(out) as image:
+        assert image.size == (side, 1)
+        pixels = np.asarray(image.convert("RGBA"))
+    vol = sc.demo("sphere", size=10)
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, distance=30, size=(side, 1), fov=0.01,
+                          fit="box")
+    frame = sc.Scene(vol).render(cam, iso=0.0)
+    np.testing.assert_array_equal(pixels, frame.to_uint8())
+    assert np.isfinite(frame.depth).sum() > 100  # the sphere is in the row
+    code, _, err = cli(["render", "demo:sphere?size=10", "--iso", "0", "--size",
+                        f"{side + 1}x1", "-o", str(out)], capsys)
+    assert code == 2
+    one_error_line(err, "--size", f"image width must be an integer >= 1 and at most {side}, "
+                               f"got {side + 1}")
+    with pytest.raises(sc.ParameterError, match=f"camera size: image height must be an integer "
+                                                f">= 1 and at most {side}, got {side + 1}"):
+        sc.Scene(vol).render(sc.Camera.orbit(vol, size=(1, side + 1)), iso=0.0)
+
+
+def test_an_iteration_budget_of_exactly_the_limit_is_accepted_and_one_more_is_refused(
+        tmp_path, capsys):
+    """MAX_ROOT_ITERATIONS = 1000 for ``--iterations``."""
+    most = limits.MAX_ROOT_ITERATIONS
+    assert most == 1000
+    base = ["render", "demo:sphere?size=10", "--iso", "0", "--model", "bspline3",
+            "--root-finder", "newton", "--size", "8x6", "--quiet", "-o", str(tmp_path / "i.png")]
+    code, _, err = cli([*base, "--iterations", str(most)], capsys)
+    assert code == 0, err
+    code, _, err = cli([*base, "--iterations", str(most + 1)], capsys)
+    assert code == 2
+    one_error_line(err, "--iterations", f"must be an integer >= 1 and at most {most}, "
+                                        f"got {most + 1}")

@@ -7,6 +7,7 @@ import bz2
 import gzip
 import io
 import json
+import math
 import os
 import resource
 from pathlib import Path
@@ -83,7 +84,37 @@ def test_parse_bytes_refuses_nonsense(text):
         limits.parse_bytes(text)
 
 
-def test_memory_cap_from_the_environment(monkeypatch):
+@pytest.fixture
+def machine(tmp_path, monkeypatch):
+    """The memory probes pointed at files the test writes: a fake ``/proc/meminfo`` and cgroup
+    v2 folder (the ``ulimit -v`` probe is off: ``test_address_space_limit_counts`` has it).
+    ``machine(available=..., cgroup_max=..., cgroup_current=...)`` writes them (``None``: the
+    file is absent) and forgets the last reading."""
+    meminfo, cgroup = tmp_path / "meminfo", tmp_path / "cgroup"
+    cgroup.mkdir()
+    monkeypatch.setattr(limits, "MEMINFO_PATH", str(meminfo))
+    monkeypatch.setattr(limits, "CGROUP_ROOT", str(cgroup))
+    monkeypatch.setattr(limits, "_address_space_left", lambda: None)
+    monkeypatch.delenv(limits.ENV_MAX_BYTES, raising=False)
+
+    def write(available=8 << 30, cgroup_max=None, cgroup_current=None):
+        lines = ["MemTotal:       16318836 kB", "MemFree:          512000 kB"]
+        if available is not None:
+            lines.append(f"MemAvailable:   {available // 1024:>9} kB")
+        meminfo.write_text("\n".join([*lines, "Buffers:           1024 kB", ""]))
+        for name, value in (("memory.max", cgroup_max), ("memory.current", cgroup_current)):
+            path = cgroup / name
+            if value is None:
+                path.unlink(missing_ok=True)
+            else:
+                path.write_text(f"{value}\n")
+        monkeypatch.setattr(limits, "_machine_reading", [-math.inf, None, []])
+
+    write()
+    return write
+
+
+def test_memory_cap_from_the_environment(machine, monkeypatch):
     monkeypatch.setenv(limits.ENV_MAX_BYTES, "1MiB")
     assert limits.memory_limit()[0] == 1 << 20
     limits.check_memory(1 << 20, "x", "opt")
@@ -95,13 +126,37 @@ def test_memory_cap_from_the_environment(monkeypatch):
         limits.memory_limit()
 
 
-def test_memory_limit_never_exceeds_available_memory(monkeypatch):
-    monkeypatch.delenv(limits.ENV_MAX_BYTES, raising=False)
-    with open("/proc/meminfo") as fh:
-        available = next(int(line.split()[1]) * 1024 for line in fh
-                         if line.startswith("MemAvailable:"))
-    # Memory moves between the two reads: allow a 10% drift.
-    assert limits.memory_limit()[0] <= available * 1.1
+def test_memory_limit_is_the_available_memory(machine):
+    machine(available=3 << 30)
+    assert limits.memory_limit() == (3 << 30, "the 3.0 GiB of available memory")
+    with pytest.raises(ParameterError, match=r"^f: a volume needs 3.0 GiB, more than the 3.0 GiB "
+                                             r"of available memory$"):
+        limits.check_memory((3 << 30) + 1, "a volume", "f")
+
+
+def test_cgroup_memory_probe(machine):
+    # The cgroup's limit less what the group uses, when that is below the available memory.
+    machine(available=8 << 30, cgroup_max=3 << 30, cgroup_current=1 << 30)
+    assert limits.memory_limit() == (2 << 30, "the 2.0 GiB of memory left under the cgroup limit")
+    # Nothing used yet (no memory.current): the whole limit.
+    machine(available=8 << 30, cgroup_max=3 << 30)
+    assert limits.memory_limit()[0] == 3 << 30
+    # A group above its limit leaves nothing.
+    machine(available=8 << 30, cgroup_max=1 << 30, cgroup_current=(1 << 30) + 4096)
+    assert limits.memory_limit()[0] == 0
+    # "max" (no limit) or no cgroup file at all: the available memory decides.
+    machine(available=5 << 30, cgroup_max="max", cgroup_current=1 << 30)
+    assert limits.memory_limit() == (5 << 30, "the 5.0 GiB of available memory")
+    machine(available=5 << 30)
+    assert limits.memory_limit()[0] == 5 << 30
+    # A cgroup limit above the available memory does not raise the limit.
+    machine(available=1 << 30, cgroup_max=4 << 30, cgroup_current=0)
+    assert limits.memory_limit()[0] == 1 << 30
+
+
+def test_the_default_probes_read_the_kernels_files():
+    assert limits.MEMINFO_PATH == "/proc/meminfo"
+    assert limits.CGROUP_ROOT == "/sys/fs/cgroup"
 
 
 def test_address_space_limit_counts(monkeypatch):

@@ -186,7 +186,7 @@ def _checkerboard_cut(mv, model: str):
 
 def _level_errors(mv, model: str, sdf, spacing: float) -> dict[int, float]:
     """Largest |reconstruction - exact distance| of each level on a shell around the surface
-    (world units), from the models' own point evaluators (not the ray kernels)."""
+    (world units), from the tests' evaluators (``evaluators.py``, not the ray kernels)."""
     from evaluators import model_evaluator
 
     rng = np.random.default_rng(0)

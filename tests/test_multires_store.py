@@ -255,6 +255,40 @@ def test_reads_plain_zarr_arrays(tmp_path):
                                   data.transpose(2, 1, 0))
 
 
+def test_channel_and_timepoint_select_their_own_voxels(tmp_path):
+    """A store written with zarr alone, axes (t, c, z, y, x), two levels, every (t, c) with its
+    own values: ``open_zarr(channel=, timepoint=)`` reads exactly that slice on every level
+    (in x, y, z order), and an index past the axis is refused naming it."""
+    rng = np.random.default_rng(4)
+    shapes = [(2, 3, 6, 5, 4), (2, 3, 3, 3, 2)]
+    group = zarr.open_group(str(tmp_path / "tc.zarr"), mode="w")
+    stored = []
+    for level, shape in enumerate(shapes):
+        values = rng.integers(0, 60000, shape).astype(np.uint16)
+        group.create_array(str(level), shape=shape, dtype="u2")[...] = values
+        stored.append(values)
+    group.attrs["ome"] = {"version": "0.5", "multiscales": [{
+        "axes": [{"name": "t", "type": "time"}, {"name": "c", "type": "channel"}]
+        + [{"name": a, "type": "space"} for a in "zyx"],
+        "datasets": [{"path": str(level), "coordinateTransformations": [
+            {"type": "scale", "scale": [1, 1, *(2.0**level,) * 3]}]} for level in (0, 1)]}]}
+    seen = set()
+    for t in range(2):
+        for c in range(3):
+            mv = open_zarr(tmp_path / "tc.zarr", channel=c, timepoint=t)
+            assert len(mv.levels) == 2
+            for level, values in enumerate(stored):
+                lv = mv.levels[level]
+                got = lv.read((0, 0, 0), lv.shape)
+                np.testing.assert_array_equal(got, values[t, c].transpose(2, 1, 0))
+            seen.add(mv.levels[0].read((0, 0, 0), mv.shape).tobytes())
+    assert len(seen) == 6  # six different volumes
+    with pytest.raises(sc.ParameterError, match="axis 'c' has 3 entries, asked for 3"):
+        open_zarr(tmp_path / "tc.zarr", channel=3, timepoint=0)
+    with pytest.raises(sc.ParameterError, match="axis 't' has 2 entries, asked for 2"):
+        open_zarr(tmp_path / "tc.zarr", channel=0, timepoint=2)
+
+
 def test_bad_stores_and_parameters_name_the_problem(tmp_path, built):
     vol, path = built
     group = zarr.open_group(str(tmp_path / "nometa.zarr"), mode="w")
@@ -336,6 +370,49 @@ def test_cli_pyramid_and_info(tmp_path, capsys):
     assert main(["pyramid", str(src), "-o", str(out), "--quiet"]) == 2
     assert "already exists" in capsys.readouterr().err
     assert main(["pyramid", str(src), "-o", str(tmp_path / "x.raw"), "--quiet"]) == 2
+
+
+def _multiscales(store):
+    """The store's NGFF ``multiscales`` entry, read from its ``zarr.json`` as plain JSON."""
+    return json.loads((store / "zarr.json").read_text())["attributes"]["ome"]["multiscales"][0]
+
+
+def test_cli_pyramid_levels_unit_and_overwrite(tmp_path, capsys):
+    data = _volume(shape=(30, 20, 10), dtype=np.uint8).data
+    src = tmp_path / "v.npy"
+    np.save(src, data)
+    out = tmp_path / "v.zarr"
+    # --levels: at most that many (three without it, test_cli_pyramid_and_info).
+    assert main(["pyramid", str(src), "-o", str(out), "--brick", "8", "--levels", "2",
+                 "--unit", "mm", "--quiet"]) == 0
+    meta = _multiscales(out)
+    assert [d["path"] for d in meta["datasets"]] == ["0", "1"]
+    assert [a["unit"] for a in meta["axes"]] == ["millimeter"] * 3  # --unit, NGFF's name
+    mv = sc.read(out)
+    assert [lv.shape for lv in mv.levels] == [(30, 20, 10), (16, 11, 6)]
+    np.testing.assert_array_equal(mv.levels[0].read((0, 0, 0), mv.shape), data)
+    # --overwrite replaces the store: three levels in micrometres now, nothing of the old one.
+    other = data[::-1].copy()
+    np.save(src, other)
+    capsys.readouterr()
+    assert main(["pyramid", str(src), "-o", str(out), "--brick", "8", "--unit", "micrometer",
+                 "--overwrite", "--quiet"]) == 0
+    meta = _multiscales(out)
+    assert [d["path"] for d in meta["datasets"]] == ["0", "1", "2"]
+    assert [a["unit"] for a in meta["axes"]] == ["micrometer"] * 3
+    mv = sc.read(out)
+    np.testing.assert_array_equal(mv.levels[0].read((0, 0, 0), mv.shape), other)
+    # Going down to one level leaves no array of the old levels behind.
+    assert main(["pyramid", str(src), "-o", str(out), "--brick", "8", "--levels", "1",
+                 "--overwrite", "--quiet"]) == 0
+    assert [d["path"] for d in _multiscales(out)["datasets"]] == ["0"]
+    assert not (out / "1").exists() and not (out / "2").exists()
+    capsys.readouterr()
+    assert main(["pyramid", str(src), "-o", str(tmp_path / "w.zarr"), "--unit", "parsec",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "unit 'parsec' is not a length unit" in err and err.count("\n") == 1
+    assert not (tmp_path / "w.zarr").exists()
 
 
 @pytest.mark.skipif(not (DATA / "mni152_t1_1mm.nii.gz").is_file(),

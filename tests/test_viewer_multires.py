@@ -4,7 +4,8 @@ spline-wavelet stores; progressive refinement of slow frames.
 References: ``MultiscaleScene.render(..., complete=True)`` and ``Scene(store, lod=eps).render``
 of separately opened scenes, with cameras built by hand (``Camera.orbit`` of the full-resolution
 volume); ``Scene.render`` of the in-memory volume for progressive frames. The brick loader is
-slowed down (a sleep in ``Level.read``) so frames arrive while bricks are still missing.
+held (``Level.read`` waits on an event the test sets) so frames arrive while bricks are still
+missing.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 
@@ -70,22 +72,27 @@ def camera(geometry, size=SIZE, **orbit) -> sc.Camera:
 
 
 @pytest.fixture
-def slow_loader(monkeypatch):
-    """Every read of a level finer than the coarsest sleeps: bricks land one batch at a time."""
+def gated_loader(monkeypatch):
+    """Reads of the levels finer than the coarsest (13^3, read at once) wait while the returned
+    gate is closed: frames are drawn while their bricks are missing, on any machine. Opened at
+    the start and at the end (no loader thread is left waiting)."""
+    gate = threading.Event()
+    gate.set()
     original = Level.read
-    delay = 0.4
 
-    def slow(self, lo, hi):
-        if self.shape[0] > 16:  # levels 0 and 1; the 13^3 coarsest level is read at once
-            time.sleep(delay)
+    def gated(self, lo, hi):
+        if self.shape[0] > 16:
+            gate.wait()
         return original(self, lo, hi)
 
-    monkeypatch.setattr(Level, "read", slow)
-    return delay
+    monkeypatch.setattr(Level, "read", gated)
+    yield gate
+    gate.set()
 
 
-async def frames_until_complete(client, ident, limit_s=600.0):
-    """Every frame of request ``ident`` until a full frame whose cut is complete."""
+async def frames_until_complete(client, ident, limit_s=600.0, first_full=None):
+    """Every frame of request ``ident`` until a full frame whose cut is complete;
+    ``first_full()`` is called when the first full frame arrived."""
     frames = []
     deadline = time.perf_counter() + limit_s
     while True:
@@ -97,6 +104,9 @@ async def frames_until_complete(client, ident, limit_s=600.0):
         if got.header["id"] != ident:
             continue
         frames.append(got)
+        if got.header["final"] and first_full is not None:
+            first_full()
+            first_full = None
         bricks = got.header.get("bricks")
         if got.header["final"] and bricks is not None and bricks["complete"]:
             return frames
@@ -132,7 +142,7 @@ def test_pyramid_hello_reads_only_the_coarsest_level(pyramid, monkeypatch):
 
 
 @pytest.mark.parametrize("interactive", [False, True], ids=["click", "after-a-drag"])
-def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid, slow_loader,
+def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid, gated_loader,
                                                                           interactive):
     # The reference first (it also compiles the kernels, so the viewer's frames are quick).
     with MultiscaleScene(sc.read(pyramid), lod=LOD) as ref_scene:
@@ -142,16 +152,17 @@ def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid,
     assert ref_frame.stats["complete"] and set(ref_frame.stats["cut_levels"]) >= {0}
 
     async def check():
+        gated_loader.clear()  # no brick finer than the coarsest level until the first full frame
         async with ViewerServer(sc.read(pyramid), lod=LOD) as server, \
                 ViewerClient(server.url) as client:
             # After a drag the full frame follows by itself once input rests.
             ident = await client.render({"size": list(SIZE)}, interactive=interactive)
-            return await frames_until_complete(client, ident)
+            return await frames_until_complete(client, ident, first_full=gated_loader.set)
 
     frames = run(check())
     full = [f for f in frames if f.header["final"]]
     assert all(f.header["pass"] == "full" for f in full)
-    # Bricks arrived while frames were shown: the first full frame was still incomplete.
+    # Bricks arrived while frames were shown: the first full frame was drawn without them.
     assert not full[0].header["bricks"]["complete"] and len(full) >= 2
     seen = []
     for f in frames:
@@ -299,9 +310,10 @@ def test_a_newer_state_cancels_the_refinement():
     frames = []
 
     async def check():
-        release = asyncio.Event()
+        release, waiting, done = asyncio.Event(), asyncio.Event(), asyncio.Event()
 
         async def run_in_thread(fn):
+            waiting.set()
             await release.wait()
             return fn()
 
@@ -310,21 +322,21 @@ def test_a_newer_state_cancels_the_refinement():
 
         async def send_bytes(data):
             from splinecast.viewer.protocol import unpack_frame
-            frames.append(unpack_frame(data)[0])
+            header = unpack_frame(data)[0]
+            frames.append(header)
+            if header["id"] == 2 and header["final"]:
+                done.set()
 
         session = Session(FrameRenderer(vol), run_in_thread, send_text, send_bytes,
                           default_state(vol), 10**6)
         task = asyncio.create_task(session.run())
         await session.handle_text(json.dumps({"type": "render", "id": 1,
                                               "state": {"size": [40, 32]}}))
-        await asyncio.sleep(0.05)  # request 1's coarse pass is waiting for the render thread
+        await asyncio.wait_for(waiting.wait(), 60)  # request 1's coarse pass waits to render
         await session.handle_text(json.dumps({"type": "render", "id": 2, "state": {
             "size": [40, 32], "camera": {"azimuth": 90.0}}}))
         release.set()
-        for _ in range(3000):
-            await asyncio.sleep(0.01)
-            if any(f["id"] == 2 and f["final"] for f in frames):
-                break
+        await asyncio.wait_for(done.wait(), 120)
         session.close()
         task.cancel()
 

@@ -392,9 +392,15 @@ def parse_bytes(value: Any, name: str = ENV_MAX_BYTES) -> int:
     return int(size)
 
 
+#: Where the machine's memory is read (module attributes, so that tests can point them at fake
+#: files): the kernel's memory summary and the cgroup v2 folder of this process.
+MEMINFO_PATH = "/proc/meminfo"
+CGROUP_ROOT = "/sys/fs/cgroup"
+
+
 def _meminfo_available() -> int | None:
     try:
-        with open("/proc/meminfo", "rb") as fh:
+        with open(MEMINFO_PATH, "rb") as fh:
             for line in fh:
                 if line.startswith(b"MemAvailable:"):
                     return int(line.split()[1]) * 1024
@@ -416,10 +422,10 @@ def _read_int(path: str) -> int | None:
 
 def _cgroup_available() -> int | None:
     """Bytes left under the cgroup v2 memory limit of this process, if it has one."""
-    limit = _read_int("/sys/fs/cgroup/memory.max")
+    limit = _read_int(os.path.join(CGROUP_ROOT, "memory.max"))
     if limit is None:
         return None
-    used = _read_int("/sys/fs/cgroup/memory.current") or 0
+    used = _read_int(os.path.join(CGROUP_ROOT, "memory.current")) or 0
     return max(0, limit - used)
 
 

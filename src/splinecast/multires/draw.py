@@ -75,6 +75,8 @@ __all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect", "screen_rects
 #: machine), and a cut of small bricks (spline-wavelet chunks of 8^3 nodes) has thousands.
 SERIAL_PIXELS = 4096
 SERIAL_CELLS = 32**3
+#: Voxels per axis of the arrays behind the launch's type exemplars (:meth:`CutRenderer._pack`).
+_EXEMPLAR = 8
 
 
 @contextlib.contextmanager
@@ -492,12 +494,16 @@ class CutRenderer:
 
     # ------------------------------------------------------------------ seams drawn in parts
     def seam_copy_bytes(self) -> int:
-        """Bytes of changed values held for seams: the shells' arrays and the whole copies of
-        bricks not split (the scene holds them inside its budget with
-        :meth:`~.cache.BrickCache.reserve`)."""
+        """Bytes of changed values held for seams: the shells' arrays, the whole copies of
+        bricks not split, and the changes they were made from (the changed elements' indices
+        and values, kept to tell whether the next frame's changes are the same); the scene holds
+        them inside its budget with :meth:`~.cache.BrickCache.reserve`."""
         shells = sum(shell.data.nbytes for _, parts, _ in self._split.values() if parts
                      for shell in parts[:-1])
-        return shells + sum(nbytes for _, _, nbytes in self._changed.values())
+        held = {id(entry[0]): entry[0] for entry in (*self._split.values(),
+                                                      *self._changed.values())}
+        changes = sum(c.index.nbytes + c.values.nbytes for c in held.values())
+        return shells + changes + sum(nbytes for _, _, nbytes in self._changed.values())
 
     def _drawn(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
                camera: Camera) -> tuple[list[Piece], dict]:
@@ -737,8 +743,12 @@ class CutRenderer:
         key = _signature(setup.params)
         kept = self._seam_pairs.get(key)
         if kept is None:
+            # Only its type matters: a corner of the array, not a float64 copy of the whole
+            # brick kept beside the budget for the session.
             array, first = self.prepared(piece)
-            grid = self.grid(piece.level, np.array(array, dtype=np.float64, order="C"), first)
+            corner = np.array(array[:_EXEMPLAR, :_EXEMPLAR, :_EXEMPLAR], dtype=np.float64,
+                              order="C")
+            grid = self.grid(piece.level, corner, first)
             pair = (grid.kernel, setup.blocks(grid.hierarchy))
             kept = self._seam_pairs[key] = (pair, _signature(pair))
         return kept
@@ -750,7 +760,8 @@ class CutRenderer:
         kept = self._seam_pairs.get(key)
         if kept is None:
             array, first = self.prepared(piece)
-            grid = self.grid(piece.level, np.asarray(array, dtype=np.float32), first)
+            corner = array[:_EXEMPLAR, :_EXEMPLAR, :_EXEMPLAR]
+            grid = self.grid(piece.level, np.array(corner, dtype=np.float32, order="C"), first)
             kept = self._seam_pairs[key] = ((grid.kernel, setup.blocks(grid.hierarchy)), None)
         return kept[0]
 

@@ -216,7 +216,8 @@ class MultiscaleScene:
     ----------
     seams_in_budget : bool
         The seam copies' bytes (``frame.stats["seam_copy_bytes"]``) are held back from the
-        bricks' share of the budget, from the frame after they appear (default). ``False``
+        bricks' share of the budget, from the frame after they appear (default; a view that
+        stays the same keeps what it held back, so its cut settles). ``False``
         leaves them beside the budget, so that the cut's brick count follows from the budget
         alone (the error cut's ``N`` of Carmona & Froehlich 2011, for comparing cut algorithms).
 
@@ -274,6 +275,8 @@ class MultiscaleScene:
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self._table_cache: dict = {}
         self._last_pieces: tuple[list, list[Piece]] | None = None
+        #: The view (camera, level of detail, visible values) of the last reservation.
+        self._reserved_view: tuple | None = None
         self.seams_in_budget = True
 
     def _cache_budget(self) -> int:
@@ -396,9 +399,19 @@ class MultiscaleScene:
             start = time.perf_counter()
             out, counters = self.renderer.render(pieces, request.setup, camera, request.planes)
         self.renderer.forget(p.key for p in pieces)
-        # The seam copies count against the budget: the bricks get what they leave.
+        # The seam copies count against the budget: the bricks get what they leave. The same
+        # view keeps what it reserved: its seams depend on its cut and its cut on the room the
+        # reservation leaves, so lowering the reservation after a smaller cut (smaller seams) let
+        # the larger cut, whose seams do not fit beside it, back in every other frame.
         seam_bytes = self.renderer.seam_copy_bytes()
-        self.stream.cache.reserve(seam_bytes if self.seams_in_budget else 0)
+        cache = self.stream.cache
+        view = (camera.pixel_basis().tobytes(), self.lod if lod is None else lod,
+                repr(value_filter))
+        reserve = seam_bytes if self.seams_in_budget else 0
+        if self.seams_in_budget and view == self._reserved_view:
+            reserve = max(reserve, cache.reserved_bytes)
+        self._reserved_view = view
+        cache.reserve(reserve)
         stats = request.stats
         stats.update(self.renderer.stats)
         stats["seam_copy_bytes"] = seam_bytes
