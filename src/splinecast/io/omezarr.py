@@ -24,6 +24,7 @@ readers ignore them, as NGFF allows.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import stat
@@ -199,6 +200,43 @@ def _refused(exc: BaseException) -> ReadError | None:
     return None
 
 
+#: Where the failures zarr's event loop drops are logged (debug level; ``--verbose`` shows them).
+_LOG = logging.getLogger("splinecast.io.zarr")
+#: What zarr's event loop says about a failure that nobody awaited.
+_UNRETRIEVED = ("Task exception was never retrieved", "Future exception was never retrieved",
+                "Task was destroyed but it is pending")
+
+
+def _quiet_unretrieved() -> None:
+    """Let zarr's event loop log at debug level, not print, the failures nobody awaited.
+
+    zarr-python reads a group's members and metadata files concurrently; when the guarded store
+    refuses several files at once, the first refusal reaches the caller (and becomes its one
+    line) while the others end in tasks no one awaits, which the loop would print as "Task
+    exception was never retrieved" at any moment, even after the process reported its error.
+    Installed on zarr's loop (again after a fork, which gives the child a new loop); other
+    contexts go to the loop's default handler.
+    """
+    try:
+        from zarr.core.sync import _get_loop
+
+        loop = _get_loop()
+    except (ImportError, AttributeError, RuntimeError):  # another zarr: nothing to quiet
+        return
+    if loop.get_exception_handler() is not _drop_unretrieved:
+        loop.set_exception_handler(_drop_unretrieved)
+
+
+def _drop_unretrieved(loop: Any, context: dict[str, Any]) -> None:
+    message = str(context.get("message", ""))
+    if message.startswith(_UNRETRIEVED):
+        exc = context.get("exception")
+        _LOG.debug("zarr: %s%s", message, f" ({type(exc).__name__}: {one_line(exc)})"
+                   if exc is not None else "")
+        return
+    loop.default_exception_handler(context)
+
+
 def open_store(path: str | os.PathLike[str], mode: str = "r",
                allow_external: bool | None = None) -> Any:
     """Open a local Zarr hierarchy (group or array) with zarr-python; read-only by default.
@@ -213,6 +251,7 @@ def open_store(path: str | os.PathLike[str], mode: str = "r",
             _GUARDED.append(_guarded_store_class())
         store = _GUARDED[0](os.fspath(path), read_only=True)
         store.allow_external = allow_external
+        _quiet_unretrieved()
     else:
         from zarr.storage import LocalStore
 
