@@ -84,6 +84,10 @@ def log(args: argparse.Namespace, message: str) -> None:
         print(message, file=getattr(args, "stderr", sys.stderr), flush=True)
 
 
+#: Bricks that could not be read named one per line after a command; the others counted.
+_BRICK_LINES = 3
+
+
 class IncompleteWarning(UserWarning):
     """What a command wrote is incomplete (bricks drawn from a coarser level because their
     chunks could not be read): printed last, even with ``--quiet``."""
@@ -116,11 +120,18 @@ class Captured:
         return inside and issubclass(w.category, UserWarning)
 
     def ours(self) -> list[str]:
-        """splinecast's own warnings (about the data), one line each; those saying the output
-        is incomplete last."""
+        """splinecast's own warnings (about the data), one line each (the first few of the
+        bricks that could not be read, then their count); those saying the output is
+        incomplete last."""
         mine = [w for w in self.warnings if self._is_ours(w)]
         last = [w for w in mine if issubclass(w.category, IncompleteWarning)]
-        return [self._line(w) for w in mine if w not in last] + [self._line(w) for w in last]
+        bricks = [w for w in mine if w.category.__name__ == "BrickUnavailableWarning"]
+        shown = [w for w in mine if w not in last and w not in bricks[_BRICK_LINES:]]
+        lines = [self._line(w) for w in shown]
+        if len(bricks) > _BRICK_LINES:
+            lines.append(f"splinecast: warning: ... and {len(bricks) - _BRICK_LINES} more "
+                         "bricks that could not be read")
+        return lines + [self._line(w) for w in last]
 
     def incomplete(self) -> list[str]:
         """The warnings saying the output is incomplete (printed even with ``--quiet``)."""
