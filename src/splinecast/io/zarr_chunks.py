@@ -669,7 +669,13 @@ class ChunkReader:
         self.source = source if source is not None else source_of(array.store)
         meta = array.metadata.to_dict()
         self.shape = tuple(int(n) for n in array.shape)
-        self.dtype = np.dtype(array.dtype)
+        try:
+            self.dtype = np.dtype(array.dtype)
+        except TypeError:  # a zarr data type numpy has no name for
+            raise ReadError(f"{label}: unsupported data type {limits.shorten(array.dtype)}"
+                            ) from None
+        if self.dtype.kind not in "biuf":
+            raise ReadError(f"{label}: data type {self.dtype} does not hold numbers")
         self.prefix = f"{array.path}/" if array.path else ""
         self._encode = array.metadata.encode_chunk_key
         outer = tuple(int(n) for n in (array.shards or array.chunks))
@@ -713,6 +719,11 @@ class ChunkReader:
         out = np.empty(tuple(b - a for a, b in zip(lo, hi, strict=True)), dtype=self.dtype)
         if out.size == 0:
             return out
+        count = math.prod((b - 1) // n - a // n + 1
+                          for a, b, n in zip(lo, hi, self.inner, strict=True))
+        if count > limits.MAX_CHUNKS_PER_READ:
+            raise ReadError(f"{self.label}: reading {lo}..{hi} needs {count} chunks, more than "
+                            f"{limits.MAX_CHUNKS_PER_READ}; the array's chunks are too small")
         for unit in _units(lo, hi, self.outer):
             if self.plan.shard is None:
                 self._read_chunk(unit, lo, hi, out)

@@ -23,11 +23,11 @@ naming the chunk, and the brick keeps being drawn from its ancestor. The store i
 nothing is ever written into it.
 
 A frame drawn at once (:meth:`BrickCache.drawing`) starts no read while it is drawn: a read
-decompresses chunks, and on a machine with few cores that took the trace's cores (measured when
-zarr's threads decoded them; now the loader thread does). Measured at 2048^3 on 2 cores, the first DVR image drawn at once from the coarsest level
-took 1.5 s with the loader reading beside it and 0.8-1.2 s without. Frames that wait for their
-load budget let the read-ahead run beside their trace, which makes a cut complete in fewer
-frames.
+decompresses chunks, and on a machine with few cores that took the trace's cores (measured
+when zarr's threads decoded them; the loader thread does now). Measured at 2048^3 on 2 cores,
+the first DVR image drawn at once from the coarsest level took 1.5 s with the loader reading
+beside it and 0.8-1.2 s without. Frames that wait for their load budget let the read-ahead run
+beside their trace, which makes a cut complete in fewer frames.
 """
 
 from __future__ import annotations
