@@ -70,8 +70,10 @@ CODECS_V3 = ("bytes", "transpose", "sharding_indexed", "zstd", "blosc", "gzip", 
 LZMA_MEMLIMIT = 80 << 20
 #: An empty entry of a shard index (offset and length both 2^64 - 1).
 _EMPTY = (1 << 64) - 1
-#: Parsed shard indexes kept per reader (a brick read touches one shard many times).
+#: Parsed shard indexes kept per reader (a brick read touches one shard many times): at most
+#: this many, and this many bytes.
 _INDEX_CACHE = 64
+_INDEX_CACHE_BYTES = 16 << 20
 
 _ZSTD_MAGIC = 0xFD2FB528
 _ZSTD_SKIPPABLE = 0x184D2A50  # .. 0x184D2A5F
@@ -815,7 +817,8 @@ class ChunkReader:
         if stamp is not None:
             with self._lock:
                 self._indexes[(key, stamp)] = index
-                while len(self._indexes) > _INDEX_CACHE:
+                while len(self._indexes) > _INDEX_CACHE or sum(
+                        v.nbytes for v in self._indexes.values()) > _INDEX_CACHE_BYTES:
                     self._indexes.popitem(last=False)
         return index
 
