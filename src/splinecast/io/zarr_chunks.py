@@ -463,8 +463,8 @@ def _plan_v3(codecs: Any, shape: tuple[int, ...], dtype: np.dtype, where: str,
         if name == "transpose" and stage == "array":
             perm = config.get("order")
             if (not isinstance(perm, list | tuple)
-                    or sorted(perm) != list(range(len(shape)))
-                    or any(isinstance(p, bool) for p in perm)):
+                    or not all(isinstance(p, int) and not isinstance(p, bool) for p in perm)
+                    or sorted(perm) != list(range(len(shape)))):
                 raise ReadError(f"{where}: transpose order {limits.shorten(perm)} is not a "
                                 f"permutation of {len(shape)} axes")
             if order != "C":
