@@ -478,3 +478,23 @@ def test_allow_missing_applies_to_pyramids_only(tmp_path):
     assert proc.returncode == 2 and "--allow-missing applies to multiscale" in proc.stderr
     assert len(_lines(proc.stderr)) == 1 and not (tmp_path / "o.png").exists()
 
+
+
+def test_the_zstd_walker_agrees_with_libzstd():
+    """Declared sizes summed over frames (skippable frames count nothing) as libzstd decodes
+    them; a frame without a size makes the sum unknown; broken structure is refused."""
+    from numcodecs import zstd
+
+    from splinecast.io.zarr_chunks import zstd_content_size
+
+    a, b = bytes(range(256)) * 3, b"xyz" * 1000
+    one, two = zstd.compress(a), zstd.compress(b)
+    skippable = struct.pack("<II", 0x184D2A50, 5) + b"12345"
+    assert zstd_content_size(one) == len(a) == len(zstd.decompress(one))
+    both = skippable + one + two
+    assert zstd_content_size(both) == len(a) + len(b) == len(zstd.decompress(both))
+    assert zstd_content_size(one + zstd_rle(1000, declare=False)) is None
+    assert zstd_content_size(zstd_rle(GIB)) == GIB
+    for broken in (one[:-3], one + b"junk", b"\x28\xb5\x2f\xfd\x08", skippable[:6]):
+        with pytest.raises(ValueError):
+            zstd_content_size(broken)
