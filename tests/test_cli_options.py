@@ -259,9 +259,10 @@ def test_every_render_option_has_a_case():
     # --array picks a point-data array of VTK files (tests/test_vtkimage.py); --budget and --lod
     # of multiscale volumes are tested in tests/test_multires_render.py, --cut in
     # tests/test_cut_render.py; --allow-external-data and --verbose (input handling, not
-    # rendering) in tests/test_hostile_input.py.
+    # rendering) in tests/test_hostile_input.py, --allow-missing (unreadable bricks of a
+    # pyramid) in tests/test_zarr_bounded.py.
     covered = {"--output", "--depth", "--quiet", "--help", "--mode", "--array", "--budget",
-               "--lod", "--cut", "--allow-external-data", "--verbose"}
+               "--lod", "--cut", "--allow-external-data", "--verbose", "--allow-missing"}
     used = {a.split("=")[0] for c in CASES for a in c.cli if a.startswith("--")}
     assert options - covered - used == set()
 

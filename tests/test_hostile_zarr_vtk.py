@@ -306,18 +306,26 @@ def test_damaged_chunks_name_the_chunk(store, v2store, capsys, damage, needles):
         folder = chunk.parents[4] if chunk.is_relative_to(store) else chunk.parents[1]
         chunk.write_bytes(damage(chunk.read_bytes()))
         line = refused(["info", str(folder)], capsys, folder.parent, str(chunk), *needles)
-        if "cannot be read" in needles:
-            assert "chunk (0, 0, 0)" in line
+        if "cannot be read" in needles:  # the chunk, or the shard whose index is damaged
+            assert "chunk (0, 0, 0)" in line or "shard (0, 0, 0)" in line
 
 
 @pytest.mark.parametrize("declared", [2**40, 2**62, 300 << 20])
 def test_a_zstd_bomb_is_refused_from_its_header(store, capsys, monkeypatch, declared):
+    """An inner chunk of a shard (its index kept valid) declaring far more than its 4x4x4
+    uint16 voxels: refused from the header, naming the chunk, whatever the memory cap."""
+    from fuzz.codecs import join_shard, shard_layout, split_shard
+
     monkeypatch.setenv(limits.ENV_MAX_BYTES, "256MiB")
-    chunk = store / "1" / "c" / "0" / "0" / "0"
+    shard = store / "1" / "c" / "0" / "0" / "0"
+    layout = shard_layout(json.loads((store / "1" / "zarr.json").read_text()))
+    chunks = split_shard(shard.read_bytes(), layout["count"], layout["at_end"],
+                         layout["checksum"])
     frame = b"\x28\xb5\x2f\xfd\xe0" + struct.pack("<Q", declared) + b"\x01\x00\x00"
-    chunk.write_bytes(frame)
-    refused(["info", str(store)], capsys, store.parent, str(chunk),
-            f"a chunk declaring {declared} bytes once decompressed")
+    chunks[0] = frame
+    shard.write_bytes(join_shard(chunks, layout["at_end"], layout["checksum"]))
+    refused(["info", str(store)], capsys, store.parent, str(shard), "chunk (0, 0, 0)",
+            f"the zstd data declares {declared} bytes, the chunk holds 128")
 
 
 # --------------------------------------------------------------------------- VTK image data

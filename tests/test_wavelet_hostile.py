@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fuzz.codecs import zstd_rle
 
 import splinecast as sc
 from splinecast.cli import main
@@ -141,8 +142,8 @@ def test_missing_array(store, capsys, array):
 
 # coarse/3 is the coarsest level (rendering reads it; the finer coarse levels are redundant).
 @pytest.mark.parametrize("array", ["wavelet/detail/1/HLH", "wavelet/coarse/3", "wavelet/hull/0"])
-@pytest.mark.parametrize("damage", ["truncate", "missing", "empty", "bomb", "junk", "folder",
-                                    "outside"])
+@pytest.mark.parametrize("damage", ["truncate", "missing", "empty", "bomb", "bomb-undeclared",
+                                    "bomb-lying", "junk", "folder", "outside"])
 def test_damaged_chunk(store, capsys, array, damage):
     target = _chunk(store, array)
     data = target.read_bytes()
@@ -154,6 +155,13 @@ def test_damaged_chunk(store, capsys, array, damage):
         target.write_bytes(b"")
     elif damage == "bomb":  # a zstd frame that declares 2^40 bytes of content
         target.write_bytes(b"\x28\xb5\x2f\xfd\xe0" + struct.pack("<Q", 2**40) + b"\x01\x00\x00")
+    elif damage == "bomb-undeclared":  # a gibibyte of RLE blocks, no content size declared
+        target.write_bytes(zstd_rle(1 << 30, declare=False))
+    elif damage == "bomb-lying":  # declares the chunk's own size, holds a gibibyte
+        doc = json.loads(_meta(store, array).read_text())
+        size = int(np.prod(doc["chunk_grid"]["configuration"]["chunk_shape"]))
+        size *= np.dtype(doc["data_type"]).itemsize
+        target.write_bytes(zstd_rle(1 << 30, declare=size))
     elif damage == "junk":
         target.write_bytes(bytes(range(256)) * 4)
     elif damage == "folder":

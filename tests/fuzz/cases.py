@@ -50,9 +50,30 @@ def _tf(folder: Path, lo: float, hi: float) -> str:
     return "tf.json"
 
 
+#: Seeds read as multiscale pyramids (``--budget``, ``--lod``, ``--allow-missing`` apply).
+PYRAMIDS = ("ome-zarr", "zarr-v2", "ome-zarr-py", "ngff-zarr", "ngff-zarr-sharded")
+
+
+def _multiscale_options(seed: Seed, rng: random.Random) -> list[str]:
+    """The options of pyramids and wavelet stores, at times: a brick budget, a level of detail,
+    substitution of unreadable bricks allowed."""
+    extra: list[str] = []
+    if seed.fmt in PYRAMIDS:
+        if rng.random() < 0.3:
+            extra.append("--allow-missing")
+        if rng.random() < 0.2:
+            extra += ["--budget", rng.choice(["64KiB", "1MiB", "256MiB"])]
+        if rng.random() < 0.2:
+            extra += ["--lod", rng.choice(["0.25", "1", "4"])]
+    elif seed.fmt == "wavelet" and rng.random() < 0.3:
+        extra += ["--lod", rng.choice(["0", "0.01"])]
+    return extra
+
+
 def _file_command(seed: Seed, folder: Path, rng: random.Random) -> tuple[list[str], list[str]]:
     lo, hi = seed.value_range
-    render = ["render", seed.main, "-o", "out.png", "--size", SMALL, "--quiet"]
+    render = ["render", seed.main, "-o", "out.png", "--size", SMALL, "--quiet",
+              *_multiscale_options(seed, rng)]
     kind = rng.choice(["info", "info", "iso", "iso", "mip", "minip", "dvr", "depth"])
     if kind == "info":
         return ["info", seed.main], []

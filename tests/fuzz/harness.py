@@ -46,7 +46,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .cases import Case
+from .cases import PYRAMIDS, Case
 
 GOOD = ("accepted", "clean-error", "skipped-compile")
 BAD = ("outside-read", "crash", "hang", "memory", "unhandled", "left-behind", "noise",
@@ -100,6 +100,16 @@ def warm_up(seed_mains: list[tuple[Path, str]], models: Iterable[str]) -> None:
     with _quiet_directory() as out:
         tf = out / "tf.json"
         sc.TransferFunction([[0, 0], [1, 0.5]], (0, 1)).save(tf)
+        pyramids = [(f, m) for f, m in seed_mains if f.name in PYRAMIDS][:1]
+        for folder, main_name in pyramids:
+            # A pyramid renders through the cut renderer (bricks of its own voxel type): every
+            # mode of the cases, once, coarse and fine.
+            render = ["render", str(folder / main_name), "--size", "8x8", "--quiet", "-o",
+                      str(out / "p.png")]
+            argv_list += [render + ["--iso", "60"], render + ["--mode", "mip"],
+                          render + ["--mode", "minip", "--lod", "0.25"],
+                          render + ["--mode", "dvr", "--tf", str(tf)],
+                          render + ["--iso", "60", "--depth", str(out / "d.npy"), "--lod", "4"]]
         for folder, main_name in seed_mains:
             if main_name != WAVELET_MAIN:
                 continue

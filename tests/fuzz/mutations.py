@@ -691,6 +691,130 @@ def zarr_chunks(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str
     return f"chunk {target.relative_to(folder)}: {op}"
 
 
+#: Sizes a hostile chunk claims or inflates to (a gibibyte from a few kilobytes of RLE blocks).
+BOMB_SIZES = [2**30, 2**26, 2**20 + 1, 129, 127, 0]
+#: Values for the 8-byte fields of a shard index and a zstd frame's content size.
+SIZE_VALUES = [0, 1, 127, 128, 129, 2**31, 2**32, 2**40, 2**63, 2**64 - 1, 2**64 - 2]
+
+
+def _chunk_files(folder: Path) -> list[Path]:
+    meta = set(_metadata_files(folder))
+    return [p for p in _files(folder) if p not in meta]
+
+
+def _zstd_mutation(data: bytes, rng: random.Random) -> tuple[bytes, str]:
+    """A zstd frame's content-size flag and field, reserved bits, window, trailing frames, or
+    an RLE bomb in its place."""
+    from .codecs import (
+        zstd_frame_info,
+        zstd_rle,
+        zstd_with_size,
+        zstd_without_size,
+    )
+
+    op = rng.choice(["no-size", "size", "size", "bomb", "bomb", "reserved", "window", "append",
+                     "skippable"])
+    if op == "no-size":
+        out = zstd_without_size(data)
+        return (out, op) if out is not None else (zstd_rle(2**30, declare=False), "bomb")
+    if op == "size":
+        value = rng.choice(SIZE_VALUES + [len(data), 2 * len(data)])
+        out = zstd_with_size(data, value)
+        return (out, f"size {value}") if out is not None else (data, "size (not zstd)")
+    if op == "bomb":
+        size = rng.choice(BOMB_SIZES[:-1])
+        declare = rng.choice([True, False, rng.choice(SIZE_VALUES)])
+        return zstd_rle(size, declare=declare), f"rle bomb {size} declaring {declare}"
+    info = zstd_frame_info(data)
+    if info is None:
+        return zstd_rle(2**30, declare=False), "bomb (not zstd)"
+    out = bytearray(data)
+    if op == "reserved":
+        out[4] |= 0x08
+    elif op == "window" and not info["single"]:
+        out[5] = rng.choice([0xFF, 0xF8, 0x00, 0x88])
+    elif op == "append":
+        out += rng.choice([data, zstd_rle(2**30, declare=False), b"\x28\xb5\x2f\xfd", b"\0" * 7])
+    else:  # a skippable frame claiming more bytes than follow
+        out = bytearray(struct.pack("<II", 0x184D2A50, rng.choice([0, 8, 2**32 - 1]))) + out
+    return bytes(out), op
+
+
+def _blosc_mutation(data: bytes, rng: random.Random) -> tuple[bytes, str]:
+    """A blosc header field set to an edge value, or a memcpyed chunk whose header lies."""
+    from .codecs import BLOSC_FIELDS, blosc_memcpy, blosc_set
+
+    if rng.random() < 0.25:
+        claim = rng.choice([2**31 - 1, 2**30, len(data) * 4, 0])
+        return blosc_memcpy(data[16:] or b"\0", nbytes=claim), f"memcpyed claiming {claim}"
+    field = rng.choice(list(BLOSC_FIELDS))
+    value = rng.choice([0, 1, 2, 3, 0x7F, 0xFF, 0x10, 2**31 - 1, 2**31, 2**32 - 1,
+                        len(data), len(data) + 1, len(data) - 1, 2**20, 128, 129])
+    return blosc_set(data, **{field: value}), f"blosc {field} = {value}"
+
+
+def zarr_codecs(folder: Path, seed: Seed, rng: random.Random, root: Path) -> str:
+    """A chunk changed with knowledge of its codec: a zstd frame's content size (declared,
+    left out, lying), reserved bits and trailing frames, RLE bombs of up to a gibibyte;
+    blosc header fields; deflate bombs; in a shard, its index entries (crc32c recomputed),
+    checksum, and any of the former inside one of its inner chunks."""
+    from .codecs import array_meta, deflate_bomb, is_blosc, join_shard, shard_layout, split_shard
+
+    chunks = _chunk_files(folder)
+    if not chunks:
+        return byte_level(folder, seed, rng, root)
+    target = rng.choice(chunks)
+    data = target.read_bytes()
+    name = target.relative_to(folder)
+    meta = array_meta(target) or {}
+    layout = shard_layout(meta) if meta.get("zarr_format") == 3 else None
+
+    def inner(chunk: bytes) -> tuple[bytes, str]:
+        if chunk.startswith(b"\x28\xb5\x2f\xfd") or rng.random() < 0.2:
+            return _zstd_mutation(chunk, rng)
+        if is_blosc(chunk):
+            return _blosc_mutation(chunk, rng)
+        if chunk[:1] == b"\x78" or chunk[:2] == b"\x1f\x8b":
+            size = rng.choice([2**24, 2**20, 129])
+            return deflate_bomb(size, gzip=chunk[:2] == b"\x1f\x8b"), f"deflate bomb {size}"
+        return _zstd_mutation(chunk, rng)
+
+    if layout is None:
+        data, what = inner(data)
+        target.write_bytes(data)
+        return f"chunk {name}: {what}"
+    try:
+        parts = split_shard(data, layout["count"], layout["at_end"], layout["checksum"])
+    except (struct.error, ValueError):
+        return f"chunk {name}: not a shard ({byte_level(folder, seed, rng, root)})"
+    full = [n for n, c in enumerate(parts) if c is not None] or list(range(len(parts)))
+    n = rng.choice(full)
+    op = rng.choice(["inner", "inner", "inner", "entry", "entry", "crc", "swap", "empty"])
+    entries: dict[int, tuple[int, int]] = {}
+    if op == "inner":
+        parts[n], what = inner(parts[n] or b"")
+        op = f"inner chunk {n}: {what}"
+    elif op == "entry":
+        offset = rng.choice(SIZE_VALUES + [len(data), len(data) - 1, 0])
+        length = rng.choice(SIZE_VALUES + [len(parts[n] or b"") + 1])
+        entries[n] = (offset, length) if rng.random() < 0.7 else (2**64 - 1, length)
+        op = f"index entry {n} = {entries[n]}"
+    elif op == "swap" and len(full) > 1:
+        a, b = rng.sample(full, 2)
+        parts[a], parts[b] = parts[b], parts[a]
+        op = f"inner chunks {a} and {b} swapped"
+    elif op == "empty":
+        parts[n] = None
+        op = f"inner chunk {n} emptied"
+    shard = join_shard(parts, layout["at_end"], layout["checksum"], entries)
+    if op == "crc" and layout["checksum"]:
+        shard = bytearray(shard)
+        shard[-1 if layout["at_end"] else 16 * layout["count"]] ^= 0x5A
+        shard = bytes(shard)
+    target.write_bytes(shard)
+    return f"shard {name}: {op}"
+
+
 # --------------------------------------------------------------------------- VTK XML
 VTI_ATTRIBUTES: dict[str, list[str]] = {
     "WholeExtent": ["0 5 0 4 0 3", "0 -1 0 4 0 3", "0 1999 0 1999 0 1999", "0 1e30 0 4 0 3",
@@ -828,9 +952,15 @@ STRUCTURED: dict[str, list[Mutation]] = {
     "vti-base64": [vti_attributes, vti_attributes, vti_sizes],
     "vti-raw": [vti_attributes, vti_sizes, vti_sizes],
     "vtk-legacy": [text_header, text_header],
-    "ome-zarr": [zarr_metadata, zarr_metadata, zarr_metadata, zarr_chunks],
-    "zarr-v2": [zarr_metadata, zarr_metadata, zarr_chunks],
-    "wavelet": [zarr_metadata, zarr_metadata, zarr_metadata, zarr_chunks],
+    "ome-zarr": [zarr_metadata, zarr_metadata, zarr_metadata, zarr_chunks, zarr_codecs,
+                 zarr_codecs],
+    "zarr-v2": [zarr_metadata, zarr_metadata, zarr_chunks, zarr_codecs, zarr_codecs],
+    "wavelet": [zarr_metadata, zarr_metadata, zarr_metadata, zarr_chunks, zarr_codecs,
+                zarr_codecs],
+    "ome-zarr-py": [zarr_metadata, zarr_metadata, zarr_chunks, zarr_codecs, zarr_codecs],
+    "ngff-zarr": [zarr_metadata, zarr_metadata, zarr_chunks, zarr_codecs, zarr_codecs],
+    "ngff-zarr-sharded": [zarr_metadata, zarr_metadata, zarr_chunks, zarr_codecs,
+                          zarr_codecs, zarr_codecs],
 }
 
 

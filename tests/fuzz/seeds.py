@@ -326,6 +326,69 @@ def _zarr_v2(folder: Path) -> str:
     return "v.zarr"
 
 
+def _ngff_levels() -> list[tuple[np.ndarray, list[float], list[float]]]:
+    """Two levels in NGFF axis order (z, y, x) with their scale and translation."""
+    data = np.ascontiguousarray(ramp().transpose(2, 1, 0))
+    spacing = [SPACING[2], SPACING[1], SPACING[0]]
+    origin = [ORIGIN[2], ORIGIN[1], ORIGIN[0]]
+    return [(block, [s * 2**level for s in spacing], origin)
+            for level, block in enumerate((data, data[::2, ::2, ::2]))]
+
+
+def _multiscales(version: str, datasets: list[tuple[str, list[float], list[float]]]) -> dict:
+    return {"version": version, "name": "v", "axes": [
+        {"name": a, "type": "space", "unit": "micrometer"} for a in "zyx"],
+        "datasets": [{"path": path, "coordinateTransformations": [
+            {"type": "scale", "scale": scale}, {"type": "translation", "translation": shift}]}
+            for path, scale, shift in datasets]}
+
+
+def _ome_zarr_py(folder: Path) -> str:
+    """OME-Zarr 0.4 laid out as ome-zarr-py writes it: Zarr v2, ``/`` as the chunk key
+    separator, zarr's default v2 compressor (blosc lz4 with byte shuffle), chunks of 4."""
+    import zarr
+    from numcodecs import Blosc
+
+    path = folder / "v.ome.zarr"
+    root = zarr.open_group(str(path), mode="w", zarr_format=2)
+    datasets = []
+    for level, (block, scale, shift) in enumerate(_ngff_levels()):
+        arr = root.create_array(str(level), shape=block.shape, dtype=block.dtype,
+                                chunks=(4, 4, 4), compressors=Blosc(cname="lz4", clevel=5,
+                                                                    shuffle=Blosc.SHUFFLE),
+                                chunk_key_encoding={"name": "v2", "separator": "/"})
+        arr[...] = block
+        datasets.append((str(level), scale, shift))
+    root.attrs["multiscales"] = [_multiscales("0.4", datasets)]
+    return "v.ome.zarr"
+
+
+def _ngff_zarr(folder: Path, sharded: bool = False) -> str:
+    """OME-Zarr 0.5 laid out as ngff-zarr writes it: Zarr v3, ``attributes.ome``, dimension
+    names, zstd (zarr's default v3 codec); ``sharded``: shards of 8 voxels holding chunks of 4
+    (blosc zstd, bit shuffle), the index at the end with its crc32c."""
+    import zarr
+    from zarr.codecs import BloscCodec
+
+    path = folder / "v.ome.zarr"
+    root = zarr.open_group(str(path), mode="w", zarr_format=3)
+    datasets = []
+    for level, (block, scale, shift) in enumerate(_ngff_levels()):
+        extra = dict(shards=(8, 8, 8), compressors=BloscCodec(cname="zstd", clevel=5,
+                                                               shuffle="bitshuffle")) \
+            if sharded else {}
+        arr = root.create_array(f"scale{level}", shape=block.shape, dtype=block.dtype,
+                                chunks=(4, 4, 4), dimension_names=("z", "y", "x"), **extra)
+        arr[...] = block
+        datasets.append((f"scale{level}", scale, shift))
+    root.attrs["ome"] = {"version": "0.5", "multiscales": [_multiscales("0.5", datasets)]}
+    return "v.ome.zarr"
+
+
+def _ngff_zarr_sharded(folder: Path) -> str:
+    return _ngff_zarr(folder, sharded=True)
+
+
 def _wavelet(folder: Path) -> str:
     """A degree-3 spline-wavelet store (Zarr v3, zstd with checksums, root attribute
     ``splinecast`` of kind ``wavelet``) written by splinecast's builder: two levels of 4-node
@@ -367,6 +430,9 @@ MAKERS: dict[str, tuple[Callable[[Path], str], str | None]] = {
     "ome-zarr": (_ome_zarr, "zarr"),
     "zarr-v2": (_zarr_v2, "zarr"),
     "wavelet": (_wavelet, "zarr"),
+    "ome-zarr-py": (_ome_zarr_py, "zarr"),
+    "ngff-zarr": (_ngff_zarr, "zarr"),
+    "ngff-zarr-sharded": (_ngff_zarr_sharded, "zarr"),
 }
 
 

@@ -14,6 +14,8 @@ splinecast's own warnings (flipped axes, uneven slices) are printed after a succ
 from __future__ import annotations
 
 import argparse
+import gc
+import logging
 import sys
 
 import splinecast as sc
@@ -49,8 +51,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.stderr = sys.stderr  # progress goes here, past the capture of library output
     verbose = getattr(args, "verbose", False)
+    ours = logging.getLogger("splinecast")
+    level = ours.level
+    code = 1  # until the command returns
     with captured_output() as captured:
         args.captured = captured  # a long-running command releases it (the viewer's server)
+        if verbose:  # splinecast's debug lines too (what zarr's event loop dropped, ...)
+            ours.setLevel(logging.DEBUG)
         try:
             code = COMMANDS[args.command].run(args)
         except sc.SplinecastError as exc:
@@ -59,7 +66,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f"splinecast: error: {printable(str(exc))}", file=args.stderr)
         except KeyboardInterrupt:
             return 130
+        finally:
+            if code != 0:
+                # What the failure left behind (tasks of zarr's event loop that failed beside
+                # the one reported) is collected now, inside the capture, not at exit.
+                gc.collect()
+            ours.setLevel(level)
     lines = captured.ours() if code == 0 and not getattr(args, "quiet", False) else []
+    if code == 0 and getattr(args, "quiet", False):
+        lines = captured.incomplete()  # what was written is incomplete: said even when quiet
     if verbose:
         lines = captured.everything()
     for line in lines:

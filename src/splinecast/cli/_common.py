@@ -21,6 +21,8 @@ from splinecast.errors import did_you_mean, limits
 
 __all__ = [
     "Captured",
+    "IncompleteWarning",
+    "add_missing_option",
     "Parser",
     "add_input_options",
     "captured_output",
@@ -124,6 +126,24 @@ def log(args: argparse.Namespace, message: str) -> None:
         print(message, file=getattr(args, "stderr", sys.stderr), flush=True)
 
 
+#: Bricks that could not be read named one per line after a command; the others counted.
+_BRICK_LINES = 3
+
+
+class IncompleteWarning(UserWarning):
+    """What a command wrote is incomplete (bricks drawn from a coarser level because their
+    chunks could not be read): printed last, even with ``--quiet``."""
+
+
+def add_missing_option(parser: argparse.ArgumentParser) -> None:
+    """``--allow-missing``: still images of a multiscale volume may draw unreadable bricks from
+    a coarser level (an error otherwise)."""
+    parser.add_argument("--allow-missing", action="store_true",
+                        help="multiscale (OME-Zarr) volumes: draw a brick whose chunks are "
+                             "missing or damaged from a coarser level and say the image is "
+                             "incomplete (default: an error naming the chunk)")
+
+
 class Captured:
     """Warnings and stderr output collected while a command ran."""
 
@@ -142,16 +162,31 @@ class Captured:
         return inside and issubclass(w.category, UserWarning)
 
     def ours(self) -> list[str]:
-        """splinecast's own warnings (about the data), one line each."""
-        return [self._line(w) for w in self.warnings if self._is_ours(w)]
+        """splinecast's own warnings (about the data), one line each (the first few of the
+        bricks that could not be read, then their count); those saying the output is
+        incomplete last."""
+        mine = [w for w in self.warnings if self._is_ours(w)]
+        last = [w for w in mine if issubclass(w.category, IncompleteWarning)]
+        bricks = [w for w in mine if w.category.__name__ == "BrickUnavailableWarning"]
+        shown = [w for w in mine if w not in last and w not in bricks[_BRICK_LINES:]]
+        lines = [self._line(w) for w in shown]
+        if len(bricks) > _BRICK_LINES:
+            lines.append(f"splinecast: warning: ... and {len(bricks) - _BRICK_LINES} more "
+                         "bricks that could not be read")
+        return lines + [self._line(w) for w in last]
+
+    def incomplete(self) -> list[str]:
+        """The warnings saying the output is incomplete (printed even with ``--quiet``)."""
+        return [self._line(w) for w in self.warnings
+                if self._is_ours(w) and issubclass(w.category, IncompleteWarning)]
 
     def everything(self) -> list[str]:
         """Every warning and every line the libraries printed or logged (``--verbose``)."""
         lines = [self._line(w) if self._is_ours(w)
                  else f"  {w.category.__name__} ({Path(w.filename).name}): {w.message}"
-                 for w in self.warnings]
+                 for w in self.warnings if not issubclass(w.category, IncompleteWarning)]
         lines += [f"  {line}" for line in self.stream.getvalue().splitlines() if line.strip()]
-        return lines
+        return lines + self.incomplete()
 
     @contextmanager
     def released(self) -> Iterator[None]:

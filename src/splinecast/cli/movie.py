@@ -28,9 +28,9 @@ from splinecast.distributed import (
     ramp,
     render_locally,
 )
-from splinecast.io.omezarr import is_zarr
+from splinecast.io.omezarr import MultiscaleVolume, is_zarr
 
-from ._common import add_input_options, derived_output, finite, log, numbers
+from ._common import add_input_options, add_missing_option, derived_output, finite, log, numbers
 from ._compiling import CompileNotice
 from ._progress import Progress
 from .render import (
@@ -39,6 +39,7 @@ from .render import (
     mode_kwargs,
     model_options,
     orbit_options,
+    warn_incomplete,
 )
 
 __all__ = ["add_parser", "run"]
@@ -84,6 +85,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             "not refined (0: full resolution; default one pixel's angle); the "
                             "coarse bricks are reused from frame to frame")
     movie.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_missing_option(movie)
     add_input_options(movie)
 
 
@@ -199,13 +201,16 @@ def run(args: argparse.Namespace) -> int:
                          allow_external=args.allow_external_data or None)
 
     start = time.perf_counter()
+    local = args.workers is None and args.scheduler is None
     with contextlib.ExitStack() as stack:
         if wavelet is not None:
             scene = sc.Scene(wavelet, model=args.model, lod=args.lod, **options)
             volume = wavelet
             where = "in this process"
-        elif args.workers is None and args.scheduler is None:
+        elif local:
             scene = sc.Scene(source.read(), model=args.model, **options)
+            if hasattr(scene, "close"):  # a pyramid's loader thread stops at the end
+                stack.callback(scene.close)
             volume = scene.volume
             where = "in this process"
         else:
@@ -215,22 +220,33 @@ def run(args: argparse.Namespace) -> int:
             dscene = DistributedScene(source, client)
             volume = dscene.volume
             where = f"on {len(client.nthreads())} Dask workers"
-        kwargs, notes = mode_kwargs(args, scene.preview if wavelet is not None else volume)
+        multiscale = wavelet is None and local and isinstance(volume, MultiscaleVolume)
+        if args.allow_missing and not multiscale:
+            raise sc.ParameterError(f"--allow-missing applies to multiscale (OME-Zarr) volumes "
+                                    f"rendered in this process only, not {args.file}")
+        info = scene.preview if wavelet is not None or multiscale else volume
+        kwargs, notes = mode_kwargs(args, info)
         for note in notes:
             log(args, note)
         kwargs["inside"] = args.inside
+        if multiscale:  # every frame a still image: its whole cut read
+            kwargs.update(complete=True, missing="substitute" if args.allow_missing else "error")
         if iso_sweep is not None:
             for v in iso_sweep:
                 sc.check_iso(volume, v)
         shots = _shots(args, volume, kwargs, iso_sweep)
         log(args, f"{volume.name}: {volume.shape} prepared ({args.model}) in "
                   f"{time.perf_counter() - start:.2f} s {where}")
-        if wavelet is not None or (args.workers is None and args.scheduler is None):
+        if wavelet is not None or local:
             # Said only when kernels really compile here (the first frame's, on first use).
             model = args.model or "trilinear"
             stack.enter_context(CompileNotice(
-                f"{model} / {args.mode}, {np.dtype(volume.dtype).name} data", model,
+                f"{model} / {args.mode}, {np.dtype(info.dtype).name} data", model,
                 enabled=not args.quiet, stream=getattr(args, "stderr", None)))
+        stats: list[dict] = []
+        if multiscale:  # the frames' stats are kept: does any draw an unreadable brick?
+            images = _images(render_locally(scene, shots), stats)
+        elif wavelet is not None or local:
             images = render_locally(scene, shots, image_only=True)
         else:
             images = dscene.render_many(shots, image_only=True)
@@ -244,4 +260,12 @@ def run(args: argparse.Namespace) -> int:
                 writer.write(image)
                 progress.update()
     print(Path(args.output).resolve())
+    warn_incomplete(args.output, stats)
     return 0
+
+
+def _images(frames: Iterator[Any], stats: list[dict]) -> Iterator[Any]:
+    """The 8-bit images of ``frames``, their stats appended to ``stats``."""
+    for frame in frames:
+        stats.append({k: frame.stats.get(k) for k in ("unreadable", "unreadable_reason")})
+        yield frame.to_uint8()

@@ -7,6 +7,7 @@ import contextlib
 import inspect
 import math
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,9 @@ from splinecast.transfer import DIVERGING, MENU
 
 from ._common import (
     IMAGE_SUFFIXES,
+    IncompleteWarning,
     add_input_options,
+    add_missing_option,
     check_output,
     derived_output,
     finite,
@@ -110,6 +113,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "importance under the budget; dvr and mip) (default lod)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
+    add_missing_option(render)
     add_input_options(render)
     _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
 
@@ -417,6 +421,11 @@ def _refuse_multiscale_options(args: argparse.Namespace, multiscale: bool,
                                wavelet: bool = False) -> None:
     """``--budget``/``--lod``/``--cut`` only for multiscale volumes (``--cut`` not for wavelet
     stores, whose ``--lod`` is an angle >= 0); ``--smooth`` only for the others."""
+    if getattr(args, "allow_missing", False) and (wavelet or not multiscale):
+        what = (f"the wavelet store {args.file} (a damaged chunk is always an error)" if wavelet
+                else f"{args.file}, which is read into memory whole")
+        raise sc.ParameterError(f"--allow-missing applies to multiscale (OME-Zarr) volumes "
+                                f"only, not {what}")
     if wavelet:
         for flag, value in (("--smooth", args.smooth), ("--cut", args.cut)):
             if value:
@@ -507,8 +516,9 @@ def run(args: argparse.Namespace) -> int:
             scene = sc.Scene(vol, model=args.model, **options)
             log(args, f"prepared {args.model} model in {time.perf_counter() - start:.2f} s")
         start = time.perf_counter()
-        # A still image: the whole cut, read.
-        extra = {"complete": True} if multiscale and not wavelet else {}
+        # A still image: the whole cut, read; an unreadable brick is an error unless allowed.
+        extra = ({"complete": True, "missing": "substitute" if args.allow_missing else "error"}
+                 if multiscale and not wavelet else {})
         # The PNG needs colour, --depth and the "hits" count the depth, the log line the per-ray
         # counters; world position, normal and face are never written, so not kept.
         frame = scene.render(camera, inside=args.inside, outputs=("rgba", "depth", "stats"),
@@ -542,4 +552,18 @@ def run(args: argparse.Namespace) -> int:
             frame.save_depth(args.depth)
             log(args, f"wrote depth {args.depth}")
         print(Path(args.output).resolve())
+        warn_incomplete(args.output, [st])
     return 0
+
+
+def warn_incomplete(output: str, stats: list[dict]) -> None:
+    """Say (last, even with ``--quiet``) that ``output`` is incomplete when frames drew
+    unreadable bricks from a coarser level (``--allow-missing``)."""
+    bad = [st for st in stats if st.get("unreadable")]
+    if not bad:
+        return
+    bricks = sum(int(st["unreadable"]) for st in bad)
+    frames = f" in {len(bad)} of {len(stats)} frames" if len(stats) > 1 else ""
+    warnings.warn(f"{output} is incomplete: {bricks} brick{'s' if bricks > 1 else ''}{frames} "
+                  f"could not be read and were drawn from a coarser level (first: "
+                  f"{bad[0]['unreadable_reason']})", IncompleteWarning, stacklevel=2)

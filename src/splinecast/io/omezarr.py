@@ -24,6 +24,7 @@ readers ignore them, as NGFF allows.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import stat
@@ -40,6 +41,7 @@ from ..volume import GridGeometry, Volume
 from ._common import check_dtype, fmt_shape, one_line, require
 from .ngff import parse_image, spatial_order
 from .store_kinds import store_opener
+from .zarr_chunks import ChunkError, ChunkReader, FileSource
 
 __all__ = [
     "ATTRIBUTE",
@@ -50,6 +52,7 @@ __all__ = [
     "open_zarr",
     "open_store",
     "guarded_array",
+    "read_array",
 ]
 
 #: Root attribute holding splinecast's description of a pyramid it built (brick size, tables, ...).
@@ -117,25 +120,20 @@ def _guarded_store_class() -> type:
 
         allow_external: bool | None = None
 
+        def _files(self) -> FileSource:
+            files = self.__dict__.get("_file_source")
+            if files is None:
+                files = self.__dict__["_file_source"] = FileSource(self.root,
+                                                                   self.allow_external)
+            return files
+
         def _read(self, key: str, prototype: Any, byte_range: Any) -> Any:
-            path = self.root / key
+            files = self._files()
+            path = files.path(key)
             label = str(path)
-            try:
-                info = os.stat(path)
-            except (FileNotFoundError, NotADirectoryError):
+            size = files.size(key)  # a regular file inside the store, or None if missing
+            if size is None:
                 return None  # missing: zarr decides (fill value, or "no such array")
-            except OSError as exc:
-                raise ReadError(f"{label}: cannot read: {exc.strerror or exc}") from None
-            if not stat.S_ISREG(info.st_mode):
-                kind = "a folder" if stat.S_ISDIR(info.st_mode) else "a pipe" \
-                    if stat.S_ISFIFO(info.st_mode) else "a device or socket"
-                raise ReadError(f"{label}: is {kind}, not a regular file")
-            # A shard file is read many times (its index, then each chunk's bytes): resolve
-            # its path once per store (resolving took a tenth of a 2048^3 pyramid's loading).
-            checked = self.__dict__.setdefault("_inside", set())
-            if key not in checked:
-                limits.check_inside(path, self.root, label, allow_external=self.allow_external)
-                checked.add(key)
             name = key.rsplit("/", 1)[-1]
             if name in _METADATA:
                 if byte_range is not None:
@@ -143,7 +141,6 @@ def _guarded_store_class() -> type:
                 raw = limits.read_limited(path, limits.MAX_JSON_BYTES, label)
                 limits.parse_json(raw, label)
                 return prototype.buffer.from_bytes(raw)
-            size = info.st_size
             if isinstance(byte_range, RangeByteRequest):
                 start, stop = byte_range.start, byte_range.end
             elif isinstance(byte_range, OffsetByteRequest):
@@ -155,11 +152,7 @@ def _guarded_store_class() -> type:
             if not 0 <= start <= stop <= size:
                 raise ReadError(f"{label}: bytes {start}..{stop} requested, the file has {size} "
                                 "(a corrupt shard index?)")
-            limits.check_memory(stop - start, "a chunk", label, ReadError)
-            fd = limits.open_regular(path, label)
-            with os.fdopen(fd, "rb") as fh:
-                fh.seek(start)
-                data = fh.read(stop - start)
+            data = files.read(key, start, stop)
             declared = _declared_size(data)
             if declared is not None:
                 limits.check_memory(declared, f"a chunk declaring {declared} bytes once "
@@ -207,6 +200,43 @@ def _refused(exc: BaseException) -> ReadError | None:
     return None
 
 
+#: Where the failures zarr's event loop drops are logged (debug level; ``--verbose`` shows them).
+_LOG = logging.getLogger("splinecast.io.zarr")
+#: What zarr's event loop says about a failure that nobody awaited.
+_UNRETRIEVED = ("Task exception was never retrieved", "Future exception was never retrieved",
+                "Task was destroyed but it is pending")
+
+
+def _quiet_unretrieved() -> None:
+    """Let zarr's event loop log at debug level, not print, the failures nobody awaited.
+
+    zarr-python reads a group's members and metadata files concurrently; when the guarded store
+    refuses several files at once, the first refusal reaches the caller (and becomes its one
+    line) while the others end in tasks no one awaits, which the loop would print as "Task
+    exception was never retrieved" at any moment, even after the process reported its error.
+    Installed on zarr's loop (again after a fork, which gives the child a new loop); other
+    contexts go to the loop's default handler.
+    """
+    try:
+        from zarr.core.sync import _get_loop
+
+        loop = _get_loop()
+    except (ImportError, AttributeError, RuntimeError):  # another zarr: nothing to quiet
+        return
+    if loop.get_exception_handler() is not _drop_unretrieved:
+        loop.set_exception_handler(_drop_unretrieved)
+
+
+def _drop_unretrieved(loop: Any, context: dict[str, Any]) -> None:
+    message = str(context.get("message", ""))
+    if message.startswith(_UNRETRIEVED):
+        exc = context.get("exception")
+        _LOG.debug("zarr: %s%s", message, f" ({type(exc).__name__}: {one_line(exc)})"
+                   if exc is not None else "")
+        return
+    loop.default_exception_handler(context)
+
+
 def open_store(path: str | os.PathLike[str], mode: str = "r",
                allow_external: bool | None = None) -> Any:
     """Open a local Zarr hierarchy (group or array) with zarr-python; read-only by default.
@@ -221,6 +251,7 @@ def open_store(path: str | os.PathLike[str], mode: str = "r",
             _GUARDED.append(_guarded_store_class())
         store = _GUARDED[0](os.fspath(path), read_only=True)
         store.allow_external = allow_external
+        _quiet_unretrieved()
     else:
         from zarr.storage import LocalStore
 
@@ -253,6 +284,7 @@ class Level:
     order: tuple[int, int, int] = (2, 1, 0)  # array axis (after `select`) of x, y, z
     folder: Path | None = None  # the level's folder, for local stores
     complete: bool = False  # every chunk was written: a missing file is damage, not fill value
+    reader: ChunkReader | None = field(default=None, repr=False)  # bounded chunk decoding
 
     @property
     def dtype(self) -> np.dtype:
@@ -274,8 +306,18 @@ class Level:
             spatial[self.order[axis]] = slice(int(lo[axis]), int(hi[axis]))
         return (*self.select, *spatial)
 
+    def chunk_reader(self) -> ChunkReader:
+        """The level's :class:`~.zarr_chunks.ChunkReader` (made on first use for a level built
+        by hand; :func:`open_zarr` makes it on opening, refusing codecs it cannot bound)."""
+        if self.reader is None:
+            self.reader = ChunkReader(self.array, self.label)
+        return self.reader
+
     def read(self, lo: Any, hi: Any) -> np.ndarray:
         """Voxels ``[lo, hi)`` (x, y, z; clipped to the level) as a C-contiguous (x, y, z) array.
+
+        Every chunk is decoded into a buffer of exactly its own size (:mod:`.zarr_chunks`): a
+        chunk whose data would inflate beyond it is refused, whatever its headers say.
 
         Raises
         ------
@@ -289,13 +331,33 @@ class Level:
         limits.check_memory(2 * limits.nbytes(box, self.dtype.itemsize),
                             f"reading {fmt_shape(box)} {self.dtype} voxels", self.label, ReadError)
         self._check_files(lo, hi)
+        starts, stops = list(self.select), [i + 1 for i in self.select]
+        for a in range(3):  # array axis order (after the leading ones)
+            axis = self.order.index(a)
+            starts.append(int(lo[axis]))
+            stops.append(int(hi[axis]))
         try:
-            block = np.asarray(self.array[self._selection(lo, hi)])
-        except Exception as exc:  # decoding, I/O and metadata errors all mean "unavailable"
-            refused = _refused(exc)
-            raise (refused or self._diagnose(lo, hi, exc)) from None
+            block = self.chunk_reader().read(starts, stops)
+        except ChunkError as exc:
+            raise self._named(exc) from None
+        except ReadError:
+            raise
+        except Exception as exc:  # a failure the decoders did not foresee still names the box
+            raise ReadError(f"{self.label}: voxels {lo.tolist()}..{hi.tolist()} cannot be read "
+                            f"({type(exc).__name__}: {one_line(exc)})") from None
+        block = block[(0,) * len(self.select)] if self.select else block
         # The array's spatial axes in x, y, z order, then one copy into C order for the kernels.
         return np.ascontiguousarray(np.transpose(block, self.order))
+
+    def _named(self, exc: ChunkError) -> ReadError:
+        """A chunk's error with its grid position in x, y, z order."""
+        spatial = exc.coords[len(self.select):]
+        if len(spatial) != 3:
+            return exc
+        xyz = tuple(int(spatial[a]) for a in self.order)
+        where = f" (file {exc.file})" if exc.file is not None else ""
+        return ReadError(f"{self.label}: {exc.kind} {xyz} (x, y, z) cannot be read{where}: "
+                         f"{exc.reason}")
 
     # ------------------------------------------------------------------ fault reporting
     def _grid(self) -> tuple[int, int, int]:
@@ -372,31 +434,12 @@ class Level:
         units = math.prod(-(-int(o) // int(i)) for o, i in zip(outer, inner, strict=False))
         return 2 * limits.nbytes(outer, self.dtype.itemsize) + 64 * units + (1 << 16)
 
-    def _diagnose(self, lo: np.ndarray, hi: np.ndarray, exc: Exception) -> ReadError:
-        """Find the first chunk of the box that cannot be read and name it."""
-        chunks = self.chunks
-        for unit in self._units(lo, hi, chunks):
-            c_lo = np.maximum(np.array(unit) * chunks, lo)
-            c_hi = np.minimum((np.array(unit) + 1) * chunks, hi)
-            try:
-                self.array[self._selection(c_lo, c_hi)]
-            except Exception as inner:
-                outer = np.array(unit) * chunks // self._grid()
-                path = self._file_of(tuple(int(v) for v in outer))
-                where = f" (file {path})" if path is not None else ""
-                return ReadError(
-                    f"{self.label}: chunk {unit} (x, y, z) cannot be read{where}: {one_line(inner)}"
-                )
-        return ReadError(f"{self.label}: voxels {lo.tolist()}..{hi.tolist()} cannot be read: "
-                         f"{one_line(exc)}")
-
     # ------------------------------------------------------------------ whole-level access
     def to_dask(self) -> Any:
-        """The level as a lazy dask array in splinecast order (x, y, z); nothing is read."""
+        """The level as a lazy dask array in splinecast order (x, y, z), one block per stored
+        chunk; nothing is read until computed, then through :meth:`read`."""
         da = require("dask.array", self.label, action="reading")
-        arr = da.from_zarr(self.array)
-        arr = arr[tuple(self.select)] if self.select else arr
-        return arr.transpose(self.order)
+        return da.from_array(_LevelBlocks(self), chunks=self.chunks, asarray=False)
 
     def to_volume(self, max_bytes: int = 2**31) -> Volume:
         """Read the whole level into memory as a :class:`~splinecast.volume.Volume`.
@@ -414,6 +457,36 @@ class Level:
         data = self.read((0, 0, 0), self.shape)
         return Volume(data, spacing=self.spacing, origin=self.origin,
                       metadata={"name": f"{self.label} level {self.index}"})
+
+
+class _LevelBlocks:
+    """A level as what ``dask.array.from_array`` slices (x, y, z order), read by
+    :meth:`Level.read`."""
+
+    def __init__(self, level: Level) -> None:
+        self.level = level
+        self.shape = level.shape
+        self.dtype = level.dtype
+        self.ndim = 3
+
+    def __getitem__(self, box: tuple[slice, ...]) -> np.ndarray:
+        lo = [s.start or 0 for s in box]
+        hi = [n if s.stop is None else s.stop for s, n in zip(box, self.shape, strict=True)]
+        return self.level.read(lo, hi)
+
+
+def read_array(array: Any, label: str) -> np.ndarray:
+    """A whole Zarr array of a store (a table, an index), its bytes checked against the memory
+    guard first and every chunk decoded within its own size (:mod:`.zarr_chunks`).
+
+    Raises
+    ------
+    ReadError
+        Naming ``label`` (and the chunk): too large, an unsupported codec, a damaged chunk.
+    """
+    itemsize = np.dtype(array.dtype).itemsize
+    limits.check_memory(limits.nbytes(array.shape, itemsize), "the array", label, ReadError)
+    return ChunkReader(array, label).read_all()
 
 
 @dataclass
@@ -516,9 +589,7 @@ class MultiscaleVolume(GridGeometry):
             array = self.root[f"{TABLES_GROUP}/{name}/{level}"]
             if not hasattr(array, "dtype") or np.dtype(array.dtype).kind not in "fiub":
                 raise ReadError(f"{where} does not hold numbers")
-            limits.check_memory(limits.nbytes(array.shape, np.dtype(array.dtype).itemsize),
-                                "the table", where, ReadError)
-            return np.asarray(array[...])
+            return read_array(array, where)
         except KeyError:
             return None
         except ReadError:
@@ -599,6 +670,7 @@ def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
         order=order,
         folder=folder,
         complete=complete,
+        reader=ChunkReader(array, f"{label}/{path}"),
     )
     if min(level.shape) < 1:
         raise ReadError(f"{level.label}: the level is empty (shape {fmt_shape(level.shape)})")
@@ -801,6 +873,7 @@ def _plain_array(path: Path, array: Any, label: str) -> MultiscaleVolume:
                    label, None, False)
     level.folder = path.absolute()
     level.label = label
+    level.chunk_reader().label = label
     return MultiscaleVolume(
         path=path,
         levels=[level],

@@ -23,11 +23,11 @@ naming the chunk, and the brick keeps being drawn from its ancestor. The store i
 nothing is ever written into it.
 
 A frame drawn at once (:meth:`BrickCache.drawing`) starts no read while it is drawn: a read
-decompresses chunks on zarr's threads, and on a machine with few cores those took the trace's
-cores. Measured at 2048^3 on 2 cores, the first DVR image drawn at once from the coarsest level
-took 1.5 s with the loader reading beside it and 0.8-1.2 s without. Frames that wait for their
-load budget let the read-ahead run beside their trace, which makes a cut complete in fewer
-frames.
+decompresses chunks, and on a machine with few cores that took the trace's cores (measured
+when zarr's threads decoded them; the loader thread does now). Measured at 2048^3 on 2 cores,
+the first DVR image drawn at once from the coarsest level took 1.5 s with the loader reading
+beside it and 0.8-1.2 s without. Frames that wait for their load budget let the read-ahead run
+beside their trace, which makes a cut complete in fewer frames.
 """
 
 from __future__ import annotations
@@ -221,7 +221,8 @@ class BrickCache:
         #: :meth:`reserve`).
         self._reserved = 0
         self._inflight: set[Key] = set()
-        self._failed: dict[Key, str] = {}
+        self._failed: dict[Key, str] = {}  # brick -> why it could not be read
+        self._unreadable: list[Key] = []  # of the last resolved cut
         self._warnings: list[str] = []
         self._ranges: list[tuple[Key, float, float]] = []
         self._counts = dict(loaded=0, loaded_frame=0, evicted=0, dropped=0, substituted=0)
@@ -393,10 +394,11 @@ class BrickCache:
                     if self._insert(brick):
                         self._counts["loaded"] += 1
                         self._counts["loaded_frame"] += 1
-                for key, message in failures.items():
-                    self._failed[key] = message
+                for key, reason in failures.items():
+                    self._failed[key] = reason
                     self.version += 1
-                    self._warnings.append(message)
+                    self._warnings.append(f"brick {key} unavailable ({reason}); drawing a "
+                                          "coarser level")
                 for key in batch:
                     self._inflight.discard(key)
                     self._needed.discard(key)
@@ -411,10 +413,9 @@ class BrickCache:
                 try:
                     bricks.extend(self._read([key]))
                 except ReadError as exc:
-                    failures[key] = f"brick {key} unavailable ({exc}); drawing a coarser level"
+                    failures[key] = str(exc)
                 except Exception as exc:  # never let the loader thread die
-                    failures[key] = (f"brick {key} unavailable ({type(exc).__name__}: {exc}); "
-                                     "drawing a coarser level")
+                    failures[key] = f"{type(exc).__name__}: {exc}"
             return bricks, failures
 
     # ------------------------------------------------------------------ the rendering thread
@@ -556,6 +557,7 @@ class BrickCache:
         self._flush_warnings()
         items = []
         substituted = 0
+        unreadable: list[Key] = []
         # Siblings share their ancestors: each parent's finest resident ancestor is looked up
         # once (a first frame substitutes thousands of bricks from a few coarse ones).
         found: dict[Key, Brick] = {}
@@ -565,16 +567,27 @@ class BrickCache:
             if brick is None:
                 brick = self.ancestor(key, found)
                 substituted += 1
+                if key in self._failed:
+                    unreadable.append(key)
             items.append(DrawItem(n, brick, brick.key != key))
         with self._cond:
             self._counts["substituted"] = substituted
+            self._unreadable = unreadable
         return items
 
-    def note_substituted(self, count: int) -> None:
-        """Set the substitution count of this frame (a caller drawing the items of an earlier
-        :meth:`resolve` again, unchanged since)."""
+    def unreadable(self) -> list[tuple[Key, str]]:
+        """The bricks of the last :meth:`resolve`'s cut that could not be read (drawn from an
+        ancestor instead), with what was wrong (naming the chunk)."""
+        with self._cond:
+            return [(key, self._failed[key]) for key in self._unreadable]
+
+    def note_substituted(self, count: int, unreadable: list[Key] | None = None) -> None:
+        """Set the substitution count (and the unreadable bricks) of this frame (a caller
+        drawing the items of an earlier :meth:`resolve` again, unchanged since)."""
         with self._cond:
             self._counts["substituted"] = int(count)
+            if unreadable is not None:
+                self._unreadable = list(unreadable)
 
     def _flush_warnings(self) -> None:
         with self._cond:
@@ -630,8 +643,10 @@ class BrickCache:
 
     def stats(self) -> dict[str, Any]:
         """Counts for ``frame.stats``: resident bricks and bytes, budget, requested (still to
-        read), loaded (this frame / in total), substituted (last :meth:`resolve`), unavailable,
-        evicted, dropped (did not fit), complete (nothing substituted)."""
+        read), loaded (this frame / in total), substituted (last :meth:`resolve`), unreadable
+        (of those substituted, bricks that could not be read: see :meth:`unreadable`),
+        unavailable (bricks that could not be read, of any cut), evicted, dropped (did not
+        fit), complete (nothing substituted)."""
         with self._cond:
             return {
                 "resident": len(self._bricks),
@@ -644,6 +659,7 @@ class BrickCache:
                 "loaded": self._counts["loaded"],
                 "substituted": self._counts["substituted"],
                 "complete": self._counts["substituted"] == 0,
+                "unreadable": len(self._unreadable),
                 "unavailable": len(self._failed),
                 "evicted": self._counts["evicted"],
                 "dropped": self._counts["dropped"],

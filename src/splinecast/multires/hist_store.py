@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ParameterError, ReadError
-from ..io.omezarr import ATTRIBUTE, TABLES_GROUP
+from ..io.omezarr import ATTRIBUTE, TABLES_GROUP, read_array
 from .cut_histograms import BrickHistograms, Quantizer, box_histograms
 
 __all__ = ["HIST2D", "FORMAT_VERSION", "level_footprints", "stream_level_histograms",
@@ -285,9 +285,10 @@ def read_histograms(volume: Any, brick: int, levels: Sequence[int],
         nbricks = int(np.prod(counts))
         try:
             group = volume.root[f"{TABLES_GROUP}/{HIST2D}/{level}"]
-            offsets = np.asarray(group["offsets"][...])
-            keys = np.asarray(group["keys"][...])
-            cnt = np.asarray(group["counts"][...])
+            offsets, keys, cnt = (read_array(group[name], f"{where}/{level}/{name}")
+                                  for name in ("offsets", "keys", "counts"))
+        except ReadError:
+            raise
         except Exception as exc:  # noqa: BLE001 - any zarr/codec failure is damage
             raise ReadError(f"{where}/{level}: cannot read ({type(exc).__name__}: "
                             f"{str(exc).splitlines()[0] if str(exc) else 'damaged'})") from None

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from ..camera import Camera
-from ..errors import ParameterError
+from ..errors import ParameterError, ReadError
 from ..io.omezarr import MultiscaleVolume
 from ..models import MODELS
 from ..render.defaults import auto_iso
@@ -337,6 +337,7 @@ class MultiscaleScene:
         wait: bool = True,
         timeout: float | None = None,
         complete: bool = False,
+        missing: str = "substitute",
     ) -> Frame:
         """Render one image of the current cut (see :meth:`splinecast.Scene.render` for the
         mode options).
@@ -358,13 +359,28 @@ class MultiscaleScene:
         complete : bool
             Wait until every brick of the cut is resident or known to be unreadable (a still
             image: the command line); default: draw after ``load_budget`` bricks.
+        missing : {"substitute", "error"}
+            A brick of the cut whose chunks cannot be read (missing in a store whose chunks
+            were all written, or damaged): drawn from its finest readable ancestor (default:
+            the frame says so in ``stats["unreadable"]`` and ``stats["unreadable_reason"]``),
+            or a :class:`~splinecast.ReadError` naming the chunk (``"error"``: a still image
+            that must show the data, the command line without ``--allow-missing``).
 
         Returns
         -------
         Frame
             ``stats["complete"]`` is ``False`` while bricks of the cut are drawn from coarser
-            ancestors; render the same view again to refine.
+            ancestors (``stats["unreadable"]`` of them because they cannot be read); render
+            the same view again to refine.
+
+        Raises
+        ------
+        ReadError
+            With ``missing="error"``, the first unreadable brick's reason (naming the chunk and
+            its file).
         """
+        if missing not in ("substitute", "error"):
+            raise ParameterError(f"missing must be 'substitute' or 'error', got {missing!r}")
         request = prepare_render(
             self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
@@ -387,6 +403,12 @@ class MultiscaleScene:
                     bricks.stats["requested"] or not bricks.stats.get("cut_final", True)):
                 bricks = self._frame(camera, value_filter, lod, True, timeout, selector)
                 rounds += 1
+            unreadable = self.stream.cache.unreadable()
+            if unreadable and missing == "error":
+                _key, reason = unreadable[0]
+                more = f" ({len(unreadable)} bricks of the view cannot be read)" \
+                    if len(unreadable) > 1 else ""
+                raise ReadError(f"{reason}{more}")
             # The same draw items (a steady view): the same pieces, so that the renderer keeps
             # its seam plan and launch arrays.
             last = self._last_pieces
@@ -416,6 +438,7 @@ class MultiscaleScene:
         stats.update(self.renderer.stats)
         stats["seam_copy_bytes"] = seam_bytes
         stats.update(bricks.stats)
+        stats["unreadable_reason"] = unreadable[0][1] if unreadable else ""
         stats["lod"] = self.lod if lod is None else lod
         return finish_frame(request, out, counters, camera, start)
 

@@ -61,6 +61,7 @@ class _LastFrame:
     cut: Cut
     items: list[DrawItem]
     substituted: int
+    unreadable: list[Key]
 
 
 class BrickStream:
@@ -147,7 +148,7 @@ class BrickStream:
         version = self.cache.version
         if reuse and last is not None and last.resolved == version:
             items = last.items
-            self.cache.note_substituted(last.substituted)
+            self.cache.note_substituted(last.substituted, last.unreadable)
         else:
             items = self.cache.resolve(cut)
         stats = self.cache.stats()
@@ -159,7 +160,8 @@ class BrickStream:
         # between would be drawn from an ancestor under the newer version). The cut is reused
         # only while nothing changed since it was chosen: its requests and kept set depend on
         # what was resident then.
-        self._last = (_LastFrame(view, selected, version, cut, items, stats["substituted"])
+        self._last = (_LastFrame(view, selected, version, cut, items, stats["substituted"],
+                                 [key for key, _ in self.cache.unreadable()])
                       if view is not None and self.cache.version == version else None)
         return FrameBricks(cut, items, stats)
 

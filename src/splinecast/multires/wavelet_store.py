@@ -417,7 +417,7 @@ def _layout(attributes: dict[str, Any], path: Path) -> tuple[WaveletLayout, np.d
 def _hull(root: Any, path: Path, layout: WaveletLayout, level: int) -> np.ndarray:
     """The stored ``[min, max]`` table of ``level``: float64 of shape ``chunks + (2,)``, every
     chunk file present, finite with ``min <= max``."""
-    from ..io.omezarr import _refused
+    from ..io.omezarr import _refused, read_array
 
     zarr = require("zarr", path, action="reading")
     key = f"{GROUP}/hull/{level}"
@@ -440,7 +440,7 @@ def _hull(root: Any, path: Path, layout: WaveletLayout, level: int) -> np.ndarra
             file = path / key / array.metadata.encode_chunk_key(unit)
             if not file.is_file():
                 raise ReadError(f"{where}: chunk file {file} is missing")
-        table = np.asarray(array[...], dtype=np.float64)
+        table = np.asarray(read_array(array, where), dtype=np.float64)
     except KeyError:
         raise ReadError(f"{path}: array {key} is missing") from None
     except ReadError:

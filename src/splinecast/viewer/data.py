@@ -133,7 +133,9 @@ def bricks_header(stats: dict[str, Any]) -> dict[str, Any] | None:
     ``cut`` bricks make this view; ``cut_resident`` of them are drawn from their own data (the
     others from a coarser ancestor); ``loading`` are still to be read; ``resident`` bricks (of
     any view, ancestors included) hold ``resident_bytes`` of ``budget``; ``progress`` is
-    ``cut_resident / cut``; ``complete`` says nothing more will arrive for this view.
+    ``cut_resident / cut``; ``complete`` says nothing more will arrive for this view;
+    ``unreadable`` bricks of the view are drawn from a coarser level because their chunks
+    cannot be read (the status line says so).
     """
     if "cut_bricks" not in stats or "substituted" not in stats:
         return None
@@ -149,6 +151,7 @@ def bricks_header(stats: dict[str, Any]) -> dict[str, Any] | None:
         "resident_bytes": int(stats.get("resident_bytes", 0)),
         "budget": int(stats.get("budget", 0)),
         "unavailable": int(stats.get("unavailable", 0)),
+        "unreadable": int(stats.get("unreadable", 0)),
         "loaded": int(stats.get("loaded", 0)),
         "progress": resident_in_cut / cut if cut else 1.0,
         "complete": complete,

@@ -189,9 +189,12 @@
     if (b) {
       let text = `bricks ${b.cut_resident}/${b.cut} resident`;
       if (b.loading > 0) text += `, loading ${b.loading}`;
-      if (b.unavailable > 0) text += `, ${b.unavailable} unreadable`;
+      // Bricks whose chunks cannot be read stay drawn from a coarser level: say so.
+      if (b.unreadable > 0) text += `, ${b.unreadable} unreadable (drawn from a coarser level)`;
+      else if (b.unavailable > 0) text += `, ${b.unavailable} unreadable`;
       parts.push(text);
-      parts.push(b.complete ? "complete" : `${Math.round(b.progress * 100)}%`);
+      const stuck = b.unreadable > 0 && b.loading === 0;
+      parts.push(b.complete ? "complete" : stuck ? "incomplete" : `${Math.round(b.progress * 100)}%`);
     } else if (h.stats.chunks !== undefined) {
       parts.push(`chunks ${h.stats.chunks}`);  // a wavelet store's reconstructed chunks
     }
