@@ -30,7 +30,7 @@ from .render.mip import Mip
 from .render.multi_iso import MultiIso
 from .render.outputs import OUTPUTS, check_outputs
 from .render.segment import make_grid, render_grid
-from .render.shading import Shading
+from .render.shading import Shading, normals_code
 from .transfer import TransferFunction
 from .volume import Volume
 
@@ -244,6 +244,7 @@ class Scene:
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
         outputs: Any = None,
+        normals: str = "smooth",
     ) -> Frame:
         """Render one image.
 
@@ -308,6 +309,13 @@ class Scene:
             compositing with other geometry needs. Summary numbers (``Frame.stats``) that
             need a buffer that was not requested (``hits``: depth; ``mean_cells_visited``:
             stats) are left out.
+        normals : str
+            Isosurfaces: ``"smooth"`` (default) shades every hit with the gradient of a smooth
+            field at the exact hit: the models that are only continuous (``trilinear``,
+            ``bspline1``), whose gradient jumps from cell to cell, with the cubic B-spline of
+            the voxels, the others with their own gradient. ``"exact"`` shades with the
+            model's own gradient (and ``Frame.normal`` holds it). Hits are the model's either
+            way (:mod:`splinecast.render.shading`).
 
         Returns
         -------
@@ -327,7 +335,7 @@ class Scene:
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
             check_iso=self._check_iso, model=self.model.name, outputs=outputs,
-            tolerance=tolerance)
+            tolerance=tolerance, normals=normals)
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:
             classify_ms = 0.0
@@ -383,6 +391,7 @@ def prepare_render(
     opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
     tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
     check_iso: Any, model: str, outputs: Any = None, tolerance: float = 0.0,
+    normals: str = "smooth",
 ) -> RenderRequest:
     """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
     type: in memory, multiresolution).
@@ -390,7 +399,8 @@ def prepare_render(
     ``volume`` supplies the automatic choices (:mod:`splinecast.render.defaults`), the metadata
     and the value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
     ``outputs`` names the Frame's buffers (``None``: all); ``tolerance`` is MIP's
-    (:class:`~splinecast.render.mip.Mip`).
+    (:class:`~splinecast.render.mip.Mip`); ``normals`` the isosurfaces'
+    (:mod:`splinecast.render.shading`).
     """
     if not isinstance(camera, Camera):
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
@@ -404,6 +414,7 @@ def prepare_render(
     limits.check_render(volume, camera, mode=mode, method=method, step=step, dvr=dvr)
     if mode not in ("mip", "minip") and tolerance != 0.0:
         raise ParameterError(f"tolerance is for mode='mip' and 'minip', not {mode!r}")
+    normals_code(normals)  # checked for every mode: a typo is refused, not ignored
     inside = inside or volume.metadata.get("inside", "high")
     if inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
@@ -429,11 +440,11 @@ def prepare_render(
         if len(iso) == 0:
             raise ParameterError("iso must hold at least one isovalue")
         setup = MultiIso([check_iso(v) for v in iso], colors, opacity, inside, shading, effects,
-                         outputs=filled)
+                         outputs=filled, normals=normals)
         stats["method"] = "exact"
     else:
         value = check_iso(iso)
-        setup = Iso(value, method, step, inside, shading, outputs=filled)
+        setup = Iso(value, method, step, inside, shading, outputs=filled, normals=normals)
         if len(planes):
             stats["planes"] = len(planes)
         stats.update(method=method, iso=value)

@@ -26,6 +26,7 @@ import numpy as np
 from ..accel.active_cells import CubeBoundHierarchy, block_ranges
 from ..accel.minmax import BLOCK_SHIFTS, PAIR_SHIFT, MinMaxHierarchy
 from ..errors import ParameterError
+from ..models.shading_field import halo_box
 from .clipping import NO_PLANES
 from .driver import GEOM_SIZE, band_order, finalize, reset_state, trace
 from .footprint import (
@@ -112,7 +113,7 @@ def _hierarchy(model: Any, array: np.ndarray, n_cells: tuple[int, int, int]) -> 
 
 def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 0),
               level_origin: Any = None, level_spacing: Any = None, domain: Any = None,
-              level_cells: Any = None) -> Grid:
+              level_cells: Any = None, halo: tuple[np.ndarray, np.ndarray] | None = None) -> Grid:
     """A :class:`Grid` of ``model`` over ``array`` (default: its whole prepared array).
 
     Parameters
@@ -131,6 +132,10 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
         ``domain()``); the same for every brick of a level.
     level_cells : 3 ints, optional
         The level's cells per axis (default: this grid's plus its offset).
+    halo : (ndarray, ndarray), optional
+        For a model with a shading field that reads beyond the cells' support
+        (``model.shading_halo``, :mod:`splinecast.models.shading_field`): the halo array and
+        its box. Default: ``array`` itself, real where it lies inside the level.
     """
     whole = array is None
     arr = model.prepared if whole else np.asarray(array)
@@ -147,20 +152,43 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
     geom[10:13] = lo
     geom[13:16] = hi
     geom[16:19] = (np.asarray(offset) + n_cells) if level_cells is None else level_cells
-    kernel = model.kernel_grid() if whole else model.kernel_grid(arr)
+    if whole:
+        kernel = model.kernel_grid()
+    elif getattr(model, "shading_halo", 0):
+        if halo is None:
+            # The array's elements are the level's prepared values from ``offset`` on; those
+            # of the level itself are real (a pyramid brick's ghosts beyond its ends are not).
+            last_cell = np.asarray(geom[16:19], np.int64) + int(model.support) - 1
+            first = np.asarray(offset, np.int64)
+            real_lo = np.clip(-first, 0, np.asarray(arr.shape) - 1)
+            real_hi = np.clip(last_cell - first, 0, np.asarray(arr.shape) - 1)
+            halo = (arr, halo_box((0, 0, 0), real_lo, real_hi))
+        kernel = model.kernel_grid(arr, halo=halo)
+    else:
+        kernel = model.kernel_grid(arr)
     return Grid(kernel, _hierarchy(model, arr, n_cells), geom, n_cells,
                 getattr(model, "band_rows", 1), getattr(model, "tile", 0))
 
 
 def brick_grid(model: Any, lo: Any, hi: Any) -> Grid:
     """The grid of the brick owning cells ``[lo, hi)`` (per axis) of ``model``'s whole grid,
-    cut from ``model.prepared`` with its ghost layers."""
+    cut from ``model.prepared`` with its ghost layers (and, for a model whose shading field
+    reads further, ``model.shading_halo``, the halo of that field around them)."""
     lo = [int(v) for v in lo]
     hi = [int(v) for v in hi]
     s = int(model.support)
-    block = model.prepared[lo[0]:hi[0] + s, lo[1]:hi[1] + s, lo[2]:hi[2] + s]
-    whole = tuple(int(n) - s for n in model.prepared.shape)
-    return make_grid(model, block, offset=lo, level_cells=whole)
+    prepared = model.prepared
+    block = prepared[lo[0]:hi[0] + s, lo[1]:hi[1] + s, lo[2]:hi[2] + s]
+    whole = tuple(int(n) - s for n in prepared.shape)
+    halo = None
+    h = int(getattr(model, "shading_halo", 0))
+    if h:
+        a = [max(0, v - h) for v in lo]
+        b = [min(n, v + s + h) for v, n in zip(hi, prepared.shape, strict=True)]
+        first = np.asarray(lo) - np.asarray(a)
+        halo = (np.ascontiguousarray(prepared[a[0]:b[0], a[1]:b[1], a[2]:b[2]]),
+                halo_box(first, (0, 0, 0), np.asarray(b) - np.asarray(a) - 1))
+    return make_grid(model, block, offset=lo, level_cells=whole, halo=halo)
 
 
 def counters(height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
