@@ -7,6 +7,7 @@ pixel in compiled, multi-threaded code.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable
@@ -20,6 +21,7 @@ from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
 from .errors import ParameterError, limits
 from .models import MODELS
+from .render.antialias import antialias, resolve_samples
 from .render.clipping import make_planes
 from .render.defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .render.dvr import Dvr, DVRSettings
@@ -29,7 +31,7 @@ from .render.iso import METHODS, Iso
 from .render.mip import Mip
 from .render.multi_iso import MultiIso
 from .render.outputs import OUTPUTS, check_outputs
-from .render.segment import make_grid, render_grid
+from .render.segment import make_grid, render_grid, trace_pixels
 from .render.shading import Shading, normals_code
 from .transfer import TransferFunction
 from .volume import Volume
@@ -245,6 +247,7 @@ class Scene:
         dvr: DVRSettings | None = None,
         outputs: Any = None,
         normals: str = "smooth",
+        samples: int | None = None,
     ) -> Frame:
         """Render one image.
 
@@ -316,6 +319,14 @@ class Scene:
             the voxels, the others with their own gradient. ``"exact"`` shades with the
             model's own gradient (and ``Frame.normal`` holds it). Hits are the model's either
             way (:mod:`splinecast.render.shading`).
+        samples : int, optional
+            Antialiasing: rays per pixel on the edges of the image (silhouettes, creases,
+            where front and back faces meet), the centre one included; the other pixels keep
+            their one ray (:mod:`splinecast.render.antialias`). ``1`` turns it off. Default:
+            :data:`~splinecast.render.antialias.DEFAULT_SAMPLES` for isosurfaces, 1 for MIP,
+            minIP and DVR. Only the colours are averaged: depth, position, normal and face
+            are the centre ray's. ``Frame.stats["antialiased"]`` counts the pixels traced
+            again.
 
         Returns
         -------
@@ -335,7 +346,7 @@ class Scene:
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
             check_iso=self._check_iso, model=self.model.name, outputs=outputs,
-            tolerance=tolerance, normals=normals)
+            tolerance=tolerance, normals=normals, samples=samples)
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:
             classify_ms = 0.0
@@ -352,7 +363,11 @@ class Scene:
         start = time.perf_counter()
         out, counters = render_grid(grid, request.setup, camera, planes, flags,
                                     count="stats" in request.outputs)
-        return finish_frame(request, out, counters, camera, start)
+
+        def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
+            return trace_pixels(grid, mode, cam, mask, planes, flags)
+
+        return finish_frame(request, out, counters, camera, start, trace)
 
 
 @dataclass
@@ -373,7 +388,9 @@ class RenderRequest:
     effects : SurfaceEffects or None
     outputs : frozenset of str
         The buffers the Frame keeps (:mod:`splinecast.render.outputs`); the mode may fill more
-        (surface effects need position, normal and face).
+        (surface effects need position, normal and face, antialiasing depth).
+    samples : int
+        Rays per edge pixel (:mod:`splinecast.render.antialias`; 1: none).
     """
 
     setup: Any
@@ -383,6 +400,7 @@ class RenderRequest:
     shading: Shading
     effects: SurfaceEffects | None
     outputs: frozenset[str] = frozenset(OUTPUTS)
+    samples: int = 1
 
 
 def prepare_render(
@@ -391,7 +409,7 @@ def prepare_render(
     opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
     tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
     check_iso: Any, model: str, outputs: Any = None, tolerance: float = 0.0,
-    normals: str = "smooth",
+    normals: str = "smooth", samples: Any = None,
 ) -> RenderRequest:
     """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
     type: in memory, multiresolution).
@@ -400,7 +418,8 @@ def prepare_render(
     and the value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
     ``outputs`` names the Frame's buffers (``None``: all); ``tolerance`` is MIP's
     (:class:`~splinecast.render.mip.Mip`); ``normals`` the isosurfaces'
-    (:mod:`splinecast.render.shading`).
+    (:mod:`splinecast.render.shading`); ``samples`` the antialiasing's (``None``: the mode's
+    default, :func:`splinecast.render.antialias.resolve_samples`).
     """
     if not isinstance(camera, Camera):
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
@@ -415,6 +434,7 @@ def prepare_render(
     if mode not in ("mip", "minip") and tolerance != 0.0:
         raise ParameterError(f"tolerance is for mode='mip' and 'minip', not {mode!r}")
     normals_code(normals)  # checked for every mode: a typo is refused, not ignored
+    samples = resolve_samples(samples, mode)
     inside = inside or volume.metadata.get("inside", "high")
     if inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
@@ -426,6 +446,10 @@ def prepare_render(
     # Surface effects are applied on the host from the hit's position, normal and face.
     filled = wanted | {"position", "normal", "face"} if (
         effects is not None and effects.active) else wanted
+    if "rgba" not in wanted:
+        samples = 1  # nothing to antialias
+    elif samples > 1 and mode == "iso":
+        filled = filled | {"depth"}  # the edges between hits and misses
     stats: dict[str, Any] = {"mode": mode, "model": model}
     value = None
     if mode in ("mip", "minip"):
@@ -450,18 +474,30 @@ def prepare_render(
         stats.update(method=method, iso=value)
         if method == "sampled":
             stats["step"] = float(step)
-    return RenderRequest(setup, planes, stats, value, shading, effects, wanted)
+    return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples)
 
 
 def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Camera,
-                 start: float) -> Frame:
-    """The :class:`Frame` of a traced image: surface effects applied, per-ray counts and the
-    time since ``start`` (``time.perf_counter()``) in ``stats``."""
+                 start: float, trace: Callable[..., tuple] | None = None) -> Frame:
+    """The :class:`Frame` of a traced image: surface effects applied, antialiased (with
+    ``trace``), per-ray counts and the time since ``start`` (``time.perf_counter()``) in
+    ``stats``.
+
+    ``trace(camera, mask, mode)`` traces the pixels of ``camera``'s image where ``mask`` is
+    true with ``mode`` (a copy of the request's with fewer outputs) and returns its outputs
+    (:func:`splinecast.render.segment.trace_pixels`); without it the frame is not antialiased.
+    """
     setup, stats, effects = request.setup, request.stats, request.effects
     frame = setup.frame(out, counters, stats)
-    if isinstance(setup, Iso) and effects is not None and effects.active:
+    shaded = isinstance(setup, Iso) and effects is not None and effects.active
+    if shaded:
         apply_effects(camera.pixel_basis(), request.shading.as_array(), effects.as_array(),
                       frame.position, frame.normal, frame.face, frame.rgba)
+    if trace is not None and request.samples > 1 and frame.rgba is not None:
+        stats["samples"] = request.samples
+        stats["antialiased"] = antialias(frame.rgba, frame.depth if request.setup.name == "iso"
+                                         else None, camera, request.samples,
+                                         _sample_tracer(request, trace, shaded))
     trace_ms = (time.perf_counter() - start) * 1e3
     stats.update({
         "width": camera.width,
@@ -481,8 +517,29 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
         })
     else:
         frame.cells_visited = frame.cells_tested = frame.blocks_skipped = None
-    # Buffers filled for the mode's own use (surface effects) but not requested.
+    # Buffers filled for the mode's own use (surface effects, antialiasing) but not requested.
     for name in ("depth", "position", "normal", "face"):
         if name not in wanted:
             setattr(frame, name, None)
     return frame
+
+
+def _sample_tracer(request: RenderRequest, trace: Callable[..., tuple],
+                   shaded: bool) -> Callable[[Camera, np.ndarray], tuple]:
+    """``trace`` as :func:`splinecast.render.antialias.antialias` calls it: the colours (surface
+    effects applied) and depths of the traced pixels, from a copy of the request's mode that
+    fills only what they need."""
+    sub = copy.copy(request.setup)
+    need = {"rgba", "depth"} | ({"position", "normal", "face"} if shaded else set())
+    sub.outputs = frozenset(need) & frozenset(OUTPUTS)
+    effects = request.effects
+
+    def samples(cam: Camera, mask: np.ndarray) -> tuple:
+        unused = np.empty(mask.shape, np.int32)  # per-ray counters: not gathered
+        frame = sub.frame(trace(cam, mask, sub), (unused, unused, unused), {})
+        if shaded:
+            apply_effects(cam.pixel_basis(), request.shading.as_array(), effects.as_array(),
+                          frame.position, frame.normal, frame.face, frame.rgba)
+        return frame.rgba, frame.depth
+
+    return samples

@@ -39,7 +39,7 @@ from .footprint import (
 )
 
 __all__ = ["Grid", "make_grid", "brick_grid", "render_grid", "new_state", "trace_segment",
-           "finish_state", "combine_states", "counters", "screen_footprint"]
+           "finish_state", "combine_states", "counters", "screen_footprint", "trace_pixels"]
 
 _NO_RANGE = np.zeros((0, 0, 2))
 
@@ -266,6 +266,28 @@ def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLAN
     _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, _NO_RANGE, False, False, True,
          stats, count, tiles)
     return out, stats
+
+
+def trace_pixels(grid: Grid, mode: Any, camera: Any, mask: np.ndarray,
+                 planes: np.ndarray = NO_PLANES, flags: tuple | None = None) -> tuple:
+    """Trace only the pixels of ``camera``'s image where ``mask`` is true (a whole-image render
+    otherwise, as :func:`render_grid`); returns ``mode``'s outputs, whose other pixels are left
+    as allocated (undefined).
+
+    The pixels' rays are the driver's own, without the screen footprint (a shifted camera's
+    rays, :meth:`~splinecast.Camera.shifted`, need none); the rest of the image costs a test
+    per pixel. This is how antialiasing traces its extra rays (:mod:`.antialias`).
+    """
+    h, w = camera.height, camera.width
+    out = mode.output(h, w)
+    t_range = np.empty((h, w, 2))
+    t_range[..., 0] = np.where(mask, -np.inf, np.inf)
+    t_range[..., 1] = -t_range[..., 0]
+    unused = np.empty((h, w), np.int32)
+    blocks = mode.blocks(grid.hierarchy, flags)
+    _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, t_range, False, False, True,
+         (unused, unused, unused), False)
+    return out
 
 
 def new_state(mode: Any, camera: Any) -> tuple:
