@@ -26,12 +26,19 @@ from .render.clipping import make_planes
 from .render.defaults import auto_iso, auto_transfer_function, auto_window, content_box
 from .render.dvr import Dvr, DVRSettings
 from .render.effects import SurfaceEffects, apply_effects
+from .render.footprint import NO_FOOTPRINT
 from .render.frame import Frame
 from .render.iso import METHODS, Iso
 from .render.mip import Mip
 from .render.multi_iso import MultiIso
 from .render.outputs import OUTPUTS, check_outputs
-from .render.segment import make_grid, render_grid, trace_pixels
+from .render.segment import (
+    make_grid,
+    pixel_ranges,
+    render_grid,
+    screen_footprint,
+    trace_pixels,
+)
 from .render.shading import Shading, normals_code
 from .transfer import TransferFunction
 from .volume import Volume
@@ -361,13 +368,12 @@ class Scene:
             stats["classify_ms"] = classify_ms
             stats.update(self.iso_stats)
         start = time.perf_counter()
-        out, counters = render_grid(grid, request.setup, camera, planes, flags,
-                                    count="stats" in request.outputs)
-
-        def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
-            return trace_pixels(grid, mode, cam, mask, planes, flags)
-
-        return finish_frame(request, out, counters, camera, start, trace)
+        setup = request.setup
+        tiles = screen_footprint(grid, setup, camera, setup.blocks(grid.hierarchy, flags))
+        out, counters = render_grid(grid, setup, camera, planes, flags,
+                                    count="stats" in request.outputs, footprint=tiles)
+        return finish_frame(request, out, counters, camera, start,
+                            _pixel_tracer(grid, camera, planes, flags, tiles))
 
 
 @dataclass
@@ -449,7 +455,7 @@ def prepare_render(
     if "rgba" not in wanted:
         samples = 1  # nothing to antialias
     elif samples > 1 and mode == "iso":
-        filled = filled | {"depth"}  # the edges between hits and misses
+        filled = filled | {"depth", "normal", "face"}  # the edges of the geometry
     stats: dict[str, Any] = {"mode": mode, "model": model}
     value = None
     if mode in ("mip", "minip"):
@@ -495,9 +501,9 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
                       frame.position, frame.normal, frame.face, frame.rgba)
     if trace is not None and request.samples > 1 and frame.rgba is not None:
         stats["samples"] = request.samples
-        stats["antialiased"] = antialias(frame.rgba, frame.depth if request.setup.name == "iso"
-                                         else None, camera, request.samples,
-                                         _sample_tracer(request, trace, shaded))
+        stats["antialiased"] = antialias(frame, camera, request.samples,
+                                         _sample_tracer(request, trace, shaded),
+                                         geometry=setup.name == "iso")
     trace_ms = (time.perf_counter() - start) * 1e3
     stats.update({
         "width": camera.width,
@@ -525,21 +531,38 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
 
 
 def _sample_tracer(request: RenderRequest, trace: Callable[..., tuple],
-                   shaded: bool) -> Callable[[Camera, np.ndarray], tuple]:
-    """``trace`` as :func:`splinecast.render.antialias.antialias` calls it: the colours (surface
-    effects applied) and depths of the traced pixels, from a copy of the request's mode that
-    fills only what they need."""
+                   shaded: bool) -> Callable[[Camera, np.ndarray], Frame]:
+    """``trace`` as :func:`splinecast.render.antialias.antialias` calls it: a Frame of the
+    traced pixels (surface effects applied), from a copy of the request's mode that fills only
+    what antialiasing reads."""
     sub = copy.copy(request.setup)
-    need = {"rgba", "depth"} | ({"position", "normal", "face"} if shaded else set())
-    sub.outputs = frozenset(need) & frozenset(OUTPUTS)
+    need = {"rgba", "depth", "normal", "face"} | ({"position"} if shaded else set())
+    sub.outputs = frozenset(need)
     effects = request.effects
 
-    def samples(cam: Camera, mask: np.ndarray) -> tuple:
+    def samples(cam: Camera, mask: np.ndarray) -> Frame:
         unused = np.empty(mask.shape, np.int32)  # per-ray counters: not gathered
         frame = sub.frame(trace(cam, mask, sub), (unused, unused, unused), {})
         if shaded:
             apply_effects(cam.pixel_basis(), request.shading.as_array(), effects.as_array(),
                           frame.position, frame.normal, frame.face, frame.rgba)
-        return frame.rgba, frame.depth
+        return frame
 
     return samples
+
+
+def _pixel_tracer(grid: Any, camera: Camera, planes: np.ndarray, flags: Any,
+                  tiles: np.ndarray) -> Callable[..., tuple]:
+    """:func:`finish_frame`'s ``trace`` for a frame of one grid: the pixels of a mask traced
+    with :func:`~splinecast.render.segment.trace_pixels`, with the frame's screen footprint
+    ``tiles`` for cameras of the frame's window (shifted inside the pixels or not)."""
+    last: list[Any] = [None, None]  # the mask and its ranges: the same for every pass
+
+    def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
+        if last[0] is not mask:
+            last[0], last[1] = mask, pixel_ranges(mask)
+        same = cam.region == camera.region and cam.size == camera.size
+        return trace_pixels(grid, mode, cam, last[1], planes, flags,
+                            tiles if same else NO_FOOTPRINT)
+
+    return trace

@@ -249,7 +249,8 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
     # A whole image's fresh pixels where nothing projects get the outputs of one of them: the
     # mode finishes a fresh state there without a ray, and the pixel is copied over the run
     # of such tiles (a fresh state's outputs do not depend on the pixel; .outputs.copy_pixel).
-    fresh = footed and final and not load and not store
+    # Not when some pixels are to be left alone (``t_range``).
+    fresh = footed and final and not load and not store and not ranged
     tc0 = c0
     while tc0 < c1:
         tc1 = min(c1, tc0 + tile)

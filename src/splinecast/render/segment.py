@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from .._jit import jit
 from ..accel.active_cells import CubeBoundHierarchy, block_ranges
 from ..accel.minmax import BLOCK_SHIFTS, PAIR_SHIFT, MinMaxHierarchy
 from ..errors import ParameterError
@@ -39,7 +40,8 @@ from .footprint import (
 )
 
 __all__ = ["Grid", "make_grid", "brick_grid", "render_grid", "new_state", "trace_segment",
-           "finish_state", "combine_states", "counters", "screen_footprint", "trace_pixels"]
+           "finish_state", "combine_states", "counters", "screen_footprint", "trace_pixels",
+           "pixel_ranges"]
 
 _NO_RANGE = np.zeros((0, 0, 2))
 
@@ -245,14 +247,15 @@ def screen_footprint(grid: Grid, mode: Any, camera: Any, blocks: tuple) -> np.nd
 
 def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLANES,
                 flags: tuple | None = None, count: bool = True,
-                footprint: bool = True) -> tuple[tuple, tuple]:
+                footprint: Any = True) -> tuple[tuple, tuple]:
     """Trace a whole image through one grid; returns ``(outputs, counters)``.
 
     ``flags`` replaces the hierarchy's own classification for the iso mode. Without ``count``
     the per-ray statistics are not gathered: the counters returned are one uninitialised array
     (never written, so never paged in) standing for all three. With ``footprint``, rays are
     traced only where and as deep as the blocks the mode can see project
-    (:func:`screen_footprint`; the image is the same, the frame faster).
+    (:func:`screen_footprint`; the image is the same, the frame faster); ``footprint`` may
+    also be that footprint, computed before.
     """
     h, w = camera.height, camera.width
     out = mode.output(h, w)
@@ -262,31 +265,55 @@ def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLAN
         unused = np.empty((h, w), np.int32)
         stats = (unused, unused, unused)
     blocks = mode.blocks(grid.hierarchy, flags)
-    tiles = screen_footprint(grid, mode, camera, blocks) if footprint else NO_FOOTPRINT
+    if isinstance(footprint, np.ndarray):
+        tiles = footprint
+    else:
+        tiles = screen_footprint(grid, mode, camera, blocks) if footprint else NO_FOOTPRINT
     _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, _NO_RANGE, False, False, True,
          stats, count, tiles)
     return out, stats
 
 
-def trace_pixels(grid: Grid, mode: Any, camera: Any, mask: np.ndarray,
-                 planes: np.ndarray = NO_PLANES, flags: tuple | None = None) -> tuple:
-    """Trace only the pixels of ``camera``'s image where ``mask`` is true (a whole-image render
-    otherwise, as :func:`render_grid`); returns ``mode``'s outputs, whose other pixels are left
-    as allocated (undefined).
+def pixel_ranges(mask: np.ndarray) -> np.ndarray:
+    """The ``t_range`` (:mod:`.driver`) that traces the pixels where ``mask`` is true and leaves
+    the others alone, for :func:`trace_pixels` (one for every pass over the same pixels)."""
+    out = np.empty((*mask.shape, 2))
+    _fill_ranges(np.ascontiguousarray(mask, np.bool_), out)
+    return out
 
-    The pixels' rays are the driver's own, without the screen footprint (a shifted camera's
-    rays, :meth:`~splinecast.Camera.shifted`, need none); the rest of the image costs a test
-    per pixel. This is how antialiasing traces its extra rays (:mod:`.antialias`).
+
+@jit()
+def _fill_ranges(mask, out):
+    # Serial: a light pass (parallel ones wait for their slowest thread on a loaded machine).
+    for row in range(mask.shape[0]):
+        for col in range(mask.shape[1]):
+            if mask[row, col]:
+                out[row, col, 0] = -np.inf
+                out[row, col, 1] = np.inf
+            else:
+                out[row, col, 0] = np.inf
+                out[row, col, 1] = -np.inf
+
+
+def trace_pixels(grid: Grid, mode: Any, camera: Any, ranges: np.ndarray,
+                 planes: np.ndarray = NO_PLANES, flags: tuple | None = None,
+                 footprint: np.ndarray = NO_FOOTPRINT) -> tuple:
+    """Trace only the pixels of ``camera``'s image that ``ranges`` (:func:`pixel_ranges`)
+    names, as :func:`render_grid` traces them; returns ``mode``'s outputs, whose other pixels
+    are left as allocated (undefined).
+
+    ``footprint`` is the screen footprint of the grid's blocks for ``camera``'s window
+    (:func:`screen_footprint`, as :func:`render_grid` computed it for the frame), or none. A
+    camera shifted inside its pixels (:meth:`~splinecast.Camera.shifted`) may use its
+    unshifted camera's: a footprint is widened by a pixel. This is how antialiasing traces its
+    extra rays (:mod:`.antialias`).
     """
     h, w = camera.height, camera.width
     out = mode.output(h, w)
-    t_range = np.empty((h, w, 2))
-    t_range[..., 0] = np.where(mask, -np.inf, np.inf)
-    t_range[..., 1] = -t_range[..., 0]
     unused = np.empty((h, w), np.int32)
     blocks = mode.blocks(grid.hierarchy, flags)
-    _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, t_range, False, False, True,
-         (unused, unused, unused), False)
+    _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, ranges, False, False, True,
+         (unused, unused, unused), False, footprint)
     return out
 
 
