@@ -44,7 +44,7 @@ from .transfer import TransferFunction
 from .volume import Volume
 
 __all__ = ["Scene", "MODES", "check_iso", "RenderRequest", "prepare_render", "finish_frame",
-           "register_scene_type"]
+           "register_scene_type", "whole_frame_tracer"]
 
 #: Render modes accepted by :meth:`Scene.render`.
 MODES = ("iso", "mip", "minip", "dvr")
@@ -564,5 +564,16 @@ def _pixel_tracer(grid: Any, camera: Camera, planes: np.ndarray, flags: Any,
         same = cam.region == camera.region and cam.size == camera.size
         return trace_pixels(grid, mode, cam, last[1], planes, flags,
                             tiles if same else NO_FOOTPRINT)
+
+    return trace
+
+
+def whole_frame_tracer(renderer: Any, pieces: Any, planes: np.ndarray) -> Callable[..., tuple]:
+    """:func:`finish_frame`'s ``trace`` for a scene drawn by a cut renderer
+    (:class:`splinecast.multires.draw.CutRenderer`) from ``pieces``: every pixel of the image
+    traced, whatever the mask (the launch has no per-pixel mask)."""
+
+    def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
+        return renderer.render(pieces, mode, cam, planes)[0]
 
     return trace
