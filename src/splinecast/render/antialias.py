@@ -16,8 +16,8 @@ shading, highlights) are left alone.
   (the quincunx pattern: a quadrature of the pixel's box exact for bilinear colours). A corner
   is shared by the four pixels around it, so an edge costs about one and a half new rays per
   pixel on it: the default costs about 1.1 to 1.3 times the frame.
-* any other count ``n``: ``n`` rays spread over the pixel (:func:`sample_offsets`), the centre
-  one included, averaged (a box filter); ``n - 1`` new rays per pixel on an edge.
+* any other count ``n``: ``n`` rays spread evenly over the pixel (:func:`sample_offsets`),
+  averaged (a box filter); ``n`` new rays per pixel on an edge.
 
 Pixels on the border of a window of a larger image (:meth:`splinecast.Camera.tile`: the
 viewer's stripes, distributed tiles) compare with their neighbours outside the window, and
@@ -72,25 +72,31 @@ def check_samples(samples: Any) -> int:
 
 
 def sample_offsets(samples: int) -> np.ndarray:
-    """Where in its pixel each of ``samples`` rays passes: ``(samples, 2)`` offsets ``(dx, dy)``
-    in pixels, in ``[-1/2, 1/2)``, the first the centre ``(0, 0)``.
+    """Where in its pixel each of ``samples`` rays passes for the box filter (``samples`` other
+    than :data:`DEFAULT_SAMPLES`): ``(samples, 2)`` offsets ``(dx, dy)`` in pixels, inside
+    ``(-1/2, 1/2)``.
 
-    The points are a rank-1 lattice, ``(i / n, i g / n)`` modulo 1, moved so that one point is
-    the centre, with the generator ``g`` whose points lie farthest apart: well spread over the
-    pixel for any ``n`` (5 gives the rotated grid of a centre and four points around it).
+    A square count ``k * k`` is the regular ``k x k`` grid of sub-pixel centres; any other
+    count ``n`` the centred rank-1 lattice ``((i + 1/2) / n, (i + 1/2) g / n mod 1)`` whose
+    generator ``g`` spreads the points farthest apart: one point per column of ``n`` and well
+    spread over the pixel.
     """
     n = check_samples(samples)
-    i = np.arange(n)
+    k = math.isqrt(n)
+    if k * k == n:
+        centres = (np.arange(k) + 0.5) / k - 0.5
+        dx, dy = np.meshgrid(centres, centres)
+        return np.stack([dx.ravel(), dy.ravel()], axis=-1)
+    i = np.arange(n) + 0.5
     best, best_g = -1.0, 1
-    for g in range(1, max(n, 2)):
-        pts = np.stack([i / n, (i * g % n) / n], axis=-1)
-        d = np.abs(pts[1:] - pts[0]) if n > 1 else np.zeros((0, 2))
-        d = np.minimum(d, 1.0 - d)  # toroidal: the lattice is a group, one point suffices
-        spread = float(np.min(np.hypot(d[:, 0], d[:, 1]))) if n > 1 else 0.0
-        if spread > best + 1e-12:
-            best, best_g = spread, g
-    pts = np.stack([i / n, (i * best_g % n) / n], axis=-1)
-    return (pts + 0.5) % 1.0 - 0.5
+    for g in range(1, n):
+        pts = np.stack([i / n, (i * g / n) % 1.0], axis=-1)
+        d = np.abs(pts[:, None, :] - pts[None, :, :])
+        d = np.minimum(d, 1.0 - d)  # on the torus: the pattern repeats over the pixels
+        dist = np.hypot(d[..., 0], d[..., 1]) + np.eye(n) * 2.0
+        if dist.min() > best + 1e-12:
+            best, best_g = float(dist.min()), g
+    return np.stack([i / n, (i * best_g / n) % 1.0], axis=-1) - 0.5
 
 
 @jit(inline="always")
@@ -256,8 +262,8 @@ def antialias(frame: Any, camera: Any, samples: int,
     if samples == _QUINCUNX:
         _quincunx(colours, mask, right, down, big, trace)
     else:
-        total = colours[mask].astype(np.float64)
-        for dx, dy in sample_offsets(samples)[1:]:
+        total = np.zeros((count, colours.shape[2]))
+        for dx, dy in sample_offsets(samples):
             total += trace(big.shifted(float(dx), float(dy)), mask).rgba[mask]
         colours[mask] = (total / samples).astype(colours.dtype)
     if big is not camera:
