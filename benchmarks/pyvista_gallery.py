@@ -12,9 +12,9 @@ renders
 * ``pyvista-smooth``: the same with ``smooth_shading=True`` (vertex normals interpolated) and
   splinecast's surface colour, so the shading can be compared.
 
-The pictures go to ``docs/_static/pyvista/`` as palette PNGs (small enough to commit), with
-the times of each in ``times.json``; ``docs/accuracy.rst`` shows them. Needs pyvista and an
-offscreen OpenGL (``scripts/install_bench.sh``). Usage::
+The pictures go to ``docs/_static/pyvista/`` as palette PNGs (small enough to commit);
+``docs/accuracy.rst`` shows them. The time of each is printed (one render each: indicative
+only). Needs pyvista and an offscreen OpenGL (``scripts/install_bench.sh``). Usage::
 
     python benchmarks/pyvista_gallery.py [--out DIR] [--size 400x300]
 """
@@ -101,7 +101,6 @@ def render_all(out: Path, size: tuple[int, int]) -> dict:
                               "triangles": int(mesh.n_cells)}
             save(np.asarray(image), out / f"{name}-{variant}.png")
         print(name, json.dumps(entry))
-    (out / "times.json").write_text(json.dumps(times, indent=1) + "\n")
     return times
 
 
