@@ -364,9 +364,10 @@ class BSplineModel:
         ``(halo, box)`` (:mod:`.shading_field`; default: ``array`` itself, all of it real)."""
         coeffs = self.coeffs if array is None else np.ascontiguousarray(array)
         halo_array, box = whole_halo(coeffs) if halo is None else halo
+        # The halo is often the grid's own array (a whole volume, a pyramid brick): no copy.
+        halo_array = coeffs if halo_array is array else np.ascontiguousarray(halo_array)
         return BSplineGrid(coeffs, self.degree, self.root_finder_id in POWER_FORM_FINDERS,
-                           self.root_finder_id, self.iterations, self.tolerance,
-                           np.ascontiguousarray(halo_array), box)
+                           self.root_finder_id, self.iterations, self.tolerance, halo_array, box)
 
     @property
     def coefficients(self) -> np.ndarray:

@@ -354,7 +354,9 @@ class TrilinearModel:
         (:mod:`.shading_field`; default: ``array`` itself, all of it real)."""
         data = self.data if array is None else np.ascontiguousarray(array)
         halo_array, box = whole_halo(data) if halo is None else halo
-        return TrilinearGrid(data, np.ascontiguousarray(halo_array), box)
+        # The halo is often the grid's own array (a whole volume, a pyramid brick): no copy.
+        halo_array = data if halo_array is array else np.ascontiguousarray(halo_array)
+        return TrilinearGrid(data, halo_array, box)
 
     @property
     def coefficients(self) -> np.ndarray:

@@ -14,8 +14,10 @@ shading, highlights) are left alone.
 
 * 5 (:data:`DEFAULT_SAMPLES`): the centre and the pixel's four corners, weighted 1/2 and 1/8
   (the quincunx pattern: a quadrature of the pixel's box exact for bilinear colours). A corner
-  is shared by the four pixels around it, so an edge costs about one and a half new rays per
-  pixel on it: the default costs about 1.1 to 1.3 times the frame.
+  is shared by the four pixels around it and traced only where an edge passes between two of
+  them (elsewhere the mean of their centres stands in), so an edge costs less than one new ray
+  per pixel on it; rays along edges are the costly ones, though (they graze surfaces), and the
+  default costs about 1.4 to 1.5 times a dense frame (the performance page).
 * any other count ``n``: ``n`` rays spread evenly over the pixel (:func:`sample_offsets`),
   averaged (a box filter); ``n`` new rays per pixel on an edge.
 
