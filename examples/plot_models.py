@@ -4,7 +4,8 @@ Reconstruction models
 
 The same coarse volume through three reconstructions: trilinear interpolation (what most tools
 use), a cubic B-spline and the cubic C1 spline ``s31`` on the type-6 tetrahedral partition. The
-splines give smooth surfaces and normals where trilinear interpolation shows the grid.
+splines give smooth surfaces where the trilinear surface shows the grid in its outline (its
+shading is smooth by default: see the next example).
 """
 
 import splinecast as sc

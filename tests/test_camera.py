@@ -205,7 +205,7 @@ def test_pixel_basis_and_compiled_rays_match_rays(ortho, size):
     vol = box_volume()
     cam = Camera.orbit(vol, azimuth=-70, elevation=15, size=size, ortho=ortho, fov=35)
     basis = cam.pixel_basis()
-    assert basis.shape == (20,) and basis.dtype == np.float64
+    assert basis.shape == (22,) and basis.dtype == np.float64
     o_ref, d_ref = cam.rays()
     o, d = _rays_via_kernel(basis, cam.width, cam.height)
     np.testing.assert_allclose(o, o_ref, rtol=0, atol=1e-14 * max(1.0, np.abs(o_ref).max()))
@@ -215,6 +215,42 @@ def test_pixel_basis_and_compiled_rays_match_rays(ortho, size):
         got = pixel_ray(basis, r, c, cam.width, cam.height)
         np.testing.assert_allclose(got[:3], o_ref[r, c], rtol=0, atol=1e-13)
         np.testing.assert_allclose(got[3:], d_ref[r, c], rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_shifted_rays_pass_off_the_pixel_centres(ortho):
+    """A shifted camera's ray through pixel (row, col) is the one through screen point
+    (col + 1/2 + dx, row + 1/2 + dy) of the full image: for an orthographic camera the origin
+    moves by dx pixel widths along ``right`` and dy down; for a perspective one the direction is
+    the unit vector through that point of the image plane at unit distance. Its tiles keep the
+    shift, and the compiled rays agree."""
+    vol = box_volume()
+    cam = Camera.orbit(vol, azimuth=40, elevation=-25, size=(19, 13), ortho=ortho, fov=40)
+    dx, dy = 0.375, -0.5
+    shifted = cam.shifted(dx, dy)
+    o, d = shifted.rays()
+    o0, d0 = cam.rays()
+    half_h = cam.ortho_height / 2 if ortho else np.tan(np.radians(cam.fov) / 2)
+    pixel = 2.0 * half_h / cam.height  # the same width and height (square pixels)
+    if ortho:
+        expected = o0 + dx * pixel * cam.right - dy * pixel * cam.up
+        np.testing.assert_allclose(o, expected, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(d, d0, rtol=0, atol=0)
+    else:
+        ray = d0 / (d0 @ cam.forward)[..., None]  # through the image plane at unit distance
+        ray = ray + dx * pixel * cam.right - dy * pixel * cam.up
+        np.testing.assert_allclose(d, ray / np.linalg.norm(ray, axis=-1, keepdims=True),
+                                   rtol=0, atol=1e-14)
+        np.testing.assert_array_equal(o, o0)
+    o_k, d_k = _rays_via_kernel(shifted.pixel_basis(), cam.width, cam.height)
+    np.testing.assert_allclose(o_k, o, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(d_k, d, rtol=0, atol=1e-14)
+    tile = shifted.tile(3, 4, 5, 6)
+    np.testing.assert_array_equal(tile.rays()[1], d[4:10, 3:8])
+    np.testing.assert_array_equal(cam.shifted(0.0, 0.0).rays()[1], d0)  # bit for bit
+    for bad in ((0.6, 0.0), (0.0, -0.51), (np.nan, 0.0), ("a", 0.0)):
+        with pytest.raises(ParameterError, match="sub-pixel shift"):
+            cam.shifted(*bad)
 
 
 @pytest.mark.parametrize(

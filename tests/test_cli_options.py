@@ -128,6 +128,11 @@ CASES = [
     Case("multi-iso-texture", ["--iso", "0.3,0.6", "--texture", "checker", "--shading", "cel"],
          {**MULTI, "effects": sc.SurfaceEffects(texture="checker", cel_bands=4)}, MULTI),
     Case("smooth", ["--iso", "0.5", "--smooth", "5"], {**ISO, "smooth": 5}, ISO),
+    Case("normals-exact", ["--iso", "0.5", "--normals", "exact"], {**ISO, "normals": "exact"},
+         ISO),
+    Case("samples", ["--iso", "0.5", "--samples", "1"], {**ISO, "samples": 1}, ISO),
+    Case("samples-mip", ["--mode", "mip", "--samples", "4"], {"mode": "mip", "samples": 4},
+         {"mode": "mip"}),
     # --- models and their options -------------------------------------------------------
     Case("model-bspline2", ["--iso", "0.5", "--model", "bspline2"],
          {**ISO, "model": "bspline2"}, ISO),
@@ -267,6 +272,24 @@ def test_every_render_option_has_a_case():
     assert options - covered - used == set()
 
 
+@pytest.mark.parametrize("args, needle", [
+    (["--samples", "0"], "--samples: must be an integer from 1 (no antialiasing) to 64"),
+    (["--samples", "65"], "--samples: must be an integer from 1 (no antialiasing) to 64"),
+    (["--samples", "2.5"], "--samples: must be an integer from 1 (no antialiasing) to 64"),
+    (["--normals", "flat"], "--normals: invalid choice: 'flat' (choose from 'smooth', 'exact')"),
+])
+def test_bad_shading_and_sample_options_are_one_line(args, needle, tmp_path, capsys):
+    """A bad sample count or normals choice: one line naming the option and what it accepts,
+    status 2, no file."""
+    png = tmp_path / "out.png"
+    with pytest.raises(SystemExit) as exit_info:
+        main(["render", ML, "--size", "8x8", "--quiet", "-o", str(png), *args])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2
+    assert err.startswith("splinecast: error:") and err.count("\n") == 1 and needle in err
+    assert not png.exists()
+
+
 def test_version_prints_the_package_version(capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["--version"])
@@ -299,6 +322,7 @@ def test_version_prints_the_package_version(capsys):
     (["--mode", "mip", "--step", "0.1"], "--step"),
     (["--iso", "0.5", "--texture-scale", "0.3"], "--texture-scale"),
     (["--mode", "dvr", "--tf", "{tf_a}", "--table-layout", "exponential"], "--table-layout"),
+    (["--mode", "mip", "--normals", "exact"], "--normals"),
 ])
 def test_options_the_settings_would_ignore_are_refused(args, needle, tmp_path, capsys, tf_files):
     """An option that would not change the output is a mistake: one line, status 2, no file."""

@@ -255,29 +255,39 @@ class SplinecastIso(IsoMethod):
     """splinecast's exact isosurface (any model): block classification plus analytic ray casting.
 
     Timed images are the colour buffer alone (``outputs=("rgba",)``), like the meshes' RGBA read
-    back from VTK; the quality metrics ask for depth and normals.
+    back from VTK, and without antialiasing (``samples=1``), like the meshes rasterized without
+    multisampling; the quality metrics ask for depth and normals. ``normals`` is the render's
+    (the default smooth shading field, or the model's own gradient).
     """
 
     name = "splinecast exact"
 
-    def __init__(self, volume: sc.Volume, size: tuple[int, int], model: str = "trilinear"):
+    def __init__(self, volume: sc.Volume, size: tuple[int, int], model: str = "trilinear",
+                 normals: str = "smooth"):
         super().__init__(volume, size)
         self.scene = sc.Scene(volume, model=model)
         self.model = model
+        self.normals = normals
         if model != "trilinear":
             self.name = f"splinecast exact ({model})"
+        if normals != "smooth":
+            self.name += f" ({normals} normals)"
         self._frame: sc.Frame | None = None
+
+    def _render(self, cam: sc.Camera, outputs: tuple[str, ...]) -> sc.Frame:
+        return self.scene.render(cam, iso=self.iso, outputs=outputs, normals=self.normals,
+                                 samples=1)
 
     def new_iso(self, iso: float, cam: sc.Camera) -> None:
         self.scene.set_iso(iso)
-        self._frame = self.scene.render(cam, iso=iso, outputs=COLOUR)
         self.iso = iso
+        self._frame = self._render(cam, COLOUR)
 
     def frame(self, cam: sc.Camera) -> None:
-        self._frame = self.scene.render(cam, iso=self.iso, outputs=COLOUR)
+        self._frame = self._render(cam, COLOUR)
 
     def surface(self, cam: sc.Camera) -> tuple[np.ndarray, np.ndarray]:
-        frame = self.scene.render(cam, iso=self.iso, outputs=("depth", "normal"))
+        frame = self._render(cam, ("depth", "normal"))
         return frame.depth, frame.normal
 
     def threads(self) -> dict[str, Any]:
@@ -465,6 +475,7 @@ class SkimageIso(_MeshIso):
 
 ISO_METHODS = {
     "splinecast": lambda vol, size: SplinecastIso(vol, size),
+    "splinecast-exact-normals": lambda vol, size: SplinecastIso(vol, size, normals="exact"),
     "splinecast-s31": lambda vol, size: SplinecastIso(vol, size, "s31"),
     "splinecast-bspline3": lambda vol, size: SplinecastIso(vol, size, "bspline3"),
     "vtk-flying-edges": lambda vol, size: VtkContourIso(vol, size, "flying-edges"),
@@ -475,6 +486,7 @@ ISO_METHODS = {
 
 ISO_LABELS = {
     "splinecast": "splinecast exact (trilinear)",
+    "splinecast-exact-normals": "splinecast exact (trilinear, the model's own normals)",
     "splinecast-s31": "splinecast exact (s31)",
     "splinecast-bspline3": "splinecast exact (bspline3)",
     "vtk-flying-edges": "VTK flying edges + render",
@@ -484,7 +496,8 @@ ISO_LABELS = {
 }
 
 #: The splinecast isosurface methods (they need neither VTK nor scikit-image).
-SPLINECAST_ISO = ("splinecast", "splinecast-s31", "splinecast-bspline3")
+SPLINECAST_ISO = ("splinecast", "splinecast-exact-normals", "splinecast-s31",
+                  "splinecast-bspline3")
 
 
 def iso_requirements(key: str) -> str | None:

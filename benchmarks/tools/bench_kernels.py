@@ -9,7 +9,12 @@ build only.
 
     python benchmarks/tools/bench_kernels.py --baseline /tmp/old/src [--quick] [--json PATH]
         [--only MODEL:MODE,...] [--volumes ml,mri] [--combo-repeats N] [--resume LOG]
-        [--clock wall|cpu]
+        [--clock wall|cpu] [--kwargs JSON] [--baseline-kwargs JSON]
+
+``--kwargs`` adds render options to every case of this build only (``'{"samples": 1}'``: the
+same frame without antialiasing, options the baseline may not know), ``--baseline-kwargs`` to
+the baseline's; so one build can also be measured against itself with other options
+(``--baseline`` the same ``src``).
 
 ``--resume LOG`` takes the rows already printed by an interrupted run (one JSON object per line)
 instead of measuring those cases again; the slow combinations (B-spline and type-6 MIP and DVR
@@ -137,6 +142,10 @@ def main() -> None:
     ap.add_argument("--volumes", default="ml,mri", help="comma-separated: ml, mri")
     ap.add_argument("--resume", help="rows printed by an earlier run, not measured again")
     ap.add_argument("--json", help="output path (default results/kernels[_quick].json)")
+    ap.add_argument("--kwargs", default="{}",
+                    help="JSON object of render options added for this build")
+    ap.add_argument("--baseline-kwargs", default="{}",
+                    help="JSON object of render options added for the baseline")
     ap.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                     help="wall time, or the worker's CPU time (steadier on a machine other "
                          "processes load; use with NUMBA_NUM_THREADS=1)")
@@ -169,8 +178,9 @@ def main() -> None:
         baseline_has = case["mode"] == "iso" or case["model"] == "trilinear"
         req["repeats"] = repeats if baseline_has or not args.combo_repeats else args.combo_repeats
         # Interleave: the builds take turns, so both see the same machine.
-        a = new.ask(req)
-        b = old.ask(req) if old and baseline_has else {"error": "mode not in the baseline"}
+        a = new.ask({**req, "kwargs": {**req["kwargs"], **json.loads(args.kwargs)}})
+        b = (old.ask({**req, "kwargs": {**req["kwargs"], **json.loads(args.baseline_kwargs)}})
+             if old and baseline_has else {"error": "mode not in the baseline"})
         row = {"volume": label, "repeats": req["repeats"], "model": case["model"],
                "mode": case["mode"], "new_ms": statistics.median(a["ms"]) if "ms" in a else None,
                "new_error": a.get("error"),
@@ -185,6 +195,7 @@ def main() -> None:
         old.close()
     out = {"machine": describe(), "quick": args.quick, "repeats": repeats, "clock": args.clock,
            "baseline": _revision(args.baseline), "build": _revision(str(HERE.parent)),
+           "kwargs": json.loads(args.kwargs), "baseline_kwargs": json.loads(args.baseline_kwargs),
            "rows": rows}
     path = Path(args.json)
     path.write_text(json.dumps(out, indent=1))
@@ -192,7 +203,8 @@ def main() -> None:
              f"Machine: {out['machine']}", "",
              f"This build: {out['build']}; baseline: {out['baseline']}. Median of {repeats} "
              "renders after a warm-up render, the builds taking turns; "
-             f"{'CPU' if args.clock == 'cpu' else 'wall'} time.", "",
+             f"{'CPU' if args.clock == 'cpu' else 'wall'} time. Options added: this build "
+             f"{args.kwargs}, baseline {args.baseline_kwargs}.", "",
              "| volume | model | mode | new ms | baseline ms | new / baseline |",
              "|---|---|---|---|---|---|"]
     for r in rows:

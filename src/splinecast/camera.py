@@ -172,6 +172,8 @@ class Camera:
         # The window of the full image this camera renders (see tile()): column and row of its
         # top-left pixel and the full image's size. A plain camera renders all of its image.
         self.region = (0, 0, self.width, self.height)
+        # Where in its pixel each ray passes (see shifted()): the centre.
+        self.subpixel = (0.0, 0.0)
 
     @property
     def size(self) -> tuple[int, int]:
@@ -288,23 +290,50 @@ class Camera:
         out.region = (base_c + c0, base_r + r0, full_w, full_h)
         return out
 
+    def shifted(self, dx: float, dy: float) -> Camera:
+        """This camera with every ray moved ``dx`` pixels to the right and ``dy`` pixels down
+        inside its pixel (the sub-pixel samples of antialiasing).
+
+        ``|dx|, |dy| <= 1/2``: each ray stays in its own pixel. Shifts do not add up: the
+        shifted camera's rays are this camera's unshifted rays moved by ``(dx, dy)``; its tiles
+        (:meth:`tile`) keep the shift.
+
+        Raises
+        ------
+        ParameterError
+            If a shift is not a number in ``[-1/2, 1/2]``.
+        """
+        try:
+            shift = (float(dx), float(dy))
+        except (TypeError, ValueError):
+            raise ParameterError(f"sub-pixel shift must be two numbers, got {dx!r}, {dy!r}"
+                                 ) from None
+        if not all(-0.5 <= v <= 0.5 for v in shift):
+            raise ParameterError(f"sub-pixel shift must lie in [-0.5, 0.5], got {shift}")
+        out = copy.copy(self)
+        out.subpixel = shift
+        return out
+
     def pixel_basis(self) -> np.ndarray:
         """Packed ray parameters for compiled kernels that generate rays per pixel.
 
-        Returns 20 float64: eye (3), forward (3), right (3), up (3), half width and half height
+        Returns 22 float64: eye (3), forward (3), right (3), up (3), half width and half height
         of the full image's window (at unit distance for perspective, in world units for
         orthographic), an orthographic flag, 0, then the column and row of this camera's first
-        pixel in the full image and the full image's width and height (see :meth:`tile`).
+        pixel in the full image and the full image's width and height (see :meth:`tile`), and
+        the rays' shift inside their pixels (:meth:`shifted`; 0, 0 through the centres).
         :meth:`rays` and the kernels follow the same formula: pixel ``(row, col)`` has screen
-        coordinates ``sx = ((col + col0 + 0.5) / full_width * 2 - 1) * half_w`` and
-        ``sy = (1 - (row + row0 + 0.5) / full_height * 2) * half_h``.
+        coordinates ``sx = ((col + col0 + 0.5 + dx) / full_width * 2 - 1) * half_w`` and
+        ``sy = (1 - (row + row0 + 0.5 + dy) / full_height * 2) * half_h``.
         """
         col0, row0, full_w, full_h = self.region
         half_h = 0.5 * self.ortho_height if self.ortho else math.tan(math.radians(self.fov) / 2)
         half_w = half_h * full_w / full_h
+        dx, dy = getattr(self, "subpixel", (0.0, 0.0))  # cameras pickled before shifts existed
         return np.concatenate(
             [self.position, self.forward, self.right, self.up,
-             [half_w, half_h, 1.0 if self.ortho else 0.0, 0.0, col0, row0, full_w, full_h]]
+             [half_w, half_h, 1.0 if self.ortho else 0.0, 0.0, col0, row0, full_w, full_h,
+              dx, dy]]
         ).astype(np.float64)
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
@@ -319,9 +348,9 @@ class Camera:
         w, h = self.width, self.height
         basis = self.pixel_basis()
         half_w, half_h = basis[12], basis[13]
-        col0, row0, full_w, full_h = basis[16:20]
-        xs = ((np.arange(w) + col0 + 0.5) / full_w * 2.0 - 1.0) * half_w
-        ys = (1.0 - (np.arange(h) + row0 + 0.5) / full_h * 2.0) * half_h
+        col0, row0, full_w, full_h, dx, dy = basis[16:22]
+        xs = ((np.arange(w) + col0 + 0.5 + dx) / full_w * 2.0 - 1.0) * half_w
+        ys = (1.0 - (np.arange(h) + row0 + 0.5 + dy) / full_h * 2.0) * half_h
         sx = xs[None, :, None]
         sy = ys[:, None, None]
         if self.ortho:

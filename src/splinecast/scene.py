@@ -7,6 +7,7 @@ pixel in compiled, multi-threaded code.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable
@@ -20,6 +21,7 @@ from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
 from .errors import ParameterError, limits
 from .models import MODELS
+from .render.antialias import antialias, resolve_samples
 from .render.clipping import make_planes
 from .render.defaults import (
     auto_colormap,
@@ -32,18 +34,25 @@ from .render.defaults import (
 )
 from .render.dvr import Dvr, DVRSettings
 from .render.effects import SurfaceEffects, apply_effects
+from .render.footprint import NO_FOOTPRINT
 from .render.frame import Frame
 from .render.iso import METHODS, Iso
 from .render.mip import Mip
 from .render.multi_iso import MultiIso
 from .render.outputs import OUTPUTS, check_outputs
-from .render.segment import make_grid, render_grid
-from .render.shading import Shading
+from .render.segment import (
+    make_grid,
+    pixel_ranges,
+    render_grid,
+    screen_footprint,
+    trace_pixels,
+)
+from .render.shading import Shading, normals_code
 from .transfer import TransferFunction
 from .volume import Volume
 
 __all__ = ["Scene", "MODES", "check_iso", "RenderRequest", "prepare_render", "finish_frame",
-           "register_scene_type"]
+           "register_scene_type", "whole_frame_tracer"]
 
 #: Render modes accepted by :meth:`Scene.render`.
 MODES = ("iso", "mip", "minip", "dvr")
@@ -252,6 +261,8 @@ class Scene:
         tf: TransferFunction | None = None,
         dvr: DVRSettings | None = None,
         outputs: Any = None,
+        normals: str = "smooth",
+        samples: int | None = None,
     ) -> Frame:
         """Render one image.
 
@@ -322,6 +333,21 @@ class Scene:
             compositing with other geometry needs. Summary numbers (``Frame.stats``) that
             need a buffer that was not requested (``hits``: depth; ``mean_cells_visited``:
             stats) are left out.
+        normals : str
+            Isosurfaces: ``"smooth"`` (default) shades every hit with the gradient of a smooth
+            field at the exact hit: the models that are only continuous (``trilinear``,
+            ``bspline1``), whose gradient jumps from cell to cell, with the cubic B-spline of
+            the voxels, the others with their own gradient. ``"exact"`` shades with the
+            model's own gradient (and ``Frame.normal`` holds it). Hits are the model's either
+            way (:mod:`splinecast.render.shading`).
+        samples : int, optional
+            Antialiasing: rays per pixel on the edges of the image (silhouettes, creases,
+            where front and back faces meet), the centre one included; the other pixels keep
+            their one ray (:mod:`splinecast.render.antialias`). ``1`` turns it off. Default:
+            :data:`~splinecast.render.antialias.DEFAULT_SAMPLES` for isosurfaces, 1 for MIP,
+            minIP and DVR. Only the colours are averaged: depth, position, normal and face
+            are the centre ray's. ``Frame.stats["antialiased"]`` counts the pixels traced
+            again.
 
         Returns
         -------
@@ -341,7 +367,7 @@ class Scene:
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
             check_iso=self._check_iso, model=self.model.name, outputs=outputs,
-            tolerance=tolerance)
+            tolerance=tolerance, normals=normals, samples=samples)
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:
             classify_ms = 0.0
@@ -356,9 +382,12 @@ class Scene:
             stats["classify_ms"] = classify_ms
             stats.update(self.iso_stats)
         start = time.perf_counter()
-        out, counters = render_grid(grid, request.setup, camera, planes, flags,
-                                    count="stats" in request.outputs)
-        return finish_frame(request, out, counters, camera, start)
+        setup = request.setup
+        tiles = screen_footprint(grid, setup, camera, setup.blocks(grid.hierarchy, flags))
+        out, counters = render_grid(grid, setup, camera, planes, flags,
+                                    count="stats" in request.outputs, footprint=tiles)
+        return finish_frame(request, out, counters, camera, start,
+                            _pixel_tracer(grid, camera, planes, flags, tiles))
 
 
 @dataclass
@@ -379,7 +408,9 @@ class RenderRequest:
     effects : SurfaceEffects or None
     outputs : frozenset of str
         The buffers the Frame keeps (:mod:`splinecast.render.outputs`); the mode may fill more
-        (surface effects need position, normal and face).
+        (surface effects need position, normal and face, antialiasing depth).
+    samples : int
+        Rays per edge pixel (:mod:`splinecast.render.antialias`; 1: none).
     """
 
     setup: Any
@@ -389,6 +420,7 @@ class RenderRequest:
     shading: Shading
     effects: SurfaceEffects | None
     outputs: frozenset[str] = frozenset(OUTPUTS)
+    samples: int = 1
 
 
 def prepare_render(
@@ -397,6 +429,7 @@ def prepare_render(
     opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
     tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
     check_iso: Any, model: str, outputs: Any = None, tolerance: float = 0.0,
+    normals: str = "smooth", samples: Any = None,
 ) -> RenderRequest:
     """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
     type: in memory, multiresolution).
@@ -404,7 +437,9 @@ def prepare_render(
     ``volume`` supplies the automatic choices (:mod:`splinecast.render.defaults`), the metadata
     and the value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
     ``outputs`` names the Frame's buffers (``None``: all); ``tolerance`` is MIP's
-    (:class:`~splinecast.render.mip.Mip`).
+    (:class:`~splinecast.render.mip.Mip`); ``normals`` the isosurfaces'
+    (:mod:`splinecast.render.shading`); ``samples`` the antialiasing's (``None``: the mode's
+    default, :func:`splinecast.render.antialias.resolve_samples`).
     """
     if not isinstance(camera, Camera):
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
@@ -418,6 +453,8 @@ def prepare_render(
     limits.check_render(volume, camera, mode=mode, method=method, step=step, dvr=dvr)
     if mode not in ("mip", "minip") and tolerance != 0.0:
         raise ParameterError(f"tolerance is for mode='mip' and 'minip', not {mode!r}")
+    normals_code(normals)  # checked for every mode: a typo is refused, not ignored
+    samples = resolve_samples(samples, mode)
     if inside is not None and inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
     shading = shading or Shading()
@@ -428,6 +465,10 @@ def prepare_render(
     # Surface effects are applied on the host from the hit's position, normal and face.
     filled = wanted | {"position", "normal", "face"} if (
         effects is not None and effects.active) else wanted
+    if "rgba" not in wanted:
+        samples = 1  # nothing to antialias
+    elif samples > 1 and mode == "iso":
+        filled = filled | {"depth", "normal", "face"}  # the edges of the geometry
     stats: dict[str, Any] = {"mode": mode, "model": model}
     value = None
     if mode in ("mip", "minip"):
@@ -445,29 +486,42 @@ def prepare_render(
             raise ParameterError("iso must hold at least one isovalue")
         isos = [check_iso(v) for v in iso]
         inside = inside or auto_inside(volume, isos)
-        setup = MultiIso(isos, colors, opacity, inside, shading, effects, outputs=filled)
+        setup = MultiIso(isos, colors, opacity, inside, shading, effects, outputs=filled,
+                         normals=normals)
         stats["method"] = "exact"
     else:
         value = check_iso(iso)
         inside = inside or auto_inside(volume, value)
-        setup = Iso(value, method, step, inside, shading, outputs=filled)
+        setup = Iso(value, method, step, inside, shading, outputs=filled, normals=normals)
         if len(planes):
             stats["planes"] = len(planes)
         stats.update(method=method, iso=value)
         if method == "sampled":
             stats["step"] = float(step)
-    return RenderRequest(setup, planes, stats, value, shading, effects, wanted)
+    return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples)
 
 
 def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Camera,
-                 start: float) -> Frame:
-    """The :class:`Frame` of a traced image: surface effects applied, per-ray counts and the
-    time since ``start`` (``time.perf_counter()``) in ``stats``."""
+                 start: float, trace: Callable[..., tuple] | None = None) -> Frame:
+    """The :class:`Frame` of a traced image: surface effects applied, antialiased (with
+    ``trace``), per-ray counts and the time since ``start`` (``time.perf_counter()``) in
+    ``stats``.
+
+    ``trace(camera, mask, mode)`` traces the pixels of ``camera``'s image where ``mask`` is
+    true with ``mode`` (a copy of the request's with fewer outputs) and returns its outputs
+    (:func:`splinecast.render.segment.trace_pixels`); without it the frame is not antialiased.
+    """
     setup, stats, effects = request.setup, request.stats, request.effects
     frame = setup.frame(out, counters, stats)
-    if isinstance(setup, Iso) and effects is not None and effects.active:
+    shaded = isinstance(setup, Iso) and effects is not None and effects.active
+    if shaded:
         apply_effects(camera.pixel_basis(), request.shading.as_array(), effects.as_array(),
                       frame.position, frame.normal, frame.face, frame.rgba)
+    if trace is not None and request.samples > 1 and frame.rgba is not None:
+        stats["samples"] = request.samples
+        stats["antialiased"] = antialias(frame, camera, request.samples,
+                                         _sample_tracer(request, trace, shaded),
+                                         geometry=setup.name == "iso")
     trace_ms = (time.perf_counter() - start) * 1e3
     stats.update({
         "width": camera.width,
@@ -487,8 +541,57 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
         })
     else:
         frame.cells_visited = frame.cells_tested = frame.blocks_skipped = None
-    # Buffers filled for the mode's own use (surface effects) but not requested.
+    # Buffers filled for the mode's own use (surface effects, antialiasing) but not requested.
     for name in ("depth", "position", "normal", "face"):
         if name not in wanted:
             setattr(frame, name, None)
     return frame
+
+
+def _sample_tracer(request: RenderRequest, trace: Callable[..., tuple],
+                   shaded: bool) -> Callable[[Camera, np.ndarray], Frame]:
+    """``trace`` as :func:`splinecast.render.antialias.antialias` calls it: a Frame of the
+    traced pixels (surface effects applied), from a copy of the request's mode that fills only
+    what antialiasing reads."""
+    sub = copy.copy(request.setup)
+    need = {"rgba", "depth", "normal", "face"} | ({"position"} if shaded else set())
+    sub.outputs = frozenset(need)
+    effects = request.effects
+
+    def samples(cam: Camera, mask: np.ndarray) -> Frame:
+        unused = np.empty(mask.shape, np.int32)  # per-ray counters: not gathered
+        frame = sub.frame(trace(cam, mask, sub), (unused, unused, unused), {})
+        if shaded:
+            apply_effects(cam.pixel_basis(), request.shading.as_array(), effects.as_array(),
+                          frame.position, frame.normal, frame.face, frame.rgba)
+        return frame
+
+    return samples
+
+
+def _pixel_tracer(grid: Any, camera: Camera, planes: np.ndarray, flags: Any,
+                  tiles: np.ndarray) -> Callable[..., tuple]:
+    """:func:`finish_frame`'s ``trace`` for a frame of one grid: the pixels of a mask traced
+    with :func:`~splinecast.render.segment.trace_pixels`, with the frame's screen footprint
+    ``tiles`` for cameras of the frame's window (shifted inside the pixels or not)."""
+    last: list[Any] = [None, None]  # the mask and its ranges: the same for every pass
+
+    def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
+        if last[0] is not mask:
+            last[0], last[1] = mask, pixel_ranges(mask)
+        same = cam.region == camera.region and cam.size == camera.size
+        return trace_pixels(grid, mode, cam, last[1], planes, flags,
+                            tiles if same else NO_FOOTPRINT)
+
+    return trace
+
+
+def whole_frame_tracer(renderer: Any, pieces: Any, planes: np.ndarray) -> Callable[..., tuple]:
+    """:func:`finish_frame`'s ``trace`` for a scene drawn by a cut renderer
+    (:class:`splinecast.multires.draw.CutRenderer`) from ``pieces``: every pixel of the image
+    traced, whatever the mask (the launch has no per-pixel mask)."""
+
+    def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
+        return renderer.render(pieces, mode, cam, planes)[0]
+
+    return trace

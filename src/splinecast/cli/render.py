@@ -32,7 +32,7 @@ from ._compiling import CompileNotice
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
            "mode_kwargs", "orbit_options", "sampled_step", "dvr_settings", "SAMPLED_STEP",
-           "DVR_FALLBACK"]
+           "DVR_FALLBACK", "sample_count"]
 
 #: Options only some modes read: flag -> (attribute, modes). Given with another mode they would be
 #: ignored without a word, so :func:`_refuse_ignored_options` refuses them instead.
@@ -53,6 +53,7 @@ _MODE_ONLY = {
     "--table-layout": ("table_layout", ("dvr",)),
     "--adaptive": ("adaptive", ("dvr",)),
     "--termination": ("termination", ("dvr",)),
+    "--normals": ("normals", ("iso",)),
 }
 
 #: The render subcommand's option defaults (attribute -> default), filled by :func:`add_parser`.
@@ -203,6 +204,14 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="DVR opacity-adaptive step (up to 8 x --step; uses a 3D table)")
     render.add_argument("--termination", type=finite,
                         help="DVR early ray termination opacity, e.g. 0.99")
+    render.add_argument("--normals", default="smooth", choices=("smooth", "exact"),
+                        help="isosurface shading: the gradient of a smooth field at the exact "
+                             "hit (default; the cubic B-spline of the voxels for trilinear and "
+                             "bspline1) or the model's own gradient")
+    render.add_argument("--samples", type=sample_count,
+                        help="antialiasing: rays per pixel on the edges of the image, the "
+                             "centre one included, 1 to 64 (default 5 for --mode iso, 1 = off "
+                             "for the other modes and for multiscale volumes)")
 
 
 def _refuse_ignored_options(args: argparse.Namespace) -> None:
@@ -262,6 +271,10 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
     :mod:`splinecast.render.defaults` (a distributed scene's ``VolumeInfo`` carries those).
     """
     kwargs: dict = {"mode": args.mode}
+    if args.samples is not None:
+        kwargs["samples"] = args.samples
+    if args.mode == "iso":
+        kwargs["normals"] = args.normals
     notes: list[str] = []
     clip = [numbers(c, "--clip", 4) for c in args.clip]
     if clip:
@@ -331,6 +344,20 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         kwargs["effects"] = sc.SurfaceEffects(texture=args.texture, scale=args.texture_scale,
                                               cel_bands=4 if args.shading == "cel" else 0)
     return kwargs, notes
+
+
+def sample_count(text: str) -> int:
+    """argparse type of ``--samples``: an integer from 1 to
+    :data:`splinecast.render.antialias.MAX_SAMPLES`."""
+    top = sc.render.antialias.MAX_SAMPLES
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= top:
+        raise argparse.ArgumentTypeError(
+            f"must be an integer from 1 (no antialiasing) to {top}, got {limits.shorten(text)}")
+    return value
 
 
 def sampled_step(args: argparse.Namespace) -> float:

@@ -315,6 +315,11 @@ def prepare_request(header: VolumeInfo, camera: Camera, options: dict[str, Any])
     bound.apply_defaults()
     args = dict(bound.arguments)
     del args["self"], args["camera"]
+    # The partial images of the shares hold no pixel's neighbours: no antialiasing.
+    if args.get("samples") not in (None, 1):
+        raise ParameterError("samples: sort-last frames are not antialiased (sort-first "
+                             "frames are), pass samples=1 or leave it out")
+    args["samples"] = 1
     return prepare_render(
         header, camera, args.pop("mode"), args.pop("iso"), args.pop("method"),
         args.pop("step"), args.pop("shading"), args.pop("inside"), table_cache={},

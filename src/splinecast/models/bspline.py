@@ -49,6 +49,7 @@ from .._jit import jit
 from ..errors import ParameterError
 from ..roots.first_root import DEFAULT_ITERATIONS, POWER_FORM_FINDERS, finder_id
 from ..volume import Volume
+from .shading_field import whole_halo
 from .validation import require_renderable
 
 __all__ = [
@@ -70,9 +71,11 @@ __all__ = [
 
 #: Kernel grid of the B-spline models (hooks in :mod:`.bspline_ray`): padded coefficients (cell
 #: ``c`` needs ``coeffs[c .. c + degree]``), the degree, whether the ray composition is in power
-#: form, and the root finder (:mod:`splinecast.roots.first_root` id, iterations, tolerance).
+#: form, the root finder (:mod:`splinecast.roots.first_root` id, iterations, tolerance), and
+#: the shading field's halo and box (:mod:`.shading_field`; degree 1 only, the others shade
+#: with their own gradient).
 BSplineGrid = namedtuple("BSplineGrid", ["coeffs", "degree", "power", "finder", "iterations",
-                                         "tol"])
+                                         "tol", "halo", "halo_box"])
 
 # Rows: scaled Bernstein basis u^r (1-u)^(d-r); columns: the d+1 B-spline pieces on the cell
 # (times SCALE[d]). Derived from the uniform B-spline segment polynomials; Steinberger 2010
@@ -354,12 +357,17 @@ class BSplineModel:
         """The box rendered, in voxel index space: the box spanned by the voxel centres."""
         return np.zeros(3), np.asarray(self.volume.shape, np.float64) - 1.0
 
-    def kernel_grid(self, array: np.ndarray | None = None) -> tuple:
+    def kernel_grid(self, array: np.ndarray | None = None,
+                    halo: tuple[np.ndarray, np.ndarray] | None = None) -> tuple:
         """The :class:`BSplineGrid` of ``array`` (a block of :attr:`prepared` with its ghost
-        layers; default: the whole volume)."""
+        layers; default: the whole volume) and, for degree 1, the shading field's
+        ``(halo, box)`` (:mod:`.shading_field`; default: ``array`` itself, all of it real)."""
         coeffs = self.coeffs if array is None else np.ascontiguousarray(array)
+        halo_array, box = whole_halo(coeffs) if halo is None else halo
+        # The halo is often the grid's own array (a whole volume, a pyramid brick): no copy.
+        halo_array = coeffs if halo_array is array else np.ascontiguousarray(halo_array)
         return BSplineGrid(coeffs, self.degree, self.root_finder_id in POWER_FORM_FINDERS,
-                           self.root_finder_id, self.iterations, self.tolerance)
+                           self.root_finder_id, self.iterations, self.tolerance, halo_array, box)
 
     @property
     def coefficients(self) -> np.ndarray:
@@ -386,6 +394,9 @@ class BSpline1Model(BSplineModel):
     name = "bspline1"
     degree = 1
     support = 1
+    #: Voxels the shading field reads beyond a cell's support (:mod:`.shading_field`): the
+    #: linear B-spline's gradient jumps between cells, as the trilinear one's.
+    shading_halo = 1
     #: Rays are traced in tiles of 8 x 8 pixels, as the trilinear model's: neighbouring rays
     #: read the same coefficients while they are in the cache. Degree 3 keeps rows: its cells
     #: cost root finding rather than loads, and tiles measured slower there.

@@ -40,6 +40,7 @@ from .bspline import (
     local_value_gradient,
 )
 from .pieces import register
+from .shading_field import halo_gradient
 
 __all__ = [
     "axis_basis_sb",
@@ -378,9 +379,28 @@ def _value_gradient_at(grid, scratch, x, y, z):
     return local_value_gradient(grid.coeffs, grid.degree, i, j, k, u, v, w)
 
 
+@jit()
+def _separate_shading(grid):
+    """The linear B-spline (degree 1, the trilinear function) shades with the smooth field;
+    the quadratic and cubic ones are C1 and C2 and shade with their own gradient."""
+    return grid.degree == 1
+
+
+@jit()
+def _shading_gradient_at(grid, scratch, x, y, z):
+    """Degree 1: the cubic B-spline of the coefficients (:mod:`.shading_field`; odd degree:
+    no knot shift, the traversal space is the coefficients' index space). Others: their own
+    gradient."""
+    if grid.degree == 1:
+        return halo_gradient(grid.halo, grid.halo_box, x, y, z)
+    _, gx, gy, gz = _value_gradient_at(grid, scratch, x, y, z)
+    return gx, gy, gz
+
+
 # Every hook is inlined into the per-pair loop; the cell's transform (on a cache miss) and the
 # segment's composition stay calls (``_fill_cell``, ``compose``), taking only the arrays they need.
 register(BSplineGrid, cell_count=_cell_count, new_scratch=_new_scratch,
          cell_load=_cell_load,
          cell_pieces=_cell_pieces, piece_range=_piece_range, piece_poly=_piece_poly,
-         gradient=_gradient, value_gradient_at=_value_gradient_at)
+         gradient=_gradient, value_gradient_at=_value_gradient_at,
+         separate_shading=_separate_shading, shading_gradient_at=_shading_gradient_at)

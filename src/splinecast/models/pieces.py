@@ -38,6 +38,15 @@ Per cell, in the order a driver uses them:
     at ``(a, b)`` on the two other axes in order, where a model can read fewer voxels
     (trilinear: the bilinear of one slice, 4 reads instead of 8); the fixed-step loop's plane
     samples use it. The default is ``value_at`` at that point.
+``separate_shading(grid) -> bool`` (optional)
+    Whether the model shades with a field of its own rather than its reconstruction's
+    gradient: the models whose reconstruction is only continuous (trilinear, the linear
+    B-spline) shade with the cubic B-spline of their voxels (:mod:`.shading_field`), whose
+    gradient is smooth. Default False (the reconstruction is C1 and shades itself).
+``shading_gradient_at(grid, scratch, x, y, z) -> (gx, gy, gz)`` (optional)
+    The shading field's gradient at a point of the grid's traversal space, per unit of the
+    grid's index space; used where ``separate_shading`` says so. Default:
+    ``value_gradient_at``'s gradient.
 ``look_ahead(grid) -> bool`` (optional, a constant)
     Whether the fixed-step loop takes each sample's value one sample early, before the table
     reads of the segment in front of it, so the two memory-bound reads overlap. Worth it for a
@@ -58,7 +67,7 @@ from .._jit import jit, overload_jit
 __all__ = [
     "register", "hooks_of", "called_of", "cell_count", "new_scratch", "cell_load", "cell_pieces",
     "piece_range", "piece_poly", "gradient", "value_gradient_at", "value_at", "whole_cell",
-    "cell_range", "look_ahead", "value_on_plane",
+    "cell_range", "look_ahead", "value_on_plane", "separate_shading", "shading_gradient_at",
 ]
 
 #: Kernel grid class -> {hook name: compiled function}.
@@ -68,7 +77,8 @@ _CALLED: dict[type, frozenset[str]] = {}
 _NAMES = ("cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range", "piece_poly",
           "gradient", "value_gradient_at")
 #: Hooks a model may leave out (the stub then derives them from the others).
-_OPTIONAL = ("value_at", "look_ahead", "value_on_plane")
+_OPTIONAL = ("value_at", "look_ahead", "value_on_plane", "separate_shading",
+             "shading_gradient_at")
 
 
 def register(grid_class: type, called: tuple[str, ...] = (), **hooks: Any) -> None:
@@ -249,6 +259,41 @@ def _look_ahead(grid):
         return None
     f = _impl(grid, "look_ahead")
     return _no_look_ahead if f is None else f.py_func
+
+
+def separate_shading(grid):
+    """Whether the model shades with a smooth field of its own (compiled code only)."""
+    raise NotImplementedError
+
+
+def _no_separate_shading(grid):
+    return False
+
+
+@overload_jit(separate_shading, inline="never")
+def _separate_shading(grid):
+    if getattr(grid, "instance_class", None) not in _HOOKS:
+        return None
+    f = _impl(grid, "separate_shading")
+    return _no_separate_shading if f is None else f.py_func
+
+
+def shading_gradient_at(grid, scratch, x, y, z):
+    """The shading field's gradient at a point of the traversal space (compiled code only)."""
+    raise NotImplementedError
+
+
+def _gradient_of_value_gradient(grid, scratch, x, y, z):
+    _, gx, gy, gz = value_gradient_at(grid, scratch, x, y, z)
+    return gx, gy, gz
+
+
+@overload_jit(shading_gradient_at, inline="never")
+def _shading_gradient_at(grid, scratch, x, y, z):
+    if getattr(grid, "instance_class", None) not in _HOOKS:
+        return None
+    f = _impl(grid, "shading_gradient_at")
+    return _gradient_of_value_gradient if f is None else f.py_func
 
 
 # Hooks shared by the models whose cell is a single piece (trilinear, B-splines).

@@ -23,6 +23,7 @@ from .._jit import jit
 from ..roots.pieces import PowerCubic
 from ..volume import Volume
 from .pieces import cell_range, register, whole_cell
+from .shading_field import SHADING_HALO, halo_gradient, whole_halo
 from .validation import require_renderable
 
 __all__ = [
@@ -153,8 +154,9 @@ def gradient(data: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- ray pieces
-#: Kernel grid of the trilinear model: the voxels (cell ``c`` needs voxels ``c .. c + 1``).
-TrilinearGrid = namedtuple("TrilinearGrid", ["data"])
+#: Kernel grid of the trilinear model: the voxels (cell ``c`` needs voxels ``c .. c + 1``), and
+#: the halo of the shading field with its box (:mod:`.shading_field`).
+TrilinearGrid = namedtuple("TrilinearGrid", ["data", "halo", "halo_box"])
 
 
 @jit()
@@ -277,10 +279,24 @@ def _look_ahead(grid):
     return True
 
 
+@jit()
+def _separate_shading(grid):
+    """The trilinear gradient jumps between cells: shading uses the smooth field."""
+    return True
+
+
+@jit()
+def _shading_gradient_at(grid, scratch, x, y, z):
+    """The cubic B-spline's gradient (:mod:`.shading_field`); the traversal space is the
+    grid array's index space (no shift)."""
+    return halo_gradient(grid.halo, grid.halo_box, x, y, z)
+
+
 register(TrilinearGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
          cell_pieces=whole_cell, piece_range=cell_range, piece_poly=_piece_poly,
          gradient=_gradient, value_gradient_at=_value_gradient_at, value_at=_value_at,
-         value_on_plane=_value_on_plane, look_ahead=_look_ahead)
+         value_on_plane=_value_on_plane, look_ahead=_look_ahead,
+         separate_shading=_separate_shading, shading_gradient_at=_shading_gradient_at)
 
 
 class TrilinearModel:
@@ -312,6 +328,9 @@ class TrilinearModel:
     #: they are in the cache (whole rows let them fall out before the next row needs them).
     band_rows = 8
     tile = 8
+    #: The shading field reads this many voxels beyond a cell's support on each side
+    #: (:mod:`.shading_field`): a brick's grid carries them as its halo.
+    shading_halo = SHADING_HALO
 
     def __init__(self, volume: Volume) -> None:
         require_renderable(volume)
@@ -328,10 +347,16 @@ class TrilinearModel:
         """The box rendered, in voxel index space: the box spanned by the voxel centres."""
         return np.zeros(3), np.asarray(self.volume.shape, np.float64) - 1.0
 
-    def kernel_grid(self, array: np.ndarray | None = None) -> tuple:
+    def kernel_grid(self, array: np.ndarray | None = None,
+                    halo: tuple[np.ndarray, np.ndarray] | None = None) -> tuple:
         """The :class:`TrilinearGrid` of ``array`` (a block of :attr:`prepared` with its ghost
-        layer; default: the whole volume)."""
-        return TrilinearGrid(self.data if array is None else np.ascontiguousarray(array))
+        layer; default: the whole volume) and the shading field's ``(halo, box)``
+        (:mod:`.shading_field`; default: ``array`` itself, all of it real)."""
+        data = self.data if array is None else np.ascontiguousarray(array)
+        halo_array, box = whole_halo(data) if halo is None else halo
+        # The halo is often the grid's own array (a whole volume, a pyramid brick): no copy.
+        halo_array = data if halo_array is array else np.ascontiguousarray(halo_array)
+        return TrilinearGrid(data, halo_array, box)
 
     @property
     def coefficients(self) -> np.ndarray:

@@ -50,7 +50,7 @@ from ..render.frame import Frame
 from ..render.iso import Iso
 from ..render.multi_iso import MultiIso
 from ..render.shading import Shading
-from ..scene import check_iso, finish_frame, prepare_render
+from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .budget import parse_bytes
@@ -309,6 +309,8 @@ class WaveletScene:
         dvr: DVRSettings | None = None,
         outputs: Any = None,
         lod: float | None = None,
+        normals: str = "smooth",
+        samples: int | None = None,
     ) -> Frame:
         """Render one image (see :meth:`splinecast.Scene.render` for the mode options).
 
@@ -318,6 +320,11 @@ class WaveletScene:
             The Frame's buffers to keep (as :meth:`splinecast.Scene.render`; default all).
         lod : float, optional
             ε of this frame (default: the scene's, else one pixel's angle).
+        normals : str
+            As :meth:`splinecast.Scene.render`.
+        samples : int, optional
+            Antialiasing as :meth:`splinecast.Scene.render`, but off by default: each further
+            sample's rays are traced for the whole image through the selection.
 
         Returns
         -------
@@ -328,7 +335,7 @@ class WaveletScene:
             crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
             check_iso=self._check_iso, model=self.model.name, outputs=outputs,
-            tolerance=tolerance)
+            tolerance=tolerance, normals=normals, samples=1 if samples is None else samples)
         eps = self.epsilon(camera, lod)
         setup = request.setup
         isos: Any = None
@@ -371,7 +378,8 @@ class WaveletScene:
             "detail_owners": int(sum(u.sum() for u in rstats.detail_owners)),
             "details_read": rstats.details_read, "resident_bytes": rstats.resident_bytes,
         })
-        return finish_frame(request, out, counters, camera, start)
+        return finish_frame(request, out, counters, camera, start,
+                            whole_frame_tracer(self.renderer, pieces, request.planes))
 
     def __repr__(self) -> str:
         return (f"WaveletScene({self.volume.name!r}, model={self.model.name!r}, "

@@ -230,16 +230,17 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
 
     This is also the one-launch cut renderer's per-piece unit (:mod:`.pieces_driver`), which
     calls the pair's compiled band instead of inlining its own copy of the pixel loop: both
-    renderers then share one compiled loop per (model, mode, argument types). Without
-    ``final``, a pixel whose ``t_range`` is empty (``t0 > t1``) is left alone, state included:
-    the cut renderer marks so the pixels a piece does not cover (tracing them would load their
-    state and store it unchanged). A non-empty ``footprint`` (:mod:`.footprint`) limits the
+    renderers then share one compiled loop per (model, mode, argument types). A pixel whose
+    ``t_range`` is empty (``t0 > t1``) is left alone, state and outputs included: the cut
+    renderer marks so the pixels a piece does not cover (tracing them would load their state
+    and store it unchanged), antialiasing the pixels it does not trace again
+    (:mod:`.antialias`). A non-empty ``footprint`` (:mod:`.footprint`) limits the
     rays of each of its tiles to the tile's interval; the pixels of a tile it leaves empty are
     not traced (their states are passed on, and finished with ``final``).
     """
     height, width = visited.shape
     ncx, ncy, ncz = cell_count(grid)
-    ranged = t_range.shape[0] > 0 and not final
+    ranged = t_range.shape[0] > 0
     footed = footprint.shape[0] > 0
     t_lo, t_hi = -math.inf, math.inf
     # The footprint's tiles are the full image's (a tile camera's pixels start at col0, row0).
@@ -248,7 +249,8 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
     # A whole image's fresh pixels where nothing projects get the outputs of one of them: the
     # mode finishes a fresh state there without a ray, and the pixel is copied over the run
     # of such tiles (a fresh state's outputs do not depend on the pixel; .outputs.copy_pixel).
-    fresh = footed and final and not load and not store
+    # Not when some pixels are to be left alone (``t_range``).
+    fresh = footed and final and not load and not store and not ranged
     tc0 = c0
     while tc0 < c1:
         tc1 = min(c1, tc0 + tile)

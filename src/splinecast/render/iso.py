@@ -4,13 +4,16 @@ Two methods share the driver, the model's pieces and the block hierarchy:
 
 * ``exact`` (default): per piece whose range holds the isovalue, the first root of its polynomial
   (:func:`splinecast.roots.pieces.poly_first_root`: guaranteed solvers for every form) ends the
-  ray; the normal is the model's analytic gradient at the hit.
+  ray; the normal is the gradient of the model's shading field at the hit (``normals``,
+  :mod:`.shading`: by default a smooth field for the models that are only continuous, the
+  model's own analytic gradient with ``normals="exact"`` and for the C1 and C2 models).
 * ``sampled``: the reference "as common viewers do": samples every ``step`` voxels along the ray
   from its entry into the volume (plus the exit point), and the first sign change refined by
   bisection on the model's reconstruction. It exists to be compared with the exact method.
 
-State per ray: the hit parameter and the world gradient there, and for the sampled method the
-last sample. Partial results of two segments of a ray combine by keeping the nearer hit.
+State per ray: the hit parameter and the world shading gradient there, and for the sampled method
+the last sample, in whose place a hit keeps the model's own derivative along the ray (which side
+the ray enters). Partial results of two segments of a ray combine by keeping the nearer hit.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from .frame import Frame
 from .mode_api import no_scratch, register, unchanged_begin
 from .outputs import ALL_OUTPUTS, buffer
 from .pixels import store_hit, store_miss
-from .shading import Shading
+from .shading import Shading, normals_code, smooth_gradient
 
 __all__ = ["IsoMode", "Iso", "METHODS", "combine_iso"]
 
@@ -41,8 +44,8 @@ METHODS = {"exact": 0, "sampled": 1}
 _BISECTION_STEPS = 60
 
 #: Kernel parameters: isovalue, method code, sampling step (voxels), which side is inside,
-#: packed shading (:meth:`Shading.as_array`).
-IsoMode = namedtuple("IsoMode", ["iso", "method", "step", "inside_high", "shading"])
+#: packed shading (:meth:`Shading.as_array`), normals code (:data:`.shading.NORMALS`).
+IsoMode = namedtuple("IsoMode", ["iso", "method", "step", "inside_high", "shading", "normals"])
 
 
 @jit()
@@ -91,11 +94,23 @@ def _done(mode, st):
 
 
 @jit()
-def _hit(grid, scratch, ray, t):
-    """State of a hit at ``t`` found by sampling: the gradient from the model at that point."""
-    _, gx, gy, gz = value_gradient_at(grid, scratch, ray[6] + t * ray[9], ray[7] + t * ray[10],
-                                      ray[8] + t * ray[11])
-    return t, gx / ray[12], gy / ray[13], gz / ray[14], math.nan, math.nan
+def _hit(mode, grid, scratch, ray, t):
+    """State of a hit at ``t`` found by sampling: the shading gradient at that point."""
+    x, y, z = ray[6] + t * ray[9], ray[7] + t * ray[10], ray[8] + t * ray[11]
+    _, gx, gy, gz = value_gradient_at(grid, scratch, x, y, z)
+    return _hit_state(mode, grid, scratch, ray, t, x, y, z, gx, gy, gz)
+
+
+@jit(inline="always")
+def _hit_state(mode, grid, scratch, ray, t, x, y, z, gx, gy, gz):
+    """The state of a hit at ``t``, at traversal-space point ``(x, y, z)``, where the model's
+    own index-space gradient is ``g``: the world shading gradient, and in place of the sampled
+    method's last sample (done with once there is a hit), the model's own derivative along the
+    ray, whose sign says which side the ray enters (:func:`.pixels.store_hit`)."""
+    slope = gx * ray[9] + gy * ray[10] + gz * ray[11]  # = world gradient . unit ray
+    hx, hy, hz = smooth_gradient(mode.normals, grid, scratch, ray, x, y, z, gx / ray[12],
+                                 gy / ray[13], gz / ray[14])
+    return t, hx, hy, hz, math.nan, slope
 
 
 @jit()
@@ -106,17 +121,17 @@ def _sample(grid, scratch, ray, t, iso):
 
 
 @jit()
-def _bisect(grid, scratch, ray, iso, ta, ga, tb, gb):
+def _bisect(mode, grid, scratch, ray, ta, ga, tb, gb):
     """Refine a sign change of the sampled method between ``ta`` and ``tb``."""
     if gb != 0.0:
         for _ in range(_BISECTION_STEPS):
             tm = 0.5 * (ta + tb)
-            gm = _sample(grid, scratch, ray, tm, iso)
+            gm = _sample(grid, scratch, ray, tm, mode.iso)
             if (gm < 0.0) == (ga < 0.0) and gm != 0.0:
                 ta, ga = tm, gm
             else:
                 tb, gb = tm, gm
-    return _hit(grid, scratch, ray, tb)
+    return _hit(mode, grid, scratch, ray, tb)
 
 
 @jit()
@@ -150,13 +165,13 @@ def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
         g = lo - mode.iso if lo > mode.iso else hi - mode.iso
         if prev_g == prev_g and (prev_g < 0.0) != (g < 0.0):
             gs = _sample(grid, scratch, ray, ts, mode.iso)
-            return _bisect(grid, scratch, ray, mode.iso, prev_t, prev_g, ts, gs)
+            return _bisect(mode, grid, scratch, ray, prev_t, prev_g, ts, gs)
     else:
         g = _sample(grid, scratch, ray, ts, mode.iso)
         if prev_g == prev_g and ((prev_g < 0.0) != (g < 0.0) or g == 0.0):
-            return _bisect(grid, scratch, ray, mode.iso, prev_t, prev_g, ts, g)
+            return _bisect(mode, grid, scratch, ray, prev_t, prev_g, ts, g)
         if prev_g != prev_g and g == 0.0:
-            return _hit(grid, scratch, ray, ts)
+            return _hit(mode, grid, scratch, ray, ts)
     last = anchor + math.floor((t1 - anchor) / dt) * dt
     return st[0], st[1], st[2], st[3], last, g
 
@@ -167,11 +182,10 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
     if mode.method == 0:
         s = poly_first_root(poly, mode.iso)
         if s == s:  # not NaN
-            gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
-                                  ay + s * (by - ay), az + s * (bz - az))
-            # Index-space gradient to world space: d/dx_world = d/dx_index / spacing.
-            return (t0 + s * (t1 - t0), gx / ray[12], gy / ray[13], gz / ray[14], st[4],
-                    st[5])
+            px, py, pz = ax + s * (bx - ax), ay + s * (by - ay), az + s * (bz - az)
+            gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, px, py, pz)
+            return _hit_state(mode, grid, scratch, ray, t0 + s * (t1 - t0), i + px, j + py,
+                              k + pz, gx, gy, gz)
         return st
     return _consume_sampled(mode, grid, scratch, poly, t0, t1, ray, st)
 
@@ -188,9 +202,9 @@ def _consume_sampled(mode, grid, scratch, poly, t0, t1, ray, st):
         s = (ts - t0) / (t1 - t0) if t1 > t0 else 0.0
         g = poly_value(poly, s) - iso
         if prev_g == prev_g and ((prev_g < 0.0) != (g < 0.0) or g == 0.0):
-            return _bisect(grid, scratch, ray, iso, prev_t, prev_g, ts, g)
+            return _bisect(mode, grid, scratch, ray, prev_t, prev_g, ts, g)
         if prev_g != prev_g and g == 0.0:
-            return _hit(grid, scratch, ray, ts)
+            return _hit(mode, grid, scratch, ray, ts)
         prev_t, prev_g = ts, g
         m += 1
         ts = anchor + m * dt
@@ -205,7 +219,7 @@ def _ray_end(mode, grid, scratch, st, ray, t_far):
     if mode.method == 1 and st[0] == math.inf and prev_g == prev_g and prev_t < t_far:
         g = _sample(grid, scratch, ray, t_far, mode.iso)
         if (prev_g < 0.0) != (g < 0.0) or g == 0.0:
-            return _bisect(grid, scratch, ray, mode.iso, prev_t, prev_g, t_far, g)
+            return _bisect(mode, grid, scratch, ray, prev_t, prev_g, t_far, g)
     return st
 
 
@@ -216,7 +230,8 @@ def _finish(mode, out, row, col, st, ray):
         store_miss(row, col, mode.shading, rgba, depth, position, normal, face)
     else:
         store_hit(row, col, st[0], ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], st[1], st[2],
-                  st[3], mode.inside_high, mode.shading, rgba, depth, position, normal, face)
+                  st[3], mode.inside_high, mode.shading, rgba, depth, position, normal, face,
+                  st[5])
 
 
 register(IsoMode,
@@ -249,8 +264,10 @@ def combine_iso(front: tuple, back: tuple, out: tuple) -> None:
             od[row, col] = src_d[row, col]
             for c in range(3):
                 og[row, col, c] = src_g[row, col, c]
-            op[row, col, 0] = bp[row, col, 0]
-            op[row, col, 1] = bp[row, col, 1]
+            # The back's last sample continues the ray; a hit's slope stays with its hit.
+            src_p = fp if fd[row, col] < math.inf and fd[row, col] <= bd[row, col] else bp
+            op[row, col, 0] = src_p[row, col, 0]
+            op[row, col, 1] = src_p[row, col, 1]
 
 
 class Iso:
@@ -270,13 +287,15 @@ class Iso:
         Colours and lighting.
     outputs : set of str, optional
         The Frame's buffers to fill (:mod:`.outputs`; default all).
+    normals : {"smooth", "exact"}
+        Shade with the model's shading field or its own gradient (:mod:`.shading`).
     """
 
     name = "iso"
 
     def __init__(self, iso: float, method: str = "exact", step: float = 0.25,
                  inside: str = "high", shading: Shading | None = None,
-                 outputs: frozenset[str] = ALL_OUTPUTS) -> None:
+                 outputs: frozenset[str] = ALL_OUTPUTS, normals: str = "smooth") -> None:
         self.outputs = outputs
         if method not in METHODS:
             raise ParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -284,8 +303,9 @@ class Iso:
             limits.check_finite_number(step, "step", lo=limits.MIN_STEP)
         self.method = method
         self.shading = shading or Shading()
+        self.normals = normals
         self.params = IsoMode(float(iso), METHODS[method], float(step), inside == "high",
-                              self.shading.as_array())
+                              self.shading.as_array(), normals_code(normals))
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Block flags for the isovalue (``flags`` overrides, e.g. a model's own), and, for

@@ -8,8 +8,9 @@ bone beneath (Koch 2009, "Blending kubischer C1-Splines"). A ray stops once its 
 reaches ``1 - 1e-4``.
 
 Front and back faces of a surface get the same colour (a translucent shell is seen from both
-sides); lighting and effects are those of :func:`splinecast.render.effects.surface_rgb`. The
-first crossing gives the pixel's depth, position, normal and face.
+sides); lighting and effects are those of :func:`splinecast.render.effects.surface_rgb`, with
+the normals of the model's shading field (``normals``, :mod:`.shading`) as for a single
+isosurface. The first crossing gives the pixel's depth, position, normal and face.
 
 Partial results of two segments of a ray combine with "over": the front colour plus the back
 colour times the front's remaining transparency.
@@ -33,7 +34,7 @@ from .effects import NO_EFFECTS, SurfaceEffects, surface_rgb
 from .frame import Frame
 from .mode_api import flagged_block_size, register, unchanged_begin, unchanged_end, unchanged_skip
 from .outputs import ALL_OUTPUTS, buffer
-from .shading import Shading
+from .shading import Shading, normals_code, smooth_gradient
 
 __all__ = ["MultiIsoMode", "MultiIso", "combine_multi_iso"]
 
@@ -41,9 +42,9 @@ __all__ = ["MultiIsoMode", "MultiIso", "combine_multi_iso"]
 OPAQUE = 1.0 - 1e-4
 
 #: Kernel parameters: isovalues, one RGB and one opacity each, which side is inside, packed
-#: shading and effects.
+#: shading and effects, normals code (:data:`.shading.NORMALS`).
 MultiIsoMode = namedtuple("MultiIsoMode", ["isos", "colors", "opacity", "inside_high", "shading",
-                                           "effects"])
+                                           "effects", "normals"])
 
 
 @jit()
@@ -128,9 +129,12 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         if q == last_q and th <= last_t + 1e-12 * (1.0 + abs(th)):
             continue  # the same crossing seen again on a shared face of two pieces
         last_t, last_q = th, q
-        gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
-                              ay + s * (by - ay), az + s * (bz - az))
-        gx, gy, gz = gx / ray[12], gy / ray[13], gz / ray[14]
+        px, py, pz = ax + s * (bx - ax), ay + s * (by - ay), az + s * (bz - az)
+        gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, px, py, pz)
+        # Which side the ray enters: the model's own derivative along the ray.
+        slope = gx * ray[9] + gy * ray[10] + gz * ray[11]
+        gx, gy, gz = smooth_gradient(mode.normals, grid, scratch, ray, i + px, j + py, k + pz,
+                                     gx / ray[12], gy / ray[13], gz / ray[14])
         norm = math.sqrt(gx * gx + gy * gy + gz * gz)
         if norm > 0.0:
             scale = (-1.0 if mode.inside_high else 1.0) / norm
@@ -148,7 +152,8 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         layers += 1
         if t_first == math.inf:
             t_first, fnx, fny, fnz = th, nxw, nyw, nzw
-            face = 1 if nxw * ux + nyw * uy + nzw * uz <= 0.0 else -1
+            front = slope >= 0.0 if mode.inside_high else slope <= 0.0
+            face = 1 if front else -1
         if acc_a >= OPAQUE:
             break
     return (acc_r, acc_g, acc_b, acc_a, t_first, fnx, fny, fnz, face, layers, last_t, last_q)
@@ -268,6 +273,8 @@ class MultiIso:
     outputs : set of str, optional
         The Frame's buffers to fill (:mod:`.outputs`; default all; ``"stats"`` includes the
         per-ray layer counts).
+    normals : {"smooth", "exact"}
+        Shade with the model's shading field or its own gradient (:mod:`.shading`).
     """
 
     name = "iso"
@@ -275,8 +282,9 @@ class MultiIso:
     def __init__(self, isos: list[float], colors: Any = None, opacity: Any = None,
                  inside: str = "high", shading: Shading | None = None,
                  effects: SurfaceEffects | None = None,
-                 outputs: frozenset[str] = ALL_OUTPUTS) -> None:
+                 outputs: frozenset[str] = ALL_OUTPUTS, normals: str = "smooth") -> None:
         self.outputs = outputs
+        self.normals = normals
         count = len(isos)
         if colors is None:
             order = np.argsort(np.argsort(isos))
@@ -289,7 +297,8 @@ class MultiIso:
         self.params = MultiIsoMode(
             np.asarray(self.isos, np.float64), _per_surface(colors, count, 3, "colors"),
             _per_surface(opacity, count, 1, "opacity"), inside == "high",
-            self.shading.as_array(), effects.as_array() if effects else NO_EFFECTS)
+            self.shading.as_array(), effects.as_array() if effects else NO_EFFECTS,
+            normals_code(normals))
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Flags of the blocks that can hold any of the isovalues."""

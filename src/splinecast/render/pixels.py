@@ -42,14 +42,16 @@ def store_hit(
     row: int, col: int, t: float, wx: float, wy: float, wz: float, ux: float, uy: float,
     uz: float, gx: float, gy: float, gz: float, inside_high: bool, shading: np.ndarray,
     rgba: np.ndarray, depth: np.ndarray, position: np.ndarray, normal: np.ndarray,
-    face: np.ndarray,
+    face: np.ndarray, slope: float = math.nan,
 ) -> None:
-    """Store a hit at ray parameter ``t`` with world-space field gradient ``g``.
+    """Store a hit at ray parameter ``t`` with world-space shading gradient ``g``.
 
     The stored normal is the unit *outward* normal: ``-g/|g|`` when the object is where values
     are high, ``+g/|g|`` when it is where they are low. A zero gradient gets a normal facing the
-    viewer. A face is front-facing when the ray enters the object through it. Buffers with no
-    rows were not asked for and are left alone.
+    viewer. A face is front-facing when the ray enters the object through it: where the field
+    rises along the ray (``slope``, the model's own derivative along the unit ray at the hit)
+    when the object is where values are high, where it falls otherwise; without a slope (NaN),
+    where the normal faces the ray. Buffers with no rows were not asked for and are left alone.
     """
     if depth.shape[0] != 0:
         depth[row, col] = t
@@ -67,7 +69,10 @@ def store_hit(
         normal[row, col, 0] = nx
         normal[row, col, 1] = ny
         normal[row, col, 2] = nz
-    front = nx * ux + ny * uy + nz * uz <= 0.0
+    if slope == slope:
+        front = slope >= 0.0 if inside_high else slope <= 0.0
+    else:
+        front = nx * ux + ny * uy + nz * uz <= 0.0
     if face.shape[0] != 0:
         face[row, col] = 1 if front else -1
     if rgba.shape[0] != 0:

@@ -34,9 +34,10 @@ def pixel_ray(basis: np.ndarray, row: int, col: int, width: int, height: int) ->
     ``width`` and ``height`` (the output's size) are not needed: the basis carries the full
     image's size and the tile's offset (:meth:`Camera.pixel_basis`).
     """
-    # Offsets and full size from the basis: a tile camera's pixels are those of the full image.
-    sx = ((col + basis[16] + 0.5) / basis[18] * 2.0 - 1.0) * basis[12]
-    sy = (1.0 - (row + basis[17] + 0.5) / basis[19] * 2.0) * basis[13]
+    # Offsets and full size from the basis: a tile camera's pixels are those of the full image;
+    # a shifted camera's rays pass off their pixels' centres (adding a zero shift is exact).
+    sx = ((col + basis[16] + 0.5 + basis[20]) / basis[18] * 2.0 - 1.0) * basis[12]
+    sy = (1.0 - (row + basis[17] + 0.5 + basis[21]) / basis[19] * 2.0) * basis[13]
     if basis[14] != 0.0:
         wx = basis[0] + sx * basis[6] + sy * basis[9]
         wy = basis[1] + sx * basis[7] + sy * basis[10]

@@ -23,9 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from .._jit import jit
 from ..accel.active_cells import CubeBoundHierarchy, block_ranges
 from ..accel.minmax import BLOCK_SHIFTS, PAIR_SHIFT, MinMaxHierarchy
 from ..errors import ParameterError
+from ..models.shading_field import halo_box
 from .clipping import NO_PLANES
 from .driver import GEOM_SIZE, band_order, finalize, reset_state, trace
 from .footprint import (
@@ -38,7 +40,8 @@ from .footprint import (
 )
 
 __all__ = ["Grid", "make_grid", "brick_grid", "render_grid", "new_state", "trace_segment",
-           "finish_state", "combine_states", "counters", "screen_footprint"]
+           "finish_state", "combine_states", "counters", "screen_footprint", "trace_pixels",
+           "pixel_ranges"]
 
 _NO_RANGE = np.zeros((0, 0, 2))
 
@@ -112,7 +115,7 @@ def _hierarchy(model: Any, array: np.ndarray, n_cells: tuple[int, int, int]) -> 
 
 def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 0),
               level_origin: Any = None, level_spacing: Any = None, domain: Any = None,
-              level_cells: Any = None) -> Grid:
+              level_cells: Any = None, halo: tuple[np.ndarray, np.ndarray] | None = None) -> Grid:
     """A :class:`Grid` of ``model`` over ``array`` (default: its whole prepared array).
 
     Parameters
@@ -131,6 +134,10 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
         ``domain()``); the same for every brick of a level.
     level_cells : 3 ints, optional
         The level's cells per axis (default: this grid's plus its offset).
+    halo : (ndarray, ndarray), optional
+        For a model with a shading field that reads beyond the cells' support
+        (``model.shading_halo``, :mod:`splinecast.models.shading_field`): the halo array and
+        its box. Default: ``array`` itself, real where it lies inside the level.
     """
     whole = array is None
     arr = model.prepared if whole else np.asarray(array)
@@ -147,20 +154,43 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
     geom[10:13] = lo
     geom[13:16] = hi
     geom[16:19] = (np.asarray(offset) + n_cells) if level_cells is None else level_cells
-    kernel = model.kernel_grid() if whole else model.kernel_grid(arr)
+    if whole:
+        kernel = model.kernel_grid()
+    elif getattr(model, "shading_halo", 0):
+        if halo is None:
+            # The array's elements are the level's prepared values from ``offset`` on; those
+            # of the level itself are real (a pyramid brick's ghosts beyond its ends are not).
+            last_cell = np.asarray(geom[16:19], np.int64) + int(model.support) - 1
+            first = np.asarray(offset, np.int64)
+            real_lo = np.clip(-first, 0, np.asarray(arr.shape) - 1)
+            real_hi = np.clip(last_cell - first, 0, np.asarray(arr.shape) - 1)
+            halo = (arr, halo_box((0, 0, 0), real_lo, real_hi))
+        kernel = model.kernel_grid(arr, halo=halo)
+    else:
+        kernel = model.kernel_grid(arr)
     return Grid(kernel, _hierarchy(model, arr, n_cells), geom, n_cells,
                 getattr(model, "band_rows", 1), getattr(model, "tile", 0))
 
 
 def brick_grid(model: Any, lo: Any, hi: Any) -> Grid:
     """The grid of the brick owning cells ``[lo, hi)`` (per axis) of ``model``'s whole grid,
-    cut from ``model.prepared`` with its ghost layers."""
+    cut from ``model.prepared`` with its ghost layers (and, for a model whose shading field
+    reads further, ``model.shading_halo``, the halo of that field around them)."""
     lo = [int(v) for v in lo]
     hi = [int(v) for v in hi]
     s = int(model.support)
-    block = model.prepared[lo[0]:hi[0] + s, lo[1]:hi[1] + s, lo[2]:hi[2] + s]
-    whole = tuple(int(n) - s for n in model.prepared.shape)
-    return make_grid(model, block, offset=lo, level_cells=whole)
+    prepared = model.prepared
+    block = prepared[lo[0]:hi[0] + s, lo[1]:hi[1] + s, lo[2]:hi[2] + s]
+    whole = tuple(int(n) - s for n in prepared.shape)
+    halo = None
+    h = int(getattr(model, "shading_halo", 0))
+    if h:
+        a = [max(0, v - h) for v in lo]
+        b = [min(n, v + s + h) for v, n in zip(hi, prepared.shape, strict=True)]
+        first = np.asarray(lo) - np.asarray(a)
+        halo = (np.ascontiguousarray(prepared[a[0]:b[0], a[1]:b[1], a[2]:b[2]]),
+                halo_box(first, (0, 0, 0), np.asarray(b) - np.asarray(a) - 1))
+    return make_grid(model, block, offset=lo, level_cells=whole, halo=halo)
 
 
 def counters(height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -217,14 +247,15 @@ def screen_footprint(grid: Grid, mode: Any, camera: Any, blocks: tuple) -> np.nd
 
 def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLANES,
                 flags: tuple | None = None, count: bool = True,
-                footprint: bool = True) -> tuple[tuple, tuple]:
+                footprint: Any = True) -> tuple[tuple, tuple]:
     """Trace a whole image through one grid; returns ``(outputs, counters)``.
 
     ``flags`` replaces the hierarchy's own classification for the iso mode. Without ``count``
     the per-ray statistics are not gathered: the counters returned are one uninitialised array
     (never written, so never paged in) standing for all three. With ``footprint``, rays are
     traced only where and as deep as the blocks the mode can see project
-    (:func:`screen_footprint`; the image is the same, the frame faster).
+    (:func:`screen_footprint`; the image is the same, the frame faster); ``footprint`` may
+    also be that footprint, computed before.
     """
     h, w = camera.height, camera.width
     out = mode.output(h, w)
@@ -234,10 +265,56 @@ def render_grid(grid: Grid, mode: Any, camera: Any, planes: np.ndarray = NO_PLAN
         unused = np.empty((h, w), np.int32)
         stats = (unused, unused, unused)
     blocks = mode.blocks(grid.hierarchy, flags)
-    tiles = screen_footprint(grid, mode, camera, blocks) if footprint else NO_FOOTPRINT
+    if isinstance(footprint, np.ndarray):
+        tiles = footprint
+    else:
+        tiles = screen_footprint(grid, mode, camera, blocks) if footprint else NO_FOOTPRINT
     _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, _NO_RANGE, False, False, True,
          stats, count, tiles)
     return out, stats
+
+
+def pixel_ranges(mask: np.ndarray) -> np.ndarray:
+    """The ``t_range`` (:mod:`.driver`) that traces the pixels where ``mask`` is true and leaves
+    the others alone, for :func:`trace_pixels` (one for every pass over the same pixels)."""
+    out = np.empty((*mask.shape, 2))
+    _fill_ranges(np.ascontiguousarray(mask, np.bool_), out)
+    return out
+
+
+@jit()
+def _fill_ranges(mask, out):
+    # Serial: a light pass (parallel ones wait for their slowest thread on a loaded machine).
+    for row in range(mask.shape[0]):
+        for col in range(mask.shape[1]):
+            if mask[row, col]:
+                out[row, col, 0] = -np.inf
+                out[row, col, 1] = np.inf
+            else:
+                out[row, col, 0] = np.inf
+                out[row, col, 1] = -np.inf
+
+
+def trace_pixels(grid: Grid, mode: Any, camera: Any, ranges: np.ndarray,
+                 planes: np.ndarray = NO_PLANES, flags: tuple | None = None,
+                 footprint: np.ndarray = NO_FOOTPRINT) -> tuple:
+    """Trace only the pixels of ``camera``'s image that ``ranges`` (:func:`pixel_ranges`)
+    names, as :func:`render_grid` traces them; returns ``mode``'s outputs, whose other pixels
+    are left as allocated (undefined).
+
+    ``footprint`` is the screen footprint of the grid's blocks for ``camera``'s window
+    (:func:`screen_footprint`, as :func:`render_grid` computed it for the frame), or none. A
+    camera shifted inside its pixels (:meth:`~splinecast.Camera.shifted`) may use its
+    unshifted camera's: a footprint is widened by a pixel. This is how antialiasing traces its
+    extra rays (:mod:`.antialias`).
+    """
+    h, w = camera.height, camera.width
+    out = mode.output(h, w)
+    unused = np.empty((h, w), np.int32)
+    blocks = mode.blocks(grid.hierarchy, flags)
+    _run(grid, mode, camera, blocks, mode.state(0, 0), out, planes, ranges, False, False, True,
+         (unused, unused, unused), False, footprint)
+    return out
 
 
 def new_state(mode: Any, camera: Any) -> tuple:

@@ -6,6 +6,15 @@ ray crosses it from outside the object into it ("inside" is the side of the isov
 volume's ``metadata["inside"]``: ``"high"`` for CT/MRI-like data, ``"low"`` for distance fields).
 Back faces appear where the object is cut by the volume box or a clip plane, or when the camera is
 inside it.
+
+Normals (``normals=``, :data:`NORMALS`): ``"smooth"`` (the default) shades with the gradient of
+the model's shading field at the exact hit, ``"exact"`` with the gradient of the model's own
+reconstruction. They differ for the models that are only continuous (trilinear, the linear
+B-spline), whose gradient jumps between cells: their shading field is the cubic B-spline of the
+voxels (:mod:`splinecast.models.shading_field`). The C1 and C2 models shade with their own
+gradient either way. Which side a hit faces is always decided by the model's own gradient
+(which way the ray crosses the surface it hit), also where the smooth normal, at a grazing hit,
+points the other way.
 """
 
 from __future__ import annotations
@@ -16,8 +25,25 @@ import numpy as np
 
 from .._jit import jit
 from ..errors import ParameterError
+from ..models.pieces import separate_shading, shading_gradient_at
 
-__all__ = ["Shading", "shade_pixel"]
+__all__ = ["Shading", "shade_pixel", "NORMALS", "normals_code", "smooth_gradient"]
+
+#: Normal choices accepted by ``Scene.render(..., normals=...)``: name -> kernel code.
+NORMALS = {"smooth": 1, "exact": 0}
+
+
+def normals_code(normals: str) -> int:
+    """The kernel code of a ``normals`` choice.
+
+    Raises
+    ------
+    ParameterError
+        For a name not in :data:`NORMALS`.
+    """
+    if not isinstance(normals, str) or normals not in NORMALS:
+        raise ParameterError(f"normals must be one of {', '.join(NORMALS)}, got {normals!r}")
+    return NORMALS[normals]
 
 
 def _rgb(value: object, name: str, n: int = 3) -> tuple[float, ...]:
@@ -100,3 +126,14 @@ def shade_pixel(
     g = params[base + 1] * (amb + dif * cos_theta) + spec
     b = params[base + 2] * (amb + dif * cos_theta) + spec
     return min(r, 1.0), min(g, 1.0), min(b, 1.0)
+
+
+@jit(inline="always")
+def smooth_gradient(normals, grid, scratch, ray, x, y, z, gx, gy, gz):
+    """The world gradient a hit is shaded with: the model's own ``g`` (world units), or with
+    ``normals == 1`` and a model that shades with a field of its own, that field's gradient at
+    the traversal-space point ``(x, y, z)`` (``ray`` as :mod:`.mode_api` gives it)."""
+    if normals != 1 or not separate_shading(grid):
+        return gx, gy, gz
+    hx, hy, hz = shading_gradient_at(grid, scratch, x, y, z)
+    return hx / ray[12], hy / ray[13], hz / ray[14]

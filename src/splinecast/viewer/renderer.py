@@ -145,9 +145,12 @@ class FrameRenderer:
     @staticmethod
     def _pass_options(request: RenderRequest, step: str) -> dict[str, Any]:
         """What a pass renders differently from the request: previews of MIP and minIP sample
-        on planes (:data:`PREVIEW_MIP`)."""
+        on planes (:data:`PREVIEW_MIP`); previews are not antialiased (the settled frames and
+        screenshots are, as ``Scene.render`` does by default)."""
         if step in PREVIEW_PASSES and request.mode in ("mip", "minip"):
-            return dict(PREVIEW_MIP)
+            return {**PREVIEW_MIP, "samples": 1}
+        if step in PREVIEW_PASSES:
+            return {"samples": 1}
         return {}
 
     def _cost_key(self, request: RenderRequest, step: str) -> tuple:

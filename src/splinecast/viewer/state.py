@@ -43,7 +43,7 @@ from ..render.clipping import make_planes
 from ..render.defaults import auto_colormap, auto_iso, auto_transfer_function, auto_window
 from ..render.dvr import DEFAULT_SETTINGS, DVRSettings
 from ..render.mip import check_tolerance
-from ..render.shading import Shading
+from ..render.shading import NORMALS, Shading
 from ..scene import MODES, check_iso
 from ..transfer import TransferFunction, check_colormap
 from ..volume import Volume
@@ -69,7 +69,7 @@ _ZOOM_RANGE = (1e-3, 1e3)
 _PAN_LIMIT = 100.0
 
 _TOP_FIELDS = ("model", "mode", "camera", "size", "iso", "opacity", "window", "colormap",
-               "tolerance", "tf", "dvr", "lighting", "clip", "crop")
+               "tolerance", "tf", "dvr", "lighting", "clip", "crop", "normals")
 _CAMERA_FIELDS = ("azimuth", "elevation", "zoom", "pan", "fov", "ortho")
 _LIGHTING_FIELDS = ("ambient", "diffuse", "specular", "shininess")
 _DVR_FIELDS = ("step", "shade", "preintegration", "termination", "sampling")
@@ -162,6 +162,8 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "lighting": {name: getattr(shading, name) for name in _LIGHTING_FIELDS},
         "clip": [],
         "crop": None,
+        # Isosurfaces shaded with a smooth field's normals (Scene.render's default).
+        "normals": "smooth",
     }
 
 
@@ -360,6 +362,7 @@ def _mode_options(state: dict[str, Any], volume: Any) -> dict[str, Any]:
         options["crop"] = crop
     if mode == "iso":
         options.update(_iso_options(state, volume))
+        options["normals"] = _check_choice(state["normals"], NORMALS, "normals")
     elif mode in ("mip", "minip"):
         window = state["window"]
         if window is not None:

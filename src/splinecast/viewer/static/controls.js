@@ -235,6 +235,7 @@
         if (Number.isFinite(v) && v > 0) { this.state.dvr.step = v; this.onChange(false); }
       });
       $("dvr-shade").addEventListener("change", (e) => { this.state.dvr.shade = e.target.checked; this.onChange(false); });
+      $("iso-smooth").addEventListener("change", (e) => { this.state.normals = e.target.checked ? "smooth" : "exact"; this.onChange(false); });
       $("dvr-termination").addEventListener("change", (e) => {
         // Checked: the server's default threshold (what Scene.render uses without settings).
         this.state.dvr.termination = e.target.checked ? (this.hello.defaults.dvr.termination ?? 0.99) : null;
@@ -355,6 +356,7 @@
       $("tf-colormap").value = s.tf.colormap || "viridis";
       $("dvr-step").value = s.dvr.step;
       $("dvr-shade").checked = s.dvr.shade;
+      $("iso-smooth").checked = s.normals !== "exact";
       $("dvr-termination").checked = s.dvr.termination !== null;
       this._drawTf();
       $("ortho").checked = s.camera.ortho;
