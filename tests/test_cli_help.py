@@ -189,6 +189,12 @@ def _check_external(stated: str) -> None:
     assert not sc.errors.limits.allow_external_default() or pytest.skip("set in the environment")
 
 
+def _check_missing(stated: str) -> None:
+    # What the error says is run in test_zarr_bounded.py (exit 2, one line naming the chunk, no
+    # image); here the help's words for it.
+    assert stated == "an error naming the chunk"
+
+
 def _check_movie_output(stated: str) -> None:
     assert stated.startswith("NAME.mp4, or NAME-MODE.mp4")
     assert derived_output("demo:NAME?size=8", "", ".mp4").name == "NAME.mp4"
@@ -224,6 +230,7 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("render", "--lod"): _check_lod,
     ("render", "--cut"): _check_cut,
     ("render", "--allow-external-data"): _check_external,
+    ("render", "--allow-missing"): _check_missing,
     ("view", "--model"): _check_view_model,
     ("view", "--iso"): _check_view_iso,
     ("view", "--budget"): _check_budget,
@@ -235,6 +242,7 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("movie", "--iso"): _check_iso,
     ("movie", "--lod"): _check_wavelet_lod,
     ("movie", "--allow-external-data"): _check_external,
+    ("movie", "--allow-missing"): _check_missing,
 }
 for _option in ("--model", "--root-finder", "--iterations", "--step", "--inside", "--background",
                 "--color", "--colormap", "--window", "--preintegration", "--table-layout"):

@@ -258,7 +258,7 @@ def test_save_and_save_depth_round_trip(small_frame, tmp_path):
 
 
 @pytest.mark.parametrize("method, name, word", [
-    ("save", "out.jpg", "must be saved as .png"),
+    ("save", "out.gif", "must be saved as .png"),
     ("save", "out", "must be saved as .png"),
     ("save_depth", "depth.txt", "must be saved as .npy"),
     ("save", "missing/out.png", "does not exist"),

@@ -50,12 +50,18 @@ def test_defaults_without_metadata_are_those_of_splinecast_render():
     state = default_state(vol)
     assert state["iso"] == sc.auto_iso(vol)
     assert 0.0 < state["iso"] < 104.0
-    assert state["window"] == list(sc.auto_window(vol))
+    # No window in the state: each projection takes its own automatic one, as Scene.render.
+    assert state["window"] is None
+    for mode in ("mip", "minip"):
+        window = parse({"mode": mode}, vol, state).options["window"]
+        assert tuple(window) == sc.auto_window(vol, mode)
+    assert sc.auto_window(vol, "mip") != sc.auto_window(vol, "minip")
+    hello = protocol.hello_message(vol, state, {"max_pixels": 10})
+    assert hello["auto_window"] == {m: list(sc.auto_window(vol, m)) for m in ("mip", "minip")}
     tf = sc.TransferFunction.from_dict(state["tf"])
     assert tf.to_dict() == sc.auto_transfer_function(vol).to_dict()
     assert 0.0 <= tf.domain[0] < tf.domain[1] <= 104.0  # within the data range
     assert state["colormap"] == sc.auto_colormap(vol) == "gray"
-    assert default_state(vol, mode="minip")["window"] == list(sc.auto_window(vol, "minip"))
 
 
 def test_signed_data_opens_with_the_diverging_map_and_any_catalog_name_renders():
@@ -64,7 +70,7 @@ def test_signed_data_opens_with_the_diverging_map_and_any_catalog_name_renders()
     vol = sc.Volume(data)
     state = default_state(vol, mode="mip")
     assert state["colormap"] == sc.transfer.DIVERGING
-    lo, hi = state["window"]
+    lo, hi = parse({}, vol, state).options["window"]
     assert lo == -hi < 0
     hello = protocol.hello_message(vol, state, {"max_pixels": 10})
     assert sc.transfer.DIVERGING in hello["colormaps"]

@@ -56,7 +56,8 @@ except ImportError:  # pragma: no cover - a numba without this class: keep its b
     IndexDataCacheFile = None  # type: ignore[assignment,misc]
 
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
-           "call_with_first_classes", "package_stamp", "reporting_compiles"]
+           "call_with_first_classes", "package_stamp", "reporting_compiles", "CompileNeeded",
+           "forbidding_compiles"]
 
 
 class _CopyModuleSharingScopes:
@@ -240,6 +241,8 @@ def _compile_once(dispatcher: Any, index_path: str) -> None:
         args, _ = sigutils.normalize_signature(sig)
         if tuple(args) in dispatcher.overloads:
             return original(sig)
+        if getattr(_FORBIDDEN, "depth", 0):
+            return _load_or_refuse(dispatcher, sig, tuple(args))
         path = _compile_lock_path(index_path, tuple(args))
         with global_compiler_lock, contextlib.ExitStack() as stack:
             if path not in _HELD:
@@ -252,6 +255,48 @@ def _compile_once(dispatcher: Any, index_path: str) -> None:
             return original(sig)
 
     dispatcher.compile = compile
+
+
+class CompileNeeded(RuntimeError):
+    """Raised under :func:`forbidding_compiles` where a kernel would have to be compiled."""
+
+
+#: Per thread: how many :func:`forbidding_compiles` blocks are open.
+_FORBIDDEN = threading.local()
+
+
+@contextlib.contextmanager
+def forbidding_compiles() -> Iterator[None]:
+    """In this thread, load kernels from memory or the on-disk cache only: a kernel that would
+    have to be compiled raises :class:`CompileNeeded` instead (before any work on it).
+
+    The viewer renders under it, so a new model or mode never stops the frames: it prepares
+    the kernels on another thread while the page goes on showing what is ready. Covers the
+    functions made with :func:`jit` (every splinecast kernel); other threads are unaffected.
+    """
+    _FORBIDDEN.depth = getattr(_FORBIDDEN, "depth", 0) + 1
+    try:
+        yield
+    finally:
+        _FORBIDDEN.depth -= 1
+
+
+def _load_or_refuse(dispatcher: Any, sig: Any, args: tuple) -> Any:
+    """The entry point of ``sig`` from memory or the disk cache, as numba's own
+    ``Dispatcher.compile`` finds it before it compiles; :class:`CompileNeeded` otherwise."""
+    with global_compiler_lock:
+        existing = dispatcher.overloads.get(args)
+        if existing is not None:
+            return existing.entry_point
+        cres = dispatcher._cache.load_overload(sig, dispatcher.targetctx)
+        if cres is None:
+            name = getattr(dispatcher.py_func, "__qualname__", "kernel")
+            raise CompileNeeded(f"{name} needs compiling for {args}")
+        if not cres.objectmode:
+            dispatcher.targetctx.insert_user_function(cres.entry_point, cres.fndesc,
+                                                      [cres.library])
+        dispatcher.add_overload(cres)
+        return cres.entry_point
 
 
 def _lock_cache(dispatcher: Any) -> Any:

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..models import MODELS
+from ..render.defaults import auto_window
 from ..scene import MODES
 from ..transfer import MENU, colormap_table
 from ..volume import Volume
@@ -44,7 +45,7 @@ PROTOCOL_VERSION = 1
 #: Minor version (``hello.v_minor``): additions a version-1 client may ignore. 1: the frame
 #: header's ``bricks`` and ``hello.multires`` (multiresolution data), ``hello.v_minor``. 2: the
 #: state's ``dvr.sampling``, and the default ``dvr`` state is the library's default DVR.
-PROTOCOL_MINOR = 2
+PROTOCOL_MINOR = 3
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.
@@ -164,6 +165,9 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
                                                  defaults["tf"].get("colormap", "viridis")])
                       if isinstance(name, str)},
         "defaults": defaults,
+        # What a null window stands for in each projection (the page shows it on the slider).
+        "auto_window": {mode: [float(v) for v in auto_window(volume, mode)]
+                        for mode in ("mip", "minip")},
         "limits": limits,
     }
 

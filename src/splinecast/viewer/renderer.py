@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from .._jit import forbidding_compiles, reporting_compiles
+from ..camera import Camera
 from ..errors import ParameterError
 from ..scene import Scene
 from ..volume import Volume
@@ -115,13 +117,21 @@ class FrameRenderer:
             if model not in self.shown.models:  # before anything is dropped
                 raise ParameterError(f"model must be one of {', '.join(self.shown.models)} for "
                                      f"{self.shown.geometry.name}, got {model!r}")
-            budget = self._max_scenes - (self._pinned is not None)
-            while self._scenes and len(self._scenes) >= max(budget, 1):
-                self.shown.close_scene(self._scenes.popitem(last=False)[1])
-            scene = self.shown.make_scene(model)
+            budget = max(self._max_scenes - (self._pinned is not None), 1)
+            if self.shown.multiresolution:  # one brick cache at a time: close before opening
+                self._drop_scenes(budget - 1)
+                scene = self.shown.make_scene(model)
+            else:  # made first: a model whose kernels are not ready drops nothing
+                scene = self.shown.make_scene(model)
+                self._drop_scenes(budget - 1)
             self._scenes[model] = scene
         self._scenes.move_to_end(model)
         return scene
+
+    def _drop_scenes(self, keep: int) -> None:
+        """Close the least recently used scenes until at most ``keep`` remain."""
+        while self._scenes and len(self._scenes) > keep:
+            self.shown.close_scene(self._scenes.popitem(last=False)[1])
 
     def bricks_loaded(self) -> dict[str, int]:
         """Bricks read so far by each pyramid scene held, by model (empty for other data); safe
@@ -179,8 +189,8 @@ class FrameRenderer:
 
     # -------------------------------------------------------------------------- rendering
     def render(self, request: RenderRequest, scale: float = 1.0,
-               abort: Callable[[], bool] | None = None, step: str = "full"
-               ) -> RenderedImage | None:
+               abort: Callable[[], bool] | None = None, step: str = "full",
+               compile: bool = True) -> RenderedImage | None:
         """Render ``request`` at ``scale`` times its size; ``None`` if ``abort()`` said stop.
 
         ``abort`` is asked between stripes. ``step`` names the pass (``interactive``,
@@ -188,7 +198,37 @@ class FrameRenderer:
         bricks (:meth:`.data.Shown.render_options`), and for MIP / minIP whether it is a preview
         sampled on planes (:data:`PREVIEW_MIP`). Errors of the request (a combination of
         model and mode the library refuses, an isovalue outside the range) raise ParameterError.
+        Without ``compile``, kernels come from memory or the disk cache only, and a render that
+        would compile one raises :class:`splinecast._jit.CompileNeeded` instead (see
+        :meth:`warm`); multiresolution data always may compile.
         """
+        if compile or self.shown.multiresolution:
+            return self._render(request, scale, abort, step)
+        with forbidding_compiles():
+            return self._render(request, scale, abort, step)
+
+    def warm(self, request: RenderRequest, on_compile: Callable[[], None] | None = None) -> None:
+        """Compile (or load) the kernels ``request`` needs, touching no scene in use: safe on
+        any thread while the render thread goes on.
+
+        A tiny volume of the same voxel type and value range is rendered with the request's
+        model, mode and options, for a full frame and a drag's preview: the kernels depend on
+        the types of the data and the mode's parameters, not on their sizes or values.
+        ``on_compile`` is called when a kernel really compiles (not when it loads).
+        """
+        tiny = _tiny_volume(self.volume)
+        scene = Scene(tiny, model=request.model)
+        camera = Camera.orbit(tiny, size=(8, 8))
+        # Clip planes and crop box are in the data's world coordinates; they change no kernel.
+        options = {k: v for k, v in request.options.items() if k not in ("clip", "crop")}
+        started = (lambda name: on_compile()) if on_compile is not None else (lambda name: None)
+        with reporting_compiles(started, lambda name, seconds: None):
+            for step in ("full", "interactive"):
+                scene.render(camera, **{"outputs": ("rgba",), **options,
+                                        **self._pass_options(request, step)})
+
+    def _render(self, request: RenderRequest, scale: float,
+                abort: Callable[[], bool] | None, step: str) -> RenderedImage | None:
         start = time.perf_counter()
         scene = self.scene(request.model)
         camera = request.camera
@@ -235,6 +275,17 @@ class FrameRenderer:
         align = max(1, int(align))
         rows = max(align, rows - rows % align)
         return max(1, min(height, rows))
+
+
+def _tiny_volume(volume: Volume) -> Volume:
+    """A 6^3 volume of ``volume``'s voxel type and value range (its smallest and largest values
+    both occur), for compiling kernels without the real data."""
+    lo, hi = volume.value_range
+    values = np.linspace(lo, hi, 6 ** 3).reshape(6, 6, 6)
+    data = np.clip(np.round(values) if np.issubdtype(volume.dtype, np.integer) else values,
+                   lo, hi).astype(volume.dtype)
+    data.flat[0], data.flat[-1] = lo, hi
+    return Volume(data, spacing=volume.spacing, origin=volume.origin)
 
 
 def _merge_stats(parts: list[tuple[int, dict[str, Any]]], width: int,

@@ -15,6 +15,14 @@ Scheduling rules (the interaction model of the issue):
   :attr:`Session.progressive_ms` is preceded by a coarse one, unless the client already shows a
   reduced frame (it comes from a drag).
 * **Screenshots** are rendered at full resolution as PNG and are never superseded.
+* **New kernels never stop the frames:** views render with the kernels that are ready (in
+  memory or in the disk cache). A request whose model or mode needs kernels compiled first
+  (their first use) has them prepared on a thread of their own
+  (:meth:`~.renderer.FrameRenderer.warm`) while the page goes on showing the last picture that
+  could be rendered, seen from the request's camera (pass ``preparing``, with a ``preparing``
+  field saying what is being prepared and for how long), and ``status`` messages say so every
+  second. When they are ready, the newest request is rendered; a newer request for kernels
+  that are ready ends the wait, one for other new kernels is prepared next (the newest wins).
 * **More detail later:** :meth:`Session.refresh` re-renders the last settled state at full
   resolution. For a pyramid the server calls :meth:`Session.bricks_arrived` a few times a second
   with the loader's count of bricks read; the session re-renders (pass ``full``, drawing what is
@@ -29,14 +37,17 @@ binary message, and a function that runs a callable on the render thread.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
+import threading
 import time
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
+from .._jit import CompileNeeded
 from ..errors import SplinecastError
 from ..volume import Volume
 from .data import bricks_header
@@ -86,6 +97,9 @@ class Session:
         The complete default state (:func:`~splinecast.viewer.state.default_state`).
     max_pixels : int
         Largest image a request may ask for.
+    prepare_in_thread : coroutine function, optional
+        ``await prepare_in_thread(fn)`` runs ``fn()`` on a thread other than the render
+        thread (kernels being compiled); by default a new daemon thread each time.
     """
 
     #: Seconds without interactive requests after which the full-resolution frame follows.
@@ -96,12 +110,25 @@ class Session:
     progressive_ms = 250.0
     #: Shortest time between two refreshes for arriving bricks (s).
     refresh_s = 0.25
+    #: Time between two status messages while kernels are prepared (s).
+    preparing_status_s = 1.0
 
     def __init__(self, renderer: FrameRenderer, run_in_thread: RunInThread,
                  send_text: SendText, send_bytes: SendBytes, defaults: dict[str, Any],
-                 max_pixels: int) -> None:
+                 max_pixels: int, prepare_in_thread: RunInThread | None = None) -> None:
         self.renderer = renderer
         self._run = run_in_thread
+        self._prepare_run = prepare_in_thread or _in_daemon_thread
+        # What the page can be shown while other kernels are prepared: the last request
+        # rendered and the pass it was rendered for (its kernels are loaded).
+        self._ready: tuple[RenderRequest, str] | None = None
+        self._wanted: _Job | None = None  # the newest view waiting for its kernels
+        self._preparing: asyncio.Task | None = None
+        self._preparing_since = 0.0
+        self._compiling = False  # the kernels being prepared are compiling (not loading)
+        # (model, mode) prepared once: if a view of it still needs a kernel (a combination the
+        # preparation did not cover), it compiles on the render thread as before.
+        self._prepared: set[tuple[str, str]] = set()
         self._send_text = send_text
         self._send_bytes = send_bytes
         self._defaults = defaults
@@ -187,6 +214,9 @@ class Session:
     def close(self) -> None:
         """Stop: waiting requests are dropped and :meth:`run` returns."""
         self._closed = True
+        self._wanted = None
+        if self._preparing is not None:
+            self._preparing.cancel()  # a compile under way finishes on its own thread
         self._cancel_settle()
         self._generation += 1
         self._wake.set()
@@ -257,13 +287,20 @@ class Session:
         if not self.renderer.has_scene(job.request.model):
             await self._send_text({"type": "status", "id": job.ident,
                                    "message": f"preparing model {job.request.model}"})
+        request = job.request
+        # Screenshots, and views of a model and mode prepared already, compile on the render
+        # thread if they must; other views render with ready kernels only.
+        may_compile = job.kind == "screenshot" or (request.model, request.mode) in self._prepared
         for step in self._passes(job):
             if stale is not None and stale():
                 return
             name = "refresh" if job.kind == "refresh" else step.name
-            work = partial(self._render_and_encode, job.request, step, stale, name)
+            work = partial(self._render_and_encode, request, step, stale, name, may_compile)
             try:
                 result = await self._run(work)
+            except CompileNeeded:
+                await self._wait_for_kernels(job, stale)
+                return
             except SplinecastError as exc:
                 await self._error(job.ident, str(exc))
                 return
@@ -276,6 +313,9 @@ class Session:
             image, data, encode_ms = result
             await self._send_bytes(pack_frame(self._header(job, step, image, encode_ms), data))
             if job.kind != "screenshot":
+                self._ready = (request, name)
+                if self._wanted is not None and self._wanted.ident <= job.ident:
+                    self._wanted = None  # a newer view rendered: nothing to wait for
                 self._shown_final = step.final
                 if step.final:
                     self._settled = job
@@ -284,10 +324,10 @@ class Session:
                         job.request.model, bricks["loaded"], bricks["complete"])
 
     def _render_and_encode(self, request: RenderRequest, step: _Pass,
-                           stale: Callable[[], bool] | None, name: str
+                           stale: Callable[[], bool] | None, name: str, compile: bool = True
                            ) -> tuple[RenderedImage, bytes, float] | None:
         """On the render thread: the image of one pass and its encoded bytes."""
-        image = self.renderer.render(request, step.scale, stale, name)
+        image = self.renderer.render(request, step.scale, stale, name, compile=compile)
         if image is None:
             return None
         start = time.perf_counter()
@@ -315,5 +355,135 @@ class Session:
             header["bricks"] = bricks
         return header
 
+    # ------------------------------------------------------------------ new kernels
+    async def _wait_for_kernels(self, job: _Job, stale: Callable[[], bool] | None) -> None:
+        """``job`` needs kernels not compiled yet: prepare them on another thread (the newest
+        such job wins) and meanwhile show the last picture that renders, from ``job``'s
+        camera."""
+        if self._wanted is None or self._wanted.request.model != job.request.model or \
+                self._wanted.request.mode != job.request.mode:
+            self._preparing_since = time.perf_counter()
+        self._wanted = job
+        if self._preparing is None or self._preparing.done():
+            self._compiling = False
+            self._preparing = asyncio.create_task(self._prepare_wanted())
+        await self._send_preparing_status()
+        if self._ready is None or (stale is not None and stale()):
+            return
+        shown, name = self._ready
+        fallback = replace(shown, camera=job.request.camera)
+        divisor = self._divisor(fallback, self.interactive_ms, 2, "interactive")
+        step = _Pass("preparing", 1.0 / divisor, "jpeg", False)
+        work = partial(self._render_and_encode_as, fallback, step, stale, name)
+        try:
+            result = await self._run(work)
+        except (CompileNeeded, SplinecastError):
+            return  # nothing ready renders this view: the page keeps its picture
+        if result is None:
+            return
+        image, data, encode_ms = result
+        header = self._header(job, step, image, encode_ms)
+        header["preparing"] = self._preparing_field()
+        await self._send_bytes(pack_frame(header, data))
+        self._shown_final = False
+
+    def _render_and_encode_as(self, request: RenderRequest, step: _Pass,
+                              stale: Callable[[], bool] | None, name: str
+                              ) -> tuple[RenderedImage, bytes, float] | None:
+        """On the render thread: ``request`` with the options of pass ``name`` (the pass its
+        kernels were loaded for) at ``step``'s scale, ready kernels only."""
+        image = self.renderer.render(request, step.scale, stale, name, compile=False)
+        if image is None:
+            return None
+        start = time.perf_counter()
+        data = encode_image(image.rgba, step.fmt)
+        return image, data, (time.perf_counter() - start) * 1e3
+
+    async def _prepare_wanted(self) -> None:
+        """Prepare the kernels of the newest waiting view, then render it; repeat while a
+        newer view waits for other kernels."""
+        ticker = asyncio.create_task(self._tick_preparing())
+        try:
+            while self._wanted is not None and not self._closed:
+                job = self._wanted
+                key = (job.request.model, job.request.mode)
+                try:
+                    await self._prepare_run(partial(self.renderer.warm, job.request,
+                                                    self._compiled_now))
+                except SplinecastError as exc:
+                    if self._wanted is job:
+                        self._wanted = None
+                    await self._error(job.ident, str(exc))
+                    continue
+                except Exception as exc:  # a bug must not end the server: log it, tell the page
+                    log.exception("preparing kernels failed")
+                    if self._wanted is job:
+                        self._wanted = None
+                    await self._error(job.ident, f"internal error: {type(exc).__name__}: {exc}")
+                    continue
+                self._prepared.add(key)
+                self._compiling = False
+                if self._wanted is job:
+                    self._wanted = None
+                    await self._send_preparing_status()
+                    self._submit_view(_Job("final", job.ident, job.request))
+        finally:
+            ticker.cancel()
+
+    def _compiled_now(self) -> None:
+        """Called on the preparing thread when a kernel compiles (not only loads)."""
+        self._compiling = True
+
+    async def _tick_preparing(self) -> None:
+        while True:
+            await asyncio.sleep(self.preparing_status_s)
+            if self._wanted is None:
+                return
+            await self._send_preparing_status()
+
+    def _preparing_field(self) -> dict[str, Any] | None:
+        """What is being prepared (the ``preparing`` field of frames and status messages)."""
+        job = self._wanted
+        if job is None:
+            return None
+        return {"model": job.request.model, "mode": job.request.mode,
+                "compiling": self._compiling,
+                "seconds": round(time.perf_counter() - self._preparing_since, 1)}
+
+    async def _send_preparing_status(self) -> None:
+        field = self._preparing_field()
+        if field is None:
+            await self._send_text({"type": "status", "id": None, "preparing": None,
+                                   "message": "ready"})
+            return
+        what = "compiling kernels (first use)" if field["compiling"] else "loading kernels"
+        await self._send_text({
+            "type": "status", "id": self._wanted.ident if self._wanted else None,
+            "preparing": field,
+            "message": f"preparing {field['model']} / {field['mode']}: {what}, "
+                       f"{field['seconds']:.0f} s"})
+
     async def _error(self, ident: int | None, message: str) -> None:
         await self._send_text({"type": "error", "id": ident, "message": message})
+
+
+async def _in_daemon_thread(fn: Callable[[], Any]) -> Any:
+    """``await`` ``fn()`` run on a new daemon thread: a compile cannot be interrupted, and a
+    server that stops must not wait for one to end."""
+    loop = asyncio.get_running_loop()
+    future = loop.create_future()
+
+    def settle(outcome: str, value: Any) -> None:
+        if not future.done():
+            (future.set_result if outcome == "result" else future.set_exception)(value)
+
+    def target() -> None:
+        try:
+            outcome = ("result", fn())
+        except BaseException as exc:  # handed to the awaiting coroutine
+            outcome = ("exception", exc)
+        with contextlib.suppress(RuntimeError):  # the server stopped (its loop is closed)
+            loop.call_soon_threadsafe(settle, *outcome)
+
+    threading.Thread(target=target, name="splinecast-prepare", daemon=True).start()
+    return await future

@@ -145,9 +145,10 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "size": [1024, 768],
         "iso": isos[0] if len(isos) == 1 else isos,
         "opacity": None,
-        # The automatic window of the initial projection (minIP's when the viewer starts in
-        # minIP, else MIP's) and colormap (gray; diverging for signed data), as Scene.render.
-        "window": [float(v) for v in auto_window(volume, "minip" if mode == "minip" else "mip")],
+        # null: the automatic window of the projection shown (MIP's or minIP's, as
+        # Scene.render; the hello message carries both); the colormap is gray, diverging for
+        # signed data, as Scene.render.
+        "window": None,
         "colormap": auto_colormap(volume),
         # The exact projection, as Scene.render gives it without tolerance=.
         "tolerance": 0.0,
@@ -343,7 +344,7 @@ def _dvr_settings(dvr: dict[str, Any], lighting: dict[str, float]) -> DVRSetting
                        diffuse=lighting["diffuse"], **names)
 
 
-def _mode_options(state: dict[str, Any], volume: Any) -> dict[str, Any]:
+def _mode_options(state: dict[str, Any], volume: Any, shown: Volume) -> dict[str, Any]:
     mode = state["mode"]
     lighting = {k: _number(state["lighting"][k], f"lighting.{k}") for k in _LIGHTING_FIELDS}
     shading = Shading(**lighting)
@@ -365,8 +366,10 @@ def _mode_options(state: dict[str, Any], volume: Any) -> dict[str, Any]:
         options["normals"] = _check_choice(state["normals"], NORMALS, "normals")
     elif mode in ("mip", "minip"):
         window = state["window"]
-        if window is not None:
-            window = _numbers(window, "window", 2)
+        # Without a window the projection's own automatic one, from the data on display (a
+        # pyramid's coarsest level: the same for every cut, so frames agree while bricks load).
+        window = (auto_window(shown, mode) if window is None
+                  else _numbers(window, "window", 2))
         options["window"] = window
         options["colormap"] = _colormap_name(state["colormap"], "colormap")
         options["tolerance"] = check_tolerance(_number(state["tolerance"], "tolerance"), "exact")
@@ -410,5 +413,5 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
     size = _size(full["size"], max_pixels)
     geometry = volume if geometry is None else geometry
     camera = orbit_camera(geometry, camera_fields, size)
-    options = _mode_options(full, geometry)
+    options = _mode_options(full, geometry, volume)
     return RenderRequest(model, mode, camera, options, full)

@@ -216,8 +216,14 @@
         : `each pixel at most ${levels}/255 of the window from the exact projection`;
     }
 
+    // The window shown: the state's, or (null) the automatic one of the projection on screen.
+    _window() {
+      const auto = (this.hello.auto_window || {})[this.state.mode === "minip" ? "minip" : "mip"];
+      return this.state.window || auto || [this.lo, this.hi];
+    }
+
     _drawWindow() {
-      const w = this.state.window || [this.lo, this.hi];
+      const w = this._window();
       $("window-label").textContent = `window ${format(w[0])} … ${format(w[1])}`;
       this.windowHistogram.draw({ window: w, gradient: this.hello.colormaps[this.state.colormap] });
     }
@@ -345,7 +351,7 @@
       this.surfaces = isos.map((v, i) => ({ value: v, opacity: opacity[i] }));
       this.selected = Math.min(this.selected, this.surfaces.length - 1);
       this._applySurfaces();
-      const w = s.window || [this.lo, this.hi];
+      const w = this._window();
       $("window-low").value = this.toSlider(w[0]);
       $("window-high").value = this.toSlider(w[1]);
       $("mip-colormap").value = s.colormap;

@@ -23,6 +23,7 @@
   let frameSeq = 0;
   let errorId = -1;
   let lastViewId = 0; // id of the newest render request sent (screenshots not included)
+  let frameStatus = ""; // the status line's part that describes the frame shown
   const sentAt = new Map(); // request id -> time sent (for the latency in the status line)
   const interactiveTimes = []; // arrival times of recent reduced frames (frames per second)
 
@@ -33,6 +34,7 @@
     lastFrame: null, // header of the last frame drawn
     frameLog: [], // {id, pass, final, scale, render_ms, latency_ms, at} of recent frames drawn
     lastError: null,
+    preparing: null, // what the server prepares (a model or mode's kernels), or null
     get state() { return state; },
     get hello() { return hello; },
     // Whether the canvas shows the full frame of the newest request, nothing being waited for:
@@ -68,7 +70,13 @@
       errorId = msg.id === null ? errorId : msg.id;
       api.lastError = msg;
       showError(msg.message);
-    } else if (msg.type === "status") statusLine.textContent = msg.message + "…";
+    } else if (msg.type === "status") {
+      if ("preparing" in msg) {
+        // New kernels: the page keeps showing what is ready and says what it waits for.
+        api.preparing = msg.preparing ? msg.message : null;
+        statusLine.textContent = [frameStatus, api.preparing].filter(Boolean).join(" · ");
+      } else statusLine.textContent = msg.message + "…";
+    }
   }
 
   function onHello(msg) {
@@ -198,8 +206,11 @@
     } else if (h.stats.chunks !== undefined) {
       parts.push(`chunks ${h.stats.chunks}`);  // a wavelet store's reconstructed chunks
     }
-    if (!h.final || (b && !b.complete && b.loading > 0)) parts.push("refining…");
-    statusLine.textContent = parts.join(" · ");
+    if (h.pass === "preparing") parts.push("previous settings");
+    else if (!h.final || (b && !b.complete && b.loading > 0)) parts.push("refining…");
+    frameStatus = parts.join(" · ");
+    if (h.final && h.id === lastViewId) api.preparing = null;
+    statusLine.textContent = [frameStatus, api.preparing].filter(Boolean).join(" · ");
   }
 
   function showError(text) {
