@@ -189,6 +189,13 @@ def _check_external(stated: str) -> None:
     assert not sc.errors.limits.allow_external_default() or pytest.skip("set in the environment")
 
 
+def _check_samples(stated: str) -> None:
+    from splinecast.render.antialias import DEFAULT_SAMPLES, resolve_samples
+    assert first(stated) == str(DEFAULT_SAMPLES) == str(resolve_samples(None, "iso"))
+    assert "1 = off for the other modes" in stated
+    assert all(resolve_samples(None, mode) == 1 for mode in ("mip", "minip", "dvr"))
+
+
 def _check_missing(stated: str) -> None:
     # What the error says is run in test_zarr_bounded.py (exit 2, one line naming the chunk, no
     # image); here the help's words for it.
@@ -231,6 +238,7 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("render", "--cut"): _check_cut,
     ("render", "--allow-external-data"): _check_external,
     ("render", "--allow-missing"): _check_missing,
+    ("render", "--samples"): _check_samples,
     ("view", "--model"): _check_view_model,
     ("view", "--iso"): _check_view_iso,
     ("view", "--budget"): _check_budget,
@@ -245,7 +253,8 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("movie", "--allow-missing"): _check_missing,
 }
 for _option in ("--model", "--root-finder", "--iterations", "--step", "--inside", "--background",
-                "--color", "--colormap", "--window", "--preintegration", "--table-layout"):
+                "--color", "--colormap", "--window", "--preintegration", "--table-layout",
+                "--samples"):
     CODE_DEFAULTS[("movie", _option)] = CODE_DEFAULTS[("render", _option)]
 
 

@@ -205,9 +205,9 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--termination", type=finite,
                         help="DVR early ray termination opacity, e.g. 0.99")
     render.add_argument("--normals", default="smooth", choices=("smooth", "exact"),
-                        help="isosurface shading: the gradient of a smooth field at the exact "
-                             "hit (default; the cubic B-spline of the voxels for trilinear and "
-                             "bspline1) or the model's own gradient")
+                        help="isosurface shading: smooth, the gradient of a smooth field at "
+                             "the exact hit (the cubic B-spline of the voxels for trilinear and "
+                             "bspline1), or exact, the model's own gradient (default smooth)")
     render.add_argument("--samples", type=sample_count,
                         help="antialiasing: rays per pixel on the edges of the image, the "
                              "centre one included, 1 to 64 (default 5 for --mode iso, 1 = off "
