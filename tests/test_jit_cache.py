@@ -4,17 +4,25 @@ Dask workers on one machine, two viewers, or the test suite run with ``pytest -n
 same functions at the same moment. Several processes here save many cache entries of one
 function at once (released together by a start time); afterwards every key of the index must name
 a data file that holds that key's own data: an unlocked save can hand two keys the same file.
+
+The cache must also survive real installs: damaged cache files are rebuilt.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import pickle
+import random
 import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
+
+import pytest
 
 PROCESSES = 4
 KEYS = 40
@@ -166,6 +174,70 @@ def test_a_process_waits_for_the_same_compile_in_another_and_loads_its_code(
     out, err = waiter.communicate(timeout=300)
     assert waiter.returncode == 0, err[-2000:]
     assert out.split() == ["1", "0"]  # loaded the holder's code, compiled nothing
+
+
+_KERNEL = "from splinecast._jit import jit\n\n\n@jit\ndef f(x):\n    return x + 1\n"
+
+
+def _import(path: Path, name: str) -> ModuleType:
+    """A new module object (so new dispatchers, nothing compiled in memory) from ``path``."""
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _garbage(data: bytes) -> bytes:
+    return random.Random(0).randbytes(len(data))
+
+
+#: (file, what is done to it): the damage a cache file can take from a full disk, a killed
+#: process, a copied-over or half-synchronised install.
+_DAMAGES: dict[str, tuple[str, Callable[[bytes], bytes] | None]] = {
+    "index-cut-to-half": ("index", lambda b: b[:len(b) // 2]),
+    "index-empty": ("index", lambda b: b""),
+    "index-garbage": ("index", _garbage),
+    "data-cut-to-half": ("data", lambda b: b[:len(b) // 2]),
+    "data-empty": ("data", lambda b: b""),
+    "data-garbage": ("data", _garbage),
+    "data-missing": ("data", None),  # the index names a data file that is not there
+}
+
+
+@pytest.mark.parametrize("damage", list(_DAMAGES))
+def test_a_damaged_cache_file_is_ignored_and_rebuilt(tmp_path: Path, damage: str,
+                                                     capfd: pytest.CaptureFixture) -> None:
+    """A kernel whose index or data file is damaged still returns the right value: the file
+    counts as a cache miss (quietly), the kernel compiles, and the save writes a valid cache
+    that the next fresh dispatcher loads without compiling."""
+    from splinecast._jit import CompileNeeded, forbidding_compiles
+
+    source = tmp_path / "damaged_kernels.py"
+    source.write_text(_KERNEL)
+    first = _import(source, "damaged_kernels_first").f
+    assert first(2) == 3  # compiled and saved
+    index = Path(first._cache._cache_file._index_path)
+    data = index.with_name(index.name[:-len(".nbi")] + ".1.nbc")
+    assert index.is_file() and data.is_file()
+
+    target, change = _DAMAGES[damage]
+    path = index if target == "index" else data
+    if change is None:
+        path.unlink()
+    else:
+        path.write_bytes(change(path.read_bytes()))
+
+    damaged = _import(source, "damaged_kernels_second").f
+    with forbidding_compiles(), pytest.raises(CompileNeeded):
+        damaged(2)  # the damaged cache is a miss, not an error
+    assert damaged(2) == 3
+    assert (sum(damaged.stats.cache_hits.values()), sum(damaged.stats.cache_misses.values())) \
+        == (0, 1)  # compiled anew
+
+    rebuilt = _import(source, "damaged_kernels_third").f
+    with forbidding_compiles():  # would raise CompileNeeded if the cache were not valid
+        assert rebuilt(2) == 3  # loaded from the rewritten cache
+    assert capfd.readouterr() == ("", "")  # nothing printed about the damage
 
 
 def test_compiler_flags_hash_and_compare_as_numba_defines_them() -> None:

@@ -12,7 +12,8 @@ two processes that save at the same moment can pick the same data-file name, and
 up naming the other process's code for a signature, which would be loaded and called with the
 wrong types. Every splinecast function therefore saves through :class:`_LockedIndexFile`, which
 holds an exclusive lock on the index while it saves and writes the data file before the index
-entry that names it. Loading needs no lock: both files are replaced atomically by numba. And a
+entry that names it. Loading needs no lock: both files are replaced atomically by numba; a file
+damaged some other way (cut short, overwritten) reads as missing and is rewritten. And a
 process about to compile a signature another process is compiling waits for it and loads its
 result instead of compiling the same code at the same time (:func:`_compile_once`).
 
@@ -54,6 +55,12 @@ try:
     from numba.core.caching import IndexDataCacheFile
 except ImportError:  # pragma: no cover - a numba without this class: keep its behaviour
     IndexDataCacheFile = None  # type: ignore[assignment,misc]
+
+try:  # prints only under NUMBA_DEBUG_CACHE, like numba's own cache messages
+    from numba.core.caching import _cache_log
+except ImportError:  # pragma: no cover
+    def _cache_log(msg: str, *args: Any) -> None:
+        pass
 
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
            "call_with_first_classes", "package_stamp", "reporting_compiles", "CompileNeeded",
@@ -171,7 +178,36 @@ def _locked(path: str) -> Iterator[None]:
 if IndexDataCacheFile is not None and fcntl is not None:
 
     class _LockedIndexFile(IndexDataCacheFile):
-        """Numba's index-and-data cache file, saved under a lock, data before index."""
+        """Numba's index-and-data cache file, saved under a lock, data before index; a file
+        that cannot be decoded counts as missing."""
+
+        # Numba unpickles the index and data files as they are: a file cut short (a full disk,
+        # a killed process on a file system without atomic replace, a copied-over install) or
+        # overwritten raises from the unpickler at every call of the kernel, in every later
+        # process, until someone deletes the file by hand. Such a file holds nothing usable,
+        # so it is read as an empty index or an absent entry: the kernel compiles as if the
+        # cache were empty and the next save writes valid files over the damaged ones. Errors
+        # of the file system itself (OSError) still propagate as in numba: they are not about
+        # the content, and numba already treats a missing data file as a miss.
+
+        def _load_index(self) -> dict:
+            try:
+                overloads = super()._load_index()
+            except OSError:
+                raise
+            except Exception as exc:  # anything the unpickler raises on arbitrary bytes
+                _cache_log("[cache] unreadable index %r ignored: %r", self._index_path, exc)
+                return {}
+            return overloads if isinstance(overloads, dict) else {}
+
+        def _load_data(self, name: str) -> Any:
+            try:
+                return super()._load_data(name)
+            except OSError:
+                raise
+            except Exception as exc:
+                _cache_log("[cache] unreadable data %r ignored: %r", name, exc)
+                return None
 
         def save(self, key: Any, data: Any) -> None:
             with _locked(self._index_path + ".lock"):
