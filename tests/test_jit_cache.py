@@ -5,12 +5,14 @@ same functions at the same moment. Several processes here save many cache entrie
 function at once (released together by a start time); afterwards every key of the index must name
 a data file that holds that key's own data: an unlocked save can hand two keys the same file.
 
-The cache must also survive real installs: damaged cache files are rebuilt.
+The cache must also survive real installs: damaged cache files are rebuilt, and a package folder
+that cannot be written has its kernels cached (and locked) in the user's cache folder.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import pickle
 import random
@@ -238,6 +240,95 @@ def test_a_damaged_cache_file_is_ignored_and_rebuilt(tmp_path: Path, damage: str
     with forbidding_compiles():  # would raise CompileNeeded if the cache were not valid
         assert rebuilt(2) == 3  # loaded from the rewritten cache
     assert capfd.readouterr() == ("", "")  # nothing printed about the damage
+
+
+_READ_ONLY = textwrap.dedent("""
+    import json, os, sys
+    package = os.path.realpath(sys.argv[1])
+    refused = []
+
+    def read_only(event, args):
+        # Refuses, as a read-only file system would, any change under the package folder.
+        if event == "open":
+            paths = [args[0]] if args[2] & (os.O_WRONLY | os.O_RDWR | os.O_CREAT) else []
+        elif event == "os.rename":
+            paths = [args[0], args[1]]
+        elif event in ("os.mkdir", "os.remove", "os.rmdir", "os.chmod", "os.utime",
+                       "os.truncate", "os.link", "os.symlink"):
+            paths = [args[0]]
+        else:
+            return
+        for path in paths:
+            if isinstance(path, int):  # a file descriptor, already open
+                continue
+            path = os.path.realpath(os.fsdecode(path))
+            if path == package or path.startswith(package + os.sep):
+                refused.append(path)
+                raise PermissionError(13, "Read-only file system", path)
+
+    sys.addaudithook(read_only)
+    sys.path.insert(0, os.path.dirname(package))
+    from readonly_kernels.kernels import f
+    assert f(2) == 3
+    print(json.dumps({"cache_file": type(f._cache._cache_file).__name__,
+                      "cache_path": os.path.realpath(f._cache.cache_path), "refused": refused,
+                      "hits": sum(f.stats.cache_hits.values()),
+                      "misses": sum(f.stats.cache_misses.values())}))
+""")
+
+
+def test_kernels_of_a_read_only_package_are_cached_in_the_user_cache_folder(
+        tmp_path: Path) -> None:
+    """An installed package whose folder cannot be written (a system-wide install used by
+    another user, a read-only container image) has its kernels cached in numba's user-wide
+    folder (``$XDG_CACHE_HOME/numba`` here); splinecast's saving lock and compile lock are
+    taken there too, and a second process loads the kernel from there without compiling.
+
+    How the read-only folder is simulated: the tests may run as root, for whom ``chmod 0o555``
+    does not stop writes, and a read-only mount needs privileges a test does not have. Each
+    process therefore installs an audit hook (``sys.addaudithook``) that refuses, with the
+    ``PermissionError`` a read-only file system gives, every opening for writing, creation,
+    renaming or removal under the package folder. Every file operation of numba's cache and of
+    splinecast's locks goes through Python's ``open``/``os`` functions, which raise those
+    audit events, so none can slip past it. The folder is also made ``0o555`` (effective for
+    a user who is not root)."""
+    package = tmp_path / "readonly_kernels"
+    (package / "__pycache__").mkdir(parents=True)  # byte-compiled when installed, read-only
+    (package / "__init__.py").write_text("")
+    (package / "kernels.py").write_text(_KERNEL)
+    user_cache = tmp_path / "user-cache"
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(XDG_CACHE_HOME=str(user_cache), PYTHONDONTWRITEBYTECODE="1")
+
+    def run() -> dict:
+        out = subprocess.run([sys.executable, "-c", _READ_ONLY, str(package)], env=env,
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return json.loads(out.stdout)
+
+    folders = [package / "__pycache__", package]
+    for folder in folders:
+        folder.chmod(0o555)
+    try:
+        first = run()
+        second = run()
+    finally:
+        for folder in folders:
+            folder.chmod(0o755)
+
+    numba_folder = os.path.realpath(user_cache / "numba")
+    assert first["cache_path"].startswith(numba_folder + os.sep), first
+    assert first["refused"]  # numba tried the package's __pycache__ first and was refused
+    assert not [p for p in first["refused"] + second["refused"]
+                if p.endswith((".nbi", ".nbc", ".lock", ".compiling"))]
+    assert first["cache_file"] == "_LockedIndexFile"
+    assert (first["hits"], first["misses"]) == (0, 1)   # compiled and saved
+    assert (second["hits"], second["misses"]) == (1, 0)  # loaded, nothing compiled
+    cached = Path(first["cache_path"])
+    for pattern in ("*.nbi", "*.nbc", "*.nbi.lock", "*.compiling"):  # saved and locked there
+        assert list(cached.glob(pattern)), pattern
+    assert not [p for p in package.rglob("*") if p.suffix in (".nbi", ".nbc", ".lock",
+                                                               ".compiling")]
 
 
 def test_compiler_flags_hash_and_compare_as_numba_defines_them() -> None:
