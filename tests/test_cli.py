@@ -23,7 +23,8 @@ def run(args: list[str], capsys: pytest.CaptureFixture) -> tuple[int, str, str]:
 def test_render_writes_png_and_depth(tmp_path, capsys):
     png, depth = tmp_path / "s.png", tmp_path / "d.npy"
     code, out, err = run(["render", "demo:sphere?size=24", "--iso", "0", "--size", "40x30",
-                          "--elevation", "10", "-o", str(png), "--depth", str(depth)], capsys)
+                          "--elevation", "10", "-o", str(png), "--depth", str(depth),
+                          "--samples", "1"], capsys)  # one ray a pixel: no blended edges
     assert code == 0
     assert out.strip() == str(png.resolve())
     assert "rendered 40x30" in err

@@ -27,7 +27,7 @@ def test_checker_texture_follows_the_hit_position(sphere):
     vol, scene, cam = sphere
     shading = sc.Shading(front_color=(0.8, 0.6, 0.4), **FLAT)
     fx = sc.SurfaceEffects(texture="checker", scale=0.15, dark=0.25)
-    frame = scene.render(cam, iso=0.0, shading=shading, effects=fx)
+    frame = scene.render(cam, iso=0.0, shading=shading, effects=fx, samples=1)
     hit = frame.hit & (frame.face == 1)
     cells = np.floor(frame.position[hit] / 0.15)
     frac = frame.position[hit] / 0.15 - cells
@@ -41,7 +41,8 @@ def test_checker_texture_follows_the_hit_position(sphere):
 def test_cel_shading_has_the_requested_bands(sphere):
     vol, scene, cam = sphere
     shading = sc.Shading(front_color=(1.0, 1.0, 1.0), ambient=0.0, diffuse=1.0, specular=0.0)
-    frame = scene.render(cam, iso=0.0, shading=shading, effects=sc.SurfaceEffects(cel_bands=4))
+    frame = scene.render(cam, iso=0.0, shading=shading, effects=sc.SurfaceEffects(cel_bands=4),
+                         samples=1)
     hit = frame.hit
     _, dirs = cam.rays()
     cos = np.abs(np.sum(frame.normal[hit].astype(np.float64) * dirs[hit], axis=1))

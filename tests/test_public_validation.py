@@ -148,7 +148,8 @@ def blinn_phong(shading: sc.Shading, face, normal, directions):
 def test_blinn_phong_colours_follow_the_formula(shading_scene, index):
     scene, cam = shading_scene
     shading = SHADINGS[index]
-    frame = scene.render(cam, iso=0.0, shading=shading, clip=CLIP)
+    # One ray a pixel: an antialiased edge pixel's colour is a mean of several rays' colours.
+    frame = scene.render(cam, iso=0.0, shading=shading, clip=CLIP, samples=1)
     _, dirs = cam.rays()
     hit = frame.hit
     assert (frame.face[hit] == 1).sum() > 20 and (frame.face[hit] == -1).sum() > 20
@@ -170,14 +171,14 @@ def test_blinn_phong_colours_follow_the_formula(shading_scene, index):
 def test_each_shading_parameter_changes_the_image_as_the_formula_says(shading_scene):
     scene, cam = shading_scene
     base = sc.Shading(ambient=0.2, diffuse=0.6, specular=0.3, shininess=8.0)
-    ref = scene.render(cam, iso=0.0, shading=base, clip=CLIP)
+    ref = scene.render(cam, iso=0.0, shading=base, clip=CLIP, samples=1)
     _, dirs = cam.rays()
     hit = ref.hit
     normal = ref.normal.astype(np.float64)
     for change in ({"ambient": 0.5}, {"diffuse": 0.1}, {"specular": 0.0}, {"shininess": 2.0},
                    {"front_color": (0.1, 0.9, 0.2)}, {"back_color": (0.9, 0.1, 0.1)}):
         shading = sc.Shading(**{**base.__dict__, **change})
-        frame = scene.render(cam, iso=0.0, shading=shading, clip=CLIP)
+        frame = scene.render(cam, iso=0.0, shading=shading, clip=CLIP, samples=1)
         expected = blinn_phong(shading, ref.face, normal, dirs)
         assert np.abs(frame.rgba[hit][:, :3] - ref.rgba[hit][:, :3]).max() > 0.01, change
         np.testing.assert_allclose(frame.rgba[hit][:, :3], expected[hit], atol=1e-5)

@@ -419,7 +419,10 @@ def test_the_cli_prints_one_line_for_members_refused_at_once(tmp_path):
     # them before the first was reported), indented after the one line.
     verbose = _cli("info", str(store), "--verbose", cwd=tmp_path)
     more = _lines(verbose.stderr)
-    assert verbose.returncode == 2 and more[0] == lines[0], verbose.stderr
+    # (which member's refusal comes first depends on which of zarr's reads ends first)
+    assert verbose.returncode == 2 and "lies outside the store's folder" in more[0], \
+        verbose.stderr
+    assert not more[0].startswith(" "), verbose.stderr
     assert all(line.startswith("  ") for line in more[1:]), verbose.stderr
 
 
