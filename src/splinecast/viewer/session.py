@@ -374,7 +374,9 @@ class Session:
         fallback = replace(shown, camera=job.request.camera)
         divisor = self._divisor(fallback, self.interactive_ms, 2, "interactive")
         step = _Pass("preparing", 1.0 / divisor, "jpeg", False)
-        work = partial(self._render_and_encode_as, fallback, step, stale, name)
+        # Rendered with the options of pass ``name`` (the pass its kernels were loaded for),
+        # at this pass's scale, ready kernels only.
+        work = partial(self._render_and_encode, fallback, step, stale, name, False)
         try:
             result = await self._run(work)
         except (CompileNeeded, SplinecastError):
@@ -386,18 +388,6 @@ class Session:
         header["preparing"] = self._preparing_field()
         await self._send_bytes(pack_frame(header, data))
         self._shown_final = False
-
-    def _render_and_encode_as(self, request: RenderRequest, step: _Pass,
-                              stale: Callable[[], bool] | None, name: str
-                              ) -> tuple[RenderedImage, bytes, float] | None:
-        """On the render thread: ``request`` with the options of pass ``name`` (the pass its
-        kernels were loaded for) at ``step``'s scale, ready kernels only."""
-        image = self.renderer.render(request, step.scale, stale, name, compile=False)
-        if image is None:
-            return None
-        start = time.perf_counter()
-        data = encode_image(image.rgba, step.fmt)
-        return image, data, (time.perf_counter() - start) * 1e3
 
     async def _prepare_wanted(self) -> None:
         """Prepare the kernels of the newest waiting view, then render it; repeat while a
