@@ -140,6 +140,23 @@ _WAITER = textwrap.dedent("""
 """)
 
 
+def _blocked_on(path: str, pid: int, timeout: float) -> bool:
+    """Whether process ``pid`` comes to wait for a ``flock`` on ``path`` within ``timeout``
+    seconds, as the kernel's lock table says (Linux ``/proc/locks``: a waiter's line has
+    ``->`` and the file's device and inode)."""
+    st = os.stat(path)
+    inode = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with open("/proc/locks") as table:
+            for line in table:
+                fields = line.split()
+                if "->" in fields and str(pid) in fields and inode in fields:
+                    return True
+        time.sleep(0.01)  # the lock table has no change notification: look again shortly
+    return False
+
+
 def test_a_process_waits_for_the_same_compile_in_another_and_loads_its_code(
         tmp_path: Path) -> None:
     """Two processes that need the same signature at once compile it once: the second waits
@@ -171,8 +188,9 @@ def test_a_process_waits_for_the_same_compile_in_another_and_loads_its_code(
         out, err = holder.communicate("go\n", timeout=300)
         assert holder.returncode == 0, err[-2000:]
         assert out.split() == ["0", "1"]  # compiled (a miss) and saved
-        time.sleep(1.0)
-        assert waiter.poll() is None  # still waiting for the lock
+        # The kernel lists the waiter as blocked on the lock file: it is waiting, not compiling.
+        assert _blocked_on(path, waiter.pid, timeout=300), waiter.poll()
+        assert waiter.poll() is None
     out, err = waiter.communicate(timeout=300)
     assert waiter.returncode == 0, err[-2000:]
     assert out.split() == ["1", "0"]  # loaded the holder's code, compiled nothing
