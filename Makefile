@@ -4,6 +4,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
+CORE_STAMP := $(VENV)/.core-stamp
 BENCH_STAMP := $(VENV)/.bench-stamp
 BROWSER_STAMP := $(VENV)/.browser-stamp
 DEMO_PNG ?= splinecast-demo.png
@@ -14,9 +15,16 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[all,test,docs]'
-	touch $(STAMP)
+	touch $(STAMP) $(CORE_STAMP)
 
-demo: $(STAMP)
+# The demo needs only the core dependencies (numpy, numba, pillow, cmap): installing the extras
+# (readers, viewer, Dask, zarr, docs) would double the wait before the first picture.
+$(CORE_STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet -e .
+	touch $(CORE_STAMP)
+
+demo: $(CORE_STAMP)
 	@$(VENV)/bin/splinecast render 'demo:marschner-lobb?size=128' --iso 0.5 --size 768x768 \
 		--azimuth 30 --elevation 25 --quiet -o $(DEMO_PNG)
 

@@ -10,7 +10,8 @@ import numba
 import pytest
 from numba.core import ir
 
-import splinecast._jit as sc_jit
+import splinecast._compile_speedups as sc_speedups
+import splinecast._jit  # noqa: F401 - installs the speed-ups through the package
 
 
 @numba.njit(inline="always")
@@ -53,7 +54,7 @@ def scope_copies(monkeypatch):
 def test_the_patch_is_installed():
     from numba.core import inline_closurecall
 
-    assert isinstance(inline_closurecall.copy, sc_jit._CopyModuleSharingScopes)
+    assert isinstance(inline_closurecall.copy, sc_speedups._CopyModuleSharingScopes)
 
 
 def test_inlining_copies_each_scope_once_and_computes_the_same(scope_copies):

@@ -18,15 +18,13 @@ process about to compile a signature another process is compiling waits for it a
 result instead of compiling the same code at the same time (:func:`_compile_once`).
 
 Compiling is slow mostly because of inlining (the render hooks are inlined at Numba's IR level, see
-:func:`overload_jit`); :func:`_copy_each_inlined_function_once` removes the largest avoidable part,
-:func:`_compare_flags_cheaply` another one.
+:func:`overload_jit`); :mod:`._compile_speedups` removes the largest avoidable parts of numba's own
+work on such large functions.
 """
 
 from __future__ import annotations
 
 import contextlib
-import copy
-import functools
 import hashlib
 import os
 import threading
@@ -45,6 +43,8 @@ from numba.core.compiler_lock import global_compiler_lock
 from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.core.types import WrapperAddressProtocol
 from numba.extending import overload
+
+from . import _compile_speedups  # noqa: F401 - installs the speed-ups before anything compiles
 
 try:  # POSIX; elsewhere saving keeps numba's own (unlocked) behaviour
     import fcntl
@@ -66,101 +66,6 @@ __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_wit
            "call_with_first_classes", "package_stamp", "reporting_compiles", "CompileNeeded",
            "forbidding_compiles"]
 
-
-class _CopyModuleSharingScopes:
-    """Stands in for the ``copy`` module inside ``numba.core.inline_closurecall``.
-
-    Numba copies the IR of every function it inlines block by block, one ``copy.deepcopy`` per
-    block, and each of those copies the function's whole variable scope again (a ``Var`` holds
-    its scope): the cost is blocks x variables. Our hooks, inlined into one another, reach
-    thousands of both, and those copies took about a fifth of a render kernel's compile time
-    (s31 iso from an empty cache: 68 s -> 53 s). While one ``inline_ir`` runs, this object gives
-    the blocks of one function a shared memo, so the scope is copied once per function copy,
-    which is what one ``deepcopy`` of the whole IR would do. Everything else is the real module.
-    """
-
-    def __init__(self) -> None:
-        self.memos: dict[int, dict] | None = None
-
-    def deepcopy(self, x: Any, memo: dict | None = None) -> Any:
-        if memo is None and self.memos is not None and isinstance(x, _ir.Block):
-            # One memo per scope: the blocks of one function copy share it, while the second
-            # copy numba makes (of the first) gets its own.
-            memo = self.memos.setdefault(id(x.scope), {})
-        return copy.deepcopy(x, memo)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(copy, name)
-
-
-def _copy_each_inlined_function_once() -> None:
-    """Install :class:`_CopyModuleSharingScopes` where numba inlines (if numba is as expected)."""
-    worker = getattr(_inline, "InlineWorker", None)
-    inline_ir = getattr(worker, "inline_ir", None)
-    if inline_ir is None or getattr(_inline, "copy", None) is not copy:
-        return  # another numba version (or already installed): keep its behaviour
-    shim = _CopyModuleSharingScopes()
-
-    @functools.wraps(inline_ir)
-    def inline_ir_copying_scopes_once(*args: Any, **kwargs: Any) -> Any:
-        shim.memos = {}
-        try:
-            return inline_ir(*args, **kwargs)
-        finally:
-            shim.memos = None
-
-    _inline.copy = shim
-    worker.inline_ir = inline_ir_copying_scopes_once
-
-
-def _compare_flags_cheaply() -> None:
-    """Let numba hash and compare its compiler flags without reading every option first.
-
-    Numba keys its cache of overload implementations by the current compiler flags and looks
-    it up at every overload call it types; the flags' ``__hash__`` and ``__eq__`` each build a
-    dictionary of all fifty-odd options, which showed in profiles of the cut renderer's launch
-    compile. Numba's hash is of the option names only (the sorted keys of that
-    dictionary), fixed per class: here it is computed from the names directly. Two flags of one
-    class with equal explicitly set options are equal without building the dictionaries; any
-    other pair is compared as numba does. Installed only if this numba's hash is the one
-    described.
-    """
-    config = getattr(_targetconfig, "TargetConfig", None)
-    flags_class = getattr(_compiler, "Flags", None)
-    if config is None or flags_class is None or "__hash__" not in vars(config):
-        return
-    original_hash, original_eq = config.__hash__, config.__eq__
-
-    def __hash__(self: Any) -> int:
-        return hash(tuple(sorted(self.options)))
-
-    def __eq__(self: Any, other: Any) -> Any:
-        if type(self) is type(other) and self._values == other._values:
-            return True
-        return original_eq(self, other)
-
-    probe = flags_class()
-    probe.nrt = True  # a set option: equal hashes whatever the values
-    if original_hash(probe) == __hash__(probe) == original_hash(flags_class()):
-        config.__hash__ = __hash__
-        config.__eq__ = __eq__
-
-
-try:
-    from numba.core import inline_closurecall as _inline
-    from numba.core import ir as _ir
-except ImportError:  # pragma: no cover - a numba without these modules
-    pass
-else:
-    _copy_each_inlined_function_once()
-
-try:
-    from numba.core import compiler as _compiler
-    from numba.core import targetconfig as _targetconfig
-except ImportError:  # pragma: no cover - a numba without these modules
-    pass
-else:
-    _compare_flags_cheaply()
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
