@@ -6,7 +6,12 @@ what is measured is what a user meets on the first use of a model, mode and voxe
 installing: Python and splinecast importing, the data read, the kernels compiled, the image
 written. After each cold run the same command runs again on the cache it filled (the *warm*
 time: every later use). Times are wall times of the whole process, the median of ``--repeats``
-runs.
+runs, and the CPU time (user + system) the process and its children used: on a machine shared
+with other work the wall time grows with the load, the CPU time much less.
+
+``--baseline PYTHON`` runs every case also with another installation's Python (for example a
+virtual environment of the main before a change), alternating with this one case by case, and
+reports the ratio of the cold CPU times (this / baseline) beside the two.
 
 Parts (``--parts``, comma-separated):
 
@@ -21,7 +26,7 @@ Parts (``--parts``, comma-separated):
     fresh cache (what a switch in the viewer prepares before its first frame).
 
     python benchmarks/bench_cold_start.py [--parts readme,table,viewer] [--repeats 3]
-        [--only TEXT] [--stem NAME]
+        [--only TEXT] [--stem NAME] [--baseline OTHER/.venv/bin/python]
 
 Results go to ``benchmarks/results/cold_start.{md,json}`` (``--stem``) with the machine.
 """
@@ -30,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -61,14 +67,16 @@ sc.Scene(vol, model=model).render(cam, mode=mode, outputs=("rgba",))
 """
 
 
-def _cli(*args: str) -> list[str]:
-    """The ``splinecast`` command a user types (the entry point installed beside Python)."""
-    return [str(Path(sys.executable).with_name("splinecast")), *args]
-
-
-def cases(parts: set[str], out: Path) -> list[tuple[str, str, list[str]]]:
-    """(part, label, command) of every case of ``parts``; outputs go under ``out``."""
+def cases(parts: set[str], out: Path, python: str = sys.executable
+          ) -> list[tuple[str, str, list[str]]]:
+    """(part, label, command) of every case of ``parts`` run by the installation of ``python``;
+    outputs go under ``out``."""
     png = str(out / "out.png")
+
+    def _cli(*args: str) -> list[str]:
+        """The ``splinecast`` command a user types (the entry point installed beside Python)."""
+        return [str(Path(python).with_name("splinecast")), *args]
+
     found: list[tuple[str, str, list[str]]] = []
     if "readme" in parts:
         found.append(("readme", "make demo's render (ML 128^3, 768x768)", _cli(
@@ -93,37 +101,45 @@ def cases(parts: set[str], out: Path) -> list[tuple[str, str, list[str]]]:
         for model in VIEWER_MODELS:
             for mode in VIEWER_MODES:
                 found.append(("viewer", f"{model} / {mode}", [
-                    sys.executable, "-c", _VIEWER_FIRST_FRAME, model, mode]))
+                    python, "-c", _VIEWER_FIRST_FRAME, model, mode]))
     return found
 
 
-def _run(command: list[str], cache: Path) -> tuple[float, str]:
-    """Wall time of one process with ``cache`` as its kernel cache, and its error if it
-    failed."""
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _run(command: list[str], cache: Path) -> tuple[float, float, str]:
+    """Wall and CPU time of one process with ``cache`` as its kernel cache, and its error if
+    it failed."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    cpu = _children_cpu()
     start = time.perf_counter()
     proc = subprocess.run(command, env=env, capture_output=True, text=True)
     seconds = time.perf_counter() - start
+    cpu = _children_cpu() - cpu
     error = "" if proc.returncode == 0 else (proc.stderr.strip().splitlines() or ["?"])[-1]
-    return seconds, error
+    return seconds, cpu, error
 
 
 def measure(command: list[str], repeats: int) -> dict[str, object]:
-    """Median cold and warm wall times of ``command`` over ``repeats`` fresh caches."""
-    cold, warm, errors = [], [], []
+    """Median cold and warm wall and CPU times of ``command`` over ``repeats`` fresh caches."""
+    runs: dict[str, list[float]] = {"cold_s": [], "cold_cpu_s": [], "warm_s": [],
+                                    "warm_cpu_s": []}
+    errors = []
     for _ in range(repeats):
         cache = Path(tempfile.mkdtemp(prefix="splinecast-cold-"))
         try:
-            seconds, error = _run(command, cache)
-            cold.append(seconds)
-            errors.append(error)
-            seconds, error = _run(command, cache)
-            warm.append(seconds)
-            errors.append(error)
+            for kind in ("cold", "warm"):  # warm: the same command on the cache just filled
+                seconds, cpu, error = _run(command, cache)
+                runs[f"{kind}_s"].append(seconds)
+                runs[f"{kind}_cpu_s"].append(cpu)
+                errors.append(error)
         finally:
             shutil.rmtree(cache, ignore_errors=True)
-    return {"cold_s": statistics.median(cold), "warm_s": statistics.median(warm),
-            "cold_runs_s": cold, "warm_runs_s": warm,
+    return {**{key: statistics.median(values) for key, values in runs.items()},
+            **{key.replace("_s", "_runs_s"): values for key, values in runs.items()},
             "error": next((e for e in errors if e), "")}
 
 
@@ -134,27 +150,50 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="fresh caches per case")
     parser.add_argument("--only", help="keep the cases whose label contains this text")
     parser.add_argument("--stem", default="cold_start", help="result file name")
+    parser.add_argument("--baseline", help="another installation's Python, run side by side")
     args = parser.parse_args(argv)
     parts = {p.strip() for p in args.parts.split(",") if p.strip()}
     rows = []
     with tempfile.TemporaryDirectory() as out:
-        for part, label, command in cases(parts, Path(out)):
+        ours = cases(parts, Path(out))
+        theirs = cases(parts, Path(out), args.baseline) if args.baseline else [None] * len(ours)
+        for (part, label, command), other in zip(ours, theirs, strict=True):
             if args.only and args.only not in label:
                 continue
             row = {"part": part, "case": label, **measure(command, args.repeats)}
+            line = (f"{part:7s} {label:40s} cold {row['cold_s']:6.1f} s ({row['cold_cpu_s']:5.1f}"
+                    f" s CPU)  warm {row['warm_s']:5.2f} s")
+            if other is not None:
+                base = measure(other[2], args.repeats)
+                row["baseline"] = base
+                row["cpu_ratio"] = row["cold_cpu_s"] / base["cold_cpu_s"]
+                line += (f"  baseline cold {base['cold_s']:6.1f} s ({base['cold_cpu_s']:5.1f} s"
+                         f" CPU)  ratio {row['cpu_ratio']:.2f}")
             rows.append(row)
-            print(f"{part:7s} {label:40s} cold {row['cold_s']:6.1f} s  warm "
-                  f"{row['warm_s']:5.2f} s  {row['error']}", flush=True)
+            print(f"{line}  {row['error']}", flush=True)
     path = HERE / "results" / args.stem
+    columns = ["part", "case", "cold (s)", "cold CPU (s)", "warm (s)", "warm CPU (s)"]
+    if args.baseline:
+        columns += ["baseline cold (s)", "baseline cold CPU (s)", "cold CPU ratio"]
+
+    def cells(r: dict) -> list[str]:
+        found = [r["part"], r["case"], f"{r['cold_s']:.1f}", f"{r['cold_cpu_s']:.1f}",
+                 f"{r['warm_s']:.2f}", f"{r['warm_cpu_s']:.2f}"]
+        if args.baseline:
+            found += [f"{r['baseline']['cold_s']:.1f}", f"{r['baseline']['cold_cpu_s']:.1f}",
+                      f"{r['cpu_ratio']:.2f}"]
+        return [*found, r["error"] or ""]
+
     write_results(
         path, "Cold starts",
-        f"Wall time of each command in a fresh process with an empty kernel cache (cold) and "
-        f"again on the cache it filled (warm), median of {args.repeats} runs "
+        f"Wall and CPU time of each command in a fresh process with an empty kernel cache "
+        f"(cold) and again on the cache it filled (warm), median of {args.repeats} runs "
         f"(`python benchmarks/bench_cold_start.py --parts {args.parts} --repeats "
-        f"{args.repeats}`).",
-        ["part", "case", "cold (s)", "warm (s)", "error"], rows,
-        lambda r: [r["part"], r["case"], f"{r['cold_s']:.1f}", f"{r['warm_s']:.2f}",
-                   r["error"] or ""])
+        f"{args.repeats}" + (" --baseline BASELINE_PYTHON" if args.baseline else "") + "`)."
+        + (" The baseline is the installation before the change, run alternately with this one"
+           " case by case; the ratio is of the cold CPU times (this / baseline)."
+           if args.baseline else ""),
+        [*columns, "error"], rows, cells)
     print(f"wrote {path}.md")
     return 0 if all(not r["error"] for r in rows) else 1
 

@@ -76,7 +76,7 @@ _CALLER = textwrap.dedent("""
     sys.path.insert(0, sys.argv[1])
     import splinecast._jit as J
     if sys.argv[2] == "edited":  # as if a module of the package had been edited since
-        stamp = J.package_stamp(J.os.path.dirname(J.__file__))
+        stamp = J.package_stamp(J.PACKAGE_ROOT)
         J._PACKAGE_STAMP[:] = [stamp + (("edited.py", 1, 1),)]
     import cached_caller
     assert cached_caller.f(2) == 3

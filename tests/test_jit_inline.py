@@ -10,8 +10,7 @@ import numba
 import pytest
 from numba.core import ir
 
-import splinecast._compile_speedups as sc_speedups
-import splinecast._jit  # noqa: F401 - installs the speed-ups through the package
+import splinecast._jit.speedups as sc_speedups
 
 
 @numba.njit(inline="always")

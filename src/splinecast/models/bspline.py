@@ -50,6 +50,7 @@ from ..errors import ParameterError
 from ..roots.first_root import DEFAULT_ITERATIONS, POWER_FORM_FINDERS, finder_id
 from ..volume import Volume
 from .shading_field import whole_halo
+from .storage import kernel_array
 from .validation import require_renderable
 
 __all__ = [
@@ -333,6 +334,8 @@ class BSplineModel:
             data = ndimage.spline_filter(
                 np.asarray(data, dtype=np.float64), order=d, output=np.float64, mode="mirror"
             )
+        else:
+            data = kernel_array(data)  # one kernel for 8/16-bit integers and float32 (exact)
         pad = pad_width(d)
         if pad:
             self.coeffs = np.pad(data, pad, mode="reflect")

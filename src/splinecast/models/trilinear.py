@@ -10,7 +10,8 @@ On a ray segment ``(x, y, z) = a + s e`` (``a`` the entry point, ``e`` the entry
 ``c1 = grad f(a) . e``, ``c2`` the mixed second derivatives contracted with ``e`` and
 ``c3 = k7 ex ey ez`` (Józsa et al. 2014, section 5; we expand the polynomial directly instead of
 fitting it to four samples, which avoids the cancellation of that fit). All arithmetic is float64;
-voxels stay in their stored dtype and are converted on load.
+voxels are converted on load from the kernels' element type (:mod:`.storage`: float32 for 8- and
+16-bit integers, else the stored type).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from ..roots.pieces import PowerCubic
 from ..volume import Volume
 from .pieces import cell_range, register, whole_cell
 from .shading_field import SHADING_HALO, halo_gradient, whole_halo
+from .storage import kernel_array
 from .validation import require_renderable
 
 __all__ = [
@@ -335,7 +337,7 @@ class TrilinearModel:
     def __init__(self, volume: Volume) -> None:
         require_renderable(volume)
         self.volume = volume
-        self.data = np.ascontiguousarray(volume.data)
+        self.data = kernel_array(volume.data)  # one kernel for 8/16-bit integers and float32
         self.n_cells = tuple(n - 1 for n in volume.shape)
 
     @property

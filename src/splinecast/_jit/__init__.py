@@ -18,7 +18,7 @@ process about to compile a signature another process is compiling waits for it a
 result instead of compiling the same code at the same time (:func:`_compile_once`).
 
 Compiling is slow mostly because of inlining (the render hooks are inlined at Numba's IR level, see
-:func:`overload_jit`); :mod:`._compile_speedups` removes the largest avoidable parts of numba's own
+:func:`overload_jit`); :mod:`.speedups` removes the largest avoidable parts of numba's own
 work on such large functions.
 """
 
@@ -44,7 +44,7 @@ from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.core.types import WrapperAddressProtocol
 from numba.extending import overload
 
-from . import _compile_speedups  # noqa: F401 - installs the speed-ups before anything compiles
+from . import speedups  # noqa: F401 - installs the speed-ups before anything compiles
 
 try:  # POSIX; elsewhere saving keeps numba's own (unlocked) behaviour
     import fcntl
@@ -129,6 +129,10 @@ if IndexDataCacheFile is not None and fcntl is not None:
                 self._save_index(overloads)
 else:  # pragma: no cover
     _LockedIndexFile = None  # type: ignore[assignment,misc]
+
+
+#: The folder of the splinecast package, whose sources :func:`package_stamp` covers.
+PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def package_stamp(root: str) -> tuple:
@@ -247,7 +251,7 @@ def _lock_cache(dispatcher: Any) -> Any:
         cache_file.__class__ = _LockedIndexFile
     if cache_file is not None and hasattr(cache_file, "_source_stamp"):
         if not _PACKAGE_STAMP:
-            _PACKAGE_STAMP.append(package_stamp(os.path.dirname(os.path.abspath(__file__))))
+            _PACKAGE_STAMP.append(package_stamp(PACKAGE_ROOT))
         cache_file._source_stamp = (cache_file._source_stamp, _PACKAGE_STAMP[0])
     if fcntl is not None and cache_file is not None and hasattr(cache_file, "_index_path"):
         _compile_once(dispatcher, cache_file._index_path)

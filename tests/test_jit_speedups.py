@@ -15,7 +15,7 @@ from numba.core import analysis, ir_utils
 from numba.core.compiler import run_frontend
 from numba.parfors import parfor
 
-import splinecast._compile_speedups as speedups
+import splinecast._jit.speedups as speedups
 
 
 def test_numba_uses_the_replacement_everywhere() -> None:
