@@ -21,6 +21,11 @@ Parts (``--parts``, comma-separated):
     A small volume (Marschner-Lobb 48^3, 128x96 image) and the MNI152 MRI (when present) in
     the default mode and model, then one further mode or model at a time: what trying the
     options of the README costs on first use.
+``sequence``
+    What a new user meets trying the README in order: ``make demo``'s render, then the MRI, MIP,
+    DVR, ``s31`` and ``bspline3``, all on one kernel cache (emptied once per repeat), each
+    command's time given the ones before it: the wait for each further model, mode and voxel
+    type after the demo.
 ``viewer``
     Every model x mode the viewer's selectors offer, each the first render of that pair in a
     fresh cache (what a switch in the viewer prepares before its first frame).
@@ -97,6 +102,23 @@ def cases(parts: set[str], out: Path, python: str = sys.executable
         if MRI.exists():
             found.append(("table", "MNI T1 NIfTI, no options (uint8)", _cli(
                 "render", str(MRI), "--size", "128x96", "--quiet", "-o", png)))
+    if "sequence" in parts:
+        mri = [str(MRI)] if MRI.exists() else [SMALL, "--iso", "0.5"]
+        quiet = ["--size", "128x96", "--quiet", "-o", png]
+        found += [
+            ("sequence", "1. make demo's render", _cli(
+                "render", "demo:marschner-lobb?size=128", "--iso", "0.5", "--size", "768x768",
+                "--azimuth", "30", "--elevation", "25", "--quiet", "-o", png)),
+            ("sequence", "2. then the MRI, no options", _cli("render", *mri, *quiet)),
+            ("sequence", "3. then the MRI --mode mip", _cli("render", *mri[:1], "--mode", "mip",
+                                                          *quiet)),
+            ("sequence", "4. then the MRI --mode dvr", _cli("render", *mri[:1], "--mode", "dvr",
+                                                          *quiet)),
+            ("sequence", "5. then ML 48^3 --model s31", _cli("render", SMALL, "--model", "s31",
+                                                           *SMALL_OPTIONS, "-o", png)),
+            ("sequence", "6. then ML 48^3 --model bspline3", _cli(
+                "render", SMALL, "--model", "bspline3", *SMALL_OPTIONS, "-o", png)),
+        ]
     if "viewer" in parts:
         for model in VIEWER_MODELS:
             for mode in VIEWER_MODES:
@@ -123,6 +145,28 @@ def _run(command: list[str], cache: Path) -> tuple[float, float, str]:
     return seconds, cpu, error
 
 
+def measure_sequence(commands: list[list[str]], repeats: int) -> list[dict[str, object]]:
+    """Median wall and CPU time of each of ``commands`` run in order on one kernel cache (a
+    fresh one per repeat): each command's cold time given the kernels of those before it."""
+    runs = [{"cold_s": [], "cold_cpu_s": []} for _ in commands]
+    errors: list[list[str]] = [[] for _ in commands]
+    for _ in range(repeats):
+        cache = Path(tempfile.mkdtemp(prefix="splinecast-cold-"))
+        try:
+            for i, command in enumerate(commands):
+                seconds, cpu, error = _run(command, cache)
+                runs[i]["cold_s"].append(seconds)
+                runs[i]["cold_cpu_s"].append(cpu)
+                errors[i].append(error)
+        finally:
+            shutil.rmtree(cache, ignore_errors=True)
+    return [{**{key: statistics.median(values) for key, values in run.items()},
+             **{key.replace("_s", "_runs_s"): values for key, values in run.items()},
+             "warm_s": float("nan"), "warm_cpu_s": float("nan"),
+             "error": next((e for e in errs if e), "")} for run, errs in zip(runs, errors,
+                                                                             strict=True)]
+
+
 def measure(command: list[str], repeats: int) -> dict[str, object]:
     """Median cold and warm wall and CPU times of ``command`` over ``repeats`` fresh caches."""
     runs: dict[str, list[float]] = {"cold_s": [], "cold_cpu_s": [], "warm_s": [],
@@ -145,8 +189,8 @@ def measure(command: list[str], repeats: int) -> dict[str, object]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--parts", default="readme,table,viewer",
-                        help="comma-separated: readme, table, viewer")
+    parser.add_argument("--parts", default="readme,table,sequence,viewer",
+                        help="comma-separated: readme, table, sequence, viewer")
     parser.add_argument("--repeats", type=int, default=3, help="fresh caches per case")
     parser.add_argument("--only", help="keep the cases whose label contains this text")
     parser.add_argument("--stem", default="cold_start", help="result file name")
@@ -157,14 +201,25 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as out:
         ours = cases(parts, Path(out))
         theirs = cases(parts, Path(out), args.baseline) if args.baseline else [None] * len(ours)
-        for (part, label, command), other in zip(ours, theirs, strict=True):
+        # The sequence's commands run together, so each row knows the ones before it.
+        in_order = [i for i, c in enumerate(ours) if c[0] == "sequence"]
+        sequence: dict[int, dict] = {}
+        if in_order:
+            results = measure_sequence([ours[i][2] for i in in_order], args.repeats)
+            base = (measure_sequence([theirs[i][2] for i in in_order], args.repeats)
+                    if args.baseline else [None] * len(in_order))
+            sequence = {i: {"ours": r, "base": b}
+                        for i, r, b in zip(in_order, results, base, strict=True)}
+        for n, ((part, label, command), other) in enumerate(zip(ours, theirs, strict=True)):
             if args.only and args.only not in label:
                 continue
-            row = {"part": part, "case": label, **measure(command, args.repeats)}
+            ran = sequence.get(n)
+            row = {"part": part, "case": label,
+                   **(ran["ours"] if ran else measure(command, args.repeats))}
             line = (f"{part:7s} {label:40s} cold {row['cold_s']:6.1f} s ({row['cold_cpu_s']:5.1f}"
                     f" s CPU)  warm {row['warm_s']:5.2f} s")
             if other is not None:
-                base = measure(other[2], args.repeats)
+                base = ran["base"] if ran else measure(other[2], args.repeats)
                 row["baseline"] = base
                 row["cpu_ratio"] = row["cold_cpu_s"] / base["cold_cpu_s"]
                 line += (f"  baseline cold {base['cold_s']:6.1f} s ({base['cold_cpu_s']:5.1f} s"
