@@ -245,8 +245,9 @@ def main(argv: list[str] | None = None) -> int:
         f"(cold) and again on the cache it filled (warm), median of {args.repeats} runs "
         f"(`python benchmarks/bench_cold_start.py --parts {args.parts} --repeats "
         f"{args.repeats}" + (" --baseline BASELINE_PYTHON" if args.baseline else "") + "`)."
-        + (" The baseline is the installation before the change, run alternately with this one"
-           " case by case; the ratio is of the cold CPU times (this / baseline)."
+        + (" The baseline is the installation before the change, run in the same process: case"
+           " by case, the sequence after this one's; the ratio is of the cold CPU times (this /"
+           " baseline)."
            if args.baseline else ""),
         [*columns, "error"], rows, cells)
     print(f"wrote {path}.md")
