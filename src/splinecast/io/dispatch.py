@@ -7,10 +7,11 @@ import os
 import zlib
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import ParameterError, ReadError, limits
 from ..volume import SUPPORTED_DTYPES, Volume
+from .remote import is_url
 from .sidecar import find_sidecar
 
 if TYPE_CHECKING:
@@ -141,8 +142,9 @@ def read(
     *,
     array: str | None = None,
     allow_external: bool | None = None,
+    storage_options: dict[str, Any] | None = None,
 ) -> Volume | MultiscaleVolume:
-    """Read a volume from a file, a DICOM folder, a Zarr folder or a ``demo:`` name.
+    """Read a volume from a file, a DICOM folder, a Zarr folder, a URL or a ``demo:`` name.
 
     Parameters
     ----------
@@ -154,6 +156,13 @@ def read(
         format is recognised by the file's signature when it has one, by its extension otherwise.
         VTK image data: ``.vti`` (XML, any encoding) and legacy ``.vtk`` structured points (needs
         ``pip install 'splinecast[vtk]'``).
+
+        Or an ``http://``, ``https://``, ``s3://`` or ``gs://`` URL (needs
+        ``pip install 'splinecast[remote]'``) of an OME-Zarr image or Zarr array, read lazily
+        chunk by chunk, or of a single file of the formats above, downloaded into a private
+        temporary folder and read there (a header naming other files is refused). Access is
+        anonymous unless credentials are configured in the environment or the usual
+        configuration files (``~/.aws``, Google application default credentials).
     array : str, optional
         The point-data array to read from a VTK file that holds several (the error message of a
         read without it lists their names). Other formats hold one array and refuse it.
@@ -161,7 +170,11 @@ def read(
         Let a header (MetaImage ``ElementDataFile``, NRRD ``data file``, a sidecar's
         ``data_file``, a NIfTI ``.img``, an OME-TIFF's other files, a DICOM folder's symbolic
         links) name files outside its own folder. Default: no, unless
-        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``.
+        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``. Never for a URL.
+    storage_options : dict, optional
+        For a URL: options of its fsspec filesystem, e.g. ``{"anon": True}``,
+        ``{"key": ..., "secret": ..., "endpoint_url": ...}`` (S3), ``{"token": ...}`` (GCS),
+        ``{"headers": {...}}`` (HTTP).
 
     Returns
     -------
@@ -195,6 +208,12 @@ def read(
         from .synthetic import demo_from_uri
 
         return demo_from_uri(path)
+    if is_url(path):  # kept as text: a Path would collapse the URL's "//"
+        from .remote import read_url
+
+        return read_url(path, array=array, storage_options=storage_options)  # type: ignore
+    if storage_options is not None:
+        raise ParameterError(f"storage_options applies to URLs, not to the path {path}")
     path = limits.check_path_text(path, "file", ReadError)
     try:
         is_dir = path.is_dir()
