@@ -209,9 +209,7 @@ def read(
 
         return demo_from_uri(path)
     if is_url(path):  # kept as text: a Path would collapse the URL's "//"
-        from .remote import read_url
-
-        return read_url(path, array=array, storage_options=storage_options)  # type: ignore
+        return _read_url(path, array, storage_options)  # type: ignore[arg-type]
     if storage_options is not None:
         raise ParameterError(f"storage_options applies to URLs, not to the path {path}")
     path = limits.check_path_text(path, "file", ReadError)
@@ -258,6 +256,33 @@ def read(
     if kind in _NAMES_FILES:
         return _reader(kind)(path, allow_external=allow_external)  # type: ignore[call-arg]
     return _reader(kind)(path)
+
+
+def _read_url(url: str, array: str | None,
+              storage_options: dict[str, Any] | None) -> Volume | MultiscaleVolume:
+    """An OME-Zarr image (or Zarr array) at ``url``, opened lazily; else a single file,
+    downloaded into a private temporary folder and read there with external files refused
+    (a header naming another file would lead outside the URL)."""
+    from .remote import Remote, basename, download, has_zarr_metadata, redact
+
+    remote = Remote(url, storage_options)
+    name = basename(remote.url)
+    kind = _extension_format(Path(name)) if name else None  # (a bare name, not the URL)
+    if kind is None and (name.lower().endswith(".zarr") or has_zarr_metadata(remote)):
+        if array is not None:
+            raise ParameterError(f"array={array!r} applies to VTK files, not to the Zarr store "
+                                 f"{redact(remote.url)}")
+        from .omezarr import open_zarr
+
+        return open_zarr(remote.url, storage_options=storage_options)
+    if kind is None:
+        raise ReadError(f"{redact(remote.url)}: neither a Zarr store (no zarr.json, .zgroup or "
+                        ".zarray) nor a file of a known format by its name")
+    with download(remote, name) as local:
+        volume = read(local, array=array, allow_external=False)
+    volume.metadata["name"] = name
+    volume.metadata["source"] = redact(remote.url)
+    return volume
 
 
 def _unknown_message(path: Path) -> str:

@@ -57,8 +57,8 @@ __all__ = [
     "RemoteSource",
     "check_url",
     "is_url",
+    "download",
     "open_remote_group",
-    "read_url",
     "redact",
 ]
 
@@ -131,7 +131,8 @@ def check_url(url: str) -> str:
                         "environment, the usual configuration files or storage_options")
     host = parts.hostname
     if not host:
-        raise ReadError(f"{shown}: malformed URL (no {'bucket' if scheme in ('s3', 'gs', 'gcs') else 'host'})")
+        what = "bucket" if scheme in ("s3", "gs", "gcs") else "host"
+        raise ReadError(f"{shown}: malformed URL (no {what})")
     if port is not None and not 0 < port < 65536:
         raise ReadError(f"{shown}: malformed URL (port {port})")
     if parts.query or parts.fragment:
@@ -845,6 +846,10 @@ def _guarded_store_class() -> type:
         async def exists(self, key: str) -> bool:
             return (await self.get(key)) is not None
 
+        def chunk_source(self) -> RemoteSource:
+            """Where :mod:`.zarr_chunks` reads this store's chunks from."""
+            return RemoteSource(self.remote)
+
     return GuardedFsspecStore
 
 
@@ -860,8 +865,7 @@ def open_remote_group(remote: Remote) -> Any:
     return zarr.open(store=store, mode="r")
 
 
-# --------------------------------------------------------------------------- entry point
-def _zarr_probe(remote: Remote) -> bool:
+def has_zarr_metadata(remote: Remote) -> bool:
     """Whether ``remote`` holds a Zarr group or array (one of its metadata files exists)."""
     found = remote.fetch_many([(m, None, None, limits.MAX_JSON_BYTES)
                                for m in ("zarr.json", ".zgroup", ".zarray", ".zattrs")],
@@ -869,37 +873,19 @@ def _zarr_probe(remote: Remote) -> bool:
     return any(data is not None for data in found)
 
 
-def read_url(url: str, *, array: str | None = None,
-             storage_options: dict[str, Any] | None = None, **zarr_options: Any) -> Any:
-    """Read the volume at ``url``: an OME-Zarr image (or Zarr array), lazily, or a single file
-    (NIfTI, NRRD, TIFF, VTK, npy, ...), downloaded into a private temporary folder and read
-    there. See :func:`splinecast.read`.
+def basename(url: str) -> str:
+    """The last name of the URL's path, unquoted (``head.nii.gz``)."""
+    return _basename(url)
 
-    Raises
-    ------
-    ReadError
-        One line naming the URL.
+
+@contextlib.contextmanager
+def download(remote: Remote, name: str) -> Any:
+    """Download the file at ``remote`` into a private temporary folder, as ``name`` (made
+    safe); yields its local path as text and removes the folder afterwards.
+
+    The size is asked first and checked against the memory guard; blocks of the file are
+    fetched several at a time, each capped at its own length.
     """
-    remote = Remote(url, storage_options)
-    from .dispatch import _extension_format
-
-    name = _basename(remote.url)
-    kind = _extension_format(Path(name)) if name else None  # a bare name: no URL involved
-    if kind is None and (name.lower().endswith(".zarr") or _zarr_probe(remote)):
-        if array is not None:
-            raise ReadError(f"{remote.url}: array={array!r} applies to VTK files")
-        from .omezarr import open_zarr
-
-        return open_zarr(remote.url, storage_options=storage_options, **zarr_options)
-    if kind is None:
-        raise ReadError(f"{redact(remote.url)}: neither a Zarr store (no zarr.json, .zgroup or "
-                        ".zarray) nor a file of a known format by its name")
-    return _read_file(remote, name, array)
-
-
-def _read_file(remote: Remote, name: str, array: str | None) -> Any:
-    from .dispatch import read
-
     url = redact(remote.url)
     size = remote.sizes([None])[0]
     if size is None:
@@ -908,7 +894,7 @@ def _read_file(remote: Remote, name: str, array: str | None) -> Any:
     blocks = [(None, a, min(a + _FILE_BLOCK, size), min(_FILE_BLOCK, size - a))
               for a in range(0, size, _FILE_BLOCK)]
     folder = tempfile.mkdtemp(prefix="splinecast-remote-")
-    safe = re.sub(r"[^A-Za-z0-9._-]", "_", name)[:200] or "data"
+    safe = re.sub(r"[^A-Za-z0-9._-]", "_", name)[:200].lstrip(".") or "data"
     local = os.path.join(folder, safe)
     try:
         with open(local, "wb") as fh:
@@ -918,14 +904,9 @@ def _read_file(remote: Remote, name: str, array: str | None) -> Any:
                     if data is None or len(data) != block[2] - block[1]:
                         raise ReadError(f"{url}: changed or shrank while read")
                     fh.write(data)
-        # No other file is read: a header naming another file (a detached NRRD, a NIfTI .img)
-        # is refused, as it would lead outside the URL.
-        volume = read(local, array=array, allow_external=False)
+        yield local
     except ReadError as exc:
         raise ReadError(str(exc).replace(local, url).replace(folder, url)) from None
     finally:
-        # The readers memory-map or copy the data: the mapping outlives the file's name.
+        # The readers memory-map or copy the data: a mapping outlives the file's name.
         shutil.rmtree(folder, ignore_errors=True)
-    volume.metadata["name"] = name
-    volume.metadata["source"] = url
-    return volume

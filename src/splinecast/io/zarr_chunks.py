@@ -641,11 +641,9 @@ class _StoreSource:
 def source_of(store: Any) -> Any:
     """The byte source of a zarr store: its files for a local store (the guarded one's
     permission for files outside it carried over), else the store itself."""
-    remote = getattr(store, "remote", None)
-    if remote is not None:  # the guarded fsspec store of splinecast.io.remote
-        from .remote import RemoteSource
-
-        return RemoteSource(remote)
+    chunk_source = getattr(store, "chunk_source", None)
+    if chunk_source is not None:  # a store that says where its chunks are (a remote one)
+        return chunk_source()
     root = getattr(store, "root", None)
     if isinstance(root, Path) and root.is_dir():
         return FileSource(root, getattr(store, "allow_external", True))
