@@ -702,6 +702,8 @@ def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
         complete=complete,
         reader=ChunkReader(array, f"{label}/{path}"),
     )
+    if complete and hasattr(level.reader.source, "strict"):  # type: ignore[union-attr]
+        level.reader.source.strict = True  # type: ignore[union-attr]  (remote: 404 is damage)
     if min(level.shape) < 1:
         raise ReadError(f"{level.label}: the level is empty (shape {fmt_shape(level.shape)})")
     return level
