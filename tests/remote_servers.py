@@ -38,6 +38,8 @@ class Faults:
     big_bytes: int = 64 << 20
     ignore_range: bool = False
     log: list[tuple[str, str, str]] = field(default_factory=list)  # (method, path, range)
+    active: int = 0  # requests being answered now
+    peak: int = 0  # most requests answered at once
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def add(self, pattern: str, kind: Any, count: int = 1) -> None:
@@ -116,6 +118,15 @@ class FileServer:
 
     async def _handle(self, request: web.Request) -> web.StreamResponse:
         faults = self.faults
+        faults.active += 1
+        faults.peak = max(faults.peak, faults.active)
+        try:
+            return await self._answer(request)
+        finally:
+            faults.active -= 1
+
+    async def _answer(self, request: web.Request) -> web.StreamResponse:
+        faults = self.faults
         path = request.path
         faults.log.append((request.method, path, request.headers.get("Range", "")))
         if faults.latency:
@@ -129,6 +140,9 @@ class FileServer:
             raise asyncio.CancelledError  # nothing answered: the client sees a reset
         if isinstance(kind, str) and kind.startswith("redirect:"):
             raise web.HTTPFound(kind.split(":", 1)[1])
+        if kind == "big" and request.method == "HEAD":
+            faults.add(path, "big")  # (HEAD answers the truth; the next GET is big)
+            kind = None
         if kind == "big":
             response = web.StreamResponse(status=200)
             response.content_length = faults.big_bytes
