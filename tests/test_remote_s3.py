@@ -84,7 +84,7 @@ def test_render_over_s3_equals_local(s3, name):
     assert remote.metadata["source"] == f"s3://{BUCKET}/{name}"
     assert [lv.shape for lv in remote.levels] == [lv.shape for lv in local.levels]
     a, b = _render(remote), _render(local)
-    assert np.array_equal(a.image, b.image)
+    assert np.array_equal(a.rgba, b.rgba)
     assert np.array_equal(a.depth, b.depth, equal_nan=True)
 
 
