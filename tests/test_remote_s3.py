@@ -8,6 +8,7 @@ exercised against a server here.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -51,6 +52,13 @@ def s3(tmp_path_factory):
     server = S3Server().start()
     client = server.client()
     client.create_bucket(Bucket=BUCKET)
+    # A public bucket, as open data is published: anonymous reads allowed (moto checks HEAD
+    # requests against "s3:HeadObject", AWS against s3:GetObject: both are listed).
+    client.put_bucket_policy(Bucket=BUCKET, Policy=json.dumps({
+        "Version": "2012-10-17",
+        "Statement": [{"Effect": "Allow", "Principal": "*",
+                       "Action": ["s3:GetObject", "s3:ListBucket", "s3:HeadObject"],
+                       "Resource": [f"arn:aws:s3:::{BUCKET}", f"arn:aws:s3:::{BUCKET}/*"]}]}))
     for name in stores:
         server.upload(BUCKET, root / name, name)
     sc.write(vol, root / "sphere.nrrd")
