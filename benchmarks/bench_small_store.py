@@ -133,7 +133,8 @@ def main() -> int:
         "`bricks`: the store drawn from bricks every frame (`whole_level=False`, what every "
         "store did before).",
         ["volume", "CLI store", "CLI NIfTI", "ratio", "steady store", "steady bricks",
-         "steady in memory", "store / memory", "bricks / memory", "max |rgba| store vs bricks"],
+         "steady in memory", "store / memory", "bricks / memory",
+         "max rgba difference, store vs bricks"],
         rows, cells, machine=describe())
     return 0
 
