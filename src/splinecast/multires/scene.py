@@ -420,8 +420,10 @@ class MultiscaleScene:
         start = time.perf_counter()
         value_filter = self._filter(request.setup)
         selector = self._selector(request.setup, camera, value_filter, interest)
-        if selector is None and self.whole is not None:
-            cut = self.whole.cut(camera, value_filter, self.lod if lod is None else lod)
+        if self.whole is not None:
+            # The error cut (DVR, MIP) chooses under the budget from what is resident: bricks.
+            cut = None if selector is not None else self.whole.cut(
+                camera, value_filter, self.lod if lod is None else lod)
             if cut is None:
                 self.whole.release()  # the bricks get the budget
             else:
