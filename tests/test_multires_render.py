@@ -88,7 +88,8 @@ def test_whole_finest_level_in_budget_equals_the_in_memory_render(noise, model, 
     vol, path = noise
     reference = sc.Scene(vol, model=model)
     options = _options(mode, vol)
-    with sc.Scene(sc.read(path), model=model, budget="64MiB", lod=1e-6) as scene:
+    with sc.Scene(sc.read(path), model=model, budget="64MiB", lod=1e-6,
+                  whole_level=False) as scene:
         for cam in _cameras(vol):
             # Antialiasing is off by default for a multiscale scene, on for an in-memory one.
             whole = reference.render(cam, samples=1, **options)
@@ -326,7 +327,8 @@ def test_frames_converge_without_holes_while_bricks_arrive(shapes):
     sdf, depth = SHAPES["torus"]
     cam = _torus_camera(vol)
     core, t_core = _core_rays(cam, sdf, depth)
-    with sc.Scene(sc.read(path), budget="64MiB", lod=1.5, load_budget=4) as scene:
+    with sc.Scene(sc.read(path), budget="64MiB", lod=1.5, load_budget=4,
+                  whole_level=False) as scene:
         first = scene.render(cam, iso=0.0)
         assert not first.stats["complete"] and first.stats["substituted"] > 0
         frames = [first]
@@ -418,7 +420,7 @@ def test_corrupt_chunk_while_rendering_draws_a_coarser_level_and_names_the_chunk
     before = _snapshot(copy)
     cam = sc.Camera((-2.6, 0.35, 0.3), (0.0, 0.0, 0.0), size=(48, 48), fov=30)
     core, t_core = _core_rays(cam, sdf, depth)
-    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5) as scene:
+    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5, whole_level=False) as scene:
         with pytest.warns(BrickUnavailableWarning, match=r"0/c/1/1/0"):
             frame = scene.render(cam, iso=0.0, complete=True, timeout=10)
         stats = frame.stats
@@ -436,7 +438,7 @@ def test_store_deleted_while_rendering(shapes, tmp_path):
     copy = tmp_path / "gone.zarr"
     shutil.copytree(path, copy)
     cam = sc.Camera((-2.6, 0.35, 0.3), (0.0, 0.0, 0.0), size=(40, 40), fov=30)
-    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5) as scene:
+    with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5, whole_level=False) as scene:
         scene.render(cam, iso=0.0, wait=False)  # the coarsest level only
         shutil.rmtree(copy)
         with warnings.catch_warnings(record=True) as caught:
@@ -466,7 +468,8 @@ def test_type6_prefilter_in_bricks_equals_the_whole_volume(noise):
     the in-memory s31 render exactly."""
     vol, path = noise
     reference = sc.Scene(vol, model="s31", prefilter=True)
-    with sc.Scene(sc.read(path), model="s31", prefilter=True, budget="64MiB", lod=1e-6) as scene:
+    with sc.Scene(sc.read(path), model="s31", prefilter=True, budget="64MiB", lod=1e-6,
+                  whole_level=False) as scene:
         for cam in _cameras(vol):
             _assert_same("iso", reference.render(cam, iso=0.3, samples=1),
                          scene.render(cam, iso=0.3, complete=True), "s31 prefilter")
@@ -503,7 +506,7 @@ def test_a_mip_tolerance_holds_over_the_bricks_of_the_cut(noise):
     tolerance = 0.05
     width = vol.value_range[1] - vol.value_range[0]
     largest = 0.0
-    with sc.Scene(sc.read(path), budget="64MiB", lod=1e-6) as scene:
+    with sc.Scene(sc.read(path), budget="64MiB", lod=1e-6, whole_level=False) as scene:
         for cam in _cameras(vol):
             exact = reference.render(cam, **options)
             frame = scene.render(cam, **options, tolerance=tolerance)

@@ -65,7 +65,8 @@ def test_a_steady_view_reuses_its_cut_and_launch_and_draws_the_same_image(sphere
     cam = _camera(mv)
     other = _camera(mv, azimuth=75.0)
     options = {"mode": "iso", "iso": RADIUS, "inside": "low"}
-    with sc.Scene(mv, budget="8MiB", lod=0.5) as scene:
+    with sc.Scene(mv, budget="8MiB", lod=0.5,
+                  whole_level=False) as scene:
         first = scene.render(cam, complete=True, **options)
         scene.stream.cache.settle(timeout=10)
         again = [scene.render(cam, **options) for _ in range(3)]
@@ -83,7 +84,7 @@ def test_a_steady_view_reuses_its_cut_and_launch_and_draws_the_same_image(sphere
         for camera, opts in changes:
             scene.render(camera, complete=True, **opts)
             frame = scene.render(camera, **opts)
-            with sc.Scene(mv, budget="8MiB", lod=0.5) as fresh:
+            with sc.Scene(mv, budget="8MiB", lod=0.5, whole_level=False) as fresh:
                 reference = fresh.render(camera, complete=True, **opts)
             assert frame.stats["complete"] and reference.stats["complete"]
             np.testing.assert_array_equal(frame.depth, reference.depth)
@@ -122,7 +123,7 @@ def test_bricks_drawn_from_one_ancestor_are_one_piece_that_draws_the_coarse_leve
                      progress=False)
     mv = sc.read(path)
     cam = sc.Camera.orbit(mv, azimuth=35, elevation=25, size=(64, 48), zoom=1.4)
-    with sc.Scene(mv, model=model, budget="8MiB", lod=0.3) as scene:
+    with sc.Scene(mv, model=model, budget="8MiB", lod=0.3, whole_level=False) as scene:
         scene.stream.cache.close()  # nothing but the pinned coarsest level, ever
         frame = scene.render(cam, iso=11.0, inside="low", wait=False)
         tree = scene.stream.octree

@@ -368,6 +368,15 @@ class Scene:
             colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
             check_iso=self._check_iso, model=self.model.name, outputs=outputs,
             tolerance=tolerance, normals=normals, samples=samples)
+        return self.draw(request, camera)
+
+    def draw(self, request: RenderRequest, camera: Camera) -> Frame:
+        """Trace a validated request (:func:`prepare_render`) through this scene's grid.
+
+        :meth:`render` is :func:`prepare_render` then this; a scene of another kind that holds
+        this one (a multiscale scene drawing its finest level from memory) prepares the request
+        with its own automatic choices and draws it here.
+        """
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:
             classify_ms = 0.0

@@ -22,7 +22,7 @@ import splinecast as sc
 from splinecast.errors.limits import printable
 
 from . import info, movie, pyramid, render, view
-from ._common import Parser, captured_output
+from ._common import Parser, apply_remote_options, captured_output
 
 __all__ = ["main", "COMMANDS"]
 
@@ -59,6 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         if verbose:  # splinecast's debug lines too (what zarr's event loop dropped, ...)
             ours.setLevel(logging.DEBUG)
         try:
+            apply_remote_options(args)
             code = COMMANDS[args.command].run(args)
         except sc.SplinecastError as exc:
             code = 2

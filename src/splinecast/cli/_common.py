@@ -8,6 +8,7 @@ import contextlib
 import io
 import logging
 import math
+import os
 import re
 import sys
 import warnings
@@ -102,6 +103,30 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--verbose", action="store_true",
                         help="also print the warnings and log lines of the file-format "
                              "libraries (captured otherwise)")
+    remote = parser.add_argument_group("remote data (http(s)://, s3://, gs:// URLs)")
+    remote.add_argument("--anon", action="store_true",
+                        help="anonymous access even when credentials are configured (default: "
+                             "anonymous unless the environment or ~/.aws, gcloud give some)")
+    remote.add_argument("--cache-dir", metavar="DIR",
+                        help="keep fetched chunks in this folder, reused by later runs "
+                             "(default: no disk cache)")
+    remote.add_argument("--cache-size", metavar="BYTES", default=None,
+                        help="most bytes the --cache-dir folder holds, least recently used "
+                             "out first (default 2GiB)")
+
+
+def apply_remote_options(args: argparse.Namespace) -> None:
+    """Hand ``--anon``, ``--cache-dir`` and ``--cache-size`` to the remote reader through its
+    environment variables, so that worker processes started by this command see them too."""
+    from splinecast.io import remote
+
+    if getattr(args, "anon", False):
+        os.environ[remote.ENV_ANON] = "1"
+    if getattr(args, "cache_size", None) is not None:
+        limits.parse_bytes(args.cache_size, "--cache-size")  # a bad size is said here
+        os.environ[remote.ENV_CACHE_SIZE] = str(args.cache_size)
+    if getattr(args, "cache_dir", None):
+        os.environ[remote.ENV_CACHE_DIR] = os.path.abspath(args.cache_dir)
 
 
 def numbers(text: str | None, option: str, count: int | None = None) -> list[float] | None:

@@ -564,8 +564,11 @@ def run(args: argparse.Namespace) -> int:
             policy = st.get("cut_policy", "lod")
             if "cut_error" in st:
                 policy += f", E(cut) {st['cut_error']:.4g}"
-            log(args, f"cut ({policy}): {st['cut_bricks']} bricks ({levels}), {st['loaded']} "
-                      f"read, {st['unavailable']} unreadable, {state}")
+            if st.get("whole_level"):
+                read = f"level 0 read whole in {st['whole_level_read_ms'] / 1e3:.2f} s"
+            else:
+                read = f"{st['loaded']} read, {st['unavailable']} unreadable"
+            log(args, f"cut ({policy}): {st['cut_bricks']} bricks ({levels}), {read}, {state}")
         background = kwargs.get("shading", sc.Shading()).background
         if args.mode in ("mip", "minip") and np.all(frame.rgba == np.float32(background)):
             what = "minimum" if args.mode == "minip" else "maximum"

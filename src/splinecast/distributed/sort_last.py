@@ -76,6 +76,7 @@ from ..camera import Camera
 from ..errors import ParameterError, SplinecastError
 from ..io import read
 from ..io.omezarr import MultiscaleVolume, is_zarr
+from ..io.remote import is_url
 from ..models import MODELS
 from ..multires.cache import read_bricks
 from ..multires.draw import CutRenderer, Piece, screen_rect
@@ -587,7 +588,7 @@ class SortLastScene:
             raise ParameterError(f"source must be the path of an OME-Zarr store for "
                                  f"strategy='sort-last', got {source!r}")
         location = SceneSource(source, model, options).location
-        if not is_zarr(Path(location)):
+        if not is_url(location) and not is_zarr(Path(location)):
             raise ParameterError(f"source must be an OME-Zarr store for strategy='sort-last' "
                                  f"(bricks are read per worker), got {location}")
         if model.startswith("bspline") and options.get("prefilter"):

@@ -7,10 +7,11 @@ import os
 import zlib
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import ParameterError, ReadError, limits
 from ..volume import SUPPORTED_DTYPES, Volume
+from .remote import is_url
 from .sidecar import find_sidecar
 
 if TYPE_CHECKING:
@@ -141,8 +142,9 @@ def read(
     *,
     array: str | None = None,
     allow_external: bool | None = None,
+    storage_options: dict[str, Any] | None = None,
 ) -> Volume | MultiscaleVolume:
-    """Read a volume from a file, a DICOM folder, a Zarr folder or a ``demo:`` name.
+    """Read a volume from a file, a DICOM folder, a Zarr folder, a URL or a ``demo:`` name.
 
     Parameters
     ----------
@@ -154,6 +156,13 @@ def read(
         format is recognised by the file's signature when it has one, by its extension otherwise.
         VTK image data: ``.vti`` (XML, any encoding) and legacy ``.vtk`` structured points (needs
         ``pip install 'splinecast[vtk]'``).
+
+        Or an ``http://``, ``https://``, ``s3://`` or ``gs://`` URL (needs
+        ``pip install 'splinecast[remote]'``) of an OME-Zarr image or Zarr array, read lazily
+        chunk by chunk, or of a single file of the formats above, downloaded into a private
+        temporary folder and read there (a header naming other files is refused). Access is
+        anonymous unless credentials are configured in the environment or the usual
+        configuration files (``~/.aws``, Google application default credentials).
     array : str, optional
         The point-data array to read from a VTK file that holds several (the error message of a
         read without it lists their names). Other formats hold one array and refuse it.
@@ -161,7 +170,11 @@ def read(
         Let a header (MetaImage ``ElementDataFile``, NRRD ``data file``, a sidecar's
         ``data_file``, a NIfTI ``.img``, an OME-TIFF's other files, a DICOM folder's symbolic
         links) name files outside its own folder. Default: no, unless
-        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``.
+        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``. Never for a URL.
+    storage_options : dict, optional
+        For a URL: options of its fsspec filesystem, e.g. ``{"anon": True}``,
+        ``{"key": ..., "secret": ..., "endpoint_url": ...}`` (S3), ``{"token": ...}`` (GCS),
+        ``{"headers": {...}}`` (HTTP).
 
     Returns
     -------
@@ -195,6 +208,10 @@ def read(
         from .synthetic import demo_from_uri
 
         return demo_from_uri(path)
+    if is_url(path):  # kept as text: a Path would collapse the URL's "//"
+        return _read_url(path, array, storage_options)  # type: ignore[arg-type]
+    if storage_options is not None:
+        raise ParameterError(f"storage_options applies to URLs, not to the path {path}")
     path = limits.check_path_text(path, "file", ReadError)
     try:
         is_dir = path.is_dir()
@@ -239,6 +256,33 @@ def read(
     if kind in _NAMES_FILES:
         return _reader(kind)(path, allow_external=allow_external)  # type: ignore[call-arg]
     return _reader(kind)(path)
+
+
+def _read_url(url: str, array: str | None,
+              storage_options: dict[str, Any] | None) -> Volume | MultiscaleVolume:
+    """An OME-Zarr image (or Zarr array) at ``url``, opened lazily; else a single file,
+    downloaded into a private temporary folder and read there with external files refused
+    (a header naming another file would lead outside the URL)."""
+    from .remote import Remote, basename, download, has_zarr_metadata, redact
+
+    remote = Remote(url, storage_options)
+    name = basename(remote.url)
+    kind = _extension_format(Path(name)) if name else None  # (a bare name, not the URL)
+    if kind is None and (name.lower().endswith(".zarr") or has_zarr_metadata(remote)):
+        if array is not None:
+            raise ParameterError(f"array={array!r} applies to VTK files, not to the Zarr store "
+                                 f"{redact(remote.url)}")
+        from .omezarr import open_zarr
+
+        return open_zarr(remote.url, storage_options=storage_options)
+    if kind is None:
+        raise ReadError(f"{redact(remote.url)}: neither a Zarr store (no zarr.json, .zgroup or "
+                        ".zarray) nor a file of a known format by its name")
+    with download(remote, name) as local:
+        volume = read(local, array=array, allow_external=False)
+    volume.metadata["name"] = name
+    volume.metadata["source"] = redact(remote.url)
+    return volume
 
 
 def _unknown_message(path: Path) -> str:

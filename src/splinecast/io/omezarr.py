@@ -40,6 +40,7 @@ from ..errors import ParameterError, ReadError, limits
 from ..volume import GridGeometry, Volume
 from ._common import check_dtype, fmt_shape, one_line, require
 from .ngff import parse_image, spatial_order
+from .remote import is_url
 from .store_kinds import store_opener
 from .zarr_chunks import ChunkError, ChunkReader, FileSource
 
@@ -97,8 +98,10 @@ def is_zarr(path: Path) -> bool:
     return path.is_dir() and any((path / m).is_file() for m in _MARKERS)
 
 
-def _zarr(path: Path) -> Any:
-    return require("zarr", path, action="reading")
+def _zarr(path: Path | str) -> Any:
+    # (the name only: a URL is not made a Path, which would collapse its "//")
+    name = path.rstrip("/").rsplit("/", 1)[-1] if isinstance(path, str) else path
+    return require("zarr", name, action="reading")
 
 
 def _guarded_store_class() -> type:
@@ -238,13 +241,18 @@ def _drop_unretrieved(loop: Any, context: dict[str, Any]) -> None:
 
 
 def open_store(path: str | os.PathLike[str], mode: str = "r",
-               allow_external: bool | None = None) -> Any:
-    """Open a local Zarr hierarchy (group or array) with zarr-python; read-only by default.
+               allow_external: bool | None = None,
+               storage_options: dict[str, Any] | None = None) -> Any:
+    """Open a Zarr hierarchy (group or array) with zarr-python; read-only by default.
 
-    Read-only stores go through the guarded store: metadata files are validated as JSON (size,
-    nesting, finite numbers), no file outside the store's folder is followed (unless
-    ``allow_external``), and a pipe, device or folder in place of a file is refused.
+    ``path`` is a local folder or an ``http(s)://``, ``s3://`` or ``gs://`` URL (read-only,
+    through :mod:`.remote`; ``storage_options`` go to its fsspec filesystem). Read-only stores
+    go through a guarded store: metadata files are validated as JSON (size, nesting, finite
+    numbers), no file outside the store's folder is followed (unless ``allow_external``; never
+    for a URL), and a pipe, device or folder in place of a file is refused.
     """
+    if is_url(path):
+        return _open_remote_store(str(path), mode, storage_options)
     zarr = _zarr(Path(path))
     if mode == "r":
         if not _GUARDED:
@@ -263,6 +271,27 @@ def open_store(path: str | os.PathLike[str], mode: str = "r",
         if refused is not None:
             raise refused from None
         raise ReadError(f"{path}: not a readable Zarr group or array ({one_line(exc)})") from None
+
+
+def _open_remote_store(url: str, mode: str, storage_options: dict[str, Any] | None) -> Any:
+    from .remote import Remote, open_remote_group, redact
+
+    if mode != "r":
+        raise ParameterError(f"{redact(url)}: remote stores are read-only")
+    _zarr(url)
+    remote = Remote(url, storage_options)
+    _quiet_unretrieved()
+    try:
+        return open_remote_group(remote)
+    except Exception as exc:
+        refused = _refused(exc)
+        if refused is not None:
+            raise refused from None
+        if isinstance(exc, FileNotFoundError | KeyError) or "not found" in str(exc).lower():
+            raise ReadError(f"{redact(remote.url)}: no Zarr group or array there (no zarr.json, "
+                            ".zgroup or .zarray)") from None
+        raise ReadError(f"{redact(remote.url)}: not a readable Zarr group or array "
+                        f"({one_line(exc)})") from None
 
 
 @dataclass
@@ -534,7 +563,8 @@ class MultiscaleVolume(GridGeometry):
 
     @property
     def name(self) -> str:
-        return str(self.metadata.get("name", self.path.name))
+        name = self.metadata.get("name")
+        return str(name) if name is not None else str(getattr(self.path, "name", self.path))
 
     @property
     def brick(self) -> int | None:
@@ -672,6 +702,8 @@ def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
         complete=complete,
         reader=ChunkReader(array, f"{label}/{path}"),
     )
+    if complete and hasattr(level.reader.source, "strict"):  # type: ignore[union-attr]
+        level.reader.source.strict = True  # type: ignore[union-attr]  (remote: 404 is damage)
     if min(level.shape) < 1:
         raise ReadError(f"{level.label}: the level is empty (shape {fmt_shape(level.shape)})")
     return level
@@ -707,7 +739,7 @@ def guarded_array(node: Any, key: str, label: str, folder: Path) -> Level:
 
 def open_zarr(
     path: str | os.PathLike[str], *, channel: int | None = None, timepoint: int | None = None,
-    allow_external: bool | None = None,
+    allow_external: bool | None = None, storage_options: dict[str, Any] | None = None,
 ) -> Any:
     """Open an OME-Zarr image or a plain Zarr array lazily (metadata only).
 
@@ -720,7 +752,9 @@ def open_zarr(
         Which entry of a channel or time axis longer than 1 to read.
     allow_external : bool, optional
         Follow symbolic links to files outside the store's folder (default: refused, unless
-        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``).
+        ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``). Never for a URL.
+    storage_options : dict, optional
+        For a URL: options of its fsspec filesystem (see :func:`splinecast.read`).
 
     Returns
     -------
@@ -734,6 +768,12 @@ def open_zarr(
         Not a Zarr hierarchy, no image metadata in a group, not three spatial axes, a level that
         does not match the axes, unsupported voxel type, or zarr-python missing.
     """
+    if is_url(path):
+        from .remote import check_url, redact
+
+        url = check_url(str(path))
+        with _zarr_calls(redact(url)):
+            return _open_zarr(url, channel, timepoint, False, storage_options)
     path = Path(os.fspath(path))
     if not path.exists():
         raise ReadError(f"{path}: no such file or folder")
@@ -757,16 +797,24 @@ def _zarr_calls(label: str) -> Any:
                                     f"({one_line(exc)})")) from None
 
 
-def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
-               allow_external: bool | None) -> MultiscaleVolume:
-    node = open_store(path, allow_external=allow_external)
+def _open_zarr(path: Path | str, channel: int | None, timepoint: int | None,
+               allow_external: bool | None,
+               storage_options: dict[str, Any] | None = None) -> MultiscaleVolume:
+    """Open a local folder (``Path``) or a checked URL (``str``, kept as text)."""
+    remote = isinstance(path, str)
+    node = open_store(path, allow_external=allow_external, storage_options=storage_options)
     zarr = _zarr(path)
     label = str(path)
     attrs = _attrs(node)
-    local = path.absolute()
+    local = None if remote else path.absolute()  # type: ignore[union-attr]
+    name = path.rsplit("/", 1)[-1] if remote else path.name  # type: ignore[union-attr]
     if isinstance(node, zarr.Array):
         return _plain_array(path, node, label)
     ome = attrs.get("ome") if isinstance(attrs.get("ome"), dict) else attrs
+    if "bioformats2raw.layout" in ome and "multiscales" not in ome and remote:
+        # Object stores and web servers are not listed: the layout puts the first image at 0/.
+        return open_zarr(f"{path}/0", channel=channel, timepoint=timepoint,
+                         storage_options=storage_options)
     if "bioformats2raw.layout" in ome and "multiscales" not in ome:
         series = sorted(k for k in node.group_keys() if k.isdigit())
         if not series:
@@ -780,6 +828,9 @@ def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
     kind = ours.get("kind")
     if kind is not None:
         opener = store_opener(kind)
+        if remote:
+            raise ReadError(f"{label}: a splinecast store of kind {kind!r} is read from a local "
+                            "folder only")
         if opener is None:
             raise ReadError(f"{label}: a splinecast store of kind {kind!r}, which this version "
                             "cannot read")
@@ -802,11 +853,12 @@ def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
         select = _leading_selection(tuple(array.shape), image.axis_names, n_lead, channel,
                                     timepoint, label)
         levels.append(_level(index, dataset.path, array, dataset.scale, dataset.translation,
-                             select, order, label, local / dataset.path, complete))
+                             select, order, label,
+                             None if local is None else local / dataset.path, complete))
     units = {u for u in image.units[n_lead:] if u}
     metadata: dict[str, Any] = {
-        "name": path.name,
-        "source": str(local),
+        "name": name,
+        "source": label if local is None else str(local),
         "format": f"ome-zarr {image.version}",
     }
     if len(units) == 1:
@@ -828,9 +880,12 @@ def _child(node: Any, key: str, label: str) -> Any:
         refused = _refused(exc)
         if refused is not None:
             raise refused from None
-        folder = Path(label) / key
-        meta = next((folder / m for m in ("zarr.json", ".zarray") if (folder / m).exists()),
-                    folder)
+        if is_url(label):
+            meta: Any = f"{label}/{key}"
+        else:
+            folder = Path(label) / key
+            meta = next((folder / m for m in ("zarr.json", ".zarray")
+                         if (folder / m).exists()), folder)
         raise ReadError(f"{label}: level {key!r} ({meta}) is not a readable Zarr array "
                         f"({one_line(exc)})") from None
 
@@ -862,7 +917,7 @@ def _our_attributes(value: Any, where: str) -> dict[str, Any]:
     return ours
 
 
-def _plain_array(path: Path, array: Any, label: str) -> MultiscaleVolume:
+def _plain_array(path: Path | str, array: Any, label: str) -> MultiscaleVolume:
     shape = tuple(array.shape)
     names = getattr(array.metadata, "dimension_names", None) or ()
     lead = len(shape) - 3
@@ -871,12 +926,14 @@ def _plain_array(path: Path, array: Any, label: str) -> MultiscaleVolume:
     order = spatial_order(tuple(str(n) for n in names[lead:])) if names else (2, 1, 0)
     level = _level(0, "", array, (1.0,) * len(shape), (0.0,) * len(shape), (0,) * lead, order,
                    label, None, False)
-    level.folder = path.absolute()
+    remote = isinstance(path, str)
+    level.folder = None if remote else path.absolute()  # type: ignore[union-attr]
     level.label = label
     level.chunk_reader().label = label
     return MultiscaleVolume(
-        path=path,
+        path=path,  # type: ignore[arg-type]
         levels=[level],
-        metadata={"name": path.name, "source": str(path.absolute()),
+        metadata={"name": path.rsplit("/", 1)[-1] if remote else path.name,  # type: ignore
+                  "source": label if remote else str(path.absolute()),  # type: ignore
                   "format": f"zarr v{array.metadata.zarr_format} array"},
     )

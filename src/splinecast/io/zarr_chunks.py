@@ -641,6 +641,9 @@ class _StoreSource:
 def source_of(store: Any) -> Any:
     """The byte source of a zarr store: its files for a local store (the guarded one's
     permission for files outside it carried over), else the store itself."""
+    chunk_source = getattr(store, "chunk_source", None)
+    if chunk_source is not None:  # a store that says where its chunks are (a remote one)
+        return chunk_source()
     root = getattr(store, "root", None)
     if isinstance(root, Path) and root.is_dir():
         return FileSource(root, getattr(store, "allow_external", True))
@@ -726,12 +729,92 @@ class ChunkReader:
         if count > limits.MAX_CHUNKS_PER_READ:
             raise ReadError(f"{self.label}: reading {lo}..{hi} needs {count} chunks, more than "
                             f"{limits.MAX_CHUNKS_PER_READ}; the array's chunks are too small")
-        for unit in _units(lo, hi, self.outer):
-            if self.plan.shard is None:
-                self._read_chunk(unit, lo, hi, out)
-            else:
-                self._read_shard(unit, lo, hi, out)
+        units = _units(lo, hi, self.outer)
+        if not hasattr(self.source, "prefetch"):
+            for unit in units:
+                self._read_unit(unit, lo, hi, out)
+            return out
+        # A remote source: the requests of a batch of chunks are made concurrently (latency is
+        # paid once per batch, not per chunk), then decoded here one by one as for local files.
+        batch: list[tuple[int, ...]] = []
+        for unit in units:
+            batch.append(unit)
+            if len(batch) >= self.source.batch:
+                self._read_batch(batch, lo, hi, out)
+                batch = []
+        if batch:
+            self._read_batch(batch, lo, hi, out)
         return out
+
+    def _read_unit(self, unit: tuple[int, ...], lo: tuple, hi: tuple, out: np.ndarray) -> None:
+        if self.plan.shard is None:
+            self._read_chunk(unit, lo, hi, out)
+        else:
+            self._read_shard(unit, lo, hi, out)
+
+    def _read_batch(self, batch: list[tuple[int, ...]], lo: tuple, hi: tuple,
+                    out: np.ndarray) -> None:
+        """Fetch what ``batch`` needs from a remote source at once, then decode it."""
+        source = self.source
+        try:
+            keys = [self.key(unit) for unit in batch]
+            if self.plan.shard is None:
+                bound = max_encoded_bytes(self.plan.nbytes)
+                source.prefetch([(key, None, None, bound) for key in keys])
+            else:
+                self._prefetch_shards(batch, keys, lo, hi)
+            for unit in batch:
+                self._read_unit(unit, lo, hi, out)
+        finally:
+            source.forget()
+
+    def _prefetch_shards(self, batch: list[tuple[int, ...]], keys: list[str], lo: tuple,
+                         hi: tuple) -> None:
+        """Sizes, then indexes, then the inner chunks the box needs: three rounds of concurrent
+        requests for a batch of shards. Whatever is wrong is left for :meth:`_read_shard` to
+        report in its usual words."""
+        shard = self.plan.shard
+        assert shard is not None
+        source = self.source
+        source.prefetch_sizes(keys)
+        n = shard.index_bytes
+        bound = shard.count * max_encoded_bytes(shard.inner.nbytes) + n
+        indexes = []
+        for key in keys:
+            size = source.size(key)
+            if size is None or not n <= size <= bound:
+                continue
+            if (key, source.stamp(key)) in self._indexes:
+                continue  # parsed before
+            start = size - n if shard.at_end else 0
+            indexes.append((key, start, start + n, n))
+        source.prefetch(indexes)
+        ranges = []
+        for unit, key in zip(batch, keys, strict=True):
+            size = source.size(key)
+            if size is None or not n <= size <= bound:
+                continue
+            index = self._index(unit, key, size)
+            for offset, length, _, _ in self._inner_parts(unit, lo, hi, index):
+                if offset != _EMPTY:
+                    ranges.append((key, offset, offset + length, length))
+        source.prefetch(ranges)
+
+    def _inner_parts(self, unit: tuple[int, ...], lo: tuple, hi: tuple,
+                     index: np.ndarray) -> Iterator[tuple[int, int, tuple, tuple]]:
+        """``(offset, length, inner, origin)`` of each inner chunk of shard ``unit`` inside the
+        box (``offset`` is ``_EMPTY`` for a chunk never written)."""
+        shard = self.plan.shard
+        assert shard is not None
+        shard_origin = tuple(u * n for u, n in zip(unit, self.outer, strict=True))
+        s_lo = tuple(max(a, o) for a, o in zip(lo, shard_origin, strict=True))
+        s_hi = tuple(min(b, o + n) for b, o, n in zip(hi, shard_origin, self.outer, strict=True))
+        first = tuple(u * g for u, g in zip(unit, shard.grid, strict=True))
+        for inner in _units(s_lo, s_hi, self.inner):
+            origin = tuple(i * n for i, n in zip(inner, self.inner, strict=True))
+            local = tuple(i - f for i, f in zip(inner, first, strict=True))
+            offset, length = (int(v) for v in index[np.ravel_multi_index(local, shard.grid)])
+            yield offset, length, inner, origin
 
     def read_all(self) -> np.ndarray:
         """The whole array (check its bytes against the memory guard first)."""
@@ -749,17 +832,24 @@ class ChunkReader:
 
     def _read_chunk(self, unit: tuple[int, ...], lo: tuple, hi: tuple, out: np.ndarray) -> None:
         key = self.key(unit)
-        size = self.source.size(key)
         origin = tuple(u * n for u, n in zip(unit, self.outer, strict=True))
-        if size is None:
-            self._place(out, lo, hi, origin, None)
-            return
         bound = max_encoded_bytes(self.plan.nbytes)
-        if size > bound:
-            raise ChunkError(self.label, unit, self.source.path(key),
-                             f"{size} bytes, more than a chunk of {self.plan.nbytes} bytes can "
-                             f"take encoded ({bound})")
-        data = self.source.read(key, 0, size)
+        if hasattr(self.source, "whole"):
+            # Remote: one request, capped at the bound (a larger file is refused unread).
+            data = self.source.whole(key, bound)
+            if data is None:
+                self._place(out, lo, hi, origin, None)
+                return
+        else:
+            size = self.source.size(key)
+            if size is None:
+                self._place(out, lo, hi, origin, None)
+                return
+            if size > bound:
+                raise ChunkError(self.label, unit, self.source.path(key),
+                                 f"{size} bytes, more than a chunk of {self.plan.nbytes} bytes "
+                                 f"can take encoded ({bound})")
+            data = self.source.read(key, 0, size)
         try:
             chunk = self.plan.decode(data)
         except _Bad as exc:
@@ -841,12 +931,7 @@ class ChunkReader:
                              f"the shard holds {size} bytes, more than it can take encoded "
                              f"({bound})", "shard")
         index = self._index(unit, key, size)
-        for inner in _units(s_lo, s_hi, self.inner):
-            origin = tuple(i * n for i, n in zip(inner, self.inner, strict=True))
-            local = tuple(i - f for i, f in zip(inner, (u * g for u, g in
-                                                        zip(unit, shard.grid, strict=True)),
-                                                strict=True))
-            offset, length = (int(v) for v in index[np.ravel_multi_index(local, shard.grid)])
+        for offset, length, inner, origin in self._inner_parts(unit, lo, hi, index):
             if offset == _EMPTY:
                 self._place(out, lo, hi, origin, None)
                 continue

@@ -511,6 +511,22 @@ class BrickCache:
             return self._cond.wait_for(
                 lambda: (not self._queue and not self._inflight) or not self.running, timeout)
 
+    def clear(self) -> None:
+        """Stop reading and evict every brick but the pinned ones (the scene is about to hold
+        the finest level whole, :mod:`.whole_level`, and gives it the budget). A read already
+        under way still lands, within the budget."""
+        with self._cond:
+            self._queue.clear()
+            self._needed.clear()
+            self._keep = set()
+            self._prefetch = set()
+            for key in [k for k in self._bricks if k not in self._pinned]:
+                self._bytes -= self._bricks.pop(key).nbytes
+                self._counts["evicted"] += 1
+            self.version += 1
+            self._cond.notify_all()
+        self.chunks.clear()
+
     def get(self, key: Key) -> Brick | None:
         """The resident brick ``key`` (marked as recently used) or ``None``."""
         with self._cond:

@@ -55,10 +55,12 @@ from ..volume import Volume
 from .budget import parse_bytes
 from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut, mip_transfer
 from .draw import CutRenderer, Piece
+from .lod import Cut
 from .octree import DEFAULT_BRICK, BrickOctree
 from .relevance import ValueFilter
 from .seams import Seams
 from .stream import BrickStream, FrameBricks
+from .whole_level import WholeLevel
 
 __all__ = ["MultiscaleScene", "pieces_of", "render_brick", "BORDER_RULES", "RENDER_BRICK"]
 
@@ -209,6 +211,12 @@ class MultiscaleScene:
         draws every brick as it is (to see the cracks).
     brick : int, optional
         Cells per brick (default: :func:`render_brick`, the pyramid's or a multiple of it).
+    whole_level : bool
+        Draw a view whose level-of-detail cut is level 0 everywhere from level 0 read whole
+        into memory, as an in-memory :class:`~splinecast.Scene` of it, when level 0 fits in
+        the budget (default; :mod:`.whole_level`): the same picture (to rounding) without the
+        per-brick costs. Frames that do not wait (``wait=False``) use it once it is read.
+        ``False`` always draws bricks.
     **options
         Model options (``root_finder``, ``prefilter`` for the type-6 splines, ...).
 
@@ -233,7 +241,7 @@ class MultiscaleScene:
     def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "2GiB",
                  lod: float = 1.0, load_budget: int | None = None, *, cut: str = "lod",
                  cut_priority: str = "improved", interest: Any = None, seams: bool = True,
-                 brick: int | None = None,
+                 brick: int | None = None, whole_level: bool = True,
                  **options: Any) -> None:
         if not isinstance(volume, MultiscaleVolume):
             raise ParameterError(f"volume must be a MultiscaleVolume, got {type(volume).__name__}")
@@ -272,6 +280,13 @@ class MultiscaleScene:
                           if self.cut == "error" else None)
         self.renderer = CutRenderer(self.model, self.stream.octree,
                                     Seams(self.model) if seams else None)
+        #: Level 0 held whole for the views whose cut is level 0 everywhere (None: never).
+        self.whole: WholeLevel | None = None
+        if whole_level:
+            finest = volume.level(0).nbytes
+            self.whole = WholeLevel(
+                volume, self.stream, finest,
+                self._cache_budget() - self.stream.cache.pinned_bytes, model, options)
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self._table_cache: dict = {}
         self._last_pieces: tuple[list, list[Piece]] | None = None
@@ -402,10 +417,21 @@ class MultiscaleScene:
         # read-ahead: pausing it during their traces too made a 2048^3 view's cut take 146
         # frames and 172 s to complete instead of 16 frames and 79 s.
         at_once = not wait and not complete
+        start = time.perf_counter()
+        value_filter = self._filter(request.setup)
+        selector = self._selector(request.setup, camera, value_filter, interest)
+        if self.whole is not None:
+            # The error cut (DVR, MIP) chooses under the budget from what is resident: bricks.
+            cut = None if selector is not None else self.whole.cut(
+                camera, value_filter, self.lod if lod is None else lod)
+            if cut is None:
+                self.whole.release()  # the bricks get the budget
+            else:
+                whole = self.whole.get(load=not at_once)
+                if whole is not None:
+                    request.stats["cut_ms"] = (time.perf_counter() - start) * 1e3
+                    return self._draw_whole(whole, cut, request, camera, lod)
         with self.stream.cache.drawing() if at_once else nullcontext():
-            start = time.perf_counter()
-            value_filter = self._filter(request.setup)
-            selector = self._selector(request.setup, camera, value_filter, interest)
             bricks = self._frame(camera, value_filter, lod, wait, timeout, selector)
             rounds = 1
             while complete and rounds < _MAX_ROUNDS and (
@@ -449,8 +475,27 @@ class MultiscaleScene:
         stats.update(bricks.stats)
         stats["unreadable_reason"] = unreadable[0][1] if unreadable else ""
         stats["lod"] = self.lod if lod is None else lod
+        stats["whole_level"] = False
         return finish_frame(request, out, counters, camera, start,
                             whole_frame_tracer(self.renderer, pieces, request.planes))
+
+    def _draw_whole(self, whole: Any, cut: Cut, request: Any, camera: Camera,
+                    lod: float | None) -> Frame:
+        """Draw a view whose cut is level 0 everywhere from level 0 held whole (the in-memory
+        scene ``whole``), with the statistics a complete frame of that cut reports."""
+        assert self.whole is not None
+        frame = whole.draw(request, camera)
+        cache = self.stream.cache
+        stats = frame.stats
+        stats.update(cache.stats())
+        stats.update(
+            resident_bytes=cache.nbytes + self.whole.nbytes, requested=0, substituted=0,
+            complete=True, unreadable=0, unreadable_reason="", cut_bricks=len(cut),
+            cut_levels=cut.levels(), cut_bytes=cut.nbytes, cut_limited_by_budget=cut.limited,
+            cut_policy="lod", lod=self.lod if lod is None else lod, pieces=1,
+            pieces_traced=1, pieces_changed_at_seams=0, seam_copy_bytes=0, whole_level=True,
+            whole_level_read_ms=self.whole.read_ms)
+        return frame
 
     def _selector(self, setup: Any, camera: Camera, value_filter: ValueFilter | None,
                   interest: Any) -> Any:

@@ -111,8 +111,7 @@ class BrickStream:
         ancestors are worth reading for substitution, through the selector's own use of it).
         """
         t0 = time.perf_counter()
-        self.cache.update_ranges()
-        budget = max(int(self.cache.brick_budget * self.cut_fraction), self.cache.pinned_bytes)
+        budget = self.cut_budget()
         lod = self.lod if lod is None else lod
         # The level-of-detail cut is a function of the view, the filter, the budget and what
         # is resident: while none of them changes (a steady view, a viewer redrawing), the
@@ -164,6 +163,13 @@ class BrickStream:
                                  [key for key, _ in self.cache.unreadable()])
                       if view is not None and self.cache.version == version else None)
         return FrameBricks(cut, items, stats)
+
+    def cut_budget(self) -> int:
+        """Bytes the cut's bricks may take: ``cut_fraction`` of what the cache may hold for
+        bricks, at least the pinned coarsest level (the value ranges learnt from the bricks read
+        so far taken in first)."""
+        self.cache.update_ranges()
+        return max(int(self.cache.brick_budget * self.cut_fraction), self.cache.pinned_bytes)
 
     def close(self) -> None:
         """Stop the loader thread."""

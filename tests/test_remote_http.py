@@ -1,0 +1,284 @@
+"""Reading over HTTP from a real aiohttp server on 127.0.0.1 (tests/remote_servers.py), with
+injected latency and faults: renders equal the local store's bit for bit; failures give one line
+naming the URL.
+
+Every render here is 32x32, trilinear, iso, float32 data: one kernel compilation for the file.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import splinecast as sc
+from splinecast.errors import ReadError
+
+pytest.importorskip("fsspec", reason="remote reading needs the remote extra")
+from remote_servers import Faults, FileServer  # noqa: E402
+
+ISO = 0.0
+SIZE = (32, 32)
+
+
+@pytest.fixture(scope="module")
+def stores(tmp_path_factory) -> Path:
+    """A folder of stores: splinecast's pyramid (Zarr v3, sharded), the same unsharded, a
+    bioformats2raw collection holding the first, and single files of the same volume."""
+    root = tmp_path_factory.mktemp("served")
+    vol = sc.demo("sphere", size=40)
+    vol = sc.Volume(vol.data.astype(np.float32), spacing=vol.spacing, origin=vol.origin)
+    sc.build_pyramid(vol, root / "sphere.zarr", brick=8, shard=16, progress=False)
+    mv = sc.read(root / "sphere.zarr")
+    _write_ngff(root / "plain.zarr", mv, zarr_format=3)  # OME-Zarr 0.5, not sharded
+    _write_ngff(root / "v2.zarr", mv, zarr_format=2)  # OME-Zarr 0.4
+    b2r = root / "collection.zarr"
+    b2r.mkdir()
+    (b2r / "zarr.json").write_text(json.dumps({
+        "zarr_format": 3, "node_type": "group",
+        "attributes": {"ome": {"version": "0.5", "bioformats2raw.layout": 3}}}))
+    shutil.copytree(root / "sphere.zarr", b2r / "0")
+    sc.write(vol, root / "sphere.nrrd")
+    sc.write(vol, root / "sphere.npy")
+    return root
+
+
+def _write_ngff(path: Path, mv, zarr_format: int) -> None:
+    """The levels of ``mv`` as an unsharded OME-Zarr image (0.4 on Zarr v2, 0.5 on v3) in
+    8^3 chunks, written with zarr-python and NGFF metadata by hand (axes z, y, x)."""
+    import zarr
+
+    group = zarr.open_group(path, mode="w", zarr_format=zarr_format)
+    datasets = []
+    for i, level in enumerate(mv.levels):
+        data = level.read((0, 0, 0), level.shape).transpose(2, 1, 0)
+        group.create_array(str(i), data=np.ascontiguousarray(data), chunks=(8, 8, 8))
+        datasets.append({"path": str(i), "coordinateTransformations": [
+            {"type": "scale", "scale": list(level.spacing[::-1])},
+            {"type": "translation", "translation": list(level.origin[::-1])}]})
+    multiscales = [{"axes": [{"name": a, "type": "space"} for a in "zyx"],
+                    "datasets": datasets, "name": path.name}]
+    if zarr_format == 2:
+        multiscales[0]["version"] = "0.4"
+        group.attrs.update({"multiscales": multiscales})
+    else:
+        group.attrs.update({"ome": {"version": "0.5", "multiscales": multiscales}})
+
+
+@pytest.fixture
+def server(stores):
+    with FileServer(stores, Faults()) as srv:
+        yield srv
+
+
+def _render(volume) -> sc.Frame:
+    scene = sc.Scene(volume)
+    try:
+        camera = sc.Camera.orbit(volume, azimuth=30, elevation=20, size=SIZE)
+        return scene.render(camera, iso=ISO, complete=True)
+    finally:
+        if hasattr(scene, "close"):
+            scene.close()
+
+
+def _same(a: sc.Frame, b: sc.Frame) -> None:
+    assert np.array_equal(a.rgba, b.rgba)
+    assert np.array_equal(a.depth, b.depth, equal_nan=True)
+
+
+@pytest.mark.parametrize("name", ["sphere.zarr", "plain.zarr", "v2.zarr", "collection.zarr"])
+def test_render_over_http_equals_local(stores, name):
+    local = _render(sc.read(stores / name))
+    with FileServer(stores, Faults(latency=0.01)) as srv:
+        remote = sc.read(f"{srv.url}/{name}")
+        assert remote.metadata["source"].startswith(f"{srv.url}/{name}")
+        frame = _render(remote)
+        gets = [entry for entry in srv.faults.log if entry[0] == "GET"]
+    _same(frame, local)
+    assert frame.stats["complete"]
+    # Chunks are fetched with a range (whole chunk capped: bytes=0-<cap>, or a shard's part).
+    metadata = ("zarr.json", ".zarray", ".zattrs", ".zgroup")
+    chunks = [r for _, path, r in gets if not path.endswith(metadata)]
+    assert chunks and all(r.startswith("bytes=") for r in chunks)
+
+
+def test_levels_equal_local_and_requests_overlap(stores):
+    """Many requests are in flight at once: with 50 ms per request, reading a level of 125
+    chunks takes far less than 125 x 50 ms (timing is not asserted; the overlap is seen in the
+    server's count of concurrent requests instead)."""
+    local = sc.read(stores / "plain.zarr")
+    faults = Faults(latency=0.05)
+    with FileServer(stores, faults) as srv:
+        remote = sc.read(f"{srv.url}/plain.zarr")
+        for a, b in zip(remote.levels, local.levels, strict=True):
+            assert np.array_equal(a.read((0, 0, 0), a.shape), b.read((0, 0, 0), b.shape))
+    assert faults.peak >= 8
+
+
+@pytest.mark.parametrize("kind", [500, 503, "reset", "short"])
+def test_transient_faults_are_retried(stores, kind):
+    local = sc.read(stores / "sphere.zarr").levels[0]
+    with FileServer(stores, Faults()) as srv:
+        remote = sc.read(f"{srv.url}/sphere.zarr").levels[0]
+        srv.faults.add("/0/c/", kind, count=2)
+        data = remote.read((0, 0, 0), remote.shape)
+        assert srv.faults.rules["/0/c/"][1] == 0  # the faults were met, and passed
+    assert np.array_equal(data, local.read((0, 0, 0), local.shape))
+
+
+def test_slow_body_times_out_then_retries(stores, monkeypatch):
+    monkeypatch.setenv("SPLINECAST_REMOTE_TIMEOUT", "0.3")
+    local = sc.read(stores / "plain.zarr").levels[1]
+    with FileServer(stores, Faults(slow_seconds=2)) as srv:
+        remote = sc.read(f"{srv.url}/plain.zarr").levels[1]
+        srv.faults.add("/1/c/", "slow", count=1)
+        data = remote.read((0, 0, 0), remote.shape)
+    assert np.array_equal(data, local.read((0, 0, 0), local.shape))
+
+
+def test_deadline_gives_one_line(stores, monkeypatch):
+    monkeypatch.setenv("SPLINECAST_REMOTE_TIMEOUT", "0.2")
+    monkeypatch.setenv("SPLINECAST_REMOTE_DEADLINE", "1.5")
+    with FileServer(stores, Faults(slow_seconds=2)) as srv:
+        remote = sc.read(f"{srv.url}/plain.zarr").levels[1]
+        srv.faults.add("/1/c/", "slow", count=1000)
+        with pytest.raises(ReadError) as err:
+            remote.read((0, 0, 0), remote.shape)
+    text = str(err.value)
+    assert f"{srv.url}/plain.zarr/1/c/" in text and "timed out" in text
+    assert "\n" not in text
+
+
+@pytest.mark.parametrize("status", [401, 403, 404])
+def test_denied_or_missing_chunk_names_the_url(server, status):
+    remote = sc.read(f"{server.url}/sphere.zarr").levels[0]
+    server.faults.add("/0/c/0/0/0", status, count=1000)
+    with pytest.raises(ReadError) as err:
+        remote.read((0, 0, 0), remote.shape)
+    text = str(err.value)
+    assert f"{server.url}/sphere.zarr/0/c/0/0/0" in text and "\n" not in text
+    assert ("denied" if status != 404 else "not found") in text
+
+
+def test_oversized_response_is_refused_unread(server):
+    remote = sc.read(f"{server.url}/plain.zarr").levels[0]
+    server.faults.big_bytes = 256 << 20
+    server.faults.add("/0/c/0/0/0", "big", count=1)
+    with pytest.raises(ReadError, match="refused unread"):
+        remote.read((0, 0, 0), (8, 8, 8))
+
+
+def test_redirects_stay_on_the_host(server):
+    here = f"{server.url}/sphere.zarr/zarr.json"
+    server.faults.add("/moved.zarr/zarr.json", f"redirect:{here}", count=1)
+    # (the same host: followed; the store's other keys then 404 under /moved.zarr)
+    with pytest.raises(ReadError):
+        sc.read(f"{server.url}/moved.zarr").levels[0].read((0, 0, 0), (1, 1, 1))
+    elsewhere = here.replace("127.0.0.1", "localhost")
+    server.faults.add("/away.zarr/zarr.json", f"redirect:{elsewhere}", count=10)
+    with pytest.raises(ReadError, match="redirected to another host"):
+        sc.read(f"{server.url}/away.zarr")
+
+
+def test_metadata_path_leaving_the_store_is_refused(stores, tmp_path):
+    bad = tmp_path / "bad.zarr"
+    shutil.copytree(stores / "plain.zarr", bad)
+    meta = json.loads((bad / "zarr.json").read_text())
+    meta["attributes"]["ome"]["multiscales"][0]["datasets"][0]["path"] = "../plain.zarr/0"
+    (bad / "zarr.json").write_text(json.dumps(meta))
+    with FileServer(tmp_path, Faults()) as srv, pytest.raises(ReadError) as err:
+        sc.read(f"{srv.url}/bad.zarr")
+    assert "'..'" in str(err.value) or "leaves the store" in str(err.value)
+    assert not any("plain.zarr" in path for _, path, _ in srv.faults.log)
+
+
+@pytest.mark.parametrize("key", ["../x", "a/../../x", "/etc/passwd", "file:///etc/passwd",
+                                 "a\\b", "a//b", "a/\x00"])
+def test_store_keys_stay_inside(server, key):
+    from splinecast.io.remote import Remote
+
+    remote = Remote(f"{server.url}/sphere.zarr")
+    with pytest.raises(ReadError, match="leaves the store"):
+        remote.url_of(key)
+
+
+@pytest.mark.parametrize("url, words", [
+    ("ftp://example.org/x.zarr", "unknown URL scheme"),
+    ("file:///etc/passwd", "file:// URLs are not read"),
+    ("http:///x.zarr", "no host"),
+    ("https://example.org:99999/x.zarr", "malformed URL"),
+    ("s3://user:secret@bucket/x.zarr", "credentials inside the URL"),
+    ("http://example.org/a b.zarr", "malformed URL"),
+])
+def test_bad_urls_are_refused(url, words):
+    with pytest.raises(ReadError) as err:
+        sc.read(url)
+    assert words in str(err.value)
+    assert "secret" not in str(err.value)
+
+
+def test_single_files_over_http(server, stores):
+    for name in ("sphere.nrrd", "sphere.npy"):
+        local = sc.read(stores / name)
+        remote = sc.read(f"{server.url}/{name}")
+        assert np.array_equal(remote.data, local.data)
+        assert remote.spacing == local.spacing and remote.origin == local.origin
+        assert remote.metadata["source"] == f"{server.url}/{name}"
+    with pytest.raises(ReadError, match="not found"):
+        sc.read(f"{server.url}/absent.nrrd")
+
+
+def _cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    import os
+
+    full = {**os.environ, **(env or {})}
+    return subprocess.run([sys.executable, "-m", "splinecast.cli", *args], capture_output=True,
+                          text=True, env=full, timeout=600)
+
+
+def test_cli_render_over_http_equals_local_and_uses_the_disk_cache(stores, tmp_path):
+    from PIL import Image
+
+    local_png, remote_png = tmp_path / "local.png", tmp_path / "remote.png"
+    cache = tmp_path / "cache"
+    common = ["--size", "32x32", "--iso", "0", "--quiet"]
+    assert _cli("render", str(stores / "sphere.zarr"), "-o", str(local_png), *common
+                ).returncode == 0
+    with FileServer(stores, Faults(latency=0.01)) as srv:
+        url = f"{srv.url}/sphere.zarr"
+        done = _cli("render", url, "-o", str(remote_png), "--cache-dir", str(cache), *common)
+        assert done.returncode == 0, done.stderr
+        first = len(srv.faults.log)
+        again = _cli("render", url, "-o", str(remote_png), "--cache-dir", str(cache),
+                     "--cache-size", "64MiB", *common)
+        assert again.returncode == 0, again.stderr
+        second = len(srv.faults.log) - first
+        info = _cli("info", url)
+    assert np.array_equal(np.asarray(Image.open(remote_png)), np.asarray(Image.open(local_png)))
+    assert any(cache.rglob("*")) and second < first  # chunks came from the cache
+    assert info.returncode == 0 and url in info.stdout
+
+
+def test_cli_bad_store_gives_one_line_exit_2_nothing_written(stores, tmp_path):
+    lying = tmp_path / "lying.zarr"
+    shutil.copytree(stores / "plain.zarr", lying)
+    for level in lying.glob("[0-9]"):
+        meta = json.loads((level / "zarr.json").read_text())
+        meta["chunk_grid"]["configuration"]["chunk_shape"] = [4, 4, 4]  # they hold 8^3
+        (level / "zarr.json").write_text(json.dumps(meta))
+    out = tmp_path / "out.png"
+    with FileServer(tmp_path, Faults()) as srv:
+        cases = [(f"{srv.url}/lying.zarr", f"{srv.url}/lying.zarr/"),
+                 (f"{srv.url}/none.zarr", "no Zarr group"),
+                 ("gopher://x/y.zarr", "unknown URL scheme")]
+        for url, words in cases:
+            done = _cli("render", url, "-o", str(out), "--size", "32x32", "--iso", "0")
+            lines = done.stderr.strip().splitlines()
+            assert done.returncode == 2, done.stderr
+            assert len(lines) == 1 and words in lines[0], lines
+            assert not out.exists()
