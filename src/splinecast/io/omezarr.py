@@ -9,8 +9,9 @@ Accepted:
 
 - OME-Zarr images written by splinecast, ome-zarr-py, ngff-zarr or any other writer: Zarr v3 with
   metadata under ``attributes["ome"]`` (0.5) or Zarr v2 with ``multiscales`` at the top of
-  ``.zattrs`` (0.4 and older). Exactly three spatial axes; time or channel axes of length 1 are
-  dropped, longer ones need ``timepoint=`` / ``channel=``.
+  ``.zattrs`` (0.4 and older). Exactly three spatial axes; one entry of a time and a channel axis
+  is read (``timepoint=`` / ``channel=``, the first by default: see
+  :mod:`splinecast.io.selection`).
 - A ``bioformats2raw`` collection: its first image (``0/``), with a warning if it holds more.
 - A plain Zarr array (v2 or v3): one level. Its ``dimension_names`` say which axis is x, y and z
   when they are named so; otherwise the order is NGFF's ``z, y, x`` (last index along x), the
@@ -40,6 +41,7 @@ from ..errors import ParameterError, ReadError, limits
 from ..volume import GridGeometry, Volume
 from ._common import check_dtype, fmt_shape, one_line, require
 from .ngff import parse_image, spatial_order
+from .selection import Selection
 from .store_kinds import store_opener
 from .zarr_chunks import ChunkError, ChunkReader, FileSource
 
@@ -609,24 +611,34 @@ def _attrs(node: Any) -> dict[str, Any]:
     return dict(node.attrs.asdict() if hasattr(node.attrs, "asdict") else node.attrs)
 
 
+def _is_time(name: str) -> bool:
+    return name.lower() in ("t", "time")
+
+
 def _leading_selection(shape: tuple[int, ...], names: tuple[str, ...], n_lead: int,
-                       channel: int | None, timepoint: int | None, label: str) -> tuple[int, ...]:
+                       selection: Selection, label: str) -> tuple[int, ...]:
+    """The index read on each axis before the spatial ones: the chosen time point on a time
+    axis, the chosen channel on any other (NGFF allows one of each)."""
     select = []
     for axis in range(n_lead):
         size, name = shape[axis], names[axis]
-        wanted = timepoint if name.lower() in ("t", "time") else channel
-        if wanted is None:
-            if size != 1:
-                option = "timepoint" if name.lower() in ("t", "time") else "channel"
-                raise ReadError(
-                    f"{label}: axis {name!r} has {size} entries; splinecast renders one scalar "
-                    f"field: open it with splinecast.io.omezarr.open_zarr(path, {option}=N)"
-                )
-            wanted = 0
-        if not 0 <= wanted < size:
-            raise ParameterError(f"{label}: axis {name!r} has {size} entries, asked for {wanted}")
-        select.append(int(wanted))
+        if _is_time(name):
+            select.append(selection.time(label, size))
+        else:
+            select.append(selection.chan(label, size))
     return tuple(select)
+
+
+def _lead_counts(shape: tuple[int, ...], names: tuple[str, ...], n_lead: int,
+                 select: tuple[int, ...], selection: Selection) -> dict[str, int]:
+    """The metadata entries of the counts and the choice (1 and 0 for an axis the image lacks)."""
+    timepoints, timepoint, channels, channel = 1, 0, 1, 0
+    for axis in range(n_lead):
+        if _is_time(names[axis]):
+            timepoints, timepoint = shape[axis], select[axis]
+        else:
+            channels, channel = shape[axis], select[axis]
+    return selection.metadata(timepoints, timepoint, channels, channel)
 
 
 def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
@@ -707,7 +719,7 @@ def guarded_array(node: Any, key: str, label: str, folder: Path) -> Level:
 
 def open_zarr(
     path: str | os.PathLike[str], *, channel: int | None = None, timepoint: int | None = None,
-    allow_external: bool | None = None,
+    allow_external: bool | None = None, selection: Selection | None = None,
 ) -> Any:
     """Open an OME-Zarr image or a plain Zarr array lazily (metadata only).
 
@@ -717,10 +729,15 @@ def open_zarr(
         The image's folder (``x.zarr``, ``x.ome.zarr``), a ``bioformats2raw`` collection, or a
         Zarr array's folder.
     channel, timepoint : int, optional
-        Which entry of a channel or time axis longer than 1 to read.
+        Which entry of the channel and time axes to read (default: the first, with a
+        :class:`~splinecast.io.selection.SeveralVolumesWarning` when the axis is longer
+        than 1).
     allow_external : bool, optional
         Follow symbolic links to files outside the store's folder (default: refused, unless
         ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``).
+    selection : Selection, optional
+        Instead of ``channel`` and ``timepoint`` (what :func:`splinecast.read` passes: it knows
+        which keyword the time point was given with).
 
     Returns
     -------
@@ -737,8 +754,10 @@ def open_zarr(
     path = Path(os.fspath(path))
     if not path.exists():
         raise ReadError(f"{path}: no such file or folder")
+    if selection is None:
+        selection = Selection(timepoint=timepoint, channel=channel)
     with _zarr_calls(str(path)):
-        return _open_zarr(path, channel, timepoint, allow_external)
+        return _open_zarr(path, selection, allow_external)
 
 
 @contextlib.contextmanager
@@ -757,7 +776,7 @@ def _zarr_calls(label: str) -> Any:
                                     f"({one_line(exc)})")) from None
 
 
-def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
+def _open_zarr(path: Path, selection: Selection,
                allow_external: bool | None) -> MultiscaleVolume:
     node = open_store(path, allow_external=allow_external)
     zarr = _zarr(path)
@@ -765,7 +784,7 @@ def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
     attrs = _attrs(node)
     local = path.absolute()
     if isinstance(node, zarr.Array):
-        return _plain_array(path, node, label)
+        return _plain_array(path, node, label, selection)
     ome = attrs.get("ome") if isinstance(attrs.get("ome"), dict) else attrs
     if "bioformats2raw.layout" in ome and "multiscales" not in ome:
         series = sorted(k for k in node.group_keys() if k.isdigit())
@@ -774,11 +793,11 @@ def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
         if len(series) > 1:
             warnings.warn(f"{label}: holds {len(series)} images; reading the first (0/)",
                           stacklevel=2)
-        return open_zarr(path / "0", channel=channel, timepoint=timepoint,
-                         allow_external=allow_external)
+        return open_zarr(path / "0", selection=selection, allow_external=allow_external)
     ours = _our_attributes(attrs.get(ATTRIBUTE), f"{label}: attribute {ATTRIBUTE!r}")
     kind = ours.get("kind")
     if kind is not None:
+        selection.single(label)  # a splinecast store holds one volume
         opener = store_opener(kind)
         if opener is None:
             raise ReadError(f"{label}: a splinecast store of kind {kind!r}, which this version "
@@ -799,8 +818,15 @@ def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
         array = _child(node, dataset.path, label)
         if not isinstance(array, zarr.Array):
             raise ReadError(f"{label}: level {dataset.path!r} is not an array")
-        select = _leading_selection(tuple(array.shape), image.axis_names, n_lead, channel,
-                                    timepoint, label)
+        if index == 0:  # the full-resolution level: the counts, the choice, its messages
+            select = _leading_selection(tuple(array.shape), image.axis_names, n_lead,
+                                        selection, label)
+            chosen = _lead_counts(tuple(array.shape), image.axis_names, n_lead, select,
+                                  selection)
+        elif tuple(array.shape[:n_lead]) != tuple(levels[0].array.shape[:n_lead]):
+            raise ReadError(f"{label}: level {dataset.path!r} has {array.shape[:n_lead]} "
+                            f"entries on the axes {image.axis_names[:n_lead]}, level "
+                            f"{image.datasets[0].path!r} {levels[0].array.shape[:n_lead]}")
         levels.append(_level(index, dataset.path, array, dataset.scale, dataset.translation,
                              select, order, label, local / dataset.path, complete))
     units = {u for u in image.units[n_lead:] if u}
@@ -809,6 +835,7 @@ def _open_zarr(path: Path, channel: int | None, timepoint: int | None,
         "source": str(local),
         "format": f"ome-zarr {image.version}",
     }
+    metadata.update(chosen)
     if len(units) == 1:
         metadata["units"] = units.pop()
     if image.downsampling:
@@ -862,8 +889,9 @@ def _our_attributes(value: Any, where: str) -> dict[str, Any]:
     return ours
 
 
-def _plain_array(path: Path, array: Any, label: str) -> MultiscaleVolume:
+def _plain_array(path: Path, array: Any, label: str, selection: Selection) -> MultiscaleVolume:
     shape = tuple(array.shape)
+    chosen = selection.single(label)
     names = getattr(array.metadata, "dimension_names", None) or ()
     lead = len(shape) - 3
     if lead < 0 or any(n != 1 for n in shape[:lead]):
@@ -878,5 +906,5 @@ def _plain_array(path: Path, array: Any, label: str) -> MultiscaleVolume:
         path=path,
         levels=[level],
         metadata={"name": path.name, "source": str(path.absolute()),
-                  "format": f"zarr v{array.metadata.zarr_format} array"},
+                  "format": f"zarr v{array.metadata.zarr_format} array", **chosen},
     )
