@@ -217,6 +217,14 @@ def _check_movie_elevation(stated: str) -> None:
     assert float(first(stated)) == movie_cli.DEFAULT_ELEVATION
 
 
+def _check_first_volume(stated: str) -> None:
+    from splinecast.io.selection import SeveralVolumesWarning, choose
+
+    assert stated.startswith("the first, with a note")
+    with pytest.warns(SeveralVolumesWarning):
+        assert choose("f", "time point", 3, None, "timepoint") == 0
+
+
 #: (command, option) -> check of the stated default against the code, for options whose parser
 #: default is None (the code fills them in).
 CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
@@ -251,6 +259,8 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("movie", "--lod"): _check_wavelet_lod,
     ("movie", "--allow-external-data"): _check_external,
     ("movie", "--allow-missing"): _check_missing,
+    **{(command, option): _check_first_volume for command in ("info", "render", "view", "movie")
+       for option in ("--timepoint", "--channel")},
 }
 for _option in ("--model", "--root-finder", "--iterations", "--step", "--inside", "--background",
                 "--color", "--colormap", "--window", "--preintegration", "--table-layout",

@@ -265,9 +265,11 @@ def test_every_render_option_has_a_case():
     # of multiscale volumes are tested in tests/test_multires_render.py, --cut in
     # tests/test_cut_render.py; --allow-external-data and --verbose (input handling, not
     # rendering) in tests/test_hostile_input.py, --allow-missing (unreadable bricks of a
-    # pyramid) in tests/test_zarr_bounded.py.
+    # pyramid) in tests/test_zarr_bounded.py; --timepoint, --volume and --channel (which
+    # volume of a series is read) in tests/test_timepoints.py.
     covered = {"--output", "--depth", "--quiet", "--help", "--mode", "--array", "--budget",
-               "--lod", "--cut", "--allow-external-data", "--verbose", "--allow-missing"}
+               "--lod", "--cut", "--allow-external-data", "--verbose", "--allow-missing",
+               "--timepoint", "--volume", "--channel"}
     used = {a.split("=")[0] for c in CASES for a in c.cli if a.startswith("--")}
     assert options - covered - used == set()
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from splinecast.errors import ParameterError, ReadError
-from splinecast.io import OrientationWarning, read, write
+from splinecast.io import OrientationWarning, SeveralVolumesWarning, read, write
 from splinecast.volume import SUPPORTED_DTYPES, Volume
 
 SPACING = (0.5, 0.75, 2.0)
@@ -354,8 +354,11 @@ def test_nifti_4d(tmp_path: Path) -> None:
     single = nifti(tmp_path, "one.nii", ramp(np.uint8)[..., None], affine_of())
     assert_same(read(single), ramp(np.uint8))
     many = nifti(tmp_path, "many.nii", np.stack([ramp(np.uint8)] * 3, axis=-1), affine_of())
-    with pytest.raises(ReadError, match=r"many\.nii: a 4D image with 3 volumes"):
-        read(many)
+    with pytest.warns(SeveralVolumesWarning, match=r"many\.nii: holds 3 time points"):
+        assert_same(read(many), ramp(np.uint8))
+    six = nifti(tmp_path, "six.nii", np.zeros((2, 2, 2, 1, 1, 2), np.uint8), affine_of())
+    with pytest.raises(ReadError, match=r"six\.nii: a 6D image .*beyond the 5th"):
+        read(six)
 
 
 def test_nifti_real_mri() -> None:

@@ -37,7 +37,7 @@ from .errors import DataError, ParameterError
 from .errors.limits import check_origin, check_spacing
 
 __all__ = ["Volume", "GridGeometry", "SUPPORTED_DTYPES", "CONVERTED_DTYPES", "exact_supported",
-           "OrientationWarning"]
+           "OrientationWarning", "find_vtk_array"]
 
 #: dtypes the renderers use as they are (no copy).
 SUPPORTED_DTYPES = (
@@ -122,6 +122,50 @@ def exact_supported(data: np.ndarray, label: str = "data") -> np.ndarray:
 class OrientationWarning(UserWarning):
     """The file's voxel axes were flipped, permuted or (for oblique data) rotated to fit x, y, z,
     or a VTK image's direction matrix was not applied."""
+
+
+def find_vtk_array(image: Any, array: str | None, label: str) -> tuple[str, Any, bool]:
+    """The data array of a ``vtkImageData`` that :meth:`Volume.from_vtk` reads.
+
+    Parameters
+    ----------
+    image : vtkImageData or pyvista.ImageData
+        The image.
+    array : str or None
+        The array's name; ``None``: the only numeric point (else cell) data array.
+    label : str
+        Names the image in messages.
+
+    Returns
+    -------
+    name : str
+        The array's name.
+    vtk_array : vtkDataArray
+        The array.
+    on_points : bool
+        Point data (else cell data).
+
+    Raises
+    ------
+    ParameterError
+        No such array, no numeric array, or several and no ``array``.
+    """
+    points, cells = _vtk_arrays(image.GetPointData()), _vtk_arrays(image.GetCellData())
+    if array is not None:
+        pool = points if array in points else cells
+        if array not in pool:
+            names = ", ".join(repr(n) for n in [*points, *cells]) or "none"
+            raise ParameterError(f"{label}: no data array {array!r} (arrays: {names})")
+    else:
+        pool = points or cells
+        if not pool:
+            raise ParameterError(f"{label}: the image has no numeric point or cell data")
+        if len(pool) > 1:
+            names = ", ".join(repr(n) for n in pool)
+            raise ParameterError(f"{label}: several data arrays ({names}); choose one with "
+                                 "array=NAME")
+        array = next(iter(pool))
+    return array, pool[array], pool is points
 
 
 def _vtk_arrays(attributes: Any) -> dict[str, Any]:
@@ -231,7 +275,8 @@ class Volume(GridGeometry):
 
     @classmethod
     def from_vtk(cls, image: Any, array: str | None = None,
-                 metadata: Mapping[str, Any] | None = None) -> Volume:
+                 metadata: Mapping[str, Any] | None = None,
+                 component: int | None = None) -> Volume:
         """A volume from a ``vtkImageData`` or ``pyvista.ImageData`` (neither is imported here).
 
         Parameters
@@ -245,6 +290,9 @@ class Volume(GridGeometry):
             Name of the point (or cell) data array; needed when there are several.
         metadata : mapping, optional
             Added to the volume's metadata (``"name"`` is used in messages).
+        component : int, optional
+            Which component of an array with several (a vector or colour array) to read; needed
+            for such arrays.
 
         Returns
         -------
@@ -257,7 +305,8 @@ class Volume(GridGeometry):
         ------
         ParameterError
             Not image data, no numeric array, an unknown or ambiguous ``array`` (the message
-            lists the names) or an array with several components.
+            lists the names), an array with several components and no ``component``, or a
+            ``component`` out of range.
 
         Warns
         -----
@@ -282,34 +331,31 @@ class Volume(GridGeometry):
                 f"{label}: expected a vtkImageData or pyvista.ImageData, got "
                 f"{type(image).__name__}"
             )
-        points, cells = _vtk_arrays(image.GetPointData()), _vtk_arrays(image.GetCellData())
-        if array is not None:
-            pool = points if array in points else cells
-            if array not in pool:
-                names = ", ".join(repr(n) for n in [*points, *cells]) or "none"
-                raise ParameterError(f"{label}: no data array {array!r} (arrays: {names})")
-        else:
-            pool = points or cells
-            if not pool:
-                raise ParameterError(f"{label}: the image has no numeric point or cell data")
-            if len(pool) > 1:
-                names = ", ".join(repr(n) for n in pool)
-                raise ParameterError(f"{label}: several data arrays ({names}); choose one with "
-                                     "array=NAME")
-            array = next(iter(pool))
-        vtk_array = pool[array]
-        if vtk_array.GetNumberOfComponents() != 1:
+        array, vtk_array, on_points = find_vtk_array(image, array, label)
+        components = vtk_array.GetNumberOfComponents()
+        if component is None and components != 1:
             raise ParameterError(
-                f"{label}: array {array!r} has {vtk_array.GetNumberOfComponents()} components; "
-                "splinecast renders scalar data (pick or compute one component)"
+                f"{label}: array {array!r} has {components} components; splinecast renders "
+                "scalar data (choose one with component=N)"
             )
+        if component is not None:
+            if isinstance(component, bool) or not isinstance(component, int | np.integer):
+                raise ParameterError(f"{label}: component must be an integer, got "
+                                     f"{component!r}")
+            if not 0 <= component < components:
+                raise ParameterError(f"{label}: component {component} is out of range (array "
+                                     f"{array!r} has {components}: 0 to {components - 1})")
         from vtkmodules.util.numpy_support import vtk_to_numpy  # present with any VTK object
 
         flat = vtk_to_numpy(vtk_array)
+        if flat.ndim == 2:
+            # One component of interleaved tuples, copied so that x runs contiguously, as the
+            # kernels walk it.
+            flat = np.ascontiguousarray(flat[:, component or 0])
         dims = np.asarray(image.GetDimensions(), dtype=np.int64)
         spacing = np.asarray(image.GetSpacing(), dtype=np.float64)
         first = np.asarray(image.GetExtent()[::2], dtype=np.float64)
-        if pool is not points:  # one voxel per cell, at the cell's centre
+        if not on_points:  # one voxel per cell, at the cell's centre
             dims = np.maximum(dims - 1, 1)
             first = first + 0.5
         if flat.size != int(np.prod(dims)):

@@ -26,6 +26,7 @@ __all__ = [
     "add_missing_option",
     "Parser",
     "add_input_options",
+    "add_selection_options",
     "captured_output",
     "check_output",
     "derived_output",
@@ -33,6 +34,7 @@ __all__ = [
     "finite",
     "log",
     "numbers",
+    "read_options",
     "uncaptured",
 ]
 
@@ -127,6 +129,30 @@ def apply_remote_options(args: argparse.Namespace) -> None:
         os.environ[remote.ENV_CACHE_SIZE] = str(args.cache_size)
     if getattr(args, "cache_dir", None):
         os.environ[remote.ENV_CACHE_DIR] = os.path.abspath(args.cache_dir)
+
+
+def add_selection_options(parser: argparse.ArgumentParser) -> None:
+    """``--timepoint`` (or ``--volume``) and ``--channel``: which volume of a file holding
+    several to read."""
+    when = parser.add_mutually_exclusive_group()
+    when.add_argument("--timepoint", type=int, metavar="N",
+                      help="time point of a time series to read: a 4D NIfTI's volume, an "
+                           "OME-Zarr 't' axis, a TIFF hyperstack's T (default: the first, with "
+                           "a note; 'splinecast info' gives the count)")
+    when.add_argument("--volume", type=int, metavar="N",
+                      help="another name for --timepoint (the volumes of a 4D NIfTI)")
+    parser.add_argument("--channel", type=int, metavar="N",
+                        help="channel to read: an OME-Zarr 'c' axis, a TIFF's channels or "
+                             "colour samples, a VTK array's components (default: the first, "
+                             "with a note)")
+
+
+def read_options(args: argparse.Namespace) -> dict[str, object]:
+    """The keywords of :func:`splinecast.read` the input options give."""
+    return {"allow_external": getattr(args, "allow_external_data", False) or None,
+            "timepoint": getattr(args, "timepoint", None),
+            "volume": getattr(args, "volume", None),
+            "channel": getattr(args, "channel", None)}
 
 
 def numbers(text: str | None, option: str, count: int | None = None) -> list[float] | None:

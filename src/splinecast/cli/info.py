@@ -1,5 +1,5 @@
-"""``splinecast info FILE``: shape, dtype, spacing, origin, value range and percentiles; the levels
-of a multiscale (Zarr) volume."""
+"""``splinecast info FILE``: shape, dtype, spacing, origin, value range and percentiles, the number
+of time points and channels; the levels of a multiscale (Zarr) volume."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 
 import splinecast as sc
 
-from ._common import add_input_options
+from ._common import add_input_options, add_selection_options, read_options
 
 __all__ = ["add_parser", "run"]
 
@@ -23,12 +23,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     info = sub.add_parser("info", help="describe a volume file: shape, dtype, spacing, values")
     info.add_argument("file", help="volume file, DICOM folder, Zarr folder or demo:NAME?size=N")
     info.add_argument("--array", help="data array of a VTK file holding several")
+    add_selection_options(info)
     add_input_options(info)
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the description of ``args.file``."""
-    vol = sc.read(args.file, array=args.array, allow_external=args.allow_external_data or None)
+    vol = sc.read(args.file, array=args.array, **read_options(args))
     if not isinstance(vol, sc.Volume):
         if isinstance(vol, sc.WaveletVolume):
             return _wavelet(vol)
@@ -50,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"origin:    {', '.join(f'{s:g}' for s in vol.origin)}")
     print(f"extent:    {', '.join(f'{s:g}' for s in vol.extent)}")
     print(f"range:     {lo:g} .. {hi:g}")
+    _series(vol.metadata)
     nan, pos, neg = vol.nonfinite_counts()
     print(f"NaN:       {nan}")
     if pos or neg:
@@ -60,6 +62,16 @@ def run(args: argparse.Namespace) -> int:
     if "default_iso" in vol.metadata:
         print(f"default iso: {vol.metadata['default_iso']:g}")
     return 0
+
+
+def _series(metadata: dict[str, Any]) -> None:
+    """The time points and channels the file holds, and the ones described (the values above
+    are those of one time point and channel)."""
+    for what, count, index in (("timepoints", "timepoints", "timepoint"),
+                               ("channels", "channels", "channel")):
+        n = int(metadata.get(count, 1))
+        shown = f" (this is {metadata.get(index, 0)}; choose with --{index} N)" if n > 1 else ""
+        print(f"{what + ':':<12}{n}{shown}")
 
 
 def _multiscale(mv) -> int:
@@ -78,6 +90,7 @@ def _multiscale(mv) -> int:
     print(f"origin:    {', '.join(f'{s:g}' for s in mv.origin)}")
     print(f"extent:    {', '.join(f'{s:g}' for s in mv.extent)}")
     print(f"range:     {lo:g} .. {hi:g}{exact}")
+    _series(mv.metadata)
     if mv.brick:
         print(f"bricks:    {mv.brick}^3 cells, tables: {', '.join(mv.tables()) or 'none'}")
     from splinecast.multires.hist_store import histogram_info

@@ -1,10 +1,18 @@
-"""``splinecast movie FILE --frames N -o OUT``: a turntable or a sweep as MP4, GIF or PNG frames.
+"""``splinecast movie FILE --frames N -o OUT``: a turntable or a sweep as MP4, GIF or PNG frames;
+``--timepoints A:B[:STEP]``: a movie over the time points of a time series.
 
 Without ``--workers`` or ``--scheduler`` the movie renders in this process, one frame after
 another, each on all cores (Numba threads); no Dask is needed. ``--workers N`` starts a local Dask
 cluster of N single-threaded worker processes, ``--scheduler ADDRESS`` uses a running cluster
 whose workers can open FILE; there each frame is one task. Frames are written in order as they
 complete, and the movie appears under its name only when the last one is written.
+
+A movie over time renders in this process: frame i is time point i of the range, read and
+prepared when its turn comes (one in memory at a time), with the camera fixed unless swept. The
+isovalue, window, colormap and transfer function are chosen once, from the first time point of
+the range, and kept for every frame: per-frame choices would make the brightness flicker, and
+choosing from all of them would read every time point twice (give ``--iso``/``--window`` to fix
+them otherwise).
 """
 
 from __future__ import annotations
@@ -30,7 +38,16 @@ from splinecast.distributed import (
 )
 from splinecast.io.omezarr import MultiscaleVolume, is_zarr
 
-from ._common import add_input_options, add_missing_option, derived_output, finite, log, numbers
+from ._common import (
+    add_input_options,
+    add_missing_option,
+    add_selection_options,
+    derived_output,
+    finite,
+    log,
+    numbers,
+    read_options,
+)
 from ._compiling import CompileNotice
 from ._progress import Progress
 from .render import (
@@ -60,7 +77,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="OUT.mp4, OUT.gif, or a folder (OUT/) for frame_0000.png, ... "
                             "(default: NAME.mp4, or NAME-MODE.mp4 for another mode than iso, "
                             "in the current folder, NAME from the input; printed)")
-    movie.add_argument("--frames", type=int, required=True, help="number of frames")
+    movie.add_argument("--frames", type=int,
+                       help="number of frames (required, except with --timepoints: one per "
+                            "time point)")
+    movie.add_argument("--timepoints", metavar="A:B[:STEP]",
+                       help="a movie over time: time points A to B-1 (every STEP-th), Python "
+                            "slice syntax ('0:20', '::2', ':' for all); camera fixed unless "
+                            "--azimuth/--elevation sweep; iso, window and colours from time "
+                            "point A for every frame")
     movie.add_argument("--azimuth", metavar="A0[:A1]",
                        help="degrees around z, fixed or from A0 to A1 (default: a full turn "
                             "30:390 when nothing else is swept, else 30)")
@@ -86,6 +110,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             "coarse bricks are reused from frame to frame")
     movie.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_missing_option(movie)
+    add_selection_options(movie)
     add_input_options(movie)
 
 
@@ -106,7 +131,8 @@ def _shots(args: argparse.Namespace, volume: Any, kwargs: dict[str, Any],
     elevation = _range(args.elevation, "--elevation")
     azimuth = _range(args.azimuth, "--azimuth")
     if azimuth is None:
-        swept = isinstance(elevation, tuple) or iso_sweep is not None
+        swept = (isinstance(elevation, tuple) or iso_sweep is not None
+                 or args.timepoints is not None)
         azimuth = DEFAULT_AZIMUTH if swept else (DEFAULT_AZIMUTH, DEFAULT_AZIMUTH + 360.0)
     cameras = orbit_path(volume, args.frames, azimuth=azimuth,
                          elevation=DEFAULT_ELEVATION if elevation is None else elevation,
@@ -116,6 +142,65 @@ def _shots(args: argparse.Namespace, volume: Any, kwargs: dict[str, Any],
     isos = ramp(iso_sweep, args.frames, "--iso")
     return [Shot(camera, {**kwargs, "iso": float(v)})
             for camera, v in zip(cameras, isos, strict=True)]
+
+
+def _slice(text: str) -> slice:
+    """``--timepoints`` ``A:B[:STEP]`` (each part optional, none negative) as a slice."""
+    parts = text.split(":")
+    if not 2 <= len(parts) <= 3:
+        raise sc.ParameterError(f"--timepoints must be A:B or A:B:STEP, got {text!r}")
+    values: list[int | None] = []
+    for part in parts:
+        part = part.strip()
+        try:
+            value = int(part) if part else None
+        except ValueError:
+            raise sc.ParameterError(f"--timepoints must be A:B or A:B:STEP of whole numbers, got "
+                                    f"{text!r}") from None
+        if value is not None and value < 0:
+            raise sc.ParameterError(f"--timepoints counts from 0, got {text!r}")
+        values.append(value)
+    if len(values) == 3 and values[2] == 0:
+        raise sc.ParameterError(f"--timepoints: STEP must be at least 1, got {text!r}")
+    return slice(*values)
+
+
+def _timepoints(args: argparse.Namespace, chosen: slice, count: int) -> list[int]:
+    """The time points of ``chosen`` in a file of ``count``: a start or stop past the end is
+    a mistake (a slice would clip it silently), an empty range too."""
+    label = args.file
+    if chosen.start is not None and chosen.start >= count:
+        raise sc.ParameterError(f"{label}: --timepoints {args.timepoints} starts past the end "
+                                f"(it holds {count} time point{'s' if count > 1 else ''}: "
+                                f"{'0' if count == 1 else f'0 to {count - 1}'})")
+    if chosen.stop is not None and chosen.stop > count:
+        raise sc.ParameterError(f"{label}: --timepoints {args.timepoints} ends past the end "
+                                f"(it holds {count} time point{'s' if count > 1 else ''}; "
+                                f"the stop may be at most {count})")
+    points = list(range(count))[chosen]
+    if not points:
+        raise sc.ParameterError(f"{label}: --timepoints {args.timepoints} is empty")
+    return points
+
+
+def _time_frames(args: argparse.Namespace, points: list[int], shots: list[Shot],
+                 options: dict[str, Any], first: Any, image_only: bool) -> Iterator[Any]:
+    """Frame i: time point ``points[i]`` read, prepared and rendered with ``shots[i]`` (as
+    :func:`render_locally` renders it); one time point in memory at a time (``first``, the
+    scene of ``points[0]``, is used for it)."""
+    for point, shot in zip(points, shots, strict=True):
+        if point == points[0]:
+            scene = first
+        else:
+            volume = sc.read(args.file, **{**read_options(args), "timepoint": point})
+            if args.smooth:
+                volume = sc.smooth(volume, args.smooth)
+            scene = sc.Scene(volume, model=args.model, **options)
+        try:
+            yield from render_locally(scene, [shot], image_only=image_only)
+        finally:
+            if scene is not first and hasattr(scene, "close"):
+                scene.close()
 
 
 def _iso_sweep(args: argparse.Namespace) -> tuple[float, float] | None:
@@ -184,7 +269,18 @@ def run(args: argparse.Namespace) -> int:
         args.output = str(derived_output(args.file, "" if args.mode == "iso" else args.mode,
                                          ".mp4"))
     width, height = check_render_args(args)
-    if args.frames < 1:
+    over_time = _slice(args.timepoints) if args.timepoints is not None else None
+    if over_time is not None:
+        for flag, value in (("--timepoint", args.timepoint), ("--volume", args.volume),
+                            ("--workers", args.workers), ("--scheduler", args.scheduler),
+                            ("--lod", args.lod)):
+            if value is not None:
+                raise sc.ParameterError(f"--timepoints makes a movie over time in this process: "
+                                        f"{flag} does not apply")
+    elif args.frames is None:
+        raise sc.ParameterError("--frames N is required (or --timepoints A:B for a movie over "
+                                "time)")
+    if args.frames is not None and args.frames < 1:
         raise sc.ParameterError(f"--frames must be at least 1, got {args.frames}")
     if args.workers is not None and args.workers < 1:
         raise sc.ParameterError(f"--workers must be at least 1, got {args.workers}")
@@ -193,12 +289,36 @@ def run(args: argparse.Namespace) -> int:
     _range(args.elevation, "--elevation")
     if args.lod is not None and not (math.isfinite(args.lod) and args.lod >= 0):
         raise sc.ParameterError(f"--lod must be an angle >= 0 in radians, got {args.lod}")
+    points: list[int] | None = None
+    if over_time is not None:
+        # The first time point of the range: read now, it gives the count and the defaults.
+        first_point = over_time.start or 0
+        try:
+            first = sc.read(args.file, **{**read_options(args), "timepoint": first_point})
+        except sc.ParameterError:
+            if not first_point:
+                raise
+            # Past the end (or a bad channel): the message should name --timepoints.
+            count = sc.read(args.file, **read_options(args)).metadata.get("timepoints", 1)
+            _timepoints(args, over_time, int(count))
+            raise
+        if isinstance(first, sc.WaveletVolume):
+            raise sc.ParameterError(f"--timepoints: the wavelet store {args.file} holds one "
+                                    "volume")
+        points = _timepoints(args, over_time, int(first.metadata.get("timepoints", 1)))
+        if args.frames is not None and args.frames != len(points):
+            raise sc.ParameterError(f"--frames {args.frames} and --timepoints "
+                                    f"{args.timepoints} ({len(points)} time points) disagree: "
+                                    "leave out --frames")
+        args.frames = len(points)
     writer = MovieWriter(args.output, (width, height), args.frames, fps=args.fps,
                          quality=args.quality)
-    wavelet = _wavelet_store(args)
+    wavelet = _wavelet_store(args) if points is None else None
     options = model_options(args)
     source = SceneSource(args.file, args.model, options, args.smooth,
-                         allow_external=args.allow_external_data or None)
+                         allow_external=args.allow_external_data or None,
+                         timepoint=args.volume if args.timepoint is None else args.timepoint,
+                         channel=args.channel)
 
     start = time.perf_counter()
     local = args.workers is None and args.scheduler is None
@@ -208,7 +328,11 @@ def run(args: argparse.Namespace) -> int:
             volume = wavelet
             where = "in this process"
         elif local:
-            scene = sc.Scene(source.read(), model=args.model, **options)
+            # Read here (not by the source) so that a message names --volume when given.
+            read = first if points is not None else sc.read(args.file, **read_options(args))
+            if args.smooth:
+                read = sc.smooth(read, args.smooth)
+            scene = sc.Scene(read, model=args.model, **options)
             if hasattr(scene, "close"):  # a pyramid's loader thread stops at the end
                 stack.callback(scene.close)
             volume = scene.volume
@@ -237,6 +361,9 @@ def run(args: argparse.Namespace) -> int:
         shots = _shots(args, volume, kwargs, iso_sweep)
         log(args, f"{volume.name}: {volume.shape} prepared ({args.model}) in "
                   f"{time.perf_counter() - start:.2f} s {where}")
+        if points is not None:
+            log(args, f"time points {points[0]} to {points[-1]} ({len(points)} frames); iso, "
+                      f"window and colours from time point {points[0]}")
         if wavelet is not None or local:
             # Said only when kernels really compile here (the first frame's, on first use).
             model = args.model or "trilinear"
@@ -244,7 +371,10 @@ def run(args: argparse.Namespace) -> int:
                 f"{model} / {args.mode}, {np.dtype(info.dtype).name} data", model,
                 enabled=not args.quiet, stream=getattr(args, "stderr", None)))
         stats: list[dict] = []
-        if multiscale:  # the frames' stats are kept: does any draw an unreadable brick?
+        if points is not None:
+            frames = _time_frames(args, points, shots, options, scene, image_only=not multiscale)
+            images = _images(frames, stats) if multiscale else frames
+        elif multiscale:  # the frames' stats are kept: does any draw an unreadable brick?
             images = _images(render_locally(scene, shots), stats)
         elif wavelet is not None or local:
             images = render_locally(scene, shots, image_only=True)

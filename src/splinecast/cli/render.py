@@ -22,11 +22,13 @@ from ._common import (
     IncompleteWarning,
     add_input_options,
     add_missing_option,
+    add_selection_options,
     check_output,
     derived_output,
     finite,
     log,
     numbers,
+    read_options,
 )
 from ._compiling import CompileNotice
 
@@ -115,6 +117,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
     add_missing_option(render)
+    add_selection_options(render)
     add_input_options(render)
     _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
 
@@ -492,7 +495,7 @@ def run(args: argparse.Namespace) -> int:
     width, height = check_render_args(args)
 
     start = time.perf_counter()
-    vol = sc.read(args.file, array=args.array, allow_external=args.allow_external_data or None)
+    vol = sc.read(args.file, array=args.array, **read_options(args))
     read_s = time.perf_counter() - start
     multiscale = not isinstance(vol, sc.Volume)
     wavelet = multiscale and isinstance(vol, sc.WaveletVolume)

@@ -16,7 +16,15 @@ import webbrowser
 import splinecast as sc
 from splinecast.errors import did_you_mean
 
-from ._common import add_input_options, finite, log, numbers, uncaptured
+from ._common import (
+    add_input_options,
+    add_selection_options,
+    finite,
+    log,
+    numbers,
+    read_options,
+    uncaptured,
+)
 
 __all__ = ["add_parser", "run"]
 
@@ -48,6 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "ε in radians below which cells are not refined (0: full resolution; "
                       "default one pixel's angle)")
     view.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_selection_options(view)
     add_input_options(view)
 
 
@@ -82,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
                                 f"got {args.model!r}{did_you_mean(args.model, sc.MODELS)}")
     isos = numbers(args.iso, "--iso")
     start = time.perf_counter()
-    vol = sc.read(args.file, allow_external=args.allow_external_data or None)
+    vol = sc.read(args.file, **read_options(args))
     _check_multires_options(args, vol)
     iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
     server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,

@@ -15,6 +15,7 @@ from typing import Any
 
 from ..errors import ParameterError
 from ..io import read
+from ..io.selection import index_argument
 from ..models import MODELS
 from ..models.smoothing import smooth as smooth_volume
 from ..render.defaults import (
@@ -51,6 +52,9 @@ class SceneSource:
     allow_external : bool, optional
         Let the file's header name data files outside its folder (see :func:`splinecast.read`);
         travels to the workers with the source.
+    timepoint, channel : int, optional
+        Which time point and channel of a file holding several to read (see
+        :func:`splinecast.read`; default: the first).
     """
 
     location: str
@@ -58,10 +62,13 @@ class SceneSource:
     options: tuple[tuple[str, Any], ...] = field(default=())
     smooth: int | None = None
     allow_external: bool | None = None
+    timepoint: int | None = None
+    channel: int | None = None
 
     def __init__(self, location: str | os.PathLike, model: str = "trilinear",
                  options: dict[str, Any] | None = None, smooth: int | None = None,
-                 allow_external: bool | None = None) -> None:
+                 allow_external: bool | None = None, timepoint: int | None = None,
+                 channel: int | None = None) -> None:
         text = os.fspath(location)
         if not isinstance(text, str) or not text:
             raise ParameterError(f"source must be a path or a demo: spec, got {location!r}")
@@ -85,11 +92,14 @@ class SceneSource:
         object.__setattr__(self, "smooth", None if smooth is None else int(smooth))
         object.__setattr__(self, "allow_external",
                            None if allow_external is None else bool(allow_external))
+        object.__setattr__(self, "timepoint", index_argument(timepoint, "timepoint"))
+        object.__setattr__(self, "channel", index_argument(channel, "channel"))
 
     def read(self) -> Volume:
         """Read (and pre-smooth) the volume; raises :class:`~splinecast.ReadError` naming the
         location when it cannot."""
-        volume = read(self.location, allow_external=self.allow_external)
+        volume = read(self.location, allow_external=self.allow_external,
+                      timepoint=self.timepoint, channel=self.channel)
         return smooth_volume(volume, self.smooth) if self.smooth else volume
 
     def open(self) -> Scene:

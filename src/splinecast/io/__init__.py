@@ -12,6 +12,7 @@ needs them; ``pip install 'splinecast[io]'`` installs them all.
 
 from .dispatch import read, write
 from .orientation import OrientationWarning
+from .selection import SeveralVolumesWarning
 from .synthetic import demo
 
-__all__ = ["read", "write", "demo", "OrientationWarning"]
+__all__ = ["read", "write", "demo", "OrientationWarning", "SeveralVolumesWarning"]

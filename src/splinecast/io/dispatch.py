@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import ParameterError, ReadError, limits
 from ..volume import SUPPORTED_DTYPES, Volume
 from .remote import is_url
+from .selection import Selection
 from .sidecar import find_sidecar
 
 if TYPE_CHECKING:
@@ -49,6 +50,9 @@ _NIFTI2_MAGIC = (b"n+2\0", b"ni2\0")
 _HEAD_BYTES = 352
 #: Formats whose header may name other files: their readers take ``allow_external``.
 _NAMES_FILES = {"metaimage", "nrrd", "sidecar", "dicom", "nifti", "tiff"}
+#: Formats that may hold several time points or channels: their readers take ``selection``
+#: (besides ``allow_external``; VTK readers take it with ``array``).
+_SELECTS = {"nifti", "tiff"}
 
 
 def sniff(path: Path) -> str | None:
@@ -143,6 +147,9 @@ def read(
     array: str | None = None,
     allow_external: bool | None = None,
     storage_options: dict[str, Any] | None = None,
+    timepoint: int | None = None,
+    volume: int | None = None,
+    channel: int | None = None,
 ) -> Volume | MultiscaleVolume:
     """Read a volume from a file, a DICOM folder, a Zarr folder, a URL or a ``demo:`` name.
 
@@ -175,6 +182,17 @@ def read(
         For a URL: options of its fsspec filesystem, e.g. ``{"anon": True}``,
         ``{"key": ..., "secret": ..., "endpoint_url": ...}`` (S3), ``{"token": ...}`` (GCS),
         ``{"headers": {...}}`` (HTTP).
+    timepoint : int, optional
+        Which time point of a time series to read: the 4th dimension of a NIfTI image, the
+        ``t`` axis of an OME-Zarr image, the ``T`` axis of a TIFF hyperstack. Default: the
+        first, with a :class:`~splinecast.io.selection.SeveralVolumesWarning` when there are
+        several. Only that time point is read (a compressed TIFF excepted).
+    volume : int, optional
+        Another name for ``timepoint`` (neuroimaging speaks of the volumes of a 4D NIfTI).
+    channel : int, optional
+        Which channel to read: the ``c`` axis of an OME-Zarr image, the ``C`` (or ``S``,
+        colour samples) axis of a TIFF, the component of a multi-component VTK array, the 5th
+        dimension of a NIfTI image. Default: the first, with a warning as for ``timepoint``.
 
     Returns
     -------
@@ -182,8 +200,10 @@ def read(
         A Zarr folder gives a lazy :class:`~splinecast.io.omezarr.MultiscaleVolume` (metadata
         read, voxels not); everything else a :class:`Volume`. Both have ``metadata["name"]`` (the
         file name or the ``demo:`` string), ``metadata["source"]`` (the full path) and
-        ``metadata["format"]``. Uncompressed npy, raw, MetaImage, NRRD, NIfTI and TIFF data stay
-        memory-mapped; big-endian data is copied once into native order.
+        ``metadata["format"]``; a file that can hold several time points or channels also
+        ``metadata["timepoints"]``, ``["timepoint"]``, ``["channels"]`` and ``["channel"]``
+        (the counts and the ones read). Uncompressed npy, raw, MetaImage, NRRD, NIfTI and TIFF
+        data stay memory-mapped; big-endian data is copied once into native order.
 
     Raises
     ------
@@ -193,13 +213,18 @@ def read(
         outside the header's folder, or a missing optional library (with the command that
         installs it).
     ParameterError
-        A bad ``demo:`` name or parameter.
+        A bad ``demo:`` name or parameter; a ``timepoint``, ``volume`` or ``channel`` outside
+        the file's range (the message gives the range), or other than 0 for a file that holds
+        one volume.
 
     Warns
     -----
     OrientationWarning
         When axes were flipped, permuted or an oblique rotation was dropped to fit x, y, z.
+    SeveralVolumesWarning
+        When the file holds several time points or channels and none was chosen.
     """
+    selection = _selection(timepoint, volume, channel)
     if array is not None and not isinstance(array, str):
         raise ParameterError(f"array must be the name of a data array, got {array!r}")
     if isinstance(path, str) and path.startswith("demo:"):
@@ -207,9 +232,10 @@ def read(
             raise ParameterError(f"array={array!r} applies to VTK files, not to {path}")
         from .synthetic import demo_from_uri
 
+        selection.single(path)
         return demo_from_uri(path)
     if is_url(path):  # kept as text: a Path would collapse the URL's "//"
-        return _read_url(path, array, storage_options)  # type: ignore[arg-type]
+        return _read_url(path, array, storage_options, selection)  # type: ignore[arg-type]
     if storage_options is not None:
         raise ParameterError(f"storage_options applies to URLs, not to the path {path}")
     path = limits.check_path_text(path, "file", ReadError)
@@ -226,9 +252,10 @@ def read(
         from .omezarr import is_zarr, open_zarr
 
         if is_zarr(path) or path.suffix.lower() == ".zarr":
-            return open_zarr(path, allow_external=allow_external)
+            return open_zarr(path, allow_external=allow_external, selection=selection)
         from .dicom import read_dicom_series
 
+        selection.single(str(path))
         return read_dicom_series(path, allow_external=allow_external)
     limits.check_regular_file(path, str(path))  # a device or pipe would block or never end
     by_content = sniff(path)
@@ -250,16 +277,20 @@ def read(
     else:
         raise ReadError(_unknown_message(path))
     if kind in ("vti", "vtk"):
-        return _reader(kind)(path, array)  # type: ignore[call-arg]
+        return _reader(kind)(path, array, selection=selection)  # type: ignore[call-arg]
     if array is not None:
         raise ParameterError(f"array={array!r} applies to VTK files (.vti, .vtk), not to {path}")
+    if kind in _SELECTS:
+        return _reader(kind)(path, allow_external=allow_external,  # type: ignore[call-arg]
+                             selection=selection)
+    selection.single(str(path))
     if kind in _NAMES_FILES:
         return _reader(kind)(path, allow_external=allow_external)  # type: ignore[call-arg]
     return _reader(kind)(path)
 
 
-def _read_url(url: str, array: str | None,
-              storage_options: dict[str, Any] | None) -> Volume | MultiscaleVolume:
+def _read_url(url: str, array: str | None, storage_options: dict[str, Any] | None,
+              selection: Selection) -> Volume | MultiscaleVolume:
     """An OME-Zarr image (or Zarr array) at ``url``, opened lazily; else a single file,
     downloaded into a private temporary folder and read there with external files refused
     (a header naming another file would lead outside the URL)."""
@@ -274,15 +305,25 @@ def _read_url(url: str, array: str | None,
                                  f"{redact(remote.url)}")
         from .omezarr import open_zarr
 
-        return open_zarr(remote.url, storage_options=storage_options)
+        return open_zarr(remote.url, storage_options=storage_options, selection=selection)
     if kind is None:
         raise ReadError(f"{redact(remote.url)}: neither a Zarr store (no zarr.json, .zgroup or "
                         ".zarray) nor a file of a known format by its name")
     with download(remote, name) as local:
-        volume = read(local, array=array, allow_external=False)
+        volume = read(local, array=array, allow_external=False, timepoint=selection.timepoint,
+                      channel=selection.channel)
     volume.metadata["name"] = name
     volume.metadata["source"] = redact(remote.url)
     return volume
+
+
+def _selection(timepoint: object, volume: object, channel: object) -> Selection:
+    """The time point and channel asked for; ``volume`` is another name for ``timepoint``."""
+    if timepoint is not None and volume is not None:
+        raise ParameterError("give timepoint or volume (another name for it), not both")
+    if volume is not None:
+        return Selection(timepoint=volume, channel=channel, time_option="volume")  # type: ignore[arg-type]
+    return Selection(timepoint=timepoint, channel=channel)  # type: ignore[arg-type]
 
 
 def _unknown_message(path: Path) -> str:

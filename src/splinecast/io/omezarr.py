@@ -9,8 +9,9 @@ Accepted:
 
 - OME-Zarr images written by splinecast, ome-zarr-py, ngff-zarr or any other writer: Zarr v3 with
   metadata under ``attributes["ome"]`` (0.5) or Zarr v2 with ``multiscales`` at the top of
-  ``.zattrs`` (0.4 and older). Exactly three spatial axes; time or channel axes of length 1 are
-  dropped, longer ones need ``timepoint=`` / ``channel=``.
+  ``.zattrs`` (0.4 and older). Exactly three spatial axes; one entry of a time and a channel axis
+  is read (``timepoint=`` / ``channel=``, the first by default: see
+  :mod:`splinecast.io.selection`).
 - A ``bioformats2raw`` collection: its first image (``0/``), with a warning if it holds more.
 - A plain Zarr array (v2 or v3): one level. Its ``dimension_names`` say which axis is x, y and z
   when they are named so; otherwise the order is NGFF's ``z, y, x`` (last index along x), the
@@ -41,6 +42,7 @@ from ..volume import GridGeometry, Volume
 from ._common import check_dtype, fmt_shape, one_line, require
 from .ngff import parse_image, spatial_order
 from .remote import is_url
+from .selection import Selection
 from .store_kinds import store_opener
 from .zarr_chunks import ChunkError, ChunkReader, FileSource
 
@@ -639,24 +641,34 @@ def _attrs(node: Any) -> dict[str, Any]:
     return dict(node.attrs.asdict() if hasattr(node.attrs, "asdict") else node.attrs)
 
 
+def _is_time(name: str) -> bool:
+    return name.lower() in ("t", "time")
+
+
 def _leading_selection(shape: tuple[int, ...], names: tuple[str, ...], n_lead: int,
-                       channel: int | None, timepoint: int | None, label: str) -> tuple[int, ...]:
+                       selection: Selection, label: str) -> tuple[int, ...]:
+    """The index read on each axis before the spatial ones: the chosen time point on a time
+    axis, the chosen channel on any other (NGFF allows one of each)."""
     select = []
     for axis in range(n_lead):
         size, name = shape[axis], names[axis]
-        wanted = timepoint if name.lower() in ("t", "time") else channel
-        if wanted is None:
-            if size != 1:
-                option = "timepoint" if name.lower() in ("t", "time") else "channel"
-                raise ReadError(
-                    f"{label}: axis {name!r} has {size} entries; splinecast renders one scalar "
-                    f"field: open it with splinecast.io.omezarr.open_zarr(path, {option}=N)"
-                )
-            wanted = 0
-        if not 0 <= wanted < size:
-            raise ParameterError(f"{label}: axis {name!r} has {size} entries, asked for {wanted}")
-        select.append(int(wanted))
+        if _is_time(name):
+            select.append(selection.time(label, size))
+        else:
+            select.append(selection.chan(label, size))
     return tuple(select)
+
+
+def _lead_counts(shape: tuple[int, ...], names: tuple[str, ...], n_lead: int,
+                 select: tuple[int, ...], selection: Selection) -> dict[str, int]:
+    """The metadata entries of the counts and the choice (1 and 0 for an axis the image lacks)."""
+    timepoints, timepoint, channels, channel = 1, 0, 1, 0
+    for axis in range(n_lead):
+        if _is_time(names[axis]):
+            timepoints, timepoint = shape[axis], select[axis]
+        else:
+            channels, channel = shape[axis], select[axis]
+    return selection.metadata(timepoints, timepoint, channels, channel)
 
 
 def _level(index: int, path: str, array: Any, scale: Any, translation: Any,
@@ -740,6 +752,7 @@ def guarded_array(node: Any, key: str, label: str, folder: Path) -> Level:
 def open_zarr(
     path: str | os.PathLike[str], *, channel: int | None = None, timepoint: int | None = None,
     allow_external: bool | None = None, storage_options: dict[str, Any] | None = None,
+    selection: Selection | None = None,
 ) -> Any:
     """Open an OME-Zarr image or a plain Zarr array lazily (metadata only).
 
@@ -749,12 +762,17 @@ def open_zarr(
         The image's folder (``x.zarr``, ``x.ome.zarr``), a ``bioformats2raw`` collection, or a
         Zarr array's folder.
     channel, timepoint : int, optional
-        Which entry of a channel or time axis longer than 1 to read.
+        Which entry of the channel and time axes to read (default: the first, with a
+        :class:`~splinecast.io.selection.SeveralVolumesWarning` when the axis is longer
+        than 1).
     allow_external : bool, optional
         Follow symbolic links to files outside the store's folder (default: refused, unless
         ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``). Never for a URL.
     storage_options : dict, optional
         For a URL: options of its fsspec filesystem (see :func:`splinecast.read`).
+    selection : Selection, optional
+        Instead of ``channel`` and ``timepoint`` (what :func:`splinecast.read` passes: it knows
+        which keyword the time point was given with).
 
     Returns
     -------
@@ -772,13 +790,17 @@ def open_zarr(
         from .remote import check_url, redact
 
         url = check_url(str(path))
+        if selection is None:
+            selection = Selection(timepoint=timepoint, channel=channel)
         with _zarr_calls(redact(url)):
-            return _open_zarr(url, channel, timepoint, False, storage_options)
+            return _open_zarr(url, selection, False, storage_options)
     path = Path(os.fspath(path))
     if not path.exists():
         raise ReadError(f"{path}: no such file or folder")
+    if selection is None:
+        selection = Selection(timepoint=timepoint, channel=channel)
     with _zarr_calls(str(path)):
-        return _open_zarr(path, channel, timepoint, allow_external)
+        return _open_zarr(path, selection, allow_external)
 
 
 @contextlib.contextmanager
@@ -797,8 +819,7 @@ def _zarr_calls(label: str) -> Any:
                                     f"({one_line(exc)})")) from None
 
 
-def _open_zarr(path: Path | str, channel: int | None, timepoint: int | None,
-               allow_external: bool | None,
+def _open_zarr(path: Path | str, selection: Selection, allow_external: bool | None,
                storage_options: dict[str, Any] | None = None) -> MultiscaleVolume:
     """Open a local folder (``Path``) or a checked URL (``str``, kept as text)."""
     remote = isinstance(path, str)
@@ -809,12 +830,11 @@ def _open_zarr(path: Path | str, channel: int | None, timepoint: int | None,
     local = None if remote else path.absolute()  # type: ignore[union-attr]
     name = path.rsplit("/", 1)[-1] if remote else path.name  # type: ignore[union-attr]
     if isinstance(node, zarr.Array):
-        return _plain_array(path, node, label)
+        return _plain_array(path, node, label, selection)
     ome = attrs.get("ome") if isinstance(attrs.get("ome"), dict) else attrs
     if "bioformats2raw.layout" in ome and "multiscales" not in ome and remote:
         # Object stores and web servers are not listed: the layout puts the first image at 0/.
-        return open_zarr(f"{path}/0", channel=channel, timepoint=timepoint,
-                         storage_options=storage_options)
+        return open_zarr(f"{path}/0", storage_options=storage_options, selection=selection)
     if "bioformats2raw.layout" in ome and "multiscales" not in ome:
         series = sorted(k for k in node.group_keys() if k.isdigit())
         if not series:
@@ -822,11 +842,11 @@ def _open_zarr(path: Path | str, channel: int | None, timepoint: int | None,
         if len(series) > 1:
             warnings.warn(f"{label}: holds {len(series)} images; reading the first (0/)",
                           stacklevel=2)
-        return open_zarr(path / "0", channel=channel, timepoint=timepoint,
-                         allow_external=allow_external)
+        return open_zarr(path / "0", selection=selection, allow_external=allow_external)
     ours = _our_attributes(attrs.get(ATTRIBUTE), f"{label}: attribute {ATTRIBUTE!r}")
     kind = ours.get("kind")
     if kind is not None:
+        selection.single(label)  # a splinecast store holds one volume
         opener = store_opener(kind)
         if remote:
             raise ReadError(f"{label}: a splinecast store of kind {kind!r} is read from a local "
@@ -850,8 +870,15 @@ def _open_zarr(path: Path | str, channel: int | None, timepoint: int | None,
         array = _child(node, dataset.path, label)
         if not isinstance(array, zarr.Array):
             raise ReadError(f"{label}: level {dataset.path!r} is not an array")
-        select = _leading_selection(tuple(array.shape), image.axis_names, n_lead, channel,
-                                    timepoint, label)
+        if index == 0:  # the full-resolution level: the counts, the choice, its messages
+            select = _leading_selection(tuple(array.shape), image.axis_names, n_lead,
+                                        selection, label)
+            chosen = _lead_counts(tuple(array.shape), image.axis_names, n_lead, select,
+                                  selection)
+        elif tuple(array.shape[:n_lead]) != tuple(levels[0].array.shape[:n_lead]):
+            raise ReadError(f"{label}: level {dataset.path!r} has {array.shape[:n_lead]} "
+                            f"entries on the axes {image.axis_names[:n_lead]}, level "
+                            f"{image.datasets[0].path!r} {levels[0].array.shape[:n_lead]}")
         levels.append(_level(index, dataset.path, array, dataset.scale, dataset.translation,
                              select, order, label,
                              None if local is None else local / dataset.path, complete))
@@ -861,6 +888,7 @@ def _open_zarr(path: Path | str, channel: int | None, timepoint: int | None,
         "source": label if local is None else str(local),
         "format": f"ome-zarr {image.version}",
     }
+    metadata.update(chosen)
     if len(units) == 1:
         metadata["units"] = units.pop()
     if image.downsampling:
@@ -917,8 +945,10 @@ def _our_attributes(value: Any, where: str) -> dict[str, Any]:
     return ours
 
 
-def _plain_array(path: Path | str, array: Any, label: str) -> MultiscaleVolume:
+def _plain_array(path: Path | str, array: Any, label: str, selection: Selection
+                 ) -> MultiscaleVolume:
     shape = tuple(array.shape)
+    chosen = selection.single(label)
     names = getattr(array.metadata, "dimension_names", None) or ()
     lead = len(shape) - 3
     if lead < 0 or any(n != 1 for n in shape[:lead]):
@@ -935,5 +965,5 @@ def _plain_array(path: Path | str, array: Any, label: str) -> MultiscaleVolume:
         levels=[level],
         metadata={"name": path.rsplit("/", 1)[-1] if remote else path.name,  # type: ignore
                   "source": label if remote else str(path.absolute()),  # type: ignore
-                  "format": f"zarr v{array.metadata.zarr_format} array"},
+                  "format": f"zarr v{array.metadata.zarr_format} array", **chosen},
     )

@@ -1,9 +1,10 @@
 """TIFF stacks (multi-page or volumetric), via tifffile.
 
-tifffile returns the stack as ``(z, y, x)``; it is transposed (a view) to ``(x, y, z)``. Spacing is
+tifffile returns the stack as ``(z, y, x)`` (once one time point and channel of a hyperstack are
+chosen, see :mod:`splinecast.io.selection`); it is transposed (a view) to ``(x, y, z)``. Spacing is
 taken from ImageJ metadata when present (``spacing`` for z, the XResolution/YResolution tags, in
-pixels per unit, for x and y); plain TIFF resolution tags are ignored because most writers fill
-them with a meaningless 72 dpi, so other files get spacing 1. Uncompressed contiguous files are
+pixels per unit, for x and y); plain TIFF resolution tags are ignored because most writers fill them
+with a meaningless 72 dpi, so other files get spacing 1. Uncompressed contiguous files are
 memory-mapped.
 
 A multi-file OME-TIFF names its other files in its OME-XML (``UUID FileName``); tifffile would
@@ -22,16 +23,23 @@ import numpy as np
 from ..errors import ReadError, limits
 from ..volume import Volume
 from ._common import check_dtype, check_in_memory, finish_volume, fmt_shape, require, third_party
+from .selection import Selection
 
 __all__ = ["read_tiff"]
 
 
-def read_tiff(path: Path, *, allow_external: bool | None = None) -> Volume:
-    """Read the first image series of a TIFF file as a 3D volume.
+def read_tiff(path: Path, *, allow_external: bool | None = None,
+              selection: Selection | None = None) -> Volume:
+    """Read one 3D volume of the first image series of a TIFF file.
 
-    The series' shape and type are checked against the limits and the memory available before
-    any pixel is decoded.
+    A time axis (``T``) and a channel axis (``C``, or the samples ``S`` of colour pages) give a
+    series of volumes: ``selection`` says which to read (default: the first, with a
+    :class:`~splinecast.io.selection.SeveralVolumesWarning` when there are several). The
+    series' shape and type are checked against the limits and the memory available before any
+    pixel is decoded; a compressed series is decoded in full, then sliced.
     """
+    selection = selection or Selection()
+    counts: list[tuple[int, int]] = []
     tifffile = require("tifffile", path)
     label = str(path)
     with third_party(label, "not a readable TIFF"):
@@ -47,11 +55,21 @@ def read_tiff(path: Path, *, allow_external: bool | None = None) -> Volume:
         page = tif.pages[0]
         xres = _resolution(page, "XResolution")
         yres = _resolution(page, "YResolution")
-        for channel_axis in ("S", "C"):
-            if channel_axis in axes and shape[axes.index(channel_axis)] > 1:
-                raise ReadError(f"{label}: colour/multi-channel TIFF (axes {axes}) is not "
-                                "supported")
-        keep = [a for a, n in enumerate(shape) if n > 1 or axes[a] in "YX"]
+        # Time (T) and channel (C, or S: the samples of an RGB page) axes longer than 1: one
+        # entry of each is read; every other axis but z, y, x must be 1 long.
+        picked: dict[int, int] = {}
+        for letters, choose in (("T", selection.time), ("CS", selection.chan)):
+            found = [a for a, name in enumerate(axes) if name in letters and shape[a] > 1]
+            if len(found) > 1:
+                raise ReadError(f"{label}: both channel (C) and sample (S) axes (axes {axes}); "
+                                "only one can be chosen from")
+            count = shape[found[0]] if found else 1
+            index = choose(label, count)
+            if found:
+                picked[found[0]] = index
+            counts.append((count, index))
+        keep = [a for a, n in enumerate(shape)
+                if a not in picked and (n > 1 or axes[a] in "YX")]
         if len(keep) < 3:
             raise ReadError(f"{label}: a single 2D image ({fmt_shape(shape)}), expected a stack")
         if len(keep) > 3 or axes[keep[-2]] != "Y" or axes[keep[-1]] != "X":
@@ -69,11 +87,12 @@ def read_tiff(path: Path, *, allow_external: bool | None = None) -> Volume:
         raise ReadError(f"{label}: decoded {fmt_shape(data.shape)} pixels, the tags give "
                         f"{fmt_shape(shape)}")
 
-    index = tuple(slice(None) if a in keep else 0 for a in range(len(shape)))
+    index = tuple(slice(None) if a in keep else picked.get(a, 0) for a in range(len(shape)))
     data = data[index].transpose(2, 1, 0)
 
     spacing = [1.0, 1.0, 1.0]
-    metadata: dict[str, Any] = {"format": "tiff", "axes": axes}
+    metadata: dict[str, Any] = {"format": "tiff", "axes": axes,
+                                **selection.metadata(*counts[0], *counts[1])}
     if imagej:
         z = imagej.get("spacing", 1.0) or 1.0
         z = limits.check_finite_number(z, f"{label}: ImageJ spacing", lo=0, lo_open=True,

@@ -31,7 +31,8 @@ import numpy as np
 
 from .._atomic import atomic_outputs
 from ..errors import ParameterError, ReadError, SplinecastError, limits
-from ..volume import Volume
+from ..volume import Volume, find_vtk_array
+from .selection import Selection
 
 __all__ = ["read_vti", "read_legacy_vtk", "write_vti"]
 
@@ -487,16 +488,33 @@ def _check_legacy_header(path: Path, label: str) -> None:
         raise ReadError(f"{label}: no DIMENSIONS line")
 
 
-def _volume(image: Any, path: Path, array: str | None, fmt: str) -> Volume:
-    meta = {"name": path.name, "source": str(path.absolute()), "format": fmt}
+def _volume(image: Any, path: Path, array: str | None, fmt: str,
+            selection: Selection | None) -> Volume:
+    """The volume of the chosen array and component; the components of a vector or colour
+    array are its channels (time points belong to a series of files, which VTK lists in a
+    ``.pvd``, not to one image)."""
+    selection = selection or Selection()
+    label = str(path)
+    meta: dict[str, Any] = {"name": path.name, "source": str(path.absolute()), "format": fmt}
     try:
-        return Volume.from_vtk(image, array=array, metadata=meta)
+        name, vtk_array, _ = find_vtk_array(image, array, path.name)
+    except SplinecastError as exc:
+        raise ReadError(str(exc)) from None
+    components = int(vtk_array.GetNumberOfComponents())
+    timepoint = selection.time(label, 1)
+    component = selection.chan(label, components, "component")
+    meta.update(selection.metadata(1, timepoint, components, component))
+    try:
+        return Volume.from_vtk(image, array=name, metadata=meta, component=component)
     except SplinecastError as exc:
         raise ReadError(str(exc)) from None
 
 
-def read_vti(path: Path, array: str | None = None) -> Volume:
-    """Read a VTK XML image data file (``.vti``) in any of VTK's encodings."""
+def read_vti(path: Path, array: str | None = None, *,
+             selection: Selection | None = None) -> Volume:
+    """Read a VTK XML image data file (``.vti``) in any of VTK's encodings; ``selection``
+    chooses the component of a multi-component array (default: the first, with a
+    :class:`~splinecast.io.selection.SeveralVolumesWarning`)."""
     path = Path(path)
     xml = _vtk_module("vtkIOXML", path, "reading", ReadError)
     _check_vti_header(path, str(path))
@@ -504,11 +522,13 @@ def read_vti(path: Path, array: str | None = None) -> Volume:
     reader.SetFileName(str(path))
     with _vtk_errors(reader, str(path), ReadError):
         reader.Update()
-    return _volume(reader.GetOutput(), path, array, "vti")
+    return _volume(reader.GetOutput(), path, array, "vti", selection)
 
 
-def read_legacy_vtk(path: Path, array: str | None = None) -> Volume:
-    """Read a legacy VTK file (``.vtk``) holding ``DATASET STRUCTURED_POINTS``."""
+def read_legacy_vtk(path: Path, array: str | None = None, *,
+                    selection: Selection | None = None) -> Volume:
+    """Read a legacy VTK file (``.vtk``) holding ``DATASET STRUCTURED_POINTS`` (``selection``
+    as for :func:`read_vti`)."""
     path = Path(path)
     legacy = _vtk_module("vtkIOLegacy", path, "reading", ReadError)
     limits.check_regular_file(path, str(path))
@@ -530,7 +550,7 @@ def read_legacy_vtk(path: Path, array: str | None = None) -> Volume:
     reader.ReadAllFieldsOn()
     with _vtk_errors(reader, str(path), ReadError):
         reader.Update()
-    return _volume(reader.GetOutput(), path, array, "vtk")
+    return _volume(reader.GetOutput(), path, array, "vtk", selection)
 
 
 def write_vti(volume: Volume, path: Path) -> None:
