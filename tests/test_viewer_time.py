@@ -201,3 +201,38 @@ def test_the_page_keeps_its_time_point_while_the_next_one_is_read(series):
             renderer.close()
 
     asyncio.run(check())
+
+
+def test_an_omezarr_time_axis_gets_the_slider_too(tmp_path):
+    """An OME-Zarr image with a ``t`` axis (a one-level pyramid): another time point is opened
+    as its own pyramid, and its screenshot equals that time point's complete render."""
+    zarr = pytest.importorskip("zarr")
+    from splinecast.multires.scene import MultiscaleScene
+
+    values = np.moveaxis(_blobs(3), -1, 0).transpose(0, 3, 2, 1)  # t, z, y, x
+    path = tmp_path / "series.zarr"
+    group = zarr.open_group(str(path), mode="w")
+    group.create_array("0", shape=values.shape, dtype="f4")[...] = values
+    group.attrs["ome"] = {"version": "0.5", "multiscales": [{
+        "axes": [{"name": "t", "type": "time"}] + [{"name": a, "type": "space"} for a in "zyx"],
+        "datasets": [{"path": "0", "coordinateTransformations": [
+            {"type": "scale", "scale": [1, 1, 1, 1]}]}]}]}
+    first = sc.read(path, timepoint=0)
+
+    async def check():
+        async with ViewerServer(first) as server, ViewerClient(server.url) as client:
+            assert client.hello["timepoints"] == 3
+            iso = client.hello["defaults"]["iso"]
+            state = {"size": list(SIZE), "camera": CAMERA, "timepoint": 2}
+            frame = await client.frame(await client.render(state))
+            assert frame.header["timepoint"] == 2
+            shot = await client.frame(await client.screenshot(state))
+            assert shot.header["timepoint"] == 2 and shot.header["bricks"]["complete"]
+            return iso, shot.image
+
+    iso, image = asyncio.run(check())
+    later = sc.read(path, timepoint=2)
+    with MultiscaleScene(later) as scene:
+        cam = sc.Camera.orbit(later, size=SIZE, **CAMERA)
+        reference = scene.render(cam, iso=iso, complete=True).to_uint8()
+    np.testing.assert_array_equal(image, reference)
