@@ -377,3 +377,9 @@ def test_keyboard_reset_returns_to_the_default_camera(page, vol):
     assert_page_shows(page, vol)
     assert not page.problems, page.problems
 
+
+
+def test_a_single_volume_has_no_time_slider(page):
+    assert page.evaluate("window.splinecastViewer.hello.timepoints") == 1
+    assert page.locator("#section-time").is_hidden()
+

@@ -95,7 +95,8 @@ def run(args: argparse.Namespace) -> int:
     _check_multires_options(args, vol)
     iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
     server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,
-                          port=args.port, budget=args.budget, lod=args.lod)
+                          port=args.port, budget=args.budget, lod=args.lod,
+                          allow_external=read_options(args)["allow_external"])
     seconds = time.perf_counter() - start
     if isinstance(vol, sc.Volume):
         read = f"read {vol.name}: {vol.shape} {vol.dtype} in {seconds:.2f} s"

@@ -13,10 +13,14 @@
 * :meth:`Shown.make_scene` - the scene of another model, when that is offered.
 * :meth:`Shown.render_options` - per pass, how long a multiscale frame waits for bricks.
 * :meth:`Shown.bricks` - the brick counts of a frame for the frame header and the status line.
+* ``timepoints`` and :meth:`Shown.read_timepoint` - a time series read from a file (a 4D NIfTI,
+  an OME-Zarr image with a ``t`` axis, a TIFF with T): how many time points it holds, and
+  another one read from the same file (same channel).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,6 +62,13 @@ class Shown:
         Keyword arguments of scenes the viewer makes itself.
     default_model : str
         The model shown first.
+    timepoints : int
+        Time points of the file the data was read from (1: not a time series, or data not
+        read from a file the viewer can read again).
+    timepoint : int
+        The time point ``volume`` and ``geometry`` are (the one shown first).
+    reader : callable, optional
+        ``reader(t)`` reads time point ``t`` of the file (a Volume, or a lazy multiscale volume).
     """
 
     kind: str
@@ -69,6 +80,9 @@ class Shown:
     initial: Any = None
     scene_options: dict[str, Any] = field(default_factory=dict)
     default_model: str = "trilinear"
+    timepoints: int = 1
+    timepoint: int = 0
+    reader: Callable[[int], Any] | None = None
 
     @property
     def multiresolution(self) -> bool:
@@ -80,13 +94,29 @@ class Shown:
         """Scenes kept at once: one brick cache at a time for a pyramid (its budget is RAM)."""
         return 1 if self.kind == "multiscale" else 2
 
-    def make_scene(self, model: str) -> Any:
-        """A new scene of ``model`` (one the page may choose)."""
+    @property
+    def data(self) -> Any:
+        """What the viewer's own scenes of the first time point are made of."""
+        return self.volume if self.kind == "volume" else self.geometry
+
+    def make_scene(self, model: str, data: Any = None) -> Any:
+        """A new scene of ``model`` (one the page may choose) of ``data`` (a time point read by
+        :meth:`read_timepoint`; default: the first one shown)."""
         if model not in self.models:
             raise ParameterError(f"model must be one of {', '.join(self.models)}, got {model!r}")
+        data = self.data if data is None else data
         if self.kind == "volume":
-            return Scene(self.volume, model=model)
-        return Scene(self.geometry, model=model, **self.scene_options)
+            return Scene(data, model=model)
+        return Scene(data, model=model, **self.scene_options)
+
+    def read_timepoint(self, timepoint: int) -> Any:
+        """Time point ``timepoint`` of the file, read again from it (same channel)."""
+        if timepoint == self.timepoint:
+            return self.data
+        if self.reader is None or not 0 <= timepoint < self.timepoints:
+            raise ParameterError(f"timepoint must be 0 for {self.geometry.name} (it holds one "
+                                 f"time point), got {timepoint!r}")
+        return self.reader(timepoint)
 
     def render_options(self, step: str) -> dict[str, Any]:
         """Extra keyword arguments of ``scene.render`` for a pass (``interactive``, ``coarse``,
@@ -159,7 +189,7 @@ def bricks_header(stats: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def shown(data: Any, model: str | None = None, budget: Any = None,
-          lod: float | None = None) -> Shown:
+          lod: float | None = None, allow_external: bool | None = None) -> Shown:
     """Classify what ``sc.view`` / ``splinecast view`` was given.
 
     Parameters
@@ -173,6 +203,9 @@ def shown(data: Any, model: str | None = None, budget: Any = None,
     lod : float, optional
         Level of detail of a pyramid (pixels per voxel, default :data:`DEFAULT_LOD`) or a wavelet
         store (ε in radians, default one pixel's angle, as ``splinecast render``).
+    allow_external : bool, optional
+        Passed to :func:`splinecast.read` when another time point of the file is read (as the
+        first one was read).
 
     Raises
     ------
@@ -180,6 +213,33 @@ def shown(data: Any, model: str | None = None, budget: Any = None,
         Anything else, a model the data cannot be rendered with, or ``budget`` / ``lod`` given
         with data they do not apply to.
     """
+    out = _classify(data, model, budget, lod)
+    if out.kind != "wavelet":
+        _time_series(out, allow_external)
+    return out
+
+
+def _time_series(out: Shown, allow_external: bool | None) -> None:
+    """Fill in ``timepoints``, ``timepoint`` and ``reader`` from the metadata of a volume read
+    from a file that holds several time points (``metadata["source"]`` is read again)."""
+    meta = getattr(out.geometry, "metadata", None) or {}
+    count, source = meta.get("timepoints", 1), meta.get("source")
+    if not isinstance(count, int) or count <= 1 or not isinstance(source, str):
+        return
+    channel = int(meta.get("channel", 0))
+
+    def reader(timepoint: int) -> Any:
+        from ..io import read  # imported here: the viewer of an in-memory volume needs no reader
+
+        return read(source, timepoint=timepoint, channel=channel,
+                    allow_external=allow_external)
+
+    out.timepoints = int(count)
+    out.timepoint = int(meta.get("timepoint", 0))
+    out.reader = reader
+
+
+def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> Shown:
     if model is not None and model not in MODELS:
         raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
     if isinstance(data, Scene | Volume):

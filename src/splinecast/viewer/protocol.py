@@ -44,8 +44,10 @@ __all__ = [
 PROTOCOL_VERSION = 1
 #: Minor version (``hello.v_minor``): additions a version-1 client may ignore. 1: the frame
 #: header's ``bricks`` and ``hello.multires`` (multiresolution data), ``hello.v_minor``. 2: the
-#: state's ``dvr.sampling``, and the default ``dvr`` state is the library's default DVR.
-PROTOCOL_MINOR = 3
+#: state's ``dvr.sampling``, and the default ``dvr`` state is the library's default DVR. 3: the
+#: automatic window, ``preparing`` frames. 4: time series (``hello.timepoints``, the state's
+#: ``timepoint``, the frame header's ``timepoint``).
+PROTOCOL_MINOR = 4
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.
@@ -132,13 +134,13 @@ def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS,
 
 def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, Any], *,
                   geometry: Any = None, models: Any = MODELS, modes: Any = MODES,
-                  multires: dict[str, Any] | None = None) -> dict:
+                  multires: dict[str, Any] | None = None, timepoints: int = 1) -> dict:
     """The first message of every connection: what the page needs to build its controls.
 
     ``volume`` gives the histogram (a multiresolution volume's coarsest level: cheap, and never
     the finest level); ``geometry`` (default ``volume``) the description of the data shown;
     ``models`` and ``modes`` the choices offered; ``multires`` describes a pyramid or wavelet
-    store.
+    store; ``timepoints`` is the number of time points of a time series (1 otherwise).
     """
     geometry = volume if geometry is None else geometry
     lo, hi = geometry.bounds
@@ -157,6 +159,8 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
         },
         "histogram": histogram(volume, value_range=geometry.value_range),
         "multires": multires,
+        # Time points the state's ``timepoint`` may choose (the page shows a slider when > 1).
+        "timepoints": int(timepoints),
         "models": list(models),
         "modes": list(modes),
         # The menu's colormaps, and those of the default state when they are not in it.

@@ -10,10 +10,16 @@ full image's, so a frame assembled from stripes equals ``Scene.render`` of the w
 exist so a slow frame can be given up between stripes when the user has already moved on.
 Multiresolution scenes are rendered whole: their cut (and a wavelet store's ε) depends on the
 camera's whole image, which a stripe's camera would change.
+
+A time series (``Shown.timepoints`` > 1) keys scenes by (model, time point). Another time point
+is read and prepared aside (:meth:`FrameRenderer.load_timepoint`, on any thread) while the
+current one goes on rendering; the first render of it makes it current and releases every scene
+of the others. So at most two time points are held: the current one and the one being loaded.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -86,6 +92,8 @@ class FrameRenderer:
     stripe_rows : int, optional
         Fixed stripe height; by default chosen from the cost of recent frames so a stripe takes
         about :data:`STRIPE_MS`.
+
+    A model is chosen per time point: ``max_scenes`` scenes of the current time point are kept.
     """
 
     def __init__(self, volume: Volume | Shown, scene: Scene | None = None, max_scenes: int = 2,
@@ -94,38 +102,113 @@ class FrameRenderer:
         self.volume = self.shown.volume
         self._stripe_rows_fixed = stripe_rows
         self._pinned = self.shown.pinned
-        self._scenes: OrderedDict[str, Any] = OrderedDict()
+        # Scenes by (model, time point), of the current time point only.
+        self._scenes: OrderedDict[tuple[str, int], Any] = OrderedDict()
+        first = self.shown.timepoint
         if self.shown.initial is not None:
-            self._scenes[self.shown.initial.model.name] = self.shown.initial
+            self._scenes[(self.shown.initial.model.name, first)] = self.shown.initial
+        # The current time point and its data; a time point loaded aside, waiting to be used:
+        # (time point, data, {model: scene}) (the lock guards it and the current one).
+        self._current: tuple[int, Any] = (first, self.shown.data)
+        self._incoming: tuple[int, Any, dict[str, Any]] | None = None
+        self._lock = threading.Lock()
         self._max_scenes = max(1, min(int(max_scenes), self.shown.max_scenes))
         # Milliseconds per pixel of recent renders, by (model, mode, several isovalues).
         self._cost: dict[tuple[str, str, bool], float] = {}
 
     # ------------------------------------------------------------------------------ scenes
-    def has_scene(self, model: str) -> bool:
-        """Whether the model's scene is prepared (otherwise the next render prepares it)."""
-        return (self._pinned is not None and self._pinned.model.name == model) or (
-            model in self._scenes)
+    def _pinned_for(self, model: str, timepoint: int) -> bool:
+        return (self._pinned is not None and self._pinned.model.name == model
+                and timepoint == self.shown.timepoint)
 
-    def scene(self, model: str) -> Any:
-        """The prepared scene of ``model``, building it if needed (least recent one dropped;
-        a pyramid's scene is closed first, so one brick cache at a time holds its budget)."""
-        if self._pinned is not None and self._pinned.model.name == model:
+    def has_scene(self, model: str, timepoint: int | None = None) -> bool:
+        """Whether the model's scene of ``timepoint`` (default: the first one shown) is
+        prepared (otherwise the next render prepares it)."""
+        timepoint = self.shown.timepoint if timepoint is None else timepoint
+        return self._pinned_for(model, timepoint) or (model, timepoint) in self._scenes
+
+    def has_timepoint(self, timepoint: int) -> bool:
+        """Whether ``timepoint`` is in memory: the current one, or one loaded aside (a render of
+        another one reads it from the file first: see :meth:`load_timepoint`)."""
+        with self._lock:
+            incoming = self._incoming
+            return self._current[0] == timepoint or (
+                incoming is not None and incoming[0] == timepoint)
+
+    def load_timepoint(self, timepoint: int, model: str) -> None:
+        """Read ``timepoint`` and prepare its scene of ``model`` aside, touching nothing the
+        render thread uses (safe on any thread); the next render of it makes it current.
+
+        A time point loaded aside before and not used since is released first.
+        """
+        with self._lock:
+            incoming, self._incoming = self._incoming, None
+            if incoming is not None and incoming[0] == timepoint and model in incoming[2]:
+                self._incoming = incoming
+                return
+        if incoming is not None and incoming[0] != timepoint:
+            self._close_all(incoming[2].values())
+            incoming = None
+        if self.has_timepoint(timepoint):
+            return
+        data = incoming[1] if incoming is not None else self.shown.read_timepoint(timepoint)
+        scenes = dict(incoming[2]) if incoming is not None else {}
+        scenes[model] = self.shown.make_scene(model, data)
+        with self._lock:
+            replaced, self._incoming = self._incoming, (timepoint, data, scenes)
+        if replaced is not None:
+            self._close_all(replaced[2].values())
+
+    def _close_all(self, scenes: Any) -> None:
+        for scene in scenes:
+            self.shown.close_scene(scene)
+
+    def _timepoint_data(self, timepoint: int) -> Any:
+        """The data of ``timepoint``, made current (render thread): loaded aside, or read now.
+        Every scene of another time point is released."""
+        with self._lock:
+            if self._current[0] == timepoint:
+                return self._current[1]
+            incoming = self._incoming
+            if incoming is not None and incoming[0] == timepoint:
+                self._incoming = None
+        if incoming is None or incoming[0] != timepoint:
+            if timepoint == self.shown.timepoint:
+                incoming = (timepoint, self.shown.data, {})
+            else:
+                incoming = (timepoint, self.shown.read_timepoint(timepoint), {})
+        self._drop_scenes(0)
+        for model, scene in incoming[2].items():
+            self._scenes[(model, timepoint)] = scene
+        with self._lock:
+            self._current = (timepoint, incoming[1])
+        return incoming[1]
+
+    def scene(self, model: str, timepoint: int | None = None) -> Any:
+        """The prepared scene of ``model`` at ``timepoint`` (default: the first one shown),
+        building it if needed (least recent one dropped; a pyramid's scene is closed first, so
+        one brick cache at a time holds its budget)."""
+        timepoint = self.shown.timepoint if timepoint is None else timepoint
+        if self._pinned_for(model, timepoint):
             return self._pinned
-        scene = self._scenes.get(model)
+        key = (model, timepoint)
+        scene = self._scenes.get(key)
         if scene is None:
             if model not in self.shown.models:  # before anything is dropped
                 raise ParameterError(f"model must be one of {', '.join(self.shown.models)} for "
                                      f"{self.shown.geometry.name}, got {model!r}")
+            data = self._timepoint_data(timepoint)
+            scene = self._scenes.get(key)
+        if scene is None:
             budget = max(self._max_scenes - (self._pinned is not None), 1)
             if self.shown.multiresolution:  # one brick cache at a time: close before opening
                 self._drop_scenes(budget - 1)
-                scene = self.shown.make_scene(model)
+                scene = self.shown.make_scene(model, data)
             else:  # made first: a model whose kernels are not ready drops nothing
-                scene = self.shown.make_scene(model)
+                scene = self.shown.make_scene(model, data)
                 self._drop_scenes(budget - 1)
-            self._scenes[model] = scene
-        self._scenes.move_to_end(model)
+            self._scenes[key] = scene
+        self._scenes.move_to_end(key)
         return scene
 
     def _drop_scenes(self, keep: int) -> None:
@@ -139,8 +222,8 @@ class FrameRenderer:
         out = {}
         scenes = list(self._scenes.items())
         if self._pinned is not None:
-            scenes.append((self._pinned.model.name, self._pinned))
-        for model, scene in scenes:
+            scenes.append(((self._pinned.model.name,), self._pinned))
+        for (model, *_), scene in scenes:
             stream = getattr(scene, "stream", None)
             if stream is not None:
                 out[model] = int(stream.cache.stats()["loaded"])
@@ -150,6 +233,10 @@ class FrameRenderer:
         """Release the scenes the viewer made (a pyramid's loader thread stops)."""
         while self._scenes:
             self.shown.close_scene(self._scenes.popitem(last=False)[1])
+        with self._lock:
+            incoming, self._incoming = self._incoming, None
+        if incoming is not None:
+            self._close_all(incoming[2].values())
 
     # ------------------------------------------------------------------------- cost model
     @staticmethod
@@ -230,7 +317,7 @@ class FrameRenderer:
     def _render(self, request: RenderRequest, scale: float,
                 abort: Callable[[], bool] | None, step: str) -> RenderedImage | None:
         start = time.perf_counter()
-        scene = self.scene(request.model)
+        scene = self.scene(request.model, request.timepoint)
         camera = request.camera
         if scale != 1.0:
             width = max(1, round(camera.width * scale))

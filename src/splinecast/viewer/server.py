@@ -94,6 +94,14 @@ class ViewerServer:
     lod : float, optional
         Level of detail of a pyramid (pixels per voxel, default 1) or a wavelet store (ε in
         radians, default one pixel's angle), as ``splinecast render --lod``.
+    allow_external : bool, optional
+        How other time points of a time series are read (``splinecast.read(allow_external=)``).
+
+    Data read from a file holding several time points (``metadata["timepoints"]`` and
+    ``["source"]``, as :func:`splinecast.read` records them) gets a time slider: the page's
+    state chooses a time point, which is read from the file on another thread while the page
+    goes on showing the current one. The automatic isovalue, window and transfer function are
+    those of the time point shown first, for every time point.
     """
 
     #: How often (s) the server looks for bricks a pyramid's loader brought in.
@@ -102,15 +110,18 @@ class ViewerServer:
     def __init__(self, data: Any, model: str | None = None, mode: str = "iso",
                  iso: Any = None, host: str = "127.0.0.1", port: int = 0,
                  token: str | None = None, max_pixels: int = MAX_PIXELS,
-                 budget: Any = None, lod: float | None = None) -> None:
+                 budget: Any = None, lod: float | None = None,
+                 allow_external: bool | None = None) -> None:
         if not isinstance(port, int) or not 0 <= port <= 65535:
             raise ParameterError(f"port must be an integer in 0..65535, got {port!r}")
-        self.shown = shown(data, model=model, budget=budget, lod=lod)
+        self.shown = shown(data, model=model, budget=budget, lod=lod,
+                           allow_external=allow_external)
         try:
             volume = self.shown.volume
             self.volume = volume
             self.defaults = default_state(volume, model=self.shown.default_model, mode=mode,
-                                          iso=iso, geometry=self.shown.geometry)
+                                          iso=iso, geometry=self.shown.geometry,
+                                          timepoint=self.shown.timepoint)
             self.renderer = FrameRenderer(self.shown)
         except BaseException:
             self.shown.close_scene(self.shown.initial)  # stop a pyramid's loader thread
@@ -123,7 +134,7 @@ class ViewerServer:
             "max_pixels": self.max_pixels, "max_message_bytes": MAX_MESSAGE_BYTES,
             "settle_ms": round(Session.settle_s * 1e3)}, geometry=self.shown.geometry,
             models=self.shown.models, modes=self.shown.modes,
-            multires=self.shown.description())
+            multires=self.shown.description(), timepoints=self.shown.timepoints)
         self._watcher: asyncio.Task | None = None
         self._allowed: frozenset[str] = frozenset()
         self._sessions: set[Session] = set()

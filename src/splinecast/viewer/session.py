@@ -23,6 +23,10 @@ Scheduling rules (the interaction model of the issue):
   field saying what is being prepared and for how long), and ``status`` messages say so every
   second. When they are ready, the newest request is rendered; a newer request for kernels
   that are ready ends the wait, one for other new kernels is prepared next (the newest wins).
+* **Another time point** of a time series is read and prepared the same way: on a thread of its
+  own (:meth:`~.renderer.FrameRenderer.load_timepoint`), while the page goes on getting
+  ``preparing`` frames of the time point it shows, seen from the request's camera; the
+  ``preparing`` field names the ``timepoint`` being loaded.
 * **More detail later:** :meth:`Session.refresh` re-renders the last settled state at full
   resolution. For a pyramid the server calls :meth:`Session.bricks_arrived` a few times a second
   with the loader's count of bricks read; the session re-renders (pass ``full``, drawing what is
@@ -126,6 +130,7 @@ class Session:
         self._preparing: asyncio.Task | None = None
         self._preparing_since = 0.0
         self._compiling = False  # the kernels being prepared are compiling (not loading)
+        self._loading: int | None = None  # the time point being read, if one is
         # (model, mode) prepared once: if a view of it still needs a kernel (a combination the
         # preparation did not cover), it compiles on the render thread as before.
         self._prepared: set[tuple[str, str]] = set()
@@ -162,7 +167,8 @@ class Session:
             shown = self.renderer.shown
             request = parse_state(message["state"], self.volume, self._defaults,
                                   self._max_pixels, geometry=shown.geometry,
-                                  models=shown.models, modes=shown.modes)
+                                  models=shown.models, modes=shown.modes,
+                                  timepoints=shown.timepoints)
         except SplinecastError as exc:
             await self._error(ident, str(exc))
             return
@@ -284,10 +290,13 @@ class Session:
     async def _serve(self, job: _Job) -> None:
         generation = self._generation
         stale = None if job.kind == "screenshot" else (lambda: self._generation != generation)
-        if not self.renderer.has_scene(job.request.model):
-            await self._send_text({"type": "status", "id": job.ident,
-                                   "message": f"preparing model {job.request.model}"})
         request = job.request
+        if job.kind != "screenshot" and not self.renderer.has_timepoint(request.timepoint):
+            await self._wait_for_kernels(job, stale)  # read aside; the page keeps its picture
+            return
+        if not self.renderer.has_scene(request.model, request.timepoint):
+            await self._send_text({"type": "status", "id": job.ident,
+                                   "message": f"preparing model {request.model}"})
         # Screenshots, and views of a model and mode prepared already, compile on the render
         # thread if they must; other views render with ready kernels only.
         may_compile = job.kind == "screenshot" or (request.model, request.mode) in self._prepared
@@ -311,7 +320,8 @@ class Session:
             if result is None:
                 return
             image, data, encode_ms = result
-            await self._send_bytes(pack_frame(self._header(job, step, image, encode_ms), data))
+            await self._send_bytes(pack_frame(self._header(job, step, image, encode_ms,
+                                                           request.timepoint), data))
             if job.kind != "screenshot":
                 self._ready = (request, name)
                 if self._wanted is not None and self._wanted.ident <= job.ident:
@@ -335,7 +345,8 @@ class Session:
         return image, data, (time.perf_counter() - start) * 1e3
 
     @staticmethod
-    def _header(job: _Job, step: _Pass, image: RenderedImage, encode_ms: float) -> dict:
+    def _header(job: _Job, step: _Pass, image: RenderedImage, encode_ms: float,
+                timepoint: int) -> dict:
         height, width = image.rgba.shape[:2]
         header = {
             "type": "frame",
@@ -349,6 +360,7 @@ class Session:
             "render_ms": round(image.render_ms, 2),
             "encode_ms": round(encode_ms, 2),
             "stats": json_safe_stats(image.stats),
+            "timepoint": timepoint,  # the time point shown (a preparing frame's: the old one)
         }
         bricks = bricks_header(image.stats)
         if bricks is not None:
@@ -357,11 +369,13 @@ class Session:
 
     # ------------------------------------------------------------------ new kernels
     async def _wait_for_kernels(self, job: _Job, stale: Callable[[], bool] | None) -> None:
-        """``job`` needs kernels not compiled yet: prepare them on another thread (the newest
-        such job wins) and meanwhile show the last picture that renders, from ``job``'s
-        camera."""
-        if self._wanted is None or self._wanted.request.model != job.request.model or \
-                self._wanted.request.mode != job.request.mode:
+        """``job`` needs kernels not compiled yet, or a time point not in memory: prepare them
+        on another thread (the newest such job wins) and meanwhile show the last picture that
+        renders, from ``job``'s camera."""
+        wanted = self._wanted
+        if wanted is None or (wanted.request.model, wanted.request.mode,
+                              wanted.request.timepoint) != (
+                job.request.model, job.request.mode, job.request.timepoint):
             self._preparing_since = time.perf_counter()
         self._wanted = job
         if self._preparing is None or self._preparing.done():
@@ -371,6 +385,8 @@ class Session:
         if self._ready is None or (stale is not None and stale()):
             return
         shown, name = self._ready
+        if not self.renderer.has_timepoint(shown.timepoint):
+            return  # released meanwhile (another page moved on): the page keeps its picture
         fallback = replace(shown, camera=job.request.camera)
         divisor = self._divisor(fallback, self.interactive_ms, 2, "interactive")
         step = _Pass("preparing", 1.0 / divisor, "jpeg", False)
@@ -384,7 +400,7 @@ class Session:
         if result is None:
             return
         image, data, encode_ms = result
-        header = self._header(job, step, image, encode_ms)
+        header = self._header(job, step, image, encode_ms, fallback.timepoint)
         header["preparing"] = self._preparing_field()
         await self._send_bytes(pack_frame(header, data))
         self._shown_final = False
@@ -397,16 +413,25 @@ class Session:
             while self._wanted is not None and not self._closed:
                 job = self._wanted
                 key = (job.request.model, job.request.mode)
+                timepoint = job.request.timepoint
                 try:
+                    if not self.renderer.has_timepoint(timepoint):
+                        self._loading = timepoint
+                        await self._send_preparing_status()
+                        await self._prepare_run(partial(self.renderer.load_timepoint, timepoint,
+                                                        job.request.model))
+                        self._loading = None
                     await self._prepare_run(partial(self.renderer.warm, job.request,
                                                     self._compiled_now))
                 except SplinecastError as exc:
+                    self._loading = None
                     if self._wanted is job:
                         self._wanted = None
                     await self._error(job.ident, str(exc))
                     continue
                 except Exception as exc:  # a bug must not end the server: log it, tell the page
                     log.exception("preparing kernels failed")
+                    self._loading = None
                     if self._wanted is job:
                         self._wanted = None
                     await self._error(job.ident, f"internal error: {type(exc).__name__}: {exc}")
@@ -437,7 +462,7 @@ class Session:
         if job is None:
             return None
         return {"model": job.request.model, "mode": job.request.mode,
-                "compiling": self._compiling,
+                "compiling": self._compiling, "timepoint": self._loading,
                 "seconds": round(time.perf_counter() - self._preparing_since, 1)}
 
     async def _send_preparing_status(self) -> None:
@@ -447,6 +472,8 @@ class Session:
                                    "message": "ready"})
             return
         what = "compiling kernels (first use)" if field["compiling"] else "loading kernels"
+        if field["timepoint"] is not None:
+            what = f"reading time point {field['timepoint']}"
         await self._send_text({
             "type": "status", "id": self._wanted.ident if self._wanted else None,
             "preparing": field,

@@ -25,6 +25,7 @@ The fields (see ``docs/viewer-protocol.md`` for the full table)::
     dvr {step, shade, preintegration, termination, sampling}
     lighting {ambient, diffuse, specular, shininess}
     clip [[nx, ny, nz, d], ...], crop [x0, x1, y0, y1, z0, z1] | null    world coordinates
+    timepoint                      which time point of a time series (0 .. hello.timepoints - 1)
 """
 
 from __future__ import annotations
@@ -69,7 +70,8 @@ _ZOOM_RANGE = (1e-3, 1e3)
 _PAN_LIMIT = 100.0
 
 _TOP_FIELDS = ("model", "mode", "camera", "size", "iso", "opacity", "window", "colormap",
-               "tolerance", "tf", "dvr", "lighting", "clip", "crop", "normals")
+               "tolerance", "tf", "dvr", "lighting", "clip", "crop", "normals",
+               "timepoint")
 _CAMERA_FIELDS = ("azimuth", "elevation", "zoom", "pan", "fov", "ortho")
 _LIGHTING_FIELDS = ("ambient", "diffuse", "specular", "shininess")
 _DVR_FIELDS = ("step", "shade", "preintegration", "termination", "sampling")
@@ -89,6 +91,8 @@ class RenderRequest:
         Keyword arguments of :meth:`splinecast.Scene.render` besides the camera.
     state : dict
         The complete state (defaults filled in).
+    timepoint : int
+        The time point of a time series to render (0 for data that is not one).
     """
 
     model: str
@@ -96,6 +100,7 @@ class RenderRequest:
     camera: Camera
     options: dict[str, Any]
     state: dict[str, Any]
+    timepoint: int = 0
 
 
 def default_iso(volume: Volume) -> float:
@@ -110,7 +115,7 @@ def _default_tf(volume: Volume) -> dict[str, Any]:
 
 
 def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
-                  iso: Any = None, *, geometry: Any = None) -> dict[str, Any]:
+                  iso: Any = None, *, geometry: Any = None, timepoint: int = 0) -> dict[str, Any]:
     """The complete state a viewer starts from (and that omitted fields take).
 
     Parameters
@@ -124,6 +129,9 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
     geometry : object, optional
         The full-resolution data when ``volume`` is a multiresolution volume's coarsest level:
         isovalues are checked against its ``value_range``.
+    timepoint : int
+        The time point of a time series shown first (``volume`` is that time point: the
+        automatic choices come from it and stay for the others).
 
     Raises
     ------
@@ -165,6 +173,7 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "crop": None,
         # Isosurfaces shaded with a smooth field's normals (Scene.render's default).
         "normals": "smooth",
+        "timepoint": int(timepoint),
     }
 
 
@@ -379,9 +388,19 @@ def _mode_options(state: dict[str, Any], volume: Any, shown: Volume) -> dict[str
     return options
 
 
+def _timepoint(value: Any, timepoints: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParameterError(f"timepoint must be an integer, got {value!r}")
+    if not 0 <= value < timepoints:
+        valid = "0" if timepoints == 1 else f"0 to {timepoints - 1}"
+        raise ParameterError(f"timepoint {value} is out of range (the data holds {timepoints} "
+                             f"time point{'s' if timepoints > 1 else ''}: {valid})")
+    return int(value)
+
+
 def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
                 max_pixels: int = MAX_PIXELS, *, geometry: Any = None,
-                models: Any = None, modes: Any = None) -> RenderRequest:
+                models: Any = None, modes: Any = None, timepoints: int = 1) -> RenderRequest:
     """Validate a client's state into a :class:`RenderRequest`.
 
     Parameters
@@ -400,6 +419,8 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
         multiresolution volume's coarsest level.
     models, modes : sequence of str, optional
         The choices offered (default: every model and mode).
+    timepoints : int
+        Time points of the data on display (``timepoint`` must be below it).
 
     Raises
     ------
@@ -413,5 +434,6 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
     size = _size(full["size"], max_pixels)
     geometry = volume if geometry is None else geometry
     camera = orbit_camera(geometry, camera_fields, size)
+    timepoint = _timepoint(full.get("timepoint", 0), timepoints)
     options = _mode_options(full, geometry, volume)
-    return RenderRequest(model, mode, camera, options, full)
+    return RenderRequest(model, mode, camera, options, full, timepoint)

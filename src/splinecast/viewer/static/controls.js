@@ -38,6 +38,7 @@
       this.surfaces = [];
       this.selected = 0;
       this._buildSelectors();
+      this._buildTime();
       this._buildIso();
       this._buildWindow();
       this._buildDvr();
@@ -68,6 +69,35 @@
       this.state.mode = mode;
       this.sync();
       this.onChange(false);
+    }
+
+    // ------------------------------------------------------------------ time points
+    // A time series (hello.timepoints > 1, protocol 1.4) gets a slider; the time point is sent
+    // when the slider is let go (each one is read from the file: no request per step of a drag).
+    _buildTime() {
+      const count = this.hello.timepoints || 1;
+      const slider = $("time-slider");
+      $("section-time").hidden = count <= 1;
+      slider.max = String(Math.max(0, count - 1));
+      slider.addEventListener("input", () => this._drawTime(Number(slider.value)));
+      slider.addEventListener("change", () => this.setTime(Number(slider.value)));
+    }
+
+    setTime(timepoint) {
+      const count = this.hello.timepoints || 1;
+      const t = Math.min(count - 1, Math.max(0, Math.round(timepoint)));
+      if (t === (this.state.timepoint || 0)) { this._drawTime(t); return; }
+      this.state.timepoint = t;
+      $("time-slider").value = String(t);
+      this._drawTime(t);
+      this.onChange(false);
+    }
+
+    stepTime(direction) { this.setTime((this.state.timepoint || 0) + direction); }
+
+    _drawTime(t) {
+      const count = this.hello.timepoints || 1;
+      $("time-label").textContent = `${t} of 0–${count - 1}`;
     }
 
     // ------------------------------------------------------------------ isosurfaces
@@ -343,6 +373,8 @@
       const s = this.state;
       $("model").value = s.model;
       $("mode").value = s.mode;
+      $("time-slider").value = String(s.timepoint || 0);
+      this._drawTime(s.timepoint || 0);
       for (const section of document.querySelectorAll("section[data-modes]")) {
         section.hidden = !section.dataset.modes.split(" ").includes(s.mode);
       }

@@ -184,6 +184,8 @@
     if (h.scale < 1) parts[0] += ` (1/${Math.round(1 / h.scale)})`;
     parts.push(h.format.toUpperCase());
     parts.push(`${h.stats.model || ""} ${h.stats.mode || ""}`.trim());
+    // The time point shown (protocol 1.4): while another one is read, still the previous one.
+    if ((hello.timepoints || 1) > 1 && h.timepoint !== undefined) parts.push(`time point ${h.timepoint}`);
     parts.push(`frame ${Math.round(h.render_ms)} ms`);
     const sent = sentAt.get(h.id);
     if (sent !== undefined) parts.push(`latency ${Math.round(now - sent)} ms`);
@@ -267,6 +269,7 @@
     else if (k === "o") { state.camera.ortho = !state.camera.ortho; controls.sync(); request(false); }
     else if (k === "c") controls.toggleClip();
     else if (k === "[" || k === "]") controls.stepIso(k === "]" ? 1 : -1);
+    else if ((k === "," || k === ".") && (hello.timepoints || 1) > 1) controls.stepTime(k === "." ? 1 : -1);
     else if (k >= "1" && k <= "9" && Number(k) <= hello.modes.length) controls.setMode(hello.modes[Number(k) - 1]);
     else if (k === "+" || k === "=") { orbit.zoomBy(1.15); request(false); }
     else if (k === "-" || k === "_") { orbit.zoomBy(1 / 1.15); request(false); }
