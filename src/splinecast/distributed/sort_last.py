@@ -61,7 +61,6 @@ workers report). Pass them explicitly to reproduce a render of another scene.
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import os
 import threading
 import time
@@ -84,10 +83,10 @@ from ..multires.scene import BORDER_RULES
 from ..render.dvr import Dvr
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
-from ..scene import Scene, check_iso, finish_frame, prepare_render
+from ..scene import check_iso, finish_frame, prepare_render
 from ..volume import Volume
 from . import worker
-from .scene import _render_options
+from .render_call import RENDER_SIGNATURE, render_options
 from .source import SceneSource, VolumeInfo
 
 if TYPE_CHECKING:
@@ -98,7 +97,6 @@ __all__ = ["SortLastScene", "Share", "KdNode", "split_bricks", "Partial"]
 #: Bricks read per store read while a worker loads its share (a box of up to 4^3 bricks: one
 #: decode of each chunk of the box, ghost chunks shared with its neighbours).
 _READ_GROUP = 4
-_RENDER_SIGNATURE = inspect.signature(Scene.render)
 #: Render requests (validated options and mode tables) a worker keeps.
 _MAX_REQUESTS = 4
 
@@ -311,7 +309,7 @@ def _request(token: str, header: VolumeInfo, camera: Camera, options: dict[str, 
 
 def prepare_request(header: VolumeInfo, camera: Camera, options: dict[str, Any]) -> Any:
     """:func:`splinecast.scene.prepare_render` of ``Scene.render`` options for a level."""
-    bound = _RENDER_SIGNATURE.bind(None, camera, **options)
+    bound = RENDER_SIGNATURE.bind(None, camera, **options)
     bound.apply_defaults()
     args = dict(bound.arguments)
     del args["self"], args["camera"]
@@ -677,7 +675,7 @@ class SortLastScene:
         from dask.base import tokenize
 
         start = time.perf_counter()
-        options = _render_options(camera, args, kwargs)
+        options = render_options(camera, args, kwargs)
         # A user error fails here, on the client.
         request = prepare_request(self.volume, camera, options)
         token = tokenize(camera.pixel_basis().tolist(), camera.width, camera.height, options)
