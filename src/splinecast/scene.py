@@ -150,7 +150,8 @@ class Scene:
         self.grid = make_grid(self.model)
         self.hierarchy = self.grid.hierarchy
         #: Per-isovalue work lists of models that classify their cells (s31, qss).
-        self.active_cells = ActiveCells(self.model) if hasattr(self.model, "tet_masks") else None
+        classifier = self.model.active_cell_classifier()
+        self.active_cells = ActiveCells(classifier) if classifier is not None else None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self.classify_ms = math.nan
         #: Counts and timings of the model's own isovalue change (models with work lists).

@@ -79,7 +79,6 @@ from ..models import MODELS
 from ..multires.cache import read_bricks
 from ..multires.draw import CutRenderer, Piece, screen_rect
 from ..multires.octree import DEFAULT_BRICK, BrickOctree
-from ..multires.scene import BORDER_RULES
 from ..render.dvr import Dvr
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
@@ -243,7 +242,7 @@ class _Loaded:
         view = level_view(volume, share.level)
         self.octree = BrickOctree(view, brick=share.brick)
         index = np.indices(np.subtract(share.hi, share.lo)).reshape(3, -1).T + share.lo
-        border = BORDER_RULES[source.model]
+        border = MODELS[source.model].border_rule
         bricks = []
         group = index // _READ_GROUP
         for g in np.unique(group, axis=0):
@@ -588,10 +587,10 @@ class SortLastScene:
         if not is_zarr(Path(location)):
             raise ParameterError(f"source must be an OME-Zarr store for strategy='sort-last' "
                                  f"(bricks are read per worker), got {location}")
-        if model.startswith("bspline") and options.get("prefilter"):
-            raise ParameterError(f"prefilter=True is not available for model {model} with "
-                                 "strategy='sort-last': the interpolating B-spline coefficients "
-                                 "depend on the whole volume, a brick cannot reproduce them")
+        refusal = MODELS[model].brick_refusal(options) if model in MODELS else None
+        if refusal is not None:
+            raise ParameterError(f"{refusal.option} is not available for model {model} with "
+                                 f"strategy='sort-last': {refusal.reason}")
         volume = read(location)
         if not isinstance(volume, MultiscaleVolume):
             raise ParameterError(f"source must be an OME-Zarr image for strategy='sort-last', "

@@ -62,10 +62,7 @@ import numpy as np
 from ..render.iso import Iso
 from .probe import grid_values_at, sample_grid
 
-__all__ = ["Seams", "Change", "IsoClosure", "NESTED_DEGREE", "refine"]
-
-#: Models whose coarse reconstruction is exactly a fine one, by their spline degree.
-NESTED_DEGREE = {"trilinear": 1, "bspline1": 1, "bspline3": 3}
+__all__ = ["Seams", "Change", "IsoClosure", "refine"]
 
 
 @dataclass(frozen=True)
@@ -122,7 +119,7 @@ class Seams:
 
     def __init__(self, model: Any) -> None:
         self.model = model
-        self.degree = NESTED_DEGREE.get(model.name)
+        self.degree = model.nested_degree
         #: Elements closer than this (level voxels, max norm) to a coarser piece are replaced.
         self.radius = (int(model.support) + 1) / 2.0
         self._last: tuple[Any, dict] | None = None
