@@ -48,6 +48,7 @@ from ..render.dvr import DVRSettings
 from ..render.effects import SurfaceEffects
 from ..render.frame import Frame
 from ..render.iso import Iso
+from ..render.modes import RenderMode
 from ..render.multi_iso import MultiIso
 from ..render.shading import Shading
 from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
@@ -290,7 +291,7 @@ class WaveletScene:
     def render(
         self,
         camera: Camera,
-        mode: str = "iso",
+        mode: str | RenderMode = "iso",
         iso: float | None = None,
         method: str = "exact",
         step: float = 0.25,
