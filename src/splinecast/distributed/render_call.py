@@ -1,9 +1,10 @@
 """A distributed ``render`` call's arguments, checked on the client as a local render checks them.
 
-Both strategies (sort-first, :mod:`.scene`, and sort-last, :mod:`.sort_last`) accept exactly the
-arguments of :meth:`splinecast.Scene.render` after the camera and ship them to the workers as
-keywords; binding them here, before any task is submitted, makes a wrong name or count fail on the
-client with Python's own message.
+Both strategies (sort-first, :mod:`splinecast.distributed.scene`, and sort-last,
+:mod:`splinecast.distributed.sort_last`) accept exactly the arguments of
+:meth:`splinecast.Scene.render` after the camera and ship them to the workers as keywords; binding
+them here, before any task is submitted, makes a wrong name or count fail on the client with
+Python's own message.
 """
 
 from __future__ import annotations

@@ -79,7 +79,6 @@ from ..models import MODELS
 from ..multires.cache import read_bricks
 from ..multires.draw import CutRenderer, Piece, screen_rect
 from ..multires.octree import DEFAULT_BRICK, BrickOctree
-from ..render.dvr import Dvr
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
 from ..scene import check_iso, finish_frame, prepare_render
@@ -509,7 +508,7 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
             "partial_bytes": int(part.stats["moved"] + part.nbytes),
             "pieces_traced": int(part.stats.get("pieces_traced", 0)),
         })
-        if isinstance(setup, Dvr):
+        if setup.refines_depth_after_compositing:
             frame.stats["depth_refined_pixels"] = refined
             frame.stats["depth_refine_ms"] = refine_ms
         frame.stats["finish_ms"] = (time.perf_counter() - start) * 1e3
@@ -683,7 +682,7 @@ class SortLastScene:
         nodes: dict[int, Future] = {}
         root = self._reduce(self.tree, leaves, camera, options, token, nodes)
         depths: list[Future] = []
-        if isinstance(request.setup, Dvr):
+        if request.setup.refines_depth_after_compositing:
             prefixes: dict[int, Any] = {}
             self._opacity_in_front(self.tree, None, nodes, camera, prefixes)
             depths = [self._submit(refine_dvr_depth, s, camera, options, self.volume, token,

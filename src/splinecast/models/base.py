@@ -69,9 +69,10 @@ class ReconstructionModel:
     defines these): ``volume``; ``prepared``, the array its kernels read, cell ``c`` depending
     on ``prepared[c .. c + support]``; ``coefficients``, the values that bound it cell by cell;
     ``domain()``, the rendered box in voxel index space; ``kernel_grid(array)``, the compiled
-    kernels' grid over a block of ``prepared`` (:mod:`.pieces`); ``shift``, where the traversal
-    puts cell ``c``; ``nbytes``, the memory it holds. The attributes and methods below are the
-    capabilities the render, multiresolution and distributed layers ask about.
+    kernels' grid over a block of ``prepared`` (:mod:`splinecast.models.pieces`); ``shift``,
+    where the traversal puts cell ``c``; ``nbytes``, the memory it holds. The attributes and
+    methods below are the capabilities the render, multiresolution and distributed layers ask
+    about.
     """
 
     #: The name users pass as ``Scene(volume, model=...)``.
@@ -93,7 +94,8 @@ class ReconstructionModel:
     #: (``cube_bounds_of(array)``) rather than from the min/max of the prepared values.
     cube_bounded: ClassVar[bool] = False
     #: Values a separate shading field reads beyond a cell's support on each side
-    #: (:mod:`.shading_field`); a brick's grid then carries them as its halo. 0: none.
+    #: (:mod:`splinecast.models.shading_field`); a brick's grid then carries them as its halo.
+    #: 0: none.
     shading_halo: ClassVar[int] = 0
     #: Pixel rows handed out to a thread at once, and the side of the square tiles they are
     #: traced in (0: whole rows): models whose cells cost loads rather than arithmetic keep

@@ -59,8 +59,6 @@ from numba.typed import List
 from ..camera import Camera
 from ..render.clipping import NO_PLANES
 from ..render.driver import GEOM_SIZE, band_order, finalize, reset_state
-from ..render.iso import Iso
-from ..render.multi_iso import MultiIso
 from ..render.pieces_driver import TILE, tile_lists, trace_pieces
 from ..render.segment import Grid, counters, make_grid, trace_segment
 from .order import eye_index, front_to_back
@@ -852,19 +850,10 @@ class _Launch:
 def _blocks_key(setup: Any) -> Hashable:
     """What a mode's block selection (``setup.blocks``) depends on besides the grid, or None
     when unknown (then it is recomputed every frame)."""
-    params = getattr(setup, "params", None)
     try:
-        if isinstance(setup, Iso):
-            return ("iso", float(setup.params.iso))
-        if isinstance(setup, MultiIso):
-            return ("isos", tuple(float(v) for v in setup.isos))
-        if hasattr(setup, "tf"):
-            return ("tf", tuple(tuple(float(v) for v in r) for r in setup.tf.visible_ranges()))
-        if params is not None and hasattr(params, "sign") and hasattr(setup, "window"):
-            return ("mip", float(params.sign))
+        return setup.blocks_key()
     except (TypeError, ValueError):
-        pass
-    return None
+        return None
 
 
 def _signature(value: Any) -> Hashable:

@@ -46,15 +46,13 @@ from ..render.defaults import auto_iso
 from ..render.dvr import DVRSettings
 from ..render.effects import SurfaceEffects
 from ..render.frame import Frame
-from ..render.iso import Iso
 from ..render.modes import RenderMode
-from ..render.multi_iso import MultiIso
 from ..render.shading import Shading
 from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .budget import parse_bytes
-from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut, mip_transfer
+from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut
 from .draw import CutRenderer, Piece
 from .octree import DEFAULT_BRICK, BrickOctree
 from .relevance import ValueFilter
@@ -293,12 +291,12 @@ class MultiscaleScene:
     def _filter(self, setup: Any) -> ValueFilter | None:
         """Which bricks can show something in this mode (None: all, for MIP/minIP)."""
         widen = self.model.value_overshoot
-        if isinstance(setup, Iso):
-            return ValueFilter.iso(setup.params.iso, widen)
-        if isinstance(setup, MultiIso):
-            return ValueFilter.iso(setup.isos, widen)
-        if hasattr(setup, "tf"):
-            return ValueFilter.transfer(setup.tf, widen)
+        isos = setup.surface_values()
+        if isos is not None:
+            return ValueFilter.iso(isos, widen)
+        tf = setup.visible_transfer()
+        if tf is not None:
+            return ValueFilter.transfer(tf, widen)
         return None
 
     def render(
@@ -447,11 +445,8 @@ class MultiscaleScene:
         """The error cut's selector for DVR and MIP/minIP, else None (level of detail)."""
         if self.error_cut is None:
             return None
-        if hasattr(setup, "tf"):
-            tf = setup.tf
-        elif hasattr(setup, "window") and hasattr(setup, "colormap"):
-            tf = mip_transfer(setup.window, setup.colormap)
-        else:
+        tf = setup.cut_transfer()
+        if tf is None:
             return None
         cache = self.stream.cache
         return self.error_cut.selector(camera, tf, value_filter, cache.loads_per_frame, interest,

@@ -59,7 +59,6 @@ from typing import Any
 
 import numpy as np
 
-from ..render.iso import Iso
 from .probe import grid_values_at, sample_grid
 
 __all__ = ["Seams", "Change", "IsoClosure", "refine"]
@@ -133,9 +132,8 @@ class Seams:
 
     def closure(self, setup: Any, camera: Any) -> IsoClosure | None:
         """The closure of the first-hit isosurface (other modes: none)."""
-        if isinstance(setup, Iso):
-            return IsoClosure(setup.params.iso, camera)
-        return None
+        iso = setup.first_hit_iso()
+        return None if iso is None else IsoClosure(iso, camera)
 
     def plan(self, pieces: Sequence[Any], renderer: Any) -> dict[Hashable, Change]:
         """The changes of every array of the cut whose bricks meet coarser ones."""

@@ -47,9 +47,7 @@ from ..render.defaults import auto_iso
 from ..render.dvr import DVRSettings
 from ..render.effects import SurfaceEffects
 from ..render.frame import Frame
-from ..render.iso import Iso
 from ..render.modes import RenderMode
-from ..render.multi_iso import MultiIso
 from ..render.shading import Shading
 from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
 from ..transfer import TransferFunction
@@ -339,11 +337,7 @@ class WaveletScene:
             tolerance=tolerance, normals=normals, samples=1 if samples is None else samples)
         eps = self.epsilon(camera, lod)
         setup = request.setup
-        isos: Any = None
-        if isinstance(setup, Iso):
-            isos = setup.params.iso
-        elif isinstance(setup, MultiIso):
-            isos = list(setup.isos)
+        isos = setup.surface_values()
         start = time.perf_counter()
         vol = self.volume
         selection = select(vol.layout, vol.ranges, camera.position, eps, isos, vol.spacing,
