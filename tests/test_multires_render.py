@@ -143,12 +143,12 @@ def _brick_maker(mv, model: str, tree):
     the cache)."""
     from splinecast.multires.draw import Piece
     from splinecast.multires.octree import GHOST
-    from splinecast.multires.scene import BORDER_RULES
 
     padded = {}
     for level in (0, 1, 2):
         lv = mv.level(level)
-        padded[level] = np.pad(lv.read((0, 0, 0), lv.shape), GHOST, mode=BORDER_RULES[model])
+        padded[level] = np.pad(lv.read((0, 0, 0), lv.shape), GHOST,
+                               mode=sc.MODELS[model].border_rule)
 
     def piece(level, index):
         first, stop = (a[0] for a in tree.window(level, np.array([index])))
@@ -239,7 +239,7 @@ def _orbit(vol, count: int = 4) -> list[sc.Camera]:
 def test_no_holes_where_levels_meet(shapes, model, shape):
     """Levels 0, 1, 2 side by side (faces, edges, corners): every ray through the solid's core
     hits the surface in front of the core, within the drawn levels' reconstruction error."""
-    from splinecast.multires.seams import NESTED_DEGREE, Seams
+    from splinecast.multires.seams import Seams
 
     vol, path = shapes[shape]
     sdf, depth = SHAPES[shape]
@@ -255,7 +255,7 @@ def test_no_holes_where_levels_meet(shapes, model, shape):
         assert bad.sum() == 0, f"{what}: {bad.sum()} rays through the core miss the surface"
         assert error.max() <= tolerance, f"{what}: hit {error.max():.4g} > {tolerance:.4g} off"
         assert renderer.stats["pieces_changed_at_seams"] > 0
-        if model in NESTED_DEGREE:  # the restriction alone closes the seams
+        if sc.MODELS[model].nested_degree is not None:  # the restriction alone closes the seams
             assert renderer.stats["seam_closure_hits"] == 0, what
 
 
@@ -287,7 +287,7 @@ def test_reconstructions_agree_on_faces_between_levels(shapes, model):
     """Nested models (trilinear, bspline1, bspline3): after the restriction the finer and the
     coarser brick reconstruct the same values on every face, edge and corner they share. The
     others: the gap shrinks well below the untreated one."""
-    from splinecast.multires.seams import NESTED_DEGREE, Seams
+    from splinecast.multires.seams import Seams
 
     vol, path = shapes["torus"]
     pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), model)
@@ -309,7 +309,7 @@ def test_reconstructions_agree_on_faces_between_levels(shapes, model):
                                                 renderer.evaluate(b, points)).max())
     assert pairs > 50
     assert gap_before > 1e-3
-    if model in NESTED_DEGREE:
+    if sc.MODELS[model].nested_degree is not None:
         assert gap_after < 1e-12, f"{model}: {gap_after:.3g}"
     else:
         assert gap_after < gap_before / 3, f"{model}: {gap_after:.3g} vs {gap_before:.3g}"

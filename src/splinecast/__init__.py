@@ -32,6 +32,7 @@ from .render.defaults import (
 from .render.dvr import DVRSettings
 from .render.effects import SurfaceEffects
 from .render.frame import Frame
+from .render.modes import Dvr, Iso, MinIp, Mip, MultiIso
 from .render.shading import Shading
 from .scene import Scene, check_iso, register_scene_type
 from .transfer import TransferFunction
@@ -96,6 +97,11 @@ __all__ = [
     "MultiscaleScene",
     "MultiscaleVolume",
     "DVRSettings",
+    "Dvr",
+    "Iso",
+    "MinIp",
+    "Mip",
+    "MultiIso",
     "DataError",
     "Frame",
     "ParameterError",

@@ -24,21 +24,15 @@ from .models import MODELS
 from .render.antialias import antialias, resolve_samples
 from .render.clipping import make_planes
 from .render.defaults import (
-    auto_colormap,
-    auto_inside,
     auto_iso,
-    auto_transfer_function,
-    auto_window,
-    background_value,
     content_box,
 )
-from .render.dvr import Dvr, DVRSettings
+from .render.dvr import DVRSettings
 from .render.effects import SurfaceEffects, apply_effects
 from .render.footprint import NO_FOOTPRINT
 from .render.frame import Frame
-from .render.iso import METHODS, Iso
-from .render.mip import Mip
-from .render.multi_iso import MultiIso
+from .render.iso import Iso
+from .render.modes import MODE_NAMES, ModeContext, RenderMode, build_mode
 from .render.outputs import OUTPUTS, check_outputs
 from .render.segment import (
     make_grid,
@@ -54,8 +48,9 @@ from .volume import Volume
 __all__ = ["Scene", "MODES", "check_iso", "RenderRequest", "prepare_render", "finish_frame",
            "register_scene_type", "whole_frame_tracer"]
 
-#: Render modes accepted by :meth:`Scene.render`.
-MODES = ("iso", "mip", "minip", "dvr")
+#: Names of the render modes accepted by :meth:`Scene.render` (the registry
+#: :data:`splinecast.render.modes.MODES` holds their classes).
+MODES = MODE_NAMES
 
 
 def check_iso(volume: Volume, iso: Any) -> float:
@@ -150,7 +145,8 @@ class Scene:
         self.grid = make_grid(self.model)
         self.hierarchy = self.grid.hierarchy
         #: Per-isovalue work lists of models that classify their cells (s31, qss).
-        self.active_cells = ActiveCells(self.model) if hasattr(self.model, "tet_masks") else None
+        classifier = self.model.active_cell_classifier()
+        self.active_cells = ActiveCells(classifier) if classifier is not None else None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
         self.classify_ms = math.nan
         #: Counts and timings of the model's own isovalue change (models with work lists).
@@ -243,7 +239,7 @@ class Scene:
     def render(
         self,
         camera: Camera,
-        mode: str = "iso",
+        mode: str | RenderMode = "iso",
         iso: float | None = None,
         method: str = "exact",
         step: float = 0.25,
@@ -270,10 +266,13 @@ class Scene:
         ----------
         camera : Camera
             Viewpoint and image size.
-        mode : str
+        mode : str or mode object
             ``"iso"``: first-hit isosurface (or several translucent ones, see ``iso``);
             ``"mip"`` / ``"minip"``: maximum / minimum intensity projection (``Frame.value``);
-            ``"dvr"``: direct volume rendering through ``tf``.
+            ``"dvr"``: direct volume rendering through ``tf``. Or a mode object holding its
+            options (:class:`~splinecast.Iso`, :class:`~splinecast.MultiIso`,
+            :class:`~splinecast.Mip`, :class:`~splinecast.MinIp`, :class:`~splinecast.Dvr`):
+            its options are then not passed as keywords too.
         iso : float or list of float, optional
             Isovalue in data units; default :func:`~splinecast.auto_iso` (the volume's
             ``metadata["default_iso"]``, else Otsu's threshold of the histogram). A list
@@ -433,7 +432,7 @@ class RenderRequest:
 
 
 def prepare_render(
-    volume: Any, camera: Camera, mode: str, iso: Any, method: str, step: float,
+    volume: Any, camera: Camera, mode: str | RenderMode, iso: Any, method: str, step: float,
     shading: Shading | None, inside: str | None, *, clip: Any, crop: Any, colors: Any,
     opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
     tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
@@ -452,18 +451,14 @@ def prepare_render(
     """
     if not isinstance(camera, Camera):
         raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
-    if mode not in MODES:
-        raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
-    if method not in METHODS and not (method == "slices" and mode in ("mip", "minip")):
-        extra = ", or slices for mip and minip" if method != "slices" else (
-            f"; slices is for mip and minip, not {mode}")
-        raise ParameterError(f"method must be one of {', '.join(METHODS)}{extra}, "
-                             f"got {method!r}")
-    limits.check_render(volume, camera, mode=mode, method=method, step=step, dvr=dvr)
-    if mode not in ("mip", "minip") and tolerance != 0.0:
-        raise ParameterError(f"tolerance is for mode='mip' and 'minip', not {mode!r}")
+    spec = build_mode(mode, {
+        "iso": iso, "method": method, "step": step, "inside": inside, "colors": colors,
+        "opacity": opacity, "window": window, "colormap": colormap, "tolerance": tolerance,
+        "tf": tf, "dvr": dvr})
+    limits.check_render(volume, camera)
+    spec.check_limits(volume)
     normals_code(normals)  # checked for every mode: a typo is refused, not ignored
-    samples = resolve_samples(samples, mode)
+    samples = resolve_samples(samples, spec.name)
     if inside is not None and inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
     shading = shading or Shading()
@@ -476,37 +471,13 @@ def prepare_render(
         effects is not None and effects.active) else wanted
     if "rgba" not in wanted:
         samples = 1  # nothing to antialias
-    elif samples > 1 and mode == "iso":
+    elif samples > 1 and spec.name == "iso":
         filled = filled | {"depth", "normal", "face"}  # the edges of the geometry
-    stats: dict[str, Any] = {"mode": mode, "model": model}
-    value = None
-    if mode in ("mip", "minip"):
-        window = auto_window(volume, mode) if window is None else window
-        colormap = auto_colormap(volume) if colormap is None else colormap
-        setup: Any = Mip(mode, method, step, window, colormap, shading.background,
-                         volume.value_range, outputs=filled, tolerance=tolerance,
-                         empty=background_value(volume))
-        stats["method"] = method
-    elif mode == "dvr":
-        tf = auto_transfer_function(volume) if tf is None else tf
-        setup = Dvr(tf, dvr, shading.background, table_cache, outputs=filled)
-    elif isinstance(iso, (list, tuple, np.ndarray)):
-        if len(iso) == 0:
-            raise ParameterError("iso must hold at least one isovalue")
-        isos = [check_iso(v) for v in iso]
-        inside = inside or auto_inside(volume, isos)
-        setup = MultiIso(isos, colors, opacity, inside, shading, effects, outputs=filled,
-                         normals=normals)
-        stats["method"] = "exact"
-    else:
-        value = check_iso(iso)
-        inside = inside or auto_inside(volume, value)
-        setup = Iso(value, method, step, inside, shading, outputs=filled, normals=normals)
-        if len(planes):
-            stats["planes"] = len(planes)
-        stats.update(method=method, iso=value)
-        if method == "sampled":
-            stats["step"] = float(step)
+    stats: dict[str, Any] = {"mode": spec.name, "model": model}
+    context = ModeContext(volume, check_iso, shading, effects, filled, table_cache,
+                          normals=normals, planes=len(planes))
+    setup, mode_stats, value = spec.setup(context)
+    stats.update(mode_stats)
     return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples)
 
 

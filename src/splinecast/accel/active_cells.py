@@ -19,9 +19,12 @@ Here:
    thesis' "high frame rate" variant, the model's ``coefficient_rows``) so the kernels read
    instead of recomputing them.
 
-The model is passed as an object offering ``cube_lo``, ``cube_hi``, ``n_cells``, ``n_points``,
-``precompute``, ``static_nbytes``, ``tet_masks(cubes, iso)`` and ``coefficient_rows(cubes)``;
-this layer never imports a model.
+The classification of a model's own pieces comes from the model: a model that classifies its
+cells hands a *classifier* from its ``active_cell_classifier()``, an object offering ``cube_lo``,
+``cube_hi``, ``n_cells``, ``n_points``, ``precompute``, ``static_nbytes``,
+``tet_masks(cubes, iso)`` and ``coefficient_rows(cubes)`` (the protocol
+``splinecast.models.base.ActiveCellClassifier`` documents them); this layer never imports a
+model and never asks which model it serves.
 """
 
 from __future__ import annotations
@@ -201,6 +204,7 @@ class ActiveCells:
     """
 
     def __init__(self, model: Any) -> None:
+        # ``model`` is the model's classifier (see the module docstring), usually the model.
         self.model = model
         self.iso: float | None = None
         shape = model.n_cells

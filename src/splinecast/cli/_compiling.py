@@ -15,22 +15,22 @@ import time
 from typing import Any, TextIO
 
 from .._jit import reporting_compiles
+from ..models import MODELS
 
 __all__ = ["CompileNotice", "typical_compile_s"]
-
-#: Seconds the kernels of a model's first render took to compile from an empty cache on a
-#: 2-core machine (``benchmarks/bench_cold_start.py``); a further mode of the same model
-#: takes about half. Only the order of magnitude is promised to the user.
-_FIRST_RENDER_S = {"trilinear": 40, "bspline1": 45, "bspline2": 60, "bspline3": 70,
-                   "qss": 60, "s31": 80}
 
 #: Seconds without news after which the elapsed time is shown.
 QUIET_S = 2.0
 
 
 def typical_compile_s(model: str) -> int:
-    """A typical compile time of a model's first render, in seconds (order of magnitude)."""
-    return _FIRST_RENDER_S.get(model, 60)
+    """A typical compile time of a model's first render, in seconds (order of magnitude).
+
+    Each model states its own (``typical_compile_s``, measured from an empty cache on a 2-core
+    machine by ``benchmarks/bench_cold_start.py``); a further mode of the same model takes about
+    half. Only the order of magnitude is promised to the user."""
+    cls = MODELS.get(model)
+    return cls.typical_compile_s if cls is not None else 60
 
 
 class CompileNotice:

@@ -15,6 +15,7 @@ import numpy as np
 import splinecast as sc
 from splinecast.errors import did_you_mean, limits
 from splinecast.render.defaults import WINDOW_PERCENTILES
+from splinecast.render.modes import MODE_NAMES, modes_reading, modes_with_method
 from splinecast.transfer import DIVERGING, MENU
 
 from ._common import (
@@ -36,26 +37,28 @@ __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "mode
            "mode_kwargs", "orbit_options", "sampled_step", "dvr_settings", "SAMPLED_STEP",
            "DVR_FALLBACK", "sample_count"]
 
-#: Options only some modes read: flag -> (attribute, modes). Given with another mode they would be
-#: ignored without a word, so :func:`_refuse_ignored_options` refuses them instead.
+#: Options only some modes read: flag -> (attribute, the ``Scene.render`` keyword it becomes).
+#: Given with a mode that does not read that keyword (:func:`~splinecast.render.modes.
+#: modes_reading`) they would be ignored without a word, so :func:`_refuse_ignored_options`
+#: refuses them instead.
 _MODE_ONLY = {
-    "--iso": ("iso", ("iso",)),
-    "--opacity": ("opacity", ("iso",)),
-    "--inside": ("inside", ("iso",)),
-    "--color": ("color", ("iso",)),
-    "--texture": ("texture", ("iso",)),
-    "--texture-scale": ("texture_scale", ("iso",)),
-    "--shading": ("shading", ("iso",)),
-    "--method": ("method", ("iso", "mip", "minip")),
-    "--colormap": ("colormap", ("mip", "minip")),
-    "--window": ("window", ("mip", "minip")),
-    "--tolerance": ("tolerance", ("mip", "minip")),
-    "--tf": ("tf", ("dvr",)),
-    "--preintegration": ("preintegration", ("dvr",)),
-    "--table-layout": ("table_layout", ("dvr",)),
-    "--adaptive": ("adaptive", ("dvr",)),
-    "--termination": ("termination", ("dvr",)),
-    "--normals": ("normals", ("iso",)),
+    "--iso": ("iso", "iso"),
+    "--opacity": ("opacity", "opacity"),
+    "--inside": ("inside", "inside"),
+    "--color": ("color", "colors"),
+    "--texture": ("texture", "effects"),
+    "--texture-scale": ("texture_scale", "effects"),
+    "--shading": ("shading", "effects"),
+    "--method": ("method", "method"),
+    "--colormap": ("colormap", "colormap"),
+    "--window": ("window", "window"),
+    "--tolerance": ("tolerance", "tolerance"),
+    "--tf": ("tf", "tf"),
+    "--preintegration": ("preintegration", "dvr"),
+    "--table-layout": ("table_layout", "dvr"),
+    "--adaptive": ("adaptive", "dvr"),
+    "--termination": ("termination", "dvr"),
+    "--normals": ("normals", "normals"),
 }
 
 #: The render subcommand's option defaults (attribute -> default), filled by :func:`add_parser`.
@@ -166,7 +169,7 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
     """Options of the render modes beyond the single isosurface."""
-    render.add_argument("--mode", default="iso", choices=("iso", "mip", "minip", "dvr"),
+    render.add_argument("--mode", default="iso", choices=MODE_NAMES,
                         help="iso: isosurface; mip/minip: maximum/minimum intensity projection; "
                              "dvr: direct volume rendering (default iso)")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
@@ -223,13 +226,15 @@ def _refuse_ignored_options(args: argparse.Namespace) -> None:
     def given(attribute: str) -> bool:
         return getattr(args, attribute) != _DEFAULTS.get(attribute)
 
-    for flag, (attribute, modes) in _MODE_ONLY.items():
+    for flag, (attribute, keyword) in _MODE_ONLY.items():
+        modes = modes_reading(keyword)
         if given(attribute) and args.mode not in modes:
             raise sc.ParameterError(f"{flag} does not apply to --mode {args.mode} "
                                     f"(only to --mode {'/'.join(modes)})")
     several = args.mode == "iso" and (args.opacity or (args.iso and "," in args.iso))
-    if args.method == "slices" and args.mode not in ("mip", "minip"):
-        raise sc.ParameterError(f"--method slices applies to --mode mip/minip only, "
+    slices = modes_with_method("slices")
+    if args.method == "slices" and args.mode not in slices:
+        raise sc.ParameterError(f"--method slices applies to --mode {'/'.join(slices)} only, "
                                 f"not --mode {args.mode}")
     if several and args.method != "exact":
         raise sc.ParameterError("--method sampled takes a single --iso value "

@@ -15,6 +15,7 @@ import webbrowser
 
 import splinecast as sc
 from splinecast.errors import did_you_mean
+from splinecast.render.modes import MODE_NAMES
 
 from ._common import (
     add_input_options,
@@ -37,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--model",
                       help=f"initial reconstruction ({', '.join(sc.MODELS)}; default trilinear; "
                            "bspline<d> for a degree-d wavelet store, the only model it renders)")
-    view.add_argument("--mode", default="iso", choices=sc.scene.MODES,
+    view.add_argument("--mode", default="iso", choices=MODE_NAMES,
                       help="initial render mode (default iso)")
     view.add_argument("--iso", help="initial isovalue(s) in data units, comma-separated "
                       "(default: the volume's, else Otsu's threshold of the non-background "

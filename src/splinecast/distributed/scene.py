@@ -15,7 +15,6 @@ movie path) never needs it.
 
 from __future__ import annotations
 
-import inspect
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -26,9 +25,10 @@ import numpy as np
 from ..camera import Camera
 from ..errors import ParameterError, SplinecastError
 from ..render.frame import Frame
-from ..scene import Scene
 from . import worker
+from .render_call import render_options
 from .shots import Shot, as_shots
+from .sort_last import SortLastScene
 from .source import SceneSource, VolumeInfo
 from .tiles import FrameCanvas, Tile, auto_tile_size, tile_grid
 
@@ -40,20 +40,6 @@ __all__ = ["DistributedScene", "STRATEGIES"]
 #: How a :class:`DistributedScene` divides the work: the image (tiles and frames) or the data
 #: (bricks of one level of an OME-Zarr pyramid, :mod:`.sort_last`).
 STRATEGIES = ("sort-first", "sort-last")
-
-_RENDER_SIGNATURE = inspect.signature(Scene.render)
-
-
-def _render_options(camera: Camera, args: tuple, kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``Scene.render``'s arguments after ``camera`` as keywords; a wrong name or count fails
-    here, on the client, exactly as it would for a local render."""
-    if not isinstance(camera, Camera):
-        raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
-    bound = _RENDER_SIGNATURE.bind(None, camera, *args, **kwargs)
-    options = dict(bound.arguments)
-    del options["self"], options["camera"]
-    return options
-
 
 class DistributedScene:
     """A volume and model prepared on every worker of a Dask cluster, rendered like a Scene.
@@ -113,8 +99,6 @@ class DistributedScene:
             raise ParameterError(f"strategy must be one of {', '.join(STRATEGIES)}, "
                                  f"got {strategy!r}")
         if cls is DistributedScene and strategy == "sort-last":
-            from .sort_last import SortLastScene
-
             return SortLastScene(source, client, model, **kwargs)
         if "level" in kwargs:
             raise ParameterError("level applies to strategy='sort-last' only (sort-first "
@@ -241,7 +225,7 @@ class DistributedScene:
         Tiles are scheduled from the image centre outwards. Leaving the loop early cancels the
         tiles not yet rendered. Arguments as for :meth:`render`.
         """
-        options = _render_options(camera, args, kwargs)
+        options = render_options(camera, args, kwargs)
         if tile_size == "auto":
             tile_size = auto_tile_size(camera.width, camera.height, self.threads)
         tiles = tile_grid(camera, tile_size)
@@ -283,7 +267,7 @@ class DistributedScene:
         from distributed import as_completed
 
         shots = as_shots(cameras, **kwargs)
-        requests = [(s.camera, _render_options(s.camera, (), dict(s.options))) for s in shots]
+        requests = [(s.camera, render_options(s.camera, (), dict(s.options))) for s in shots]
         window = in_flight or 4 * self.threads
         running = as_completed()
         index: dict[str, int] = {}  # future key -> frame number, for the futures in flight

@@ -61,7 +61,6 @@ workers report). Pass them explicitly to reproduce a render of another scene.
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import os
 import threading
 import time
@@ -81,14 +80,12 @@ from ..models import MODELS
 from ..multires.cache import read_bricks
 from ..multires.draw import CutRenderer, Piece, screen_rect
 from ..multires.octree import DEFAULT_BRICK, BrickOctree
-from ..multires.scene import BORDER_RULES
-from ..render.dvr import Dvr
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
-from ..scene import Scene, check_iso, finish_frame, prepare_render
+from ..scene import check_iso, finish_frame, prepare_render
 from ..volume import Volume
 from . import worker
-from .scene import _render_options
+from .render_call import RENDER_SIGNATURE, render_options
 from .source import SceneSource, VolumeInfo
 
 if TYPE_CHECKING:
@@ -99,7 +96,6 @@ __all__ = ["SortLastScene", "Share", "KdNode", "split_bricks", "Partial"]
 #: Bricks read per store read while a worker loads its share (a box of up to 4^3 bricks: one
 #: decode of each chunk of the box, ghost chunks shared with its neighbours).
 _READ_GROUP = 4
-_RENDER_SIGNATURE = inspect.signature(Scene.render)
 #: Render requests (validated options and mode tables) a worker keeps.
 _MAX_REQUESTS = 4
 
@@ -246,7 +242,7 @@ class _Loaded:
         view = level_view(volume, share.level)
         self.octree = BrickOctree(view, brick=share.brick)
         index = np.indices(np.subtract(share.hi, share.lo)).reshape(3, -1).T + share.lo
-        border = BORDER_RULES[source.model]
+        border = MODELS[source.model].border_rule
         bricks = []
         group = index // _READ_GROUP
         for g in np.unique(group, axis=0):
@@ -312,7 +308,7 @@ def _request(token: str, header: VolumeInfo, camera: Camera, options: dict[str, 
 
 def prepare_request(header: VolumeInfo, camera: Camera, options: dict[str, Any]) -> Any:
     """:func:`splinecast.scene.prepare_render` of ``Scene.render`` options for a level."""
-    bound = _RENDER_SIGNATURE.bind(None, camera, **options)
+    bound = RENDER_SIGNATURE.bind(None, camera, **options)
     bound.apply_defaults()
     args = dict(bound.arguments)
     del args["self"], args["camera"]
@@ -513,7 +509,7 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
             "partial_bytes": int(part.stats["moved"] + part.nbytes),
             "pieces_traced": int(part.stats.get("pieces_traced", 0)),
         })
-        if isinstance(setup, Dvr):
+        if setup.refines_depth_after_compositing:
             frame.stats["depth_refined_pixels"] = refined
             frame.stats["depth_refine_ms"] = refine_ms
         frame.stats["finish_ms"] = (time.perf_counter() - start) * 1e3
@@ -591,10 +587,10 @@ class SortLastScene:
         if not is_url(location) and not is_zarr(Path(location)):
             raise ParameterError(f"source must be an OME-Zarr store for strategy='sort-last' "
                                  f"(bricks are read per worker), got {location}")
-        if model.startswith("bspline") and options.get("prefilter"):
-            raise ParameterError(f"prefilter=True is not available for model {model} with "
-                                 "strategy='sort-last': the interpolating B-spline coefficients "
-                                 "depend on the whole volume, a brick cannot reproduce them")
+        refusal = MODELS[model].brick_refusal(options) if model in MODELS else None
+        if refusal is not None:
+            raise ParameterError(f"{refusal.option} is not available for model {model} with "
+                                 f"strategy='sort-last': {refusal.reason}")
         volume = read(location)
         if not isinstance(volume, MultiscaleVolume):
             raise ParameterError(f"source must be an OME-Zarr image for strategy='sort-last', "
@@ -678,7 +674,7 @@ class SortLastScene:
         from dask.base import tokenize
 
         start = time.perf_counter()
-        options = _render_options(camera, args, kwargs)
+        options = render_options(camera, args, kwargs)
         # A user error fails here, on the client.
         request = prepare_request(self.volume, camera, options)
         token = tokenize(camera.pixel_basis().tolist(), camera.width, camera.height, options)
@@ -687,7 +683,7 @@ class SortLastScene:
         nodes: dict[int, Future] = {}
         root = self._reduce(self.tree, leaves, camera, options, token, nodes)
         depths: list[Future] = []
-        if isinstance(request.setup, Dvr):
+        if request.setup.refines_depth_after_compositing:
             prefixes: dict[int, Any] = {}
             self._opacity_in_front(self.tree, None, nodes, camera, prefixes)
             depths = [self._submit(refine_dvr_depth, s, camera, options, self.volume, token,

@@ -340,24 +340,19 @@ def check_image(width: int, height: int, name: str) -> None:
                  name)
 
 
-def check_render(
-    volume: Any, camera: Any, *, mode: str, method: str, step: Any, dvr: Any = None
-) -> None:
-    """What :meth:`splinecast.Scene.render` checks before any compiled code runs.
+def check_render(volume: Any, camera: Any) -> None:
+    """What :meth:`splinecast.Scene.render` checks of every frame before any compiled code runs.
 
     An in-memory volume's data holds no NaN or infinity (the policy of :mod:`splinecast.volume`;
-    a lazy multiscale volume, which has no ``require_finite``, is not scanned here), the image
-    fits in memory, and the sampling step (``method="sampled"`` or ``"slices"``, or DVR's) is
-    within the bounds of :func:`check_step` for this volume.
+    a lazy multiscale volume, which has no ``require_finite``, is not scanned here) and the image
+    fits in memory. A mode's own limits (a sampling step within the bounds of
+    :func:`check_step` for this volume) are checked by the mode object
+    (``splinecast.render.modes.RenderMode.check_limits``), which calls :func:`check_step`.
     """
     require_finite = getattr(volume, "require_finite", None)
     if require_finite is not None:
         require_finite()
     check_image(camera.width, camera.height, "camera size")
-    if method in ("sampled", "slices") and mode != "dvr":
-        check_step(step, "step", volume.shape)
-    if mode == "dvr" and dvr is not None and hasattr(dvr, "step"):
-        check_step(dvr.step, "DVRSettings.step", volume.shape)
 
 
 # --------------------------------------------------------------------------- memory

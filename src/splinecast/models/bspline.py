@@ -42,6 +42,7 @@ Per-cell polynomials
 from __future__ import annotations
 
 from collections import namedtuple
+from typing import Any
 
 import numpy as np
 
@@ -49,6 +50,7 @@ from .._jit import jit
 from ..errors import ParameterError
 from ..roots.first_root import DEFAULT_ITERATIONS, POWER_FORM_FINDERS, finder_id
 from ..volume import Volume
+from .base import BrickRefusal, ReconstructionModel
 from .shading_field import whole_halo
 from .storage import kernel_array
 from .validation import require_renderable
@@ -270,7 +272,7 @@ def gradient(coeffs: np.ndarray, degree: int, points: np.ndarray) -> np.ndarray:
     return out[:, 1:]
 
 
-class BSplineModel:
+class BSplineModel(ReconstructionModel):
     """Tensor-product B-spline reconstruction of one degree, prepared from a volume.
 
     Use the subclasses (``model="bspline1" | "bspline2" | "bspline3"``); see the module
@@ -302,6 +304,9 @@ class BSplineModel:
 
     name = "bspline"
     degree = 0
+    #: The coefficients are mirrored beyond the ends (:func:`pad_width`), as SciPy's
+    #: ``mode="mirror"`` does.
+    border_rule = "reflect"
     #: Render methods the kernel implements.
     methods = ("exact",)
 
@@ -345,6 +350,15 @@ class BSplineModel:
 
     #: cell ``c`` depends on coefficients ``c .. c + support`` per axis (set per subclass).
     support = 0
+
+    @classmethod
+    def brick_refusal(cls, options: dict[str, Any]) -> BrickRefusal | None:
+        """Interpolating coefficients (``prefilter=True``) cannot be made brick by brick."""
+        if options.get("prefilter"):
+            return BrickRefusal("prefilter=True", "the interpolating B-spline coefficients depend "
+                                "on the whole volume, a brick cannot reproduce them (render the "
+                                "voxels as coefficients, the default, or use s31)")
+        return None
 
     @property
     def shift(self) -> float:
@@ -397,6 +411,8 @@ class BSpline1Model(BSplineModel):
     name = "bspline1"
     degree = 1
     support = 1
+    nested_degree = 1
+    typical_compile_s = 45
     #: Voxels the shading field reads beyond a cell's support (:mod:`.shading_field`): the
     #: linear B-spline's gradient jumps between cells, as the trilinear one's.
     shading_halo = 1
@@ -413,6 +429,7 @@ class BSpline2Model(BSplineModel):
     name = "bspline2"
     degree = 2
     support = 2
+    typical_compile_s = 60
     #: Tiles of 8 x 8 pixels, as :class:`BSpline1Model`.
     band_rows = 8
     tile = 8
@@ -424,3 +441,5 @@ class BSpline3Model(BSplineModel):
     name = "bspline3"
     degree = 3
     support = 3
+    nested_degree = 3
+    typical_compile_s = 70

@@ -114,6 +114,7 @@ class QSSModel(Type6Model):
     """
 
     name = "qss"
+    typical_compile_s = 60
     degree = 2
 
     def __init__(self, volume: Volume, variant: str = "qss-b", precompute: bool = False,

@@ -118,6 +118,7 @@ class S31Model(Type6Model):
     """
 
     name = "s31"
+    typical_compile_s = 80
     degree = 3
 
     def __init__(self, volume: Volume, prefilter: bool = False, precompute: bool = False,

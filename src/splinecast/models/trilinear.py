@@ -23,6 +23,7 @@ import numpy as np
 from .._jit import jit
 from ..roots.pieces import PowerCubic
 from ..volume import Volume
+from .base import ReconstructionModel
 from .pieces import cell_range, register, whole_cell
 from .shading_field import SHADING_HALO, halo_gradient, whole_halo
 from .storage import kernel_array
@@ -301,7 +302,7 @@ register(TrilinearGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_l
          separate_shading=_separate_shading, shading_gradient_at=_shading_gradient_at)
 
 
-class TrilinearModel:
+class TrilinearModel(ReconstructionModel):
     """Trilinear reconstruction prepared from a volume.
 
     The voxels are used as they are stored (no conversion of the whole volume): the kernels read
@@ -322,6 +323,9 @@ class TrilinearModel:
     name = "trilinear"
     #: cell ``c`` depends on voxels ``c .. c + support`` per axis.
     support = 1
+    #: A coarse level's trilinear interpolant is a fine level's (the linear B-spline refined).
+    nested_degree = 1
+    typical_compile_s = 40
     #: index-space coordinate of the lower corner of cell 0 (cell ``c`` spans ``[c, c + 1]``).
     cell_offset = 0.0
     #: The traversal walks cells in ``voxel index + shift`` (cell ``c`` is ``[c, c + 1]`` there).

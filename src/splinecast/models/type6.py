@@ -37,6 +37,7 @@ from numba import prange
 from .._jit import jit
 from ..errors import ParameterError
 from ..volume import Volume
+from .base import ActiveCellClassifier, ReconstructionModel
 from .type6_geometry import (
     Type6Program,
     Type6Tables,
@@ -569,7 +570,38 @@ def laplacian_prefilter(pad: np.ndarray) -> np.ndarray:
     return np.pad(core - lap / 8.0, 1, mode="edge")
 
 
-class Type6Model:
+def laplacian_prefilter_brick(data: np.ndarray, first: np.ndarray,
+                              shape: Any) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`laplacian_prefilter` of a brick of a pyramid level, with the whole level's border
+    rule: beyond the level's ends the prefiltered values repeat the outer voxel's (re-clamped,
+    not prefiltered ghosts). One ghost layer is used up.
+
+    Parameters
+    ----------
+    data : ndarray
+        The brick's voxels with their ghost layers (at least one).
+    first : ndarray of 3 ints
+        The level index of ``data[0, 0, 0]``.
+    shape : 3 ints
+        The level's shape.
+
+    Returns
+    -------
+    (ndarray, ndarray)
+        The prefiltered values (float64) and the level index of their first element.
+    """
+    f = data.astype(np.float64)
+    core = f[1:-1, 1:-1, 1:-1]
+    lap = (f[2:, 1:-1, 1:-1] + f[:-2, 1:-1, 1:-1] + f[1:-1, 2:, 1:-1] + f[1:-1, :-2, 1:-1]
+           + f[1:-1, 1:-1, 2:] + f[1:-1, 1:-1, :-2] - 6.0 * core)
+    out = core - lap / 8.0
+    first = first + 1
+    index = [np.clip(first[a] + np.arange(out.shape[a]), 0, shape[a] - 1) - first[a]
+             for a in range(3)]
+    return np.ascontiguousarray(out[np.ix_(*index)]), first
+
+
+class Type6Model(ReconstructionModel):
     """Base of the spline models on the type-6 partition (use :class:`S31Model`/:class:`QSSModel`).
 
     Parameters
@@ -640,6 +672,31 @@ class Type6Model:
     #: Rays are traced in tiles of 8 x 8 pixels so the per-thread cube cache serves neighbours.
     band_rows = 8
     tile = 8
+
+    @property
+    def value_overshoot(self) -> float:
+        """Type-6 coefficients are affine combinations of the data with weights up to 9/8 in
+        absolute sum (1/16 of the range beyond it); the Laplacian prefilter reaches up to 6/8 of
+        the range beyond it (counted as a whole range)."""
+        return 1.0 if self.prefilter else 1.0 / 16.0
+
+    @property
+    def grid_copy_dtype(self) -> np.dtype:
+        """The padded data's dtype: ``kernel_grid`` converts a block into it."""
+        return self.pad.dtype
+
+    def prefilter_brick(self, data: np.ndarray, first: np.ndarray,
+                        level_shape: Any) -> tuple[np.ndarray, np.ndarray]:
+        """With ``prefilter=True``, :func:`laplacian_prefilter_brick` of the brick; otherwise
+        the brick as it is."""
+        if not self.prefilter:
+            return data, first
+        return laplacian_prefilter_brick(data, first, level_shape)
+
+    def active_cell_classifier(self) -> ActiveCellClassifier:
+        """The model itself: it classifies cubes and tetrahedra by isovalue
+        (:meth:`tet_masks`, :meth:`coefficient_rows`)."""
+        return self
 
     @property
     def prepared(self) -> np.ndarray:

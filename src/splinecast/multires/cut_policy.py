@@ -209,12 +209,6 @@ def octree_histograms(octree: BrickOctree, quantizer: Quantizer,
     return hist
 
 
-def mip_transfer(window: tuple[float, float], colormap: Any) -> TransferFunction:
-    """The classification of a MIP/minIP image: the window's colormap at full opacity."""
-    lo, hi = (float(v) for v in window)
-    return TransferFunction([(lo, 1.0), (hi, 1.0)], domain=(lo, hi), colormap=colormap)
-
-
 def _signature(tf: TransferFunction, value_filter: ValueFilter | None) -> tuple:
     intervals = None if value_filter is None else (tuple(value_filter.intervals or ()),
                                                     value_filter.widen)

@@ -59,8 +59,6 @@ from numba.typed import List
 from ..camera import Camera
 from ..render.clipping import NO_PLANES
 from ..render.driver import GEOM_SIZE, band_order, finalize, reset_state
-from ..render.iso import Iso
-from ..render.multi_iso import MultiIso
 from ..render.pieces_driver import TILE, tile_lists, trace_pieces
 from ..render.segment import Grid, counters, make_grid, trace_segment
 from .order import eye_index, front_to_back
@@ -320,8 +318,7 @@ class CutRenderer:
             return cached
         first = np.asarray(piece.first, dtype=np.int64)
         data = piece.data
-        if getattr(self.model, "prefilter", False) and hasattr(self.model, "tet_masks"):
-            data, first = _type6_prefilter(data, first, self.levels[piece.level].shape)
+        data, first = self.model.prefilter_brick(data, first, self.levels[piece.level].shape)
         self._prepared[piece.key] = (data, first)
         return data, first
 
@@ -853,19 +850,10 @@ class _Launch:
 def _blocks_key(setup: Any) -> Hashable:
     """What a mode's block selection (``setup.blocks``) depends on besides the grid, or None
     when unknown (then it is recomputed every frame)."""
-    params = getattr(setup, "params", None)
     try:
-        if isinstance(setup, Iso):
-            return ("iso", float(setup.params.iso))
-        if isinstance(setup, MultiIso):
-            return ("isos", tuple(float(v) for v in setup.isos))
-        if hasattr(setup, "tf"):
-            return ("tf", tuple(tuple(float(v) for v in r) for r in setup.tf.visible_ranges()))
-        if params is not None and hasattr(params, "sign") and hasattr(setup, "window"):
-            return ("mip", float(params.sign))
+        return setup.blocks_key()
     except (TypeError, ValueError):
-        pass
-    return None
+        return None
 
 
 def _signature(value: Any) -> Hashable:
@@ -905,19 +893,3 @@ def _scatter(state: tuple, local: tuple, rect: tuple[int, int, int, int]) -> Non
     c0, r0, w, h = rect
     for full, part in zip(state, local, strict=True):
         full[r0:r0 + h, c0:c0 + w] = part
-
-
-def _type6_prefilter(data: np.ndarray, first: np.ndarray,
-                     shape: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The type-6 Laplacian prefilter (:func:`splinecast.models.type6.laplacian_prefilter`) of a
-    brick, with the whole level's border rule: beyond the level's ends the prefiltered values
-    repeat the outer voxel's (re-clamped, not prefiltered ghosts). One ghost layer is used up."""
-    f = data.astype(np.float64)
-    core = f[1:-1, 1:-1, 1:-1]
-    lap = (f[2:, 1:-1, 1:-1] + f[:-2, 1:-1, 1:-1] + f[1:-1, 2:, 1:-1] + f[1:-1, :-2, 1:-1]
-           + f[1:-1, 1:-1, 2:] + f[1:-1, 1:-1, :-2] - 6.0 * core)
-    out = core - lap / 8.0
-    first = first + 1
-    index = [np.clip(first[a] + np.arange(out.shape[a]), 0, shape[a] - 1) - first[a]
-             for a in range(3)]
-    return np.ascontiguousarray(out[np.ix_(*index)]), first

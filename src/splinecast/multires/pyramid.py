@@ -38,21 +38,22 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .._atomic import atomic_directory
-from ..errors import ParameterError, ReadError
+from ..errors import ParameterError
 from ..io._common import fmt_shape, require
 from ..io.ngff import multiscales_attributes, ngff_unit, to_ngff
-from ..io.omezarr import ATTRIBUTE, Level, MultiscaleVolume
-from ..volume import SUPPORTED_DTYPES, Volume
+from ..io.omezarr import ATTRIBUTE, Level
+from .build_source import PyramidSource, level_source, open_pyramid_source
 from .downsample import binomial_halve, fine_range
 from .octree import GHOST, brick_counts
 from .tables import MINMAX, window_minmax, write_table
+from .wavelet_store import build_wavelet_pyramid
 
 __all__ = ["build_pyramid", "plan_levels", "DOWNSAMPLING"]
 
@@ -93,66 +94,6 @@ def plan_levels(
     return plan  # type: ignore[return-value]
 
 
-# --------------------------------------------------------------------------- sources
-class _Source:
-    """Random access to the source volume in splinecast order: ``read(lo, hi)`` -> (x, y, z)."""
-
-    def __init__(self, shape: tuple[int, int, int], dtype: np.dtype,
-                 read: Callable[[np.ndarray, np.ndarray], np.ndarray], label: str,
-                 spacing: Any = (1.0, 1.0, 1.0), origin: Any = (0.0, 0.0, 0.0),
-                 metadata: dict[str, Any] | None = None, dask: Any = None) -> None:
-        self.shape, self.dtype, self.read, self.label = shape, np.dtype(dtype), read, label
-        self.spacing, self.origin = tuple(spacing), tuple(origin)
-        self.metadata = metadata or {}
-        self.dask = dask  # a dask array source is written to level 0 by dask itself
-
-
-def _from_array(data: Any, label: str, **kw: Any) -> _Source:
-    def read(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        try:
-            return np.array(data[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]])
-        except OSError as exc:  # a memory-mapped file that shrank, a disk error
-            raise ReadError(f"{label}: cannot read voxels {lo.tolist()}..{hi.tolist()}: "
-                            f"{exc}") from None
-
-    return _Source(tuple(int(n) for n in data.shape), data.dtype, read, label, **kw)
-
-
-def _from_level(level: Level, label: str, **kw: Any) -> _Source:
-    return _Source(level.shape, level.dtype, level.read, label, **kw)
-
-
-def _open_source(source: Any, allow_external: bool | None = None) -> _Source:
-    """Wrap any accepted source; nothing is read here."""
-    if isinstance(source, (str, os.PathLike)):
-        from ..io import read
-
-        source = read(source, allow_external=allow_external)
-    if isinstance(source, MultiscaleVolume):
-        level = source.levels[0]
-        return _from_level(level, str(source.path), spacing=source.spacing,
-                           origin=source.origin, metadata=dict(source.metadata))
-    if isinstance(source, Volume):
-        return _from_array(source.data, source.name, spacing=source.spacing,
-                           origin=source.origin, metadata=dict(source.metadata))
-    module = type(source).__module__
-    if module.startswith("dask"):
-        src = _Source(tuple(int(n) for n in source.shape), source.dtype, lambda lo, hi: None,
-                      "dask array", dask=source)
-        return src
-    if module.startswith("zarr"):
-        from ..io.omezarr import _plain_array  # the reader's axis rules for bare arrays
-
-        level = _plain_array(Path("zarr array"), source, "zarr array").levels[0]
-        level.folder = None  # not a local folder of ours: no file checks
-        return _from_level(level, "zarr array")
-    if hasattr(source, "shape") and hasattr(source, "dtype") and len(source.shape) == 3:
-        return _from_array(source, "array")
-    raise ParameterError(
-        f"source must be a path, a Volume, a MultiscaleVolume or a 3D array, got {type(source)}"
-    )
-
-
 # --------------------------------------------------------------------------- tasks
 def _shard_regions(shape: tuple[int, ...], shard: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     counts = [max(1, math.ceil(n / shard)) for n in shape]
@@ -176,7 +117,7 @@ def _bricks_of(lo: np.ndarray, hi: np.ndarray, counts: np.ndarray, brick: int):
     return b_lo, np.maximum(b_hi, b_lo)
 
 
-def _copy_task(source: _Source, array: Any, lo: np.ndarray, hi: np.ndarray, brick: int,
+def _copy_task(source: PyramidSource, array: Any, lo: np.ndarray, hi: np.ndarray, brick: int,
                write: bool) -> tuple[np.ndarray, np.ndarray]:
     """Level 0: copy one shard from the source, and measure its bricks' value ranges."""
     shape = np.array(source.shape)
@@ -264,21 +205,6 @@ class _Progress:
 
 
 # --------------------------------------------------------------------------- build
-def open_pyramid_source(source: Any, path: Path, levels: int | None, overwrite: bool,
-                        allow_external: bool | None) -> _Source:
-    """The checks every pyramid builder makes before reading anything (``levels``, an existing
-    ``path``), then ``source`` opened lazily and its voxel type and rank checked."""
-    if levels is not None and (isinstance(levels, bool) or int(levels) != levels or levels < 1):
-        raise ParameterError(f"levels must be a positive integer, got {levels!r}")
-    if path.exists() and not overwrite:
-        raise ParameterError(f"{path}: already exists (pass overwrite=True or --overwrite)")
-    src = _open_source(source, allow_external)
-    if src.dtype.newbyteorder("=") not in SUPPORTED_DTYPES or len(src.shape) != 3:
-        raise ParameterError(f"{src.label}: cannot build a pyramid of {src.dtype} voxels of "
-                             f"shape {src.shape}")
-    return src
-
-
 def build_pyramid(
     source: Any,
     path: str | os.PathLike[str],
@@ -360,8 +286,6 @@ def build_pyramid(
         written under a temporary name beside it and renamed when complete.
     """
     if kind == "wavelet":
-        from .wavelet_store import build_wavelet_pyramid
-
         return build_wavelet_pyramid(source, path, degree, levels, chunk, dtype, overwrite,
                                      name=name, progress=progress,
                                      allow_external=allow_external)
@@ -413,7 +337,7 @@ def build_pyramid(
                     data = src.dask.transpose(2, 1, 0).rechunk((shard,) * 3)
                     with dask.config.set(scheduler="threads", num_workers=workers):
                         data.store(arrays[0], lock=False)
-                    reader = _from_level(_level_view(arrays[0], shape, index), src.label)
+                    reader = level_source(_level_view(arrays[0], shape, index), src.label)
                 else:
                     reader = src
                 tasks = [dask.delayed(_copy_task)(reader, arrays[0], lo, hi, brick, write)

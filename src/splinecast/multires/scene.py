@@ -46,14 +46,13 @@ from ..render.defaults import auto_iso
 from ..render.dvr import DVRSettings
 from ..render.effects import SurfaceEffects
 from ..render.frame import Frame
-from ..render.iso import Iso
-from ..render.multi_iso import MultiIso
+from ..render.modes import RenderMode
 from ..render.shading import Shading
 from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .budget import parse_bytes
-from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut, mip_transfer
+from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut
 from .draw import CutRenderer, Piece
 from .lod import Cut
 from .octree import DEFAULT_BRICK, BrickOctree
@@ -62,16 +61,11 @@ from .seams import Seams
 from .stream import BrickStream, FrameBricks
 from .whole_level import WholeLevel
 
-__all__ = ["MultiscaleScene", "pieces_of", "render_brick", "BORDER_RULES", "RENDER_BRICK"]
+__all__ = ["MultiscaleScene", "pieces_of", "render_brick", "RENDER_BRICK"]
 
 #: Most rounds of ``load_budget`` bricks a ``complete=True`` frame waits for (a cut that keeps
 #: changing, in a store whose ranges are learnt while reading, ends there).
 _MAX_ROUNDS = 10_000
-
-#: Ghost filling at a level's ends per model: the border rule each model applies to a whole
-#: volume (the B-splines mirror the coefficients, the others repeat the outer voxel).
-BORDER_RULES = {"trilinear": "edge", "bspline1": "reflect", "bspline2": "reflect",
-                "bspline3": "reflect", "qss": "edge", "s31": "edge"}
 
 
 #: Cells per brick a scene renders with when the pyramid's are fewer (see
@@ -247,11 +241,10 @@ class MultiscaleScene:
             raise ParameterError(f"volume must be a MultiscaleVolume, got {type(volume).__name__}")
         if model not in MODELS:
             raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
-        if model.startswith("bspline") and options.get("prefilter"):
-            raise ParameterError(
-                f"prefilter=True is not available for model {model} on a multiscale volume: the "
-                "interpolating B-spline coefficients depend on the whole volume, a brick cannot "
-                "reproduce them (render the voxels as coefficients, the default, or use s31)")
+        refusal = MODELS[model].brick_refusal(options)
+        if refusal is not None:
+            raise ParameterError(f"{refusal.option} is not available for model {model} on a "
+                                 f"multiscale volume: {refusal.reason}")
         self.cut = check_cut(cut)
         if cut_priority not in CUT_PRIORITIES:
             raise ParameterError(f"cut_priority must be one of "
@@ -272,7 +265,7 @@ class MultiscaleScene:
             # The frame's wait is for bytes read: bricks of 64^3 are 8 of 32^3.
             load_budget = max(4, min(64, round(64 * (32 / brick) ** 3)))
         self.stream = BrickStream(volume, self._cache_budget(), lod=lod,
-                                  loads_per_frame=load_budget, border=BORDER_RULES[model],
+                                  loads_per_frame=load_budget, border=self.model.border_rule,
                                   brick=brick)
         #: The error-metric cut (``cut="error"``), None for the level-of-detail cut.
         self.error_cut = (ErrorCut(self.stream.octree, interest=interest,
@@ -297,9 +290,8 @@ class MultiscaleScene:
     def _cache_budget(self) -> int:
         """The cache's share of the budget: all of it, unless the model's grids copy the bricks
         into another dtype (type-6), which then takes its share."""
-        copy = self.model.prepared.dtype.itemsize if hasattr(self.model, "tet_masks") else 0
-        if copy and self.model.prepared.dtype == self.volume.dtype:
-            copy = 0
+        copy_dtype = self.model.grid_copy_dtype
+        copy = 0 if copy_dtype is None or copy_dtype == self.volume.dtype else copy_dtype.itemsize
         item = self.volume.dtype.itemsize
         return int(self.budget * item / (item + copy))
 
@@ -313,23 +305,19 @@ class MultiscaleScene:
 
     def _filter(self, setup: Any) -> ValueFilter | None:
         """Which bricks can show something in this mode (None: all, for MIP/minIP)."""
-        # Type-6 coefficients are affine combinations with weights up to 9/8 in absolute sum;
-        # the Laplacian prefilter reaches up to 6/8 of the range beyond it.
-        widen = 0.0
-        if hasattr(self.model, "tet_masks"):
-            widen = 1.0 if getattr(self.model, "prefilter", False) else 1.0 / 16.0
-        if isinstance(setup, Iso):
-            return ValueFilter.iso(setup.params.iso, widen)
-        if isinstance(setup, MultiIso):
-            return ValueFilter.iso(setup.isos, widen)
-        if hasattr(setup, "tf"):
-            return ValueFilter.transfer(setup.tf, widen)
+        widen = self.model.value_overshoot
+        isos = setup.surface_values()
+        if isos is not None:
+            return ValueFilter.iso(isos, widen)
+        tf = setup.visible_transfer()
+        if tf is not None:
+            return ValueFilter.transfer(tf, widen)
         return None
 
     def render(
         self,
         camera: Camera,
-        mode: str = "iso",
+        mode: str | RenderMode = "iso",
         iso: float | None = None,
         method: str = "exact",
         step: float = 0.25,
@@ -502,11 +490,8 @@ class MultiscaleScene:
         """The error cut's selector for DVR and MIP/minIP, else None (level of detail)."""
         if self.error_cut is None:
             return None
-        if hasattr(setup, "tf"):
-            tf = setup.tf
-        elif hasattr(setup, "window") and hasattr(setup, "colormap"):
-            tf = mip_transfer(setup.window, setup.colormap)
-        else:
+        tf = setup.cut_transfer()
+        if tf is None:
             return None
         cache = self.stream.cache
         return self.error_cut.selector(camera, tf, value_filter, cache.loads_per_frame, interest,

@@ -59,13 +59,9 @@ from typing import Any
 
 import numpy as np
 
-from ..render.iso import Iso
 from .probe import grid_values_at, sample_grid
 
-__all__ = ["Seams", "Change", "IsoClosure", "NESTED_DEGREE", "refine"]
-
-#: Models whose coarse reconstruction is exactly a fine one, by their spline degree.
-NESTED_DEGREE = {"trilinear": 1, "bspline1": 1, "bspline3": 3}
+__all__ = ["Seams", "Change", "IsoClosure", "refine"]
 
 
 @dataclass(frozen=True)
@@ -122,7 +118,7 @@ class Seams:
 
     def __init__(self, model: Any) -> None:
         self.model = model
-        self.degree = NESTED_DEGREE.get(model.name)
+        self.degree = model.nested_degree
         #: Elements closer than this (level voxels, max norm) to a coarser piece are replaced.
         self.radius = (int(model.support) + 1) / 2.0
         self._last: tuple[Any, dict] | None = None
@@ -136,9 +132,8 @@ class Seams:
 
     def closure(self, setup: Any, camera: Any) -> IsoClosure | None:
         """The closure of the first-hit isosurface (other modes: none)."""
-        if isinstance(setup, Iso):
-            return IsoClosure(setup.params.iso, camera)
-        return None
+        iso = setup.first_hit_iso()
+        return None if iso is None else IsoClosure(iso, camera)
 
     def plan(self, pieces: Sequence[Any], renderer: Any) -> dict[Hashable, Change]:
         """The changes of every array of the cut whose bricks meet coarser ones."""

@@ -47,8 +47,7 @@ from ..render.defaults import auto_iso
 from ..render.dvr import DVRSettings
 from ..render.effects import SurfaceEffects
 from ..render.frame import Frame
-from ..render.iso import Iso
-from ..render.multi_iso import MultiIso
+from ..render.modes import RenderMode
 from ..render.shading import Shading
 from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
 from ..transfer import TransferFunction
@@ -290,7 +289,7 @@ class WaveletScene:
     def render(
         self,
         camera: Camera,
-        mode: str = "iso",
+        mode: str | RenderMode = "iso",
         iso: float | None = None,
         method: str = "exact",
         step: float = 0.25,
@@ -338,11 +337,7 @@ class WaveletScene:
             tolerance=tolerance, normals=normals, samples=1 if samples is None else samples)
         eps = self.epsilon(camera, lod)
         setup = request.setup
-        isos: Any = None
-        if isinstance(setup, Iso):
-            isos = setup.params.iso
-        elif isinstance(setup, MultiIso):
-            isos = list(setup.isos)
+        isos = setup.surface_values()
         start = time.perf_counter()
         vol = self.volume
         selection = select(vol.layout, vol.ranges, camera.position, eps, isos, vol.spacing,

@@ -55,6 +55,7 @@ from ..errors import ParameterError, ReadError, limits
 from ..io._common import fmt_shape, one_line, require
 from ..io.omezarr import ATTRIBUTE
 from ..volume import GridGeometry
+from .build_source import open_pyramid_source
 from .wavelet_filters import spline_wavelet
 from .wavelet_layout import DETAIL_BANDS, WaveletLayout
 from .wavelet_reconstruct import DETAIL_BLOCK
@@ -180,8 +181,6 @@ def build_wavelet_pyramid(
         ``overwrite``. Nothing is left at ``path`` on failure.
     """
     zarr = require("zarr", path, action="writing", error=ParameterError)
-    from .pyramid import open_pyramid_source
-
     path = Path(os.fspath(path))
     if isinstance(degree, bool) or degree not in (1, 2, 3):
         raise ParameterError(f"degree must be 1, 2 or 3, got {degree!r}")

@@ -57,6 +57,7 @@ import json
 import math
 import time
 from collections import namedtuple
+from collections.abc import Hashable
 from dataclasses import dataclass
 from typing import Any
 
@@ -85,6 +86,7 @@ from .mode_api import (
     unchanged_end,
     unchanged_skip,
 )
+from .mode_host import ModeHost
 from .outputs import ALL_OUTPUTS, buffer
 
 __all__ = ["DVRSettings", "DEFAULT_SETTINGS", "PREINTEGRATION", "TABLE_LAYOUTS", "SAMPLINGS",
@@ -656,7 +658,7 @@ def combine_dvr(front: tuple, back: tuple, out: tuple) -> None:
             os_[row, col] = fs[row, col] + bs[row, col]
 
 
-class Dvr:
+class Dvr(ModeHost):
     """Host side of direct volume rendering: the transfer function's tables and the Frame.
 
     Parameters
@@ -677,6 +679,21 @@ class Dvr:
     """
 
     name = "dvr"
+    #: The depth of a sort-last pixel is where the opacity in front crosses the threshold,
+    #: which only the composited shares in front of a share know.
+    refines_depth_after_compositing = True
+
+    def blocks_key(self) -> Hashable:
+        """The transfer function's visible value ranges."""
+        return ("tf", tuple(tuple(float(v) for v in r) for r in self.tf.visible_ranges()))
+
+    def visible_transfer(self) -> TransferFunction:
+        """The transfer function: a brick it makes transparent shows nothing."""
+        return self.tf
+
+    def cut_transfer(self) -> TransferFunction:
+        """The transfer function."""
+        return self.tf
 
     def __init__(self, tf: TransferFunction, settings: DVRSettings | None = None,
                  background: Any = (0.0, 0.0, 0.0, 1.0), cache: dict | None = None,

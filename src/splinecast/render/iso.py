@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Hashable
 from typing import Any
 
 import numpy as np
@@ -32,6 +33,7 @@ from ..models.pieces import gradient, value_gradient_at
 from ..roots.pieces import poly_first_root, poly_value
 from .frame import Frame
 from .mode_api import no_scratch, register, unchanged_begin
+from .mode_host import ModeHost
 from .outputs import ALL_OUTPUTS, buffer
 from .pixels import store_hit, store_miss
 from .shading import Shading, normals_code, smooth_gradient
@@ -270,7 +272,7 @@ def combine_iso(front: tuple, back: tuple, out: tuple) -> None:
             op[row, col, 1] = src_p[row, col, 1]
 
 
-class Iso:
+class Iso(ModeHost):
     """Host side of the first-hit isosurface mode: parameters, buffers, the Frame.
 
     Parameters
@@ -292,6 +294,18 @@ class Iso:
     """
 
     name = "iso"
+
+    def blocks_key(self) -> Hashable:
+        """The isovalue."""
+        return ("iso", float(self.params.iso))
+
+    def surface_values(self) -> float:
+        """The isovalue."""
+        return self.params.iso
+
+    def first_hit_iso(self) -> float:
+        """The isovalue: a first-hit isosurface's gaps at level boundaries are closed."""
+        return self.params.iso
 
     def __init__(self, iso: float, method: str = "exact", step: float = 0.25,
                  inside: str = "high", shading: Shading | None = None,

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Hashable
 from typing import Any
 
 import numpy as np
@@ -72,9 +73,10 @@ from ..accel.traversal import clip_to_box, walk_begin, walk_step
 from ..errors import ParameterError, limits
 from ..models.pieces import value_at, value_gradient_at
 from ..roots.pieces import poly_bounds, poly_max
-from ..transfer import apply_colormap, colormap_table
+from ..transfer import TransferFunction, apply_colormap, colormap_table
 from .frame import Frame
 from .mode_api import register, unchanged_end, unchanged_skip
+from .mode_host import ModeHost
 from .outputs import ALL_OUTPUTS, buffer
 
 __all__ = ["MipMode", "MipRayMode", "Mip", "combine_mip", "SAMPLED_METHODS"]
@@ -368,7 +370,7 @@ def check_tolerance(tolerance: Any, method: str) -> float:
     return value
 
 
-class Mip:
+class Mip(ModeHost):
     """Host side of MIP (``kind="mip"``) and minIP (``"minip"``).
 
     Parameters
@@ -406,6 +408,15 @@ class Mip:
         The Frame's buffers to fill (:mod:`.outputs`; default all). The colour is mapped from
         the projected values, so ``"rgba"`` computes them even when ``"value"`` is not kept.
     """
+
+    def blocks_key(self) -> Hashable:
+        """Which extremum: the blocks depend on the grid's ranges alone."""
+        return ("mip", float(self.params.sign))
+
+    def cut_transfer(self) -> TransferFunction:
+        """The classification of the image: the window's colormap at full opacity."""
+        lo, hi = (float(v) for v in self.window)
+        return TransferFunction([(lo, 1.0), (hi, 1.0)], domain=(lo, hi), colormap=self.colormap)
 
     def __init__(self, kind: str = "mip", method: str = "exact", step: float = 0.25,
                  window: Any = None, colormap: Any = "gray",

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Hashable
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,7 @@ from ..transfer import colormap_table
 from .effects import NO_EFFECTS, SurfaceEffects, surface_rgb
 from .frame import Frame
 from .mode_api import flagged_block_size, register, unchanged_begin, unchanged_end, unchanged_skip
+from .mode_host import ModeHost
 from .outputs import ALL_OUTPUTS, buffer
 from .shading import Shading, normals_code, smooth_gradient
 
@@ -255,7 +257,7 @@ def _per_surface(values: Any, count: int, width: int, name: str) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
-class MultiIso:
+class MultiIso(ModeHost):
     """Host side of several translucent isosurfaces.
 
     Parameters
@@ -278,6 +280,14 @@ class MultiIso:
     """
 
     name = "iso"
+
+    def blocks_key(self) -> Hashable:
+        """The isovalues."""
+        return ("isos", tuple(float(v) for v in self.isos))
+
+    def surface_values(self) -> list[float]:
+        """The isovalues."""
+        return list(self.isos)
 
     def __init__(self, isos: list[float], colors: Any = None, opacity: Any = None,
                  inside: str = "high", shading: Shading | None = None,

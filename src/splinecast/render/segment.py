@@ -107,7 +107,7 @@ def read_only_kernel(kernel: tuple) -> tuple:
 
 
 def _hierarchy(model: Any, array: np.ndarray, n_cells: tuple[int, int, int]) -> Any:
-    if getattr(model, "cube_bounded", False):
+    if model.cube_bounded:
         lo, hi = model.cube_bounds_of(array)
         return CubeBoundHierarchy(*block_ranges(lo, hi), n_cells)
     return MinMaxHierarchy(_read_only(array), n_cells, model.support)
@@ -156,7 +156,7 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
     geom[16:19] = (np.asarray(offset) + n_cells) if level_cells is None else level_cells
     if whole:
         kernel = model.kernel_grid()
-    elif getattr(model, "shading_halo", 0):
+    elif model.shading_halo:
         if halo is None:
             # The array's elements are the level's prepared values from ``offset`` on; those
             # of the level itself are real (a pyramid brick's ghosts beyond its ends are not).
@@ -169,7 +169,7 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
     else:
         kernel = model.kernel_grid(arr)
     return Grid(kernel, _hierarchy(model, arr, n_cells), geom, n_cells,
-                getattr(model, "band_rows", 1), getattr(model, "tile", 0))
+                model.band_rows, model.tile)
 
 
 def brick_grid(model: Any, lo: Any, hi: Any) -> Grid:
@@ -183,7 +183,7 @@ def brick_grid(model: Any, lo: Any, hi: Any) -> Grid:
     block = prepared[lo[0]:hi[0] + s, lo[1]:hi[1] + s, lo[2]:hi[2] + s]
     whole = tuple(int(n) - s for n in prepared.shape)
     halo = None
-    h = int(getattr(model, "shading_halo", 0))
+    h = int(model.shading_halo)
     if h:
         a = [max(0, v - h) for v in lo]
         b = [min(n, v + s + h) for v, n in zip(hi, prepared.shape, strict=True)]

@@ -26,7 +26,8 @@ from typing import Any
 
 from ..errors import ParameterError
 from ..models import MODELS
-from ..scene import MODES, Scene
+from ..render.modes import MODE_NAMES as MODES
+from ..scene import Scene
 from ..volume import Volume
 
 __all__ = ["Shown", "shown", "DEFAULT_BUDGET", "DEFAULT_LOD", "FULL_WAIT_S"]

@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..models import MODELS
 from ..render.defaults import auto_window
-from ..scene import MODES
+from ..render.modes import MODE_NAMES as MODES
 from ..transfer import MENU, colormap_table
 from ..volume import Volume
 

@@ -44,8 +44,9 @@ from ..render.clipping import make_planes
 from ..render.defaults import auto_colormap, auto_iso, auto_transfer_function, auto_window
 from ..render.dvr import DEFAULT_SETTINGS, DVRSettings
 from ..render.mip import check_tolerance
+from ..render.modes import MODE_NAMES as MODES
 from ..render.shading import NORMALS, Shading
-from ..scene import MODES, check_iso
+from ..scene import check_iso
 from ..transfer import TransferFunction, check_colormap
 from ..volume import Volume
 

@@ -1,0 +1,394 @@
+"""The render modes as objects, and the one registry of them that every front end reads.
+
+A mode object holds the options of one mode (``Iso(0.5)``, ``Mip(window=(0, 1))``,
+``Dvr(tf)``), checked when it is made, and knows how to become the compiled kernels' host object
+for a volume (:meth:`RenderMode.setup`: the automatic window, isovalue or transfer function
+filled in). :meth:`splinecast.Scene.render` takes a mode object or a mode's name with its options
+as keywords (``render(cam, "mip", window=(0, 1))``); either way the name's class in
+:data:`MODES` builds the object, so the command line, the viewer and the checks of a render ask
+this registry which modes exist and which options each one reads, instead of keeping lists of
+their own.
+
+The kernel side of a mode (its parameter tuple and compiled hooks) lives in its own module,
+:mod:`.iso`, :mod:`.multi_iso`, :mod:`.mip`, :mod:`.dvr` (see :mod:`.mode_api`); the classes here
+are what a user writes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..errors import ParameterError, limits
+from ..transfer import TransferFunction
+from .defaults import (
+    auto_colormap,
+    auto_inside,
+    auto_transfer_function,
+    auto_window,
+    background_value,
+)
+from .dvr import Dvr as DvrKernel
+from .dvr import DVRSettings
+from .effects import SurfaceEffects
+from .iso import METHODS
+from .iso import Iso as IsoKernel
+from .mip import Mip as MipKernel
+from .multi_iso import MultiIso as MultiIsoKernel
+from .shading import Shading
+
+__all__ = ["RenderMode", "ModeContext", "Iso", "MultiIso", "Mip", "MinIp", "Dvr", "MODES",
+           "MODE_NAMES", "RENDER_DEFAULTS", "build_mode", "modes_reading", "modes_with_method"]
+
+#: :meth:`splinecast.Scene.render`'s defaults of the keywords a mode reads: a keyword left at
+#: its default does not clash with a mode object that sets it.
+RENDER_DEFAULTS: dict[str, Any] = {
+    "iso": None, "method": "exact", "step": 0.25, "inside": None, "colors": None,
+    "opacity": None, "window": None, "colormap": None, "tolerance": 0.0, "tf": None,
+    "dvr": None,
+}
+
+
+@dataclass
+class ModeContext:
+    """What a mode needs of the scene and the frame to build its kernels' host object.
+
+    Attributes
+    ----------
+    volume : Volume, MultiscaleVolume or VolumeInfo
+        Supplies the automatic choices (:mod:`.defaults`), the metadata and the value range.
+    check_iso : callable
+        ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
+    shading : Shading
+    effects : SurfaceEffects or None
+    outputs : frozenset of str
+        The buffers the kernels fill.
+    table_cache : dict
+        The scene's cache of pre-integration tables.
+    normals : str
+        The isosurfaces' normals (:mod:`.shading`).
+    planes : int
+        How many clip planes the frame has (reported by the isosurface).
+    """
+
+    volume: Any
+    check_iso: Callable[[Any], float]
+    shading: Shading
+    effects: SurfaceEffects | None
+    outputs: frozenset[str]
+    table_cache: dict
+    normals: str = "smooth"
+    planes: int = 0
+
+
+class RenderMode:
+    """Base of the mode objects: what every layer above the kernels asks a mode.
+
+    A subclass is a frozen dataclass of its options, registered by name in :data:`MODES`.
+    """
+
+    #: The name :meth:`splinecast.Scene.render` takes (``mode="iso"``).
+    name: ClassVar[str] = ""
+    #: The values of ``method`` the mode accepts (the first is the default).
+    methods: ClassVar[tuple[str, ...]] = ("exact",)
+    #: The keywords of :meth:`splinecast.Scene.render` the mode reads; the others are the
+    #: frame's (camera, clipping, outputs, ...) or another mode's.
+    keywords: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def from_options(cls, **options: Any) -> RenderMode:
+        """The mode built from :meth:`splinecast.Scene.render` keywords (any of
+        :attr:`keywords`; the others are not passed)."""
+        names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+        return cls(**{k: v for k, v in options.items() if k in names})
+
+    def options(self) -> dict[str, Any]:
+        """The mode's options as :meth:`splinecast.Scene.render` keywords."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}  # type: ignore
+
+    def check_limits(self, volume: Any) -> None:
+        """Refuse options the volume's size makes impossible (a sampling step out of the
+        bounds of :func:`splinecast.errors.limits.check_step`); by default none."""
+
+    def setup(self, context: ModeContext) -> tuple[Any, dict[str, Any], float | None]:
+        """The kernels' host object of the mode for a frame.
+
+        Returns
+        -------
+        (setup, stats, iso)
+            The host object (:mod:`.iso`, :mod:`.multi_iso`, :mod:`.mip`, :mod:`.dvr`), what
+            the frame's statistics report of the mode, and the single isovalue of a first-hit
+            isosurface (None for the other modes).
+        """
+        raise NotImplementedError
+
+
+def _check_method(mode: type[RenderMode], method: str) -> None:
+    if method in mode.methods:
+        return
+    others = modes_with_method(method)
+    if others:
+        extra = f"; {method} is for {' and '.join(others)}, not {mode.name}"
+    else:
+        wider = [m for m in dict.fromkeys(m for cls in MODES.values() for m in cls.methods)
+                 if m not in METHODS]
+        extra = "".join(f", or {m} for {' and '.join(modes_with_method(m))}" for m in wider)
+    raise ParameterError(f"method must be one of {', '.join(METHODS)}{extra}, got {method!r}")
+
+
+def _check_inside(inside: Any) -> None:
+    if inside is not None and inside not in ("high", "low"):
+        raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
+
+
+@dataclass(frozen=True)
+class Iso(RenderMode):
+    """The first-hit isosurface.
+
+    Parameters
+    ----------
+    iso : float, optional
+        Isovalue in data units (default :func:`~splinecast.auto_iso`).
+    method : {"exact", "sampled"}
+        Analytic first root per cell, or fixed steps plus bisection.
+    step : float
+        Sampling step of ``method="sampled"``, in voxels.
+    inside : {"high", "low"}, optional
+        Which side of the isovalue is the inside (default :func:`~splinecast.auto_inside`).
+    """
+
+    name: ClassVar[str] = "iso"
+    methods: ClassVar[tuple[str, ...]] = ("exact", "sampled")
+    keywords: ClassVar[tuple[str, ...]] = ("iso", "method", "step", "inside", "colors",
+                                           "opacity", "normals", "effects")
+
+    iso: float | None = None
+    method: str = "exact"
+    step: float = 0.25
+    inside: str | None = None
+
+    def __post_init__(self) -> None:
+        _check_method(type(self), self.method)
+        _check_inside(self.inside)
+
+    @classmethod
+    def from_options(cls, **options: Any) -> RenderMode:
+        """An :class:`Iso`, or a :class:`MultiIso` when ``iso`` is a list of values."""
+        iso = options.get("iso")
+        if isinstance(iso, (list, tuple, np.ndarray)):
+            _check_method(cls, options.get("method", "exact"))
+            return MultiIso(iso, options.get("colors"), options.get("opacity"),
+                            options.get("inside"))
+        return cls(iso, options.get("method", "exact"), options.get("step", 0.25),
+                   options.get("inside"))
+
+    def check_limits(self, volume: Any) -> None:
+        """A sampled isosurface's step."""
+        if self.method == "sampled":
+            limits.check_step(self.step, "step", volume.shape)
+
+    def setup(self, context: ModeContext) -> tuple[Any, dict[str, Any], float | None]:
+        """The :class:`splinecast.render.iso.Iso` of the (checked) isovalue."""
+        value = context.check_iso(self.iso)
+        inside = self.inside or auto_inside(context.volume, value)
+        kernel = IsoKernel(value, self.method, self.step, inside, context.shading,
+                           outputs=context.outputs, normals=context.normals)
+        stats: dict[str, Any] = {}
+        if context.planes:
+            stats["planes"] = context.planes
+        stats.update(method=self.method, iso=value)
+        if self.method == "sampled":
+            stats["step"] = float(self.step)
+        return kernel, stats, value
+
+
+@dataclass(frozen=True)
+class MultiIso(RenderMode):
+    """Every crossing of several isosurfaces, composited front to back (``mode="iso"`` with a
+    list of isovalues).
+
+    Parameters
+    ----------
+    iso : sequence of float
+        The isovalues in data units.
+    colors, opacity : optional
+        One RGB and one opacity per isovalue.
+    inside : {"high", "low"}, optional
+        Which side of the isovalues is the inside.
+    """
+
+    name: ClassVar[str] = "iso"
+    methods: ClassVar[tuple[str, ...]] = Iso.methods
+    keywords: ClassVar[tuple[str, ...]] = Iso.keywords
+
+    iso: Sequence[float] = ()
+    colors: Any = None
+    opacity: Any = None
+    inside: str | None = None
+
+    def __post_init__(self) -> None:
+        if len(self.iso) == 0:
+            raise ParameterError("iso must hold at least one isovalue")
+        _check_inside(self.inside)
+
+    def setup(self, context: ModeContext) -> tuple[Any, dict[str, Any], float | None]:
+        """The :class:`splinecast.render.multi_iso.MultiIso` of the (checked) isovalues."""
+        isos = [context.check_iso(v) for v in self.iso]
+        inside = self.inside or auto_inside(context.volume, isos)
+        kernel = MultiIsoKernel(isos, self.colors, self.opacity, inside, context.shading,
+                                context.effects, outputs=context.outputs,
+                                normals=context.normals)
+        return kernel, {"method": "exact"}, None
+
+
+@dataclass(frozen=True)
+class Mip(RenderMode):
+    """The maximum intensity projection (``Frame.value``), exact per piece or sampled.
+
+    Parameters
+    ----------
+    window : (lo, hi), optional
+        The value window shown (default :func:`~splinecast.auto_window`).
+    colormap : str, optional
+        The colormap (default :func:`~splinecast.auto_colormap`).
+    method : {"exact", "sampled", "slices"}
+        Analytic extrema per cell, samples every ``step`` voxels, or samples on every
+        ``step``-th plane of voxels.
+    step : float
+        Sampling step of the sampled methods, in voxels.
+    tolerance : float
+        How far a pixel may fall short of the exact projection, as a fraction of the window.
+    """
+
+    name: ClassVar[str] = "mip"
+    methods: ClassVar[tuple[str, ...]] = ("exact", "sampled", "slices")
+    keywords: ClassVar[tuple[str, ...]] = ("window", "colormap", "method", "step", "tolerance")
+
+    window: Any = None
+    colormap: Any = None
+    method: str = "exact"
+    step: float = 0.25
+    tolerance: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_method(type(self), self.method)
+
+    def check_limits(self, volume: Any) -> None:
+        """The sampled methods' step."""
+        if self.method != "exact":
+            limits.check_step(self.step, "step", volume.shape)
+
+    def setup(self, context: ModeContext) -> tuple[Any, dict[str, Any], float | None]:
+        """The :class:`splinecast.render.mip.Mip` with the automatic window and colormap."""
+        volume = context.volume
+        window = auto_window(volume, self.name) if self.window is None else self.window
+        colormap = auto_colormap(volume) if self.colormap is None else self.colormap
+        kernel = MipKernel(self.name, self.method, self.step, window, colormap,
+                           context.shading.background, volume.value_range,
+                           outputs=context.outputs, tolerance=self.tolerance,
+                           empty=background_value(volume))
+        return kernel, {"method": self.method}, None
+
+
+@dataclass(frozen=True)
+class MinIp(Mip):
+    """The minimum intensity projection; options as :class:`Mip`."""
+
+    name: ClassVar[str] = "minip"
+
+
+@dataclass(frozen=True)
+class Dvr(RenderMode):
+    """Direct volume rendering: the emission-absorption integral through a transfer function.
+
+    Parameters
+    ----------
+    tf : TransferFunction, optional
+        Default :func:`~splinecast.auto_transfer_function`.
+    dvr : DVRSettings, optional
+        Step, pre-integration, adaptive step, early termination, shading
+        (default :data:`splinecast.render.dvr.DEFAULT_SETTINGS`).
+    """
+
+    name: ClassVar[str] = "dvr"
+    methods: ClassVar[tuple[str, ...]] = ("exact", "sampled")
+    keywords: ClassVar[tuple[str, ...]] = ("tf", "dvr")
+
+    tf: TransferFunction | None = None
+    dvr: DVRSettings | None = None
+
+    @classmethod
+    def from_options(cls, **options: Any) -> RenderMode:
+        """A :class:`Dvr`; ``method`` is checked, though the integral has no other."""
+        _check_method(cls, options.get("method", "exact"))
+        return cls(options.get("tf"), options.get("dvr"))
+
+    def check_limits(self, volume: Any) -> None:
+        """The settings' step."""
+        if self.dvr is not None and hasattr(self.dvr, "step"):
+            limits.check_step(self.dvr.step, "DVRSettings.step", volume.shape)
+
+    def setup(self, context: ModeContext) -> tuple[Any, dict[str, Any], float | None]:
+        """The :class:`splinecast.render.dvr.Dvr` of the (automatic) transfer function."""
+        tf = auto_transfer_function(context.volume) if self.tf is None else self.tf
+        kernel = DvrKernel(tf, self.dvr, context.shading.background, context.table_cache,
+                           outputs=context.outputs)
+        return kernel, {}, None
+
+
+#: Render modes by the name :meth:`splinecast.Scene.render` takes, the one list the command
+#: line, the viewer and the checks read (a list of isovalues makes ``"iso"`` a
+#: :class:`MultiIso`).
+MODES: dict[str, type[RenderMode]] = {"iso": Iso, "mip": Mip, "minip": MinIp, "dvr": Dvr}
+#: The names of :data:`MODES`, in order.
+MODE_NAMES: tuple[str, ...] = tuple(MODES)
+
+
+def modes_with_method(method: str) -> tuple[str, ...]:
+    """Names of the modes that accept ``method``."""
+    return tuple(name for name, cls in MODES.items() if method in cls.methods)
+
+
+def modes_reading(keyword: str) -> tuple[str, ...]:
+    """Names of the modes that read :meth:`splinecast.Scene.render`'s ``keyword``."""
+    return tuple(name for name, cls in MODES.items() if keyword in cls.keywords)
+
+
+def _same(value: Any, default: Any) -> bool:
+    return value is default or (isinstance(value, (str, int, float)) and value == default)
+
+
+def build_mode(mode: str | RenderMode, given: dict[str, Any]) -> RenderMode:
+    """The mode object of a render call: ``mode`` itself, or built from its name and the
+    keywords ``given`` (the call's values of :data:`RENDER_DEFAULTS`' keys).
+
+    Raises
+    ------
+    ParameterError
+        An unknown mode name, a keyword another mode reads that cannot be ignored
+        (``tolerance``), or a keyword that a mode object sets too.
+    """
+    if isinstance(mode, RenderMode):
+        for key in mode.options():
+            if key in given and not _same(given[key], RENDER_DEFAULTS[key]):
+                raise ParameterError(f"{key} is an option of the mode object "
+                                     f"{type(mode).__name__}: set it there, not as a keyword "
+                                     "as well")
+        cls: type[RenderMode] = type(mode)
+        name = mode.name
+    elif not isinstance(mode, str) or mode not in MODES:
+        raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    else:
+        cls, name = MODES[mode], mode
+        _check_method(cls, given.get("method", "exact"))
+    tolerance = given.get("tolerance", 0.0)
+    if "tolerance" not in cls.keywords and not _same(tolerance, 0.0):
+        raise ParameterError("tolerance is for mode=" + " and ".join(
+            repr(m) for m in modes_reading("tolerance")) + f", not {name!r}")
+    if isinstance(mode, RenderMode):
+        return mode
+    return cls.from_options(**{k: v for k, v in given.items() if k in cls.keywords})
