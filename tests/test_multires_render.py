@@ -15,6 +15,7 @@ References, independent of the code under test:
 from __future__ import annotations
 
 import shutil
+import threading
 import warnings
 from pathlib import Path
 
@@ -320,31 +321,81 @@ def _torus_camera(vol) -> sc.Camera:
     return sc.Camera.orbit(vol, azimuth=35, elevation=40, size=(56, 48), zoom=2.0)
 
 
-def test_frames_converge_without_holes_while_bricks_arrive(shapes):
+class _OneReadAtATime:
+    """Stands in for ``Level.read`` while ``gating``: each read waits for a permit given by the
+    test (:meth:`allow_one`), which then waits for that read to finish. Frames drawn in between
+    see every state of the cache on the way, on any machine and under any load."""
+
+    def __init__(self, original) -> None:
+        self.original = original
+        self.gating = False
+        self.permits = threading.Semaphore(0)
+        self.done = 0
+        self.finished = threading.Condition()
+
+    def read(self, level, lo, hi):
+        if self.gating:
+            self.permits.acquire()
+        try:
+            return self.original(level, lo, hi)
+        finally:
+            with self.finished:
+                self.done += 1
+                self.finished.notify_all()
+
+    def allow_one(self, timeout: float = 120.0) -> None:
+        with self.finished:
+            before = self.done
+            self.permits.release()
+            assert self.finished.wait_for(lambda: self.done > before, timeout), "no read came"
+
+    def open(self) -> None:
+        self.gating = False
+        for _ in range(64):  # more than loader threads: none is left waiting
+            self.permits.release()
+
+
+def test_frames_converge_without_holes_while_bricks_arrive(shapes, monkeypatch):
     """A small load budget: the first frames draw ancestors for missing bricks (levels mixed by
-    substitution), have no holes, and the view converges to the complete cut."""
+    substitution), have no holes, and the view converges to the complete cut. The loader reads
+    one batch of bricks between two frames (:class:`_OneReadAtATime`)."""
+    from splinecast.io.omezarr import Level
+
     vol, path = shapes["torus"]
     sdf, depth = SHAPES["torus"]
     cam = _torus_camera(vol)
     core, t_core = _core_rays(cam, sdf, depth)
-    with sc.Scene(sc.read(path), budget="64MiB", lod=1.5, load_budget=4,
-                  whole_level=False) as scene:
-        first = scene.render(cam, iso=0.0)
-        assert not first.stats["complete"] and first.stats["substituted"] > 0
-        frames = [first]
-        for _ in range(200):
-            frames.append(scene.render(cam, iso=0.0))
-            if frames[-1].stats["complete"]:
-                break
-        assert frames[-1].stats["complete"]
-        # Some frame met ancestors beside finer bricks (which frame depends on the loader).
-        assert any(f.stats["pieces_changed_at_seams"] > 0 for f in frames)
-        for frame in frames:
-            hit = np.isfinite(frame.depth)
-            bad = core & (~hit | (frame.depth > t_core))
-            assert bad.sum() == 0, frame.stats
-        final = scene.render(cam, iso=0.0)
-        np.testing.assert_array_equal(final.depth, frames[-1].depth)  # converged: it stays
+    reads = _OneReadAtATime(Level.read)
+    monkeypatch.setattr(Level, "read", lambda level, lo, hi: reads.read(level, lo, hi))
+    scene = sc.Scene(sc.read(path), budget="64MiB", lod=1.5, load_budget=4, whole_level=False)
+    reads.gating = True  # the coarsest level is resident; every later read waits for a permit
+    try:
+        with scene:
+            first = scene.render(cam, iso=0.0, wait=False)
+            assert not first.stats["complete"] and first.stats["substituted"] > 0
+            frames = [first]
+            for _ in range(1000):
+                reads.allow_one()
+                # The bricks of that read are in the cache before the next frame looks.
+                scene.stream.cache.wait(max_loads=1, timeout=120)
+                frames.append(scene.render(cam, iso=0.0, wait=False))
+                if frames[-1].stats["complete"]:
+                    break
+            assert frames[-1].stats["complete"]
+            # Some frame met ancestors beside finer bricks.
+            assert any(f.stats["pieces_changed_at_seams"] > 0 for f in frames)
+            # Every frame from the first read on (the first frame, drawn from the pinned
+            # coarsest level alone before any read, is too coarse for the thin torus: a frame
+            # the renderer only draws with ``wait=False``).
+            for frame in frames[1:]:
+                hit = np.isfinite(frame.depth)
+                bad = core & (~hit | (frame.depth > t_core))
+                assert bad.sum() == 0, frame.stats
+            reads.open()
+            final = scene.render(cam, iso=0.0)
+            np.testing.assert_array_equal(final.depth, frames[-1].depth)  # converged: it stays
+    finally:
+        reads.open()
 
 
 @pytest.mark.parametrize("model", ["trilinear", "bspline3", "qss"])
