@@ -31,7 +31,6 @@ from .render.dvr import DVRSettings
 from .render.effects import SurfaceEffects, apply_effects
 from .render.footprint import NO_FOOTPRINT
 from .render.frame import Frame
-from .render.iso import Iso
 from .render.modes import MODE_NAMES, ModeContext, RenderMode, build_mode
 from .render.outputs import OUTPUTS, check_outputs
 from .render.segment import (
@@ -493,7 +492,7 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
     """
     setup, stats, effects = request.setup, request.stats, request.effects
     frame = setup.frame(out, counters, stats)
-    shaded = isinstance(setup, Iso) and effects is not None and effects.active
+    shaded = setup.effects_after_tracing and effects is not None and effects.active
     if shaded:
         apply_effects(camera.pixel_basis(), request.shading.as_array(), effects.as_array(),
                       frame.position, frame.normal, frame.face, frame.rgba)

@@ -16,6 +16,7 @@ import splinecast as sc
 from splinecast.errors import did_you_mean, limits
 from splinecast.render.defaults import WINDOW_PERCENTILES
 from splinecast.render.modes import MODE_NAMES, modes_reading, modes_with_method
+from splinecast.render.modes import MODES as MODE_CLASSES
 from splinecast.transfer import DIVERGING, MENU
 
 from ._common import (
@@ -279,9 +280,10 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
     :mod:`splinecast.render.defaults` (a distributed scene's ``VolumeInfo`` carries those).
     """
     kwargs: dict = {"mode": args.mode}
+    reads = MODE_CLASSES[args.mode].keywords  # the Scene.render keywords the mode reads
     if args.samples is not None:
         kwargs["samples"] = args.samples
-    if args.mode == "iso":
+    if "normals" in reads:
         kwargs["normals"] = args.normals
     notes: list[str] = []
     clip = [numbers(c, "--clip", 4) for c in args.clip]
@@ -289,10 +291,10 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         kwargs["clip"] = clip
     if args.crop:
         kwargs["crop"] = numbers(args.crop, "--crop", 6)
-    isos = numbers(args.iso, "--iso") if args.mode == "iso" else None
+    isos = numbers(args.iso, "--iso") if "iso" in reads else None
     shading, _ = _shading(args, isos)
     kwargs.update(shading)
-    if args.mode in ("mip", "minip"):
+    if "window" in reads:  # the projections
         if args.colormap is not None:
             kwargs["colormap"] = sc.transfer.check_colormap(args.colormap, "--colormap")
         else:
@@ -313,7 +315,7 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         kwargs["method"] = args.method
         kwargs["step"] = sampled_step(args)
         return kwargs, notes
-    if args.mode == "dvr":
+    if "tf" in reads:
         if args.tf:
             kwargs["tf"] = sc.TransferFunction.load(args.tf)
         else:

@@ -294,6 +294,7 @@ class Iso(ModeHost):
     """
 
     name = "iso"
+    effects_after_tracing = True
 
     def blocks_key(self) -> Hashable:
         """The isovalue."""

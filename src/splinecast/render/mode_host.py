@@ -25,6 +25,10 @@ class ModeHost:
     #: Whether a sort-last render refines the depth of its pixels after compositing (DVR: the
     #: depth where the opacity in front of a share's first sample crosses the threshold).
     refines_depth_after_compositing: bool = False
+    #: Whether the frame's surface effects (:class:`~splinecast.render.effects.SurfaceEffects`)
+    #: are applied on the host from the hit's position, normal and face after tracing (the
+    #: first-hit isosurface; several isosurfaces apply them in their kernels).
+    effects_after_tracing: bool = False
 
     def blocks_key(self) -> Hashable | None:
         """What the mode's block selection (``blocks``) depends on besides the grid; None when

@@ -25,6 +25,7 @@ from ..errors import ParameterError
 from ..models import MODELS
 from ..render.defaults import auto_window
 from ..render.modes import MODE_NAMES as MODES
+from ..render.modes import modes_reading
 from ..transfer import MENU, colormap_table
 from ..volume import Volume
 
@@ -171,7 +172,7 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
         "defaults": defaults,
         # What a null window stands for in each projection (the page shows it on the slider).
         "auto_window": {mode: [float(v) for v in auto_window(volume, mode)]
-                        for mode in ("mip", "minip")},
+                        for mode in modes_reading("window")},
         "limits": limits,
     }
 

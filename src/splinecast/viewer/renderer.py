@@ -31,6 +31,7 @@ import numpy as np
 from .._jit import forbidding_compiles, reporting_compiles
 from ..camera import Camera
 from ..errors import ParameterError
+from ..render.modes import modes_with_method
 from ..scene import Scene
 from ..volume import Volume
 from .data import Shown, shown
@@ -244,7 +245,7 @@ class FrameRenderer:
         """What a pass renders differently from the request: previews of MIP and minIP sample
         on planes (:data:`PREVIEW_MIP`); previews are not antialiased (the settled frames and
         screenshots are, as ``Scene.render`` does by default)."""
-        if step in PREVIEW_PASSES and request.mode in ("mip", "minip"):
+        if step in PREVIEW_PASSES and request.mode in modes_with_method(PREVIEW_MIP["method"]):
             return {**PREVIEW_MIP, "samples": 1}
         if step in PREVIEW_PASSES:
             return {"samples": 1}

@@ -45,6 +45,7 @@ from ..render.defaults import auto_colormap, auto_iso, auto_transfer_function, a
 from ..render.dvr import DEFAULT_SETTINGS, DVRSettings
 from ..render.mip import check_tolerance
 from ..render.modes import MODE_NAMES as MODES
+from ..render.modes import MODES as MODE_CLASSES
 from ..render.shading import NORMALS, Shading
 from ..scene import check_iso
 from ..transfer import TransferFunction, check_colormap
@@ -371,20 +372,26 @@ def _mode_options(state: dict[str, Any], volume: Any, shown: Volume) -> dict[str
         options["clip"] = clip
     if crop is not None:
         options["crop"] = crop
-    if mode == "iso":
+    # The state's fields that the mode reads (the registry says which), as its options.
+    reads = MODE_CLASSES[mode].keywords
+    if "iso" in reads:
         options.update(_iso_options(state, volume))
+    if "normals" in reads:
         options["normals"] = _check_choice(state["normals"], NORMALS, "normals")
-    elif mode in ("mip", "minip"):
+    if "window" in reads:
         window = state["window"]
         # Without a window the projection's own automatic one, from the data on display (a
         # pyramid's coarsest level: the same for every cut, so frames agree while bricks load).
         window = (auto_window(shown, mode) if window is None
                   else _numbers(window, "window", 2))
         options["window"] = window
+    if "colormap" in reads:
         options["colormap"] = _colormap_name(state["colormap"], "colormap")
+    if "tolerance" in reads:
         options["tolerance"] = check_tolerance(_number(state["tolerance"], "tolerance"), "exact")
-    elif mode == "dvr":
+    if "tf" in reads:
         options["tf"] = _transfer_function(state["tf"])
+    if "dvr" in reads:
         options["dvr"] = _dvr_settings(state["dvr"], lighting)
     return options
 
