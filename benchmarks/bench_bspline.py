@@ -144,8 +144,8 @@ def ray_profiles(count: int) -> np.ndarray:
 
 def mp_first_root(power: np.ndarray) -> float:
     mpmath.mp.dps = 60
-    roots = mpmath.polyroots([mpmath.mpf(float(c)) for c in power], maxsteps=400,
-                             extraprec=400, asc=True)
+    roots = mpmath.polyroots([mpmath.mpf(float(c)) for c in power[::-1]], maxsteps=400,
+                             extraprec=400)
     real = [float(mpmath.re(r)) for r in roots
             if abs(mpmath.im(r)) < 1e-25 and 0 <= mpmath.re(r) <= 1]
     return min(real) if real else np.nan

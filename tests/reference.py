@@ -119,7 +119,7 @@ def mp_cubic_real_roots(c3, c2, c1, c0, dps: int = 60, imag_tol: float = 1e-25) 
             return None  # identically zero
         if len(coeffs) == 1:
             return []
-        roots = mpmath.polyroots(coeffs[::-1], maxsteps=400, extraprec=4 * dps, asc=True)
+        roots = mpmath.polyroots(coeffs, maxsteps=400, extraprec=4 * dps)  # highest degree first
         real = []
         for r in roots:
             r = mpmath.mpc(r)

@@ -11,6 +11,7 @@ does not use.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -225,6 +226,42 @@ def _check_first_volume(stated: str) -> None:
         assert choose("f", "time point", 3, None, "timepoint") == 0
 
 
+def _check_anon(stated: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Without --anon, access is anonymous exactly when no credentials are configured."""
+    from splinecast.io import remote
+
+    assert stated == "anonymous unless the environment or ~/.aws, gcloud give some"
+    monkeypatch.setenv("HOME", str(tmp_path))
+    for name in ("AWS_ACCESS_KEY_ID", "AWS_PROFILE", "AWS_WEB_IDENTITY_TOKEN_FILE",
+                 "AWS_CONTAINER_CREDENTIALS_RELATIVE_URI", "AWS_CONTAINER_CREDENTIALS_FULL_URI",
+                 "AWS_SHARED_CREDENTIALS_FILE", "AWS_CONFIG_FILE",
+                 "GOOGLE_APPLICATION_CREDENTIALS"):
+        monkeypatch.delenv(name, raising=False)
+    assert not remote._credentials_configured("s3") and not remote._credentials_configured("gcs")
+    monkeypatch.setenv("AWS_ACCESS_KEY_ID", "x")
+    assert remote._credentials_configured("s3")
+    monkeypatch.delenv("AWS_ACCESS_KEY_ID")
+    (tmp_path / ".config" / "gcloud").mkdir(parents=True)
+    (tmp_path / ".config" / "gcloud" / "application_default_credentials.json").write_text("{}")
+    assert remote._credentials_configured("gcs")
+
+
+def _check_cache_dir(stated: str) -> None:
+    from splinecast.io import remote
+
+    assert stated == "no disk cache"
+    if not os.environ.get(remote.ENV_CACHE_DIR):
+        assert remote.RemoteSettings.from_env().cache_dir is None
+
+
+def _check_cache_size(stated: str) -> None:
+    from splinecast.errors.limits import parse_bytes
+    from splinecast.io import remote
+
+    if not os.environ.get(remote.ENV_CACHE_SIZE):
+        assert remote.RemoteSettings.from_env().cache_bytes == parse_bytes(first(stated))
+
+
 #: (command, option) -> check of the stated default against the code, for options whose parser
 #: default is None (the code fills them in).
 CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
@@ -261,6 +298,10 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("movie", "--allow-missing"): _check_missing,
     **{(command, option): _check_first_volume for command in ("info", "render", "view", "movie")
        for option in ("--timepoint", "--channel")},
+    **{(command, "--cache-dir"): _check_cache_dir for command in ("info", "render", "view",
+                                                                  "movie")},
+    **{(command, "--cache-size"): _check_cache_size for command in ("info", "render", "view",
+                                                                    "movie")},
 }
 for _option in ("--model", "--root-finder", "--iterations", "--step", "--inside", "--background",
                 "--color", "--colormap", "--window", "--preintegration", "--table-layout",
@@ -273,7 +314,7 @@ def _parser_default_text(default: object) -> str:
 
 
 @pytest.mark.parametrize("command", ["render", "view", "movie"])
-def test_help_states_the_defaults_the_code_uses(command, capsys, monkeypatch):
+def test_help_states_the_defaults_the_code_uses(command, capsys, monkeypatch, tmp_path):
     monkeypatch.setenv("COLUMNS", "100000")  # argparse's width: no line breaks
     checked = 0
     for option, (action, stated) in stated_defaults(command, capsys).items():
@@ -284,6 +325,10 @@ def test_help_states_the_defaults_the_code_uses(command, capsys, monkeypatch):
             assert stated is not None, f"{command} {option}: --help does not state {default!r}"
             assert first(stated) == _parser_default_text(default), (command, option, stated)
         elif stated is not None:
+            if option == "--anon":  # needs a home folder and environment of its own
+                _check_anon(stated, monkeypatch, tmp_path)
+                checked += 1
+                continue
             check = CODE_DEFAULTS.get((command, option))
             assert check is not None, f"{command} {option}: states {stated!r}, not checked"
             check(stated)

@@ -266,10 +266,12 @@ def test_every_render_option_has_a_case():
     # tests/test_cut_render.py; --allow-external-data and --verbose (input handling, not
     # rendering) in tests/test_hostile_input.py, --allow-missing (unreadable bricks of a
     # pyramid) in tests/test_zarr_bounded.py; --timepoint, --volume and --channel (which
-    # volume of a series is read) in tests/test_timepoints.py.
+    # volume of a series is read) in tests/test_timepoints.py; --anon (S3 without
+    # credentials) in tests/test_remote_s3.py, --cache-dir and --cache-size (the local cache of
+    # fetched chunks) in tests/test_remote_http.py.
     covered = {"--output", "--depth", "--quiet", "--help", "--mode", "--array", "--budget",
                "--lod", "--cut", "--allow-external-data", "--verbose", "--allow-missing",
-               "--timepoint", "--volume", "--channel"}
+               "--timepoint", "--volume", "--channel", "--anon", "--cache-dir", "--cache-size"}
     used = {a.split("=")[0] for c in CASES for a in c.cli if a.startswith("--")}
     assert options - covered - used == set()
 

@@ -56,7 +56,7 @@ def reference_first_root(power: list[Fraction]) -> float | None:
         return None
     mpmath.mp.dps = 60
     coeffs = [mpmath.mpf(c.numerator) / c.denominator for c in p]
-    roots = mpmath.polyroots(coeffs, maxsteps=400, extraprec=400, asc=True)
+    roots = mpmath.polyroots(coeffs[::-1], maxsteps=400, extraprec=400)  # highest first
     real = [
         float(mpmath.re(r)) for r in roots
         if abs(mpmath.im(r)) < mpmath.mpf(10) ** -25 and -1e-30 <= mpmath.re(r) <= 1 + 1e-30
@@ -95,7 +95,7 @@ def check_newton(got: float, power: np.ndarray) -> None:
         return
     assert 0.0 <= got <= 1.0
     roots = [float(mpmath.re(r)) for r in mpmath.polyroots(
-        [mpmath.mpf(float(c)) for c in power], maxsteps=400, extraprec=400, asc=True)
+        [mpmath.mpf(float(c)) for c in power[::-1]], maxsteps=400, extraprec=400)
         if abs(mpmath.im(r)) < 1e-20]
     assert roots and min(abs(got - r) for r in roots) <= 1e-8
 

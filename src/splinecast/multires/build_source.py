@@ -73,8 +73,9 @@ def _open_source(source: Any, allow_external: bool | None = None) -> PyramidSour
         return src
     if module.startswith("zarr"):
         from ..io.omezarr import _plain_array  # the reader's axis rules for bare arrays
+        from ..io.selection import Selection
 
-        level = _plain_array(Path("zarr array"), source, "zarr array").levels[0]
+        level = _plain_array(Path("zarr array"), source, "zarr array", Selection()).levels[0]
         level.folder = None  # not a local folder of ours: no file checks
         return level_source(level, "zarr array")
     if hasattr(source, "shape") and hasattr(source, "dtype") and len(source.shape) == 3:

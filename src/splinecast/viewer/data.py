@@ -271,8 +271,10 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
         return Shown("wavelet", scene.preview, data, (scene.model.name,), pinned=scene,
                      default_model=scene.model.name)
     if isinstance(data, MultiscaleVolume):
+        # Bricks always (whole_level=False): reading a whole level inside a frame would stop the
+        # frames until it is read, where bricks let the page refine while they arrive.
         options = {"budget": DEFAULT_BUDGET if budget is None else budget,
-                   "lod": DEFAULT_LOD if lod is None else lod}
+                   "lod": DEFAULT_LOD if lod is None else lod, "whole_level": False}
         scene = MultiscaleScene(data, model=model or "trilinear", **options)  # coarsest level
         return Shown("multiscale", scene.preview, data, tuple(MODELS), initial=scene,
                      scene_options=options, default_model=scene.model.name)
