@@ -145,7 +145,8 @@ def test_pyramid_hello_reads_only_the_coarsest_level(pyramid, monkeypatch):
 def test_pyramid_frames_refine_as_bricks_arrive_and_end_in_scene_render(pyramid, gated_loader,
                                                                           interactive):
     # The reference first (it also compiles the kernels, so the viewer's frames are quick).
-    with MultiscaleScene(sc.read(pyramid), lod=LOD) as ref_scene:
+    # The viewer draws pyramids from bricks: the reference too (not level 0 held whole).
+    with MultiscaleScene(sc.read(pyramid), lod=LOD, whole_level=False) as ref_scene:
         iso = default_state(ref_scene.preview)["iso"]
         ref_frame = ref_scene.render(camera(ref_scene.volume), iso=iso, complete=True)
     reference = ref_frame.to_uint8()
@@ -193,7 +194,8 @@ def test_pyramid_screenshot_is_the_complete_cut_in_every_mode(pyramid):
         "dvr": {"mode": "dvr", "tf": tf, "dvr": {"termination": None, "preintegration": "none",
                                                  "step": 0.5, "sampling": "grid"}},
     }
-    with MultiscaleScene(sc.read(pyramid), lod=LOD) as ref_scene:
+    # The viewer draws pyramids from bricks: the reference too (not level 0 held whole).
+    with MultiscaleScene(sc.read(pyramid), lod=LOD, whole_level=False) as ref_scene:
         cam = camera(mv, size=size, azimuth=70.0)
         refs = {
             "mip": ref_scene.render(cam, mode="mip", window=(0.0, 0.9), colormap="viridis",

@@ -232,7 +232,7 @@ def test_an_omezarr_time_axis_gets_the_slider_too(tmp_path):
 
     iso, image = asyncio.run(check())
     later = sc.read(path, timepoint=2)
-    with MultiscaleScene(later) as scene:
+    with MultiscaleScene(later, whole_level=False) as scene:  # the viewer draws bricks
         cam = sc.Camera.orbit(later, size=SIZE, **CAMERA)
         reference = scene.render(cam, iso=iso, complete=True).to_uint8()
     np.testing.assert_array_equal(image, reference)
