@@ -484,14 +484,24 @@ def test_corrupt_chunk_while_rendering_draws_a_coarser_level_and_names_the_chunk
     assert _snapshot(copy) == before  # nothing was written into the store
 
 
-def test_store_deleted_while_rendering(shapes, tmp_path):
+def test_store_deleted_while_rendering(shapes, tmp_path, monkeypatch):
+    """The store disappears after the first frame and before any finer brick is read: the
+    later reads fail, are reported, and the frame is drawn from what is resident. The reads
+    are held at a gate (:class:`_OneReadAtATime`) until the store is gone, so that no loader
+    can finish them first on a fast machine."""
+    from splinecast.io.omezarr import Level
+
     vol, path = shapes["sphere"]
     copy = tmp_path / "gone.zarr"
     shutil.copytree(path, copy)
     cam = sc.Camera((-2.6, 0.35, 0.3), (0.0, 0.0, 0.0), size=(40, 40), fov=30)
+    reads = _OneReadAtATime(Level.read)
+    monkeypatch.setattr(Level, "read", lambda level, lo, hi: reads.read(level, lo, hi))
     with sc.Scene(sc.read(copy), budget="64MiB", lod=0.5, whole_level=False) as scene:
+        reads.gating = True  # the coarsest level is resident; finer reads wait at the gate
         scene.render(cam, iso=0.0, wait=False)  # the coarsest level only
         shutil.rmtree(copy)
+        reads.open()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             frame = scene.render(cam, iso=0.0, complete=True, timeout=10)
