@@ -15,6 +15,7 @@ import threading
 
 import numba
 import numpy as np
+import pytest
 
 from splinecast._jit import reporting_compiles
 from splinecast.cli import _compiling
@@ -107,11 +108,20 @@ def test_compiles_of_other_threads_are_not_reported():
     assert seen and seen[0].endswith("kernel")
 
 
-def test_the_command_says_nothing_of_compiling_when_its_kernels_are_cached(tmp_path):
+@pytest.mark.parametrize("source", ["volume", "pyramid"])
+def test_the_command_says_nothing_of_compiling_when_its_kernels_are_cached(tmp_path, source):
     """Two runs of the real command: the second finds every kernel in the disk cache (the
-    first may compile them, and then says so) and prints no notice."""
+    first may compile them, and then says so) and prints no notice. A pyramid drawn from
+    bricks too: nothing it compiles (the typed lists of bricks included) is left out of the
+    cache, or every run would compile it again."""
     out = tmp_path / "sphere.png"
-    command = [sys.executable, "-m", "splinecast.cli", "render", "demo:sphere?size=16",
+    volume = "demo:sphere?size=16"
+    if source == "pyramid":
+        import splinecast as sc
+
+        volume = str(tmp_path / "sphere.zarr")
+        sc.build_pyramid(sc.demo("sphere", size=40), volume, brick=8, shard=16, progress=False)
+    command = [sys.executable, "-m", "splinecast.cli", "render", volume,
                "--size", "24x20", "-o", str(out)]
     first = subprocess.run(command, capture_output=True, text=True, timeout=1800)
     assert first.returncode == 0, first.stderr

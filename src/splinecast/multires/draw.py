@@ -56,6 +56,7 @@ import numba
 import numpy as np
 from numba.typed import List
 
+from .._jit import jit
 from ..camera import Camera
 from ..render.clipping import NO_PLANES
 from ..render.driver import GEOM_SIZE, band_order, finalize, reset_state
@@ -73,6 +74,23 @@ __all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect", "screen_rects
 #: machine), and a cut of small bricks (spline-wavelet chunks of 8^3 nodes) has thousands.
 SERIAL_PIXELS = 4096
 SERIAL_CELLS = 32**3
+
+
+# Numba's typed List builds and grows itself with functions compiled in every process (about a
+# second per run, several on a busy machine); these two are cached on disk like the kernels.
+@jit()
+def _typed_list_of(item: Any) -> Any:
+    """An empty typed List whose items have ``item``'s Numba type."""
+    items = List()
+    items.append(item)
+    items.pop()
+    return items
+
+
+@jit()
+def _append(items: Any, item: Any) -> None:
+    """``items.append(item)`` for a typed List."""
+    items.append(item)
 #: Voxels per axis of the arrays behind the launch's type exemplars (:meth:`CutRenderer._pack`).
 _EXEMPLAR = 8
 
@@ -721,12 +739,12 @@ class CutRenderer:
         grids: list[Any] = []
         for number, signature in enumerate(order):
             if signature is None:  # only float64 grids
-                grids.append(List.empty_list(numba.typeof(float32_pair())))
+                grids.append(_typed_list_of(float32_pair()))
                 continue
             ats = members.get(signature, [])
-            items = List.empty_list(numba.typeof(pairs[ats[0]][0] if ats else seam))
+            items = _typed_list_of(pairs[ats[0]][0] if ats else seam)
             for k, at in enumerate(ats):
-                items.append(pairs[at][0])
+                _append(items, pairs[at][0])
                 slot[at] = number, k
             grids.append(items)
         # The pairs themselves are kept (compared by identity: the lists hold copies).

@@ -441,13 +441,20 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     # A list of grids that is empty (the float64 copies at level seams in most frames; the
     # float32 list of a float64 store) calls no band: a stub of the band's signature stands in
     # for it, compiled in a moment where the band would take as long as the other's.
-    if len(grids_b) == 0:
+    if _length(grids_b) == 0:
         functions = _launch_functions_a
-    elif len(grids_a) == 0:
+    elif _length(grids_a) == 0:
         functions = _launch_functions_b
     else:
         functions = _launch_functions
     return call_with_first_classes(_launch, functions, args)
+
+
+@jit()
+def _length(items: Any) -> int:
+    """``len`` of a typed List, compiled once and cached (``len`` from Python compiles numba's
+    own helper in every process)."""
+    return len(items)
 
 
 def _launch_functions_a(kinds: tuple) -> tuple:
