@@ -294,3 +294,26 @@ def test_canvas_refuses_an_incomplete_frame(volume):
     assert not canvas.complete
     with pytest.raises(ValueError, match="100 of 400 pixels"):
         canvas.frame()
+
+
+def test_a_url_is_opened_by_every_worker_and_renders_as_the_local_file(client, tmp_path):
+    """The workers read the volume over HTTP themselves (a real aiohttp server on 127.0.0.1):
+    the assembled frame equals the local render of the same file."""
+    pytest.importorskip("fsspec", reason="remote reading needs the remote extra")
+    from remote_servers import Faults, FileServer
+
+    volume = sc.read(SRC)
+    sc.write(volume, tmp_path / "ml.nrrd")
+    local = sc.read(tmp_path / "ml.nrrd")
+    cam = sc.Camera.orbit(local, azimuth=40, size=(40, 32))
+    with FileServer(tmp_path, Faults()) as server:
+        url = f"{server.url}/ml.nrrd"
+        scene = sc.distributed.DistributedScene(url, client)
+        try:
+            assert str(scene.source) == url  # the workers were given the URL, not a path
+            assert scene.volume.shape == local.shape
+            assert_frames_equal(scene.render(cam, iso=0.5, tile_size=16),
+                                sc.Scene(local).render(cam, iso=0.5))
+        finally:
+            scene.close()
+        assert any(path.endswith("/ml.nrrd") for _, path, _ in server.faults.log)
