@@ -282,3 +282,17 @@ def test_cli_bad_store_gives_one_line_exit_2_nothing_written(stores, tmp_path):
             assert done.returncode == 2, done.stderr
             assert len(lines) == 1 and words in lines[0], lines
             assert not out.exists()
+
+
+def test_cli_movie_over_http_equals_the_local_movie(stores, tmp_path):
+    """`splinecast movie URL` writes the frames `splinecast movie PATH` writes."""
+    common = ["--size", "32x32", "--iso", "0", "--frames", "3", "--quiet"]
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    assert _cli("movie", str(stores / "sphere.nrrd"), "-o", f"{local}/", *common).returncode == 0
+    with FileServer(stores, Faults()) as srv:
+        done = _cli("movie", f"{srv.url}/sphere.nrrd", "-o", f"{remote}/", *common)
+    assert done.returncode == 0, done.stderr
+    names = sorted(p.name for p in local.iterdir())
+    assert len(names) == 3 and names == sorted(p.name for p in remote.iterdir())
+    for name in names:
+        assert (local / name).read_bytes() == (remote / name).read_bytes(), name

@@ -396,3 +396,44 @@ def test_view_multires_mistakes_are_one_line(which, args, words, pyramid, wavele
     out, err = capsys.readouterr()
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and words in err, err
+
+
+def test_view_of_a_url_shows_what_the_local_store_shows(pyramid):
+    """`splinecast view URL` (the store served over HTTP by a real aiohttp server on 127.0.0.1)
+    and `splinecast view PATH` of the same store: equal screenshots (the whole cut)."""
+    pytest.importorskip("fsspec", reason="remote reading needs the remote extra")
+    from remote_servers import Faults, FileServer
+
+    state = {"size": [64, 48], "camera": {"azimuth": 50.0}}
+
+    def screenshot(location: str) -> np.ndarray:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "splinecast.cli", "view", location, "--no-browser",
+             "--budget", "64MiB", "--lod", str(LOD)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        try:
+            url = proc.stdout.readline().strip()
+            assert url.startswith("http://127.0.0.1:"), proc.stderr.read() if not url else url
+
+            async def shoot():
+                async with ViewerClient(url) as client:
+                    assert client.hello["multires"]["kind"] == "multiscale"
+                    shot = await client.frame(await client.screenshot(state))
+                    assert shot.header["bricks"]["complete"]
+                    return shot.image
+            image = run(shoot())
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+        assert proc.returncode == 0 and "Traceback" not in err, err
+        return image
+
+    local = screenshot(str(pyramid))
+    with FileServer(pyramid.parent, Faults(latency=0.005)) as server:
+        remote = screenshot(f"{server.url}/{pyramid.name}")
+        assert any(path.endswith("zarr.json") for _, path, _ in server.faults.log)
+    np.testing.assert_array_equal(remote, local)
