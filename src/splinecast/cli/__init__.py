@@ -21,7 +21,7 @@ import sys
 import splinecast as sc
 from splinecast.errors.limits import printable
 
-from . import info, movie, pyramid, render, view
+from . import info, movie, pyramid, render, view, warmup
 from ._common import Parser, apply_remote_options, captured_output
 
 __all__ = ["main", "COMMANDS"]
@@ -33,6 +33,7 @@ COMMANDS = {
     "view": view,
     "movie": movie,
     "pyramid": pyramid,
+    "warmup": warmup,
 }
 
 
