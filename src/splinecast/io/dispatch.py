@@ -52,7 +52,7 @@ _HEAD_BYTES = 352
 _NAMES_FILES = {"metaimage", "nrrd", "sidecar", "dicom", "nifti", "tiff"}
 #: Formats that may hold several time points or channels: their readers take ``selection``
 #: (besides ``allow_external``; VTK readers take it with ``array``).
-_SELECTS = {"nifti", "tiff"}
+_SELECTS = {"nifti", "tiff", "nrrd"}
 
 
 def sniff(path: Path) -> str | None:

@@ -27,6 +27,7 @@ from ..volume import Volume
 from ._common import check_in_memory, finish_volume, fmt_shape, native, require, third_party
 from .orientation import align_to_world
 from .rawfile import map_raw
+from .selection import Selection
 
 __all__ = ["read_nrrd", "write_nrrd"]
 
@@ -62,24 +63,36 @@ _MAX_LINE_SKIP = 1 << 16
 _MAX_BYTE_SKIP = 1 << 30
 
 
-def read_nrrd(path: Path, *, allow_external: bool | None = None) -> Volume:
-    """Read a ``.nrrd`` or ``.nhdr`` file (3 dimensions, one value per voxel).
+def read_nrrd(path: Path, *, allow_external: bool | None = None,
+              selection: Selection | None = None) -> Volume:
+    """Read a ``.nrrd`` or ``.nhdr`` file: a 3D volume, or one volume of a 4D file.
+
+    A 4D file has three spatial axes and one more, told apart by ``kinds`` (``domain`` and
+    ``space`` are spatial) or, without kinds, by the axis whose ``space directions`` entry is
+    ``none``. An extra axis of kind ``time`` holds time points; any other (``list``, ``vector``,
+    ``RGB-color``, ...) holds channels; without kinds it is taken for time. ``selection`` says
+    which to read (default: the first, with a
+    :class:`~splinecast.io.selection.SeveralVolumesWarning`).
 
     Oblique ``space directions`` are snapped to the axes with a warning (the rotation is ignored);
     axes that run backwards are flipped as array views and the origin moved to match.
     """
     nrrd = require("nrrd", path)
     label = str(path)
+    selection = selection or Selection()
     lines, header_end = _header_lines(path)
     with third_party(label, "bad NRRD header"):
         header = nrrd.read_header(lines)
 
     with third_party(label, "bad NRRD sizes"):
         sizes = list(np.atleast_1d(header.get("sizes", [])).tolist())
-    if header.get("dimension") != 3 or len(sizes) != 3:
+    dimension = header.get("dimension")
+    if dimension not in (3, 4) or len(sizes) != dimension:
         shown = limits.shorten(sizes) if sizes else "(none)"
-        raise ReadError(f"{label}: only 3D NRRD volumes are supported, this one has sizes {shown}")
-    shape = limits.check_shape(sizes, f"{label}: sizes", error=ReadError)
+        raise ReadError(f"{label}: only 3D and 4D NRRD volumes are supported, this one has "
+                        f"sizes {shown}")
+    shape = limits.check_shape(sizes, f"{label}: sizes", error=ReadError, ndim=dimension)
+    extra = _extra_axis(header, len(shape), label)
     type_name = str(header.get("type", "")).lower()
     if type_name not in _NRRD_TYPES:
         shown = limits.shorten(type_name) if type_name else "(missing)"
@@ -92,6 +105,24 @@ def read_nrrd(path: Path, *, allow_external: bool | None = None) -> Volume:
         dtype = dtype.newbyteorder("<" if endian == "little" else ">")
     encoding = str(header.get("encoding", "")).lower()
 
+    if extra is None:
+        chosen = selection.single(label)
+        index = 0
+    else:
+        # Without kinds the extra axis is taken for time, as a 4D NIfTI's fourth axis is.
+        is_time = "kinds" not in header or str(header["kinds"][extra]).lower() == "time"
+        count = shape[extra]
+        # The axis the file lacks is checked first: a wrong option fails before any warning.
+        if is_time:
+            channel = selection.chan(label, 1)
+            index = selection.time(label, count)
+            chosen = selection.metadata(count, index, 1, channel)
+        else:
+            timepoint = selection.time(label, 1)
+            index = selection.chan(label, count)
+            chosen = selection.metadata(1, timepoint, count, index)
+
+    spatial = _spatial_header(header, extra)
     data_path, offset = _data_location(path, header, header_end, allow_external)
     line_skip = limits.check_count(header.get("line skip", header.get("lineskip", 0)),
                                    f"{label}: line skip", lo=0, hi=_MAX_LINE_SKIP, error=ReadError)
@@ -106,22 +137,65 @@ def read_nrrd(path: Path, *, allow_external: bool | None = None) -> Volume:
     elif encoding in _COMPRESSED:
         if byte_skip == -1:
             raise ReadError(f"{label}: byte skip -1 is not allowed with {encoding} data")
+        after = 0
+        if extra == len(shape) - 1:  # the slowest axis: decompress, not keep, the others
+            one, count = tuple(shape[:3]), shape[3]
+            size = limits.nbytes(one, dtype.itemsize)
+            byte_skip, after = byte_skip + index * size, (count - index - 1) * size
+            shape, extra, index = one, None, 0
         data = _read_compressed(data_path, offset, byte_skip, _COMPRESSED[encoding], shape,
-                                dtype, label)
+                                dtype, label, after)
     elif encoding in _TEXT:
         data = _read_text(data_path, offset, shape, dtype, label)
     else:
         shown = limits.shorten(encoding) if encoding else "(missing)"
         raise ReadError(f"{label}: NRRD encoding {shown} is not supported "
                         "(use raw, gzip, bzip2 or text)")
+    if extra is not None:
+        data = np.take(data, index, axis=extra) if encoding == "raw" else np.ascontiguousarray(
+            np.take(data, index, axis=extra))
 
     with third_party(label, "bad NRRD geometry"):
-        matrix, origin = _geometry(header, label)
+        matrix, origin = _geometry(spatial, label)
     data, spacing, origin = align_to_world(data, matrix, origin, label)
-    metadata: dict[str, Any] = {"format": "nrrd", "encoding": encoding}
+    metadata: dict[str, Any] = {"format": "nrrd", "encoding": encoding, **chosen}
     if "space" in header:
         metadata["space"] = str(header["space"])[:200]
     return finish_volume(data, spacing, origin, path, metadata=metadata)
+
+
+#: NRRD axis kinds of spatial axes (every other kind is a time or channel axis).
+_SPATIAL_KINDS = {"domain", "space"}
+
+
+def _extra_axis(header: dict[str, Any], dimension: int, label: str) -> int | None:
+    """The axis of a 4D file that is not spatial (``None`` for a 3D file)."""
+    if dimension == 3:
+        return None
+    kinds = header.get("kinds")
+    if kinds is not None and len(kinds) == dimension:
+        others = [i for i, kind in enumerate(kinds) if str(kind).lower() not in _SPATIAL_KINDS]
+    else:
+        rows = header.get("space directions")
+        others = [] if rows is None else [
+            i for i, row in enumerate(np.asarray(rows, dtype=np.float64).reshape(dimension, -1))
+            if not np.all(np.isfinite(row))]
+    if len(others) != 1:
+        raise ReadError(f"{label}: a 4D NRRD needs exactly one axis that is not spatial (by its "
+                        "kinds, or a space direction of none); cannot tell which it is")
+    return others[0]
+
+
+def _spatial_header(header: dict[str, Any], extra: int | None) -> dict[str, Any]:
+    """``header`` with the geometry entries of the three spatial axes only."""
+    if extra is None:
+        return header
+    spatial = dict(header)
+    for key in ("spacings", "space directions"):
+        if header.get(key) is not None:
+            values = np.asarray(header[key], dtype=np.float64)
+            spatial[key] = np.delete(values, extra, axis=0)
+    return spatial
 
 
 def _header_lines(path: Path) -> tuple[list[bytes], int]:
@@ -171,8 +245,12 @@ def _skip_lines(data_path: Path, offset: int, count: int) -> int:
 
 
 def _read_compressed(data_path: Path, offset: int, byte_skip: int, opener: Any,
-                     shape: tuple[int, ...], dtype: np.dtype, label: str) -> np.ndarray:
-    """Decompress exactly the header's byte count (after ``byte_skip`` bytes), no further."""
+                     shape: tuple[int, ...], dtype: np.dtype, label: str,
+                     after: int = 0) -> np.ndarray:
+    """Decompress exactly the header's byte count (after ``byte_skip`` bytes), no further.
+
+    ``after``: bytes that follow the ones read (the later volumes of a 4D file, not kept), which
+    are decompressed and dropped to check that the stream ends where the header says."""
     expected = limits.nbytes(shape, dtype.itemsize)
     check_in_memory(shape, dtype, label, copies=2 if not dtype.isnative else 1)
     limits.check_regular_file(data_path, str(data_path))
@@ -183,9 +261,32 @@ def _read_compressed(data_path: Path, offset: int, byte_skip: int, opener: Any,
             raw.seek(offset)
             stream = opener(raw)
             _discard(stream, byte_skip, str(data_path))
-        buffer = limits.read_exact(stream, expected, str(data_path), "compressed data")
+        if not after:
+            buffer = limits.read_exact(stream, expected, str(data_path), "compressed data")
+        else:
+            buffer = limits.read_exact(_Window(stream, expected), expected, str(data_path),
+                                       "compressed data")
+            with third_party(str(data_path), "corrupt compressed data"):
+                _discard(stream, after, str(data_path))
+                more = stream.read(1)
+            if more:
+                raise ReadError(f"{data_path}: compressed data holds more than the "
+                                f"{byte_skip + expected + after} bytes the header gives")
     data = buffer.view(dtype).reshape(shape, order="F")
     return native(data, label)
+
+
+class _Window:
+    """The first ``size`` bytes of a stream, then its end (the stream stays open)."""
+
+    def __init__(self, stream: IO[bytes], size: int) -> None:
+        self.stream, self.left = stream, size
+
+    def read(self, count: int = -1) -> bytes:
+        count = self.left if count < 0 else min(count, self.left)
+        chunk = self.stream.read(count) if count else b""
+        self.left -= len(chunk)
+        return chunk
 
 
 def _discard(stream: IO[bytes], count: int, name: str) -> None:

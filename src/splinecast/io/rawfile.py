@@ -39,7 +39,7 @@ def map_raw(
     path : path-like
         The data file.
     shape : tuple of 3 int
-        ``(nx, ny, nz)``.
+        ``(nx, ny, nz)``; a fourth entry for a 4D file.
     dtype : numpy dtype
         Voxel type including byte order.
     offset : int, optional
@@ -57,7 +57,9 @@ def map_raw(
     """
     path = Path(path)
     dtype = check_dtype(dtype, str(path))
-    shape = limits.check_shape(shape, f"{header or path}: the size", error=ReadError)
+    # Four axes: a 4D file (time points or channels) mapped whole, a volume taken by the caller.
+    shape = limits.check_shape(shape, f"{header or path}: the size", error=ReadError,
+                               ndim=4 if len(shape) == 4 else 3)
     if order not in ("F", "C"):
         raise ReadError(f"{path}: voxel order must be 'F' (x fastest) or 'C', got {order!r}")
     offset = limits.check_count(offset, f"{header or path}: the header size", lo=-1,
