@@ -386,10 +386,13 @@ def write_dicom_series(
     z_positions: list[float] | None = None,
     orientation: tuple[float, ...] = (1, 0, 0, 0, 1, 0),
     seed: int = 0,
+    tags: dict | None = None,
+    prefix: str = "IM",
 ) -> None:
     """One file per slice (data[:, :, k]), shuffled, under meaningless names.
 
-    ``z_positions`` are the slice offsets from ``origin`` along the slice normal.
+    ``z_positions`` are the slice offsets from ``origin`` along the slice normal; ``tags`` are
+    set on every slice; ``prefix`` starts the file names.
     """
     pydicom = pytest.importorskip("pydicom")
     from pydicom.dataset import Dataset, FileMetaDataset
@@ -424,9 +427,11 @@ def write_dicom_series(
         ds.RescaleSlope = slope
         ds.RescaleIntercept = intercept
         ds.InstanceNumber = int(n)
+        for keyword, value in (tags or {}).items():
+            setattr(ds, keyword, value)
         rows_cols = np.ascontiguousarray(data[:, :, k].T)  # DICOM pixels are (y, x)
         ds.PixelData = rows_cols.astype(data.dtype.newbyteorder("<")).tobytes()
-        ds.save_as(folder / f"IM{n:04d}", enforce_file_format=True)
+        ds.save_as(folder / f"{prefix}{n:04d}", enforce_file_format=True)
     assert pydicom  # imported for the skip
 
 
@@ -487,6 +492,44 @@ def test_dicom_duplicate_positions(tmp_path: Path) -> None:
     write_dicom_series(tmp_path / "d", ramp(np.int16, (4, 4, 3)), z_positions=[0, 2, 2])
     with pytest.raises(ReadError, match=r"folder .*d: .*duplicate slice"):
         read(tmp_path / "d")
+
+
+@pytest.mark.parametrize("tag", ["TemporalPositionIdentifier", "TriggerTime",
+                                 "AcquisitionNumber"])
+def test_dicom_time_series_reads_one_time_point(tmp_path: Path, tag: str) -> None:
+    """Three time points of one series in one folder (the positions repeat), told apart by
+    ``tag``: each reads as the volume written for it, in time order; out of range is one line."""
+    from pydicom.uid import generate_uid
+
+    series = generate_uid()
+    frames = [ramp(np.int16, (6, 5, 4)) + 100 * t for t in range(3)]
+    values = {"TemporalPositionIdentifier": [1, 2, 3], "TriggerTime": [0.0, 350.5, 701.0],
+              "AcquisitionNumber": [7, 8, 9]}[tag]
+    for t in (2, 0, 1):  # written out of time order
+        write_dicom_series(tmp_path / "dyn", frames[t], series_uid=series, seed=t,
+                           tags={tag: values[t]}, prefix=f"T{t}_")
+    for t in range(3):
+        vol = read(tmp_path / "dyn", timepoint=t)
+        assert_same(vol, frames[t], spacing=(0.7, 0.8, 2.5), origin=(-50, -60, 10))
+        assert vol.metadata["timepoints"] == 3 and vol.metadata["timepoint"] == t
+        assert vol.metadata["slices"] == 4
+    one = read(tmp_path / "dyn" / "T1_0002", timepoint=1)  # a file of the series
+    np.testing.assert_array_equal(one.data, frames[1])
+    with pytest.warns(SeveralVolumesWarning, match="3 time points"):
+        np.testing.assert_array_equal(read(tmp_path / "dyn").data, frames[0])
+    with pytest.raises(ParameterError, match=r"dyn.*timepoint 3 is out of range"):
+        read(tmp_path / "dyn", timepoint=3)
+
+
+def test_dicom_repeated_positions_without_a_time_tag_stay_duplicates(tmp_path: Path) -> None:
+    from pydicom.uid import generate_uid
+
+    series = generate_uid()
+    for t in range(2):
+        write_dicom_series(tmp_path / "rep", ramp(np.int16, (4, 4, 3)), series_uid=series,
+                           prefix=f"R{t}_")
+    with pytest.raises(ReadError, match="duplicate slice"):
+        read(tmp_path / "rep")
 
 
 def test_dicom_folder_without_slices(tmp_path: Path) -> None:

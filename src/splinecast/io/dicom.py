@@ -27,6 +27,7 @@ from ..errors import ReadError, limits
 from ..volume import Volume
 from ._common import check_dtype, check_in_memory, finish_volume, require, third_party
 from .orientation import align_to_world
+from .selection import Selection
 
 __all__ = ["read_dicom_series", "read_dicom_file"]
 
@@ -38,14 +39,15 @@ _UNEVEN = 0.01
 _DEFER_BYTES = 4096
 
 
-def read_dicom_file(path: Path, *, allow_external: bool | None = None) -> Volume:
+def read_dicom_file(path: Path, *, allow_external: bool | None = None,
+                    selection: Selection | None = None) -> Volume:
     """Read the series that a single DICOM file belongs to (from the file's folder)."""
     pydicom = require("pydicom", path)
     with third_party(str(path), "not a readable DICOM file"):
         ds = pydicom.dcmread(path, stop_before_pixels=True)
         uid = ds.get("SeriesInstanceUID", None)
     return read_dicom_series(path.parent, series_uid=str(uid) if uid else None, name=path.name,
-                             allow_external=allow_external)
+                             allow_external=allow_external, selection=selection)
 
 
 def read_dicom_series(
@@ -54,8 +56,10 @@ def read_dicom_series(
     name: str | None = None,
     *,
     allow_external: bool | None = None,
+    selection: Selection | None = None,
 ) -> Volume:
-    """Read every DICOM slice of ``folder`` into one volume.
+    """Read every DICOM slice of ``folder`` into one volume, or one time point of a series that
+    repeats its slice positions over time (see :func:`_time_points`).
 
     Parameters
     ----------
@@ -68,6 +72,9 @@ def read_dicom_series(
     allow_external : bool, optional
         Follow slices that are symbolic links to files outside the folder (default: refuse,
         unless ``SPLINECAST_ALLOW_EXTERNAL_DATA=1``).
+    selection : Selection, optional
+        The time point to read of a time series (default: the first, with a
+        :class:`~splinecast.io.selection.SeveralVolumesWarning`).
 
     Raises
     ------
@@ -101,6 +108,14 @@ def read_dicom_series(
             raise ReadError(f"{label}: slice {file.name} has no ImagePositionPatient")
         positions.append(np.array(ipp))
     depth = np.array([p @ normal for p in positions])
+    groups = _time_points(slices, depth, label)
+    selection = selection or Selection()
+    channel = selection.chan(label, 1)
+    timepoint = selection.time(label, len(groups))
+    chosen = groups[timepoint]
+    slices = [slices[i] for i in chosen]
+    positions = [positions[i] for i in chosen]
+    depth = depth[chosen]
     order = np.argsort(depth, kind="stable")
     slices = [slices[i] for i in order]
     positions = [positions[i] for i in order]
@@ -123,6 +138,7 @@ def read_dicom_series(
         "series_description": _text(first, "SeriesDescription"),
         "series_uid": _text(first, "SeriesInstanceUID"),
         "slices": len(slices),
+        **selection.metadata(len(groups), timepoint, 1, channel),
     }
     if name is not None:
         metadata["name"] = name
@@ -259,6 +275,46 @@ def _orientation(ds: Any, file: Path, label: str) -> tuple[np.ndarray, np.ndarra
     if np.linalg.norm(np.cross(row_dir, col_dir)) < 1e-3:
         raise ReadError(f"{label}: ImageOrientationPatient has parallel row and column vectors")
     return row_dir, col_dir
+
+
+#: Tags that tell the time points of a series apart, most specific first.
+_TIME_TAGS = ("TemporalPositionIdentifier", "TriggerTime", "AcquisitionNumber")
+
+
+def _time_points(slices: list[tuple[Path, Any]], depth: np.ndarray,
+                 label: str) -> list[np.ndarray]:
+    """The slices of each time point (indices into ``slices``), in time order.
+
+    A series whose slice positions all differ is one time point. One that repeats positions
+    (a dynamic, cardiac or perfusion acquisition) is split by the first of :data:`_TIME_TAGS`
+    that every slice has and that gives groups of equal size, each with every position once;
+    without one, the repeated position is reported as a duplicate slice
+    (:func:`_slice_distance`).
+    """
+    every = [np.arange(len(slices))]
+    if len(slices) < 2:
+        return every
+    span = float(np.ptp(depth)) or 1.0
+    positions = np.round(depth / (1e-4 * span)).astype(np.int64)
+    if len(np.unique(positions)) == len(positions):
+        return every
+    for keyword in _TIME_TAGS:
+        values = []
+        for _, ds in slices:
+            value = ds.get(keyword, None)
+            try:
+                values.append(float(value))
+            except (TypeError, ValueError):
+                break
+        if len(values) != len(slices) or not np.all(np.isfinite(values)):
+            continue
+        keys = np.asarray(values)
+        groups = [np.flatnonzero(keys == key) for key in np.unique(keys)]
+        sizes = {len(g) for g in groups}
+        if len(groups) > 1 and len(sizes) == 1 and all(
+                len(np.unique(positions[g])) == len(g) for g in groups):
+            return groups
+    return every
 
 
 def _slice_distance(depth: np.ndarray, slices: list[tuple[Path, Any]], label: str) -> float:

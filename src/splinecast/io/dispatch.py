@@ -52,7 +52,7 @@ _HEAD_BYTES = 352
 _NAMES_FILES = {"metaimage", "nrrd", "sidecar", "dicom", "nifti", "tiff"}
 #: Formats that may hold several time points or channels: their readers take ``selection``
 #: (besides ``allow_external``; VTK readers take it with ``array``).
-_SELECTS = {"nifti", "tiff", "nrrd"}
+_SELECTS = {"nifti", "tiff", "nrrd", "dicom"}
 
 
 def sniff(path: Path) -> str | None:
@@ -255,8 +255,7 @@ def read(
             return open_zarr(path, allow_external=allow_external, selection=selection)
         from .dicom import read_dicom_series
 
-        selection.single(str(path))
-        return read_dicom_series(path, allow_external=allow_external)
+        return read_dicom_series(path, allow_external=allow_external, selection=selection)
     limits.check_regular_file(path, str(path))  # a device or pipe would block or never end
     by_content = sniff(path)
     by_extension = _extension_format(path)
