@@ -162,15 +162,38 @@ class LabelScene:
         for value, style in image_label_table(meta, name).items():
             if value in styles:  # a store's table may name labels of other levels or times
                 styles[value] = style
-        if colors is None:
-            return styles
+        self.styles = styles
+        if colors is not None:
+            self.set_colors(colors)
+        return self.styles
+
+    def set_colors(self, colors: Any, option: str = "colors") -> None:
+        """Colour (and name) the labels a colour table names; the others keep theirs.
+
+        Parameters
+        ----------
+        colors : path, mapping or list
+            A ``.json``/``.csv`` file or its content (:mod:`splinecast.io.label_colors`).
+        option : str
+            What gave it, for messages (``"--label-colors"``).
+
+        Raises
+        ------
+        ParameterError
+            A bad table, or one naming a label the volume does not hold (the message names
+            the file and ``option``).
+        """
         if isinstance(colors, (Mapping, list)):
-            table, where = parse_color_table(colors, "colors"), "colors"
+            table, where = parse_color_table(colors, option), option
         else:
-            table, where = read_color_table(colors, "colors"), f"{colors} (colors)"
+            table, where = read_color_table(colors, option), f"{colors} ({option})"
         self._check_present(table, where)
-        styles.update(table)
-        return styles
+        self.styles.update(table)
+
+    @property
+    def shown(self) -> tuple[int, ...]:
+        """The labels drawn by default (``show``)."""
+        return self._show
 
     def _check_present(self, values: Iterable[int], where: str) -> None:
         present = set(int(v) for v in self.labels)
