@@ -415,3 +415,41 @@ def test_nearest_hit_and_over_by_depth_on_random_frames():
     np.testing.assert_allclose(straight[..., 3], 1.0)
     expected = out[..., :3] + (1 - out[..., 3:]) * np.array([0.2, 0.4, 0.6])
     np.testing.assert_allclose(straight[..., :3], expected, atol=1e-6)
+
+
+def test_antialiased_label_windows_equal_the_whole_image_render(vol, camera):
+    """Labels are traced in windows of the image; antialiasing looks past a window's border,
+    so the picture equals the whole image's render of the label."""
+    frame = sc.Scene(vol, labels=True).render(camera, show=[5], shading=FLAT)
+    assert frame.stats["traced_pixels"] < camera.width * camera.height
+    colour = palette_color(5)[:3]
+    look = sc.Shading(front_color=colour, back_color=tuple(0.6 * c for c in colour),
+                      background=(0, 0, 0, 0), ambient=1.0, diffuse=0.0, specular=0.0)
+    indicator = sc.Volume((vol.data == 5).astype(np.float32), spacing=vol.spacing,
+                          origin=vol.origin)
+    single = sc.Scene(indicator).render(camera, iso=0.5, inside="high", shading=look)
+    assert single.stats["antialiased"] > 0
+    np.testing.assert_allclose(frame.rgba, over_background(single.rgba, FLAT.background),
+                               atol=1e-6)
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_box_window_holds_every_ray_that_meets_the_box(ortho):
+    lo, hi = np.array([1.0, -2.0, 0.5]), np.array([3.0, 1.0, 2.0])
+    vol = sc.Volume(np.zeros((10, 10, 10), np.float32), origin=(-3, -4, -2))
+    for azimuth in (0, 40, 130, 250):
+        cam = sc.Camera.orbit(vol, azimuth=azimuth, elevation=30, size=(80, 60), ortho=ortho)
+        for camera in (cam, cam.tile(10, 5, 50, 40)):
+            origins, dirs = camera.rays()
+            with np.errstate(divide="ignore", invalid="ignore"):  # the slab test, brute force
+                t0, t1 = (lo - origins) / dirs, (hi - origins) / dirs
+            near = np.nanmax(np.minimum(t0, t1), axis=-1)
+            far = np.nanmin(np.maximum(t0, t1), axis=-1)
+            meets = (near <= far) & (far >= 0)
+            window = camera.box_window(lo, hi, pad=0)
+            assert window is not None and meets.any()
+            c0, r0, w, h = window
+            inside = np.zeros_like(meets)
+            inside[r0:r0 + h, c0:c0 + w] = True
+            assert not np.any(meets & ~inside)
+            assert w * h < 0.9 * camera.width * camera.height or camera is cam

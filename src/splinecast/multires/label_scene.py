@@ -352,7 +352,7 @@ class LabelScene:
         if "stats" in wanted:
             need.append("stats")
         start = time.perf_counter()
-        frames, drawn = [], []
+        frames, drawn, offsets = [], [], []
         prepare_ms = 0.0
         for value in values:
             alpha = self.styles[value].rgba[3] * alphas[value]
@@ -361,54 +361,57 @@ class LabelScene:
             t0 = time.perf_counter()
             scene = self._scene(value)
             prepare_ms += (time.perf_counter() - t0) * 1e3
+            # Only the window of the image the label's box projects to is traced: a label
+            # costs its share of the picture, not a whole frame.
+            window = camera.box_window(*scene.volume.bounds)
+            if window is None:
+                continue
             rgb = self.styles[value].rgba[:3]
             look = replace(shading, front_color=rgb,
                            back_color=tuple(c * _BACK_SHADE for c in rgb),
                            background=(0.0, 0.0, 0.0, 0.0))
-            frame = scene.render(camera, iso=0.5, inside="high", shading=look, clip=clip,
-                                 crop=crop, normals=normals, samples=samples, outputs=need)
+            frame = scene.render(camera.tile(*window), iso=0.5, inside="high", shading=look,
+                                 clip=clip, crop=crop, normals=normals, samples=samples,
+                                 outputs=need)
             if alpha < 1.0:  # premultiplied: colour and alpha scale together
                 frame.rgba *= np.float32(alpha)
             frames.append(frame)
             drawn.append(value)
-        return self._compose(frames, drawn, camera, shading, wanted, start, prepare_ms)
+            offsets.append((window[1], window[0]))
+        return self._compose(frames, drawn, offsets, camera, shading, wanted, start,
+                             prepare_ms)
 
-    def _compose(self, frames: list[Frame], drawn: list[int], camera: Camera,
-                 shading: Shading, wanted: frozenset[str], start: float,
+    def _compose(self, frames: list[Frame], drawn: list[int], offsets: list[tuple[int, int]],
+                 camera: Camera, shading: Shading, wanted: frozenset[str], start: float,
                  prepare_ms: float) -> Frame:
-        height, width = camera.height, camera.width
+        size = height, width = camera.height, camera.width
         stats: dict[str, Any] = {"mode": "labels", "model": self.model_name,
                                  "labels": len(drawn), "width": width, "height": height,
                                  "rays": width * height}
-        if not frames:
-            empty = np.zeros((height, width, 4), np.float32)
-            depth, source = np.full((height, width), np.inf), np.full((height, width), -1)
-            rgba = over_background(empty, shading.background)
-        else:
-            depth, source = nearest_hit(frames)
-            rgba = over_background(over_by_depth(frames), shading.background)
+        depth, source = nearest_hit(frames, offsets, size)
+        rgba = over_background(over_by_depth(frames, offsets, size), shading.background)
         values = np.asarray([0, *drawn], np.int64)
-        label = values[source + 1]
+
+        def nearest(name: str) -> np.ndarray | None:
+            return gather(frames, source, name, offsets) if name in wanted else None
+
         frame = Frame(rgba=rgba if "rgba" in wanted else None,
                       depth=depth if "depth" in wanted else None,
-                      position=gather(frames, source, "position") if frames and
-                      "position" in wanted else None,
-                      normal=gather(frames, source, "normal") if frames and
-                      "normal" in wanted else None,
-                      face=gather(frames, source, "face") if frames and
-                      "face" in wanted else None,
-                      cells_visited=None, cells_tested=None, blocks_skipped=None,
-                      stats=stats, label=label)
+                      position=nearest("position"), normal=nearest("normal"),
+                      face=nearest("face"), cells_visited=None, cells_tested=None,
+                      blocks_skipped=None, stats=stats, label=values[source + 1])
         if "stats" in wanted:
             for name in ("cells_visited", "cells_tested", "blocks_skipped"):
-                total = np.zeros((height, width), np.int32)
-                for f in frames:  # work per pixel over all the labels' rays
-                    total += getattr(f, name)
+                total = np.zeros(size, np.int32)
+                for f, (r0, c0) in zip(frames, offsets, strict=True):
+                    counts = getattr(f, name)  # work per pixel over all the labels' rays
+                    total[r0:r0 + counts.shape[0], c0:c0 + counts.shape[1]] += counts
                 setattr(frame, name, total)
             stats["mean_cells_visited"] = float(frame.cells_visited.mean())
         stats["hits"] = int(np.count_nonzero(np.isfinite(depth)))
         stats["prepare_ms"] = prepare_ms
         stats["trace_ms"] = (time.perf_counter() - start) * 1e3 - prepare_ms
+        stats["traced_pixels"] = int(sum(f.rgba.shape[0] * f.rgba.shape[1] for f in frames))
         stats["samples"] = max((f.stats.get("samples", 1) for f in frames), default=1)
         return frame
 

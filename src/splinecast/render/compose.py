@@ -29,28 +29,55 @@ from .frame import Frame
 __all__ = ["nearest_hit", "gather", "over_by_depth", "over_background"]
 
 
-def _check_same_size(frames: Sequence[Frame], need: str) -> tuple[int, int]:
-    if not frames:
+Offsets = Sequence[tuple[int, int]] | None
+
+
+def _layout(frames: Sequence[Frame], need: str, offsets: Offsets,
+            size: tuple[int, int] | None) -> tuple[tuple[int, int], list[tuple[int, int]]]:
+    """The composite's ``(height, width)`` and each frame's top-left pixel in it, checked."""
+    if not frames and size is None:
         raise ParameterError("nothing to composite: no frames")
-    shapes = set()
+    shapes = []
     for frame in frames:
         array = getattr(frame, need)
         if array is None:
             raise ParameterError(f"compositing needs each frame's {need} buffer: render with "
                                  f"outputs including {need!r}")
-        shapes.add(array.shape[:2])
-    if len(shapes) != 1:
-        raise ParameterError(f"frames of different sizes cannot be composited: {sorted(shapes)}")
-    return shapes.pop()
+        shapes.append(array.shape[:2])
+    if offsets is None:
+        if len(set(shapes)) > 1:
+            raise ParameterError(f"frames of different sizes cannot be composited: "
+                                 f"{sorted(set(shapes))}")
+        offsets = [(0, 0)] * len(frames)
+        size = size or shapes[0]
+    elif len(offsets) != len(frames) or size is None:
+        raise ParameterError("offsets need one (row, column) per frame and the size")
+    height, width = size
+    for (h, w), (r0, c0) in zip(shapes, offsets, strict=True):
+        if r0 < 0 or c0 < 0 or r0 + h > height or c0 + w > width:
+            raise ParameterError(f"a {w}x{h} frame at row {r0}, column {c0} does not fit in "
+                                 f"the {width}x{height} image")
+    return (int(height), int(width)), [(int(r), int(c)) for r, c in offsets]
 
 
-def nearest_hit(frames: Sequence[Frame]) -> tuple[np.ndarray, np.ndarray]:
+def _window(array: np.ndarray, offset: tuple[int, int], frame_array: np.ndarray) -> np.ndarray:
+    r0, c0 = offset
+    return array[r0:r0 + frame_array.shape[0], c0:c0 + frame_array.shape[1]]
+
+
+def nearest_hit(frames: Sequence[Frame], offsets: Offsets = None,
+                size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel, the frame whose ray hit first.
 
     Parameters
     ----------
     frames : sequence of Frame
-        Renders of one camera, each with a ``depth`` buffer.
+        Renders of one camera, each with a ``depth`` buffer: the whole image, or windows of it
+        (:meth:`splinecast.Camera.tile`) placed by ``offsets``.
+    offsets : sequence of (row, column), optional
+        The top-left pixel of each frame in the image (default: every frame is the image).
+    size : (height, width), optional
+        The image's size (needed with ``offsets``).
 
     Returns
     -------
@@ -60,33 +87,38 @@ def nearest_hit(frames: Sequence[Frame]) -> tuple[np.ndarray, np.ndarray]:
         Index into ``frames`` of the frame that gave it; ``-1`` where every ray missed. Ties go
         to the earlier frame.
     """
-    height, width = _check_same_size(frames, "depth")
+    (height, width), places = _layout(frames, "depth", offsets, size)
     depth = np.full((height, width), np.inf)
     source = np.full((height, width), -1, np.int32)
-    for index, frame in enumerate(frames):  # streaming: one frame in memory beside the result
-        nearer = frame.depth < depth
-        depth[nearer] = frame.depth[nearer]
-        source[nearer] = index
+    for index, (frame, place) in enumerate(zip(frames, places, strict=True)):
+        d, s = _window(depth, place, frame.depth), _window(source, place, frame.depth)
+        nearer = frame.depth < d  # streaming: one frame in memory beside the result
+        d[nearer] = frame.depth[nearer]
+        s[nearer] = index
     return depth, source
 
 
-def gather(frames: Sequence[Frame], source: np.ndarray, name: str) -> np.ndarray | None:
-    """Buffer ``name`` of the frame ``source`` names at each pixel (:func:`nearest_hit`);
-    ``None`` if a frame lacks it. Pixels without a source hold the buffer's miss value (NaN for
-    floats, 0 for integers)."""
+def gather(frames: Sequence[Frame], source: np.ndarray, name: str, offsets: Offsets = None,
+           ) -> np.ndarray | None:
+    """Buffer ``name`` of the frame ``source`` names at each pixel (:func:`nearest_hit`, with
+    the same ``offsets``); ``None`` if a frame lacks it. Pixels without a source hold the
+    buffer's miss value (NaN for floats, 0 for integers)."""
     arrays = [getattr(f, name) for f in frames]
-    if any(a is None for a in arrays):
+    if not arrays or any(a is None for a in arrays):
         return None
+    places = offsets if offsets is not None else [(0, 0)] * len(frames)
     first = arrays[0]
     fill = np.nan if first.dtype.kind == "f" else 0
-    out = np.full(first.shape, fill, first.dtype)
-    for index, array in enumerate(arrays):
-        mask = source == index
-        out[mask] = array[mask]
+    out = np.full(source.shape + first.shape[2:], fill, first.dtype)
+    for index, (array, place) in enumerate(zip(arrays, places, strict=True)):
+        window = _window(out, place, array)
+        mask = _window(source, place, array) == index
+        window[mask] = array[mask]
     return out
 
 
-def over_by_depth(frames: Sequence[Frame]) -> np.ndarray:
+def over_by_depth(frames: Sequence[Frame], offsets: Offsets = None,
+                  size: tuple[int, int] | None = None) -> np.ndarray:
     """Composite premultiplied colours front to back by depth with the "over" operator.
 
     Each frame contributes, at each pixel where its alpha is positive, one fragment at that
@@ -98,23 +130,27 @@ def over_by_depth(frames: Sequence[Frame]) -> np.ndarray:
     ----------
     frames : sequence of Frame
         Renders of one camera with ``rgba`` (premultiplied) and ``depth``.
+    offsets, size : optional
+        Windows of the image, as for :func:`nearest_hit`.
 
     Returns
     -------
     ndarray (height, width, 4), float32
         Premultiplied RGBA of the composite (alpha 0 where nothing was drawn).
     """
-    height, width = _check_same_size(frames, "rgba")
-    _check_same_size(frames, "depth")
+    (height, width), places = _layout(frames, "rgba", offsets, size)
+    _layout(frames, "depth", offsets, (height, width))
     # Only the pixels a frame drew are kept (a label covers a small part of the image), so the
     # memory is that of the fragments, not of a stack of whole frames.
     pixels, depths, order, colours = [], [], [], []
-    for index, frame in enumerate(frames):
-        drawn = np.flatnonzero(frame.rgba[..., 3].reshape(-1) > 0)
-        pixels.append(drawn)
-        depths.append(frame.depth.reshape(-1)[drawn])
-        order.append(np.full(drawn.size, index, np.int32))
-        colours.append(frame.rgba.reshape(-1, 4)[drawn].astype(np.float32))
+    for index, (frame, (r0, c0)) in enumerate(zip(frames, places, strict=True)):
+        rows, cols = np.nonzero(frame.rgba[..., 3] > 0)
+        pixels.append((rows + r0).astype(np.int64) * width + (cols + c0))
+        depths.append(frame.depth[rows, cols])
+        order.append(np.full(rows.size, index, np.int32))
+        colours.append(frame.rgba[rows, cols].astype(np.float32))
+    if not pixels:
+        return np.zeros((height, width, 4), np.float32)
     pixel = np.concatenate(pixels)
     depth = np.concatenate(depths)
     colour = np.concatenate(colours)
