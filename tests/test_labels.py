@@ -453,3 +453,27 @@ def test_box_window_holds_every_ray_that_meets_the_box(ortho):
             inside[r0:r0 + h, c0:c0 + w] = True
             assert not np.any(meets & ~inside)
             assert w * h < 0.9 * camera.width * camera.height or camera is cam
+
+
+def test_distributed_labels_equal_the_local_render(vol, camera, label_file, tmp_path):
+    """Sort-first on a Dask cluster: tiles rendered by the workers' label scenes assemble
+    into the local label render (label buffer, depth and colours)."""
+    distributed = pytest.importorskip("distributed")
+    table = {"3": {"rgba": [255, 0, 0, 255], "name": "liver"}}
+    read = sc.read(label_file)
+    cam = sc.Camera.orbit(read, azimuth=60, elevation=-20, size=(64, 48), fit="box")
+    local = sc.Scene(read, labels=True, colors=table, show=[3, 5],
+                     opacity={5: 0.5}).render(cam)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        from splinecast.distributed import DistributedScene
+
+        scene = DistributedScene(label_file, client, labels=True, colors=table, show=[3, 5],
+                                 opacity={5: 0.5})
+        frame = scene.render(cam, tile_size=16)
+    assert frame.stats["tiles"] > 4
+    np.testing.assert_array_equal(frame.label, local.label)
+    np.testing.assert_array_equal(frame.depth, local.depth)
+    np.testing.assert_allclose(frame.rgba, local.rgba, atol=1e-6)
+    assert set(np.unique(frame.label)) == {0, 3, 5}

@@ -5,9 +5,10 @@ isosurface of its indicator (1 where the voxel holds ``k``, 0 elsewhere) reconst
 scene's model: trilinear gives the faceted boundary of the voxels, the smooth models (B-splines,
 s31) smooth organ surfaces. Each label is rendered from a sub-volume: its voxel box plus
 :data:`MARGIN` voxels on every side (clamped to the volume), with the origin shifted so it sits
-where it belongs. The indicator is float32, so every label reuses the kernels of float32 volumes
-(no compile per label), and the boxes of all labels together hold about as many voxels as the
-volume: a frame of 30 labels costs about one render of the whole volume.
+where it belongs, and traced only in the window of the image that box projects to
+(:meth:`splinecast.Camera.box_window`). The indicator is float32, so every label reuses the
+kernels of float32 volumes (no compile per label), and the boxes of all labels together hold
+about as many voxels as the volume.
 
 The labels' frames are rendered on a transparent background and composited per pixel
 (:mod:`splinecast.render.compose`): front to back in depth order with the "over" operator (so
@@ -15,10 +16,12 @@ translucent labels show the labels behind them, and antialiased silhouettes blen
 surface behind), then once over the scene's background. ``Frame.label`` holds, per pixel, the
 value of the label hit first (0 on a miss): what a viewer shows under the cursor.
 
-Every kind of volume goes through this one path: an in-memory :class:`~splinecast.Volume`, and a
+Every kind of volume goes through this one path: an in-memory :class:`~splinecast.Volume`, a
 multiscale (OME-Zarr) label image, whose finest level that fits the memory ``budget`` is read
 (label pyramids are downsampled by the most frequent label, :mod:`.label_downsample`, so every
-level is a label volume of its own).
+level is a label volume of its own), and the workers of a sort-first
+:class:`~splinecast.distributed.DistributedScene` (``labels=True``), which render image tiles of
+it (a tile camera's frame is that window of the whole frame, ``label`` included).
 """
 
 from __future__ import annotations
