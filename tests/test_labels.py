@@ -179,6 +179,16 @@ def test_translucent_labels_composite_front_to_back(vol, camera):
     assert overlap.sum() > 50  # the spheres do overlap in the image
 
 
+def test_a_small_budget_prepares_labels_again_with_the_same_picture(vol, camera):
+    whole = sc.Scene(vol, labels=True).render(camera, samples=1)
+    tight = sc.Scene(vol, labels=True, budget=4 * 20**3)  # about one label's indicator
+    for _ in range(2):
+        frame = tight.render(camera, samples=1)
+        np.testing.assert_array_equal(frame.depth, whole.depth)
+        np.testing.assert_array_equal(frame.rgba, whole.rgba)
+    assert len(tight._scenes) == 1
+
+
 def test_hidden_labels_are_not_drawn(vol, camera):
     scene = sc.Scene(vol, labels=True)
     frame = scene.render(camera, show=[5], samples=1)
@@ -254,6 +264,7 @@ def test_a_bad_colour_table_is_one_line_naming_file_and_option(label_file, tmp_p
     (["--labels", "--mode", "mip"], "--mode mip does not apply to --labels"),
     (["--show", "3"], "--show applies to --labels only"),
     (["--labels", "--label-opacity", "2"], "--label-opacity"),
+    (["--labels", "--budget", "1GiB"], "--budget applies to multiscale"),
 ])
 def test_bad_label_options_are_one_line(label_file, tmp_path, capsys, args, needle):
     code = main(["render", str(label_file), "--quiet", "-o", str(tmp_path / "x.png"), *args])
@@ -262,15 +273,19 @@ def test_bad_label_options_are_one_line(label_file, tmp_path, capsys, args, need
     assert len(err.splitlines()) == 1 and needle in err, err
 
 
-def test_cli_render_equals_the_api(label_file, tmp_path, capsys):
+@pytest.mark.parametrize("smooth", [None, 5])
+def test_cli_render_equals_the_api(label_file, tmp_path, capsys, smooth):
     from PIL import Image
 
     out = tmp_path / "labels.png"
     depth = tmp_path / "depth.npy"
-    main(["render", str(label_file), "--labels", "--show", "3,12", "--size", "64x48",
-          "--fit", "box", "--samples", "1", "--quiet", "-o", str(out), "--depth", str(depth)])
+    more = ["--smooth", str(smooth)] if smooth else []
+    code = main(["render", str(label_file), "--labels", "--show", "3,12", "--size", "64x48",
+                 "--fit", "box", "--samples", "1", "--quiet", "-o", str(out), "--depth",
+                 str(depth), *more])
+    assert code == 0
     read = sc.read(label_file)  # a .npy file: unit spacing, origin 0
-    scene = sc.Scene(read, labels=True, show=[3, 12])
+    scene = sc.Scene(read, labels=True, show=[3, 12], smooth=smooth)
     cam = sc.Camera.orbit(read, azimuth=30, elevation=20, size=(64, 48), fit="box")
     frame = scene.render(cam, samples=1)
     np.testing.assert_array_equal(np.load(depth), frame.depth)

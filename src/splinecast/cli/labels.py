@@ -28,7 +28,7 @@ _NOT_FOR_LABELS = {
     "--iso": ("iso", None), "--color": ("color", None), "--opacity": ("opacity", None),
     "--method": ("method", "exact"), "--tf": ("tf", None), "--colormap": ("colormap", None),
     "--window": ("window", None), "--texture": ("texture", None), "--lod": ("lod", None),
-    "--cut": ("cut", None), "--smooth": ("smooth", None), "--step": ("step", None),
+    "--cut": ("cut", None), "--step": ("step", None),
     "--preintegration": ("preintegration", None), "--adaptive": ("adaptive", False),
     "--termination": ("termination", None), "--allow-missing": ("allow_missing", False),
 }
@@ -61,8 +61,9 @@ def wants_labels(args: argparse.Namespace, vol: Any) -> bool:
     return bool(args.labels)
 
 
-def check_label_args(args: argparse.Namespace, labels: bool) -> None:
-    """Refuse label options without labels, and options labels do not read."""
+def check_label_args(args: argparse.Namespace, labels: bool, multiscale: bool = False) -> None:
+    """Refuse label options without labels, and options labels do not read (``--budget`` is
+    the memory of the level read, for multiscale volumes only)."""
     if not labels:
         for flag, value in (("--show", args.show), ("--label-colors", args.label_colors),
                             ("--label-opacity", args.label_opacity)):
@@ -77,6 +78,11 @@ def check_label_args(args: argparse.Namespace, labels: bool) -> None:
             raise sc.ParameterError(f"{flag} does not apply to --labels")
     if args.label_opacity is not None:
         limits.check_finite_number(args.label_opacity, "--label-opacity", lo=0, hi=1)
+    if args.budget is not None:
+        if not multiscale:
+            raise sc.ParameterError(f"--budget applies to multiscale (OME-Zarr) volumes only; "
+                                    f"{args.file} is read into memory whole")
+        limits.parse_bytes(args.budget, "--budget")
 
 
 def _show(text: str | None) -> list[int] | None:
@@ -99,6 +105,8 @@ def _scene(args: argparse.Namespace, vol: Any, options: dict) -> Any:
         kwargs["opacity"] = args.label_opacity
     if args.budget is not None:
         kwargs["budget"] = args.budget
+    if args.smooth:
+        kwargs["smooth"] = args.smooth  # each label's indicator, never the labels
     scene = sc.Scene(vol, model=args.model, labels=True, **kwargs, **options)
     if args.label_colors is not None:
         scene.set_colors(Path(args.label_colors), "--label-colors")

@@ -199,7 +199,9 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--shading", default="phong", choices=("phong", "cel"),
                         help="phong: smooth Blinn-Phong; cel: 4-band cel shading (default phong)")
     render.add_argument("--smooth", type=int, choices=(3, 5),
-                        help="Gaussian pre-smoothing kernel size")
+                        help="Gaussian pre-smoothing kernel size (with --labels: of each "
+                             "label's indicator, for smooth surfaces; the labels are never "
+                             "averaged)")
     render.add_argument("--preintegration", choices=("none", "2d", "3d"),
                         help="DVR classification (default 2d pre-integration). With none of "
                              "--step, --preintegration, --table-layout, --adaptive and "
@@ -509,7 +511,7 @@ def run(args: argparse.Namespace) -> int:
     multiscale = not isinstance(vol, sc.Volume)
     wavelet = multiscale and isinstance(vol, sc.WaveletVolume)
     labels = wants_labels(args, vol)
-    check_label_args(args, labels)
+    check_label_args(args, labels, multiscale and not wavelet)
     if labels:
         options = model_options(args)
         shading = _shading(args, None)[0].get("shading")

@@ -27,6 +27,7 @@ it (a tile camera's frame is that window of the whole frame, ``label`` included)
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
 from typing import Any
@@ -116,7 +117,9 @@ class LabelScene:
     opacity : float or mapping, optional
         Opacity of every label, or label -> opacity (others 1); multiplies the colour's alpha.
     budget : int or str
-        Multiscale volumes: memory for the level read (:func:`label_volume`).
+        Multiscale volumes: memory for the level read (:func:`label_volume`); every volume:
+        memory for the labels' indicators kept prepared between frames (beyond it the least
+        recently drawn are dropped and prepared again when needed).
     smooth : {3, 5}, optional
         Filter each label's indicator with the ``smooth^3`` Gaussian
         (:func:`splinecast.smooth`) before the model reconstructs it: the voxels' staircase,
@@ -165,7 +168,10 @@ class LabelScene:
         self.styles = self._styles(colors, name)
         self._show = self._check_show(show, "show")
         self._opacity = self._check_opacity(opacity)
-        self._scenes: dict[int, Scene] = {}
+        # Prepared label scenes, least recently used first; their indicators' bytes are kept
+        # within the budget (a scene dropped is prepared again when its label is drawn).
+        self._scenes: OrderedDict[int, Scene] = OrderedDict()
+        self._budget = limits.parse_bytes(budget, "budget")
         self.prepare_ms = (time.perf_counter() - start) * 1e3
 
     # ------------------------------------------------------------------ set-up
@@ -252,12 +258,17 @@ class LabelScene:
         """The scene of label ``value``'s indicator over its box plus the margin (made on first
         use, then kept)."""
         scene = self._scenes.get(value)
-        if scene is None:
+        if scene is not None:
+            self._scenes.move_to_end(value)
+        else:
             index = int(np.searchsorted(self.labels, value))
             shape = np.array(self.data.shape)
             lo = np.maximum(self._lo[index] - MARGIN, 0)
             hi = np.minimum(self._hi[index] + MARGIN + 1, shape)
             box = tuple(slice(int(a), int(b)) for a, b in zip(lo, hi, strict=True))
+            name = self.volume.metadata.get("name", "the volume")
+            limits.check_memory(4 * int(np.prod(hi - lo)), f"the indicator of label {value}",
+                                str(name))
             indicator = (self.data[box] == value).astype(np.float32)
             spacing = np.asarray(self.volume.spacing)
             origin = np.asarray(self.volume.origin) + lo * spacing
@@ -270,6 +281,10 @@ class LabelScene:
                 sub.metadata["inside"] = "high"
             scene = Scene(sub, model=self.model_name, **self.options)
             self._scenes[value] = scene
+            held = sum(s.volume.data.nbytes for s in self._scenes.values())
+            while held > self._budget and len(self._scenes) > 1:
+                _, dropped = self._scenes.popitem(last=False)
+                held -= dropped.volume.data.nbytes
         return scene
 
     # ------------------------------------------------------------------ what a camera frames
