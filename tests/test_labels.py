@@ -265,6 +265,8 @@ def test_a_bad_colour_table_is_one_line_naming_file_and_option(label_file, tmp_p
     (["--show", "3"], "--show applies to --labels only"),
     (["--labels", "--label-opacity", "2"], "--label-opacity"),
     (["--labels", "--budget", "1GiB"], "--budget applies to multiscale"),
+    (["--labels", "--shading", "cel"], "--shading does not apply to --labels"),
+    (["--labels", "--inside", "low"], "--inside does not apply to --labels"),
 ])
 def test_bad_label_options_are_one_line(label_file, tmp_path, capsys, args, needle):
     code = main(["render", str(label_file), "--quiet", "-o", str(tmp_path / "x.png"), *args])
@@ -492,3 +494,16 @@ def test_distributed_labels_equal_the_local_render(vol, camera, label_file, tmp_
     np.testing.assert_array_equal(frame.depth, local.depth)
     np.testing.assert_allclose(frame.rgba, local.rgba, atol=1e-6)
     assert set(np.unique(frame.label)) == {0, 3, 5}
+
+
+def test_a_label_image_source_makes_a_label_pyramid_keeping_its_colours(tmp_path):
+    data = blocky_labels((20, 18, 16))
+    colours = [{"label-value": 900, "rgba": [0, 255, 0, 255]}]
+    vol = sc.Volume(data, metadata={"image_label": {"colors": colours}})
+    mv = sc.build_pyramid(vol, tmp_path / "a.zarr", brick=8, progress=False)  # labels: auto
+    assert mv.attributes["labels"] is True
+    assert mv.metadata["image_label"]["colors"] == colours
+    assert sc.Scene(mv, labels=True).style(900).rgba == (0.0, 1.0, 0.0, 1.0)
+    plain = sc.build_pyramid(sc.Volume(data), tmp_path / "b.zarr", brick=8, progress=False)
+    assert "image_label" not in plain.metadata  # never guessed from integer voxels
+    assert plain.metadata["downsampling"] == "binomial-vertex-centred"

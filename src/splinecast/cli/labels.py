@@ -31,6 +31,9 @@ _NOT_FOR_LABELS = {
     "--cut": ("cut", None), "--step": ("step", None),
     "--preintegration": ("preintegration", None), "--adaptive": ("adaptive", False),
     "--termination": ("termination", None), "--allow-missing": ("allow_missing", False),
+    "--inside": ("inside", None), "--shading": ("shading", "phong"),
+    "--texture-scale": ("texture_scale", 0.1), "--tolerance": ("tolerance", 0.0),
+    "--table-layout": ("table_layout", None),
 }
 
 
