@@ -125,6 +125,8 @@ class LabelScene:
         (:func:`splinecast.smooth`) before the model reconstructs it: the voxels' staircase,
         which every model's 0.5 isosurface of a binary indicator still shows as ripples, melts
         into a smooth organ surface (about a voxel's detail is lost). Default: none.
+    labels : bool
+        ``True``, as ``Scene(volume, labels=True)`` passes it.
     **options
         Model options (``prefilter=True``, ...), passed to every label's scene.
 
@@ -151,6 +153,9 @@ class LabelScene:
                  budget: Any = DEFAULT_BUDGET, smooth: int | None = None, labels: bool = True,
                  **options: Any) -> None:
         from ..models import MODELS
+
+        if not labels:
+            raise ParameterError("a LabelScene renders labels: labels must be True")
 
         if model not in MODELS:
             raise ParameterError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
