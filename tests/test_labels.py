@@ -298,12 +298,12 @@ def test_cli_render_equals_the_api(label_file, tmp_path, capsys, smooth):
 def blocky_labels(shape=(37, 30, 26), seed=7) -> np.ndarray:
     """Labels 0..6 in random boxes (and a thin sheet), so blocks hold ties and mixtures."""
     rng = np.random.default_rng(seed)
-    data = np.zeros(shape, np.uint16)
+    data = np.zeros(shape, np.uint8)
     for value in rng.integers(1, 7, 40):
         lo = rng.integers(0, np.array(shape) - 2)
         size = rng.integers(1, 9, 3)
         data[lo[0]:lo[0] + size[0], lo[1]:lo[1] + size[1], lo[2]:lo[2] + size[2]] = value
-    data[:, 11, :] = 900  # a one-voxel sheet of a high label
+    data[:, 11, :] = 200  # a one-voxel sheet of a high label
     return data
 
 
@@ -390,6 +390,16 @@ def test_label_store_renders_as_labels(label_store, tmp_path, capsys):
     code = main(["render", str(path), "--size", "32x24", "-o", str(tmp_path / "a.png")])
     err = capsys.readouterr().err
     assert code == 0 and "label image" in err and "--no-labels" in err
+    # --no-labels: the raw values' isosurface, as the plain scene of the store draws it.
+    code = main(["render", str(path), "--no-labels", "--size", "32x24", "--iso", "3.5",
+                 "--samples", "1", "--fit", "box", "--depth", str(tmp_path / "d.npy"),
+                 "-o", str(tmp_path / "b.png")])
+    err = capsys.readouterr().err
+    assert code == 0 and "label image" not in err
+    raw_cam = sc.Camera.orbit(mv, azimuth=30, elevation=20, size=(32, 24), fit="box")
+    with sc.Scene(mv) as plain:
+        raw = plain.render(raw_cam, iso=3.5, samples=1, complete=True)
+    np.testing.assert_array_equal(np.load(tmp_path / "d.npy"), raw.depth)
     main(["info", str(path)])
     assert "labels:" in capsys.readouterr().out
 
@@ -498,12 +508,12 @@ def test_distributed_labels_equal_the_local_render(vol, camera, label_file, tmp_
 
 def test_a_label_image_source_makes_a_label_pyramid_keeping_its_colours(tmp_path):
     data = blocky_labels((20, 18, 16))
-    colours = [{"label-value": 900, "rgba": [0, 255, 0, 255]}]
+    colours = [{"label-value": 200, "rgba": [0, 255, 0, 255]}]
     vol = sc.Volume(data, metadata={"image_label": {"colors": colours}})
     mv = sc.build_pyramid(vol, tmp_path / "a.zarr", brick=8, progress=False)  # labels: auto
     assert mv.attributes["labels"] is True
     assert mv.metadata["image_label"]["colors"] == colours
-    assert sc.Scene(mv, labels=True).style(900).rgba == (0.0, 1.0, 0.0, 1.0)
+    assert sc.Scene(mv, labels=True).style(200).rgba == (0.0, 1.0, 0.0, 1.0)
     plain = sc.build_pyramid(sc.Volume(data), tmp_path / "b.zarr", brick=8, progress=False)
     assert "image_label" not in plain.metadata  # never guessed from integer voxels
     assert plain.metadata["downsampling"] == "binomial-vertex-centred"
