@@ -262,6 +262,44 @@ def _check_cache_size(stated: str) -> None:
         assert remote.RemoteSettings.from_env().cache_bytes == parse_bytes(first(stated))
 
 
+def _two_labels(metadata=None) -> sc.Volume:
+    data = np.zeros((8, 8, 8), np.uint8)
+    data[1:4, 1:4, 1:4], data[5:7, 5:7, 5:7] = 2, 9
+    return sc.Volume(data, metadata=metadata)
+
+
+def _check_labels(stated: str) -> None:
+    from splinecast.cli.labels import wants_labels
+
+    assert stated.startswith("for OME-Zarr label images")
+    args = argparse.Namespace(labels=None, file="x", quiet=True)
+    assert wants_labels(args, _two_labels({"image_label": {}}))
+    assert not wants_labels(args, _two_labels())  # never guessed from the voxels
+
+
+def _check_show(stated: str) -> None:
+    assert first(stated) == "all"
+    assert sc.Scene(_two_labels(), labels=True).shown == (2, 9)
+
+
+def _check_label_colors(stated: str) -> None:
+    from splinecast.io.label_colors import palette_color
+
+    assert stated.startswith("the store's image-label colours, else a palette")
+    meta = {"image_label": {"colors": [{"label-value": 2, "rgba": [0, 0, 255, 255]}]}}
+    scene = sc.Scene(_two_labels(meta), labels=True)
+    assert scene.style(2).rgba == (0.0, 0.0, 1.0, 1.0)
+    assert scene.style(9).rgba == palette_color(9)
+
+
+def _check_label_opacity(stated: str) -> None:
+    import inspect
+
+    from splinecast.multires.label_scene import LabelScene
+
+    assert float(first(stated)) == inspect.signature(LabelScene).parameters["opacity"].default
+
+
 #: (command, option) -> check of the stated default against the code, for options whose parser
 #: default is None (the code fills them in).
 CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
@@ -284,6 +322,10 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("render", "--allow-external-data"): _check_external,
     ("render", "--allow-missing"): _check_missing,
     ("render", "--samples"): _check_samples,
+    ("render", "--labels"): _check_labels,
+    ("render", "--show"): _check_show,
+    ("render", "--label-colors"): _check_label_colors,
+    ("render", "--label-opacity"): _check_label_opacity,
     ("view", "--model"): _check_view_model,
     ("view", "--iso"): _check_view_iso,
     ("view", "--budget"): _check_budget,

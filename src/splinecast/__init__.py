@@ -34,6 +34,7 @@ from .render.effects import SurfaceEffects
 from .render.frame import Frame
 from .render.modes import Dvr, Iso, MinIp, Mip, MultiIso
 from .render.shading import Shading
+from .scene import LABELS as _LABELS
 from .scene import Scene, check_iso, register_scene_type
 from .transfer import TransferFunction
 from .volume import Volume
@@ -46,6 +47,7 @@ _LAZY = {
     "build_pyramid": ("splinecast.multires.pyramid", "build_pyramid"),
     "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
     "MultiscaleScene": ("splinecast.multires.scene", "MultiscaleScene"),
+    "LabelScene": ("splinecast.multires.label_scene", "LabelScene"),
     "WaveletVolume": ("splinecast.multires.wavelet_store", "WaveletVolume"),
     "WaveletScene": ("splinecast.multires.wavelet_scene", "WaveletScene"),
     "multires": ("splinecast.multires", None),
@@ -78,6 +80,16 @@ def _open_wavelet_store(path, root, attributes):
 
 
 register_scene_type("splinecast.multires.wavelet_store.WaveletVolume", _wavelet_scene)
+
+
+def _label_scene(volume, *args, **kwargs):
+    """``Scene(volume, labels=True, ...)``: each label's surface in its colour (any volume)."""
+    from .multires.label_scene import LabelScene
+
+    return LabelScene(volume, *args, **kwargs)
+
+
+register_scene_type(_LABELS, _label_scene)
 _register_store_kind("wavelet", _open_wavelet_store)
 
 
@@ -94,6 +106,7 @@ def __getattr__(name: str):
 __all__ = [
     "Camera",
     "MODELS",
+    "LabelScene",
     "MultiscaleScene",
     "MultiscaleVolume",
     "DVRSettings",

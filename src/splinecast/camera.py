@@ -290,6 +290,37 @@ class Camera:
         out.region = (base_c + c0, base_r + r0, full_w, full_h)
         return out
 
+    def box_window(self, lo: Any, hi: Any, pad: int = 2) -> tuple[int, int, int, int] | None:
+        """The window of this camera's image (``col0, row0, width, height`` for :meth:`tile`)
+        that holds every ray meeting the world box ``[lo, hi]``, ``pad`` pixels wider on each
+        side; ``None`` when no ray of the image can meet it.
+
+        The box's eight corners are projected onto the image; when a corner lies behind the
+        eye (a perspective camera inside or beside the box) the whole image is returned.
+        """
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        corners = np.array([[(lo, hi)[(n >> a) & 1][a] for a in range(3)] for n in range(8)])
+        basis = self.pixel_basis()
+        half_w, half_h = basis[12], basis[13]
+        col_base, row_base, full_w, full_h = self.region
+        v = corners - self.position
+        z = v @ self.forward
+        sx, sy = v @ self.right, v @ self.up
+        if not self.ortho:
+            if np.any(z <= 1e-9 * max(1.0, float(np.abs(v).max()))):
+                return 0, 0, self.width, self.height
+            sx, sy = sx / z, sy / z
+        # Pixel centres: col + 0.5 = (sx / half_w + 1) / 2 * full_w (the formula of rays()).
+        cols = (sx / half_w + 1.0) * 0.5 * full_w - 0.5 - col_base
+        rows = (1.0 - sy / half_h) * 0.5 * full_h - 0.5 - row_base
+        c0 = max(0, int(math.floor(cols.min())) - pad)
+        c1 = min(self.width - 1, int(math.ceil(cols.max())) + pad)
+        r0 = max(0, int(math.floor(rows.min())) - pad)
+        r1 = min(self.height - 1, int(math.ceil(rows.max())) + pad)
+        if c0 > c1 or r0 > r1:
+            return None
+        return c0, r0, c1 - c0 + 1, r1 - r0 + 1
+
     def shifted(self, dx: float, dy: float) -> Camera:
         """This camera with every ray moved ``dx`` pixels to the right and ``dy`` pixels down
         inside its pixel (the sub-pixel samples of antialiasing).

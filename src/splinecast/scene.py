@@ -80,11 +80,17 @@ def check_iso(volume: Volume, iso: Any) -> float:
 _SCENE_TYPES: dict[str, Callable[..., Any]] = {}
 
 
+#: The key of :func:`register_scene_type` under which the scene of label volumes
+#: (``Scene(volume, labels=True)``, any kind of volume) is registered.
+LABELS = "labels"
+
+
 def register_scene_type(volume_class: str, factory: Callable[..., Any]) -> None:
     """Make ``Scene(volume, ...)`` return ``factory(volume, ...)`` for another kind of volume.
 
     ``volume_class`` is the qualified name of the volume's class (or of a base class), for
-    example ``"splinecast.io.omezarr.MultiscaleVolume"``: the layers above this module register
+    example ``"splinecast.io.omezarr.MultiscaleVolume"``, or :data:`LABELS` for the scene of
+    ``Scene(volume, labels=True)``: the layers above this module register
     their scenes here (``splinecast/__init__.py`` registers
     :class:`splinecast.multires.scene.MultiscaleScene`), so this module never imports them.
     """
@@ -110,6 +116,11 @@ class Scene:
         Reconstruction: ``"trilinear"``, ``"bspline1"``, ``"bspline2"``, ``"bspline3"``,
         ``"qss"`` or ``"s31"`` (see :data:`splinecast.models.MODELS`); every model renders in
         every mode.
+    labels : bool
+        ``True``: ``volume`` is a label volume (a segmentation: 0 is the background, every
+        other integer a region); each label's boundary is drawn as its own surface in its own
+        colour, and ``Scene`` returns a :class:`~splinecast.multires.label_scene.LabelScene`
+        (options ``colors``, ``show``, ``opacity``). Never guessed from the voxel type.
     **options
         Model options (for example ``prefilter=True`` for spline models), passed to the model.
 
@@ -124,15 +135,25 @@ class Scene:
     """
 
     def __new__(cls, volume: Any = None, *args: Any, **kwargs: Any) -> Any:
-        # A volume of another kind (a lazy multiscale OME-Zarr image) gets the scene registered
-        # for it (register_scene_type); a Volume gets this class.
+        # Label volumes (labels=True) of any kind get the label scene registered under
+        # LABELS; a volume of another kind (a lazy multiscale OME-Zarr image) gets the scene
+        # registered for it (register_scene_type); a Volume gets this class.
+        if cls is Scene and kwargs.get("labels"):
+            factory = _SCENE_TYPES.get(LABELS)
+            if factory is not None:
+                return factory(volume, *args, **kwargs)
+        kwargs.pop("labels", None)
         if cls is Scene and not isinstance(volume, Volume):
             factory = _scene_factory(volume)
             if factory is not None:
                 return factory(volume, *args, **kwargs)
         return super().__new__(cls)
 
-    def __init__(self, volume: Volume, model: str = "trilinear", **options: Any) -> None:
+    def __init__(self, volume: Volume, model: str = "trilinear", *, labels: bool = False,
+                 **options: Any) -> None:
+        if labels:
+            raise ParameterError("labels=True needs the label scene, registered by importing "
+                                 "splinecast")
         if not isinstance(volume, Volume):
             raise ParameterError(f"volume must be a splinecast.Volume, got {type(volume).__name__}")
         if model not in MODELS:

@@ -91,6 +91,14 @@ def _multiscale(mv) -> int:
     print(f"extent:    {', '.join(f'{s:g}' for s in mv.extent)}")
     print(f"range:     {lo:g} .. {hi:g}{exact}")
     _series(mv.metadata)
+    image_label = mv.metadata.get("image_label")
+    if isinstance(image_label, dict):
+        colours = image_label.get("colors")
+        told = f", {len(colours)} colours given" if isinstance(colours, list) else ""
+        how = mv.metadata.get("downsampling")
+        down = f", levels by {how}" if how else ""
+        print(f"labels:    an OME-Zarr label image{told}{down}; rendered as labels "
+              "(--no-labels for the raw values)")
     if mv.brick:
         print(f"bricks:    {mv.brick}^3 cells, tables: {', '.join(mv.tables()) or 'none'}")
     from splinecast.multires.hist_store import histogram_info

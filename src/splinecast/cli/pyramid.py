@@ -33,6 +33,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cmd.add_argument("--histograms", action="store_true",
                      help="also store the brick histograms of the error cut (--cut error): "
                           "opening it then reads no level, a transfer-function edit no voxel")
+    cmd.add_argument("--labels", action=argparse.BooleanOptionalAction, default=None,
+                     help="a label volume (segmentation): coarser levels take the most "
+                          "frequent label, never an average, and the store is marked as an "
+                          "OME-Zarr label image (default: when the source is one)")
     cmd.add_argument("--overwrite", action="store_true", help="replace an existing store")
     cmd.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_input_options(cmd)
@@ -54,6 +58,9 @@ def run(args: argparse.Namespace) -> int:
     # The per-level progress goes to the real stderr, past the capture of library output
     # (splinecast.cli.main); warnings and log records stay captured.
     if args.wavelet is not None:
+        if args.labels:
+            raise sc.ParameterError("--labels does not apply to --wavelet pyramids (a wavelet "
+                                    "pyramid averages)")
         if args.wavelet not in (1, 2, 3):
             raise sc.ParameterError(f"--wavelet must be a B-spline degree 1, 2 or 3, got "
                                     f"{args.wavelet}")
@@ -68,7 +75,9 @@ def run(args: argparse.Namespace) -> int:
         mv = build_pyramid(args.source, out, brick=args.brick, levels=args.levels,
                            overwrite=args.overwrite, unit=args.unit, workers=args.workers,
                            progress=not args.quiet, histograms=args.histograms,
-                           allow_external=args.allow_external_data or None)
-    log(args, f"wrote {len(mv.levels)} levels in {time.perf_counter() - start:.1f} s")
+                           allow_external=args.allow_external_data or None,
+                           labels=args.labels)
+    kind = " of labels (most frequent label per block)" if mv.attributes.get("labels") else ""
+    log(args, f"wrote {len(mv.levels)} levels{kind} in {time.perf_counter() - start:.1f} s")
     print(out)
     return 0

@@ -33,6 +33,7 @@ from ._common import (
     read_options,
 )
 from ._compiling import CompileNotice
+from .labels import add_label_options, check_label_args, run_labels, wants_labels
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
            "mode_kwargs", "orbit_options", "sampled_step", "dvr_settings", "SAMPLED_STEP",
@@ -120,6 +121,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "importance under the budget; dvr and mip) (default lod)")
     render.add_argument("--depth", help="also save the depth buffer to this .npy file")
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
+    add_label_options(render)
     add_missing_option(render)
     add_selection_options(render)
     add_input_options(render)
@@ -197,7 +199,9 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
     render.add_argument("--shading", default="phong", choices=("phong", "cel"),
                         help="phong: smooth Blinn-Phong; cel: 4-band cel shading (default phong)")
     render.add_argument("--smooth", type=int, choices=(3, 5),
-                        help="Gaussian pre-smoothing kernel size")
+                        help="Gaussian pre-smoothing kernel size (with --labels: of each "
+                             "label's indicator, for smooth surfaces; the labels are never "
+                             "averaged)")
     render.add_argument("--preintegration", choices=("none", "2d", "3d"),
                         help="DVR classification (default 2d pre-integration). With none of "
                              "--step, --preintegration, --table-layout, --adaptive and "
@@ -506,6 +510,15 @@ def run(args: argparse.Namespace) -> int:
     read_s = time.perf_counter() - start
     multiscale = not isinstance(vol, sc.Volume)
     wavelet = multiscale and isinstance(vol, sc.WaveletVolume)
+    labels = wants_labels(args, vol)
+    check_label_args(args, labels, multiscale and not wavelet)
+    if labels:
+        options = model_options(args)
+        shading = _shading(args, None)[0].get("shading")
+        with CompileNotice(f"{args.model} / labels", args.model,
+                           enabled=not getattr(args, "quiet", False),
+                           stream=getattr(args, "stderr", None)):
+            return run_labels(args, vol, read_s, options, shading, orbit_options(args))
     if args.model is None and wavelet:
         args.model = f"bspline{vol.degree}"
     _refuse_multiscale_options(args, multiscale, wavelet)

@@ -107,6 +107,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         read = (f"opened {vol.name}: {len(vol.levels)} levels, {vol.shape} {vol.dtype} in "
                 f"{seconds:.2f} s (coarsest level read; bricks load while you look)")
+    if isinstance(getattr(vol, "metadata", {}).get("image_label"), dict):
+        # The viewer draws one isosurface of the raw values; labels need the label scene.
+        read += ("; an OME-Zarr label image: the viewer shows its raw values (splinecast "
+                 "render --labels draws each label)")
     with uncaptured(args):  # serving: warnings and log lines as they come, not at the end
         asyncio.run(_serve(server, args, read))
     log(args, "stopped")

@@ -63,7 +63,13 @@ class DistributedScene:
         same arguments and returns the same :class:`Frame`; ``level``, ``parts`` and
         ``brick`` are its options).
     smooth : int, optional
-        Gaussian pre-smoothing kernel size (3 or 5), applied on the workers (sort-first).
+        Gaussian pre-smoothing kernel size (3 or 5), applied on the workers (sort-first); with
+        ``labels=True``, to each label's indicator (a label volume is never averaged).
+    labels : bool
+        A label volume (sort-first): every worker opens ``Scene(volume, labels=True, ...)``
+        (:class:`~splinecast.multires.label_scene.LabelScene`) with the options ``colors`` (a
+        path or a table), ``show``, ``opacity`` and ``budget``; the frame's ``label`` buffer is
+        assembled with the others.
     **options
         Model options, as for :class:`~splinecast.Scene`.
 
@@ -107,11 +113,13 @@ class DistributedScene:
 
     def __init__(self, source: str | os.PathLike | SceneSource, client: Client | None = None,
                  model: str = "trilinear", *, strategy: str = "sort-first",
-                 smooth: int | None = None, **options: Any) -> None:
+                 smooth: int | None = None, labels: bool = False, **options: Any) -> None:
         from distributed import Client, get_client
 
         if not isinstance(source, SceneSource):
-            source = SceneSource(source, model, options, smooth)
+            label_options = _label_options(options, smooth) if labels else None
+            source = SceneSource(source, model, options, None if labels else smooth,
+                                 labels=label_options)
         if client is None:
             try:
                 client = get_client()
@@ -323,3 +331,26 @@ class DistributedScene:
         a generator may be collected after its client closed)."""
         if futures and self.client.status == "running":
             self.client.cancel(futures)
+
+
+def _label_options(options: dict[str, Any], smooth: int | None) -> dict[str, Any]:
+    """The label scene's options taken out of ``options`` (the rest are the model's), made
+    hashable: a colour table as a path or JSON text, ``show`` as a tuple."""
+    import json
+
+    labels: dict[str, Any] = {}
+    for name in ("colors", "show", "opacity", "budget"):
+        value = options.pop(name, None)
+        if value is None:
+            continue
+        if name == "colors":
+            value = (json.dumps(value) if isinstance(value, (dict, list))
+                     else os.path.abspath(os.fspath(value)))
+        elif name == "show":
+            value = tuple(int(v) for v in value)
+        elif name == "opacity" and isinstance(value, dict):
+            value = tuple(sorted(value.items()))
+        labels[name] = value
+    if smooth is not None:
+        labels["smooth"] = int(smooth)
+    return labels

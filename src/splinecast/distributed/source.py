@@ -9,6 +9,7 @@ back, enough for the client to aim cameras and check isovalues without reading t
 from __future__ import annotations
 
 import inspect
+import json
 import os
 from dataclasses import dataclass, field
 from typing import Any
@@ -55,6 +56,10 @@ class SceneSource:
     timepoint, channel : int, optional
         Which time point and channel of a file holding several to read (see
         :func:`splinecast.read`; default: the first).
+    labels : dict, optional
+        A label volume: the options of the label scene the workers open (``Scene(volume,
+        labels=True, **labels)``: ``colors`` as a path or JSON text, ``show``, ``opacity``,
+        ``smooth``, ``budget``); hashable values. ``None``: an ordinary scene.
     """
 
     location: str
@@ -64,11 +69,12 @@ class SceneSource:
     allow_external: bool | None = None
     timepoint: int | None = None
     channel: int | None = None
+    labels: tuple[tuple[str, Any], ...] | None = None
 
     def __init__(self, location: str | os.PathLike, model: str = "trilinear",
                  options: dict[str, Any] | None = None, smooth: int | None = None,
                  allow_external: bool | None = None, timepoint: int | None = None,
-                 channel: int | None = None) -> None:
+                 channel: int | None = None, labels: dict[str, Any] | None = None) -> None:
         text = os.fspath(location)
         if not isinstance(text, str) or not text:
             raise ParameterError(f"source must be a path or a demo: spec, got {location!r}")
@@ -94,6 +100,13 @@ class SceneSource:
                            None if allow_external is None else bool(allow_external))
         object.__setattr__(self, "timepoint", index_argument(timepoint, "timepoint"))
         object.__setattr__(self, "channel", index_argument(channel, "channel"))
+        label_items = None if labels is None else tuple(sorted(labels.items()))
+        try:
+            hash(label_items)
+        except TypeError:
+            raise ParameterError(f"label options must be hashable values, got {labels}"
+                                 ) from None
+        object.__setattr__(self, "labels", label_items)
 
     def read(self) -> Volume:
         """Read (and pre-smooth) the volume; raises :class:`~splinecast.ReadError` naming the
@@ -104,6 +117,14 @@ class SceneSource:
 
     def open(self) -> Scene:
         """Read the volume and prepare the model: the expensive step workers do once."""
+        if self.labels is not None:
+            labels = dict(self.labels)
+            if isinstance(labels.get("colors"), str) and labels["colors"].lstrip()[:1] in "[{":
+                labels["colors"] = json.loads(labels["colors"])  # a table sent as JSON text
+            if isinstance(labels.get("opacity"), tuple):  # per label, as pairs
+                labels["opacity"] = dict(labels["opacity"])
+            return Scene(self.read(), model=self.model, labels=True, **labels,
+                         **dict(self.options))
         return Scene(self.read(), model=self.model, **dict(self.options))
 
     def __str__(self) -> str:

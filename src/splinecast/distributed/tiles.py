@@ -141,7 +141,7 @@ class FrameCanvas:
         """Copy ``frame`` (the render of ``tile``) into its window of the full image."""
         if frame.size != (tile.width, tile.height):
             raise ValueError(f"a {frame.size} frame cannot fill tile {tile}")
-        for name in PIXEL_FIELDS + ("value",):
+        for name in PIXEL_FIELDS + ("value", "label"):
             part = getattr(frame, name)
             if part is None:  # not requested (``outputs=``) or not a MIP value
                 continue
@@ -166,7 +166,8 @@ class FrameCanvas:
         a = self._arrays
         stats = merge_stats(self._tile_stats, a, self.width, self.height)
         stats.update(extra_stats)
-        return Frame(*(a.get(name) for name in PIXEL_FIELDS), stats, a.get("value"))
+        return Frame(*(a.get(name) for name in PIXEL_FIELDS), stats, a.get("value"),
+                     a.get("label"))
 
 
 #: Statistics recomputed from the assembled per-ray arrays (exactly the local render's numbers).

@@ -894,6 +894,10 @@ def _open_zarr(path: Path | str, selection: Selection, allow_external: bool | No
     if image.downsampling:
         metadata["downsampling"] = image.downsampling
     metadata.update(ours.get("source_metadata", {}))
+    if isinstance(ome.get("image-label"), dict):
+        # An NGFF label image (a segmentation): its colours and names, and the sign that it
+        # renders as labels (Scene(vol, labels=True), the CLI's default for such stores).
+        metadata["image_label"] = ome["image-label"]
     return MultiscaleVolume(path=path, levels=levels, metadata=metadata, attributes=ours,
                             root=node)
 

@@ -51,6 +51,8 @@ from ..io.ngff import multiscales_attributes, ngff_unit, to_ngff
 from ..io.omezarr import ATTRIBUTE, Level
 from .build_source import PyramidSource, level_source, open_pyramid_source
 from .downsample import binomial_halve, fine_range
+from .label_downsample import DESCRIPTION as LABEL_DOWNSAMPLING_TEXT
+from .label_downsample import mode_halve
 from .octree import GHOST, brick_counts
 from .tables import MINMAX, window_minmax, write_table
 from .wavelet_store import build_wavelet_pyramid
@@ -59,6 +61,8 @@ __all__ = ["build_pyramid", "plan_levels", "DOWNSAMPLING"]
 
 #: NGFF ``multiscales[0]["type"]`` of pyramids built here.
 DOWNSAMPLING = "binomial-vertex-centred"
+#: NGFF ``multiscales[0]["type"]`` of label pyramids built here (:mod:`.label_downsample`).
+LABEL_DOWNSAMPLING = "mode-vertex-centred"
 _SHARD_VOXELS = 128  # target shard side: 2 MiB of uint8 per shard file
 _SLAB = 32  # output planes per downsampling step inside a task (bounds the temporaries)
 _WRITE_BATCH = 64  # chunks zarr encodes per batch while the build writes
@@ -134,7 +138,7 @@ def _copy_task(source: PyramidSource, array: Any, lo: np.ndarray, hi: np.ndarray
 
 def _downsample_task(fine: Any, halve: tuple[bool, bool, bool], shape: tuple[int, int, int],
                      array: Any, lo: np.ndarray, hi: np.ndarray,
-                     brick: int) -> tuple[np.ndarray, np.ndarray]:
+                     brick: int, labels: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Level L+1: compute one shard (plus the ghost ring its bricks' ranges need) from level L.
 
     ``fine`` is anything with ``shape`` and ``read(lo, hi)``: the level just written, or for
@@ -142,8 +146,10 @@ def _downsample_task(fine: Any, halve: tuple[bool, bool, bool], shape: tuple[int
     than decoding the Zarr chunks again). The fine voxels are read in as few pieces as
     :data:`_READ_BYTES` allows (every read decodes whole chunks, so many thin reads decode the
     chunks on their boundaries over and over); the filter then runs a slab of output planes at a
-    time over the piece in memory, which bounds its float64 temporaries.
+    time over the piece in memory, which bounds its float64 temporaries. ``labels``: the
+    weighted mode of :mod:`.label_downsample` instead of the binomial average.
     """
+    halve_block = mode_halve if labels else binomial_halve
     out_shape = np.array(shape)
     ext_lo = np.maximum(lo - GHOST, 0)
     ext_hi = np.minimum(hi + GHOST + 1, out_shape)
@@ -164,8 +170,8 @@ def _downsample_task(fine: Any, halve: tuple[bool, bool, bool], shape: tuple[int
         for s0 in range(r0, r1, _SLAB):
             out_lo = np.array([s0, ext_lo[1], ext_lo[2]])
             out_hi = np.array([min(s0 + _SLAB, r1), ext_hi[1], ext_hi[2]])
-            slabs.append(binomial_halve(block, read_lo, fine_shape, halve, out_lo,
-                                        out_hi - out_lo))
+            slabs.append(halve_block(block, read_lo, fine_shape, halve, out_lo,
+                                     out_hi - out_lo))
         del block
     out = np.concatenate(slabs, axis=0)
     core = tuple(slice(int(a), int(b)) for a, b in zip(lo - ext_lo, hi - ext_lo, strict=True))
@@ -224,6 +230,7 @@ def build_pyramid(
     dtype: Any = None,
     histograms: bool = False,
     bins: int | None = None,
+    labels: bool | None = None,
 ) -> Any:
     """Write ``source`` as an OME-Zarr 0.5 brick pyramid at ``path``.
 
@@ -272,6 +279,11 @@ def build_pyramid(
         Without them a ``Scene(..., cut="error")`` builds them when it opens, reading every level.
     bins : int, optional
         Histogram bins per value axis (default :data:`~.cut_histograms.DEFAULT_BINS`).
+    labels : bool, optional
+        A label volume (segmentation): the coarser levels take the most frequent label
+        (:mod:`.label_downsample`), never an average, and the store says it is an NGFF label
+        image (``image-label`` metadata, the source's colours kept), so readers render it as
+        labels. Default: when the source is such a label image itself. Integer voxels only.
 
     Returns
     -------
@@ -305,6 +317,13 @@ def build_pyramid(
     src = open_pyramid_source(source, path, levels, overwrite, allow_external)
     if min(src.shape) < 1:
         raise ParameterError(f"{src.label}: the volume is empty ({fmt_shape(src.shape)})")
+    image_label = src.metadata.get("image_label")
+    if labels is None:
+        labels = isinstance(image_label, dict)
+    if labels and np.dtype(src.dtype).kind not in "iub":
+        raise ParameterError(f"{src.label}: labels must be integers, the voxels are "
+                             f"{np.dtype(src.dtype)} (convert the segmentation to an integer "
+                             "type)")
     unit_name = ngff_unit(unit if unit is not None else src.metadata.get("units"))
     if unit is not None and unit_name is None:
         raise ParameterError(f"unit {unit!r} is not a length unit (try millimeter, micrometer)")
@@ -348,7 +367,8 @@ def build_pyramid(
                     fine = src  # equal to level 0 and cheaper to read than its chunks
                 halve = tuple(factor[a] != plan[index - 1][1][a] for a in range(3))
                 tasks = [dask.delayed(_downsample_task)(fine, halve, shape, arrays[index], lo,
-                                                       hi, brick) for lo, hi in regions]
+                                                       hi, brick, bool(labels))
+                         for lo, hi in regions]
             # zarr encodes a shard's chunks in batches instead of one at a time: a third
             # less CPU per shard written (reads do not gain), the bytes are the same.
             with bar.callback(), zarr.config.set({"codec_pipeline.batch_size": _WRITE_BATCH}):
@@ -372,22 +392,38 @@ def build_pyramid(
             (str(i), tuple(s * f for s, f in zip(src.spacing, factor, strict=True)), origin)
             for i, (_shape, factor) in enumerate(plan)
         ]
-        attrs = multiscales_attributes(
-            name or path.name, datasets, unit=unit_name, downsampling=DOWNSAMPLING,
-            downsampling_metadata={
+        if labels:
+            downsampling, described = LABEL_DOWNSAMPLING, {
+                "description": LABEL_DOWNSAMPLING_TEXT,
+                "method": "splinecast.multires.label_downsample.mode_halve",
+            }
+        else:
+            downsampling, described = DOWNSAMPLING, {
                 "description": "coarse voxel c = (f[2c-1] + 2 f[2c] + f[2c+1]) / 4 along every "
                                "halved axis, mirrored at the ends; voxel centres shared with "
                                "level 0 (translation unchanged)",
                 "method": "splinecast.multires.downsample.binomial_halve",
-            },
+            }
+        attrs = multiscales_attributes(
+            name or path.name, datasets, unit=unit_name, downsampling=downsampling,
+            downsampling_metadata=described,
         )
+        if labels:
+            # NGFF's mark of a label image: readers (napari, splinecast) show it as labels.
+            # The source's colours and names are kept; without any, the default palette applies.
+            label_meta: dict[str, Any] = {"version": attrs["ome"]["version"]}
+            if isinstance(image_label, dict):
+                for key in ("colors", "properties"):
+                    if isinstance(image_label.get(key), list):
+                        label_meta[key] = image_label[key]
+            attrs["ome"]["image-label"] = label_meta
         ours = dict(root.attrs.get(ATTRIBUTE, {}))
         keep = {k: src.metadata[k] for k in ("inside", "default_iso", "modality")
                 if k in src.metadata and isinstance(src.metadata[k], (str, int, float))}
         ours.update({
             "version": 1, "brick": brick, "ghost": GHOST, "complete_chunks": True,
             "value_range": value_range, "source": str(src.metadata.get("source", src.label)),
-            "source_metadata": keep,
+            "source_metadata": keep, "labels": bool(labels),
         })
         root.attrs.update({**attrs, ATTRIBUTE: ours})
         if histograms:

@@ -45,6 +45,10 @@ class Frame:
     value : ndarray, shape (height, width), float64, optional
         Projected data value of ``mode="mip"`` / ``"minip"`` (NaN where the ray misses the
         volume); ``None`` for other modes.
+    label : ndarray, shape (height, width), int64, optional
+        Label volumes (``Scene(vol, labels=True)``): the value of the label whose surface the
+        pixel's ray hit first, 0 on a miss (what a viewer shows under the cursor); ``None``
+        for other scenes.
     """
 
     rgba: np.ndarray | None
@@ -57,6 +61,7 @@ class Frame:
     blocks_skipped: np.ndarray | None
     stats: dict[str, Any] = field(default_factory=dict)
     value: np.ndarray | None = None
+    label: np.ndarray | None = None
 
     def _needs(self, name: str) -> np.ndarray:
         array = getattr(self, name)
