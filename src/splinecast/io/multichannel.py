@@ -84,6 +84,10 @@ class MultichannelVolume(GridGeometry):
     option : str
         The keyword or command-line option the volumes came with, named in messages (a grid
         that differs from the first channel's).
+    hide_inactive : bool
+        Whether a channel the file marks inactive (``metadata["channel_active"]``) is hidden
+        by default. :func:`splinecast.read` hides them when asked for ``"all"`` channels, not
+        when the channels were named one by one.
 
     Attributes
     ----------
@@ -94,7 +98,7 @@ class MultichannelVolume(GridGeometry):
     defaults : list of dict
         Per channel, what the file says about showing it: ``label``, ``color`` (RGB in [0, 1]
         or ``None``), ``window`` (``(lo, hi)`` or ``None``) and ``active`` (a channel the file
-        marks inactive is hidden by default, as napari and OMERO do).
+        marks inactive is hidden by default, as napari and OMERO do; see ``hide_inactive``).
     metadata : dict
         The first channel's metadata, its name the image's.
 
@@ -113,7 +117,7 @@ class MultichannelVolume(GridGeometry):
     """
 
     def __init__(self, volumes: Sequence[Any], labels: Sequence[str] | None = None,
-                 option: str = "volumes") -> None:
+                 option: str = "volumes", hide_inactive: bool = True) -> None:
         volumes = list(volumes)
         if not volumes:
             raise ParameterError(f"{option}: a multichannel volume needs at least one channel")
@@ -140,7 +144,7 @@ class MultichannelVolume(GridGeometry):
                 "label": str(label) if label else f"channel {self.indices[i]}",
                 "color": meta.get("channel_color"),
                 "window": meta.get("channel_window"),
-                "active": bool(meta.get("channel_active", True)),
+                "active": bool(meta.get("channel_active", True)) or not hide_inactive,
             })
         self.metadata = dict(volumes[0].metadata)
 
@@ -243,4 +247,5 @@ def read_channels(read_one: Callable[[int], Any], channel: Any, label: str,
     volumes = [first] + [read_one(i) for i in wanted[1:]]
     names = [f"{label} channel {i}" for i in wanted]
     check_same_grid(volumes, option, names)
-    return MultichannelVolume(volumes, option=option)
+    # A channel named explicitly is shown even if the file marks it inactive.
+    return MultichannelVolume(volumes, option=option, hide_inactive=is_all(channel))
