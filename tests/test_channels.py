@@ -16,10 +16,12 @@ tifffile and vtk from arrays the test holds.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import splinecast as sc
 from splinecast.cli import main
@@ -267,3 +269,108 @@ def _run(argv: list[str], capsys) -> tuple[int, str, str]:
     code = main(argv)
     out, err = capsys.readouterr()
     return code, out, err
+
+
+@pytest.fixture(scope="module")
+def npy_files(tmp_path_factory, pair) -> tuple[Path, Path, Path]:
+    """The pair as two .npy files, and a third on a grid one voxel shorter."""
+    folder = tmp_path_factory.mktemp("npy")
+    paths = folder / "a.npy", folder / "b.npy", folder / "short.npy"
+    sc.write(sc.Volume(pair[0].data), paths[0])
+    sc.write(sc.Volume(pair[1].data), paths[1])
+    sc.write(sc.Volume(pair[1].data[:, :, :-1].copy()), paths[2])
+    return paths
+
+
+def test_cli_mip_of_channel_files_is_the_composite_of_single_renders(npy_files, tmp_path,
+                                                                       capsys):
+    a, b, _ = npy_files
+    png = tmp_path / "mip.png"
+    code, out, err = _run(["render", str(a), "--channel-file", str(b), "--mode", "mip",
+                           "--size", "40x32", "--fit", "box", "--channel-colors", "red,00FF00",
+                           "--channel-window", "0.1:0.9,0.2:1.6", "-o", str(png)], capsys)
+    assert code == 0, err
+    assert "channel 0 'channel 0': #ff0000, window 0.1..0.9" in err
+    volumes = [sc.read(a), sc.read(b)]
+    camera = sc.Camera.orbit(volumes[0], azimuth=30, elevation=20, size=(40, 32))
+    windows, colors = [(0.1, 0.9), (0.2, 1.6)], [(1, 0, 0), (0, 1, 0)]
+    values = [sc.Scene(v).render(camera, "mip", window=w, outputs=("value",)).value
+              for v, w in zip(volumes, windows, strict=True)]
+    summed = np.minimum(sum(_ramp(v, w, c) for v, w, c in zip(values, windows, colors,
+                                                              strict=True)), 1.0)
+    met = np.isfinite(values[0]) | np.isfinite(values[1])
+    expected = np.where(met[..., None], summed, np.asarray(BG[:3]))
+    got = np.asarray(Image.open(png), np.float64)[..., :3] / 255.0
+    np.testing.assert_allclose(got, expected, atol=0.5 / 255 + 1e-6)
+
+
+def test_cli_iso_takes_one_isovalue_per_channel(npy_files, tmp_path, capsys):
+    a, b, _ = npy_files
+    png = tmp_path / "iso.png"
+    code, _, err = _run(["render", str(a), "--channel-file", str(b), "--size", "40x32",
+                         "--fit", "box", "--samples", "1", "--channel-iso", "0.5,1.0",
+                         "--channel-colors", "auto,blue", "-o", str(png)], capsys)
+    assert code == 0, err
+    camera = sc.Camera.orbit(sc.read(a), azimuth=30, elevation=20, size=(40, 32))
+    scene = sc.Scene([sc.read(a), sc.read(b)], isos=[0.5, 1.0], colors=[None, "blue"])
+    expected = scene.render(camera, "iso", samples=1)
+    assert [c["iso"] for c in expected.stats["channels"]] == [0.5, 1.0]
+    np.testing.assert_array_equal(np.asarray(Image.open(png)), expected.to_uint8())
+
+
+def test_cli_ome_zarr_channels_with_their_omero_settings(store, tmp_path, capsys, camera):
+    path, _ = store
+    png = tmp_path / "cells.png"
+    code, _, err = _run(["render", str(path), "--channel", "all", "--mode", "mip",
+                         "--size", "40x32", "--fit", "box", "-o", str(png)], capsys)
+    assert code == 0, err
+    assert "channel 2 'RFP': #ff0000, window 0..1 (hidden: inactive" in err
+    assert "2 channels composited (additive)" in err
+    code, out, _ = _run(["info", str(path), "--channel", "1"], capsys)
+    assert code == 0
+    assert "  channel 0: 'DAPI' #0000ff, window 0.1..0.9\n" in out
+    assert "  channel 2: 'RFP' #ff0000, window 0..1 (inactive)\n" in out
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--channel", "0,5"], r"cells\.ome\.zarr: channel 5 is out of range \(it holds 3 "
+                           r"channels: 0 to 2\)"),
+    (["--channel", "0,1", "--channel-colors", "red"],
+     r"--channel-colors: 1 value for 2 channels"),
+    (["--channel", "0,1", "--channel-window", "0:1,3:2"], r"--channel-window: 3:2 must be "
+                                                          r"LO:HI with LO < HI"),
+    (["--channel-colors", "red,blue"], r"--channel-colors needs several channels"),
+    (["--channel", "0,1", "--colormap", "hot"], r"--colormap does not apply to several"),
+    (["--channel", "0,x"], r"argument --channel: must be an index"),
+])
+def test_cli_bad_channel_input_is_one_line(store, tmp_path, capsys, args, needle):
+    path, _ = store
+    png = tmp_path / "bad.png"
+    try:
+        code, _, err = _run(["render", str(path), "--mode", "mip", "-o", str(png), *args],
+                            capsys)
+    except SystemExit as exit_info:  # argparse's own errors
+        code, err = exit_info.code, capsys.readouterr().err
+    assert code == 2
+    assert err.startswith("splinecast: error:") and err.count("\n") == 1, err
+    assert re.search(needle, err), err
+    assert not png.exists()
+
+
+def test_cli_channel_file_on_another_grid_is_one_line(npy_files, tmp_path, capsys):
+    a, _, short = npy_files
+    png = tmp_path / "bad.png"
+    code, _, err = _run(["render", str(a), "--channel-file", str(short), "--mode", "mip",
+                         "-o", str(png)], capsys)
+    assert code == 2 and err.count("\n") == 1 and not png.exists()
+    assert re.search(r"^splinecast: error: .*short\.npy: --channel-file: shape "
+                     r"\(24, 22, 19\) differs from a\.npy's \(24, 22, 20\)", err), err
+
+
+def test_default_colours_are_napari_s():
+    from splinecast.channels import default_colors
+
+    assert default_colors(1) == [(1.0, 1.0, 1.0)]
+    assert default_colors(2) == [(1.0, 0.0, 1.0), (0.0, 1.0, 0.0)]
+    assert default_colors(4) == [(0.0, 1.0, 1.0), (1.0, 1.0, 0.0), (1.0, 0.0, 1.0),
+                                 (1.0, 0.0, 0.0)]

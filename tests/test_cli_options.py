@@ -268,10 +268,13 @@ def test_every_render_option_has_a_case():
     # pyramid) in tests/test_zarr_bounded.py; --timepoint, --volume and --channel (which
     # volume of a series is read) in tests/test_timepoints.py; --anon (S3 without
     # credentials) in tests/test_remote_s3.py, --cache-dir and --cache-size (the local cache of
-    # fetched chunks) in tests/test_remote_http.py.
+    # fetched chunks) in tests/test_remote_http.py; the options of several channels rendered
+    # together (--channel-colors, --channel-window, --channel-iso, --channel-file) in
+    # tests/test_channels.py.
     covered = {"--output", "--depth", "--quiet", "--help", "--mode", "--array", "--budget",
                "--lod", "--cut", "--allow-external-data", "--verbose", "--allow-missing",
-               "--timepoint", "--volume", "--channel", "--anon", "--cache-dir", "--cache-size"}
+               "--timepoint", "--volume", "--channel", "--anon", "--cache-dir", "--cache-size",
+               "--channel-colors", "--channel-window", "--channel-iso", "--channel-file"}
     used = {a.split("=")[0] for c in CASES for a in c.cli if a.startswith("--")}
     assert options - covered - used == set()
 

@@ -26,16 +26,17 @@ def add_channel_options(parser: argparse.ArgumentParser) -> None:
         "and dvr add the channels' colours, iso shows the nearest channel's surface)")
     group.add_argument("--channel-colors", metavar="C1,C2,...",
                        help="one colour per channel, comma-separated: names (red, lime, "
-                            "magenta, ...) or hex RRGGBB / #RRGGBB; 'auto' keeps the default "
-                            "(the file's OME-Zarr omero colour, else magenta/green for two "
-                            "channels, else cyan, yellow, magenta, red, green, blue)")
+                            "magenta, ...) or hex RRGGBB / #RRGGBB; 'auto' or no option: the "
+                            "file's OME-Zarr omero colour, else magenta, green for two "
+                            "channels, else cyan, yellow, magenta, red, green, blue in turn")
     group.add_argument("--channel-window", metavar="LO:HI,...",
                        help="one MIP/minIP window per channel, comma-separated LO:HI pairs; "
-                            "'auto' keeps the default (the file's omero window, else "
-                            "automatic)")
+                            "'auto' or no option: the file's omero window, else the "
+                            "automatic window of the channel")
     group.add_argument("--channel-iso", metavar="V1,V2,...",
                        help="one isovalue per channel for --mode iso, comma-separated; 'auto' "
-                            "keeps the default (Otsu's threshold of the channel)")
+                            "or no option: --iso if given, else the automatic isovalue of the "
+                            "channel")
     group.add_argument("--channel-file", action="append", metavar="FILE",
                        help="another volume on the same grid (shape, spacing, origin), "
                             "rendered as a further channel (repeatable)")
