@@ -374,3 +374,35 @@ def test_default_colours_are_napari_s():
     assert default_colors(2) == [(1.0, 0.0, 1.0), (0.0, 1.0, 0.0)]
     assert default_colors(4) == [(0.0, 1.0, 1.0), (1.0, 1.0, 0.0), (1.0, 0.0, 1.0),
                                  (1.0, 0.0, 0.0)]
+
+
+def test_channel_settings_are_checked_when_changed(pair, camera):
+    scene = sc.Scene(pair)
+    scene.channels[0].color = "00FFFF"  # bare hex, as omero writes it
+    scene.channels[0].window = [0.1, 0.9]
+    assert scene.channels[0].color == (0.0, 1.0, 1.0) and scene.channels[0].window == (0.1, 0.9)
+    with pytest.raises(sc.ParameterError, match="color 'teal-ish' is not a colour"):
+        scene.channels[0].color = "teal-ish"
+    with pytest.raises(sc.ParameterError, match="visible must be True or False"):
+        scene.channels[1].visible = "no"
+    frame = scene.render(camera, "mip")  # the refused values left the settings usable
+    assert frame.stats["channels"][0]["window"] == (0.1, 0.9)
+
+
+def test_malformed_omero_fields_are_left_out():
+    from splinecast.io.ngff import omero_channels
+
+    attrs = {"omero": {"channels": [
+        {"label": "ok", "color": "00FF00", "window": {"start": 1, "end": 5}, "active": False},
+        {"label": 7, "color": "green", "window": {"start": 5, "end": 1}, "active": "yes"},
+        "not a dict"]}}
+    assert omero_channels(attrs, 3) == [
+        {"label": "ok", "color": (0.0, 1.0, 0.0), "window": (1.0, 5.0), "active": False},
+        {"label": None, "color": None, "window": None, "active": True},
+        {"label": None, "color": None, "window": None, "active": True}]
+    assert omero_channels(attrs, 2) is None  # a list for another number of channels
+    assert omero_channels({"omero": "x"}, 1) is None
+    ome = {"ome": {"omero": {"channels": [{"label": "a\nb" * 50, "color": "#FF0000"}]}}}
+    (entry,) = omero_channels(ome, 1)
+    assert entry["color"] == (1.0, 0.0, 0.0)
+    assert "\n" not in entry["label"] and len(entry["label"]) == 80

@@ -120,16 +120,30 @@ class Channel:
     visible: bool = True
     label: str = ""
 
-    def __post_init__(self) -> None:
-        self.color = channel_color(self.color, f"channel {self.label or ''} color".replace(
-            "  ", " "))
-        self.window = _window(self.window, "window")
-        if self.iso is not None:
-            self.iso = limits.check_finite_number(self.iso, "iso")
-        if self.tf is not None and not isinstance(self.tf, TransferFunction):
-            raise ParameterError(f"tf must be a TransferFunction, got {type(self.tf).__name__}")
-        if not isinstance(self.visible, (bool, np.bool_)):
-            raise ParameterError(f"visible must be True or False, got {self.visible!r}")
+    def __setattr__(self, name: str, value: Any) -> None:
+        # Checked on every assignment, not only on construction: settings are changed between
+        # renders (``scene.channels[1].color = "#00ff00"``) and a bad one must be refused here,
+        # not deep inside the next render.
+        super().__setattr__(name, _checked(name, value))
+
+
+def _checked(name: str, value: Any) -> Any:
+    """A :class:`Channel` field's value, normalized (colour as RGB, window as two floats)."""
+    if name == "color":
+        return channel_color(value, "color")
+    if name == "window":
+        return _window(value, "window")
+    if name == "iso" and value is not None:
+        return limits.check_finite_number(value, "iso")
+    if name == "tf" and value is not None and not isinstance(value, TransferFunction):
+        raise ParameterError(f"tf must be a TransferFunction, got {type(value).__name__}")
+    if name == "visible":
+        if not isinstance(value, (bool, np.bool_)):
+            raise ParameterError(f"visible must be True or False, got {value!r}")
+        return bool(value)
+    if name == "label":
+        return str(value)
+    return value
 
 
 def _per_channel(values: Any, count: int, name: str) -> list[Any]:
