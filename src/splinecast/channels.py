@@ -372,17 +372,21 @@ class ChannelScene:
             layer = additive([f.rgba for f in frames])
             depth = np.min([f.depth for f in frames], axis=0)
         else:
-            depths = [f.depth for f in frames]
-            layer = nearest_hit_over([f.rgba for f in frames], depths)
-            nearest = np.argmin(np.stack(depths), axis=0)
-            depth = np.min(depths, axis=0)
-            pick = np.ix_(range(height), range(width))
+            layer, nearest = nearest_hit_over([f.rgba for f in frames],
+                                              [f.depth for f in frames])
+            depth = np.min([f.depth for f in frames], axis=0)
+            hit = nearest >= 0
 
             def chosen(attribute: str) -> np.ndarray | None:
+                """The buffer of the channel hit nearest (a miss's: the first channel's)."""
                 if attribute not in wanted:
                     return None
-                return np.stack([getattr(f, attribute) for f in frames])[
-                    (nearest, *pick)]
+                buffers = [getattr(f, attribute) for f in frames]
+                picked = buffers[0].copy()
+                for k, buffer in enumerate(buffers[1:], start=1):
+                    mine = hit & (nearest == k)
+                    picked[mine] = buffer[mine]
+                return picked
 
             position, normal, face = chosen("position"), chosen("normal"), chosen("face")
         rgba = on_background(layer, shading.background) if "rgba" in wanted else None

@@ -17,11 +17,14 @@ background; the background is put under the result once, at the end
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numba import prange
 
+from .._jit import jit
 from ..errors import ParameterError
 
 __all__ = ["additive", "nearest_hit_over", "on_background", "window_ramp"]
@@ -92,26 +95,68 @@ def additive(layers: Sequence[np.ndarray]) -> np.ndarray:
     return out
 
 
-def nearest_hit_over(layers: Sequence[np.ndarray], depths: Sequence[np.ndarray]) -> np.ndarray:
+def nearest_hit_over(layers: Sequence[np.ndarray], depths: Sequence[np.ndarray]
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Premultiplied RGBA layers of surfaces composited in depth order, nearest first.
 
-    Each pixel's layers are sorted by their ``depth`` (``inf``, a miss, last; ties keep the
-    layers' order) and composited front to back with "over". Where the nearest hit is opaque
-    that is simply its colour: the nearest surface hides the others, as in a depth-buffered
-    scene; where it is not (an antialiased edge, a translucent surface) the next ones show
-    through.
+    Each pixel's layers are sorted by their ``depth`` (``inf`` or NaN, a miss, last; ties keep
+    the layers' order) and composited front to back with "over". Where the nearest hit is
+    opaque that is simply its colour: the nearest surface hides the others, as in a
+    depth-buffered scene; where it is not (an antialiased edge, a translucent surface) the
+    next ones show through.
+
+    Returns
+    -------
+    rgba : ndarray (height, width, 4), float64
+        The composite (premultiplied).
+    nearest : ndarray (height, width), int64
+        The layer hit nearest to the camera, -1 where no layer has a finite depth.
     """
-    stacked = _stack(layers, "nearest_hit_over")
+    stacked = _stack(layers, "nearest_hit_over").astype(np.float32)
     depth = np.stack([np.asarray(d, np.float64) for d in depths])
     if depth.shape != stacked.shape[:3]:
         raise ParameterError(f"nearest_hit_over: depths of shape {depth.shape[1:]} for layers "
                              f"of {stacked.shape[1:3]}")
-    order = np.argsort(np.where(np.isnan(depth), np.inf, depth), axis=0, kind="stable")
-    ordered = np.take_along_axis(stacked, order[..., None], axis=0)
-    out = np.zeros(stacked.shape[1:])
-    for layer in ordered:
-        out += (1.0 - out[..., 3:4]) * layer
-    return out
+    out = np.empty(stacked.shape[1:])
+    nearest = np.empty(depth.shape[1:], np.int64)
+    _nearest_over(stacked, depth, out, nearest)
+    return out, nearest
+
+
+@jit(parallel=True)
+def _nearest_over(layers, depth, out, nearest):  # pragma: no cover - compiled
+    """Per pixel: the layers in increasing depth (insertion sort: a handful of layers),
+    composited front to back; the first one's index if it was hit."""
+    n, height, width = depth.shape
+    for row in prange(height):
+        order = np.empty(n, np.int64)
+        keys = np.empty(n)
+        for col in range(width):
+            for k in range(n):
+                d = depth[k, row, col]
+                key = d if d == d else math.inf  # NaN: a miss
+                at = k
+                while at > 0 and keys[at - 1] > key:  # strict: ties keep the layers' order
+                    keys[at] = keys[at - 1]
+                    order[at] = order[at - 1]
+                    at -= 1
+                keys[at] = key
+                order[at] = k
+            nearest[row, col] = order[0] if keys[0] < math.inf else -1
+            r = g = b = a = 0.0
+            for k in range(n):
+                rest = 1.0 - a
+                if rest <= 0.0:
+                    break
+                layer = order[k]
+                r += rest * layers[layer, row, col, 0]
+                g += rest * layers[layer, row, col, 1]
+                b += rest * layers[layer, row, col, 2]
+                a += rest * layers[layer, row, col, 3]
+            out[row, col, 0] = r
+            out[row, col, 1] = g
+            out[row, col, 2] = b
+            out[row, col, 3] = a
 
 
 def on_background(rgba: np.ndarray, background: Any) -> np.ndarray:
