@@ -406,3 +406,26 @@ def test_malformed_omero_fields_are_left_out():
     (entry,) = omero_channels(ome, 1)
     assert entry["color"] == (1.0, 0.0, 0.0)
     assert "\n" not in entry["label"] and len(entry["label"]) == 80
+
+
+def test_nearest_hit_over_against_a_per_pixel_sort():
+    """Translucent layers too (antialiased edges): "over" in depth order, checked pixel by
+    pixel with Python's sort; ties and misses (inf, NaN) keep the layers' order."""
+    from splinecast.render.compose import nearest_hit_over
+
+    rng = np.random.default_rng(11)
+    n, h, w = 3, 6, 7
+    alpha = rng.choice([0.0, 0.3, 1.0], size=(n, h, w))
+    layers = np.concatenate([rng.random((n, h, w, 3)) * alpha[..., None], alpha[..., None]],
+                            axis=-1).astype(np.float32)
+    depth = rng.choice([1.0, 2.0, 2.0, np.inf, np.nan], size=(n, h, w))
+    got, nearest = nearest_hit_over(list(layers), list(depth))
+    for r in range(h):
+        for c in range(w):
+            keys = [d if np.isfinite(d) else np.inf for d in depth[:, r, c]]
+            order = sorted(range(n), key=lambda k: keys[k])
+            acc = np.zeros(4)
+            for k in order:
+                acc += (1.0 - acc[3]) * layers[k, r, c].astype(np.float64)
+            np.testing.assert_allclose(got[r, c], acc, atol=1e-6)
+            assert nearest[r, c] == (order[0] if keys[order[0]] < np.inf else -1)
