@@ -146,6 +146,18 @@ def channel_argument(text: str) -> int | list[int] | str:
     return indices[0] if len(indices) == 1 and "," not in value else indices
 
 
+def _one_channel(text: str) -> int:
+    """argparse type of ``--channel`` where one channel is read (``info``, ``view``,
+    ``movie``)."""
+    try:
+        return int(text)
+    except ValueError:
+        several = "," in text or text.strip().lower() == "all"
+        hint = " (several channels render together with 'splinecast render')" if several else ""
+        raise argparse.ArgumentTypeError(f"takes one channel index here, got "
+                                         f"{limits.shorten(text)}{hint}") from None
+
+
 def add_selection_options(parser: argparse.ArgumentParser, several: bool = False) -> None:
     """``--timepoint`` (or ``--volume``) and ``--channel``: which volume of a file holding
     several to read (``several``: ``--channel`` may name several channels, rendered
@@ -164,7 +176,7 @@ def add_selection_options(parser: argparse.ArgumentParser, several: bool = False
                                  "(0,2 or all) are rendered together, each in its colour "
                                  "(default: the first, with a note)")
         return
-    parser.add_argument("--channel", type=int, metavar="N",
+    parser.add_argument("--channel", type=_one_channel, metavar="N",
                         help="channel to read: an OME-Zarr 'c' axis, a TIFF's channels or "
                              "colour samples, a VTK array's components (default: the first, "
                              "with a note)")

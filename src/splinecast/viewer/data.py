@@ -278,6 +278,10 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
         scene = MultiscaleScene(data, model=model or "trilinear", **options)  # coarsest level
         return Shown("multiscale", scene.preview, data, tuple(MODELS), initial=scene,
                      scene_options=options, default_model=scene.model.name)
+    if type(data).__name__ in ("MultichannelVolume", "ChannelScene"):
+        raise ParameterError("the viewer shows one channel at a time: pass one of the "
+                             "channels (volumes[i]); 'splinecast render --channel 0,2' renders "
+                             "several together")
     raise ParameterError(f"the viewer shows a splinecast Volume or Scene (or a multiresolution "
                          f"volume or scene), got {type(data).__name__}")
 
