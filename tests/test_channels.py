@@ -431,7 +431,7 @@ def test_nearest_hit_over_against_a_per_pixel_sort():
             assert nearest[r, c] == (order[0] if keys[order[0]] < np.inf else -1)
 
 
-@pytest.mark.parametrize("command", ["info", "view", "movie"])
+@pytest.mark.parametrize("command", ["info", "movie"])
 def test_commands_reading_one_channel_say_where_several_render(command, npy_files, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main([command, str(npy_files[0]), "--channel", "0,1"])
@@ -439,8 +439,3 @@ def test_commands_reading_one_channel_say_where_several_render(command, npy_file
     assert exit_info.value.code == 2 and err.count("\n") == 1
     assert ("argument --channel: takes one channel index here, got '0,1' (several channels "
             "render together with 'splinecast render')") in err
-
-
-def test_the_viewer_refuses_several_channels_with_a_way_out(pair):
-    with pytest.raises(sc.ParameterError, match="the viewer shows one channel at a time"):
-        sc.view(sc.MultichannelVolume(pair))

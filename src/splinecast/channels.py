@@ -262,9 +262,50 @@ class ChannelScene:
     def __len__(self) -> int:
         return len(self.channels)
 
+    @property
+    def model(self) -> Any:
+        """The reconstruction model (every channel's is of the same kind: the first one's)."""
+        return self.scenes[0].model
+
+    @property
+    def tile_shape(self) -> tuple[int, int]:
+        """Tiles every channel's scene traces as units (see :attr:`splinecast.Scene.tile_shape`):
+        a window of the image on their grid renders exactly the whole image's pixels."""
+        shapes = [getattr(s, "tile_shape", (0, 1)) for s in self.scenes]
+        columns = math.lcm(*(max(1, int(c)) for c, _ in shapes)) if any(
+            c for c, _ in shapes) else 0
+        return columns, math.lcm(*(max(1, int(r)) for _, r in shapes))
+
+    def with_settings(self, overrides: Sequence[Any]) -> list[Channel]:
+        """The channels' settings with ``overrides`` applied (not kept): one entry per channel,
+        ``None`` or a dict of :class:`Channel` fields (``visible``, ``color``, ``window``,
+        ``iso``, ``tf``), checked as an assignment is."""
+        if isinstance(overrides, (str, bytes)) or not isinstance(overrides, Sequence):
+            raise ParameterError(f"channels must be a list with one entry per channel "
+                                 f"({len(self.channels)}), got {limits.shorten(overrides)}")
+        if len(overrides) != len(self.channels):
+            raise ParameterError(f"channels: {len(overrides)} entries for "
+                                 f"{len(self.channels)} channels")
+        fields = {f.name for f in dataclasses.fields(Channel)}
+        out = []
+        for i, (channel, given) in enumerate(zip(self.channels, overrides, strict=True)):
+            if given is None:
+                out.append(channel)
+                continue
+            if not isinstance(given, dict):
+                raise ParameterError(f"channels[{i}] must be an object of Channel fields, got "
+                                     f"{limits.shorten(given)}")
+            unknown = sorted(str(k) for k in given if k not in fields)
+            if unknown:
+                raise ParameterError(f"channels[{i}] has no field {unknown[0]!r} (valid: "
+                                     f"{', '.join(sorted(fields))})")
+            out.append(dataclasses.replace(channel, **given))
+        return out
+
     # ------------------------------------------------------------------ rendering
     def render(self, camera: Camera, mode: str | RenderMode = "mip", *,
-               shading: Shading | None = None, outputs: Any = None, **kwargs: Any) -> Frame:
+               shading: Shading | None = None, outputs: Any = None, channels: Any = None,
+               **kwargs: Any) -> Frame:
         """Render every visible channel and composite them.
 
         Parameters
@@ -280,6 +321,10 @@ class ChannelScene:
         outputs : list of str, optional
             ``"rgba"``, ``"depth"`` (the nearest channel's), ``"position"``, ``"normal"``,
             ``"face"`` (iso: the nearest channel's) and ``"stats"``; default all.
+        channels : list, optional
+            Settings of this render only, one entry per channel: ``None`` (the channel's own)
+            or a dict of :class:`Channel` fields (:meth:`with_settings`), as the viewer sends
+            them.
         **kwargs
             Other :meth:`splinecast.Scene.render` keywords (``method``, ``step``, ``clip``,
             ``crop``, ``dvr``, ``samples``, ...), the same for every channel. ``window``,
@@ -311,21 +356,25 @@ class ChannelScene:
         unknown = wanted - {"rgba", "depth", "position", "normal", "face", "stats", "value"}
         if unknown:
             raise ParameterError(f"outputs: unknown buffer(s) {sorted(unknown)}")
+        settings = self.channels if channels is None else self.with_settings(channels)
         start = time.perf_counter()
-        shown = [i for i, c in enumerate(self.channels) if c.visible]
+        shown = [i for i, c in enumerate(settings) if c.visible]
         frames, stats = [], []
         for i in shown:
-            frame = self._render_channel(i, camera, mode, name, shading, wanted, kwargs)
+            frame = self._render_channel(settings[i], i, camera, mode, name, shading, wanted,
+                                         kwargs)
             frames.append(frame)
-            stats.append({"index": self.volume.indices[i], "label": self.channels[i].label,
+            stats.append({"index": self.volume.indices[i], "label": settings[i].label,
                           **frame.stats})
-        return self._composite(name, shown, frames, stats, camera, shading, wanted, start)
+        return self._composite(name, shown, settings, frames, stats, camera, shading, wanted,
+                               start)
 
-    def _render_channel(self, i: int, camera: Camera, mode: Any, name: str, shading: Shading,
-                        wanted: frozenset[str], kwargs: dict[str, Any]) -> Frame:
-        """Channel ``i`` alone, on a transparent background, with the buffers compositing
-        needs."""
-        channel, scene = self.channels[i], self.scenes[i]
+    def _render_channel(self, channel: Channel, i: int, camera: Camera, mode: Any, name: str,
+                        shading: Shading, wanted: frozenset[str], kwargs: dict[str, Any]
+                        ) -> Frame:
+        """Channel ``i`` alone (with the settings ``channel``), on a transparent background,
+        with the buffers compositing needs."""
+        scene = self.scenes[i]
         clear = dataclasses.replace(shading, background=(0.0, 0.0, 0.0, 0.0))
         own = dict(kwargs)
         setting = {"mip": ("window", channel.window), "minip": ("window", channel.window),
@@ -349,9 +398,9 @@ class ChannelScene:
             keep |= {"rgba", "depth"}
         return scene.render(camera, mode, shading=clear, outputs=tuple(sorted(keep)), **own)
 
-    def _composite(self, name: str, shown: list[int], frames: list[Frame], stats: list[dict],
-                   camera: Camera, shading: Shading, wanted: frozenset[str],
-                   start: float) -> Frame:
+    def _composite(self, name: str, shown: list[int], settings: list[Channel],
+                   frames: list[Frame], stats: list[dict], camera: Camera, shading: Shading,
+                   wanted: frozenset[str], start: float) -> Frame:
         height, width = camera.height, camera.width
         depth = np.full((height, width), np.inf)
         position = normal = face = None
@@ -365,7 +414,7 @@ class ChannelScene:
                 empty = np.abs(frame.value - background_value(info)) <= 1e-9 * max(hi - lo,
                                                                                       1e-300)
                 layers.append(window_ramp(frame.value, frame.stats["window"],
-                                          self.channels[i].color, empty))
+                                          settings[i].color, empty))
             layer = additive(layers)
             depth = np.min([f.depth for f in frames], axis=0)
         elif name == "dvr":

@@ -170,6 +170,12 @@ class MultichannelVolume(GridGeometry):
         return _describe(self.volumes[0])
 
     @property
+    def value_range(self) -> tuple[float, float]:
+        """The smallest and largest value of any channel."""
+        ranges = [v.value_range for v in self.volumes]
+        return (min(float(r[0]) for r in ranges), max(float(r[1]) for r in ranges))
+
+    @property
     def labels(self) -> list[str]:
         """Each channel's label."""
         return [d["label"] for d in self.defaults]
