@@ -290,7 +290,7 @@ def test_cli_mip_of_channel_files_is_the_composite_of_single_renders(npy_files, 
                            "--size", "40x32", "--fit", "box", "--channel-colors", "red,00FF00",
                            "--channel-window", "0.1:0.9,0.2:1.6", "-o", str(png)], capsys)
     assert code == 0, err
-    assert "channel 0 'channel 0': #ff0000, window 0.1..0.9" in err
+    assert "channel 0 'a.npy': #ff0000, window 0.1..0.9" in err
     volumes = [sc.read(a), sc.read(b)]
     camera = sc.Camera.orbit(volumes[0], azimuth=30, elevation=20, size=(40, 32))
     windows, colors = [(0.1, 0.9), (0.2, 1.6)], [(1, 0, 0), (0, 1, 0)]

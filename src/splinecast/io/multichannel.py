@@ -79,8 +79,9 @@ class MultichannelVolume(GridGeometry):
     volumes : sequence of Volume or MultiscaleVolume
         The channels, in order (at least one).
     labels : sequence of str, optional
-        A name per channel (default: ``metadata["channel_label"]``, else ``"channel i"`` with
-        ``i`` the channel's index in its file).
+        A name per channel (default: ``metadata["channel_label"]``; else, for volumes of
+        separate files, ``metadata["name"]``; else ``"channel i"`` with ``i`` the channel's
+        index in its file).
     option : str
         The keyword or command-line option the volumes came with, named in messages (a grid
         that differs from the first channel's).
@@ -140,6 +141,8 @@ class MultichannelVolume(GridGeometry):
         for i, volume in enumerate(volumes):
             meta = volume.metadata
             label = labels[i] if labels is not None else meta.get("channel_label")
+            if not label and not one_file:  # separate volumes: their own names
+                label = meta.get("name")
             self.defaults.append({
                 "label": str(label) if label else f"channel {self.indices[i]}",
                 "color": meta.get("channel_color"),
