@@ -439,3 +439,15 @@ def test_commands_reading_one_channel_say_where_several_render(command, npy_file
     assert exit_info.value.code == 2 and err.count("\n") == 1
     assert ("argument --channel: takes one channel index here, got '0,1' (several channels "
             "render together with 'splinecast render')") in err
+
+
+def test_a_pyramid_and_an_in_memory_volume_are_channels_of_one_scene(store, camera, pair):
+    """Keywords only a multiscale scene takes (complete=) go to its channel alone."""
+    path, _ = store
+    lazy = sc.read(path, channel=0)
+    with sc.Scene([lazy, sc.Volume(pair[1].data)], colors=["red", "lime"],
+                  windows=[(0.1, 0.9), (0.2, 1.6)]) as scene:
+        frame = scene.render(camera, "mip", complete=True)
+    memory = sc.Scene([sc.Volume(v.data) for v in pair], colors=["red", "lime"],
+                      windows=[(0.1, 0.9), (0.2, 1.6)]).render(camera, "mip")
+    np.testing.assert_allclose(frame.rgba, memory.rgba, atol=1e-6)

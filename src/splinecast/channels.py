@@ -26,6 +26,7 @@ colour, window, label, active) gives the defaults; a channel the file marks inac
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import time
 from collections.abc import Sequence
@@ -396,7 +397,8 @@ class ChannelScene:
                                         back_color=tuple(0.6 * c for c in channel.color))
         else:
             keep |= {"rgba", "depth"}
-        return scene.render(camera, mode, shading=clear, outputs=tuple(sorted(keep)), **own)
+        return scene.render(camera, mode, shading=clear, outputs=tuple(sorted(keep)),
+                            **_accepted(scene, own))
 
     def _composite(self, name: str, shown: list[int], settings: list[Channel],
                    frames: list[Frame], stats: list[dict], camera: Camera, shading: Shading,
@@ -447,6 +449,22 @@ class ChannelScene:
         }
         return Frame(rgba, depth if "depth" in wanted else None, position, normal, face,
                      None, None, None, frame_stats)
+
+
+#: Keyword arguments of the render methods of scene types that only some take (a multiscale
+#: scene's ``complete``, ``missing``, ``wait``): left out for the channels whose scene has no
+#: such keyword, so pyramids and in-memory volumes can be channels of one scene.
+_SCENE_ONLY = ("complete", "missing", "wait", "timeout")
+
+
+def _accepted(scene: Any, kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``kwargs`` without the scene-type keywords :data:`_SCENE_ONLY` that ``scene.render``
+    does not take."""
+    extra = [k for k in _SCENE_ONLY if k in kwargs]
+    if not extra:
+        return kwargs
+    names = inspect.signature(scene.render).parameters
+    return {k: v for k, v in kwargs.items() if k not in extra or k in names}
 
 
 def _coloured(tf: TransferFunction, color: Sequence[float]) -> TransferFunction:
