@@ -270,11 +270,14 @@ def test_every_render_option_has_a_case():
     # credentials) in tests/test_remote_s3.py, --cache-dir and --cache-size (the local cache of
     # fetched chunks) in tests/test_remote_http.py; --labels, --no-labels, --show,
     # --label-colors and --label-opacity (label volumes, against the API's LabelScene) in
-    # tests/test_labels.py.
+    # tests/test_labels.py; the options of several channels rendered together
+    # (--channel-colors, --channel-window, --channel-iso, --channel-file) in
+    # tests/test_channels.py.
     covered = {"--output", "--depth", "--quiet", "--help", "--mode", "--array", "--budget",
                "--lod", "--cut", "--allow-external-data", "--verbose", "--allow-missing",
                "--timepoint", "--volume", "--channel", "--anon", "--cache-dir", "--cache-size",
-               "--labels", "--no-labels", "--show", "--label-colors", "--label-opacity"}
+               "--labels", "--no-labels", "--show", "--label-colors", "--label-opacity",
+               "--channel-colors", "--channel-window", "--channel-iso", "--channel-file"}
     used = {a.split("=")[0] for c in CASES for a in c.cli if a.startswith("--")}
     assert options - covered - used == set()
 

@@ -16,7 +16,7 @@ import pytest
 import splinecast as sc
 from splinecast.cli import main
 from splinecast.io.label_colors import palette_color
-from splinecast.render.compose import nearest_hit, over_background, over_by_depth
+from splinecast.render.compose import nearest_hit, on_background, over_by_depth
 
 N = 48
 SPACING = 0.5
@@ -438,10 +438,10 @@ def test_nearest_hit_and_over_by_depth_on_random_frames():
                 colour += transmit * frames[i].rgba[r, c]
                 transmit *= 1.0 - frames[i].rgba[r, c, 3]
             np.testing.assert_allclose(out[r, c], colour, atol=1e-6)
-    straight = over_background(out, (0.2, 0.4, 0.6, 1.0))
-    np.testing.assert_allclose(straight[..., 3], 1.0)
+    composed = on_background(out, (0.2, 0.4, 0.6, 1.0))
+    np.testing.assert_allclose(composed[..., 3], 1.0)
     expected = out[..., :3] + (1 - out[..., 3:]) * np.array([0.2, 0.4, 0.6])
-    np.testing.assert_allclose(straight[..., :3], expected, atol=1e-6)
+    np.testing.assert_allclose(composed[..., :3], expected, atol=1e-6)
 
 
 def test_antialiased_label_windows_equal_the_whole_image_render(vol, camera):
@@ -456,7 +456,7 @@ def test_antialiased_label_windows_equal_the_whole_image_render(vol, camera):
                           origin=vol.origin)
     single = sc.Scene(indicator).render(camera, iso=0.5, inside="high", shading=look)
     assert single.stats["antialiased"] > 0
-    np.testing.assert_allclose(frame.rgba, over_background(single.rgba, FLAT.background),
+    np.testing.assert_allclose(frame.rgba, on_background(single.rgba, FLAT.background),
                                atol=1e-6)
 
 

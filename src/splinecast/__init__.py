@@ -15,9 +15,11 @@ Coordinate convention: see :mod:`splinecast.volume`.
 from .camera import Camera
 from .errors import DataError, ParameterError, ReadError, SplinecastError
 from .io import demo, read, write
+from .io.multichannel import MultichannelVolume
 from .io.store_kinds import register_store_kind as _register_store_kind
 from .models import MODELS
 from .models.smoothing import smooth
+from .multires.channel_scene import Channel, ChannelScene
 from .preintegration import preintegrate
 from .render.defaults import (
     auto_colormap,
@@ -65,6 +67,12 @@ def _multiscale_scene(volume, *args, **kwargs):
 register_scene_type("splinecast.io.omezarr.MultiscaleVolume", _multiscale_scene)
 
 
+# Several channels on one grid: a list of volumes, or what read(path, channel=[0, 2]) gives.
+for _kind in ("splinecast.io.multichannel.MultichannelVolume", "builtins.list",
+              "builtins.tuple"):
+    register_scene_type(_kind, ChannelScene)
+
+
 def _wavelet_scene(volume, *args, **kwargs):
     """``Scene(WaveletVolume, ...)``: the spline-wavelet renderer (loaded on first use)."""
     from .multires.wavelet_scene import WaveletScene
@@ -105,8 +113,11 @@ def __getattr__(name: str):
 
 __all__ = [
     "Camera",
+    "Channel",
+    "ChannelScene",
     "MODELS",
     "LabelScene",
+    "MultichannelVolume",
     "MultiscaleScene",
     "MultiscaleVolume",
     "DVRSettings",

@@ -111,7 +111,10 @@ class Scene:
     Parameters
     ----------
     volume : Volume
-        The data to render.
+        The data to render. A lazy OME-Zarr volume gives a
+        :class:`~splinecast.MultiscaleScene`; a list of volumes on one grid, or the
+        :class:`~splinecast.MultichannelVolume` of ``read(path, channel=[0, 2])``, a
+        :class:`~splinecast.ChannelScene` rendering the channels together.
     model : str
         Reconstruction: ``"trilinear"``, ``"bspline1"``, ``"bspline2"``, ``"bspline3"``,
         ``"qss"`` or ``"s31"`` (see :data:`splinecast.models.MODELS`); every model renders in

@@ -28,6 +28,7 @@ __all__ = [
     "add_input_options",
     "add_selection_options",
     "captured_output",
+    "channel_argument",
     "check_output",
     "derived_output",
     "IMAGE_SUFFIXES",
@@ -131,9 +132,36 @@ def apply_remote_options(args: argparse.Namespace) -> None:
         os.environ[remote.ENV_CACHE_DIR] = os.path.abspath(args.cache_dir)
 
 
-def add_selection_options(parser: argparse.ArgumentParser) -> None:
+def channel_argument(text: str) -> int | list[int] | str:
+    """argparse type of ``--channel`` where several channels may be chosen: an index, a
+    comma-separated list of indices, or ``all``."""
+    value = text.strip().lower()
+    if value == "all":
+        return "all"
+    try:
+        indices = [int(v) for v in value.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an index, a comma-separated list of indices "
+                                         f"or all, got {limits.shorten(text)}") from None
+    return indices[0] if len(indices) == 1 and "," not in value else indices
+
+
+def _one_channel(text: str) -> int:
+    """argparse type of ``--channel`` where one channel is read (``info``, ``view``,
+    ``movie``)."""
+    try:
+        return int(text)
+    except ValueError:
+        several = "," in text or text.strip().lower() == "all"
+        hint = " (several channels render together with 'splinecast render')" if several else ""
+        raise argparse.ArgumentTypeError(f"takes one channel index here, got "
+                                         f"{limits.shorten(text)}{hint}") from None
+
+
+def add_selection_options(parser: argparse.ArgumentParser, several: bool = False) -> None:
     """``--timepoint`` (or ``--volume``) and ``--channel``: which volume of a file holding
-    several to read."""
+    several to read (``several``: ``--channel`` may name several channels, rendered
+    together)."""
     when = parser.add_mutually_exclusive_group()
     when.add_argument("--timepoint", type=int, metavar="N",
                       help="time point of a time series to read: a 4D NIfTI's volume, an "
@@ -141,7 +169,14 @@ def add_selection_options(parser: argparse.ArgumentParser) -> None:
                            "a note; 'splinecast info' gives the count)")
     when.add_argument("--volume", type=int, metavar="N",
                       help="another name for --timepoint (the volumes of a 4D NIfTI)")
-    parser.add_argument("--channel", type=int, metavar="N",
+    if several:
+        parser.add_argument("--channel", type=channel_argument, metavar="N[,M...]|all",
+                            help="channel(s) to read: an OME-Zarr 'c' axis, a TIFF's channels "
+                                 "or colour samples, a VTK array's components; several "
+                                 "(0,2 or all) are rendered together, each in its colour "
+                                 "(default: the first, with a note)")
+        return
+    parser.add_argument("--channel", type=_one_channel, metavar="N",
                         help="channel to read: an OME-Zarr 'c' axis, a TIFF's channels or "
                              "colour samples, a VTK array's components (default: the first, "
                              "with a note)")

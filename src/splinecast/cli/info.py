@@ -70,8 +70,26 @@ def _series(metadata: dict[str, Any]) -> None:
     for what, count, index in (("timepoints", "timepoints", "timepoint"),
                                ("channels", "channels", "channel")):
         n = int(metadata.get(count, 1))
-        shown = f" (this is {metadata.get(index, 0)}; choose with --{index} N)" if n > 1 else ""
+        several = "; render several with --channel 0,2 or all" if index == "channel" else ""
+        shown = (f" (this is {metadata.get(index, 0)}; choose with --{index} N{several})"
+                 if n > 1 else "")
         print(f"{what + ':':<12}{n}{shown}")
+    _omero(metadata.get("omero"))
+
+
+def _omero(channels: Any) -> None:
+    """Each channel's display settings from OME-Zarr ``omero`` metadata (label, colour,
+    window, active): what a multichannel render uses by default."""
+    if not channels:
+        return
+    for index, entry in enumerate(channels):
+        colour = ("#" + "".join(f"{round(255 * c):02x}" for c in entry["color"])
+                  if entry.get("color") else "no colour")
+        window = (f", window {entry['window'][0]:g}..{entry['window'][1]:g}"
+                  if entry.get("window") else "")
+        active = "" if entry.get("active", True) else " (inactive)"
+        label = entry.get("label") or f"channel {index}"
+        print(f"  channel {index}: {label!r} {colour}{window}{active}")
 
 
 def _multiscale(mv) -> int:

@@ -33,6 +33,13 @@ from ._common import (
     read_options,
 )
 from ._compiling import CompileNotice
+from .channels import (
+    CHANNEL_OPTIONS,
+    add_channel_options,
+    channel_settings,
+    read_channels,
+    several_channels,
+)
 from .labels import add_label_options, check_label_args, run_labels, wants_labels
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
@@ -123,7 +130,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     render.add_argument("--quiet", action="store_true", help="no progress or timing on stderr")
     add_label_options(render)
     add_missing_option(render)
-    add_selection_options(render)
+    add_selection_options(render, several=True)
+    add_channel_options(render)
     add_input_options(render)
     _DEFAULTS.update({a.dest: a.default for a in render._actions if a.option_strings})
 
@@ -504,9 +512,20 @@ def run(args: argparse.Namespace) -> int:
     if args.depth:
         check_output(args.depth, ".npy", "--depth")
     width, height = check_render_args(args)
+    several = several_channels(args)
+    if several:
+        _refuse_channel_conflicts(args)
+    else:
+        for flag, attribute in CHANNEL_OPTIONS.items():
+            if getattr(args, attribute) is not None:
+                raise sc.ParameterError(f"{flag} needs several channels (--channel 0,2 or all, "
+                                        "or --channel-file)")
 
     start = time.perf_counter()
     vol = sc.read(args.file, array=args.array, **read_options(args))
+    if several:
+        return _run_channels(args, read_channels(args, vol), time.perf_counter() - start,
+                             derived)
     read_s = time.perf_counter() - start
     multiscale = not isinstance(vol, sc.Volume)
     wavelet = multiscale and isinstance(vol, sc.WaveletVolume)
@@ -606,6 +625,118 @@ def run(args: argparse.Namespace) -> int:
             log(args, f"wrote depth {args.depth}")
         print(Path(args.output).resolve())
         warn_incomplete(args.output, [st])
+    return 0
+
+
+def _refuse_channel_conflicts(args: argparse.Namespace) -> None:
+    """Options a multichannel render cannot honour: one colour or colormap for every channel
+    (each has its own), several isovalues, pre-smoothing."""
+    for flag, value, instead in (("--colormap", args.colormap, "--channel-colors"),
+                                 ("--color", args.color, "--channel-colors"),
+                                 ("--opacity", args.opacity, "one --iso per channel"),
+                                 ("--smooth", args.smooth, "a smoothed file")):
+        if value:
+            raise sc.ParameterError(f"{flag} does not apply to several channels (use {instead})")
+    if args.iso and "," in args.iso:
+        raise sc.ParameterError("--iso takes one value for several channels (--channel-iso "
+                                "gives one per channel)")
+    if args.channel_iso is not None and args.mode != "iso":
+        raise sc.ParameterError(f"--channel-iso does not apply to --mode {args.mode}")
+    if args.channel_window is not None and args.mode not in ("mip", "minip"):
+        raise sc.ParameterError(f"--channel-window does not apply to --mode {args.mode} "
+                                "(only to --mode mip/minip)")
+
+
+def _channel_kwargs(args: argparse.Namespace) -> dict:
+    """``ChannelScene.render`` keywords of the options every channel shares."""
+    kwargs: dict = {"mode": args.mode}
+    if args.samples is not None:
+        kwargs["samples"] = args.samples
+    clip = [numbers(c, "--clip", 4) for c in args.clip]
+    if clip:
+        kwargs["clip"] = clip
+    if args.crop:
+        kwargs["crop"] = numbers(args.crop, "--crop", 6)
+    if args.background is not None:
+        kwargs["shading"] = sc.Shading(background=sc.transfer.parse_color(
+            args.background, "--background", alpha=True))
+    if args.inside is not None:
+        kwargs["inside"] = args.inside
+    if args.mode in ("mip", "minip"):
+        kwargs.update(method=args.method, step=sampled_step(args))
+        if args.tolerance:
+            kwargs["tolerance"] = args.tolerance
+        if args.window:
+            kwargs["window"] = numbers(args.window, "--window", 2)
+    elif args.mode == "dvr":
+        if args.tf:
+            kwargs["tf"] = sc.TransferFunction.load(args.tf)
+        settings = dvr_settings(args)
+        if settings is not None:
+            kwargs["dvr"] = settings
+    else:
+        kwargs.update(method=args.method, step=sampled_step(args), normals=args.normals)
+        if args.iso:
+            kwargs["iso"] = numbers(args.iso, "--iso", 1)[0]  # type: ignore[index]
+    return kwargs
+
+
+def _run_channels(args: argparse.Namespace, volumes: sc.MultichannelVolume, read_s: float,
+                  derived: bool) -> int:
+    """Render several channels together (:class:`splinecast.ChannelScene`) to ``args.output``."""
+    multiscale = any(not isinstance(v, sc.Volume) for v in volumes)
+    if any(isinstance(v, sc.WaveletVolume) for v in volumes):
+        raise sc.ParameterError(f"{args.file}: a wavelet store holds one channel")
+    _refuse_multiscale_options(args, multiscale)
+    if args.method != "exact" or (args.mode == "dvr" and args.step is not None):
+        limits.check_step(sampled_step(args), "--step", volumes.shape)
+    settings = channel_settings(args, len(volumes))
+    kwargs = _channel_kwargs(args)
+    options = model_options(args)
+    if multiscale:
+        options.update(budget=args.budget or DEFAULT_BUDGET, cut=args.cut or DEFAULT_CUT,
+                       lod=DEFAULT_LOD if args.lod is None else args.lod)
+    with contextlib.ExitStack() as stack:
+        start = time.perf_counter()
+        scene = stack.enter_context(sc.ChannelScene(volumes, model=args.model, **settings,
+                                                    **options))
+        what = "opened" if multiscale else "read"
+        log(args, f"{what} {volumes.name}: {len(volumes)} channels, {volumes.shape} "
+                  f"{volumes.dtype} in {read_s:.2f} s; prepared {args.model} models in "
+                  f"{time.perf_counter() - start:.2f} s")
+        for index, channel in zip(volumes.indices, scene.channels, strict=True):
+            colour = "#" + "".join(f"{round(255 * c):02x}" for c in channel.color)
+            state = "" if channel.visible else " (hidden: inactive in the file's metadata)"
+            window = (f", window {channel.window[0]:g}..{channel.window[1]:g}"
+                      if channel.window and args.mode in ("mip", "minip") else "")
+            log(args, f"channel {index} {channel.label!r}: {colour}{window}{state}")
+        mode = kwargs.pop("mode")
+        fit: object = "box"
+        if args.fit == "content":
+            fit = scene.content_box(iso=kwargs.get("iso"), tf=kwargs.get("tf"))
+        camera = sc.Camera.orbit(scene, azimuth=args.azimuth, elevation=args.elevation,
+                                 fit=fit, **orbit_options(args))
+        stack.enter_context(CompileNotice(
+            f"{args.model} / {mode}, {volumes.dtype.name} data", args.model,
+            enabled=not getattr(args, "quiet", False), stream=getattr(args, "stderr", None)))
+        extra = ({"complete": True, "missing": "substitute" if args.allow_missing else "error"}
+                 if multiscale else {})
+        start = time.perf_counter()
+        frame = scene.render(camera, mode, outputs=("rgba", "depth", "stats"), **extra,
+                             **kwargs)
+        st = frame.stats
+        drawn = len(st["channels"])
+        log(args, f"rendered {camera.width}x{camera.height} {mode}, {drawn} channel"
+                  f"{'s' if drawn != 1 else ''} composited ({st['compositing']}) in "
+                  f"{time.perf_counter() - start:.2f} s ({st['hits']} hits)")
+        frame.save(args.output, background=kwargs.get("shading", sc.Shading()).background)
+        if derived:
+            log(args, f"wrote {args.output} (named after the input; set -o)")
+        if args.depth:
+            frame.save_depth(args.depth)
+            log(args, f"wrote depth {args.depth}")
+        print(Path(args.output).resolve())
+        warn_incomplete(args.output, st["channels"])
     return 0
 
 

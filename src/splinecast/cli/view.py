@@ -57,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "ε in radians below which cells are not refined (0: full resolution; "
                       "default one pixel's angle)")
     view.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    add_selection_options(view)
+    add_selection_options(view, several=True)
     add_input_options(view)
 
 
@@ -93,13 +93,17 @@ def run(args: argparse.Namespace) -> int:
     isos = numbers(args.iso, "--iso")
     start = time.perf_counter()
     vol = sc.read(args.file, **read_options(args))
-    _check_multires_options(args, vol)
+    several = isinstance(vol, sc.MultichannelVolume)
+    _check_multires_options(args, vol[0] if several else vol)
     iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
     server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,
                           port=args.port, budget=args.budget, lod=args.lod,
                           allow_external=read_options(args)["allow_external"])
     seconds = time.perf_counter() - start
-    if isinstance(vol, sc.Volume):
+    if several:
+        read = (f"read {vol.name}: {len(vol)} channels ({', '.join(vol.labels)}), {vol.shape} "
+                f"{vol.dtype} in {seconds:.2f} s")
+    elif isinstance(vol, sc.Volume):
         read = f"read {vol.name}: {vol.shape} {vol.dtype} in {seconds:.2f} s"
     elif server.shown.kind == "wavelet":
         read = (f"opened {vol.name}: degree-{vol.degree} wavelet store, {vol.layout.levels} "

@@ -5,12 +5,13 @@ from __future__ import annotations
 import gzip
 import os
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import ParameterError, ReadError, limits
 from ..volume import SUPPORTED_DTYPES, Volume
+from .multichannel import MultichannelVolume, channel_indices, is_all, read_channels
 from .remote import is_url
 from .selection import Selection
 from .sidecar import find_sidecar
@@ -149,8 +150,8 @@ def read(
     storage_options: dict[str, Any] | None = None,
     timepoint: int | None = None,
     volume: int | None = None,
-    channel: int | None = None,
-) -> Volume | MultiscaleVolume:
+    channel: int | Sequence[int] | str | None = None,
+) -> Volume | MultiscaleVolume | MultichannelVolume:
     """Read a volume from a file, a DICOM folder, a Zarr folder, a URL or a ``demo:`` name.
 
     Parameters
@@ -193,12 +194,17 @@ def read(
         Which channel to read: the ``c`` axis of an OME-Zarr image, the ``C`` (or ``S``,
         colour samples) axis of a TIFF, the component of a multi-component VTK array, the 5th
         dimension of a NIfTI image. Default: the first, with a warning as for ``timepoint``.
+        A list of indices (``[0, 2]``, or ``"0,2"``) or ``"all"`` reads several channels as
+        one :class:`~splinecast.io.multichannel.MultichannelVolume`, which
+        :class:`~splinecast.Scene` renders together (see :class:`splinecast.ChannelScene`).
 
     Returns
     -------
     Volume or MultiscaleVolume
         A Zarr folder gives a lazy :class:`~splinecast.io.omezarr.MultiscaleVolume` (metadata
-        read, voxels not); everything else a :class:`Volume`. Both have ``metadata["name"]`` (the
+        read, voxels not); several channels a
+        :class:`~splinecast.io.multichannel.MultichannelVolume` of those; everything else a
+        :class:`Volume`. Both have ``metadata["name"]`` (the
         file name or the ``demo:`` string), ``metadata["source"]`` (the full path) and
         ``metadata["format"]``; a file that can hold several time points or channels also
         ``metadata["timepoints"]``, ``["timepoint"]``, ``["channels"]`` and ``["channel"]``
@@ -224,6 +230,13 @@ def read(
     SeveralVolumesWarning
         When the file holds several time points or channels and none was chosen.
     """
+    if is_all(channel) or channel_indices(channel) is not None:
+        def read_one(index: int) -> Any:
+            return read(path, array=array, allow_external=allow_external,
+                        storage_options=storage_options, timepoint=timepoint, volume=volume,
+                        channel=index)
+
+        return read_channels(read_one, channel, str(path))
     selection = _selection(timepoint, volume, channel)
     if array is not None and not isinstance(array, str):
         raise ParameterError(f"array must be the name of a data array, got {array!r}")

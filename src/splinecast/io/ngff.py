@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ReadError
-from ..errors.limits import shorten
+from ..errors.limits import printable, shorten
 
 __all__ = [
     "NGFF_VERSION",
@@ -37,6 +37,7 @@ __all__ = [
     "NgffImage",
     "NgffDataset",
     "parse_image",
+    "omero_channels",
 ]
 
 #: The OME-Zarr version splinecast writes (Zarr v3).
@@ -268,3 +269,68 @@ def parse_image(attributes: dict[str, Any], label: str) -> NgffImage | None:
         datasets=tuple(datasets),
         downsampling=downsampling if isinstance(downsampling, str) else None,
     )
+
+
+# --------------------------------------------------------------------------- omero
+def _omero_color(value: Any) -> tuple[float, float, float] | None:
+    """An ``omero`` channel colour (``"FF0000"``, 6 hex digits, ``#`` tolerated) as RGB in
+    [0, 1]; ``None`` for anything else."""
+    if not isinstance(value, str):
+        return None
+    text = value.strip().lstrip("#")
+    if len(text) != 6:
+        return None
+    try:
+        packed = int(text, 16)
+    except ValueError:
+        return None
+    return ((packed >> 16) / 255.0, ((packed >> 8) & 255) / 255.0, (packed & 255) / 255.0)
+
+
+def _omero_window(value: Any) -> tuple[float, float] | None:
+    """``window.start`` and ``window.end`` as ``(lo, hi)`` with ``lo < hi``, else ``None``."""
+    if not isinstance(value, dict):
+        return None
+    try:
+        lo, hi = float(value["start"]), float(value["end"])
+    except (KeyError, TypeError, ValueError, OverflowError):
+        return None
+    return (lo, hi) if np.isfinite(lo) and np.isfinite(hi) and lo < hi else None
+
+
+def omero_channels(attributes: dict[str, Any], count: int) -> list[dict[str, Any]] | None:
+    """The display settings of an image's channels from its ``omero`` metadata.
+
+    ``omero`` is transitional NGFF metadata (0.4 at the top of the attributes, 0.5 under
+    ``"ome"``) written by ome-zarr-py, OMERO and Fiji: per channel a ``label``, a ``color``
+    (``"RRGGBB"``), a ``window`` (``start``/``end`` shown, ``min``/``max`` of the data) and
+    ``active``. Display metadata never stops an image from being read: a malformed field is
+    left out (``None``), and a list whose length is not ``count`` (the image's channels) is
+    ignored.
+
+    Returns
+    -------
+    list of dict or None
+        One ``{"label", "color", "window", "active"}`` per channel (``color`` RGB in [0, 1],
+        ``window`` ``(start, end)``, either ``None`` when absent), or ``None`` without usable
+        ``omero`` metadata.
+    """
+    ome = attributes.get("ome")
+    omero = attributes.get("omero")
+    if omero is None and isinstance(ome, dict):
+        omero = ome.get("omero")
+    channels = omero.get("channels") if isinstance(omero, dict) else None
+    if not isinstance(channels, list) or len(channels) != count:
+        return None
+    found = []
+    for entry in channels:
+        entry = entry if isinstance(entry, dict) else {}
+        label = entry.get("label")
+        active = entry.get("active")
+        found.append({
+            "label": printable(label)[:80] if isinstance(label, str) else None,
+            "color": _omero_color(entry.get("color")),
+            "window": _omero_window(entry.get("window")),
+            "active": active if isinstance(active, bool) else True,
+        })
+    return found

@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import ParameterError, ReadError, limits
 from ..volume import GridGeometry, Volume
 from ._common import check_dtype, fmt_shape, one_line, require
-from .ngff import parse_image, spatial_order
+from .ngff import omero_channels, parse_image, spatial_order
 from .remote import is_url
 from .selection import Selection
 from .store_kinds import store_opener
@@ -889,6 +889,7 @@ def _open_zarr(path: Path | str, selection: Selection, allow_external: bool | No
         "format": f"ome-zarr {image.version}",
     }
     metadata.update(chosen)
+    metadata.update(_display(attrs, chosen))
     if len(units) == 1:
         metadata["units"] = units.pop()
     if image.downsampling:
@@ -900,6 +901,20 @@ def _open_zarr(path: Path | str, selection: Selection, allow_external: bool | No
         metadata["image_label"] = ome["image-label"]
     return MultiscaleVolume(path=path, levels=levels, metadata=metadata, attributes=ours,
                             root=node)
+
+
+def _display(attrs: dict[str, Any], chosen: dict[str, int]) -> dict[str, Any]:
+    """Metadata entries of the image's ``omero`` display settings (:func:`.ngff.omero_channels`):
+    ``"omero"``, the list for every channel, and for the channel read its ``channel_label``,
+    ``channel_color``, ``channel_window`` and ``channel_active`` (those it has)."""
+    found = omero_channels(attrs, chosen["channels"])
+    if found is None:
+        return {}
+    entries: dict[str, Any] = {"omero": found}
+    for key, value in found[chosen["channel"]].items():
+        if value is not None:
+            entries[f"channel_{key}"] = value
+    return entries
 
 
 def _child(node: Any, key: str, label: str) -> Any:

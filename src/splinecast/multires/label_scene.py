@@ -46,7 +46,7 @@ from ..io.label_colors import (
     read_color_table,
 )
 from ..models.smoothing import smooth as smooth_volume
-from ..render.compose import gather, nearest_hit, over_background, over_by_depth
+from ..render.compose import gather, nearest_hit, on_background, over_by_depth
 from ..render.frame import Frame
 from ..render.outputs import check_outputs
 from ..render.shading import Shading
@@ -412,7 +412,7 @@ class LabelScene:
                                  "labels": len(drawn), "width": width, "height": height,
                                  "rays": width * height}
         depth, source = nearest_hit(frames, offsets, size)
-        rgba = over_background(over_by_depth(frames, offsets, size), shading.background)
+        rgba = on_background(over_by_depth(frames, offsets, size), shading.background)
         values = np.asarray([0, *drawn], np.int64)
 
         def nearest(name: str) -> np.ndarray | None:

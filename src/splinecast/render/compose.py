@@ -1,32 +1,49 @@
-"""Compositing frames of the same camera: nearest hit, "over" in depth order, a background.
+"""Compositing images of one camera rendered separately: labels, channels, layers.
 
-Frames rendered separately with one camera (one per label of a label volume, one per channel,
-an isosurface beside other geometry) are put together per pixel here. Two rules:
+Frames rendered separately with one camera (one per label of a label volume, one per channel of
+a multichannel volume) are put together per pixel here. Every layer is read as
+**premultiplied** RGBA rendered on a transparent background (``Shading(background=(0, 0, 0,
+0))``: a hit is opaque, a miss is zero, antialiasing averages both); the scene's background goes
+under the result once, at the end (:func:`on_background`), so it is not counted once per layer.
+
+Surfaces, by depth:
 
 * :func:`nearest_hit`: each pixel takes the frame whose ray hit first (smallest finite
-  ``depth``), and reports which frame that was, so the picture can say what lies under the
-  cursor. Ties go to the frame listed first.
-* :func:`over_by_depth`: every frame's colour at a pixel, sorted front to back by its depth, is
-  composited with the "over" operator. Opaque surfaces then give the nearest hit's colour;
-  translucent ones let what lies behind show through; antialiased silhouettes (partial alpha,
-  their centre ray's depth) blend with the surface behind them instead of a background.
+  ``depth``) and reports which frame that was, so the picture can say what lies under the cursor
+  (:func:`gather` then takes any buffer of that frame). Ties go to the frame listed first.
+* :func:`over_by_depth`: every frame's colour at a pixel, sorted front to back by its depth,
+  composited with "over": opaque surfaces give the nearest hit's colour, translucent ones let
+  what lies behind show through, antialiased silhouettes blend with the surface behind them.
+  It keeps only the pixels each frame drew, and frames may be windows of the image: the form
+  for many small layers (the labels of a segmentation, each drawn in its own window).
+* :func:`nearest_hit_over`: the same rule for a few whole-image layers (channels), compiled,
+  returning the composite and the nearest layer at once.
 
-The colours are read as **premultiplied** RGBA: a frame rendered on a transparent background
-(``Shading(background=(0, 0, 0, 0))``) is premultiplied already (a hit is opaque, a miss is
-zero, antialiasing averages both). :func:`over_background` composites the result once on a
-background at the end and returns straight (unpremultiplied) RGBA, as :class:`Frame` holds.
+Projections and volumes, order-independent:
+
+* :func:`window_ramp`: one projected channel (MIP values) through its window onto a
+  black-to-colour ramp.
+* :func:`additive`: colours summed and clipped, opacities joined as independent coverages
+  (``1 - prod(1 - a)``): napari's additive blending and Fiji's "Composite", where a pixel in
+  two channels shows the sum of their colours (red + green = yellow).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+from numba import prange
 
+from .._jit import jit
 from ..errors import ParameterError
 from .frame import Frame
 
-__all__ = ["nearest_hit", "gather", "over_by_depth", "over_background"]
+__all__ = ["nearest_hit", "gather", "over_by_depth", "nearest_hit_over", "window_ramp",
+           "additive", "on_background"]
+
 
 
 Offsets = Sequence[tuple[int, int]] | None
@@ -170,25 +187,145 @@ def over_by_depth(frames: Sequence[Frame], offsets: Offsets = None,
     return out.reshape(height, width, 4)
 
 
-def over_background(premultiplied: np.ndarray, background: Sequence[float]) -> np.ndarray:
-    """Straight RGBA of premultiplied colours composited over a background colour.
+
+
+def _stack(layers: Sequence[np.ndarray], what: str) -> np.ndarray:
+    if len(layers) == 0:
+        raise ParameterError(f"{what}: no layers to composite")
+    shapes = {np.shape(a) for a in layers}
+    if len(shapes) != 1:
+        raise ParameterError(f"{what}: layers of different shapes {sorted(shapes)}")
+    stacked = np.stack([np.asarray(a, np.float64) for a in layers])
+    if stacked.ndim != 4 or stacked.shape[-1] != 4:
+        raise ParameterError(f"{what}: layers must be (height, width, 4) RGBA images, got "
+                             f"{stacked.shape[1:]}")
+    return stacked
+
+
+def window_ramp(value: np.ndarray, window: tuple[float, float], color: Sequence[float],
+                empty: np.ndarray | None = None) -> np.ndarray:
+    """A projected channel as a premultiplied RGBA layer: ``value`` through ``window`` onto
+    the ramp from black to ``color``.
 
     Parameters
     ----------
-    premultiplied : ndarray (..., 4)
-        Premultiplied RGBA (:func:`over_by_depth`).
-    background : 4 floats in [0, 1]
-        Straight RGBA of the background (``Shading.background``).
+    value : ndarray (height, width)
+        Projected values (``Frame.value`` of a MIP); NaN where the ray missed the volume.
+    window : (lo, hi)
+        Values at or below ``lo`` are black, at or above ``hi`` the full colour (linear in
+        between, not quantized).
+    color : 3 floats in [0, 1]
+    empty : ndarray (height, width) of bool, optional
+        Pixels whose ray met only background: transparent, as misses are.
 
     Returns
     -------
-    ndarray (..., 4), float32
-        Straight RGBA; where the result is fully transparent its colour is 0.
+    ndarray (height, width, 4), float64
+        Opaque (alpha 1) wherever the ray met the volume, transparent elsewhere.
     """
-    bg = np.asarray(background, np.float32)
-    alpha = premultiplied[..., 3:4]
-    colour = premultiplied[..., :3] + bg[:3] * bg[3] * (1.0 - alpha)
-    total = alpha + bg[3] * (1.0 - alpha)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        straight = np.where(total > 0, colour / np.where(total > 0, total, 1), 0.0)
-    return np.concatenate([np.clip(straight, 0, 1), total], axis=-1).astype(np.float32)
+    lo, hi = float(window[0]), float(window[1])
+    span = hi - lo if hi > lo else 1.0
+    value = np.asarray(value, np.float64)
+    met = np.isfinite(value)
+    if empty is not None:
+        met &= ~np.asarray(empty, bool)
+    t = np.clip((np.where(met, value, lo) - lo) / span, 0.0, 1.0)
+    out = np.zeros((*value.shape, 4))
+    out[..., :3] = t[..., None] * np.asarray(color, np.float64)[:3]
+    out[..., 3] = met
+    return out
+
+
+def additive(layers: Sequence[np.ndarray]) -> np.ndarray:
+    """The additive composite of premultiplied RGBA layers.
+
+    Colour: the sum of the layers' colours, clipped to 1. Opacity: ``1 - prod(1 - a_i)``, the
+    coverage of independent layers (1 where any layer is opaque; a single layer's own). The
+    result does not depend on the layers' order.
+
+    Its limit, for volume renderings: each layer was integrated alone, so a channel in front
+    does not hide (absorb) another behind it along the ray; both glow through each other, as
+    in napari's additive blending of volume layers.
+    """
+    stacked = _stack(layers, "additive")
+    out = np.empty(stacked.shape[1:])
+    out[..., :3] = np.minimum(stacked[..., :3].sum(axis=0), 1.0)
+    out[..., 3] = 1.0 - np.prod(1.0 - np.clip(stacked[..., 3], 0.0, 1.0), axis=0)
+    return out
+
+
+def nearest_hit_over(layers: Sequence[np.ndarray], depths: Sequence[np.ndarray]
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Premultiplied RGBA layers of surfaces composited in depth order, nearest first.
+
+    Each pixel's layers are sorted by their ``depth`` (``inf`` or NaN, a miss, last; ties keep
+    the layers' order) and composited front to back with "over". Where the nearest hit is
+    opaque that is simply its colour: the nearest surface hides the others, as in a
+    depth-buffered scene; where it is not (an antialiased edge, a translucent surface) the
+    next ones show through.
+
+    Returns
+    -------
+    rgba : ndarray (height, width, 4), float64
+        The composite (premultiplied).
+    nearest : ndarray (height, width), int64
+        The layer hit nearest to the camera, -1 where no layer has a finite depth.
+    """
+    stacked = _stack(layers, "nearest_hit_over").astype(np.float32)
+    depth = np.stack([np.asarray(d, np.float64) for d in depths])
+    if depth.shape != stacked.shape[:3]:
+        raise ParameterError(f"nearest_hit_over: depths of shape {depth.shape[1:]} for layers "
+                             f"of {stacked.shape[1:3]}")
+    out = np.empty(stacked.shape[1:])
+    nearest = np.empty(depth.shape[1:], np.int64)
+    _nearest_over(stacked, depth, out, nearest)
+    return out, nearest
+
+
+@jit(parallel=True)
+def _nearest_over(layers, depth, out, nearest):  # pragma: no cover - compiled
+    """Per pixel: the layers in increasing depth (insertion sort: a handful of layers),
+    composited front to back; the first one's index if it was hit."""
+    n, height, width = depth.shape
+    for row in prange(height):
+        order = np.empty(n, np.int64)
+        keys = np.empty(n)
+        for col in range(width):
+            for k in range(n):
+                d = depth[k, row, col]
+                key = d if d == d else math.inf  # NaN: a miss
+                at = k
+                while at > 0 and keys[at - 1] > key:  # strict: ties keep the layers' order
+                    keys[at] = keys[at - 1]
+                    order[at] = order[at - 1]
+                    at -= 1
+                keys[at] = key
+                order[at] = k
+            nearest[row, col] = order[0] if keys[0] < math.inf else -1
+            r = g = b = a = 0.0
+            for k in range(n):
+                rest = 1.0 - a
+                if rest <= 0.0:
+                    break
+                layer = order[k]
+                r += rest * layers[layer, row, col, 0]
+                g += rest * layers[layer, row, col, 1]
+                b += rest * layers[layer, row, col, 2]
+                a += rest * layers[layer, row, col, 3]
+            out[row, col, 0] = r
+            out[row, col, 1] = g
+            out[row, col, 2] = b
+            out[row, col, 3] = a
+
+
+def on_background(rgba: np.ndarray, background: Any) -> np.ndarray:
+    """A premultiplied composite put over ``background`` (RGBA, straight alpha), as the
+    render modes put a ray's colour over it: ``C + (1 - A) * bg_rgb * bg_a``,
+    ``A + (1 - A) * bg_a``. Returns float32, clipped to [0, 1]."""
+    bg = np.asarray(background, np.float64).reshape(4)
+    rgba = np.asarray(rgba, np.float64)
+    rest = 1.0 - rgba[..., 3:4]
+    out = np.empty(rgba.shape, np.float32)
+    out[..., :3] = np.clip(rgba[..., :3] + rest * bg[:3] * bg[3], 0.0, 1.0)
+    out[..., 3:] = np.clip(rgba[..., 3:] + rest * bg[3], 0.0, 1.0)
+    return out

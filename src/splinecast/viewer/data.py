@@ -25,7 +25,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import ParameterError
+from ..io.multichannel import MultichannelVolume
 from ..models import MODELS
+from ..multires.channel_scene import ChannelScene
 from ..render.modes import MODE_NAMES as MODES
 from ..scene import Scene
 from ..volume import Volume
@@ -72,7 +74,7 @@ class Shown:
         ``reader(t)`` reads time point ``t`` of the file (a Volume, or a lazy multiscale volume).
     """
 
-    kind: str
+    kind: str  # "volume", "multiscale", "wavelet" or "channels"
     volume: Volume
     geometry: Any
     models: tuple[str, ...]
@@ -84,16 +86,24 @@ class Shown:
     timepoints: int = 1
     timepoint: int = 0
     reader: Callable[[int], Any] | None = None
+    #: Several channels (``kind="channels"``): each one's label, colour (``#rrggbb``), window
+    #: and visibility as its scene starts (the state's ``channels``), and whether the channels
+    #: are pyramids.
+    channels: list[dict[str, Any]] | None = None
+    layered_pyramids: bool = False
 
     @property
     def multiresolution(self) -> bool:
         """Whether the data is a pyramid or a wavelet store (rendered without stripes)."""
+        if self.kind == "channels":
+            return self.layered_pyramids
         return self.kind != "volume"
 
     @property
     def max_scenes(self) -> int:
-        """Scenes kept at once: one brick cache at a time for a pyramid (its budget is RAM)."""
-        return 1 if self.kind == "multiscale" else 2
+        """Scenes kept at once: one brick cache at a time for a pyramid (its budget is RAM),
+        one set of channel scenes (each holds a scene per channel)."""
+        return 1 if self.kind in ("multiscale", "channels") else 2
 
     @property
     def data(self) -> Any:
@@ -108,6 +118,8 @@ class Shown:
         data = self.data if data is None else data
         if self.kind == "volume":
             return Scene(data, model=model)
+        if self.kind == "channels":
+            return ChannelScene(data, model=model, **self.scene_options)
         return Scene(data, model=model, **self.scene_options)
 
     def read_timepoint(self, timepoint: int) -> Any:
@@ -127,6 +139,10 @@ class Shown:
         reading); a full frame waits up to :data:`FULL_WAIT_S` for its cut; a screenshot waits
         for the whole cut (a still image, as ``splinecast render``).
         """
+        if self.kind == "channels" and self.layered_pyramids:
+            # A scene per channel, each with its own loader: no refresh as bricks arrive, so a
+            # full frame waits for every channel's cut, a reduced one draws what is resident.
+            return {"complete": True} if step in ("full", "screenshot") else {"wait": False}
         if self.kind != "multiscale":
             return {}
         if step == "screenshot":
@@ -215,7 +231,7 @@ def shown(data: Any, model: str | None = None, budget: Any = None,
         with data they do not apply to.
     """
     out = _classify(data, model, budget, lod)
-    if out.kind != "wavelet":
+    if out.kind not in ("wavelet", "channels"):  # (channels: one time point)
         _time_series(out, allow_external)
     return out
 
@@ -278,8 +294,45 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
         scene = MultiscaleScene(data, model=model or "trilinear", **options)  # coarsest level
         return Shown("multiscale", scene.preview, data, tuple(MODELS), initial=scene,
                      scene_options=options, default_model=scene.model.name)
+    if isinstance(data, list | tuple):
+        data = MultichannelVolume(data)
+    if isinstance(data, MultichannelVolume | ChannelScene):
+        return _channels(data, model, budget, lod)
     raise ParameterError(f"the viewer shows a splinecast Volume or Scene (or a multiresolution "
                          f"volume or scene), got {type(data).__name__}")
+
+
+def _channels(data: Any, model: str | None, budget: Any, lod: float | None) -> Shown:
+    """Several channels on one grid: a :class:`~splinecast.ChannelScene` made now (so its
+    channels' defaults are known for the ``hello`` message)."""
+    volumes = data.volume if isinstance(data, ChannelScene) else data
+    pyramids = any(not isinstance(v, Volume) for v in volumes)
+    if (budget is not None or lod is not None) and not pyramids:
+        raise ParameterError("budget and lod apply to multiresolution (OME-Zarr) data only")
+    options: dict[str, Any] = {}
+    if pyramids:
+        options = {"budget": DEFAULT_BUDGET if budget is None else budget,
+                   "lod": DEFAULT_LOD if lod is None else lod, "whole_level": False}
+    if isinstance(data, ChannelScene):
+        scene, pinned = data, data
+        _only_model(model, data.model.name, volumes.name)
+        models: tuple[str, ...] = (data.model.name,)
+    else:
+        scene, pinned = ChannelScene(volumes, model=model or "trilinear", **options), None
+        models = tuple(MODELS)
+    first = scene.scenes[0]
+    volume = getattr(first, "preview", None) or first.volume
+    described = [{"label": c.label, "color": _hex(c.color),
+                  "window": None if c.window is None else list(c.window),
+                  "iso": c.iso, "visible": c.visible} for c in scene.channels]
+    return Shown("channels", volume, volumes, models, pinned=pinned,
+                 initial=None if pinned is not None else scene, scene_options=options,
+                 default_model=scene.model.name, channels=described,
+                 layered_pyramids=pyramids)
+
+
+def _hex(color: Any) -> str:
+    return "#" + "".join(f"{round(255 * float(c)):02x}" for c in color)
 
 
 def _only_model(model: str | None, own: str, name: str) -> None:

@@ -47,8 +47,9 @@ PROTOCOL_VERSION = 1
 #: header's ``bricks`` and ``hello.multires`` (multiresolution data), ``hello.v_minor``. 2: the
 #: state's ``dvr.sampling``, and the default ``dvr`` state is the library's default DVR. 3: the
 #: automatic window, ``preparing`` frames. 4: time series (``hello.timepoints``, the state's
-#: ``timepoint``, the frame header's ``timepoint``).
-PROTOCOL_MINOR = 4
+#: ``timepoint``, the frame header's ``timepoint``). 5: several channels (``hello.channels``,
+#: the state's ``channels``).
+PROTOCOL_MINOR = 5
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.
@@ -135,13 +136,16 @@ def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS,
 
 def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, Any], *,
                   geometry: Any = None, models: Any = MODELS, modes: Any = MODES,
-                  multires: dict[str, Any] | None = None, timepoints: int = 1) -> dict:
+                  multires: dict[str, Any] | None = None, timepoints: int = 1,
+                  channels: list[dict[str, Any]] | None = None) -> dict:
     """The first message of every connection: what the page needs to build its controls.
 
     ``volume`` gives the histogram (a multiresolution volume's coarsest level: cheap, and never
     the finest level); ``geometry`` (default ``volume``) the description of the data shown;
     ``models`` and ``modes`` the choices offered; ``multires`` describes a pyramid or wavelet
-    store; ``timepoints`` is the number of time points of a time series (1 otherwise).
+    store; ``timepoints`` is the number of time points of a time series (1 otherwise);
+    ``channels`` lists the channels shown together (their labels and starting settings;
+    ``None`` for one volume).
     """
     geometry = volume if geometry is None else geometry
     lo, hi = geometry.bounds
@@ -162,6 +166,8 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
         "multires": multires,
         # Time points the state's ``timepoint`` may choose (the page shows a slider when > 1).
         "timepoints": int(timepoints),
+        # Channels shown together (the page lists them; the state's ``channels`` sets them).
+        "channels": channels,
         "models": list(models),
         "modes": list(modes),
         # The menu's colormaps, and those of the default state when they are not in it.

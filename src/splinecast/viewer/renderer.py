@@ -290,7 +290,9 @@ class FrameRenderer:
         would compile one raises :class:`splinecast._jit.CompileNeeded` instead (see
         :meth:`warm`); multiresolution data always may compile.
         """
-        if compile or self.shown.multiresolution:
+        # Several channels render each channel's scene in turn: warming one tiny scene need not
+        # cover every kernel they use, so they may compile (as pyramids may).
+        if compile or self.shown.multiresolution or self.shown.kind == "channels":
             return self._render(request, scale, abort, step)
         with forbidding_compiles():
             return self._render(request, scale, abort, step)
@@ -308,7 +310,10 @@ class FrameRenderer:
         scene = Scene(tiny, model=request.model)
         camera = Camera.orbit(tiny, size=(8, 8))
         # Clip planes and crop box are in the data's world coordinates; they change no kernel.
-        options = {k: v for k, v in request.options.items() if k not in ("clip", "crop")}
+        # (Several channels: the channels' settings are values, not kernels; the tiny scene
+        # is one volume, rendered as the mode's automatic choices make it.)
+        options = {k: v for k, v in request.options.items()
+                   if k not in ("clip", "crop", "channels")}
         started = (lambda name: on_compile()) if on_compile is not None else (lambda name: None)
         with reporting_compiles(started, lambda name, seconds: None):
             for step in ("full", "interactive"):

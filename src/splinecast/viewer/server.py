@@ -121,7 +121,8 @@ class ViewerServer:
             self.volume = volume
             self.defaults = default_state(volume, model=self.shown.default_model, mode=mode,
                                           iso=iso, geometry=self.shown.geometry,
-                                          timepoint=self.shown.timepoint)
+                                          timepoint=self.shown.timepoint,
+                                          channels=self.shown.channels)
             self.renderer = FrameRenderer(self.shown)
         except BaseException:
             self.shown.close_scene(self.shown.initial)  # stop a pyramid's loader thread
@@ -134,7 +135,8 @@ class ViewerServer:
             "max_pixels": self.max_pixels, "max_message_bytes": MAX_MESSAGE_BYTES,
             "settle_ms": round(Session.settle_s * 1e3)}, geometry=self.shown.geometry,
             models=self.shown.models, modes=self.shown.modes,
-            multires=self.shown.description(), timepoints=self.shown.timepoints)
+            multires=self.shown.description(), timepoints=self.shown.timepoints,
+            channels=self.shown.channels)
         self._watcher: asyncio.Task | None = None
         self._allowed: frozenset[str] = frozenset()
         self._sessions: set[Session] = set()

@@ -168,7 +168,8 @@ class Session:
             request = parse_state(message["state"], self.volume, self._defaults,
                                   self._max_pixels, geometry=shown.geometry,
                                   models=shown.models, modes=shown.modes,
-                                  timepoints=shown.timepoints)
+                                  timepoints=shown.timepoints,
+                                  channels=len(shown.channels or ()))
         except SplinecastError as exc:
             await self._error(ident, str(exc))
             return

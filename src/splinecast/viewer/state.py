@@ -26,6 +26,9 @@ The fields (see ``docs/viewer-protocol.md`` for the full table)::
     lighting {ambient, diffuse, specular, shininess}
     clip [[nx, ny, nz, d], ...], crop [x0, x1, y0, y1, z0, z1] | null    world coordinates
     timepoint                      which time point of a time series (0 .. hello.timepoints - 1)
+    channels [{visible, color, window, iso}, ...]   several channels shown together (only
+                                   when hello.channels lists them): each channel's settings;
+                                   iso, window, colormap, opacity and tf then go unused
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import numpy as np
 
 from ..camera import Camera, parse_size
 from ..errors import ParameterError
+from ..errors.limits import shorten as limits_shorten
 from ..models import MODELS
 from ..render.clipping import make_planes
 from ..render.defaults import auto_colormap, auto_iso, auto_transfer_function, auto_window
@@ -73,7 +77,9 @@ _PAN_LIMIT = 100.0
 
 _TOP_FIELDS = ("model", "mode", "camera", "size", "iso", "opacity", "window", "colormap",
                "tolerance", "tf", "dvr", "lighting", "clip", "crop", "normals",
-               "timepoint")
+               "timepoint", "channels")
+#: The fields of one entry of the state's ``channels``.
+_CHANNEL_FIELDS = ("visible", "color", "window", "iso")
 _CAMERA_FIELDS = ("azimuth", "elevation", "zoom", "pan", "fov", "ortho")
 _LIGHTING_FIELDS = ("ambient", "diffuse", "specular", "shininess")
 _DVR_FIELDS = ("step", "shade", "preintegration", "termination", "sampling")
@@ -117,7 +123,8 @@ def _default_tf(volume: Volume) -> dict[str, Any]:
 
 
 def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
-                  iso: Any = None, *, geometry: Any = None, timepoint: int = 0) -> dict[str, Any]:
+                  iso: Any = None, *, geometry: Any = None, timepoint: int = 0,
+                  channels: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """The complete state a viewer starts from (and that omitted fields take).
 
     Parameters
@@ -134,6 +141,10 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
     timepoint : int
         The time point of a time series shown first (``volume`` is that time point: the
         automatic choices come from it and stay for the others).
+    channels : list of dict, optional
+        Several channels shown together: each one's ``visible``, ``color``, ``window`` and
+        ``iso`` as it starts (:attr:`splinecast.viewer.data.Shown.channels`); the state then
+        has a ``channels`` field.
 
     Raises
     ------
@@ -147,7 +158,7 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
     values = volume if geometry is None else geometry
     isos = [check_iso(values, v) for v in (iso if isinstance(iso, list | tuple) else [iso])]
     shading = Shading()
-    return {
+    state = {
         "model": model,
         "mode": mode,
         "camera": {"azimuth": 30.0, "elevation": 20.0, "zoom": 1.0, "pan": [0.0, 0.0],
@@ -177,6 +188,10 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         "normals": "smooth",
         "timepoint": int(timepoint),
     }
+    if channels is not None:
+        state["channels"] = [{k: copy.deepcopy(c.get(k)) for k in _CHANNEL_FIELDS}
+                             for c in channels]
+    return state
 
 
 # ------------------------------------------------------------------------------ type checks
@@ -355,7 +370,12 @@ def _dvr_settings(dvr: dict[str, Any], lighting: dict[str, float]) -> DVRSetting
                        diffuse=lighting["diffuse"], **names)
 
 
-def _mode_options(state: dict[str, Any], volume: Any, shown: Volume) -> dict[str, Any]:
+def _mode_options(state: dict[str, Any], volume: Any, shown: Volume,
+                  channels: bool = False) -> dict[str, Any]:
+    """``Scene.render`` keywords of the state's mode fields. ``channels``: several channels
+    shown together, each with its own isovalue, window and colours, so the single volume's
+    ``iso``, ``opacity``, ``window``, ``colormap`` and ``tf`` are left out (of the first
+    channel's range, they would be wrong for the others)."""
     mode = state["mode"]
     lighting = {k: _number(state["lighting"][k], f"lighting.{k}") for k in _LIGHTING_FIELDS}
     shading = Shading(**lighting)
@@ -374,6 +394,9 @@ def _mode_options(state: dict[str, Any], volume: Any, shown: Volume) -> dict[str
         options["crop"] = crop
     # The state's fields that the mode reads (the registry says which), as its options.
     reads = MODE_CLASSES[mode].keywords
+    if channels:
+        reads = tuple(k for k in reads if k not in ("iso", "opacity", "window", "colormap",
+                                                    "tf"))
     if "iso" in reads:
         options.update(_iso_options(state, volume))
     if "normals" in reads:
@@ -396,6 +419,39 @@ def _mode_options(state: dict[str, Any], volume: Any, shown: Volume) -> dict[str
     return options
 
 
+def _channel_settings(value: Any, count: int) -> list[dict[str, Any]]:
+    """The state's ``channels``: one object per channel, each field type-checked here and its
+    value by :class:`splinecast.Channel` (colours, windows) when the scene applies it."""
+    if not count:
+        raise ParameterError("channels: the data on display has one channel")
+    if not isinstance(value, list) or len(value) != count:
+        raise ParameterError(f"channels must be a list of {count} objects (one per channel), "
+                             f"got {limits_shorten(value)}")
+    out = []
+    for i, entry in enumerate(value):
+        entry = _check_fields(entry, _CHANNEL_FIELDS, f"channels[{i}]")
+        settings: dict[str, Any] = {}
+        if entry.get("visible") is not None:
+            settings["visible"] = _boolean(entry["visible"], f"channels[{i}].visible")
+        if entry.get("color") is not None:
+            color = entry["color"]
+            if isinstance(color, list):
+                color = _numbers(color, f"channels[{i}].color", 3)
+            elif not isinstance(color, str) or len(color) > 32:
+                raise ParameterError(f"channels[{i}].color must be '#rrggbb' or [r, g, b], got "
+                                     f"{limits_shorten(color)}")
+            settings["color"] = color
+        if "window" in entry:  # null: the channel's automatic window
+            window = entry["window"]
+            settings["window"] = (None if window is None
+                                  else _numbers(window, f"channels[{i}].window", 2))
+        if "iso" in entry:  # null: the channel's automatic isovalue
+            iso = entry["iso"]
+            settings["iso"] = None if iso is None else _number(iso, f"channels[{i}].iso")
+        out.append(settings)
+    return out
+
+
 def _timepoint(value: Any, timepoints: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ParameterError(f"timepoint must be an integer, got {value!r}")
@@ -408,7 +464,8 @@ def _timepoint(value: Any, timepoints: int) -> int:
 
 def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
                 max_pixels: int = MAX_PIXELS, *, geometry: Any = None,
-                models: Any = None, modes: Any = None, timepoints: int = 1) -> RenderRequest:
+                models: Any = None, modes: Any = None, timepoints: int = 1,
+                channels: int = 0) -> RenderRequest:
     """Validate a client's state into a :class:`RenderRequest`.
 
     Parameters
@@ -429,6 +486,11 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
         The choices offered (default: every model and mode).
     timepoints : int
         Time points of the data on display (``timepoint`` must be below it).
+    channels : int
+        Channels shown together (0: one volume). With channels, the request's options hold
+        the state's ``channels`` (:meth:`splinecast.ChannelScene.render`) instead of the
+        single volume's isovalue, window, colormap, opacity and transfer function, which each
+        channel has of its own.
 
     Raises
     ------
@@ -443,5 +505,8 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
     geometry = volume if geometry is None else geometry
     camera = orbit_camera(geometry, camera_fields, size)
     timepoint = _timepoint(full.get("timepoint", 0), timepoints)
-    options = _mode_options(full, geometry, volume)
+    several = bool(channels) or "channels" in full
+    options = _mode_options(full, geometry, volume, several)
+    if several:
+        options["channels"] = _channel_settings(full.get("channels"), channels)
     return RenderRequest(model, mode, camera, options, full, timepoint)

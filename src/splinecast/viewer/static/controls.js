@@ -44,6 +44,7 @@
       this._buildDvr();
       this._buildClip();
       this._buildLighting();
+      this._buildChannels();
       $("ortho").addEventListener("change", (e) => {
         this.state.camera.ortho = e.target.checked;
         this.onChange(false);
@@ -399,6 +400,94 @@
       this._drawTf();
       $("ortho").checked = s.camera.ortho;
       for (const [name, input] of Object.entries(this.lightSliders)) input.value = s.lighting[name];
+      this._syncChannels();
+    }
+
+    // ------------------------------------------------------------------ channels
+    // Several channels shown together (hello.channels, protocol 1.5): a row per channel with
+    // its visibility, colour, and its window (mip, minip) or isovalue (iso); an empty field is
+    // the channel's automatic value. The single volume's isovalue, window and transfer function
+    // give way to it (the server leaves them out).
+    _buildChannels() {
+      const channels = this.hello.channels;
+      if (!channels) return;
+      $("section-channels").hidden = false;
+      $("panel").classList.add("single-hidden");
+      $("channels-note").textContent =
+        "mip, minip and dvr add the channels' colours; iso shows the nearest surface";
+      if (!Array.isArray(this.state.channels)) this.state.channels = structuredClone(this.hello.defaults.channels);
+      const list = $("channels");
+      list.replaceChildren();
+      this.channelRows = channels.map((info, i) => {
+        const li = document.createElement("li");
+        const visible = document.createElement("input");
+        visible.type = "checkbox";
+        visible.title = "show this channel";
+        visible.setAttribute("aria-label", `show ${info.label}`);
+        const color = document.createElement("input");
+        color.type = "color";
+        color.title = "colour";
+        color.setAttribute("aria-label", `colour of ${info.label}`);
+        const label = document.createElement("span");
+        label.className = "label";
+        label.textContent = info.label;
+        const settings = document.createElement("div");
+        settings.className = "settings";
+        const number = (name) => {
+          const input = document.createElement("input");
+          input.type = "number";
+          input.step = "any";
+          input.placeholder = "auto";
+          input.setAttribute("aria-label", `${name} of ${info.label}`);
+          return input;
+        };
+        const low = number("window low");
+        const high = number("window high");
+        const iso = number("isovalue");
+        const windowBox = document.createElement("span");
+        windowBox.append("window ", low, " … ", high);
+        const isoBox = document.createElement("span");
+        isoBox.append("iso ", iso);
+        settings.append(windowBox, isoBox);
+        const entry = () => this.state.channels[i];
+        visible.addEventListener("change", () => { entry().visible = visible.checked; this.onChange(false); });
+        color.addEventListener("input", () => { entry().color = color.value; this.onChange(true); });
+        color.addEventListener("change", () => { entry().color = color.value; this.onChange(false); });
+        const setWindow = () => {
+          const a = low.value === "" ? NaN : Number(low.value);
+          const b = high.value === "" ? NaN : Number(high.value);
+          if (low.value === "" && high.value === "") entry().window = null;
+          else if (Number.isFinite(a) && Number.isFinite(b) && a < b) entry().window = [a, b];
+          else return; // incomplete: wait for the other end
+          this.onChange(false);
+        };
+        low.addEventListener("change", setWindow);
+        high.addEventListener("change", setWindow);
+        iso.addEventListener("change", () => {
+          const v = iso.value === "" ? null : Number(iso.value);
+          if (v !== null && !Number.isFinite(v)) return;
+          entry().iso = v;
+          this.onChange(false);
+        });
+        li.append(visible, color, label, settings);
+        list.append(li);
+        return { visible, color, low, high, iso, windowBox, isoBox };
+      });
+    }
+
+    _syncChannels() {
+      if (!this.channelRows) return;
+      const mode = this.state.mode;
+      this.channelRows.forEach((row, i) => {
+        const c = this.state.channels[i];
+        row.visible.checked = c.visible !== false;
+        row.color.value = c.color || this.hello.channels[i].color;
+        row.low.value = c.window ? String(c.window[0]) : "";
+        row.high.value = c.window ? String(c.window[1]) : "";
+        row.iso.value = c.iso === null || c.iso === undefined ? "" : String(c.iso);
+        row.windowBox.hidden = mode !== "mip" && mode !== "minip";
+        row.isoBox.hidden = mode !== "iso";
+      });
     }
 
     // Canvases drawn at their CSS size: redraw when the panel appears or the window resizes.
