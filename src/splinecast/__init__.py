@@ -19,6 +19,7 @@ from .io.store_kinds import register_store_kind as _register_store_kind
 from .models import MODELS
 from .models.smoothing import smooth
 from .preintegration import preintegrate
+from .render.aip import Aip
 from .render.defaults import (
     auto_colormap,
     auto_inside,
@@ -92,6 +93,7 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "Aip",
     "Camera",
     "MODELS",
     "MultiscaleScene",
