@@ -77,6 +77,29 @@ def test_the_mean_along_each_ray_is_the_dense_mean(lobb, model, ortho):
     assert frame.stats["mode"] == "aip" and frame.stats["window"] == (0.0, 1.0)
 
 
+@pytest.mark.parametrize("model", ["bspline1", "bspline2", "qss", "s31"])
+def test_every_other_model_averages_its_own_reconstruction(model):
+    """The models' 3D reconstructions evaluated directly (``tests/evaluators.py``: scipy's
+    B-splines, the type-6 splines' Bernstein-Bezier rules written in the tests), densely
+    sampled along each ray inside the model's box."""
+    from evaluators import model_evaluator
+
+    vol = sc.Volume(smooth_noise((11, 10, 12), seed=7, sigma=1.6).astype(np.float32),
+                    spacing=(1.0, 1.2, 0.9), origin=(-3.0, 1.0, 0.5))
+    cam = sc.Camera.orbit(vol, azimuth=37, elevation=23, size=(14, 11))
+    scene = sc.Scene(vol, model=model)
+    frame = scene.render(cam, sc.Aip(window=(-1.0, 1.0)))
+    ev = model_evaluator(model, vol, scene)
+    o, d = _index_rays(vol, cam)
+    t0, t1 = box_interval(o, d, ev.lo, ev.hi)
+    want = _dense_mean(ev.value, o, d, t0, t1).reshape(cam.height, cam.width)
+    hit = np.isfinite(want)
+    assert 30 < hit.sum()
+    np.testing.assert_array_equal(np.isfinite(frame.value), hit)
+    # The midpoint rule's error at 20000 samples: far below 1e-6 of these values (std 1).
+    np.testing.assert_allclose(frame.value[hit], want[hit], rtol=0, atol=1e-6)
+
+
 def _ramp() -> tuple[sc.Volume, np.ndarray]:
     i, j, k = np.meshgrid(*(np.arange(n, dtype=float) for n in (13, 11, 9)), indexing="ij")
     coeff = np.array([2.0, -3.0, 0.5])
