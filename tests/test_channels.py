@@ -77,6 +77,29 @@ def test_mip_is_the_sum_of_the_single_channel_projections(pair, camera):
     np.testing.assert_array_equal(frame.depth, np.minimum(singles[0].depth, singles[1].depth))
 
 
+def test_every_projection_mode_composites_as_mip_does(pair, camera):
+    """Modes asked of the registry, not listed: each projection through a window (aip too)
+    sums its channels' ramps as MIP does."""
+    from splinecast.render.modes import MODES
+
+    colors, windows = [(1.0, 0.0, 1.0), (0.0, 1.0, 0.0)], [(0.05, 0.5), (0.1, 0.8)]
+    scene = sc.Scene(pair, colors=colors, windows=windows)
+    projections = [name for name, mode in MODES.items() if "window" in mode.keywords]
+    assert {"mip", "minip", "aip"} <= set(projections)
+    for name in projections:
+        frame = scene.render(camera, name)
+        assert frame.stats["compositing"] == "additive"
+        singles = [sc.Scene(v).render(camera, name, window=w, outputs=("value", "depth"))
+                   for v, w in zip(pair, windows, strict=True)]
+        summed = sum(_ramp(f.value, w, c) for f, w, c in zip(singles, windows, colors,
+                                                                strict=True))
+        met = np.any([np.isfinite(f.value) for f in singles], axis=0)
+        drawn = met & np.any(summed > 0, axis=-1)
+        assert drawn.any(), name
+        np.testing.assert_allclose(frame.rgba[drawn][:, :3], np.minimum(summed, 1.0)[drawn],
+                                   atol=2e-6, err_msg=name)
+
+
 def test_mip_does_not_depend_on_the_channel_order(pair, camera):
     colors = [(1.0, 0.2, 0.0), (0.0, 0.6, 1.0)]
     forward = sc.Scene(pair, colors=colors).render(camera, "mip")

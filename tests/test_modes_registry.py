@@ -5,14 +5,23 @@ same frame as its name with the same options; the registry is the one list of mo
 ends read; every model answers the capability questions itself.
 """
 
+import dataclasses
 import inspect
+from typing import ClassVar
 
 import numpy as np
 import pytest
 
 import splinecast as sc
 from splinecast.models.base import ReconstructionModel
-from splinecast.render.modes import MODE_NAMES, MODES, RENDER_DEFAULTS, RenderMode, build_mode
+from splinecast.render.modes import (
+    MODE_NAMES,
+    MODES,
+    RENDER_DEFAULTS,
+    RenderMode,
+    build_mode,
+    register_mode,
+)
 
 
 @pytest.fixture(scope="module")
@@ -22,8 +31,29 @@ def sphere():
 
 
 def test_the_registry_names_the_modes_scene_render_takes():
-    assert MODE_NAMES == ("iso", "mip", "minip", "dvr") == sc.scene.MODES
+    # The built-in modes come first; a mode module adds its own (register_mode), and the names
+    # every front end reads follow the registry, also when taken before the module registered.
+    assert tuple(MODE_NAMES)[:4] == ("iso", "mip", "minip", "dvr")
+    assert MODE_NAMES == tuple(MODES) == tuple(sc.scene.MODES)
     assert all(issubclass(cls, RenderMode) and cls.name == name for name, cls in MODES.items())
+    assert all(cls.summary for cls in MODES.values())
+
+
+def test_a_registered_mode_joins_every_list():
+    @dataclasses.dataclass(frozen=True)
+    class Toy(RenderMode):
+        name: ClassVar[str] = "toy"
+        summary: ClassVar[str] = "a toy"
+
+    try:
+        register_mode(Toy)
+        assert MODE_NAMES[-1] == "toy" and "toy" in sc.scene.MODES
+        assert len(MODE_NAMES) == len(MODES)
+    finally:
+        del MODES["toy"]
+    assert "toy" not in MODE_NAMES
+    with pytest.raises(TypeError, match="taken by Mip"):
+        register_mode(type("Other", (sc.Mip,), {"name": "mip"}))
 
 
 def test_render_defaults_are_scene_render_defaults():
@@ -77,7 +107,7 @@ def test_mode_objects_check_their_options_when_made():
 
 def test_unknown_modes_are_refused_with_the_registry_list(sphere):
     scene, cam = sphere
-    with pytest.raises(sc.ParameterError, match="mode must be one of iso, mip, minip, dvr"):
+    with pytest.raises(sc.ParameterError, match="mode must be one of " + ", ".join(MODES)):
         scene.render(cam, mode="xray")
 
 

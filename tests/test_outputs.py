@@ -32,6 +32,7 @@ MODES = {
     "multi-iso": {"iso": [-0.2, 0.0]},
     "mip": {"mode": "mip"},
     "dvr": {"mode": "dvr"},
+    "aip": {"mode": "aip"},
 }
 
 

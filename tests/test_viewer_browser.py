@@ -275,14 +275,18 @@ def test_adding_and_removing_isosurfaces(page, vol):
     assert_page_shows(page, vol)
 
 
-@pytest.mark.parametrize("mode", ["mip", "dvr"])
+@pytest.mark.parametrize("mode", ["mip", "dvr", "aip"])
 def test_switching_the_mode(page, vol, mode):
     after_id = last_id(page)
     page.select_option("#mode", mode)
     header = wait_final(page, after_id)
     assert header["stats"]["mode"] == mode
-    assert page.is_visible("#section-mip") == (mode == "mip")
+    # The controls of the keywords the mode reads (the registry's answer, hello.mode_keywords):
+    # AIP has a window and a colormap but no tolerance.
+    assert page.is_visible("#section-mip") == (mode in ("mip", "aip"))
+    assert page.is_visible("#mip-tolerance") == (mode == "mip")
     assert page.is_visible("#section-dvr") == (mode == "dvr")
+    assert page.is_visible("#section-lighting") == (mode == "dvr")
     assert_page_shows(page, vol)
 
 

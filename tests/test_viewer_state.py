@@ -15,6 +15,7 @@ import pytest
 from PIL import Image
 
 import splinecast as sc
+from splinecast.render.modes import MODES
 from splinecast.viewer import protocol
 from splinecast.viewer.encoding import decode_image, encode_image
 from splinecast.viewer.state import default_state, parse_state, resized_camera
@@ -57,7 +58,16 @@ def test_defaults_without_metadata_are_those_of_splinecast_render():
         assert tuple(window) == sc.auto_window(vol, mode)
     assert sc.auto_window(vol, "mip") != sc.auto_window(vol, "minip")
     hello = protocol.hello_message(vol, state, {"max_pixels": 10})
-    assert hello["auto_window"] == {m: list(sc.auto_window(vol, m)) for m in ("mip", "minip")}
+    assert {m: hello["auto_window"][m] for m in ("mip", "minip")} == {
+        m: list(sc.auto_window(vol, m)) for m in ("mip", "minip")}
+    # Every mode with a window has its automatic one there, and the page learns which
+    # controls each mode reads from the registry.
+    windowed = [m for m, cls in MODES.items() if "window" in cls.keywords]
+    assert sorted(hello["auto_window"]) == sorted(windowed)
+    for mode in windowed:
+        window = parse({"mode": mode}, vol, state).options["window"]
+        assert list(window) == hello["auto_window"][mode]
+    assert hello["mode_keywords"] == {m: list(cls.keywords) for m, cls in MODES.items()}
     tf = sc.TransferFunction.from_dict(state["tf"])
     assert tf.to_dict() == sc.auto_transfer_function(vol).to_dict()
     assert 0.0 <= tf.domain[0] < tf.domain[1] <= 104.0  # within the data range

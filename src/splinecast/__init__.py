@@ -21,6 +21,7 @@ from .models import MODELS
 from .models.smoothing import smooth
 from .multires.channel_scene import Channel, ChannelScene
 from .preintegration import preintegrate
+from .render.aip import Aip
 from .render.defaults import (
     auto_colormap,
     auto_inside,
@@ -112,6 +113,7 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "Aip",
     "Camera",
     "Channel",
     "ChannelScene",

@@ -292,10 +292,12 @@ class Scene:
         mode : str or mode object
             ``"iso"``: first-hit isosurface (or several translucent ones, see ``iso``);
             ``"mip"`` / ``"minip"``: maximum / minimum intensity projection (``Frame.value``);
-            ``"dvr"``: direct volume rendering through ``tf``. Or a mode object holding its
-            options (:class:`~splinecast.Iso`, :class:`~splinecast.MultiIso`,
-            :class:`~splinecast.Mip`, :class:`~splinecast.MinIp`, :class:`~splinecast.Dvr`):
-            its options are then not passed as keywords too.
+            ``"dvr"``: direct volume rendering through ``tf``; any other name of the registry
+            :data:`splinecast.render.modes.MODES` (``"aip"``: average intensity projection,
+            :class:`~splinecast.Aip`). Or a mode object holding its options
+            (:class:`~splinecast.Iso`, :class:`~splinecast.MultiIso`,
+            :class:`~splinecast.Mip`, :class:`~splinecast.MinIp`, :class:`~splinecast.Dvr`,
+            ...): its options are then not passed as keywords too.
         iso : float or list of float, optional
             Isovalue in data units; default :func:`~splinecast.auto_iso` (the volume's
             ``metadata["default_iso"]``, else Otsu's threshold of the histogram). A list
@@ -327,11 +329,13 @@ class Scene:
         effects : SurfaceEffects, optional
             Procedural texture and cel shading of isosurfaces.
         window, colormap : optional
-            MIP/minIP display: value window ``(lo, hi)`` (default :func:`~splinecast.auto_window`:
-            percentiles of the volume's axis-aligned projections, symmetric about 0 for signed
-            data) and colormap (a name of :mod:`splinecast.transfer`: any matplotlib or cmap
-            name; default :func:`~splinecast.auto_colormap`: ``"gray"``, a diverging map for
-            signed data). Pixels whose projected value is the background value
+            The projections' display (the modes that read them: MIP, minIP, AIP): value window
+            ``(lo, hi)`` (default: the mode's ``default_window``, for MIP
+            :func:`~splinecast.auto_window`: percentiles of the volume's axis-aligned
+            projections, symmetric about 0 for signed data) and colormap (a name of
+            :mod:`splinecast.transfer`: any matplotlib or cmap name; default
+            :func:`~splinecast.auto_colormap`: ``"gray"``, a diverging map for signed data).
+            Pixels whose projected value is the background value
             (:func:`~splinecast.background_value`) show the background colour.
         tolerance : float
             MIP/minIP with the exact method: how far a pixel may fall short of the exact
@@ -349,7 +353,7 @@ class Scene:
             1 - 2^-10).
         outputs : list of str, optional
             The Frame's buffers to fill, from ``"rgba"``, ``"depth"``, ``"position"``,
-            ``"normal"``, ``"face"``, ``"value"`` (MIP/minIP) and ``"stats"`` (the per-ray
+            ``"normal"``, ``"face"``, ``"value"`` (the projections) and ``"stats"`` (the per-ray
             counters); default all. The others are ``None`` in the Frame and cost nothing:
             ``outputs=("rgba",)`` is what an image viewer needs, ``("rgba", "depth")`` what
             compositing with other geometry needs. Summary numbers (``Frame.stats``) that

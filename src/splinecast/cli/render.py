@@ -15,7 +15,7 @@ import numpy as np
 import splinecast as sc
 from splinecast.errors import did_you_mean, limits
 from splinecast.render.defaults import WINDOW_PERCENTILES
-from splinecast.render.modes import MODE_NAMES, modes_reading, modes_with_method
+from splinecast.render.modes import MODE_NAMES, all_methods, modes_reading, modes_with_method
 from splinecast.render.modes import MODES as MODE_CLASSES
 from splinecast.transfer import DIVERGING, MENU
 
@@ -154,10 +154,11 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
                         help="vertical field of view, degrees (default 30)")
     render.add_argument("--zoom", type=finite, default=1.0, help="magnification (default 1)")
     render.add_argument("--ortho", action="store_true", help="orthographic projection")
-    render.add_argument("--method", default="exact", choices=("exact", "sampled", "slices"),
-                        help="exact: analytic roots; sampled: fixed-step sampling; for --mode "
-                             "mip/minip also slices: samples on every STEP-th plane of voxels "
-                             "across the ray, the fastest (default exact)")
+    render.add_argument("--method", default="exact", choices=all_methods(),
+                        help="exact: analytic roots; sampled: fixed-step sampling (--mode "
+                             f"{_modes('sampled')}); slices: samples on every STEP-th plane "
+                             f"of voxels across the ray, the fastest (--mode {_modes('slices')})"
+                             " (default exact)")
     render.add_argument("--step", type=finite,
                         help="sampling step in voxels for --method sampled/slices (default "
                              "0.25) and --mode dvr (default 0.25 when another DVR option is "
@@ -178,23 +179,36 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
     _add_mode_options(render)
 
 
+def _reading(keyword: str) -> str:
+    """The modes that read ``keyword``, as the help says them (``mip/minip``)."""
+    return "/".join(modes_reading(keyword))
+
+
+def _modes(method: str) -> str:
+    """The modes that accept ``method``, as the help says them."""
+    return "/".join(modes_with_method(method))
+
+
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
     """Options of the render modes beyond the single isosurface."""
     render.add_argument("--mode", default="iso", choices=MODE_NAMES,
-                        help="iso: isosurface; mip/minip: maximum/minimum intensity projection; "
-                             "dvr: direct volume rendering (default iso)")
+                        help="; ".join(f"{name}: {cls.summary}"
+                                       for name, cls in MODE_CLASSES.items())
+                        + " (default iso)")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
     render.add_argument("--tf", help="transfer function JSON file (--mode dvr)")
     render.add_argument("--colormap",
-                        help="colormap of --mode mip/minip, any matplotlib or cmap name "
+                        help=f"colormap of --mode {_reading('colormap')}, any matplotlib or "
+                             "cmap name "
                              f"({', '.join(MENU)}, ...; default gray, {DIVERGING} for signed "
                              "data)")
-    render.add_argument("--window", help="LO,HI value window of --mode mip/minip (default: "
-                        "the {:g}th-{:g}th percentiles of the volume's maximum projections along "
-                        "its axes, minIP: minimum projections, symmetric about 0 for signed "
-                        "data; printed)".format(*WINDOW_PERCENTILES))
+    render.add_argument("--window", help=f"LO,HI value window of --mode {_reading('window')} "
+                        "(default: the {:g}th-{:g}th percentiles of the volume's projections "
+                        "along its axes, symmetric about 0 for signed data; printed)".format(
+                            *WINDOW_PERCENTILES))
     render.add_argument("--tolerance", type=finite, default=0.0,
-                        help="--mode mip/minip, exact method: how far short of the exact "
+                        help=f"--mode {_reading('tolerance')}, exact method: how far short "
+                             "of the exact "
                              "projection a pixel may fall, as a fraction of the window "
                              "(e.g. 0.004 for one 8-bit level; default 0, exact), for faster "
                              "frames")
@@ -319,13 +333,14 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         if args.window:
             kwargs["window"] = numbers(args.window, "--window", 2)
         else:
-            kwargs["window"] = sc.auto_window(vol, args.mode)
+            kwargs["window"] = MODE_CLASSES[args.mode].default_window(vol)
             how = ("symmetric about 0, signed data" if sc.is_signed(vol) else
                    "percentiles of the volume's axis-aligned projections")
             notes.append("window {:g}..{:g} (automatic: {}; set --window LO,HI)".format(
                 *kwargs["window"], how))
-        kwargs["method"] = args.method
-        kwargs["step"] = sampled_step(args)
+        if "method" in reads:
+            kwargs["method"] = args.method
+            kwargs["step"] = sampled_step(args)
         return kwargs, notes
     if "tf" in reads:
         if args.tf:

@@ -23,10 +23,10 @@ from ..render.defaults import (
     auto_colormap,
     auto_iso,
     auto_transfer_function,
-    auto_window,
     background_value,
     is_signed,
 )
+from ..render.modes import MODES, modes_reading
 from ..scene import Scene
 from ..volume import GridGeometry, Volume
 
@@ -156,9 +156,10 @@ class VolumeInfo(GridGeometry):
         metadata.setdefault("background", background_value(volume))
         metadata.setdefault("signed", is_signed(volume))
         metadata.setdefault("default_colormap", auto_colormap(volume))
-        if metadata.get("default_window") is None:
-            metadata["default_window"] = auto_window(volume, "mip")
-            metadata["default_window_minip"] = auto_window(volume, "minip")
+        # Every projection's automatic window (RenderMode.default_window reads it back).
+        for name in modes_reading("window"):
+            if metadata.get(f"default_window_{name}") is None:
+                metadata[f"default_window_{name}"] = MODES[name].default_window(volume)
         metadata.setdefault("default_tf", auto_transfer_function(volume).to_dict())
         return cls(volume.name, volume.shape, str(volume.dtype), volume.spacing, volume.origin,
                    volume.value_range, metadata)

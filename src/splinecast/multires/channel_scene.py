@@ -46,10 +46,19 @@ from ..render.shading import Shading
 from ..scene import Scene
 from ..transfer import TransferFunction, parse_color
 
-__all__ = ["Channel", "ChannelScene", "channel_color", "default_colors", "COMPOSITING"]
+__all__ = ["Channel", "ChannelScene", "channel_color", "default_colors", "compositing"]
 
-#: How each mode composites its channels.
-COMPOSITING = {"mip": "additive", "minip": "additive", "dvr": "additive", "iso": "nearest hit"}
+
+def _projects(name: str) -> bool:
+    """Whether mode ``name`` projects a value per ray through a window (mip, minip, aip):
+    asked of the mode registry, so a new projection composites as these do."""
+    return "window" in MODES[name].keywords
+
+
+def compositing(name: str) -> str:
+    """How mode ``name`` composites its channels: ``"nearest hit"`` for surfaces,
+    ``"additive"`` for projections and volume rendering."""
+    return "nearest hit" if name == "iso" else "additive"
 
 #: Colours of channels without one of their own, as napari gives them: one channel white
 #: (the plain grey ramp), two magenta and green (told apart with any colour vision), more the
@@ -378,9 +387,10 @@ class ChannelScene:
         scene = self.scenes[i]
         clear = dataclasses.replace(shading, background=(0.0, 0.0, 0.0, 0.0))
         own = dict(kwargs)
-        setting = {"mip": ("window", channel.window), "minip": ("window", channel.window),
-                   "iso": ("iso", channel.iso), "dvr": ("tf", channel.tf)}[name]
-        key, value = setting
+        if _projects(name):
+            key, value = "window", channel.window
+        else:
+            key, value = {"iso": ("iso", channel.iso), "dvr": ("tf", channel.tf)}[name]
         if name == "dvr" and value is None and kwargs.get("tf") is None:
             value = _coloured(auto_transfer_function(_info(scene)), channel.color)
         if isinstance(mode, RenderMode):
@@ -389,7 +399,7 @@ class ChannelScene:
         elif value is not None:
             own[key] = value
         keep = {"stats"} & wanted
-        if name in ("mip", "minip"):
+        if _projects(name):
             keep |= {"value", "depth"}
         elif name == "iso":
             keep |= {"rgba", "depth"} | ({"position", "normal", "face"} & wanted)
@@ -408,7 +418,7 @@ class ChannelScene:
         position = normal = face = None
         if not frames:
             layer = np.zeros((height, width, 4))
-        elif name in ("mip", "minip"):
+        elif _projects(name):
             layers = []
             for i, frame in zip(shown, frames, strict=True):
                 info = _info(self.scenes[i])
@@ -442,7 +452,7 @@ class ChannelScene:
             position, normal, face = chosen("position"), chosen("normal"), chosen("face")
         rgba = on_background(layer, shading.background) if "rgba" in wanted else None
         frame_stats: dict[str, Any] = {
-            "mode": name, "compositing": COMPOSITING[name], "channels": stats,
+            "mode": name, "compositing": compositing(name), "channels": stats,
             "width": width, "height": height, "rays": width * height * len(frames),
             "trace_ms": (time.perf_counter() - start) * 1e3,
             "hits": int(np.count_nonzero(np.isfinite(depth))),

@@ -333,11 +333,10 @@ def _projected(volume: Volume, kind: str) -> np.ndarray:
 def auto_window(volume: Any, mode: str = "mip") -> tuple[float, float]:
     """The MIP / minIP value window shown when none is given: ``(lo, hi)``, ``lo < hi``.
 
-    ``volume.metadata["default_window"]`` when present (``"default_window_minip"`` for minIP,
-    when present), else percentiles of the volume's axis-aligned projections
-    (:data:`WINDOW_PERCENTILES`; symmetric about 0 for signed data: see the module's
-    description), or the data range (widened by one when the volume is constant) when those
-    coincide.
+    ``volume.metadata["default_window_<mode>"]``, else ``["default_window"]``, when present;
+    else percentiles of the volume's axis-aligned projections (:data:`WINDOW_PERCENTILES`;
+    symmetric about 0 for signed data: see the module's description), or the data range
+    (widened by one when the volume is constant) when those coincide.
 
     Parameters
     ----------
@@ -348,7 +347,7 @@ def auto_window(volume: Any, mode: str = "mip") -> tuple[float, float]:
     if mode not in ("mip", "minip"):
         raise ParameterError(f"mode must be 'mip' or 'minip', got {mode!r}")
     meta = volume.metadata
-    stored = meta.get("default_window_minip") if mode == "minip" else None
+    stored = meta.get(f"default_window_{mode}")
     stored = meta.get("default_window") if stored is None else stored
     if stored is not None:
         lo, hi = (float(v) for v in stored)

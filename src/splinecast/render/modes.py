@@ -17,7 +17,7 @@ are what a user writes.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -42,7 +42,8 @@ from .multi_iso import MultiIso as MultiIsoKernel
 from .shading import Shading
 
 __all__ = ["RenderMode", "ModeContext", "Iso", "MultiIso", "Mip", "MinIp", "Dvr", "MODES",
-           "MODE_NAMES", "RENDER_DEFAULTS", "build_mode", "modes_reading", "modes_with_method"]
+           "MODE_NAMES", "RENDER_DEFAULTS", "build_mode", "modes_reading", "modes_with_method",
+           "register_mode", "all_methods"]
 
 #: :meth:`splinecast.Scene.render`'s defaults of the keywords a mode reads: a keyword left at
 #: its default does not clash with a mode object that sets it.
@@ -98,6 +99,18 @@ class RenderMode:
     #: The keywords of :meth:`splinecast.Scene.render` the mode reads; the others are the
     #: frame's (camera, clipping, outputs, ...) or another mode's.
     keywords: ClassVar[tuple[str, ...]] = ()
+    #: What the mode shows, in a few words (the command line's and the viewer's menus).
+    summary: ClassVar[str] = ""
+
+    @classmethod
+    def default_window(cls, volume: Any) -> tuple[float, float] | None:
+        """The value window shown when a mode that reads ``window`` is given none (the command
+        line prints it, the viewer puts it on its slider); None for a mode without one.
+
+        ``volume`` is a :class:`~splinecast.Volume`, a pyramid's preview or a distributed
+        scene's :class:`~splinecast.distributed.source.VolumeInfo`, whose metadata carries
+        ``default_window_<name>`` for every such mode (the workers' data is not at hand)."""
+        return None
 
     @classmethod
     def from_options(cls, **options: Any) -> RenderMode:
@@ -165,6 +178,7 @@ class Iso(RenderMode):
     methods: ClassVar[tuple[str, ...]] = ("exact", "sampled")
     keywords: ClassVar[tuple[str, ...]] = ("iso", "method", "step", "inside", "colors",
                                            "opacity", "normals", "effects")
+    summary: ClassVar[str] = "isosurface(s)"
 
     iso: float | None = None
     method: str = "exact"
@@ -267,6 +281,7 @@ class Mip(RenderMode):
     name: ClassVar[str] = "mip"
     methods: ClassVar[tuple[str, ...]] = ("exact", "sampled", "slices")
     keywords: ClassVar[tuple[str, ...]] = ("window", "colormap", "method", "step", "tolerance")
+    summary: ClassVar[str] = "maximum intensity projection"
 
     window: Any = None
     colormap: Any = None
@@ -276,6 +291,11 @@ class Mip(RenderMode):
 
     def __post_init__(self) -> None:
         _check_method(type(self), self.method)
+
+    @classmethod
+    def default_window(cls, volume: Any) -> tuple[float, float]:
+        """:func:`~splinecast.auto_window` of the projection."""
+        return auto_window(volume, cls.name)
 
     def check_limits(self, volume: Any) -> None:
         """The sampled methods' step."""
@@ -299,6 +319,7 @@ class MinIp(Mip):
     """The minimum intensity projection; options as :class:`Mip`."""
 
     name: ClassVar[str] = "minip"
+    summary: ClassVar[str] = "minimum intensity projection"
 
 
 @dataclass(frozen=True)
@@ -317,6 +338,7 @@ class Dvr(RenderMode):
     name: ClassVar[str] = "dvr"
     methods: ClassVar[tuple[str, ...]] = ("exact", "sampled")
     keywords: ClassVar[tuple[str, ...]] = ("tf", "dvr")
+    summary: ClassVar[str] = "direct volume rendering"
 
     tf: TransferFunction | None = None
     dvr: DVRSettings | None = None
@@ -342,10 +364,61 @@ class Dvr(RenderMode):
 
 #: Render modes by the name :meth:`splinecast.Scene.render` takes, the one list the command
 #: line, the viewer and the checks read (a list of isovalues makes ``"iso"`` a
-#: :class:`MultiIso`).
+#: :class:`MultiIso`). A mode's module adds its class with :func:`register_mode`.
 MODES: dict[str, type[RenderMode]] = {"iso": Iso, "mip": Mip, "minip": MinIp, "dvr": Dvr}
-#: The names of :data:`MODES`, in order.
-MODE_NAMES: tuple[str, ...] = tuple(MODES)
+
+
+class _ModeNames(Sequence[str]):
+    """The names of :data:`MODES`, in order, as they are when read: a mode registered after
+    this module was imported (:func:`register_mode`) is among them, so a front end that took
+    the list at import time still offers it."""
+
+    def __getitem__(self, index: Any) -> Any:
+        return tuple(MODES)[index]
+
+    def __len__(self) -> int:
+        return len(MODES)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(tuple(MODES))
+
+    def __contains__(self, name: object) -> bool:
+        return name in MODES
+
+    def __eq__(self, other: object) -> bool:
+        return tuple(MODES) == (tuple(other) if isinstance(other, Sequence) else other)
+
+    def __hash__(self) -> int:
+        return hash(tuple(MODES))
+
+    def __repr__(self) -> str:
+        return repr(tuple(MODES))
+
+
+#: The names of :data:`MODES`, in order (a live view: modes registered later are included).
+MODE_NAMES: Sequence[str] = _ModeNames()
+
+
+def register_mode(mode: type[RenderMode]) -> type[RenderMode]:
+    """Add a mode class to :data:`MODES` under its :attr:`~RenderMode.name` (usable as a class
+    decorator); the command line, the viewer, pyramids and Dask then offer it.
+
+    Raises
+    ------
+    TypeError
+        Not a :class:`RenderMode` subclass with a name, or the name is taken by another class.
+    """
+    if not (isinstance(mode, type) and issubclass(mode, RenderMode) and mode.name):
+        raise TypeError(f"a mode is a RenderMode subclass with a name, got {mode!r}")
+    if MODES.get(mode.name, mode) is not mode:
+        raise TypeError(f"mode name {mode.name!r} is taken by {MODES[mode.name].__name__}")
+    MODES[mode.name] = mode
+    return mode
+
+
+def all_methods() -> tuple[str, ...]:
+    """Every value of ``method`` some registered mode accepts, ``"exact"`` first."""
+    return tuple(dict.fromkeys(m for cls in MODES.values() for m in cls.methods))
 
 
 def modes_with_method(method: str) -> tuple[str, ...]:

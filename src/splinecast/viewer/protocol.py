@@ -23,8 +23,8 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..models import MODELS
-from ..render.defaults import auto_window
 from ..render.modes import MODE_NAMES as MODES
+from ..render.modes import MODES as MODE_CLASSES
 from ..render.modes import modes_reading
 from ..transfer import MENU, colormap_table
 from ..volume import Volume
@@ -48,8 +48,9 @@ PROTOCOL_VERSION = 1
 #: state's ``dvr.sampling``, and the default ``dvr`` state is the library's default DVR. 3: the
 #: automatic window, ``preparing`` frames. 4: time series (``hello.timepoints``, the state's
 #: ``timepoint``, the frame header's ``timepoint``). 5: several channels (``hello.channels``,
-#: the state's ``channels``).
-PROTOCOL_MINOR = 5
+#: the state's ``channels``). 6: ``hello.mode_keywords`` (which controls each mode reads),
+#: ``hello.auto_window`` for every mode with a window.
+PROTOCOL_MINOR = 6
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.
@@ -177,8 +178,10 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
                       if isinstance(name, str)},
         "defaults": defaults,
         # What a null window stands for in each projection (the page shows it on the slider).
-        "auto_window": {mode: [float(v) for v in auto_window(volume, mode)]
+        "auto_window": {mode: [float(v) for v in MODE_CLASSES[mode].default_window(volume)]
                         for mode in modes_reading("window")},
+        # The render keywords each mode reads: the page shows the controls of those.
+        "mode_keywords": {mode: list(MODE_CLASSES[mode].keywords) for mode in modes},
         "limits": limits,
     }
 

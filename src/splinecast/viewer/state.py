@@ -45,7 +45,7 @@ from ..errors import ParameterError
 from ..errors.limits import shorten as limits_shorten
 from ..models import MODELS
 from ..render.clipping import make_planes
-from ..render.defaults import auto_colormap, auto_iso, auto_transfer_function, auto_window
+from ..render.defaults import auto_colormap, auto_iso, auto_transfer_function
 from ..render.dvr import DEFAULT_SETTINGS, DVRSettings
 from ..render.mip import check_tolerance
 from ..render.modes import MODE_NAMES as MODES
@@ -405,7 +405,7 @@ def _mode_options(state: dict[str, Any], volume: Any, shown: Volume,
         window = state["window"]
         # Without a window the projection's own automatic one, from the data on display (a
         # pyramid's coarsest level: the same for every cut, so frames agree while bricks load).
-        window = (auto_window(shown, mode) if window is None
+        window = (MODE_CLASSES[mode].default_window(shown) if window is None
                   else _numbers(window, "window", 2))
         options["window"] = window
     if "colormap" in reads:

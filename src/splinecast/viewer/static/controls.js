@@ -249,7 +249,7 @@
 
     // The window shown: the state's, or (null) the automatic one of the projection on screen.
     _window() {
-      const auto = (this.hello.auto_window || {})[this.state.mode === "minip" ? "minip" : "mip"];
+      const auto = (this.hello.auto_window || {})[this.state.mode];
       return this.state.window || auto || [this.lo, this.hi];
     }
 
@@ -376,8 +376,11 @@
       $("mode").value = s.mode;
       $("time-slider").value = String(s.timepoint || 0);
       this._drawTime(s.timepoint || 0);
-      for (const section of document.querySelectorAll("section[data-modes]")) {
-        section.hidden = !section.dataset.modes.split(" ").includes(s.mode);
+      // A control is shown when the mode reads one of the render keywords it names (the
+      // registry's answer, hello.mode_keywords): a new mode needs no change here.
+      const reads = (this.hello.mode_keywords || {})[s.mode] || [];
+      for (const element of document.querySelectorAll("[data-reads]")) {
+        element.hidden = !element.dataset.reads.split(" ").some((k) => reads.includes(k));
       }
       const isos = Array.isArray(s.iso) ? s.iso : [s.iso];
       const opacity = s.opacity || isos.map((_, i) => (i === isos.length - 1 ? 1 : 0.5));
@@ -485,8 +488,9 @@
         row.low.value = c.window ? String(c.window[0]) : "";
         row.high.value = c.window ? String(c.window[1]) : "";
         row.iso.value = c.iso === null || c.iso === undefined ? "" : String(c.iso);
-        row.windowBox.hidden = mode !== "mip" && mode !== "minip";
-        row.isoBox.hidden = mode !== "iso";
+        const reads = (this.hello.mode_keywords || {})[mode] || [];
+        row.windowBox.hidden = !reads.includes("window");
+        row.isoBox.hidden = !reads.includes("iso");
       });
     }
 
