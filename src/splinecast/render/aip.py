@@ -36,7 +36,7 @@ from numba import prange
 
 from .._jit import jit
 from ..roots.pieces import poly_value
-from ..transfer import TransferFunction, apply_colormap, colormap_table
+from ..transfer import TransferFunction, colormap_table
 from .defaults import (
     WINDOW_PERCENTILES,
     _cached,
@@ -46,7 +46,7 @@ from .defaults import (
     is_signed,
 )
 from .frame import Frame
-from .mip import check_window
+from .mip import check_window, projection_buffers, projection_frame
 from .mode_api import (
     never,
     no_scratch,
@@ -57,7 +57,7 @@ from .mode_api import (
 )
 from .mode_host import ModeHost
 from .modes import ModeContext, RenderMode, register_mode
-from .outputs import ALL_OUTPUTS, buffer
+from .outputs import ALL_OUTPUTS
 
 __all__ = ["Aip", "AipHost", "AipMode", "combine_aip", "aip_window", "GAUSS_NODES"]
 
@@ -244,28 +244,11 @@ class AipHost(ModeHost):
 
     def output(self, height: int, width: int) -> tuple:
         """Output buffers: value, depth, position (zero rows: not requested)."""
-        o = self.outputs
-        return (buffer("value" in o or "rgba" in o, (height, width)),
-                buffer("depth" in o, (height, width)),
-                buffer("position" in o, (height, width, 3)))
+        return projection_buffers(self.outputs, height, width)
 
     def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
         """The Frame: colormapped means; ``Frame.value`` holds them."""
-        value, depth, position = out
-        o = self.outputs
-        h, w = counters[0].shape
-        rgba = (apply_colormap(value, self.window, self.colormap, self.background)
-                if "rgba" in o else None)
-        if rgba is not None and self.empty is not None:
-            span = float(self.value_range[1]) - float(self.value_range[0])
-            rgba[np.abs(value - self.empty) <= 1e-9 * max(span, 1e-300)] = np.asarray(
-                self.background, np.float32)
-        normal = np.full((h, w, 3), np.nan, np.float32) if "normal" in o else None
-        face = np.zeros((h, w), np.int8) if "face" in o else None
-        stats.update(window=self.window)
-        return Frame(rgba, depth if "depth" in o else None,
-                     position if "position" in o else None, normal, face, *counters, stats,
-                     value if "value" in o else None)
+        return projection_frame(self, out, counters, stats)
 
     combine = staticmethod(combine_aip)
 

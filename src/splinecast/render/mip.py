@@ -370,6 +370,36 @@ def check_tolerance(tolerance: Any, method: str) -> float:
     return value
 
 
+
+def projection_buffers(outputs: frozenset[str], height: int, width: int) -> tuple:
+    """The output buffers of a projection through a window (MIP, minIP, AIP): value, depth,
+    position (zero rows where not requested; the value also for the colour)."""
+    return (buffer("value" in outputs or "rgba" in outputs, (height, width)),
+            buffer("depth" in outputs, (height, width)),
+            buffer("position" in outputs, (height, width, 3)))
+
+
+def projection_frame(host: Any, out: tuple, counters: tuple, stats: dict) -> Frame:
+    """The Frame of a projection through a window: the values colormapped through
+    ``host.window`` and ``host.colormap``, rays that met only background (``host.empty``) in
+    the background colour, ``Frame.value`` the projected values."""
+    value, depth, position = out
+    o = host.outputs
+    h, w = counters[0].shape
+    rgba = apply_colormap(value, host.window, host.colormap, host.background) if "rgba" in o \
+        else None
+    if rgba is not None and host.empty is not None:
+        # Rays that meet only background: the background colour (their value is the
+        # background's up to rounding of a spline's partition of unity).
+        span = float(host.value_range[1]) - float(host.value_range[0])
+        rgba[np.abs(value - host.empty) <= 1e-9 * max(span, 1e-300)] = np.asarray(
+            host.background, np.float32)
+    normal = np.full((h, w, 3), np.nan, np.float32) if "normal" in o else None
+    face = np.zeros((h, w), np.int8) if "face" in o else None
+    stats.update(window=host.window)
+    return Frame(rgba, depth if "depth" in o else None, position if "position" in o else None,
+                 normal, face, *counters, stats, value if "value" in o else None)
+
 class Mip(ModeHost):
     """Host side of MIP (``kind="mip"``) and minIP (``"minip"``).
 
@@ -488,33 +518,14 @@ class Mip(ModeHost):
 
     def output(self, height: int, width: int) -> tuple:
         """Output buffers: value, depth, position (zero rows: not requested)."""
-        o = self.outputs
-        return (buffer("value" in o or "rgba" in o, (height, width)),
-                buffer("depth" in o, (height, width)),
-                buffer("position" in o, (height, width, 3)))
+        return projection_buffers(self.outputs, height, width)
 
     def frame(self, out: tuple, counters: tuple, stats: dict) -> Frame:
         """The Frame: colormapped values; ``Frame.value`` holds the projected values."""
-        value, depth, position = out
-        o = self.outputs
-        h, w = counters[0].shape
-        rgba = (apply_colormap(value, self.window, self.colormap, self.background)
-                if "rgba" in o else None)
-        if rgba is not None and self.empty is not None:
-            # Rays that meet only background: the background colour (their value is the
-            # background's up to rounding of a spline's partition of unity).
-            span = float(self.value_range[1]) - float(self.value_range[0])
-            rgba[np.abs(value - self.empty) <= 1e-9 * max(span, 1e-300)] = np.asarray(
-                self.background, np.float32)
-        normal = np.full((h, w, 3), np.nan, np.float32) if "normal" in o else None
-        face = np.zeros((h, w), np.int8) if "face" in o else None
-        stats.update(window=self.window)
         if self.tolerance > 0.0:
             stats["tolerance"] = self.tolerance
         if self.method in SAMPLED_METHODS:
             stats["step"] = self.params.step
-        return Frame(rgba, depth if "depth" in o else None,
-                     position if "position" in o else None, normal, face, *counters, stats,
-                     value if "value" in o else None)
+        return projection_frame(self, out, counters, stats)
 
     combine = staticmethod(combine_mip)
