@@ -95,7 +95,8 @@ def test_every_projection_mode_composites_as_mip_does(pair, camera):
                                                                 strict=True))
         met = np.any([np.isfinite(f.value) for f in singles], axis=0)
         drawn = met & np.any(summed > 0, axis=-1)
-        assert drawn.any(), name
+        # (The blobs' minima are background everywhere: a minIP draws nothing to compare.)
+        assert drawn.any() or name == "minip", name
         np.testing.assert_allclose(frame.rgba[drawn][:, :3], np.minimum(summed, 1.0)[drawn],
                                    atol=2e-6, err_msg=name)
 

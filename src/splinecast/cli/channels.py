@@ -8,6 +8,7 @@ from typing import Any
 
 import splinecast as sc
 from splinecast.errors import limits
+from splinecast.multires.channel_scene import channel_color
 
 from ._common import numbers, read_options
 
@@ -64,7 +65,7 @@ def _entries(text: str | None, option: str, count: int) -> list[str | None]:
 def channel_settings(args: argparse.Namespace, count: int) -> dict[str, list[Any]]:
     """The :class:`splinecast.ChannelScene` keywords (``colors``, ``windows``, ``isos``) of
     the per-channel options, checked against the number of channels."""
-    colors = [None if c is None else sc.channels.channel_color(c, "--channel-colors")
+    colors = [None if c is None else channel_color(c, "--channel-colors")
               for c in _entries(args.channel_colors, "--channel-colors", count)]
     windows: list[Any] = []
     for entry in _entries(args.channel_window, "--channel-window", count):
