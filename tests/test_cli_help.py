@@ -323,8 +323,10 @@ CODE_DEFAULTS: dict[tuple[str, str], Callable[[str], None]] = {
     ("render", "--allow-missing"): _check_missing,
     ("render", "--samples"): _check_samples,
     ("render", "--labels"): _check_labels,
+    ("view", "--labels"): _check_labels,  # the same wants_labels decides
     ("render", "--show"): _check_show,
     ("render", "--label-colors"): _check_label_colors,
+    ("view", "--label-colors"): _check_label_colors,
     ("render", "--label-opacity"): _check_label_opacity,
     ("view", "--model"): _check_view_model,
     ("view", "--iso"): _check_view_iso,

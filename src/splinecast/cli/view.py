@@ -12,6 +12,7 @@ import math
 import signal
 import time
 import webbrowser
+from pathlib import Path
 
 import splinecast as sc
 from splinecast.errors import did_you_mean
@@ -26,6 +27,7 @@ from ._common import (
     read_options,
     uncaptured,
 )
+from .labels import wants_labels
 
 __all__ = ["add_parser", "run"]
 
@@ -56,6 +58,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "covers more than this many pixels (default 1); wavelet stores: the angle "
                       "ε in radians below which cells are not refined (0: full resolution; "
                       "default one pixel's angle)")
+    view.add_argument("--labels", action=argparse.BooleanOptionalAction, default=None,
+                      help="a label volume (segmentation): each label's boundary as its own "
+                           "surface in its own colour, a label list, and the label under the "
+                           "cursor (default: for OME-Zarr label images; --no-labels shows their "
+                           "raw values)")
+    view.add_argument("--label-colors", metavar="TABLE",
+                      help="--labels: colour table, .json or .csv (as render; default: the "
+                           "store's image-label colours, else a palette)")
     view.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_selection_options(view, several=True)
     add_input_options(view)
@@ -96,11 +106,22 @@ def run(args: argparse.Namespace) -> int:
     several = isinstance(vol, sc.MultichannelVolume)
     _check_multires_options(args, vol[0] if several else vol)
     iso = None if isos is None else (isos[0] if len(isos) == 1 else isos)
+    if several and args.labels:
+        raise sc.ParameterError(f"--labels needs one volume of labels; {args.file} was read as "
+                                f"{len(vol)} channels")
+    labels = not several and wants_labels(args, vol)
+    _check_label_options(args, labels, isos)
     server = ViewerServer(vol, model=args.model, mode=args.mode, iso=iso, host=args.host,
                           port=args.port, budget=args.budget, lod=args.lod,
-                          allow_external=read_options(args)["allow_external"])
+                          allow_external=read_options(args)["allow_external"], labels=labels,
+                          colors=None if args.label_colors is None
+                          else Path(args.label_colors))
     seconds = time.perf_counter() - start
-    if several:
+    if labels:
+        count = len(server.shown.labels or ())
+        read = (f"read {vol.name}: {count} label{'s' if count != 1 else ''}, {vol.shape} "
+                f"{vol.dtype} in {seconds:.2f} s")
+    elif several:
         read = (f"read {vol.name}: {len(vol)} channels ({', '.join(vol.labels)}), {vol.shape} "
                 f"{vol.dtype} in {seconds:.2f} s")
     elif isinstance(vol, sc.Volume):
@@ -111,14 +132,24 @@ def run(args: argparse.Namespace) -> int:
     else:
         read = (f"opened {vol.name}: {len(vol.levels)} levels, {vol.shape} {vol.dtype} in "
                 f"{seconds:.2f} s (coarsest level read; bricks load while you look)")
-    if isinstance(getattr(vol, "metadata", {}).get("image_label"), dict):
-        # The viewer draws one isosurface of the raw values; labels need the label scene.
-        read += ("; an OME-Zarr label image: the viewer shows its raw values (splinecast "
-                 "render --labels draws each label)")
     with uncaptured(args):  # serving: warnings and log lines as they come, not at the end
         asyncio.run(_serve(server, args, read))
     log(args, "stopped")
     return 0
+
+
+def _check_label_options(args: argparse.Namespace, labels: bool, isos: object) -> None:
+    """Label options only with labels; options label volumes do not read, refused."""
+    if not labels:
+        if args.label_colors is not None:
+            raise sc.ParameterError("--label-colors applies to --labels only")
+        return
+    if args.mode != "iso":
+        raise sc.ParameterError(f"--mode {args.mode} does not apply to --labels (labels show "
+                                "as surfaces)")
+    for flag, value in (("--iso", isos), ("--lod", args.lod)):
+        if value is not None:
+            raise sc.ParameterError(f"{flag} does not apply to --labels")
 
 
 def _check_multires_options(args: argparse.Namespace, vol: object) -> None:

@@ -120,6 +120,28 @@ class ViewerClient:
         """Ask for a full-resolution PNG of ``state``; returns the request id."""
         return await self.send("screenshot", state)
 
+    async def pick(self, state: dict[str, Any], x: float, y: float,
+                   timeout: float = 600.0) -> dict[str, Any]:
+        """Ask which label is under pixel ``(x, y)`` of ``state``'s image and wait for the
+        answer: the ``pick`` message (``label``, ``name``, ``position``). Frames and other
+        messages meanwhile are skipped; an ``error`` for it raises :class:`ServerError`."""
+        ident = self._next_id
+        self._next_id += 1
+        self._sent[ident] = time.perf_counter()
+        await self._ws.send_str(json.dumps({"v": PROTOCOL_VERSION, "type": "pick", "id": ident,
+                                            "state": state, "x": x, "y": y}))
+        deadline = time.perf_counter() + timeout
+        while True:
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                raise TimeoutError(f"no pick answer for request {ident} within {timeout:g} s")
+            got = await self.receive(left)
+            if isinstance(got, dict) and got.get("id") == ident:
+                if got.get("type") == "error":
+                    raise ServerError(got)
+                if got.get("type") == "pick":
+                    return got
+
     async def receive(self, timeout: float = 600.0) -> ReceivedFrame | dict[str, Any]:
         """The next message: a :class:`ReceivedFrame` or a JSON message (dict)."""
         import aiohttp

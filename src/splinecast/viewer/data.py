@@ -28,6 +28,7 @@ from ..errors import ParameterError
 from ..io.multichannel import MultichannelVolume
 from ..models import MODELS
 from ..multires.channel_scene import ChannelScene
+from ..multires.label_scene import LabelScene
 from ..render.modes import MODE_NAMES as MODES
 from ..scene import Scene
 from ..volume import Volume
@@ -91,6 +92,10 @@ class Shown:
     #: are pyramids.
     channels: list[dict[str, Any]] | None = None
     layered_pyramids: bool = False
+    #: A label volume (``kind="labels"``): each label's value, name and colour (``#rrggbb``),
+    #: as ``hello.labels`` lists them, and the colour table given (kept for the label scenes of
+    #: other models).
+    labels: list[dict[str, Any]] | None = None
 
     @property
     def multiresolution(self) -> bool:
@@ -103,7 +108,7 @@ class Shown:
     def max_scenes(self) -> int:
         """Scenes kept at once: one brick cache at a time for a pyramid (its budget is RAM),
         one set of channel scenes (each holds a scene per channel)."""
-        return 1 if self.kind in ("multiscale", "channels") else 2
+        return 1 if self.kind in ("multiscale", "channels", "labels") else 2
 
     @property
     def data(self) -> Any:
@@ -118,6 +123,8 @@ class Shown:
         data = self.data if data is None else data
         if self.kind == "volume":
             return Scene(data, model=model)
+        if self.kind == "labels":
+            return LabelScene(data, model=model, **self.scene_options)
         if self.kind == "channels":
             return ChannelScene(data, model=model, **self.scene_options)
         return Scene(data, model=model, **self.scene_options)
@@ -206,7 +213,8 @@ def bricks_header(stats: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def shown(data: Any, model: str | None = None, budget: Any = None,
-          lod: float | None = None, allow_external: bool | None = None) -> Shown:
+          lod: float | None = None, allow_external: bool | None = None, *,
+          labels: bool = False, colors: Any = None) -> Shown:
     """Classify what ``sc.view`` / ``splinecast view`` was given.
 
     Parameters
@@ -223,6 +231,12 @@ def shown(data: Any, model: str | None = None, budget: Any = None,
     allow_external : bool, optional
         Passed to :func:`splinecast.read` when another time point of the file is read (as the
         first one was read).
+    labels : bool
+        Show ``data`` (a Volume or a multiscale volume of integer labels) as a label volume:
+        each label its own surface (:class:`~splinecast.multires.label_scene.LabelScene`). A
+        ``LabelScene`` given as ``data`` is one already.
+    colors : path, mapping or list, optional
+        With ``labels``: the labels' colour table (as ``Scene(vol, labels=True, colors=...)``).
 
     Raises
     ------
@@ -230,6 +244,10 @@ def shown(data: Any, model: str | None = None, budget: Any = None,
         Anything else, a model the data cannot be rendered with, or ``budget`` / ``lod`` given
         with data they do not apply to.
     """
+    if labels or isinstance(data, LabelScene):
+        return _labels(data, model, budget, lod, colors)
+    if colors is not None:
+        raise ParameterError("colors applies to label volumes (labels=True) only")
     out = _classify(data, model, budget, lod)
     if out.kind not in ("wavelet", "channels"):  # (channels: one time point)
         _time_series(out, allow_external)
@@ -329,6 +347,35 @@ def _channels(data: Any, model: str | None, budget: Any, lod: float | None) -> S
                  initial=None if pinned is not None else scene, scene_options=options,
                  default_model=scene.model.name, channels=described,
                  layered_pyramids=pyramids)
+
+
+def _labels(data: Any, model: str | None, budget: Any, lod: float | None,
+            colors: Any) -> Shown:
+    """A label volume: its :class:`LabelScene` made now (the labels present, their names and
+    colours go into the ``hello`` message). One mode (the labels' surfaces, ``iso``); any model
+    reconstructs each label's indicator."""
+    if lod is not None:
+        raise ParameterError("lod does not apply to label volumes (a multiscale label image's "
+                             "finest level within budget is read whole)")
+    if isinstance(data, LabelScene):
+        if budget is not None or colors is not None:
+            raise ParameterError("budget and colors are the label scene's own: pass a volume "
+                                 "to set them")
+        _only_model(model, data.model_name, str(data.volume.metadata.get("name", "labels")))
+        scene, pinned, models, options = data, data, (data.model_name,), {}
+    else:
+        options: dict[str, Any] = {} if budget is None else {"budget": budget}
+        scene = LabelScene(data, model=model or "trilinear", **options)
+        if colors is not None:
+            scene.set_colors(colors)
+            options["colors"] = colors
+        pinned, models = None, tuple(MODELS)
+    described = [{"value": int(v), "name": scene.style(v).name, "color": _hex(
+        scene.style(v).rgba[:3])} for v in scene.labels]
+    volume = scene.volume
+    return Shown("labels", volume, volume, models, modes=("iso",), pinned=pinned,
+                 initial=None if pinned is not None else scene, scene_options=options,
+                 default_model=scene.model_name, labels=described)
 
 
 def _hex(color: Any) -> str:

@@ -100,7 +100,8 @@ class ViewerHandle:
 def view(data: Any, model: str | None = None, mode: str = "iso", iso: Any = None, *,
          host: str = "127.0.0.1", port: int = 0, open_browser: bool | None = None,
          max_pixels: int | None = None, budget: Any = None,
-         lod: float | None = None) -> ViewerHandle:
+         lod: float | None = None, labels: bool = False,
+         colors: Any = None) -> ViewerHandle:
     """Show a volume or scene in the interactive browser viewer.
 
     Parameters
@@ -125,6 +126,13 @@ def view(data: Any, model: str | None = None, mode: str = "iso", iso: Any = None
     lod : float, optional
         Level of detail of a pyramid volume (pixels per voxel, default 1) or a wavelet store (ε in
         radians, default one pixel's angle).
+    labels : bool
+        Show ``data`` (integer labels: a segmentation) as a label volume: each label its own
+        coloured surface, a label list on the page and the label under the cursor (as
+        ``Scene(data, labels=True)``; a ``LabelScene`` given as ``data`` is shown as it is).
+    colors : path, mapping or list, optional
+        With ``labels``: colours and names of labels (a colour table, as
+        ``Scene(data, labels=True, colors=...)``).
 
     Returns
     -------
@@ -150,7 +158,8 @@ def view(data: Any, model: str | None = None, mode: str = "iso", iso: Any = None
     from .state import MAX_PIXELS
 
     server = ViewerServer(data, model=model, mode=mode, iso=iso, host=host, port=port,
-                          max_pixels=max_pixels or MAX_PIXELS, budget=budget, lod=lod)
+                          max_pixels=max_pixels or MAX_PIXELS, budget=budget, lod=lod,
+                          labels=labels, colors=colors)
     loop = asyncio.new_event_loop()
     started = threading.Event()
     failure: list[BaseException] = []

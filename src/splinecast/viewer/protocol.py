@@ -3,11 +3,12 @@
 Documented for other clients in ``docs/viewer-protocol.md``. In short:
 
 * client -> server: JSON text messages ``{"type": "render", "id": N, "state": {...},
-  "interactive": bool}`` and ``{"type": "screenshot", "id": N, "state": {...}}``;
+  "interactive": bool}``, ``{"type": "screenshot", "id": N, "state": {...}}`` and (label
+  volumes) ``{"type": "pick", "id": N, "state": {...}, "x": X, "y": Y}``;
 * server -> client: a JSON ``hello`` on connection (protocol version, volume, histogram, models,
-  modes, colormaps, default state), JSON ``error`` and ``status`` messages, and frames as binary
-  messages: a 4-byte big-endian header length, the UTF-8 JSON header, then the image (JPEG or
-  PNG).
+  modes, colormaps, default state), JSON ``error``, ``status`` and ``pick`` messages, and
+  frames as binary messages: a 4-byte big-endian header length, the UTF-8 JSON header, then
+  the image (JPEG or PNG).
 
 This module turns bytes into checked messages and back; it knows nothing of sockets.
 """
@@ -49,12 +50,13 @@ PROTOCOL_VERSION = 1
 #: automatic window, ``preparing`` frames. 4: time series (``hello.timepoints``, the state's
 #: ``timepoint``, the frame header's ``timepoint``). 5: several channels (``hello.channels``,
 #: the state's ``channels``). 6: ``hello.mode_keywords`` (which controls each mode reads),
-#: ``hello.auto_window`` for every mode with a window.
-PROTOCOL_MINOR = 6
+#: ``hello.auto_window`` for every mode with a window. 7: label volumes (``hello.labels``, the
+#: state's ``labels``, ``pick`` requests answered by ``pick`` messages).
+PROTOCOL_MINOR = 7
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.
-REQUEST_TYPES = ("render", "screenshot")
+REQUEST_TYPES = ("render", "screenshot", "pick")
 #: Largest request id (ids are echoed in frame headers; JavaScript integers stay exact below).
 MAX_ID = 2**53 - 1
 
@@ -94,7 +96,7 @@ def decode_request(text: Any) -> dict[str, Any]:
     if kind not in REQUEST_TYPES:
         raise ParameterError(f"message: type must be one of {', '.join(REQUEST_TYPES)}, "
                              f"got {kind!r}")
-    fields = ("type", "id", "state", "interactive", "v")
+    fields = ("type", "id", "state", "interactive", "v", "x", "y")
     unknown = sorted(str(k) for k in message if k not in fields)
     if unknown:
         raise ParameterError(f"message: no field {unknown[0]!r} (valid: {', '.join(fields)})")
@@ -111,7 +113,18 @@ def decode_request(text: Any) -> dict[str, Any]:
     state = message.get("state", {})
     if not isinstance(state, dict):
         raise ParameterError("message: state must be an object")
-    return {"type": kind, "id": ident, "state": state, "interactive": interactive}
+    out = {"type": kind, "id": ident, "state": state, "interactive": interactive}
+    if kind == "pick":
+        for axis in ("x", "y"):
+            value = message.get(axis)
+            if isinstance(value, bool) or not isinstance(value, int | float) \
+                    or not math.isfinite(value):
+                raise ParameterError(f"pick: {axis} must be a pixel coordinate (a number), "
+                                     f"got {value!r}")
+            out[axis] = float(value)
+    elif "x" in message or "y" in message:
+        raise ParameterError(f"message: x and y belong to pick requests, not {kind}")
+    return out
 
 
 def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS,
@@ -138,7 +151,8 @@ def histogram(volume: Volume, bins: int = _HISTOGRAM_BINS,
 def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, Any], *,
                   geometry: Any = None, models: Any = MODELS, modes: Any = MODES,
                   multires: dict[str, Any] | None = None, timepoints: int = 1,
-                  channels: list[dict[str, Any]] | None = None) -> dict:
+                  channels: list[dict[str, Any]] | None = None,
+                  labels: list[dict[str, Any]] | None = None) -> dict:
     """The first message of every connection: what the page needs to build its controls.
 
     ``volume`` gives the histogram (a multiresolution volume's coarsest level: cheap, and never
@@ -146,7 +160,8 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
     ``models`` and ``modes`` the choices offered; ``multires`` describes a pyramid or wavelet
     store; ``timepoints`` is the number of time points of a time series (1 otherwise);
     ``channels`` lists the channels shown together (their labels and starting settings;
-    ``None`` for one volume).
+    ``None`` for one volume); ``labels`` the labels of a label volume (``value``, ``name``,
+    ``color``; ``None`` for other data).
     """
     geometry = volume if geometry is None else geometry
     lo, hi = geometry.bounds
@@ -169,6 +184,8 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
         "timepoints": int(timepoints),
         # Channels shown together (the page lists them; the state's ``channels`` sets them).
         "channels": channels,
+        # A label volume's labels (the page lists them; the state's ``labels`` sets them).
+        "labels": labels,
         "models": list(models),
         "modes": list(modes),
         # The menu's colormaps, and those of the default state when they are not in it.

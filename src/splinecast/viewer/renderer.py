@@ -107,7 +107,7 @@ class FrameRenderer:
         self._scenes: OrderedDict[tuple[str, int], Any] = OrderedDict()
         first = self.shown.timepoint
         if self.shown.initial is not None:
-            self._scenes[(self.shown.initial.model.name, first)] = self.shown.initial
+            self._scenes[(_model_name(self.shown.initial), first)] = self.shown.initial
         # The current time point and its data; a time point loaded aside, waiting to be used:
         # (time point, data, {model: scene}) (the lock guards it and the current one).
         self._current: tuple[int, Any] = (first, self.shown.data)
@@ -119,7 +119,7 @@ class FrameRenderer:
 
     # ------------------------------------------------------------------------------ scenes
     def _pinned_for(self, model: str, timepoint: int) -> bool:
-        return (self._pinned is not None and self._pinned.model.name == model
+        return (self._pinned is not None and _model_name(self._pinned) == model
                 and timepoint == self.shown.timepoint)
 
     def has_scene(self, model: str, timepoint: int | None = None) -> bool:
@@ -223,7 +223,7 @@ class FrameRenderer:
         out = {}
         scenes = list(self._scenes.items())
         if self._pinned is not None:
-            scenes.append(((self._pinned.model.name,), self._pinned))
+            scenes.append(((_model_name(self._pinned),), self._pinned))
         for (model, *_), scene in scenes:
             stream = getattr(scene, "stream", None)
             if stream is not None:
@@ -292,7 +292,9 @@ class FrameRenderer:
         """
         # Several channels render each channel's scene in turn: warming one tiny scene need not
         # cover every kernel they use, so they may compile (as pyramids may).
-        if compile or self.shown.multiresolution or self.shown.kind == "channels":
+        # Label volumes too: each label's scene is a float32 indicator, whatever the labels'
+        # voxel type, so the tiny volume of :meth:`warm` would not stand for it.
+        if compile or self.shown.multiresolution or self.shown.kind in ("channels", "labels"):
             return self._render(request, scale, abort, step)
         with forbidding_compiles():
             return self._render(request, scale, abort, step)
@@ -352,10 +354,44 @@ class FrameRenderer:
         stats = _merge_stats(parts, camera.width, camera.height)
         return RenderedImage(image, stats, render_ms, camera.height / request.camera.height)
 
+    def pick(self, request: RenderRequest, x: float, y: float) -> dict[str, Any]:
+        """The label under pixel ``(x, y)`` of ``request``'s full-resolution image (render
+        thread): that one pixel's ray, rendered as :meth:`Camera.tile` of a 1x1 window of the
+        request's camera with one sample, through the label scene as every frame.
+
+        Returns
+        -------
+        dict
+            ``label`` (0: no label there), ``name`` (the label's, or None) and ``position``
+            (the world point hit, or None).
+
+        Raises
+        ------
+        ParameterError
+            The data is not a label volume, or the pixel is outside the image.
+        """
+        if self.shown.kind != "labels":
+            raise ParameterError("pick: the data on display is not a label volume")
+        camera = request.camera
+        col, row = int(np.floor(x)), int(np.floor(y))
+        if not (0 <= col < camera.width and 0 <= row < camera.height):
+            raise ParameterError(f"pick: pixel ({x:g}, {y:g}) is outside the "
+                                 f"{camera.width}x{camera.height} image")
+        scene = self.scene(request.model, request.timepoint)
+        options = {**request.options, "samples": 1, "outputs": ("position",)}  # label: always
+        frame = scene.render(camera.tile(col, row, 1, 1), **options)
+        label = int(frame.label[0, 0])
+        position = frame.position[0, 0] if frame.position is not None else None
+        hit = label != 0 and position is not None and bool(np.all(np.isfinite(position)))
+        return {"label": label, "name": scene.style(label).name if label else None,
+                "position": [float(v) for v in position] if hit else None}
+
     def _stripe_rows(self, request: RenderRequest, step: str, width: int, height: int,
                      align: int = 1) -> int:
         """Rows per stripe: about :data:`STRIPE_MS` of work, a multiple of ``align``."""
-        if self.shown.multiresolution:
+        if self.shown.multiresolution or self.shown.kind == "labels":
+            # A label scene traces each label in the window its box projects to: rendered
+            # whole, so the frame is LabelScene.render of the whole camera as it is.
             return height
         if self._stripe_rows_fixed is not None:
             rows = self._stripe_rows_fixed
@@ -368,6 +404,12 @@ class FrameRenderer:
         align = max(1, int(align))
         rows = max(align, rows - rows % align)
         return max(1, min(height, rows))
+
+
+def _model_name(scene: Any) -> str:
+    """The model a scene renders (a label scene names it; other scenes hold the model)."""
+    name = getattr(scene, "model_name", None)
+    return name if isinstance(name, str) else scene.model.name
 
 
 def _tiny_volume(volume: Volume) -> Volume:

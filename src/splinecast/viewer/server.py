@@ -96,6 +96,12 @@ class ViewerServer:
         radians, default one pixel's angle), as ``splinecast render --lod``.
     allow_external : bool, optional
         How other time points of a time series are read (``splinecast.read(allow_external=)``).
+    labels : bool
+        Show ``data`` as a label volume (:class:`~splinecast.multires.label_scene.LabelScene`):
+        ``hello.labels`` lists its labels, the state's ``labels`` chooses and fades them, and
+        ``pick`` requests name the label under a pixel. A ``LabelScene`` is shown so anyway.
+    colors : path, mapping or list, optional
+        With ``labels``: the labels' colour table.
 
     Data read from a file holding several time points (``metadata["timepoints"]`` and
     ``["source"]``, as :func:`splinecast.read` records them) gets a time slider: the page's
@@ -111,18 +117,20 @@ class ViewerServer:
                  iso: Any = None, host: str = "127.0.0.1", port: int = 0,
                  token: str | None = None, max_pixels: int = MAX_PIXELS,
                  budget: Any = None, lod: float | None = None,
-                 allow_external: bool | None = None) -> None:
+                 allow_external: bool | None = None, labels: bool = False,
+                 colors: Any = None) -> None:
         if not isinstance(port, int) or not 0 <= port <= 65535:
             raise ParameterError(f"port must be an integer in 0..65535, got {port!r}")
         self.shown = shown(data, model=model, budget=budget, lod=lod,
-                           allow_external=allow_external)
+                           allow_external=allow_external, labels=labels, colors=colors)
         try:
             volume = self.shown.volume
             self.volume = volume
             self.defaults = default_state(volume, model=self.shown.default_model, mode=mode,
                                           iso=iso, geometry=self.shown.geometry,
                                           timepoint=self.shown.timepoint,
-                                          channels=self.shown.channels)
+                                          channels=self.shown.channels,
+                                          labels=self.shown.labels)
             self.renderer = FrameRenderer(self.shown)
         except BaseException:
             self.shown.close_scene(self.shown.initial)  # stop a pyramid's loader thread
@@ -136,7 +144,7 @@ class ViewerServer:
             "settle_ms": round(Session.settle_s * 1e3)}, geometry=self.shown.geometry,
             models=self.shown.models, modes=self.shown.modes,
             multires=self.shown.description(), timepoints=self.shown.timepoints,
-            channels=self.shown.channels)
+            channels=self.shown.channels, labels=self.shown.labels)
         self._watcher: asyncio.Task | None = None
         self._allowed: frozenset[str] = frozenset()
         self._sessions: set[Session] = set()

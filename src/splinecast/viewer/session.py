@@ -169,9 +169,14 @@ class Session:
                                   self._max_pixels, geometry=shown.geometry,
                                   models=shown.models, modes=shown.modes,
                                   timepoints=shown.timepoints,
-                                  channels=len(shown.channels or ()))
+                                  channels=len(shown.channels or ()),
+                                  labels=None if shown.labels is None
+                                  else [entry["value"] for entry in shown.labels])
         except SplinecastError as exc:
             await self._error(ident, str(exc))
+            return
+        if message["type"] == "pick":
+            await self._pick(ident, request, message["x"], message["y"])
             return
         if message["type"] == "screenshot":
             self._shot = _Job("screenshot", ident, request)
@@ -186,6 +191,16 @@ class Session:
         else:
             job = _Job("final", ident, request)
         self._submit_view(job)
+
+    async def _pick(self, ident: int, request: RenderRequest, x: float, y: float) -> None:
+        """Answer a ``pick`` request: the label under pixel (x, y) of the request's image,
+        rendered on the render thread (one ray; between frames, never during one)."""
+        try:
+            found = await self._run(partial(self.renderer.pick, request, x, y))
+        except SplinecastError as exc:
+            await self._error(ident, str(exc))
+            return
+        await self._send_text({"type": "pick", "id": ident, "x": x, "y": y, **found})
 
     def refresh(self) -> None:
         """Render the last full-resolution state again (call on the event loop's thread, e.g.

@@ -29,6 +29,9 @@ The fields (see ``docs/viewer-protocol.md`` for the full table)::
     channels [{visible, color, window, iso}, ...]   several channels shown together (only
                                    when hello.channels lists them): each channel's settings;
                                    iso, window, colormap, opacity and tf then go unused
+    labels {show: [v, ...] | null, opacity: a | {"v": a, ...}}   a label volume (only when
+                                   hello.labels lists its labels): the labels drawn (null:
+                                   all) and their opacity; iso and opacity then go unused
 """
 
 from __future__ import annotations
@@ -77,7 +80,9 @@ _PAN_LIMIT = 100.0
 
 _TOP_FIELDS = ("model", "mode", "camera", "size", "iso", "opacity", "window", "colormap",
                "tolerance", "tf", "dvr", "lighting", "clip", "crop", "normals",
-               "timepoint", "channels")
+               "timepoint", "channels", "labels")
+#: The fields of the state's ``labels``.
+_LABEL_FIELDS = ("show", "opacity")
 #: The fields of one entry of the state's ``channels``.
 _CHANNEL_FIELDS = ("visible", "color", "window", "iso")
 _CAMERA_FIELDS = ("azimuth", "elevation", "zoom", "pan", "fov", "ortho")
@@ -124,7 +129,8 @@ def _default_tf(volume: Volume) -> dict[str, Any]:
 
 def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
                   iso: Any = None, *, geometry: Any = None, timepoint: int = 0,
-                  channels: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+                  channels: list[dict[str, Any]] | None = None,
+                  labels: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """The complete state a viewer starts from (and that omitted fields take).
 
     Parameters
@@ -145,6 +151,9 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
         Several channels shown together: each one's ``visible``, ``color``, ``window`` and
         ``iso`` as it starts (:attr:`splinecast.viewer.data.Shown.channels`); the state then
         has a ``channels`` field.
+    labels : list of dict, optional
+        A label volume's labels (:attr:`splinecast.viewer.data.Shown.labels`); the state then
+        has a ``labels`` field: every label drawn, opaque.
 
     Raises
     ------
@@ -191,6 +200,8 @@ def default_state(volume: Volume, model: str = "trilinear", mode: str = "iso",
     if channels is not None:
         state["channels"] = [{k: copy.deepcopy(c.get(k)) for k in _CHANNEL_FIELDS}
                              for c in channels]
+    if labels is not None:
+        state["labels"] = {"show": None, "opacity": 1.0}
     return state
 
 
@@ -296,6 +307,8 @@ def _complete(state: Any, defaults: dict[str, Any]) -> dict[str, Any]:
             full[key] = _merged(defaults[key], value, _LIGHTING_FIELDS, "lighting")
         elif key == "dvr":
             full[key] = _merged(defaults[key], value, _DVR_FIELDS, "dvr")
+        elif key == "labels" and isinstance(defaults.get(key), dict):
+            full[key] = _merged(defaults[key], value, _LABEL_FIELDS, "labels")
         else:
             full[key] = value
     return full
@@ -452,6 +465,53 @@ def _channel_settings(value: Any, count: int) -> list[dict[str, Any]]:
     return out
 
 
+def _label_settings(value: Any, present: list[int] | None) -> dict[str, Any]:
+    """The state's ``labels`` as :meth:`LabelScene.render` keywords (``show``, ``opacity``).
+
+    Checked here, so a label the volume does not hold or an opacity outside [0, 1] is one
+    error naming the field (the scene would name its keyword instead)."""
+    if present is None:
+        raise ParameterError("labels: the data on display is not a label volume")
+    value = _check_fields(value, _LABEL_FIELDS, "labels")
+    known = set(present)
+
+    def label(v: Any, name: str) -> int:
+        if isinstance(v, str):  # JSON object keys are strings
+            try:
+                v = int(v)
+            except ValueError:
+                raise ParameterError(f"{name} must be a label value (an integer), got "
+                                     f"{limits_shorten(v)}") from None
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ParameterError(f"{name} must be a label value (an integer), got "
+                                 f"{limits_shorten(v)}")
+        if v not in known:
+            raise ParameterError(f"{name}: label {v} does not occur in the volume (its labels: "
+                                 f"{limits_shorten(sorted(known))})")
+        return int(v)
+
+    def alpha(v: Any, name: str) -> float:
+        number = _number(v, name)
+        if not 0.0 <= number <= 1.0:
+            raise ParameterError(f"{name} must be in [0, 1], got {number:g}")
+        return number
+
+    out: dict[str, Any] = {}
+    show = value.get("show")
+    if show is not None:
+        if not isinstance(show, list):
+            raise ParameterError(f"labels.show must be a list of label values or null, got "
+                                 f"{limits_shorten(show)}")
+        out["show"] = [label(v, f"labels.show[{i}]") for i, v in enumerate(show)]
+    opacity = value.get("opacity", 1.0)
+    if isinstance(opacity, dict):
+        out["opacity"] = {label(k, f"labels.opacity key {k!r}"):
+                          alpha(v, f"labels.opacity[{k!r}]") for k, v in opacity.items()}
+    else:
+        out["opacity"] = alpha(opacity, "labels.opacity")
+    return out
+
+
 def _timepoint(value: Any, timepoints: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ParameterError(f"timepoint must be an integer, got {value!r}")
@@ -465,7 +525,7 @@ def _timepoint(value: Any, timepoints: int) -> int:
 def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
                 max_pixels: int = MAX_PIXELS, *, geometry: Any = None,
                 models: Any = None, modes: Any = None, timepoints: int = 1,
-                channels: int = 0) -> RenderRequest:
+                channels: int = 0, labels: list[int] | None = None) -> RenderRequest:
     """Validate a client's state into a :class:`RenderRequest`.
 
     Parameters
@@ -491,6 +551,10 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
         the state's ``channels`` (:meth:`splinecast.ChannelScene.render`) instead of the
         single volume's isovalue, window, colormap, opacity and transfer function, which each
         channel has of its own.
+    labels : list of int, optional
+        The values of a label volume's labels (None: not a label volume). The request's
+        options then hold ``show`` and ``opacity`` (:meth:`LabelScene.render`) from the
+        state's ``labels`` instead of the isovalue and its opacity.
 
     Raises
     ------
@@ -506,6 +570,11 @@ def parse_state(state: Any, volume: Volume, defaults: dict[str, Any],
     camera = orbit_camera(geometry, camera_fields, size)
     timepoint = _timepoint(full.get("timepoint", 0), timepoints)
     several = bool(channels) or "channels" in full
+    if labels is not None or "labels" in full:
+        # A label scene draws its labels' own surfaces: no isovalue, window or colormap.
+        options = _mode_options(full, geometry, volume, channels=True)
+        options.update(_label_settings(full.get("labels"), labels))
+        return RenderRequest(model, mode, camera, options, full, timepoint)
     options = _mode_options(full, geometry, volume, several)
     if several:
         options["channels"] = _channel_settings(full.get("channels"), channels)
