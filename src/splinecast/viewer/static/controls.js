@@ -45,6 +45,7 @@
       this._buildClip();
       this._buildLighting();
       this._buildChannels();
+      this._buildLabels();
       $("ortho").addEventListener("change", (e) => {
         this.state.camera.ortho = e.target.checked;
         this.onChange(false);
@@ -404,6 +405,63 @@
       $("ortho").checked = s.camera.ortho;
       for (const [name, input] of Object.entries(this.lightSliders)) input.value = s.lighting[name];
       this._syncChannels();
+      this._syncLabels();
+    }
+
+    // ------------------------------------------------------------------ labels
+    // A label volume (hello.labels, protocol 1.7): a row per label with its colour swatch, its
+    // name or value and a box that shows or hides it; all / none; one opacity for every label.
+    // The isovalue, window and transfer function do not apply (the server leaves them out).
+    _buildLabels() {
+      const labels = this.hello.labels;
+      if (!labels) return;
+      $("section-labels").hidden = false;
+      $("panel").classList.add("single-hidden");
+      if (!this.state.labels) this.state.labels = structuredClone(this.hello.defaults.labels);
+      const values = labels.map((l) => l.value);
+      // The shown labels as a list (null in the state: every label).
+      const shown = () => (this.state.labels.show === null ? values.slice() : this.state.labels.show.slice());
+      const setShown = (list) => {
+        const set = new Set(list);
+        // Every label shown is sent as null: the state says "all", as the defaults do.
+        this.state.labels.show = values.every((v) => set.has(v)) ? null : values.filter((v) => set.has(v));
+        this.sync();
+        this.onChange(false);
+      };
+      this.labelRows = labels.map((info) => {
+        const li = document.createElement("li");
+        const box = document.createElement("input");
+        box.type = "checkbox";
+        const text = info.name ? `${info.name} (${info.value})` : `label ${info.value}`;
+        box.setAttribute("aria-label", `show ${text}`);
+        const swatch = document.createElement("span");
+        swatch.className = "swatch";
+        swatch.style.background = info.color;
+        const name = document.createElement("span");
+        name.className = "label";
+        name.textContent = text;
+        box.addEventListener("change", () => {
+          const list = shown().filter((v) => v !== info.value);
+          if (box.checked) list.push(info.value);
+          setShown(list);
+        });
+        li.append(box, swatch, name);
+        return { li, box, value: info.value };
+      });
+      $("labels").replaceChildren(...this.labelRows.map((r) => r.li));
+      $("labels-all").addEventListener("click", () => setShown(values));
+      $("labels-none").addEventListener("click", () => setShown([]));
+      const opacity = $("labels-opacity");
+      opacity.addEventListener("input", () => { this.state.labels.opacity = Number(opacity.value); this.onChange(true); });
+      opacity.addEventListener("change", () => { this.state.labels.opacity = Number(opacity.value); this.onChange(false); });
+    }
+
+    _syncLabels() {
+      if (!this.labelRows) return;
+      const show = this.state.labels.show;
+      for (const row of this.labelRows) row.box.checked = show === null || show.includes(row.value);
+      const a = this.state.labels.opacity;
+      $("labels-opacity").value = typeof a === "number" ? a : 1;
     }
 
     // ------------------------------------------------------------------ channels

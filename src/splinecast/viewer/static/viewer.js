@@ -34,6 +34,7 @@
     lastFrame: null, // header of the last frame drawn
     frameLog: [], // {id, pass, final, scale, render_ms, latency_ms, at} of recent frames drawn
     lastError: null,
+    lastPick: null, // the last pick answer shown (label volumes): {label, name, position, ...}
     preparing: null, // what the server prepares (a model or mode's kernels), or null
     get state() { return state; },
     get hello() { return hello; },
@@ -69,7 +70,10 @@
     else if (msg.type === "error") {
       errorId = msg.id === null ? errorId : msg.id;
       api.lastError = msg;
+      picking = false; // a refused pick has no answer to wait for
       showError(msg.message);
+    } else if (msg.type === "pick") {
+      showPick(msg);
     } else if (msg.type === "status") {
       if ("preparing" in msg) {
         // New kernels: the page keeps showing what is ready and says what it waits for.
@@ -78,6 +82,48 @@
       } else statusLine.textContent = msg.message + "…";
     }
   }
+
+  // ------------------------------------------------------------------------ picking
+  // Label volumes (hello.labels): the label under the cursor, asked of the server (one ray of
+  // the state's camera through that pixel). One pick in flight at a time; the newest position
+  // waits for its answer.
+  const pickBar = document.getElementById("pick");
+  let picking = false;
+  let pickWanted = null; // [x, y] in full-resolution pixels, not yet asked
+
+  function wantPick(e) {
+    if (!hello || !hello.labels || e.buttons) return;
+    const rect = canvas.getBoundingClientRect();
+    const x = ((e.clientX - rect.left) / rect.width) * canvas.width;
+    const y = ((e.clientY - rect.top) / rect.height) * canvas.height;
+    if (x < 0 || y < 0 || x >= canvas.width || y >= canvas.height) return;
+    pickWanted = [x, y];
+    if (!picking) sendPick();
+  }
+
+  function sendPick() {
+    if (!pickWanted || !ws || ws.readyState !== WebSocket.OPEN) return;
+    const [x, y] = pickWanted;
+    pickWanted = null;
+    picking = true;
+    ws.send(JSON.stringify({ v: PROTOCOL_VERSION, type: "pick", id: nextId++, x, y, state: wireState() }));
+  }
+
+  function showPick(msg) {
+    picking = false;
+    api.lastPick = msg;
+    pickBar.hidden = false;
+    if (!msg.label) pickBar.textContent = "no label";
+    else {
+      const p = msg.position ? ` at (${msg.position.map((v) => v.toPrecision(4)).join(", ")})` : "";
+      pickBar.textContent = `label ${msg.label}${msg.name ? " · " + msg.name : ""}${p}`;
+    }
+    sendPick();
+  }
+
+  canvas.addEventListener("pointermove", wantPick);
+  canvas.addEventListener("click", wantPick);
+  canvas.addEventListener("pointerleave", () => { pickWanted = null; pickBar.hidden = true; });
 
   function onHello(msg) {
     if (Math.floor(msg.v) !== PROTOCOL_VERSION) {
