@@ -11,12 +11,17 @@ Python client; waits are on the server's messages, never sleeps.
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from test_labels import SPACING, first_sphere, sphere_labels
 
 import splinecast as sc
+from splinecast.cli import main
 from splinecast.viewer.client import ServerError, ViewerClient
 from splinecast.viewer.protocol import PROTOCOL_MINOR, decode_request
 from splinecast.viewer.server import ViewerServer
@@ -161,3 +166,45 @@ def test_other_data_refuses_labels_and_picks(vol):
                 await client.pick({"size": list(SIZE)}, 1, 1)
 
     asyncio.run(check())
+
+
+def test_splinecast_view_labels_serves_the_label_scene(vol, tmp_path):
+    path = tmp_path / "spheres.nrrd"
+    sc.write(vol, path)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "splinecast.cli", "view", str(path), "--labels", "--no-browser"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        url = proc.stdout.readline().strip()
+        assert "/?token=" in url, url
+
+        async def check():
+            async with ViewerClient(url) as client:
+                assert [e["value"] for e in client.hello["labels"]] == [3, 5, 12]
+                got = await client.pick({"size": list(SIZE), "camera": CAMERA}, 1, 1)
+                assert got["label"] == 0
+
+        asyncio.run(check())
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    assert "3 labels" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--label-colors", "t.json"], "--label-colors applies to --labels only"),
+    (["--labels", "--mode", "mip"], "--mode mip does not apply to --labels"),
+    (["--labels", "--iso", "0.5"], "--iso does not apply to --labels"),
+])
+def test_view_label_mistakes_are_one_line_and_status_2(vol, tmp_path, args, words, capsys):
+    path = tmp_path / "spheres.nrrd"
+    sc.write(vol, path)
+    code = main(["view", str(path), *args, "--no-browser"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and words in err, err
