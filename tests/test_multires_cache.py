@@ -532,3 +532,40 @@ def test_the_loader_starts_no_read_beside_the_trace_of_a_frame_drawn_at_once(sph
         assert cache.settle(timeout=30) and starts
         (t0, t1), = traces
         assert min(starts) > t1
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_requests_go_coarse_first_then_nearest_the_centre_of_the_screen(sphere, ortho):
+    """The camera looks at the centre of one off-centre level-0 brick: after the coarser
+    levels, that brick is read first, and the level-0 requests follow in the order of the
+    angle (perspective) or the distance (orthographic) of their centres from the view axis."""
+    data, path = sphere
+    mv = sc.read(path)
+    octree = BrickOctree(mv)
+    level0 = mv.levels[0]
+    target = np.array([1, 4, 3])  # brick index on level 0 (bricks of B voxels)
+    look = np.asarray(level0.origin) + (target * B + B / 2) * np.asarray(level0.spacing)
+    eye = look + np.array([-3.0, 40.0, 25.0])
+    cam = sc.Camera(eye, look, size=(120, 90), fov=20, ortho=ortho)
+    with BrickStream(mv, budget="64MiB", lod=1e-9) as stream:
+        asked = []
+        request_cut = stream.cache.request_cut
+        stream.cache.request_cut = lambda cut: (asked.append(list(cut.requests)),
+                                                request_cut(cut))
+        stream.frame(cam, wait=False)
+    requests = asked[0]
+    levels = [k[0] for k in requests]
+    assert levels == sorted(levels, reverse=True) and levels[-1] == 0
+    finest = [k for k in requests if k[0] == 0]
+    assert finest[0] == (0, *target)
+
+    def away(key):
+        lo, hi = octree.world_box(0, np.array([key[1:]]))  # the geometry the tests above check
+        v = 0.5 * (lo[0] + hi[0]) - cam.position
+        along = v @ cam.forward
+        aside = np.linalg.norm(v - along * cam.forward)
+        return aside if ortho else math.atan2(aside, along)
+
+    distances = [away(k) for k in finest]
+    assert len(finest) > 20
+    assert all(b >= a - 1e-12 for a, b in zip(distances, distances[1:], strict=False))

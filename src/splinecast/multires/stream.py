@@ -25,7 +25,7 @@ from ..camera import Camera
 from ..errors import ParameterError
 from ..io.omezarr import MultiscaleVolume
 from .cache import BrickCache, DrawItem
-from .lod import Cut, Key, select_cut
+from .lod import Cut, Key, centre_first, select_cut
 from .octree import BrickOctree
 from .relevance import ValueFilter
 
@@ -135,6 +135,7 @@ class BrickStream:
         t1 = time.perf_counter()
         self.cache.begin_frame()
         if not reuse:  # the loader already has this cut's requests
+            cut.requests = centre_first(cut.requests, self.octree, camera)
             self.cache.request_cut(cut)
         if wait:
             self.cache.wait(timeout=timeout)
