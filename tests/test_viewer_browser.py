@@ -15,6 +15,10 @@ import base64
 import io
 import os
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -41,18 +45,19 @@ def vol() -> sc.Volume:
     return sc.demo("marschner-lobb", size=20)
 
 
-@pytest.fixture(scope="module")
-def page(vol, tmp_path_factory):
+@contextmanager
+def viewer_page(handle: Any, profile: Path, viewport: dict, **options: Any) -> Iterator[Any]:
+    """A headless Chromium page on the viewer ``handle`` serves, its first frame drawn, with
+    ``page.problems`` collecting page errors and console errors; at the end the browser is
+    closed and the server stopped. ``options`` go to Playwright's context."""
     from playwright.sync_api import sync_playwright
 
-    handle = sc.view(vol, open_browser=False)
-    profile = tmp_path_factory.mktemp("chromium-profile")
     problems: list[str] = []
     try:
         with sync_playwright() as pw:
             context = pw.chromium.launch_persistent_context(
                 str(profile), executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS,
-                viewport={"width": 760, "height": 420}, accept_downloads=True)
+                viewport=viewport, **options)
             try:
                 page = context.new_page()
                 page.set_default_timeout(TIMEOUT_MS)
@@ -67,6 +72,14 @@ def page(vol, tmp_path_factory):
                 context.close()
     finally:
         handle.stop()
+
+
+@pytest.fixture(scope="module")
+def page(vol, tmp_path_factory):
+    handle = sc.view(vol, open_browser=False)
+    with viewer_page(handle, tmp_path_factory.mktemp("chromium-profile"),
+                     {"width": 760, "height": 420}, accept_downloads=True) as shown:
+        yield shown
 
 
 def wait_final(page, after: int) -> dict:

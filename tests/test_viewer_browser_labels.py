@@ -13,10 +13,10 @@ import pytest
 from test_labels import SPACING, first_sphere, sphere_labels
 from test_viewer_browser import (
     CHROMIUM,
-    CHROMIUM_ARGS,
     TIMEOUT_MS,
     canvas_pixels,
     last_id,
+    viewer_page,
     wait_final,
 )
 
@@ -34,30 +34,10 @@ def vol() -> sc.Volume:
 
 @pytest.fixture(scope="module")
 def page(vol, tmp_path_factory):
-    from playwright.sync_api import sync_playwright
-
     handle = sc.view(vol, labels=True, open_browser=False)
-    profile = tmp_path_factory.mktemp("chromium-profile")
-    problems: list[str] = []
-    try:
-        with sync_playwright() as pw:
-            context = pw.chromium.launch_persistent_context(
-                str(profile), executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS,
-                viewport={"width": 600, "height": 360})
-            try:
-                page = context.new_page()
-                page.set_default_timeout(TIMEOUT_MS)
-                page.on("pageerror", lambda exc: problems.append(f"page error: {exc}"))
-                page.on("console", lambda m: problems.append(f"console: {m.text}")
-                        if m.type == "error" else None)
-                page.goto(handle.url)
-                wait_final(page, 0)
-                page.problems = problems
-                yield page
-            finally:
-                context.close()
-    finally:
-        handle.stop()
+    with viewer_page(handle, tmp_path_factory.mktemp("chromium-profile"),
+                     {"width": 600, "height": 360}) as shown:
+        yield shown
 
 
 def page_camera(page, vol) -> sc.Camera:
