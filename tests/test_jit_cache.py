@@ -44,6 +44,14 @@ _SAVER = textwrap.dedent("""
 """).format(keys=KEYS)
 
 
+def _read_index(path: Path) -> dict:
+    """The index file's entries, key -> data file name (each key is pickled on its own)."""
+    with open(path, "rb") as fh:
+        pickle.load(fh)  # numba's version and the index format
+        _, entries = pickle.loads(fh.read())
+    return {pickle.loads(raw): name for raw, name in entries.items()}
+
+
 def test_concurrent_saves_keep_index_and_data_consistent(tmp_path: Path) -> None:
     (tmp_path / "cached_module.py").write_text(
         "from splinecast._jit import jit\n\n@jit\ndef f(x):\n    return x + 1\n")
@@ -59,9 +67,7 @@ def test_concurrent_saves_keep_index_and_data_consistent(tmp_path: Path) -> None
 
     indexes = list((tmp_path / "cache").rglob("*.nbi"))
     assert len(indexes) == 1, indexes
-    with open(indexes[0], "rb") as fh:
-        pickle.load(fh)  # numba's version stamp
-        _, overloads = pickle.loads(fh.read())
+    overloads = _read_index(indexes[0])
     expected = {("proc", i, "key", j) for i in range(PROCESSES) for j in range(KEYS)}
     assert set(overloads) == expected  # no entry lost
     assert len(set(overloads.values())) == len(expected)  # one data file per key
@@ -373,3 +379,59 @@ def test_compiler_flags_hash_and_compare_as_numba_defines_them() -> None:
     for a, b in itertools.product(variants, repeat=2):
         assert hash(a) == hash(tuple(sorted(a.values())))
         assert (a == b) == (a.values() == b.values()), (a, b)
+
+
+_FOREIGN_CALLER = textwrap.dedent("""
+    import json, sys
+    sys.path.insert(0, sys.argv[1])
+    if sys.argv[2] == "with-points":  # the script that defines its own argument type
+        sys.path.insert(0, sys.argv[3])
+        from points import Point
+        arg = Point(2.0, 5.0)
+    else:
+        arg = (2.0, 5.0)  # a plain tuple: a type every process can decode
+    from splinecast._jit import forbidding_compiles
+    import generic_kernels
+    if sys.argv[4] == "forbid":
+        with forbidding_compiles():  # raises CompileNeeded instead of compiling
+            value = generic_kernels.first(arg)
+    else:
+        value = generic_kernels.first(arg)
+    f = generic_kernels.first
+    print(json.dumps([value, sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values())]))
+""")
+
+
+def test_a_type_another_process_cannot_import_keeps_every_cached_kernel(tmp_path: Path) -> None:
+    """A generic kernel (the image loop, the cut launch) is cached for the types of every model
+    it was called with, also a model a user defines in a script. A process that cannot import
+    that script must neither fail to read the other entries nor drop them when it saves its
+    own: each process then loads what the others compiled instead of compiling it again."""
+    kernels, script = tmp_path / "kernels", tmp_path / "script"
+    kernels.mkdir()
+    script.mkdir()
+    (kernels / "generic_kernels.py").write_text(
+        "from splinecast._jit import jit\n\n@jit\ndef first(p):\n    return p[0] + 1.0\n")
+    (script / "points.py").write_text(
+        "from collections import namedtuple\nPoint = namedtuple('Point', 'x y')\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run(kind: str, compiles: str) -> list:
+        proc = subprocess.run([sys.executable, "-c", _FOREIGN_CALLER, str(kernels), kind,
+                               str(script), compiles], env=env, capture_output=True, text=True,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    assert run("with-points", "allow") == [3.0, 0, 1]  # compiled for the script's Point
+    assert run("plain", "allow") == [3.0, 0, 1]  # compiled for a tuple, beside it
+    # Both entries are still there: each loads without compiling (``forbidding_compiles``
+    # raises, and the process fails, where a kernel would need compiling), in a process that
+    # can decode only its own type.
+    assert run("with-points", "forbid")[0] == 3.0
+    assert run("plain", "forbid")[0] == 3.0
+    index = next((tmp_path / "cache").rglob("*.nbi"))
+    with open(index, "rb") as fh:
+        pickle.load(fh)
+        _, entries = pickle.loads(fh.read())
+    assert len(entries) == 2 and len(set(entries.values())) == 2  # two keys, two data files

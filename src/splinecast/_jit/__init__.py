@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import pickle
 import threading
 import time
 import types
@@ -62,6 +63,9 @@ except ImportError:  # pragma: no cover
     def _cache_log(msg: str, *args: Any) -> None:
         pass
 
+#: Marks an index written by :class:`_LockedIndexFile` (each key pickled on its own).
+_INDEX_FORMAT = "splinecast-keys-1"
+
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
            "call_with_first_classes", "package_stamp", "reporting_compiles", "CompileNeeded",
            "forbidding_compiles"]
@@ -83,8 +87,8 @@ def _locked(path: str) -> Iterator[None]:
 if IndexDataCacheFile is not None and fcntl is not None:
 
     class _LockedIndexFile(IndexDataCacheFile):
-        """Numba's index-and-data cache file, saved under a lock, data before index; a file
-        that cannot be decoded counts as missing."""
+        """Numba's index-and-data cache file, saved under a lock, data before index, each key
+        of the index decoded on its own; a file that cannot be decoded counts as missing."""
 
         # Numba unpickles the index and data files as they are: a file cut short (a full disk,
         # a killed process on a file system without atomic replace, a copied-over install) or
@@ -94,16 +98,56 @@ if IndexDataCacheFile is not None and fcntl is not None:
         # cache were empty and the next save writes valid files over the damaged ones. Errors
         # of the file system itself (OSError) still propagate as in numba: they are not about
         # the content, and numba already treats a missing data file as a miss.
+        #
+        # Numba pickles the whole index as one dictionary whose keys hold the argument types.
+        # The generic kernels (the image loop, the cut renderer's launch) take the grid and
+        # mode types of every model and mode they were called with, including models that a
+        # user registers in a script: a process that cannot import that script cannot unpickle
+        # the index at all, read it as empty, and its next save wrote an index holding only its
+        # own entry, dropping every other process's kernels (they were compiled again, for
+        # minutes, by the next process that needed them). So each key is pickled on its own
+        # (:data:`_INDEX_FORMAT`): a key this process cannot decode is kept as bytes, written
+        # back unchanged, and its data file is never reused for another key.
 
         def _load_index(self) -> dict:
+            self._undecoded: dict[bytes, str] = {}
             try:
-                overloads = super()._load_index()
+                with open(self._index_path, "rb") as fh:
+                    version = pickle.load(fh)
+                    payload = fh.read()
+            except FileNotFoundError:
+                return {}
             except OSError:
                 raise
             except Exception as exc:  # anything the unpickler raises on arbitrary bytes
                 _cache_log("[cache] unreadable index %r ignored: %r", self._index_path, exc)
                 return {}
-            return overloads if isinstance(overloads, dict) else {}
+            if version != (self._version, _INDEX_FORMAT):
+                return {}  # numba's own format or another version: stale, rewritten on save
+            try:
+                stamp, entries = pickle.loads(payload)
+                if stamp != self._source_stamp or not isinstance(entries, dict):
+                    return {}
+                overloads = {}
+                undecoded = {}
+                for raw, name in entries.items():
+                    try:
+                        overloads[pickle.loads(raw)] = name
+                    except Exception:  # a type from a module this process does not have
+                        undecoded[raw] = name
+            except Exception as exc:
+                _cache_log("[cache] unreadable index %r ignored: %r", self._index_path, exc)
+                return {}
+            self._undecoded = undecoded
+            return overloads
+
+        def _save_index(self, overloads: dict) -> None:
+            entries = dict(getattr(self, "_undecoded", {}))
+            entries.update((self._dump(key), name) for key, name in overloads.items())
+            payload = self._dump((self._source_stamp, entries))
+            with self._open_for_write(self._index_path) as fh:
+                pickle.dump((self._version, _INDEX_FORMAT), fh, protocol=-1)
+                fh.write(payload)
 
         def _load_data(self, name: str) -> Any:
             try:
@@ -114,12 +158,16 @@ if IndexDataCacheFile is not None and fcntl is not None:
                 _cache_log("[cache] unreadable data %r ignored: %r", name, exc)
                 return None
 
+        def flush(self) -> None:
+            self._undecoded = {}
+            self._save_index({})
+
         def save(self, key: Any, data: Any) -> None:
             with _locked(self._index_path + ".lock"):
                 overloads = self._load_index()
                 name = overloads.get(key)
                 if name is None:
-                    taken = set(overloads.values())
+                    taken = set(overloads.values()) | set(self._undecoded.values())
                     number = 1
                     while self._data_name(number) in taken:
                         number += 1
@@ -247,7 +295,7 @@ def _load_or_refuse(dispatcher: Any, sig: Any, args: tuple) -> Any:
 def _lock_cache(dispatcher: Any) -> Any:
     cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
     if _LockedIndexFile is not None and type(cache_file) is IndexDataCacheFile:
-        # Same state, safer ``save``: the subclass adds no attributes.
+        # Same state, safer ``save``: the subclass adds only what each index load sets.
         cache_file.__class__ = _LockedIndexFile
     if cache_file is not None and hasattr(cache_file, "_source_stamp"):
         if not _PACKAGE_STAMP:
