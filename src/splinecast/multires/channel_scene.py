@@ -26,11 +26,11 @@ colour, window, label, active) gives the defaults; a channel the file marks inac
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -43,6 +43,7 @@ from ..render.defaults import auto_transfer_function, background_value, content_
 from ..render.frame import Frame
 from ..render.modes import MODES, RenderMode
 from ..render.shading import Shading
+from ..render.template import RenderOptions, SceneTemplate
 from ..scene import Scene
 from ..transfer import TransferFunction, parse_color
 
@@ -175,7 +176,7 @@ def _info(scene: Any) -> Any:
     return preview if preview is not None else scene.volume
 
 
-class ChannelScene:
+class ChannelScene(SceneTemplate):
     """The channels of one grid, rendered together (see the module's description).
 
     Parameters
@@ -313,14 +314,34 @@ class ChannelScene:
         return out
 
     # ------------------------------------------------------------------ rendering
-    def render(self, camera: Camera, mode: str | RenderMode = "mip", *,
-               shading: Shading | None = None, outputs: Any = None, channels: Any = None,
-               **kwargs: Any) -> Frame:
-        """Render every visible channel and composite them.
+    default_mode = "mip"
+    frame_options = MappingProxyType({"channels": None})
+    passes_options = True
 
-        Parameters
-        ----------
-        camera : Camera
+    def check_frame_options(self, given: Mapping[str, Any]) -> dict[str, Any]:
+        """``channels`` and the frame options of the channels' scenes (a multiscale channel's
+        ``complete``, ``lod``, ...), which are passed on to the scenes that take them.
+
+        Raises
+        ------
+        TypeError
+            A name neither this scene nor any channel's scene takes.
+        """
+        known = set(self.frame_options).union(*(s.frame_options for s in self.scenes))
+        for name in given:
+            if name not in known:
+                raise TypeError(f"{type(self).__name__}.render() got an unexpected keyword "
+                                f"argument {name!r}")
+        return {**self.frame_options, **given}
+
+    def render_frame(self, camera: Camera, options: RenderOptions,
+                     frame_options: Mapping[str, Any]) -> Frame:
+        """Render every visible channel and composite them: the render template's step for a
+        scene of scenes (``render`` is :meth:`splinecast.Scene.render`, with the frame option
+        ``channels`` and ``"mip"`` by default).
+
+        ``render`` options a channel scene reads:
+
         mode : str or mode object
             ``"mip"``, ``"minip"``, ``"dvr"`` or ``"iso"`` (see the module's description of
             how each composites), or a mode object (:class:`splinecast.Mip`, ...) whose
@@ -335,12 +356,12 @@ class ChannelScene:
             Settings of this render only, one entry per channel: ``None`` (the channel's own)
             or a dict of :class:`Channel` fields (:meth:`with_settings`), as the viewer sends
             them.
-        **kwargs
-            Other :meth:`splinecast.Scene.render` keywords (``method``, ``step``, ``clip``,
-            ``crop``, ``dvr``, ``samples``, ...), the same for every channel. ``window``,
-            ``iso`` and ``tf`` apply to the channels that have none of their own;
-            ``colormap`` and ``colors`` are refused: a channel's colour is its
-            :attr:`Channel.color`.
+        others
+            The other :meth:`splinecast.Scene.render` keywords (``method``, ``step``,
+            ``clip``, ``crop``, ``dvr``, ``samples``, ...) and the channels' scenes' frame
+            options, the same for every channel. ``window``, ``iso`` and ``tf`` apply to the
+            channels that have none of their own; ``colormap`` and ``colors`` are refused: a
+            channel's colour is its :attr:`Channel.color`.
 
         Returns
         -------
@@ -348,6 +369,11 @@ class ChannelScene:
             ``stats["channels"]`` holds each rendered channel's statistics (with its
             ``label`` and ``index``), ``stats["compositing"]`` the compositing.
         """
+        mode, shading, outputs = options.mode, options.shading, options.outputs
+        channels = frame_options["channels"]
+        kwargs = {k: v for k, v in options.as_dict().items()
+                  if k not in ("mode", "shading", "outputs")}
+        kwargs.update((k, v) for k, v in frame_options.items() if k != "channels")
         if not isinstance(camera, Camera):
             raise ParameterError(f"camera must be a splinecast.Camera, got "
                                  f"{type(camera).__name__}")
@@ -461,20 +487,12 @@ class ChannelScene:
                      None, None, None, frame_stats)
 
 
-#: Keyword arguments of the render methods of scene types that only some take (a multiscale
-#: scene's ``complete``, ``missing``, ``wait``): left out for the channels whose scene has no
-#: such keyword, so pyramids and in-memory volumes can be channels of one scene.
-_SCENE_ONLY = ("complete", "missing", "wait", "timeout")
-
-
 def _accepted(scene: Any, kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``kwargs`` without the scene-type keywords :data:`_SCENE_ONLY` that ``scene.render``
-    does not take."""
-    extra = [k for k in _SCENE_ONLY if k in kwargs]
-    if not extra:
-        return kwargs
-    names = inspect.signature(scene.render).parameters
-    return {k: v for k, v in kwargs.items() if k not in extra or k in names}
+    """``kwargs`` without the frame options that ``scene`` does not take (a multiscale
+    channel's ``complete`` or ``wait`` for an in-memory channel), so pyramids and in-memory
+    volumes can be channels of one scene."""
+    options = frozenset(RenderOptions.__dataclass_fields__) | frozenset(scene.frame_options)
+    return {k: v for k, v in kwargs.items() if k in options}
 
 
 def _coloured(tf: TransferFunction, color: Sequence[float]) -> TransferFunction:

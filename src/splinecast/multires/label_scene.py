@@ -30,6 +30,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,7 @@ from ..render.compose import gather, nearest_hit, on_background, over_by_depth
 from ..render.frame import Frame
 from ..render.outputs import check_outputs
 from ..render.shading import Shading
+from ..render.template import RenderOptions, SceneTemplate
 from ..scene import Scene
 from ..volume import Volume
 
@@ -97,7 +99,7 @@ def label_volume(volume: Any, budget: Any = DEFAULT_BUDGET) -> Volume:
                          f"exceeds the labels' budget={limit / 2**20:.0f} MiB")
 
 
-class LabelScene:
+class LabelScene(SceneTemplate):
     """A label volume: each label's surface rendered in its own colour.
 
     Usually made by ``Scene(volume, labels=True, ...)``; see the module's text for the method.
@@ -326,15 +328,19 @@ class LabelScene:
         self.close()
 
     # ------------------------------------------------------------------ rendering
-    def render(self, camera: Camera, mode: str = "iso", *, show: Iterable[int] | None = None,
-               opacity: Any = None, shading: Shading | None = None, clip: Any = None,
-               crop: Any = None, normals: str = "smooth", samples: int | None = None,
-               outputs: Any = None, inside: str | None = None, **unused: Any) -> Frame:
-        """Render the labels' surfaces.
+    #: The options of ``render`` a label scene reads; the others must keep their defaults.
+    _READS = frozenset(("mode", "opacity", "shading", "clip", "crop", "normals", "samples",
+                        "outputs", "inside"))
+    frame_options = MappingProxyType({"show": None})
 
-        Parameters
-        ----------
-        camera : Camera
+    def render_frame(self, camera: Camera, options: RenderOptions,
+                     frame_options: Mapping[str, Any]) -> Frame:
+        """Render the labels' surfaces: the render template's step for a scene that composites
+        one in-memory scene's frame per label (``render`` is :meth:`splinecast.Scene.render`,
+        with the frame option ``show``).
+
+        ``render`` options a label scene reads:
+
         mode : str
             ``"iso"`` (the labels' surfaces), the only mode of label scenes.
         show : iterable of int, optional
@@ -349,24 +355,31 @@ class LabelScene:
             Buffers of the frame (as :meth:`Scene.render`); ``"label"`` (the label hit per
             pixel) and ``"depth"`` are always filled.
 
+        The others (``iso``, ``window``, ``tf``, ...) are refused unless left at their defaults.
+
         Returns
         -------
         Frame
             ``rgba`` composited, ``depth`` (and ``position``, ``normal``, ``face``) of the first
             label hit, ``label`` its value (0 on a miss), ``stats["labels"]`` the labels drawn.
         """
-        if mode not in ("iso", None):
+        mode, inside = options.mode, options.inside
+        if mode != "iso":
             raise ParameterError(f"label volumes render their labels' surfaces (mode 'iso'), "
                                  f"not mode {mode!r}")
         if inside is not None and inside != "high":
             raise ParameterError("inside does not apply to label volumes (a label is inside "
                                  "where the voxels hold it)")
-        for key, value in unused.items():
-            if value is not None:
+        for key in options.given():
+            if key not in self._READS:
                 raise ParameterError(f"{key} does not apply to label volumes")
         if not isinstance(camera, Camera):
             raise ParameterError(f"camera must be a splinecast.Camera, got "
                                  f"{type(camera).__name__}")
+        show, opacity, shading = frame_options["show"], options.opacity, options.shading
+        clip, crop, normals, samples = (options.clip, options.crop, options.normals,
+                                        options.samples)
+        outputs = options.outputs
         values = self._check_show(show, "show") if show is not None else self._show
         alphas = self._check_opacity(opacity) if opacity is not None else self._opacity
         shading = shading or Shading()

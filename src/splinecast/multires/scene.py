@@ -43,13 +43,7 @@ from ..errors import ParameterError, ReadError
 from ..io.omezarr import MultiscaleVolume
 from ..models import MODELS
 from ..render.defaults import auto_iso
-from ..render.dvr import DVRSettings
-from ..render.effects import SurfaceEffects
-from ..render.frame import Frame
-from ..render.modes import RenderMode
-from ..render.shading import Shading
-from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
-from ..transfer import TransferFunction
+from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
 from ..volume import Volume
 from .budget import parse_bytes
 from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut
@@ -169,7 +163,7 @@ def _merged_nodes(keys: np.ndarray, items: list,
     return out
 
 
-class MultiscaleScene:
+class MultiscaleScene(SceneTemplate):
     """A multiscale volume, a reconstruction model, a brick cache and the renderer of its cuts.
 
     Parameters
@@ -230,7 +224,16 @@ class MultiscaleScene:
         for a B-spline model.
     ReadError
         The coarsest level cannot be read.
+
+    Notes
+    -----
+    ``render`` is the render template's (:meth:`splinecast.Scene.render`), with this scene's
+    frame options ``lod``, ``interest``, ``wait``, ``timeout``, ``complete`` and ``missing``
+    (see :meth:`trace`), and antialiasing off by default.
     """
+
+    #: Each further antialiasing sample is traced over the whole image: off unless asked.
+    default_samples = 1
 
     def __init__(self, volume: MultiscaleVolume, model: str = "trilinear", budget: Any = "2GiB",
                  lod: float = 1.0, load_budget: int | None = None, *, cut: str = "lod",
@@ -281,7 +284,6 @@ class MultiscaleScene:
                 volume, self.stream, finest,
                 self._cache_budget() - self.stream.cache.pinned_bytes, model, options)
         self.prepare_ms = (time.perf_counter() - start) * 1e3
-        self._table_cache: dict = {}
         self._last_pieces: tuple[list, list[Piece]] | None = None
         #: The view (camera, level of detail, visible values) of the last reservation.
         self._reserved_view: tuple | None = None
@@ -300,7 +302,14 @@ class MultiscaleScene:
         """The default level-of-detail threshold (pixels per voxel)."""
         return self.stream.lod
 
-    def _check_iso(self, iso: Any) -> float:
+    @property
+    def defaults_volume(self) -> Volume:
+        """The coarsest level in memory (:attr:`preview`): the automatic choices come from it."""
+        return self.preview
+
+    def check_iso(self, iso: Any) -> float:
+        """An isovalue checked against the whole volume's range (``None``: the automatic one
+        of the coarsest level)."""
         return check_iso(self.volume, auto_iso(self.preview) if iso is None else iso)
 
     def _filter(self, setup: Any) -> ValueFilter | None:
@@ -314,43 +323,19 @@ class MultiscaleScene:
             return ValueFilter.transfer(tf, widen)
         return None
 
-    def render(
-        self,
-        camera: Camera,
-        mode: str | RenderMode = "iso",
-        iso: float | None = None,
-        method: str = "exact",
-        step: float = 0.25,
-        shading: Shading | None = None,
-        inside: str | None = None,
-        *,
-        clip: Any = None,
-        crop: Any = None,
-        colors: Any = None,
-        opacity: Any = None,
-        effects: SurfaceEffects | None = None,
-        window: Any = None,
-        colormap: Any = None,
-        tolerance: float = 0.0,
-        tf: TransferFunction | None = None,
-        dvr: DVRSettings | None = None,
-        outputs: Any = None,
-        lod: float | None = None,
-        interest: Any = None,
-        wait: bool = True,
-        timeout: float | None = None,
-        complete: bool = False,
-        missing: str = "substitute",
-        normals: str = "smooth",
-        samples: int | None = None,
-    ) -> Frame:
-        """Render one image of the current cut (see :meth:`splinecast.Scene.render` for the
-        mode options).
+    def trace(self, request: Any, camera: Camera, *, lod: float | None = None,
+              interest: Any = None, wait: bool = True, timeout: float | None = None,
+              complete: bool = False, missing: str = "substitute") -> Traced:
+        """The cut of ``camera`` traced in the mode of ``request``: the piece of the render
+        template (:class:`~splinecast.render.template.SceneTemplate`) a multiscale scene
+        supplies. Its keywords are the scene's frame options: ``render(camera, ..., lod=...,
+        wait=False)`` passes them here. Antialiasing (``samples``) is off by default: the rays
+        of each further sample are traced for the whole image through the cut (the default 5
+        samples cost about one more frame), where an in-memory scene traces only the pixels on
+        edges.
 
         Parameters
         ----------
-        outputs : list of str, optional
-            The Frame's buffers to keep (as :meth:`splinecast.Scene.render`; default all).
         lod : float, optional
             Level of detail of this frame (default: the scene's; ``cut="lod"`` and the
             isosurface modes).
@@ -370,20 +355,13 @@ class MultiscaleScene:
             the frame says so in ``stats["unreadable"]`` and ``stats["unreadable_reason"]``),
             or a :class:`~splinecast.ReadError` naming the chunk (``"error"``: a still image
             that must show the data, the command line without ``--allow-missing``).
-        normals : str
-            As :meth:`splinecast.Scene.render`.
-        samples : int, optional
-            Antialiasing as :meth:`splinecast.Scene.render`, but off by default: the rays of
-            each further sample are traced for the whole image through the cut (the default 5
-            samples cost about one more frame), where an in-memory scene traces only the
-            pixels on edges.
 
         Returns
         -------
-        Frame
-            ``stats["complete"]`` is ``False`` while bricks of the cut are drawn from coarser
-            ancestors (``stats["unreadable"]`` of them because they cannot be read); render
-            the same view again to refine.
+        Traced
+            The frame's ``stats["complete"]`` is ``False`` while bricks of the cut are drawn
+            from coarser ancestors (``stats["unreadable"]`` of them because they cannot be
+            read); render the same view again to refine.
 
         Raises
         ------
@@ -393,12 +371,6 @@ class MultiscaleScene:
         """
         if missing not in ("substitute", "error"):
             raise ParameterError(f"missing must be 'substitute' or 'error', got {missing!r}")
-        request = prepare_render(
-            self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
-            crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
-            colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name, outputs=outputs,
-            tolerance=tolerance, normals=normals, samples=1 if samples is None else samples)
         # A frame drawn at once (the viewer's interactive passes, the first image) has the
         # cores to itself: no read starts from its start to the end of its trace
         # (BrickCache.drawing). Frames that wait for bricks share them with the loader's
@@ -418,7 +390,7 @@ class MultiscaleScene:
                 whole = self.whole.get(load=not at_once)
                 if whole is not None:
                     request.stats["cut_ms"] = (time.perf_counter() - start) * 1e3
-                    return self._draw_whole(whole, cut, request, camera, lod)
+                    return self._trace_whole(whole, cut, request, camera, lod)
         with self.stream.cache.drawing() if at_once else nullcontext():
             bricks = self._frame(camera, value_filter, lod, wait, timeout, selector)
             rounds = 1
@@ -464,17 +436,17 @@ class MultiscaleScene:
         stats["unreadable_reason"] = unreadable[0][1] if unreadable else ""
         stats["lod"] = self.lod if lod is None else lod
         stats["whole_level"] = False
-        return finish_frame(request, out, counters, camera, start,
-                            whole_frame_tracer(self.renderer, pieces, request.planes))
+        return Traced(out, counters, start,
+                      whole_frame_tracer(self.renderer, pieces, request.planes))
 
-    def _draw_whole(self, whole: Any, cut: Cut, request: Any, camera: Camera,
-                    lod: float | None) -> Frame:
-        """Draw a view whose cut is level 0 everywhere from level 0 held whole (the in-memory
+    def _trace_whole(self, whole: Any, cut: Cut, request: Any, camera: Camera,
+                     lod: float | None) -> Traced:
+        """Trace a view whose cut is level 0 everywhere from level 0 held whole (the in-memory
         scene ``whole``), with the statistics a complete frame of that cut reports."""
         assert self.whole is not None
-        frame = whole.draw(request, camera)
+        traced = whole.trace(request, camera)
         cache = self.stream.cache
-        stats = frame.stats
+        stats = request.stats
         stats.update(cache.stats())
         stats.update(
             resident_bytes=cache.nbytes + self.whole.nbytes, requested=0, substituted=0,
@@ -483,7 +455,7 @@ class MultiscaleScene:
             cut_policy="lod", lod=self.lod if lod is None else lod, pieces=1,
             pieces_traced=1, pieces_changed_at_seams=0, seam_copy_bytes=0, whole_level=True,
             whole_level_read_ms=self.whole.read_ms)
-        return frame
+        return traced
 
     def _selector(self, setup: Any, camera: Camera, value_filter: ValueFilter | None,
                   interest: Any) -> Any:

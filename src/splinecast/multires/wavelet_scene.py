@@ -44,13 +44,7 @@ from ..camera import Camera
 from ..errors import ParameterError
 from ..models import MODELS
 from ..render.defaults import auto_iso
-from ..render.dvr import DVRSettings
-from ..render.effects import SurfaceEffects
-from ..render.frame import Frame
-from ..render.modes import RenderMode
-from ..render.shading import Shading
-from ..scene import check_iso, finish_frame, prepare_render, whole_frame_tracer
-from ..transfer import TransferFunction
+from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
 from ..volume import Volume
 from .budget import parse_bytes
 from .draw import CutRenderer, Piece, gc_paused
@@ -179,7 +173,7 @@ def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor,
     return out
 
 
-class WaveletScene:
+class WaveletScene(SceneTemplate):
     """A spline-wavelet store, the matching B-spline model, a chunk reconstructor and the
     renderer of its selections.
 
@@ -204,7 +198,15 @@ class WaveletScene:
     ------
     ParameterError
         Another model, a bad ``lod`` or bad options.
+
+    Notes
+    -----
+    ``render`` is the render template's (:meth:`splinecast.Scene.render`), with this scene's
+    frame option ``lod`` (see :meth:`trace`), and antialiasing off by default.
     """
+
+    #: Each further antialiasing sample is traced over the whole image: off unless asked.
+    default_samples = 1
 
     def __init__(self, volume: WaveletVolume, model: str | None = None, lod: float | None = None,
                  budget: Any = "2GiB", **options: Any) -> None:
@@ -246,7 +248,6 @@ class WaveletScene:
         # (reconstructor version, octant tables, pieces) of the last frame.
         self._last_pieces: tuple[int, list[np.ndarray], list[Piece]] | None = None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
-        self._table_cache: dict = {}
 
     @staticmethod
     def _check_lod(lod: Any) -> None:
@@ -283,58 +284,29 @@ class WaveletScene:
                 return float(value)
         return math.radians(camera.fov) / max(camera.height, 1)
 
-    def _check_iso(self, iso: Any) -> float:
+    @property
+    def defaults_volume(self) -> Volume:
+        """The coarsest level's coefficients (:attr:`preview`): the automatic choices come
+        from it."""
+        return self.preview
+
+    def check_iso(self, iso: Any) -> float:
+        """An isovalue checked against the voxels' range (``None``: the automatic one of the
+        coarsest level)."""
         return check_iso(self.volume, auto_iso(self.preview) if iso is None else iso)
 
-    def render(
-        self,
-        camera: Camera,
-        mode: str | RenderMode = "iso",
-        iso: float | None = None,
-        method: str = "exact",
-        step: float = 0.25,
-        shading: Shading | None = None,
-        inside: str | None = None,
-        *,
-        clip: Any = None,
-        crop: Any = None,
-        colors: Any = None,
-        opacity: Any = None,
-        effects: SurfaceEffects | None = None,
-        window: Any = None,
-        colormap: Any = None,
-        tolerance: float = 0.0,
-        tf: TransferFunction | None = None,
-        dvr: DVRSettings | None = None,
-        outputs: Any = None,
-        lod: float | None = None,
-        normals: str = "smooth",
-        samples: int | None = None,
-    ) -> Frame:
-        """Render one image (see :meth:`splinecast.Scene.render` for the mode options).
+    def trace(self, request: Any, camera: Camera, *, lod: float | None = None) -> Traced:
+        """The selection of ``camera`` traced in the mode of ``request``: the piece of the
+        render template (:class:`~splinecast.render.template.SceneTemplate`) a wavelet scene
+        supplies. Antialiasing (``samples``) is off by default: each further sample's rays are
+        traced for the whole image through the selection.
 
         Parameters
         ----------
-        outputs : list of str, optional
-            The Frame's buffers to keep (as :meth:`splinecast.Scene.render`; default all).
         lod : float, optional
-            ε of this frame (default: the scene's, else one pixel's angle).
-        normals : str
-            As :meth:`splinecast.Scene.render`.
-        samples : int, optional
-            Antialiasing as :meth:`splinecast.Scene.render`, but off by default: each further
-            sample's rays are traced for the whole image through the selection.
-
-        Returns
-        -------
-        Frame
+            ε of this frame (a frame option: ``render(camera, ..., lod=ε)``; default: the
+            scene's, else one pixel's angle).
         """
-        request = prepare_render(
-            self.preview, camera, mode, iso, method, step, shading, inside, clip=clip,
-            crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
-            colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name, outputs=outputs,
-            tolerance=tolerance, normals=normals, samples=1 if samples is None else samples)
         eps = self.epsilon(camera, lod)
         setup = request.setup
         isos = setup.surface_values()
@@ -373,8 +345,8 @@ class WaveletScene:
             "detail_owners": int(sum(u.sum() for u in rstats.detail_owners)),
             "details_read": rstats.details_read, "resident_bytes": rstats.resident_bytes,
         })
-        return finish_frame(request, out, counters, camera, start,
-                            whole_frame_tracer(self.renderer, pieces, request.planes))
+        return Traced(out, counters, start,
+                      whole_frame_tracer(self.renderer, pieces, request.planes))
 
     def __repr__(self) -> str:
         return (f"WaveletScene({self.volume.name!r}, model={self.model.name!r}, "
