@@ -60,7 +60,7 @@ from splinecast.multires.cut_metric import CutMetric, cut_error
 from splinecast.multires.cut_select import greedy_cut, optimal_cut, optimal_update
 from splinecast.multires.cut_tree import regular_brick_tree
 from splinecast.multires.cut_update import CutUpdater
-from splinecast.multires.mean_pyramid import mean_downsample
+from splinecast.multires.store.mean_pyramid import mean_downsample
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import MRI, describe  # noqa: E402

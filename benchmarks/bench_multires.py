@@ -93,7 +93,7 @@ _CHILD = textwrap.dedent("""
     import numpy as np
     import splinecast as sc
     if job == "build":
-        from splinecast.multires.pyramid import build_pyramid
+        from splinecast.multires.store.pyramid import build_pyramid
         before = anon(); threading.Thread(target=sample, daemon=True).start()
         t = time.perf_counter()
         build_pyramid(args["source"], args["out"], overwrite=True, progress=False)
@@ -242,7 +242,7 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
     """Both modes, the in-memory baseline and the image errors; the isosurface's memory
     above the budget at ``other_budgets``."""
     import splinecast as sc
-    from splinecast.multires.budget import parse_bytes
+    from splinecast.multires.store.budget import parse_bytes
 
     mv = sc.read(store)
     limit = parse_bytes(budget, "budget")
@@ -472,7 +472,7 @@ def main() -> None:
     else:
         results["cache"] = old.get("cache")
     if "render" in parts:
-        from splinecast.multires.budget import parse_bytes
+        from splinecast.multires.store.budget import parse_bytes
 
         if not store.exists():
             child("build", source=str(source), out=str(store))

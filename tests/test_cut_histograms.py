@@ -27,7 +27,7 @@ from splinecast.multires.cut_histograms import (
 )
 from splinecast.multires.cut_metric import histogram_distortion
 from splinecast.multires.cut_tree import regular_brick_tree
-from splinecast.multires.mean_pyramid import mean_downsample, mean_pyramid
+from splinecast.multires.store.mean_pyramid import mean_downsample, mean_pyramid
 
 MNI = Path(__file__).resolve().parents[2] / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 TF = sc.TransferFunction([(30, 0.0), (60, 0.05), (90, 0.1), (140, 0.6), (255, 0.9)],

@@ -25,7 +25,7 @@ from splinecast.multires.cut_metric import (
     visible_nodes,
 )
 from splinecast.multires.cut_tree import BrickTree, regular_brick_tree
-from splinecast.multires.mean_pyramid import mean_pyramid
+from splinecast.multires.store.mean_pyramid import mean_pyramid
 
 UNIT = (np.zeros((1, 3)), np.ones((1, 3)))
 

@@ -25,8 +25,8 @@ from splinecast.multires.cut_metric import ArrayMetric, CutMetric
 from splinecast.multires.cut_select import greedy_cut
 from splinecast.multires.cut_tree import BrickTree, regular_brick_tree
 from splinecast.multires.cut_update import CutUpdater
-from splinecast.multires.mean_pyramid import mean_pyramid
 from splinecast.multires.partial_queue import PartialQueue
+from splinecast.multires.store.mean_pyramid import mean_pyramid
 
 
 def ids(*letters):

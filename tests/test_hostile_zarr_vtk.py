@@ -71,7 +71,7 @@ def refused(args: list[str], capsys: pytest.CaptureFixture, folder: Path, *needl
 def store(tmp_path: Path) -> Path:
     """splinecast's own pyramid (Zarr v3, sharded, zstd), two levels; its root attributes do not
     store the value range, so ``info`` reads the coarsest level's chunk."""
-    from splinecast.multires.pyramid import build_pyramid
+    from splinecast.multires.store.pyramid import build_pyramid
 
     path = tmp_path / "v.ome.zarr"
     build_pyramid(sc.Volume(ramp(), spacing=SPACING), path, brick=4, workers=1, progress=False)

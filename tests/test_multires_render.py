@@ -28,8 +28,8 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
 from splinecast.io.synthetic import sphere_sdf, torus_sdf  # noqa: E402
-from splinecast.multires.cache import BrickUnavailableWarning  # noqa: E402
 from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.store.cache import BrickUnavailableWarning  # noqa: E402
 
 MODELS = ["trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31"]
 MODES = ["iso", "multi", "mip", "minip", "dvr"]

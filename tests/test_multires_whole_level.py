@@ -23,8 +23,8 @@ from reference import smooth_noise
 pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.cache import BrickUnavailableWarning  # noqa: E402
 from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.store.cache import BrickUnavailableWarning  # noqa: E402
 
 B = 8
 

@@ -47,7 +47,7 @@ __version__ = "0.1.0"
 #: Names loaded on first use, so that ``import splinecast`` never imports zarr, dask or the
 #: viewer's server.
 _LAZY = {
-    "build_pyramid": ("splinecast.multires.pyramid", "build_pyramid"),
+    "build_pyramid": ("splinecast.multires.store.pyramid", "build_pyramid"),
     "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
     "MultiscaleScene": ("splinecast.multires.scene", "MultiscaleScene"),
     "LabelScene": ("splinecast.multires.label_scene", "LabelScene"),

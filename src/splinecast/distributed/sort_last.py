@@ -7,7 +7,7 @@ Shares of bricks
     box (in bricks) is cut in proportion to the number of parts on each side, recursively, until
     every part is one box. ``P`` is the number of workers (at most the number of bricks); part
     ``p`` is a :class:`Share`, pinned to worker ``p``. A worker opens the store itself, reads the
-    bricks of its share once (:func:`splinecast.multires.cache.read_bricks`: the chunks of its
+    bricks of its share once (:func:`splinecast.multires.store.cache.read_bricks`: the chunks of its
     bricks, and of the neighbouring chunks the two ghost layers reach into, which every model's
     support needs) and keeps them between renders, like the sort-first workers keep their scene.
 
@@ -78,9 +78,9 @@ from ..io import read
 from ..io.omezarr import MultiscaleVolume, is_zarr
 from ..io.remote import is_url
 from ..models import MODELS
-from ..multires.cache import read_bricks
 from ..multires.draw import CutRenderer, Piece, screen_rect
 from ..multires.octree import DEFAULT_BRICK, BrickOctree
+from ..multires.store.cache import read_bricks
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
 from ..render.template import (

@@ -15,7 +15,7 @@ the screen-space level-of-detail cut of :mod:`.lod`. This module only connects t
    the children of a brick own exactly its voxels; its approximation is the edge-clamped trilinear
    reconstruction of its level at the source voxel centres, through the level's own index map
    (:meth:`~.octree.BrickOctree.level_map`: the vertex-centred binomial pyramid of
-   :mod:`~splinecast.multires.pyramid` or another store's translation);
+   :mod:`~splinecast.multires.store.pyramid` or another store's translation);
 3. :class:`ErrorCut`: per frame, the metric's view (eye = the camera position, the optional point of
    interest) and transfer function are set (a new transfer function recomputes the hull's D from the
    histograms and repairs the cut), the updater makes one step, and the new cut becomes a
@@ -44,7 +44,7 @@ Choices
   highest split priority, i.e. the next splits of the split queue S in order (the head of the
   extended cut S+ of section 4).
 * **Histograms** come from the pyramid's ``hist2d`` group when it has one
-  (:mod:`.hist_store`, written by ``build_pyramid(..., histograms=True)``): opening reads no
+  (:mod:`.store.hist_store`, written by ``build_pyramid(..., histograms=True)``): opening reads no
   level and a transfer-function edit no voxel. A store without it (or whose group does not fit
   the octree or is damaged: one warning says which) gets them built here from every level read
   whole, which bounds ``cut="error"`` on such stores to volumes whose levels fit in memory once.
@@ -79,10 +79,10 @@ from .cut_histograms import (
 from .cut_metric import CutMetric, cut_error, frustum_planes
 from .cut_tree import BrickTree
 from .cut_update import CutUpdate, CutUpdater
-from .hist_store import HIST2D, read_histograms
 from .lod import Cut, Key, cut_of_keys
 from .octree import BrickOctree
 from .relevance import ValueFilter
+from .store.hist_store import HIST2D, read_histograms
 
 __all__ = ["CUT_POLICIES", "CUT_PRIORITIES", "check_cut", "octree_tree", "octree_histograms",
            "ErrorCut"]
@@ -249,7 +249,7 @@ class ErrorCut:
         The levels in memory (default: read from the store once, here, unless the store holds
         its histograms).
     stored : bool
-        Use the histograms stored with the pyramid (:mod:`.hist_store`) when it has them
+        Use the histograms stored with the pyramid (:mod:`.store.hist_store`) when it has them
         (default); otherwise, or when they do not fit this octree or are damaged (one warning
         says so), build them from the levels.
     frustum : bool
@@ -461,7 +461,7 @@ class ErrorCut:
                  ) -> Callable[[int, Callable[[Key], bool], int], Cut]:
         """A :data:`~.stream.Selector` for one frame (what :meth:`BrickStream.frame
         <.stream.BrickStream.frame>` calls with its byte budget); ``resident_keys()`` lists the
-        cache's bricks (:meth:`.cache.BrickCache.resident_keys`)."""
+        cache's bricks (:meth:`.store.cache.BrickCache.resident_keys`)."""
 
         def select(budget_bytes: int, resident: Callable[[Key], bool], prefetch: int) -> Cut:
             held = None if resident_keys is None else resident_keys()

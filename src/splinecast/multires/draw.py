@@ -512,7 +512,7 @@ class CutRenderer:
         """Bytes of changed values held for seams: the shells' arrays, the whole copies of
         bricks not split, and the changes they were made from (the changed elements' indices
         and values, kept to tell whether the next frame's changes are the same); the scene holds
-        them inside its budget with :meth:`~.cache.BrickCache.reserve`."""
+        them inside its budget with :meth:`~.store.cache.BrickCache.reserve`."""
         shells = sum(shell.data.nbytes for _, parts, _ in self._split.values() if parts
                      for shell in parts[:-1])
         held = {id(entry[0]): entry[0] for entry in (*self._split.values(),

@@ -18,7 +18,7 @@ value of the label hit first (0 on a miss): what a viewer shows under the cursor
 
 Every kind of volume goes through this one path: an in-memory :class:`~splinecast.Volume`, a
 multiscale (OME-Zarr) label image, whose finest level that fits the memory ``budget`` is read
-(label pyramids are downsampled by the most frequent label, :mod:`.label_downsample`, so every
+(label pyramids are downsampled by the most frequent label, :mod:`.store.label_downsample`, so every
 level is a label volume of its own), and the workers of a sort-first
 :class:`~splinecast.distributed.DistributedScene` (``labels=True``), which render image tiles of
 it (a tile camera's frame is that window of the whole frame, ``label`` included).

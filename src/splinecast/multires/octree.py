@@ -3,7 +3,8 @@
 Bricks and keys
     A brick is identified by its key ``(level, i, j, k)``: pyramid level (0 finest) and brick index
     along x, y, z. On level ``L`` with per-axis factor ``f_L`` (the power of two by which that axis
-    was halved, see :mod:`~splinecast.multires.pyramid`), brick ``b`` covers the level-0 index box
+    was halved, see :mod:`~splinecast.multires.store.pyramid`), brick ``b`` covers the level-0
+    index box
     ``[b B f_L, (b + 1) B f_L]`` per axis, clipped to the volume ``[0, n - 1]``: ``B`` cells of its
     own level. Every level has the same ``B`` cells per brick, so a brick's children on the next
     finer level are the 2 (or 1, along an axis that was not halved) bricks per axis inside it: up to
@@ -17,7 +18,8 @@ Ghosts (one rule for every model)
     ``c .. c + 1``; cubic B-spline cell ``c`` reads ``c - 1 .. c + 2``; quadratic B-spline and
     type-6 (qss, s31) cube ``c`` read ``c - 1 .. c + 1``; the type-6 Laplacian prefilter widens that
     by one, to ``c - 2 .. c + 2``. Beyond the level's ends the ghosts are filled by the model's own
-    border rule (``"edge"`` or ``"reflect"``, see :class:`.cache.BrickCache`). A brick therefore
+    border rule (``"edge"`` or ``"reflect"``, see :class:`.store.cache.BrickCache`). A brick
+    therefore
     renders without reading its neighbours.
 
 Stores written by other tools
@@ -42,7 +44,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..io.omezarr import MultiscaleVolume
-from .tables import MINMAX
+from .store.tables import MINMAX
 
 __all__ = ["GHOST", "DEFAULT_BRICK", "brick_counts", "BrickOctree"]
 

@@ -45,13 +45,13 @@ from ..models import MODELS
 from ..render.defaults import auto_iso
 from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
 from ..volume import Volume
-from .budget import parse_bytes
 from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut
 from .draw import CutRenderer, Piece
 from .lod import Cut
 from .octree import DEFAULT_BRICK, BrickOctree
 from .relevance import ValueFilter
 from .seams import Seams
+from .store.budget import parse_bytes
 from .stream import BrickStream, FrameBricks
 from .whole_level import WholeLevel
 

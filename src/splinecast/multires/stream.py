@@ -6,11 +6,12 @@ cache with its loader thread, and the per-frame sequence
 1. the cut for the camera and the cut's share of the budget: :func:`.lod.select_cut` (screen-space
    level of detail ``lod``), or the ``selector`` a caller passes (the error-metric cut of
    :mod:`.cut_policy`): every policy shares the cache, its loader and the substitution below;
-2. :meth:`.cache.BrickCache.request_cut` (the loader starts reading, coarse levels first);
-3. :meth:`.cache.BrickCache.wait` for at most ``loads_per_frame`` bricks;
-4. :meth:`.cache.BrickCache.resolve`: every brick of the cut, or its finest resident ancestor.
+2. :meth:`.store.cache.BrickCache.request_cut` (the loader starts reading, coarse levels first);
+3. :meth:`.store.cache.BrickCache.wait` for at most ``loads_per_frame`` bricks;
+4. :meth:`.store.cache.BrickCache.resolve`: every brick of the cut, or its finest resident ancestor.
 
-The renderer then traces each :class:`~.cache.DrawItem`'s brick over the cut's box ``n`` (front to
+The renderer then traces each :class:`~.store.cache.DrawItem`'s brick over the cut's box ``n``
+(front to
 back per ray) and reports ``FrameBricks.stats`` in ``frame.stats``.
 """
 
@@ -24,10 +25,10 @@ from typing import Any
 from ..camera import Camera
 from ..errors import ParameterError
 from ..io.omezarr import MultiscaleVolume
-from .cache import BrickCache, DrawItem
 from .lod import Cut, Key, centre_first, select_cut
 from .octree import BrickOctree
 from .relevance import ValueFilter
+from .store.cache import BrickCache, DrawItem
 
 __all__ = ["BrickStream", "FrameBricks", "Selector"]
 

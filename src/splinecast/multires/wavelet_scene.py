@@ -46,8 +46,8 @@ from ..models import MODELS
 from ..render.defaults import auto_iso
 from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
 from ..volume import Volume
-from .budget import parse_bytes
 from .draw import CutRenderer, Piece, gc_paused
+from .store.budget import parse_bytes
 from .wavelet_layout import WaveletLayout
 from .wavelet_lod import Selection, select
 from .wavelet_reconstruct import ChunkReconstructor

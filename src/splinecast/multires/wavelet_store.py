@@ -55,7 +55,7 @@ from ..errors import ParameterError, ReadError, limits
 from ..io._common import fmt_shape, one_line, require
 from ..io.omezarr import ATTRIBUTE
 from ..volume import GridGeometry
-from .build_source import open_pyramid_source
+from .store.build_source import open_pyramid_source
 from .wavelet_filters import spline_wavelet
 from .wavelet_layout import DETAIL_BANDS, WaveletLayout
 from .wavelet_reconstruct import DETAIL_BLOCK
@@ -103,7 +103,7 @@ class ZarrSink:
 
 
 class _SourceArray:
-    """A :mod:`.pyramid` source as a sliceable array (``array[a:b, c:d, e:f]``)."""
+    """A :mod:`.store.pyramid` source as a sliceable array (``array[a:b, c:d, e:f]``)."""
 
     def __init__(self, source: Any) -> None:
         self.source = source

@@ -2,7 +2,7 @@
 
 Downsampling (the choice decides the NGFF translation; see also :mod:`.octree`)
 -------------------------------------------------------------------------------
-Vertex-centred (:mod:`.downsample`): coarse voxel ``c`` sits exactly on fine voxel ``2 c`` and
+Vertex-centred (:mod:`.store.downsample`): coarse voxel ``c`` sits exactly on fine voxel ``2 c`` and
 holds the binomial average ``(f[2c-1] + 2 f[2c] + f[2c+1]) / 4`` along every halved axis (the
 separable 3x3x3 ``[1, 2, 1] / 4`` filter, exact for linear data, zero response at the fine Nyquist
 frequency), with the fine grid mirrored about its first and last voxel outside. A halved axis of
@@ -25,7 +25,7 @@ in one brick (or ``levels`` are made).
 Storage: one Zarr v3 array per level (``0``, ``1``, ...; dimension names ``z, y, x``), chunks of one
 brick (``B^3``) in shards of about ``128^3`` voxels, zstd with a checksum (so a damaged chunk is
 detected instead of decoded into garbage), every chunk written (a missing file is then damage, not
-"fill value"). Per-brick value ranges go to the ``minmax`` table (:mod:`.tables`).
+"fill value"). Per-brick value ranges go to the ``minmax`` table (:mod:`.store.tables`).
 
 Memory: the work is split into one task per output shard (dask, a few threads). A task holds one
 shard of its level and at most a slab of the finer level around it, so peak memory depends on the
@@ -44,24 +44,24 @@ from typing import Any
 
 import numpy as np
 
-from .._atomic import atomic_directory
-from ..errors import ParameterError
-from ..io._common import fmt_shape, require
-from ..io.ngff import multiscales_attributes, ngff_unit, to_ngff
-from ..io.omezarr import ATTRIBUTE, Level
+from ..._atomic import atomic_directory
+from ...errors import ParameterError
+from ...io._common import fmt_shape, require
+from ...io.ngff import multiscales_attributes, ngff_unit, to_ngff
+from ...io.omezarr import ATTRIBUTE, Level
+from ..octree import GHOST, brick_counts
+from ..wavelet_store import build_wavelet_pyramid
 from .build_source import PyramidSource, level_source, open_pyramid_source
 from .downsample import binomial_halve, fine_range
 from .label_downsample import DESCRIPTION as LABEL_DOWNSAMPLING_TEXT
 from .label_downsample import mode_halve
-from .octree import GHOST, brick_counts
 from .tables import MINMAX, window_minmax, write_table
-from .wavelet_store import build_wavelet_pyramid
 
 __all__ = ["build_pyramid", "plan_levels", "DOWNSAMPLING"]
 
 #: NGFF ``multiscales[0]["type"]`` of pyramids built here.
 DOWNSAMPLING = "binomial-vertex-centred"
-#: NGFF ``multiscales[0]["type"]`` of label pyramids built here (:mod:`.label_downsample`).
+#: NGFF ``multiscales[0]["type"]`` of label pyramids built here (:mod:`.store.label_downsample`).
 LABEL_DOWNSAMPLING = "mode-vertex-centred"
 _SHARD_VOXELS = 128  # target shard side: 2 MiB of uint8 per shard file
 _SLAB = 32  # output planes per downsampling step inside a task (bounds the temporaries)
@@ -147,7 +147,7 @@ def _downsample_task(fine: Any, halve: tuple[bool, bool, bool], shape: tuple[int
     :data:`_READ_BYTES` allows (every read decodes whole chunks, so many thin reads decode the
     chunks on their boundaries over and over); the filter then runs a slab of output planes at a
     time over the piece in memory, which bounds its float64 temporaries. ``labels``: the
-    weighted mode of :mod:`.label_downsample` instead of the binomial average.
+    weighted mode of :mod:`.store.label_downsample` instead of the binomial average.
     """
     halve_block = mode_halve if labels else binomial_halve
     out_shape = np.array(shape)
@@ -275,13 +275,14 @@ def build_pyramid(
         type (float32 or float64).
     histograms : bool
         Also store the sparse brick histograms of the ``cut="error"`` policy (group
-        ``splinecast/hist2d``, :mod:`.hist_store`; one more pass over the source, tile by tile).
+        ``splinecast/hist2d``, :mod:`.store.hist_store`; one more pass over the source, tile by
+        tile).
         Without them a ``Scene(..., cut="error")`` builds them when it opens, reading every level.
     bins : int, optional
         Histogram bins per value axis (default :data:`~.cut_histograms.DEFAULT_BINS`).
     labels : bool, optional
         A label volume (segmentation): the coarser levels take the most frequent label
-        (:mod:`.label_downsample`), never an average, and the store says it is an NGFF label
+        (:mod:`.store.label_downsample`), never an average, and the store says it is an NGFF label
         image (``image-label`` metadata, the source's colours kept), so readers render it as
         labels. Default: when the source is such a label image itself. Integer voxels only.
 
@@ -395,14 +396,14 @@ def build_pyramid(
         if labels:
             downsampling, described = LABEL_DOWNSAMPLING, {
                 "description": LABEL_DOWNSAMPLING_TEXT,
-                "method": "splinecast.multires.label_downsample.mode_halve",
+                "method": "splinecast.multires.store.label_downsample.mode_halve",
             }
         else:
             downsampling, described = DOWNSAMPLING, {
                 "description": "coarse voxel c = (f[2c-1] + 2 f[2c] + f[2c+1]) / 4 along every "
                                "halved axis, mirrored at the ends; voxel centres shared with "
                                "level 0 (translation unchanged)",
-                "method": "splinecast.multires.downsample.binomial_halve",
+                "method": "splinecast.multires.store.downsample.binomial_halve",
             }
         attrs = multiscales_attributes(
             name or path.name, datasets, unit=unit_name, downsampling=downsampling,
@@ -429,7 +430,7 @@ def build_pyramid(
         if histograms:
             _store_histograms(root, arrays, plan, brick, shard, src.dtype, value_range,
                               bins, progress, path.name)
-    from ..io.omezarr import open_zarr
+    from ...io.omezarr import open_zarr
 
     return open_zarr(path)
 
@@ -437,8 +438,9 @@ def build_pyramid(
 def _store_histograms(root: Any, arrays: list[Any], plan: list[Any], brick: int, shard: int,
                       dtype: np.dtype, value_range: list[float], bins: int | None,
                       progress: bool, name: str) -> None:
-    """The ``hist2d`` group (:mod:`.hist_store`) from the levels just written, tile by tile."""
-    from .cut_histograms import DEFAULT_BINS, Quantizer
+    """The ``hist2d`` group (:mod:`.store.hist_store`) from the levels just written, tile by
+    tile."""
+    from ..cut_histograms import DEFAULT_BINS, Quantizer
     from .hist_store import stream_level_histograms, write_histograms
 
     quantizer = Quantizer.for_data(dtype, value_range, int(bins or DEFAULT_BINS))

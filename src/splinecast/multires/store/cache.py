@@ -13,7 +13,7 @@ Budget accounting: the bytes of the resident brick arrays never exceed ``budget`
 insertion (``peak_bytes`` records the maximum). A brick that does not fit without evicting
 what the current view needs is not loaded (``dropped``). Transient buffers of one read (the union
 window of up to 8 sibling bricks and its padded copies) and the decoded chunks kept for the
-neighbours' ghost layers (:class:`~.chunk_cache.ChunkCache`: an eighth of the budget, at most
+neighbours' ghost layers (:class:`~.store.chunk_cache.ChunkCache`: an eighth of the budget, at most
 :data:`CHUNK_CACHE_MAX`) are the fixed overhead on top of the budget;
 ``benchmarks/bench_multires.py`` measures it.
 
@@ -42,12 +42,12 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError, ReadError
-from ..io.omezarr import MultiscaleVolume
+from ...errors import ParameterError, ReadError
+from ...io.omezarr import MultiscaleVolume
+from ..lod import Cut
+from ..octree import BrickOctree
 from .budget import format_bytes, parse_bytes
 from .chunk_cache import ChunkCache
-from .lod import Cut
-from .octree import BrickOctree
 
 __all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS", "read_bricks",
            "CHUNK_CACHE_MAX"]

@@ -1,5 +1,5 @@
 """Per-brick tables stored with a pyramid: value ranges (the sparse 2D histograms of the error cut
-have a layout of their own, :mod:`.hist_store`).
+have a layout of their own, :mod:`.store.hist_store`).
 
 A table holds one entry per brick of one level, as a Zarr array ``splinecast/<name>/<level>`` in
 the pyramid's group, indexed ``[bi, bj, bk, ...]`` with the brick index along x, y, z first
@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError
-from ..io._common import require
-from ..io.omezarr import ATTRIBUTE, TABLES_GROUP
+from ...errors import ParameterError
+from ...io._common import require
+from ...io.omezarr import ATTRIBUTE, TABLES_GROUP
 
 __all__ = ["write_table", "window_minmax", "MINMAX"]
 

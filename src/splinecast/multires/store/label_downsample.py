@@ -1,7 +1,7 @@
 """The downsampling filter of label pyramids: the most frequent label, never an average.
 
 Averaging labels invents values (the mean of labels 2 and 4 is 3, another organ). A label
-pyramid keeps the geometry of splinecast's other pyramids (:mod:`.downsample`: coarse voxel
+pyramid keeps the geometry of splinecast's other pyramids (:mod:`.store.downsample`: coarse voxel
 ``c`` sits on fine voxel ``2 c``, same NGFF translation on every level, nested bricks), and
 takes, instead of the binomial average of the fine voxels ``2c - 1, 2c, 2c + 1`` along every
 halved axis, their **weighted mode**: each of those (up to 27) voxels votes for its label with
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._jit import jit
+from ..._jit import jit
 from .downsample import mirror
 
 __all__ = ["mode_halve", "DESCRIPTION"]
@@ -70,7 +70,8 @@ def mode_halve(fine: np.ndarray, fine_lo: np.ndarray, fine_shape: np.ndarray,
                out_shape: np.ndarray) -> np.ndarray:
     """Coarse labels ``out_lo .. out_lo + out_shape`` (x, y, z) from a fine block.
 
-    The same contract as :func:`.downsample.binomial_halve` (``fine`` holds the fine level from
+    The same contract as :func:`.store.downsample.binomial_halve` (``fine`` holds the fine level
+    from
     index ``fine_lo`` on, every mirrored voxel the output reads; ``halve`` says which axes are
     halved, the others are copied), with the weighted mode of the module's text instead of the
     average. The result has ``fine``'s dtype.

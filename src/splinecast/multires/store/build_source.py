@@ -1,6 +1,6 @@
 """What a pyramid builder reads: any accepted source opened lazily, in splinecast axis order.
 
-Both builders, the binomial brick pyramid (:mod:`splinecast.multires.pyramid`) and the
+Both builders, the binomial brick pyramid (:mod:`splinecast.multires.store.pyramid`) and the
 spline-wavelet pyramid (:mod:`splinecast.multires.wavelet_store`), accept the same sources (a
 path, a :class:`~splinecast.Volume`, a :class:`~splinecast.io.omezarr.MultiscaleVolume`, a zarr,
 dask or numpy array) and make the same
@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError, ReadError
-from ..io.omezarr import Level, MultiscaleVolume
-from ..volume import SUPPORTED_DTYPES, Volume
+from ...errors import ParameterError, ReadError
+from ...io.omezarr import Level, MultiscaleVolume
+from ...volume import SUPPORTED_DTYPES, Volume
 
 __all__ = ["PyramidSource", "level_source", "open_pyramid_source"]
 
@@ -56,7 +56,7 @@ def level_source(level: Level, label: str, **kw: Any) -> PyramidSource:
 def _open_source(source: Any, allow_external: bool | None = None) -> PyramidSource:
     """Wrap any accepted source; nothing is read here."""
     if isinstance(source, (str, os.PathLike)):
-        from ..io import read
+        from ...io import read
 
         source = read(source, allow_external=allow_external)
     if isinstance(source, MultiscaleVolume):
@@ -72,8 +72,8 @@ def _open_source(source: Any, allow_external: bool | None = None) -> PyramidSour
                       "dask array", dask=source)
         return src
     if module.startswith("zarr"):
-        from ..io.omezarr import _plain_array  # the reader's axis rules for bare arrays
-        from ..io.selection import Selection
+        from ...io.omezarr import _plain_array  # the reader's axis rules for bare arrays
+        from ...io.selection import Selection
 
         level = _plain_array(Path("zarr array"), source, "zarr array", Selection()).levels[0]
         level.folder = None  # not a local folder of ours: no file checks

@@ -39,9 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError, ReadError
-from ..io.omezarr import ATTRIBUTE, TABLES_GROUP, read_array
-from .cut_histograms import BrickHistograms, Quantizer, box_histograms
+from ...errors import ParameterError, ReadError
+from ...io.omezarr import ATTRIBUTE, TABLES_GROUP, read_array
+from ..cut_histograms import BrickHistograms, Quantizer, box_histograms
 
 __all__ = ["HIST2D", "FORMAT_VERSION", "level_footprints", "stream_level_histograms",
            "write_histograms", "read_histograms", "histogram_info"]

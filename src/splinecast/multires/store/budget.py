@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..errors import limits
+from ...errors import limits
 
 __all__ = ["parse_bytes", "format_bytes"]
 
