@@ -10,7 +10,7 @@ previous results.
   fresh process: wall time, peak RSS (``ru_maxrss``, which counts the source's mapped pages the
   build touched) and peak anonymous memory (sampled ``RssAnon``: what the build itself holds).
   Baseline in the same run: one plain pass over the source (read and sum, in the same slabs).
-- ``cache``: a :class:`~splinecast.multires.stream.BrickStream` with a byte budget renders the
+- ``cache``: a :class:`~splinecast.multires.cut.stream.BrickStream` with a byte budget renders the
   cut of several views to completion in a fresh process; the overhead is the peak anonymous
   memory above the process before the stream opened, minus the cache's own peak bytes.
 - ``render``: ``Scene(pyramid, budget=1GiB)`` (``--quick``: 4 MiB, so that level 0 does not fit
@@ -108,8 +108,8 @@ _CHILD = textwrap.dedent("""
         result = render_job(job, args, anon, sample, stop, peak)
         before = result.pop("before")
     else:
-        from splinecast.multires.stream import BrickStream
-        from splinecast.multires.relevance import ValueFilter
+        from splinecast.multires.cut.stream import BrickStream
+        from splinecast.multires.cut.relevance import ValueFilter
         mv = sc.read(args["out"])
         before = anon(); threading.Thread(target=sample, daemon=True).start()
         t = time.perf_counter(); frames = 0

@@ -573,7 +573,7 @@ def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
     """A coarse level translated 50 voxels away would make bricks read outside its voxels."""
     import zarr
 
-    from splinecast.multires.octree import BrickOctree
+    from splinecast.multires.cut.octree import BrickOctree
 
     path = tmp_path / "v.zarr"
     root = zarr.open_group(str(path), mode="w", zarr_format=2)

@@ -23,13 +23,13 @@ pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.lod import select_cut  # noqa: E402
-from splinecast.multires.octree import GHOST, BrickOctree  # noqa: E402
-from splinecast.multires.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut.lod import select_cut  # noqa: E402
+from splinecast.multires.cut.octree import GHOST, BrickOctree  # noqa: E402
+from splinecast.multires.cut.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut.stream import BrickStream  # noqa: E402
 from splinecast.multires.store.budget import parse_bytes  # noqa: E402
 from splinecast.multires.store.cache import BrickCache, BrickUnavailableWarning  # noqa: E402
 from splinecast.multires.store.pyramid import build_pyramid  # noqa: E402
-from splinecast.multires.stream import BrickStream  # noqa: E402
 
 B = 8
 RADIUS = 17.0

@@ -142,8 +142,8 @@ def _brick_maker(mv, model: str, tree):
     """``piece(level, index)``: the :class:`Piece` of one brick of levels 0-2, its array cut
     from the level read whole and padded by numpy with the model's border rule (independent of
     the cache)."""
+    from splinecast.multires.cut.octree import GHOST
     from splinecast.multires.draw import Piece
-    from splinecast.multires.octree import GHOST
 
     padded = {}
     for level in (0, 1, 2):
@@ -167,8 +167,8 @@ def _checkerboard_cut(mv, model: str):
     """A cut that puts levels 0, 1 and 2 side by side in every direction: level-2 bricks with an
     odd index sum stay whole, the others split into level-1 bricks, of which those with an even
     index sum split into level-0 bricks (arrays from :func:`_brick_maker`)."""
+    from splinecast.multires.cut.octree import BrickOctree
     from splinecast.multires.draw import CutRenderer
-    from splinecast.multires.octree import BrickOctree
 
     tree = BrickOctree(mv)
     piece = _brick_maker(mv, model, tree)

@@ -17,8 +17,8 @@ pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.relevance import ValueFilter  # noqa: E402
-from splinecast.multires.stream import BrickStream  # noqa: E402
+from splinecast.multires.cut.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut.stream import BrickStream  # noqa: E402
 
 RADIUS = 17.0
 
@@ -146,8 +146,8 @@ def test_merged_nodes_are_the_coarsest_whose_cut_bricks_share_the_drawn_ancestor
     not (brute force over the cut's boxes)."""
     from types import SimpleNamespace
 
-    from splinecast.multires.lod import select_cut
-    from splinecast.multires.octree import BrickOctree
+    from splinecast.multires.cut.lod import select_cut
+    from splinecast.multires.cut.octree import BrickOctree
     from splinecast.multires.scene import _merged_nodes
 
     mv = sc.read(sphere)

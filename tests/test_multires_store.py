@@ -20,7 +20,7 @@ import splinecast as sc  # noqa: E402
 from splinecast.cli import main  # noqa: E402
 from splinecast.io import SeveralVolumesWarning  # noqa: E402
 from splinecast.io.omezarr import MultiscaleVolume, open_zarr  # noqa: E402
-from splinecast.multires.octree import BrickOctree  # noqa: E402
+from splinecast.multires.cut.octree import BrickOctree  # noqa: E402
 from splinecast.multires.store.pyramid import build_pyramid  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

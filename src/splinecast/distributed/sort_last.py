@@ -2,7 +2,7 @@
 workers, their partial images composited in visibility order on the workers.
 
 Shares of bricks
-    The level's bricks (:class:`~splinecast.multires.octree.BrickOctree`, ``B`` cells each) are
+    The level's bricks (:class:`~splinecast.multires.cut.octree.BrickOctree`, ``B`` cells each) are
     cut into ``P`` boxes of bricks by a k-d split (:func:`split_bricks`): the longest side of a
     box (in bricks) is cut in proportion to the number of parts on each side, recursively, until
     every part is one box. ``P`` is the number of workers (at most the number of bricks); part
@@ -78,8 +78,8 @@ from ..io import read
 from ..io.omezarr import MultiscaleVolume, is_zarr
 from ..io.remote import is_url
 from ..models import MODELS
+from ..multires.cut.octree import DEFAULT_BRICK, BrickOctree
 from ..multires.draw import CutRenderer, Piece, screen_rect
-from ..multires.octree import DEFAULT_BRICK, BrickOctree
 from ..multires.store.cache import read_bricks
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state

@@ -4,13 +4,13 @@
 (``splinecast/__init__.py`` registers it with :func:`splinecast.scene.register_scene_type`). Per
 frame it
 
-1. asks its :class:`~.stream.BrickStream` for the cut of the camera (bricks that cannot
+1. asks its :class:`~.cut.stream.BrickStream` for the cut of the camera (bricks that cannot
    contribute to the mode left out, at most ``load_budget`` bricks read while the frame waits; a
    brick not yet resident is drawn from its finest resident ancestor). The cut policy ``cut``:
    ``"lod"`` (default) refines while a voxel covers more than ``lod`` pixels; ``"error"`` keeps the
    cut of Carmona & Froehlich 2011 (transfer-function distortion times importance from the eye and
    an optional point of ``interest``, split-and-collapse under the brick budget and ``load_budget``,
-   updated from the previous frame's cut; :mod:`.cut_policy`) in DVR and MIP/minIP, and the
+   updated from the previous frame's cut; :mod:`.cut.policy`) in DVR and MIP/minIP, and the
    level-of-detail cut in the isosurface modes;
 2. turns the cut into :class:`~.draw.Piece` s and fixes the seams between levels (:mod:`.seams`);
 3. traces the pieces front to back per ray (:class:`~.draw.CutRenderer`) in the mode of
@@ -45,14 +45,14 @@ from ..models import MODELS
 from ..render.defaults import auto_iso
 from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
 from ..volume import Volume
-from .cut_policy import CUT_PRIORITIES, ErrorCut, check_cut
+from .cut.lod import Cut
+from .cut.octree import DEFAULT_BRICK, BrickOctree
+from .cut.policy import CUT_PRIORITIES, ErrorCut, check_cut
+from .cut.relevance import ValueFilter
+from .cut.stream import BrickStream, FrameBricks
 from .draw import CutRenderer, Piece
-from .lod import Cut
-from .octree import DEFAULT_BRICK, BrickOctree
-from .relevance import ValueFilter
 from .seams import Seams
 from .store.budget import parse_bytes
-from .stream import BrickStream, FrameBricks
 from .whole_level import WholeLevel
 
 __all__ = ["MultiscaleScene", "pieces_of", "render_brick", "RENDER_BRICK"]
@@ -85,7 +85,7 @@ def render_brick(volume: MultiscaleVolume) -> int:
 
 
 def pieces_of(frame: FrameBricks, octree: BrickOctree | None = None) -> list[Piece]:
-    """The pieces of a frame of a :class:`~.stream.BrickStream`: each brick of the cut with the
+    """The pieces of a frame of a :class:`~.cut.stream.BrickStream`: each brick of the cut with the
     array drawn for it (its own or its finest resident ancestor's).
 
     With the ``octree``, bricks of the cut drawn from one ancestor are drawn as one piece per

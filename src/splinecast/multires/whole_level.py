@@ -26,9 +26,9 @@ from ..errors import ReadError
 from ..io.omezarr import MultiscaleVolume
 from ..scene import Scene
 from ..volume import Volume
-from .lod import Cut, select_cut
-from .relevance import ValueFilter
-from .stream import BrickStream
+from .cut.lod import Cut, select_cut
+from .cut.relevance import ValueFilter
+from .cut.stream import BrickStream
 
 __all__ = ["WholeLevel"]
 

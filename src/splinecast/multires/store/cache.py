@@ -1,6 +1,6 @@
 """The RAM brick cache and its loader thread.
 
-:class:`BrickCache` holds bricks (arrays with ghost layers, see :mod:`.octree`) within a hard
+:class:`BrickCache` holds bricks (arrays with ghost layers, see :mod:`.cut.octree`) within a hard
 byte budget. A background thread reads the bricks it is asked for, in the order given, from the
 store; the bricks of the coarsest level are read when the cache opens and never leave, so every
 frame can show the whole volume at some resolution. A frame asks for its cut
@@ -44,8 +44,8 @@ import numpy as np
 
 from ...errors import ParameterError, ReadError
 from ...io.omezarr import MultiscaleVolume
-from ..lod import Cut
-from ..octree import BrickOctree
+from ..cut.lod import Cut
+from ..cut.octree import BrickOctree
 from .budget import format_bytes, parse_bytes
 from .chunk_cache import ChunkCache
 
@@ -234,7 +234,7 @@ class BrickCache:
         self.pause_while_drawing = True
         #: Counts every change of what a cut can be drawn from (a brick read, evicted, found
         #: unavailable or dropped for want of room, a value range learnt): equal versions,
-        #: equal cuts and draw items for an unchanged view (:class:`~.stream.BrickStream`).
+        #: equal cuts and draw items for an unchanged view (:class:`~.cut.stream.BrickStream`).
         self.version = 0
         self._pin_coarsest()
         self.update_ranges()

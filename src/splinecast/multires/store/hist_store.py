@@ -1,7 +1,7 @@
 """The brick histograms of Carmona & Froehlich 2011 stored with a pyramid (the ``hist2d`` group).
 
-:mod:`.cut_histograms` defines the sparse (source value, approximating value) histogram of a
-brick; :mod:`.cut_policy` turns them into the distortion D(b) of every brick for any transfer
+:mod:`.cut.histograms` defines the sparse (source value, approximating value) histogram of a
+brick; :mod:`.cut.policy` turns them into the distortion D(b) of every brick for any transfer
 function. This module computes them for a pyramid store in bounded memory and stores them next to
 the bricks, so that opening ``Scene(pyramid, cut="error")`` reads them instead of every level,
 and a transfer-function edit never reads a voxel.
@@ -19,7 +19,7 @@ has no histograms (its bricks are the source). The root attribute ``splinecast["
 
 Which voxels a brick covers: brick ``b`` of ``B`` cells on a level with per-axis factor ``f`` owns
 level-0 voxels ``[b B f, (b + 1) B f)`` per axis, the last brick of an axis up to the volume's
-end, exactly as :func:`.cut_policy.octree_tree` counts them.
+end, exactly as :func:`.cut.policy.octree_tree` counts them.
 
 Memory
 ------
@@ -41,7 +41,7 @@ import numpy as np
 
 from ...errors import ParameterError, ReadError
 from ...io.omezarr import ATTRIBUTE, TABLES_GROUP, read_array
-from ..cut_histograms import BrickHistograms, Quantizer, box_histograms
+from ..cut.histograms import BrickHistograms, Quantizer, box_histograms
 
 __all__ = ["HIST2D", "FORMAT_VERSION", "level_footprints", "stream_level_histograms",
            "write_histograms", "read_histograms", "histogram_info"]

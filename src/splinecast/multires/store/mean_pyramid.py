@@ -3,7 +3,7 @@
 Level ``l`` has ``ceil(n / 2)`` voxels per axis of level ``l - 1``; each voxel is the mean of the
 (up to) 2x2x2 voxels below it (at an odd border the mean of those that exist), rounded to the
 nearest integer for integer dtypes so every level keeps the source dtype, as a brick store does.
-The continuous index map of a level is :func:`~.cut_histograms.mean_pyramid_map` (regular
+The continuous index map of a level is :func:`~.cut.histograms.mean_pyramid_map` (regular
 spacing; the last voxel of an odd border averages fewer voxels and sits half a voxel off it, as
 NGFF's one scale and translation per level cannot say otherwise).
 

@@ -1,6 +1,6 @@
 """Building an OME-Zarr 0.5 brick pyramid from any volume, chunk by chunk, in bounded memory.
 
-Downsampling (the choice decides the NGFF translation; see also :mod:`.octree`)
+Downsampling (the choice decides the NGFF translation; see also :mod:`.cut.octree`)
 -------------------------------------------------------------------------------
 Vertex-centred (:mod:`.store.downsample`): coarse voxel ``c`` sits exactly on fine voxel ``2 c`` and
 holds the binomial average ``(f[2c-1] + 2 f[2c] + f[2c+1]) / 4`` along every halved axis (the
@@ -49,7 +49,7 @@ from ...errors import ParameterError
 from ...io._common import fmt_shape, require
 from ...io.ngff import multiscales_attributes, ngff_unit, to_ngff
 from ...io.omezarr import ATTRIBUTE, Level
-from ..octree import GHOST, brick_counts
+from ..cut.octree import GHOST, brick_counts
 from ..wavelet_store import build_wavelet_pyramid
 from .build_source import PyramidSource, level_source, open_pyramid_source
 from .downsample import binomial_halve, fine_range
@@ -279,7 +279,7 @@ def build_pyramid(
         tile).
         Without them a ``Scene(..., cut="error")`` builds them when it opens, reading every level.
     bins : int, optional
-        Histogram bins per value axis (default :data:`~.cut_histograms.DEFAULT_BINS`).
+        Histogram bins per value axis (default :data:`~.cut.histograms.DEFAULT_BINS`).
     labels : bool, optional
         A label volume (segmentation): the coarser levels take the most frequent label
         (:mod:`.store.label_downsample`), never an average, and the store says it is an NGFF label
@@ -440,7 +440,7 @@ def _store_histograms(root: Any, arrays: list[Any], plan: list[Any], brick: int,
                       progress: bool, name: str) -> None:
     """The ``hist2d`` group (:mod:`.store.hist_store`) from the levels just written, tile by
     tile."""
-    from ..cut_histograms import DEFAULT_BINS, Quantizer
+    from ..cut.histograms import DEFAULT_BINS, Quantizer
     from .hist_store import stream_level_histograms, write_histograms
 
     quantizer = Quantizer.for_data(dtype, value_range, int(bins or DEFAULT_BINS))

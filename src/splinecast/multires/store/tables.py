@@ -10,7 +10,8 @@ table needs per brick after it. The root attribute ``splinecast["tables"][name]`
 
 The table every pyramid has, ``minmax`` (float64, ``[..., 0]`` = min, ``[..., 1]`` = max), is the
 range of the voxels a brick's renderer may read: its ``B + 1`` voxels per axis plus
-:data:`~splinecast.multires.octree.GHOST` ghost voxels on each side, clipped to the level. Border
+:data:`~splinecast.multires.cut.octree.GHOST` ghost voxels on each side, clipped to the level.
+Border
 padding repeats voxels of the window, so the range also bounds the padded brick. A brick without
 a finite voxel has ``(+inf, -inf)``, an empty range.
 """

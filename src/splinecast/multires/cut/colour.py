@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transfer import TransferFunction
+from ...transfer import TransferFunction
 
 __all__ = ["srgb_to_luv", "classified_luv", "distortion_table", "D65"]
 

@@ -1,30 +1,32 @@
 """The error-metric cut of Carmona & Froehlich 2011 as the cut policy of a multiscale scene.
 
 ``Scene(pyramid, cut="error")`` draws, in DVR and MIP/minIP, the cut that
-:class:`~.cut_update.CutUpdater` keeps up to date frame after frame (transfer-function distortion
+:class:`~.cut.update.CutUpdater` keeps up to date frame after frame (transfer-function distortion
 times importance, greedy split-and-collapse under a brick budget N and a load budget M) instead of
-the screen-space level-of-detail cut of :mod:`.lod`. This module only connects the pieces:
+the screen-space level-of-detail cut of :mod:`.cut.lod`. This module only connects the pieces:
 
-1. :func:`octree_tree`: the :class:`~.cut_tree.BrickTree` of a store's
-   :class:`~.octree.BrickOctree` (node ids level by level, finest first, C order of the brick grid
+1. :func:`octree_tree`: the :class:`~.cut.tree.BrickTree` of a store's
+   :class:`~.cut.octree.BrickOctree` (node ids level by level, finest first, C order of the brick
+   grid
    within a level; a store whose coarsest level has several bricks gets a *virtual root* above
    them, never part of a cut) and the key ``(level, i, j, k)`` of every node;
 2. :func:`octree_histograms`: the sparse (source value, approximation) histograms of every brick
-   (:mod:`.cut_histograms`). A brick of ``B`` cells on a level with factor ``f`` owns the source
+   (:mod:`.cut.histograms`). A brick of ``B`` cells on a level with factor ``f`` owns the source
    voxels ``[b B f, (b + 1) B f)`` per axis (the last brick of an axis up to the volume's end), so
    the children of a brick own exactly its voxels; its approximation is the edge-clamped trilinear
    reconstruction of its level at the source voxel centres, through the level's own index map
-   (:meth:`~.octree.BrickOctree.level_map`: the vertex-centred binomial pyramid of
+   (:meth:`~.cut.octree.BrickOctree.level_map`: the vertex-centred binomial pyramid of
    :mod:`~splinecast.multires.store.pyramid` or another store's translation);
 3. :class:`ErrorCut`: per frame, the metric's view (eye = the camera position, the optional point of
    interest) and transfer function are set (a new transfer function recomputes the hull's D from the
    histograms and repairs the cut), the updater makes one step, and the new cut becomes a
-   :class:`~.lod.Cut` for the :class:`~.stream.BrickStream` -- whose cache, loader thread and
+   :class:`~.cut.lod.Cut` for the :class:`~.cut.stream.BrickStream` -- whose cache, loader thread
+   and
    substitution of missing bricks by resident ancestors are the same for both policies.
 
 Choices
 -------
-* **Which bricks can be seen** comes from the renderer's :class:`~.relevance.ValueFilter` (the
+* **Which bricks can be seen** comes from the renderer's :class:`~.cut.relevance.ValueFilter` (the
   transfer function's visible ranges, widened for the type-6 models) applied to the tree's
   hierarchical value ranges, so both policies leave out exactly the same transparent bricks; the
   transfer function itself gives the colours of eq. (2). MIP and minIP classify with their
@@ -49,7 +51,7 @@ Choices
   the octree or is damaged: one warning says which) gets them built here from every level read
   whole, which bounds ``cut="error"`` on such stores to volumes whose levels fit in memory once.
 * **Frustum culling**: a brick more than one finest brick's diagonal outside the camera's view
-  frustum has importance 0 (:func:`~.cut_metric.frustum_planes`), so it is never split; the cut
+  frustum has importance 0 (:func:`~.cut.metric.frustum_planes`), so it is never split; the cut
   still covers it once. The margin keeps the finest neighbours of a brick in view refined with
   it, so no seam between levels touches a visible brick: at full budget the image is the finest
   level's.
@@ -66,23 +68,23 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
-from ..errors import ParameterError, ReadError
-from ..transfer import TransferFunction
-from .cut_histograms import (
+from ...camera import Camera
+from ...errors import ParameterError, ReadError
+from ...transfer import TransferFunction
+from ..store.hist_store import HIST2D, read_histograms
+from .histograms import (
     DEFAULT_BINS,
     BrickHistograms,
     Quantizer,
     box_histograms,
     stack_histograms,
 )
-from .cut_metric import CutMetric, cut_error, frustum_planes
-from .cut_tree import BrickTree
-from .cut_update import CutUpdate, CutUpdater
 from .lod import Cut, Key, cut_of_keys
+from .metric import CutMetric, cut_error, frustum_planes
 from .octree import BrickOctree
 from .relevance import ValueFilter
-from .store.hist_store import HIST2D, read_histograms
+from .tree import BrickTree
+from .update import CutUpdate, CutUpdater
 
 __all__ = ["CUT_POLICIES", "CUT_PRIORITIES", "check_cut", "octree_tree", "octree_histograms",
            "ErrorCut"]
@@ -228,7 +230,7 @@ class _RenderUpdater(CutUpdater):
 
 
 class ErrorCut:
-    """The error-metric cut of a :class:`~.octree.BrickOctree`, one update per frame.
+    """The error-metric cut of a :class:`~.cut.octree.BrickOctree`, one update per frame.
 
     Parameters
     ----------
@@ -236,7 +238,7 @@ class ErrorCut:
         The stream's octree (its value ranges are those of the store's ``minmax`` table).
     bins : int, optional
         Histogram bins per value axis (default: the stored histograms', else
-        :data:`~.cut_histograms.DEFAULT_BINS`).
+        :data:`~.cut.histograms.DEFAULT_BINS`).
     improved : bool
         ``P = ER`` (the paper's "improved" priority, default) or ``P = E`` ("naive").
     interest : 3 floats, optional
@@ -244,7 +246,7 @@ class ErrorCut:
         is the eye term alone.
     fill : bool
         Set aside a split that does not fit N or M and go on (default; see
-        :mod:`.cut_update`), or end the frame there (the paper's rule).
+        :mod:`.cut.update`), or end the frame there (the paper's rule).
     levels : list of ndarray, optional
         The levels in memory (default: read from the store once, here, unless the store holds
         its histograms).
@@ -459,7 +461,7 @@ class ErrorCut:
                  load_budget: int | None, interest: Any = None,
                  resident_keys: Callable[[], Iterable[Key]] | None = None
                  ) -> Callable[[int, Callable[[Key], bool], int], Cut]:
-        """A :data:`~.stream.Selector` for one frame (what :meth:`BrickStream.frame
+        """A :data:`~.cut.stream.Selector` for one frame (what :meth:`BrickStream.frame
         <.stream.BrickStream.frame>` calls with its byte budget); ``resident_keys()`` lists the
         cache's bricks (:meth:`.store.cache.BrickCache.resident_keys`)."""
 
@@ -474,7 +476,7 @@ class ErrorCut:
 
     def to_cut(self, nodes: np.ndarray, value_filter: ValueFilter | None,
                resident: Callable[[Key], bool], prefetch: int, limited: bool = False) -> Cut:
-        """The :class:`~.lod.Cut` of tree nodes, with the next splits as prefetch."""
+        """The :class:`~.cut.lod.Cut` of tree nodes, with the next splits as prefetch."""
         assert self.metric is not None
         nodes = np.asarray(nodes, np.int64)
         cut = cut_of_keys(self.octree, self.keys[nodes], self.metric.error(nodes), value_filter,

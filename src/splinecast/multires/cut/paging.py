@@ -13,12 +13,12 @@ C+. Every node of S+ and all its ancestors are in RAM; the cache's capacity coun
 * Nodes of C+ whose children belong to the rendering cut (the nodes of C that are in C+) are never
   collapsed: S stays resident.
 * The rendering update splits only nodes whose children are in RAM
-  (:meth:`~.cut_update.CutUpdater.update` with ``in_ram``), so S never leaves the cached tree;
+  (:meth:`~.cut.update.CutUpdater.update` with ``in_ram``), so S never leaves the cached tree;
   :meth:`ExtendedCut.set_render_cut` still forces S+ below any rendering node it does not cover
   (after a transfer-function repair the two cuts are repaired independently).
 
 Threading: the loader thread should own its :class:`ExtendedCut` and its own
-:class:`~.cut_metric.CutMetric` (a second instance over the same tree and histograms, whose view
+:class:`~.cut.metric.CutMetric` (a second instance over the same tree and histograms, whose view
 and transfer function the main thread updates by message, as the paper does); the metric's caches
 are not shared between threads.
 """
@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from .cut_update import CutUpdate, SplitCollapse
+from .update import CutUpdate, SplitCollapse
 
 __all__ = ["ExtendedCut"]
 

@@ -2,8 +2,8 @@
 
 * **Distortion** ``D(b)`` (eqs. 1-2): the CIELUV distance between the transfer-function-classified
   colours of the source voxels and of the brick's approximation, summed over the voxels, read from
-  the brick's sparse 2D histogram (:mod:`.cut_histograms`) and the transfer function's pair table
-  (:func:`.colour.distortion_table`): ``D(b) = sum H_b(u, v) D(u, v)``. A transfer-function edit
+  the brick's sparse 2D histogram (:mod:`.cut.histograms`) and the transfer function's pair table
+  (:func:`.cut.colour.distortion_table`): ``D(b) = sum H_b(u, v) D(u, v)``. A transfer-function edit
   recomputes it without reading a voxel.
 * **Fix-up** (section 3.2.1, "block-based monotonicity"): where a parent's distortion is below the
   sum of its children's, it is replaced by that sum: ``D*(b) = max(D(b), sum_c D(c))`` over the
@@ -48,12 +48,12 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import prange
 
-from .._jit import jit
-from ..errors import ParameterError
-from ..transfer import TransferFunction
+from ..._jit import jit
+from ...errors import ParameterError
+from ...transfer import TransferFunction
 from .colour import distortion_table
-from .cut_histograms import BrickHistograms
-from .cut_tree import BrickTree
+from .histograms import BrickHistograms
+from .tree import BrickTree
 
 __all__ = [
     "TRANSPARENCY_BINS",
@@ -108,7 +108,7 @@ def histogram_distortion(hist: BrickHistograms, table: np.ndarray,
                          nodes: np.ndarray | None = None) -> np.ndarray:
     """Raw ``D(b) = sum H_b(u, v) D(u, v)`` (eq. 1) for ``nodes`` (default: all), in parallel.
 
-    ``table`` is :func:`.colour.distortion_table` for the histograms' bin values.
+    ``table`` is :func:`.cut.colour.distortion_table` for the histograms' bin values.
     """
     if nodes is None:
         nodes = np.arange(hist.offsets.shape[0] - 1)

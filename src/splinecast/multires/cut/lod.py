@@ -10,7 +10,7 @@ with the voxel size the largest world size of the level's voxels and the distanc
 distance from the eye to the brick's box (0 inside: always refined), as in Steinberger 2010's
 "collapse when diameter / distance < epsilon". Bricks outside the camera's view (a tile's view
 for :meth:`Camera.tile <splinecast.camera.Camera.tile>` cameras) and bricks whose value range
-cannot contribute (:class:`.relevance.ValueFilter`) are left out and never refined.
+cannot contribute (:class:`.cut.relevance.ValueFilter`) are left out and never refined.
 
 Budget: a child is never coarser on screen than its parent, so refining every brick above a
 threshold gives the same cut as refining greedily in order of projected size. When the ideal cut
@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..camera import Camera
-from ..errors import ParameterError
+from ...camera import Camera
+from ...errors import ParameterError
 from .octree import BrickOctree
 from .relevance import ValueFilter
 
@@ -271,7 +271,7 @@ def cut_of_keys(octree: BrickOctree, key_arr: np.ndarray, priority: np.ndarray,
     """The :class:`Cut` of given bricks: boxes, bytes, what to keep and what to read.
 
     Shared by every cut policy (the level of detail here, the error metric of
-    :mod:`.cut_policy`). ``Cut.requests`` lists the bricks and their non-resident contributing
+    :mod:`.cut.policy`). ``Cut.requests`` lists the bricks and their non-resident contributing
     ancestors, coarse levels first and, within a level, highest ``priority`` first;
     ``Cut.prefetch`` is left empty for the policy to fill.
 

@@ -35,7 +35,7 @@ exact 8-bit bins.
 
 Storage (flat arrays, storage-neutral)
 --------------------------------------
-:class:`BrickHistograms` holds, for the K nodes of a :class:`~.cut_tree.BrickTree`, the
+:class:`BrickHistograms` holds, for the K nodes of a :class:`~.cut.tree.BrickTree`, the
 non-zero entries in CSR form: ``offsets`` (K + 1, int64); ``keys`` (uint16 when ``bins <= 256``:
 ``source_bin * bins + approx_bin``, ascending within a node); ``counts`` (uint32). That is 6 bytes
 per non-zero pair; :meth:`BrickHistograms.to_arrays` gives the three arrays plus the quantizer as
@@ -51,9 +51,9 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import jit
-from ..errors import ParameterError
-from .cut_tree import BrickGrid, regular_brick_tree, segment_indices
+from ..._jit import jit
+from ...errors import ParameterError
+from .tree import BrickGrid, regular_brick_tree, segment_indices
 
 __all__ = [
     "DEFAULT_BINS",
@@ -405,7 +405,7 @@ def pyramid_histograms(levels: list[np.ndarray], brick: int, quantizer: Quantize
     levels : list of numpy.ndarray
         The pyramid, finest first; ``levels[0]`` is the source and may be a ``numpy.memmap``
         (it is read brick by brick; the coarser levels are read whole, they are 1/7 of it).
-        Level ``l`` must have the shape :func:`~.cut_tree.regular_brick_tree` gives it.
+        Level ``l`` must have the shape :func:`~.cut.tree.regular_brick_tree` gives it.
     brick : int
         Voxels per brick edge.
     quantizer : Quantizer
@@ -460,7 +460,7 @@ def box_histograms(source: np.ndarray, coarse: np.ndarray, lo: np.ndarray, hi: n
         The whole approximating level.
     lo, hi : numpy.ndarray
         (n, 3) source voxel ranges ``[lo, hi)`` of the bricks (any tiling: a pyramid store's
-        bricks, which need not be :func:`~.cut_tree.regular_brick_tree`'s).
+        bricks, which need not be :func:`~.cut.tree.regular_brick_tree`'s).
     a, c : 3 floats
         Source index to level index, ``u = a i + c`` (edge-clamped trilinear reconstruction).
     quantizer : Quantizer
@@ -567,7 +567,7 @@ def leaf_value_ranges(source: np.ndarray, brick: int,
 
     The trilinear reconstruction inside a brick reads the neighbouring voxel across each face,
     hence ``ghost = 1``. Returns float64 arrays shaped like the level-0 brick grid, ready for
-    :func:`~.cut_tree.regular_brick_tree` (which makes them hierarchical).
+    :func:`~.cut.tree.regular_brick_tree` (which makes them hierarchical).
     """
     nb = tuple(-(-n // brick) for n in source.shape)
     vmin = np.empty(int(np.prod(nb)), np.float64)

@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from .._jit import jit
-from ..errors import ParameterError
-from .cut_tree import BrickTree
+from ..._jit import jit
+from ...errors import ParameterError
+from .tree import BrickTree
 
 __all__ = ["greedy_cut", "optimal_cut", "optimal_cut_errors", "optimal_update"]
 
@@ -48,7 +48,7 @@ def greedy_cut(metric: Any, budget: int, fill: bool = False) -> np.ndarray:
     budget : int
         ``N``, the most bricks the cut may hold.
     fill : bool
-        False (the paper's rule, and the fixed point of :class:`~.cut_update.CutUpdater`): stop
+        False (the paper's rule, and the fixed point of :class:`~.cut.update.CutUpdater`): stop
         at the first node whose split does not fit. True: keep that node unsplit and go on with
         the next ones, filling the budget with the splits that still fit.
 
@@ -59,7 +59,7 @@ def greedy_cut(metric: Any, budget: int, fill: bool = False) -> np.ndarray:
 
     Notes
     -----
-    Pops the node of highest priority (ties: :func:`.cut_metric.rank`) and replaces it by its
+    Pops the node of highest priority (ties: :func:`.cut.metric.rank`) and replaces it by its
     visible children, until the popped node's priority is not positive (no split reduces the
     error), or its split would exceed ``N``. The same stop rules as the update's, so that the
     update converges to this cut. With small budgets the first rule leaves up to

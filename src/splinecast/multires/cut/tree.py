@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError
+from ...errors import ParameterError
 
 __all__ = ["BrickTree", "BrickGrid", "regular_brick_tree", "segment_indices"]
 

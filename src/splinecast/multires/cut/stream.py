@@ -3,9 +3,10 @@
 :class:`BrickStream` is what a renderer of a multiscale volume holds (one per scene): an octree, a
 cache with its loader thread, and the per-frame sequence
 
-1. the cut for the camera and the cut's share of the budget: :func:`.lod.select_cut` (screen-space
+1. the cut for the camera and the cut's share of the budget: :func:`.cut.lod.select_cut`
+(screen-space
    level of detail ``lod``), or the ``selector`` a caller passes (the error-metric cut of
-   :mod:`.cut_policy`): every policy shares the cache, its loader and the substitution below;
+   :mod:`.cut.policy`): every policy shares the cache, its loader and the substitution below;
 2. :meth:`.store.cache.BrickCache.request_cut` (the loader starts reading, coarse levels first);
 3. :meth:`.store.cache.BrickCache.wait` for at most ``loads_per_frame`` bricks;
 4. :meth:`.store.cache.BrickCache.resolve`: every brick of the cut, or its finest resident ancestor.
@@ -22,13 +23,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..camera import Camera
-from ..errors import ParameterError
-from ..io.omezarr import MultiscaleVolume
+from ...camera import Camera
+from ...errors import ParameterError
+from ...io.omezarr import MultiscaleVolume
+from ..store.cache import BrickCache, DrawItem
 from .lod import Cut, Key, centre_first, select_cut
 from .octree import BrickOctree
 from .relevance import ValueFilter
-from .store.cache import BrickCache, DrawItem
 
 __all__ = ["BrickStream", "FrameBricks", "Selector"]
 

@@ -42,9 +42,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError
-from ..io.omezarr import MultiscaleVolume
-from .store.tables import MINMAX
+from ...errors import ParameterError
+from ...io.omezarr import MultiscaleVolume
+from ..store.tables import MINMAX
 
 __all__ = ["GHOST", "DEFAULT_BRICK", "brick_counts", "BrickOctree"]
 

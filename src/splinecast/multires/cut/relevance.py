@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..transfer import TransferFunction
+from ...transfer import TransferFunction
 
 __all__ = ["ValueFilter"]
 

@@ -5,7 +5,8 @@ Each frame starts from the previous cut instead of the root (section 3.5):
 
 * **S**, the splittable nodes of the cut, in descending priority; **C**, the collapsible parents
   (every visible child in the cut), in ascending priority; **DL**, the bricks to download for the
-  next frame. Both queues are :class:`~.partial_queue.PartialQueue` s: when the priorities change
+  next frame. Both queues are :class:`~.cut.partial_queue.PartialQueue` s: when the priorities
+  change
   (view, interest point, transfer function) they are re-prioritised and partially sorted in
   O(N + M log M), then the frame's O(M) operations cost O(log M) each.
 * Loop on ``S0 = head(S)``: if splitting it fits N and M, split it (its visible children enter the
@@ -21,7 +22,7 @@ Each frame starts from the previous cut instead of the root (section 3.5):
   visible children (borders, transparent children), which matter when N and M are small against
   the 7 bricks and 8 downloads of a full octree split (with M = 8 the paper's rule cannot even
   pair a collapse with a split). The fixed point is then close to the greedy cut with
-  ``fill=True`` (:func:`~.cut_select.greedy_cut`), which ``benchmarks/bench_cut.py`` finds
+  ``fill=True`` (:func:`~.cut.select.greedy_cut`), which ``benchmarks/bench_cut.py`` finds
   closer to the optimum than the paper's rule.
 * Downloads count the bricks of the new cut that were not resident (not in the previous frame's
   cut): a split downloads its non-resident children, a collapse its parent if not resident, and a
@@ -40,7 +41,7 @@ Each frame starts from the previous cut instead of the root (section 3.5):
 
 The same engine, counting every brick of the cut *and its ancestors* against a RAM capacity and
 never collapsing a parent of the rendering cut, maintains the extended cut of the paging loader
-(:mod:`.cut_paging`).
+(:mod:`.cut.paging`).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError
+from ...errors import ParameterError
 from .partial_queue import PartialQueue
 
 __all__ = ["CutUpdater", "CutUpdate", "SplitCollapse"]
