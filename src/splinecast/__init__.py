@@ -51,7 +51,7 @@ _LAZY = {
     "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
     "MultiscaleScene": ("splinecast.multires.scene", "MultiscaleScene"),
     "LabelScene": ("splinecast.multires.label_scene", "LabelScene"),
-    "WaveletVolume": ("splinecast.multires.wavelet_store", "WaveletVolume"),
+    "WaveletVolume": ("splinecast.multires.wavelet.store", "WaveletVolume"),
     "WaveletScene": ("splinecast.multires.wavelet_scene", "WaveletScene"),
     "multires": ("splinecast.multires", None),
     "view": ("splinecast.viewer", "view"),
@@ -83,12 +83,12 @@ def _wavelet_scene(volume, *args, **kwargs):
 
 def _open_wavelet_store(path, root, attributes):
     """``read("x.zarr")`` of a spline-wavelet store: a lazy ``WaveletVolume``."""
-    from .multires.wavelet_store import open_wavelet_store
+    from .multires.wavelet.store import open_wavelet_store
 
     return open_wavelet_store(path, root, attributes)
 
 
-register_scene_type("splinecast.multires.wavelet_store.WaveletVolume", _wavelet_scene)
+register_scene_type("splinecast.multires.wavelet.store.WaveletVolume", _wavelet_scene)
 
 
 def _label_scene(volume, *args, **kwargs):

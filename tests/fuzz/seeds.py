@@ -394,7 +394,7 @@ def _wavelet(folder: Path) -> str:
     ``splinecast`` of kind ``wavelet``) written by splinecast's builder: two levels of 4-node
     chunks, so coarse, detail and hull arrays all exist."""
     import splinecast as sc
-    from splinecast.multires.wavelet_store import build_wavelet_pyramid
+    from splinecast.multires.wavelet.store import build_wavelet_pyramid
 
     build_wavelet_pyramid(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN),
                           folder / WAVELET_MAIN, degree=3, levels=2, chunk=4)

@@ -3,17 +3,17 @@
 ``sc.Scene(sc.read("x.zarr"), lod=ε)`` of a store written with ``kind="wavelet"`` returns a
 :class:`WaveletScene` (registered in ``splinecast/__init__.py``). Per frame it
 
-1. selects the chunks for the camera (:func:`.wavelet_lod.select`: refine while a level's cell
+1. selects the chunks for the camera (:func:`.wavelet.lod.select`: refine while a level's cell
    looks larger than ``ε`` radians from the eye and the isovalue lies in the chunk's range);
 2. reconstructs the selected chunks' B-spline coefficient bricks
-   (:class:`.wavelet_reconstruct.ChunkReconstructor`, reusing unchanged bricks across frames; the
+   (:class:`.wavelet.reconstruct.ChunkReconstructor`, reusing unchanged bricks across frames; the
    details of a chunk are read from the store the first time it is refined);
 3. draws every region the selection shows from its brick with the ``bspline<degree>`` model
    through the cut renderer (:class:`.draw.CutRenderer`, the segment entry point, front to back
    per ray), in any mode of :meth:`splinecast.Scene.render`.
 
 Coefficients, not samples
-    A brick *is* a padded B-spline coefficient array (:mod:`.wavelet_layout`), exactly what the
+    A brick *is* a padded B-spline coefficient array (:mod:`.wavelet.layout`), exactly what the
     model's prepared array is for its default smoothing reconstruction (voxels as coefficients),
     so it goes to the kernels as is: nothing is prefiltered, and ``prefilter=True`` is refused.
     Hence the model must be the store's ``bspline<degree>``. With ``ε = 0`` every chunk is
@@ -21,7 +21,7 @@ Coefficients, not samples
 
 Seams
     None need fixing: where levels meet, both bricks evaluate the selection's one global spline
-    (:mod:`.wavelet_lod`), continuous (C^(d-1)) by construction.
+    (:mod:`.wavelet.lod`), continuous (C^(d-1)) by construction.
 
 ``frame.stats`` adds ``lod`` (ε), ``chunks`` (reconstructed), ``chunk_share`` (over all chunks
 of all levels), ``active_chunks`` (refined), ``select_ms``, ``reconstruct_ms``,
@@ -48,10 +48,10 @@ from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_trac
 from ..volume import Volume
 from .draw import CutRenderer, Piece, gc_paused
 from .store.budget import parse_bytes
-from .wavelet_layout import WaveletLayout
-from .wavelet_lod import Selection, select
-from .wavelet_reconstruct import ChunkReconstructor
-from .wavelet_store import WaveletVolume
+from .wavelet.layout import WaveletLayout
+from .wavelet.lod import Selection, select
+from .wavelet.reconstruct import ChunkReconstructor
+from .wavelet.store import WaveletVolume
 
 __all__ = ["WaveletScene", "WaveletTree", "wavelet_pieces"]
 

@@ -288,8 +288,8 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
     # Imported here: the viewer of an in-memory volume never loads zarr.
     from ..io.omezarr import MultiscaleVolume
     from ..multires.scene import MultiscaleScene
+    from ..multires.wavelet.store import WaveletVolume
     from ..multires.wavelet_scene import WaveletScene
-    from ..multires.wavelet_store import WaveletVolume
 
     if isinstance(data, MultiscaleScene | WaveletScene):
         if budget is not None or lod is not None:

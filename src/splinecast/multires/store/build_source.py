@@ -1,7 +1,7 @@
 """What a pyramid builder reads: any accepted source opened lazily, in splinecast axis order.
 
 Both builders, the binomial brick pyramid (:mod:`splinecast.multires.store.pyramid`) and the
-spline-wavelet pyramid (:mod:`splinecast.multires.wavelet_store`), accept the same sources (a
+spline-wavelet pyramid (:mod:`splinecast.multires.wavelet.store`), accept the same sources (a
 path, a :class:`~splinecast.Volume`, a :class:`~splinecast.io.omezarr.MultiscaleVolume`, a zarr,
 dask or numpy array) and make the same
 checks before reading anything; they share this module so that neither imports the other's

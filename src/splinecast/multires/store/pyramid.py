@@ -50,7 +50,7 @@ from ...io._common import fmt_shape, require
 from ...io.ngff import multiscales_attributes, ngff_unit, to_ngff
 from ...io.omezarr import ATTRIBUTE, Level
 from ..cut.octree import GHOST, brick_counts
-from ..wavelet_store import build_wavelet_pyramid
+from ..wavelet.store import build_wavelet_pyramid
 from .build_source import PyramidSource, level_source, open_pyramid_source
 from .downsample import binomial_halve, fine_range
 from .label_downsample import DESCRIPTION as LABEL_DOWNSAMPLING_TEXT
@@ -235,9 +235,9 @@ def build_pyramid(
     """Write ``source`` as an OME-Zarr 0.5 brick pyramid at ``path``.
 
     ``kind="wavelet"`` writes a spline-wavelet pyramid instead
-    (:func:`.wavelet_store.build_wavelet_pyramid`, with ``degree``, ``levels``, ``chunk``,
+    (:func:`.wavelet.store.build_wavelet_pyramid`, with ``degree``, ``levels``, ``chunk``,
     ``dtype``, ``overwrite``, ``name`` and ``progress``) and returns its
-    :class:`~.wavelet_store.WaveletVolume`.
+    :class:`~.wavelet.store.WaveletVolume`.
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """View-dependent selection of wavelet chunks (Steinberger 2010, §4.2 and §4.4, Algorithm 1).
 
-Per chunk ``(j, idx)`` of ``k^3`` level-``j`` nodes (:mod:`.wavelet_layout`), three conditions
+Per chunk ``(j, idx)`` of ``k^3`` level-``j`` nodes (:mod:`.wavelet.layout`), three conditions
 decide whether its details (the level-``j + 1`` details it owns) are added — the chunk is
 *active* and level ``j`` is shown on its region:
 
@@ -11,7 +11,7 @@ decide whether its details (the level-``j + 1`` details it owns) are added — t
   look smaller than ε are not refined. ε = 0 refines everywhere; a value near the angle of one
   pixel (``fov / image height``) keeps cells about a pixel wide;
 * c2: the isovalue (any of several) lies in the chunk's selection range
-  (:func:`.wavelet_ranges.selection_ranges`); skipped when no isovalue is given (DVR, MIP).
+  (:func:`.wavelet.ranges.selection_ranges`); skipped when no isovalue is given (DVR, MIP).
 
 Neighbours (the thesis' Fig. 4.8, derived here)
     A chunk's wavelets reach beyond its region — measured in level-``j`` cells, at most
@@ -19,7 +19,7 @@ Neighbours (the thesis' Fig. 4.8, derived here)
     4/4 cells for degree 1, 2, 3), always less than one chunk since ``k >= 4``. Every neighbour
     of an active chunk (26-neighbourhood) is therefore *reconstructed* at level ``j`` as well,
     with its own details zero, so the spline it shows includes the active chunk's wavelets. A
-    reconstructed chunk needs only its parent's brick (:mod:`.wavelet_reconstruct`), and that
+    reconstructed chunk needs only its parent's brick (:mod:`.wavelet.reconstruct`), and that
     parent is active or a neighbour of an active chunk itself, so the set is closed upwards.
 
 Rendering
@@ -36,9 +36,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..accel.minmax import neighbourhood
-from ..errors import ParameterError
-from .wavelet_layout import WaveletLayout
+from ...accel.minmax import neighbourhood
+from ...errors import ParameterError
+from .layout import WaveletLayout
 
 __all__ = ["Selection", "select", "WHOLE_CHUNK"]
 

@@ -44,7 +44,7 @@ from math import comb
 
 import numpy as np
 
-from ..errors import ParameterError
+from ...errors import ParameterError
 
 __all__ = ["Filter", "SplineWavelet", "spline_wavelet", "DUAL_MOMENTS"]
 

@@ -2,7 +2,7 @@
 2010, §4.4).
 
 For a chunk ``(j, idx)`` the brick is the ``(k + d)^3`` level-``j`` nodes
-``k idx - pad .. k idx - pad + k + d - 1`` per axis (:mod:`.wavelet_layout`). Each node is
+``k idx - pad .. k idx - pad + k + d - 1`` per axis (:mod:`.wavelet.layout`). Each node is
 gathered — never scattered — from the level-``j + 1`` coarse nodes and details under the synthesis
 filters, separably along z, then y, then x, as the thesis' three kernels do:
 
@@ -24,7 +24,7 @@ Reuse across frames
 
 Memory
     Bricks and the detail blocks they were made from are cached within a byte budget
-    (:mod:`.wavelet_memory`): what the current selection uses stays, the least recently used
+    (:mod:`.wavelet.memory`): what the current selection uses stays, the least recently used
     rest makes room (the roots and coarse bricks every frame uses therefore stay resident).
 """
 
@@ -38,13 +38,13 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import jit
-from ..errors import ParameterError
-from .wavelet_filters import spline_wavelet
-from .wavelet_layout import DETAIL_BANDS, WaveletLayout, reflect_index, reflect_indices
-from .wavelet_lod import Selection, _dilate
-from .wavelet_memory import Budget, SlotPool
-from .wavelet_transform import WaveletPyramid
+from ..._jit import jit
+from ...errors import ParameterError
+from .filters import spline_wavelet
+from .layout import DETAIL_BANDS, WaveletLayout, reflect_index, reflect_indices
+from .lod import Selection, _dilate
+from .memory import Budget, SlotPool
+from .transform import WaveletPyramid
 
 __all__ = ["Brick", "ChunkReconstructor", "ReconstructionStats", "DETAIL_BLOCK"]
 
@@ -244,7 +244,7 @@ class Brick:
     scale : float
         Voxels per local voxel, ``2^level``.
     octants : int
-        Which octants of the chunk's region to draw (:data:`.wavelet_lod.WHOLE_CHUNK` = all).
+        Which octants of the chunk's region to draw (:data:`.wavelet.lod.WHOLE_CHUNK` = all).
     """
 
     level: int
@@ -281,7 +281,7 @@ class ChunkReconstructor:
         ``loader(level, block) -> sequence of 7 arrays``: the level-``level`` details of block
         ``block`` (3 ints; nodes ``DETAIL_BLOCK * block`` onwards, at most :data:`DETAIL_BLOCK`
         per axis, clipped to each subband's shape), in :data:`DETAIL_BANDS` order
-        (:meth:`.wavelet_store.WaveletVolume.read_detail_block`). Default: slices of
+        (:meth:`.wavelet.store.WaveletVolume.read_detail_block`). Default: slices of
         ``pyramid.details``.
     budget : int, optional
         Bytes the cached bricks and detail blocks may hold together (``None``: unbounded).
@@ -292,7 +292,7 @@ class ChunkReconstructor:
 
     Notes
     -----
-    Memory is two :class:`.wavelet_memory.SlotPool`: bricks of every level in one array (the
+    Memory is two :class:`.wavelet.memory.SlotPool`: bricks of every level in one array (the
     kernel reads a parent slot and writes a child slot of the same array), detail blocks in
     another with one slot table per level. ``resident_bytes`` is their size.
     """

@@ -1,7 +1,7 @@
 """Spline-wavelet pyramids in a Zarr store: written streamed, read lazily (Steinberger 2010, §4).
 
 ``sc.build_pyramid(src, "x.zarr", kind="wavelet", degree=3)`` (``splinecast pyramid SRC -o
-x.zarr --wavelet 3``) runs :func:`.wavelet_transform.decompose` block by block with a
+x.zarr --wavelet 3``) runs :func:`.wavelet.transform.decompose` block by block with a
 :class:`ZarrSink`, so the coarse levels and detail subbands go straight to the store and peak
 memory is a few blocks, whatever the volume's size. ``sc.read("x.zarr")`` then returns a
 :class:`WaveletVolume`, whose details are read from the store only when the reconstructor needs
@@ -19,19 +19,19 @@ Layout of the store (a Zarr v3 group)
     ``wavelet/hull/<j>``, j = 0..J
         Per chunk of level ``j`` (shape ``layout.chunks(j) + (2,)``, float64): ``[min, max]``
         of the level's coefficients acting on the chunk's region, a conservative bound of the
-        pure level-``j`` spline there (:mod:`.wavelet_ranges`). The view-dependent selection's
+        pure level-``j`` spline there (:mod:`.wavelet.ranges`). The view-dependent selection's
         ranges are derived from them when the store is opened.
 
     All arrays are zstd-compressed with a checksum, in chunks of :data:`STORE_CHUNK` nodes per
     axis, every chunk written. The root attribute ``"splinecast"`` says ``kind: "wavelet"``,
     the degree, levels, chunk edge ``k``, the volume's shape, spacing and origin, the
     coefficient dtype, the value range of the voxels, the wavelet and the boundary rules
-    (:mod:`.wavelet_layout`: the voxels mirrored about the first and last voxel as the
+    (:mod:`.wavelet.layout`: the voxels mirrored about the first and last voxel as the
     ``bspline`` models do, then whole-sample symmetric coarse / half-sample symmetric detail
     sequences for odd degree, half-sample symmetric / antisymmetric for even degree).
 
 Lazy details
-    The reconstructor (:class:`.wavelet_reconstruct.ChunkReconstructor`) asks for the details one
+    The reconstructor (:class:`.wavelet.reconstruct.ChunkReconstructor`) asks for the details one
     block of :data:`STORE_CHUNK` nodes per axis at a time (:meth:`WaveletVolume.read_detail_block`:
     one store chunk of each of the seven subbands), the first time a chunk whose details are active
     needs them, and keeps them within its byte budget (least recently used blocks go first). A frame
@@ -50,16 +50,16 @@ from typing import Any
 
 import numpy as np
 
-from .._atomic import atomic_directory
-from ..errors import ParameterError, ReadError, limits
-from ..io._common import fmt_shape, one_line, require
-from ..io.omezarr import ATTRIBUTE
-from ..volume import GridGeometry
-from .store.build_source import open_pyramid_source
-from .wavelet_filters import spline_wavelet
-from .wavelet_layout import DETAIL_BANDS, WaveletLayout
-from .wavelet_reconstruct import DETAIL_BLOCK
-from .wavelet_transform import WaveletPyramid, decompose
+from ..._atomic import atomic_directory
+from ...errors import ParameterError, ReadError, limits
+from ...io._common import fmt_shape, one_line, require
+from ...io.omezarr import ATTRIBUTE
+from ...volume import GridGeometry
+from ..store.build_source import open_pyramid_source
+from .filters import spline_wavelet
+from .layout import DETAIL_BANDS, WaveletLayout
+from .reconstruct import DETAIL_BLOCK
+from .transform import WaveletPyramid, decompose
 
 __all__ = ["KIND", "STORE_CHUNK", "ZarrSink", "WaveletVolume", "build_wavelet_pyramid",
            "open_wavelet_store"]
@@ -86,7 +86,7 @@ _BOUNDARY = {
 
 
 class ZarrSink:
-    """The :class:`~.wavelet_transform.Sink` of a Zarr group: one array per name under
+    """The :class:`~.wavelet.transform.Sink` of a Zarr group: one array per name under
     ``wavelet/`` (chunks of :data:`STORE_CHUNK` nodes, zstd with a checksum)."""
 
     def __init__(self, group: Any) -> None:
@@ -285,7 +285,7 @@ class WaveletVolume(GridGeometry):
     @cached_property
     def ranges(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Selection ranges per chunk of levels 0..J-1 (:func:`.selection_ranges`)."""
-        from .wavelet_ranges import selection_ranges
+        from .ranges import selection_ranges
 
         return selection_ranges(self.layout, self.hull_lo, self.hull_hi)
 
@@ -339,7 +339,7 @@ class WaveletVolume(GridGeometry):
 
     @cached_property
     def pyramid(self) -> WaveletPyramid:
-        """A :class:`~.wavelet_transform.WaveletPyramid` view for the reconstructor: the
+        """A :class:`~.wavelet.transform.WaveletPyramid` view for the reconstructor: the
         coarsest level read, no details (they come block by block through
         :meth:`read_detail_block`)."""
         lay = self.layout
@@ -348,7 +348,7 @@ class WaveletVolume(GridGeometry):
 
     def load(self) -> WaveletPyramid:
         """Everything read into memory: an in-memory
-        :class:`~.wavelet_transform.WaveletPyramid` (every coarse level and detail subband)."""
+        :class:`~.wavelet.transform.WaveletPyramid` (every coarse level and detail subband)."""
         lay = self.layout
         coarse = {j: self.coarse(j) for j in range(1, lay.levels + 1)}
         details = {j: {b: self._read(f"detail/{j}/{b}") for b in DETAIL_BANDS}
@@ -367,7 +367,7 @@ def _checked_array(root: Any, path: Path, name: str, shape: tuple[int, ...],
                    dtype: np.dtype) -> Any:
     """Array ``wavelet/<name>`` through the guarded store's checks, with the shape and data
     type the layout and the metadata promise."""
-    from ..io.omezarr import guarded_array
+    from ...io.omezarr import guarded_array
 
     level = guarded_array(root, f"{GROUP}/{name}", str(path), path)
     if level.shape != tuple(shape):
@@ -416,7 +416,7 @@ def _layout(attributes: dict[str, Any], path: Path) -> tuple[WaveletLayout, np.d
 def _hull(root: Any, path: Path, layout: WaveletLayout, level: int) -> np.ndarray:
     """The stored ``[min, max]`` table of ``level``: float64 of shape ``chunks + (2,)``, every
     chunk file present, finite with ``min <= max``."""
-    from ..io.omezarr import _refused, read_array
+    from ...io.omezarr import _refused, read_array
 
     zarr = require("zarr", path, action="reading")
     key = f"{GROUP}/hull/{level}"
@@ -469,11 +469,11 @@ def open_wavelet_store(path: str | os.PathLike[str], root: Any = None,
     """
     path = Path(os.fspath(path))
     if root is None:
-        from ..io.omezarr import open_store
+        from ...io.omezarr import open_store
 
         root = open_store(path)
     if attributes is None:
-        from ..io.omezarr import _our_attributes
+        from ...io.omezarr import _our_attributes
 
         try:
             attributes = _our_attributes(dict(root.attrs).get(ATTRIBUTE),

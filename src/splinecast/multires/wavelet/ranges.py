@@ -12,7 +12,7 @@ Two tables, both computed from coefficients, never by sampling:
     The interval the view-dependent selection tests the isovalue against before it adds a
     chunk's details. It must cover every surface the details could reveal or remove, so it is the
     union, over the chunk's 3x3x3 neighbourhood (a chunk's wavelets reach at most 4 cells into its
-    neighbours, see :mod:`.wavelet_lod`), of the hulls of every pure level ``0 .. j + 1`` —
+    neighbours, see :mod:`.wavelet.lod`), of the hulls of every pure level ``0 .. j + 1`` —
     the full-resolution spline (level 0), the level the chunk reconstructs (``j``) and the level
     shown when it is not refined (``j + 1``, through the parent's hull). If the isovalue lies
     outside it, no single-level approximation at these levels, in particular not the full
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .wavelet_layout import WaveletLayout
+from .layout import WaveletLayout
 
 __all__ = ["block_hulls", "selection_ranges", "EMPTY_RANGE"]
 

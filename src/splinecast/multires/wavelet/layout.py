@@ -1,7 +1,7 @@
 """Geometry of a spline-wavelet pyramid: level windows, boundary rules, chunks and bricks.
 
 Everything here is integer bookkeeping shared by the transform, the per-chunk ranges, the
-view-dependent selection and the chunk reconstruction; see :mod:`.wavelet_filters` for the filters.
+view-dependent selection and the chunk reconstruction; see :mod:`.wavelet.filters` for the filters.
 
 Levels and node positions
     Level 0 is the finest. Level ``j`` is a B-spline coefficient sequence per axis whose node ``m``
@@ -59,8 +59,8 @@ from functools import cached_property
 
 import numpy as np
 
-from .._jit import jit
-from ..errors import ParameterError
+from ..._jit import jit
+from ...errors import ParameterError
 
 __all__ = [
     "WS",

@@ -2,9 +2,9 @@
 1996, §4.3).
 
 One step filters the level-``j`` coefficients along x, y and z with the analysis low- and
-high-pass of :mod:`.wavelet_filters` and keeps every other output: one scaling subband ``LLL``
+high-pass of :mod:`.wavelet.filters` and keeps every other output: one scaling subband ``LLL``
 (level ``j + 1``) and seven detail subbands (``LLH`` .. ``HHH``, letters per axis x, y, z). The
-step is repeated on ``LLL`` only. Geometry, windows and boundary rules: :mod:`.wavelet_layout`.
+step is repeated on ``LLL`` only. Geometry, windows and boundary rules: :mod:`.wavelet.layout`.
 
 Bounded memory
     :func:`decompose` works block by block: an output block of ``B^3`` level-``j + 1`` nodes
@@ -17,7 +17,7 @@ Bounded memory
 Output
     A :class:`WaveletPyramid`: every coarse level ``1..J`` (the pure B-spline approximations; the
     non-redundant set is level ``J`` plus all details, the same node count as the window), the
-    detail subbands of every level, and the per-chunk hulls of :mod:`.wavelet_ranges`.
+    detail subbands of every level, and the per-chunk hulls of :mod:`.wavelet.ranges`.
 """
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..errors import ParameterError
-from .wavelet_filters import Filter, SplineWavelet, spline_wavelet
-from .wavelet_layout import BANDS, DETAIL_BANDS, WS, WaveletLayout, reflect_indices
-from .wavelet_ranges import block_hulls, selection_ranges
+from ...errors import ParameterError
+from .filters import Filter, SplineWavelet, spline_wavelet
+from .layout import BANDS, DETAIL_BANDS, WS, WaveletLayout, reflect_indices
+from .ranges import block_hulls, selection_ranges
 
 __all__ = [
     "Sink",
@@ -90,7 +90,7 @@ class WaveletPyramid:
         reconstruct level ``j - 1`` (shapes ``layout.band_shape(j, band)``).
     hull_lo, hull_hi : list of arrays
         Per level 0..J, per chunk: convex-hull bound of the pure level's spline on the chunk's
-        region (:mod:`.wavelet_ranges`).
+        region (:mod:`.wavelet.ranges`).
     """
 
     layout: WaveletLayout

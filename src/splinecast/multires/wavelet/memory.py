@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import ReadError, limits
+from ...errors import ReadError, limits
 
 __all__ = ["SlotPool", "Budget"]
 
