@@ -22,7 +22,7 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 from frame_replay import replay  # noqa: E402
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.draw import screen_rect, screen_rects  # noqa: E402
+from splinecast.multires.draw.cut_renderer import screen_rect, screen_rects  # noqa: E402
 
 MODES = ["iso", "multi", "mip", "minip", "dvr"]
 

@@ -13,7 +13,8 @@ Shares of bricks
 
 Partial images
     Each worker traces its bricks front to back per ray through the segment entry point
-    (:class:`~splinecast.multires.draw.CutRenderer`, the multiresolution renderer of a cut whose
+    (:class:`~splinecast.multires.draw.cut_renderer.CutRenderer`, the multiresolution renderer of a
+    cut whose
     bricks all come from this level) into the mode's per-pixel state, without finishing it: iso
     keeps the nearest hit and its gradient, MIP the extreme value and where, DVR the
     premultiplied colour and opacity, the depth where the opacity passed 1/2 and the segment
@@ -79,7 +80,7 @@ from ..io.omezarr import MultiscaleVolume, is_zarr
 from ..io.remote import is_url
 from ..models import MODELS
 from ..multires.cut.octree import DEFAULT_BRICK, BrickOctree
-from ..multires.draw import CutRenderer, Piece, screen_rect
+from ..multires.draw.cut_renderer import CutRenderer, Piece, screen_rect
 from ..multires.store.cache import read_bricks
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state

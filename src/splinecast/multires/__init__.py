@@ -27,9 +27,9 @@ _EXPORTS = {
     "write_table": "store.tables",
     "parse_bytes": "store.budget",
     "MultiscaleScene": "scene",
-    "CutRenderer": "draw",
-    "Piece": "draw",
-    "Seams": "seams",
+    "CutRenderer": "draw.cut_renderer",
+    "Piece": "draw.cut_renderer",
+    "Seams": "draw.seams",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -12,8 +12,9 @@ frame it
    an optional point of ``interest``, split-and-collapse under the brick budget and ``load_budget``,
    updated from the previous frame's cut; :mod:`.cut.policy`) in DVR and MIP/minIP, and the
    level-of-detail cut in the isosurface modes;
-2. turns the cut into :class:`~.draw.Piece` s and fixes the seams between levels (:mod:`.seams`);
-3. traces the pieces front to back per ray (:class:`~.draw.CutRenderer`) in the mode of
+2. turns the cut into :class:`~.draw.cut_renderer.Piece` s and fixes the seams between levels
+(:mod:`.draw.seams`);
+3. traces the pieces front to back per ray (:class:`~.draw.cut_renderer.CutRenderer`) in the mode of
    :meth:`~splinecast.Scene.render`, with the same options and the same :class:`Frame`.
 
 ``frame.stats`` adds the stream's counts (``complete``, ``substituted``, ``resident``,
@@ -50,8 +51,8 @@ from .cut.octree import DEFAULT_BRICK, BrickOctree
 from .cut.policy import CUT_PRIORITIES, ErrorCut, check_cut
 from .cut.relevance import ValueFilter
 from .cut.stream import BrickStream, FrameBricks
-from .draw import CutRenderer, Piece
-from .seams import Seams
+from .draw.cut_renderer import CutRenderer, Piece
+from .draw.seams import Seams
 from .store.budget import parse_bytes
 from .whole_level import WholeLevel
 
@@ -195,7 +196,7 @@ class MultiscaleScene(SceneTemplate):
         Point of interest (world coordinates) of the ``"error"`` cut; without one its importance
         is the distance to the eye alone. :meth:`render` can move it per frame.
     seams : bool
-        Make bricks of different levels meet without cracks (:mod:`.seams`; default). ``False``
+        Make bricks of different levels meet without cracks (:mod:`.draw.seams`; default). ``False``
         draws every brick as it is (to see the cracks).
     brick : int, optional
         Cells per brick (default: :func:`render_brick`, the pyramid's or a multiple of it).

@@ -9,7 +9,8 @@
    (:class:`.wavelet.reconstruct.ChunkReconstructor`, reusing unchanged bricks across frames; the
    details of a chunk are read from the store the first time it is refined);
 3. draws every region the selection shows from its brick with the ``bspline<degree>`` model
-   through the cut renderer (:class:`.draw.CutRenderer`, the segment entry point, front to back
+   through the cut renderer (:class:`.draw.cut_renderer.CutRenderer`, the segment entry point,
+   front to back
    per ray), in any mode of :meth:`splinecast.Scene.render`.
 
 Coefficients, not samples
@@ -46,7 +47,7 @@ from ..models import MODELS
 from ..render.defaults import auto_iso
 from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
 from ..volume import Volume
-from .draw import CutRenderer, Piece, gc_paused
+from .draw.cut_renderer import CutRenderer, Piece, gc_paused
 from .store.budget import parse_bytes
 from .wavelet.layout import WaveletLayout
 from .wavelet.lod import Selection, select
@@ -83,8 +84,9 @@ class _Placement:
 
 
 class WaveletTree:
-    """The chunk octree of a wavelet layout, in the shape :class:`.draw.CutRenderer` and
-    :func:`.order.front_to_back` read (``levels``, ``brick``, ``factors``, ``counts``, ``n0``,
+    """The chunk octree of a wavelet layout, in the shape :class:`.draw.cut_renderer.CutRenderer`
+    and
+    :func:`.draw.order.front_to_back` read (``levels``, ``brick``, ``factors``, ``counts``, ``n0``,
     ``volume``, ``level_map``)."""
 
     def __init__(self, volume: WaveletVolume) -> None:

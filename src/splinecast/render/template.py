@@ -580,7 +580,8 @@ def _sample_tracer(request: RenderRequest, trace: Callable[..., tuple],
 
 def whole_frame_tracer(renderer: Any, pieces: Any, planes: np.ndarray) -> Callable[..., tuple]:
     """:func:`finish_frame`'s ``trace`` for a scene drawn by a cut renderer
-    (:class:`splinecast.multires.draw.CutRenderer`) from ``pieces``: every pixel of the image
+    (:class:`splinecast.multires.draw.cut_renderer.CutRenderer`) from ``pieces``: every pixel of
+    the image
     traced, whatever the mask (the launch has no per-pixel mask)."""
 
     def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:

@@ -4,7 +4,7 @@
   ray a brick of a cut owns), clipped by the clip planes;
 - :func:`sample_grid`: a kernel grid's reconstruction at points (seams, tests);
 - :func:`grid_values_at`: the reconstruction at one parameter per ray (the isosurface's seam
-  closure, :class:`.seams.IsoClosure`).
+  closure, :class:`.draw.seams.IsoClosure`).
 
 They use the models' own compiled hooks (:func:`splinecast.models.pieces.value_gradient_at`) and
 the driver's ray formula (:func:`splinecast.render.rays.pixel_ray`), so the values and ray
@@ -16,10 +16,10 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
-from .._jit import jit
-from ..models.pieces import new_scratch, value_gradient_at
-from ..render.pieces_driver import box_interval
-from ..render.rays import grid_point
+from ..._jit import jit
+from ...models.pieces import new_scratch, value_gradient_at
+from ...render.pieces_driver import box_interval
+from ...render.rays import grid_point
 
 __all__ = ["box_ranges", "sample_grid", "grid_values_at"]
 

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
+from ...camera import Camera
 
 __all__ = ["front_to_back", "eye_index"]
 

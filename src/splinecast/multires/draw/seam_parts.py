@@ -1,6 +1,6 @@
 """A brick changed at a seam, drawn as thin shells of changed values around its unchanged core.
 
-:mod:`.seams` makes neighbouring levels agree by replacing the elements of the finer brick that
+:mod:`.draw.seams` makes neighbouring levels agree by replacing the elements of the finer brick that
 lie within the model's radius ``r`` of a coarser piece. Those elements all lie near the brick's
 faces, yet a grid needs one dense array, so the changed brick used to be drawn from a float64
 copy of its whole array: 8 bytes per voxel for every brick at a level boundary, 2 MiB per 64^3

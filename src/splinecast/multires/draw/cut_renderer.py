@@ -17,15 +17,15 @@ Grids
     so that the grid's cell ``c`` reads the same voxels as cell ``offset + c`` of the whole
     level), the level's origin and spacing and the rendered domain in the level's index space.
     The grid covers the whole brick; each ray is restricted to the piece's box with a per-ray
-    parameter interval (:func:`.probe.box_ranges`, the driver's ``t_range``), so boxes that cut
+    parameter interval (:func:`.draw.probe.box_ranges`, the driver's ``t_range``), so boxes that cut
     through cells (the even B-spline and the type-6 models, whose cells are centred on voxels,
     or an ancestor drawn over a descendant's box) need nothing special. Grids of unmodified
     bricks are kept between frames while their bricks are in the cut; grids of bricks changed at
     a seam are built when first traced and kept while the seam plan keeps its change
-    (:mod:`.seams`).
+    (:mod:`.draw.seams`).
 
 Tracing
-    The pieces are put in front-to-back order (:mod:`.order`) and traced in one compiled launch
+    The pieces are put in front-to-back order (:mod:`.draw.order`) and traced in one compiled launch
     per frame (:func:`splinecast.render.pieces_driver.trace_pieces`): parallel over screen
     tiles, each tile walks the pieces whose screen rectangle (:func:`screen_rects`, the box's
     projection) overlaps it, in that order, and hands each pixel of the rectangle to the
@@ -56,12 +56,12 @@ import numba
 import numpy as np
 from numba.typed import List
 
-from .._jit import jit
-from ..camera import Camera
-from ..render.clipping import NO_PLANES
-from ..render.driver import GEOM_SIZE, band_order, finalize, reset_state
-from ..render.pieces_driver import TILE, tile_lists, trace_pieces
-from ..render.segment import Grid, counters, make_grid, trace_segment
+from ..._jit import jit
+from ...camera import Camera
+from ...render.clipping import NO_PLANES
+from ...render.driver import GEOM_SIZE, band_order, finalize, reset_state
+from ...render.pieces_driver import TILE, tile_lists, trace_pieces
+from ...render.segment import Grid, counters, make_grid, trace_segment
 from .order import eye_index, front_to_back
 from .probe import box_ranges, sample_grid
 from .seam_parts import SHELL_SHARE_MAX, Parts, crop_range, part_order, split_box
@@ -156,7 +156,7 @@ class Piece:
         inside its domain (spline-wavelet chunk regions): :meth:`CutRenderer.box` neither moves
         nor extends them.
     seam_part : {"", "core", "shell"}
-        Part of a brick changed at a seam (:mod:`.seam_parts`): the core is drawn from the
+        Part of a brick changed at a seam (:mod:`.draw.seam_parts`): the core is drawn from the
         brick's own grid (no seam change applies to it), a shell from ``data``, which is
         already the changed prepared array around it.
     """
@@ -271,7 +271,7 @@ class CutRenderer:
         The levels' geometry and the bricks' nesting (for the front-to-back order).
     seams : optional
         Seam treatment with ``plan(pieces, renderer)`` and ``closure``
-        (:class:`.seams.Seams`); ``None`` draws every brick as it is.
+        (:class:`.draw.seams.Seams`); ``None`` draws every brick as it is.
     """
 
     def __init__(self, model: Any, tree: Any, seams: Any = None) -> None:
@@ -297,7 +297,7 @@ class CutRenderer:
         #: (which keeps its ``Change`` objects while the cut stays) hands out the same one.
         self._changed: dict[Hashable, tuple[Any, Grid, int]] = {}
         #: Per (brick key, box) changed at a seam: the change and the parts it is drawn as
-        #: (:mod:`.seam_parts`: shells, then the core last), or ``None`` for a whole copy.
+        #: (:mod:`.draw.seam_parts`: shells, then the core last), or ``None`` for a whole copy.
         self._split: dict[tuple, tuple[Any, list[Piece] | None, Any]] = {}
         #: Draw bricks changed at a seam as shells around their unchanged core (else each from
         #: a float64 copy of its whole array, the reference the parts are tested against).
@@ -523,7 +523,7 @@ class CutRenderer:
     def _drawn(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
                camera: Camera) -> tuple[list[Piece], dict]:
         """The pieces to trace, front to back, and the seam changes still to apply to them:
-        each piece changed at a seam is replaced by its parts (:mod:`.seam_parts`) in the order
+        each piece changed at a seam is replaced by its parts (:mod:`.draw.seam_parts`) in the order
         seen from ``camera``, where it splits."""
         ordered = [pieces[int(n)] for n in order]
         if not changes or not self.split_seams:
@@ -753,7 +753,7 @@ class CutRenderer:
 
     def _seam_pair(self, piece: Piece, setup: Any) -> tuple[tuple, Hashable]:
         """A ``(kernel, blocks)`` pair of the type a grid changed at a seam has (built from a
-        float64 copy of ``piece``'s array, as :meth:`~.seams.Change.apply` makes), and its
+        float64 copy of ``piece``'s array, as :meth:`~.draw.seams.Change.apply` makes), and its
         signature; one per mode type."""
         key = _signature(setup.params)
         kept = self._seam_pairs.get(key)
