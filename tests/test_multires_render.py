@@ -28,7 +28,7 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
 from splinecast.io.synthetic import sphere_sdf, torus_sdf  # noqa: E402
-from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.scenes.multiscale import MultiscaleScene  # noqa: E402
 from splinecast.multires.store.cache import BrickUnavailableWarning  # noqa: E402
 
 MODELS = ["trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31"]

@@ -19,7 +19,7 @@ from .io.multichannel import MultichannelVolume
 from .io.store_kinds import register_store_kind as _register_store_kind
 from .models import MODELS
 from .models.smoothing import smooth
-from .multires.channel_scene import Channel, ChannelScene
+from .multires.scenes.channels import Channel, ChannelScene
 from .preintegration import preintegrate
 from .render.aip import Aip
 from .render.defaults import (
@@ -49,10 +49,10 @@ __version__ = "0.1.0"
 _LAZY = {
     "build_pyramid": ("splinecast.multires.store.pyramid", "build_pyramid"),
     "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
-    "MultiscaleScene": ("splinecast.multires.scene", "MultiscaleScene"),
-    "LabelScene": ("splinecast.multires.label_scene", "LabelScene"),
+    "MultiscaleScene": ("splinecast.multires.scenes.multiscale", "MultiscaleScene"),
+    "LabelScene": ("splinecast.multires.scenes.labels", "LabelScene"),
     "WaveletVolume": ("splinecast.multires.wavelet.store", "WaveletVolume"),
-    "WaveletScene": ("splinecast.multires.wavelet_scene", "WaveletScene"),
+    "WaveletScene": ("splinecast.multires.scenes.wavelet", "WaveletScene"),
     "multires": ("splinecast.multires", None),
     "view": ("splinecast.viewer", "view"),
 }
@@ -60,7 +60,7 @@ _LAZY = {
 
 def _multiscale_scene(volume, *args, **kwargs):
     """``Scene(MultiscaleVolume, ...)``: the renderer of cuts (loaded with zarr on first use)."""
-    from .multires.scene import MultiscaleScene
+    from .multires.scenes.multiscale import MultiscaleScene
 
     return MultiscaleScene(volume, *args, **kwargs)
 
@@ -76,7 +76,7 @@ for _kind in ("splinecast.io.multichannel.MultichannelVolume", "builtins.list",
 
 def _wavelet_scene(volume, *args, **kwargs):
     """``Scene(WaveletVolume, ...)``: the spline-wavelet renderer (loaded on first use)."""
-    from .multires.wavelet_scene import WaveletScene
+    from .multires.scenes.wavelet import WaveletScene
 
     return WaveletScene(volume, *args, **kwargs)
 
@@ -93,7 +93,7 @@ register_scene_type("splinecast.multires.wavelet.store.WaveletVolume", _wavelet_
 
 def _label_scene(volume, *args, **kwargs):
     """``Scene(volume, labels=True, ...)``: each label's surface in its colour (any volume)."""
-    from .multires.label_scene import LabelScene
+    from .multires.scenes.labels import LabelScene
 
     return LabelScene(volume, *args, **kwargs)
 

@@ -68,7 +68,8 @@ def register_scene_type(volume_class: str, factory: Callable[..., Any]) -> None:
     example ``"splinecast.io.omezarr.MultiscaleVolume"``, or :data:`LABELS` for the scene of
     ``Scene(volume, labels=True)``: the layers above this module register
     their scenes here (``splinecast/__init__.py`` registers
-    :class:`splinecast.multires.scene.MultiscaleScene`), so this module never imports them.
+    :class:`splinecast.multires.scenes.multiscale.MultiscaleScene`), so this module never imports
+    them.
     """
     _SCENE_TYPES[volume_class] = factory
 
@@ -98,7 +99,7 @@ class Scene(SceneTemplate):
     labels : bool
         ``True``: ``volume`` is a label volume (a segmentation: 0 is the background, every
         other integer a region); each label's boundary is drawn as its own surface in its own
-        colour, and ``Scene`` returns a :class:`~splinecast.multires.label_scene.LabelScene`
+        colour, and ``Scene`` returns a :class:`~splinecast.multires.scenes.labels.LabelScene`
         (options ``colors``, ``show``, ``opacity``). Never guessed from the voxel type.
     **options
         Model options (for example ``prefilter=True`` for spline models), passed to the model.

@@ -54,7 +54,8 @@ DVR depth
     another share.
 
 Defaults: the automatic isovalue, MIP window and transfer function come from the pyramid's
-coarsest level, read by the client (as :class:`~splinecast.multires.scene.MultiscaleScene` does);
+coarsest level, read by the client (as
+:class:`~splinecast.multires.scenes.multiscale.MultiscaleScene` does);
 the isovalue is checked against the level's value range (the union of the bricks' ranges the
 workers report). Pass them explicitly to reproduce a render of another scene.
 """

@@ -26,7 +26,7 @@ _EXPORTS = {
     "BrickStream": "cut.stream",
     "write_table": "store.tables",
     "parse_bytes": "store.budget",
-    "MultiscaleScene": "scene",
+    "MultiscaleScene": "scenes.multiscale",
     "CutRenderer": "draw.cut_renderer",
     "Piece": "draw.cut_renderer",
     "Seams": "draw.seams",

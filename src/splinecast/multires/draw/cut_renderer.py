@@ -8,7 +8,8 @@ Pieces
     element and a key naming its contents. A brick drawn in place of a missing descendant (a
     substitution) is a piece whose level is coarser than the cut's brick; several pieces may
     share one array. Anything that produces pieces can be rendered: the brick stream of an
-    OME-Zarr pyramid (:mod:`~splinecast.multires.scene`), spline-wavelet reconstructions, a
+    OME-Zarr pyramid (:mod:`~splinecast.multires.scenes.multiscale`), spline-wavelet
+    reconstructions, a
     distributed worker's share of the bricks.
 
 Grids

@@ -513,7 +513,7 @@ class BrickCache:
 
     def clear(self) -> None:
         """Stop reading and evict every brick but the pinned ones (the scene is about to hold
-        the finest level whole, :mod:`.whole_level`, and gives it the budget). A read already
+        the finest level whole, :mod:`.scenes.whole_level`, and gives it the budget). A read already
         under way still lands, within the budget."""
         with self._cond:
             self._queue.clear()

@@ -232,7 +232,7 @@ class WaveletVolume(GridGeometry):
 
     Geometry (``shape``, ``spacing``, ``origin``, ``bounds``) is the source volume's, so
     cameras frame it like a :class:`~splinecast.Volume`; ``Scene(wv, lod=ε)`` renders it with
-    model ``bspline<degree>`` (:class:`.wavelet_scene.WaveletScene`).
+    model ``bspline<degree>`` (:class:`.scenes.wavelet.WaveletScene`).
 
     Attributes
     ----------

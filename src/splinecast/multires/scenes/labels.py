@@ -35,10 +35,10 @@ from typing import Any
 
 import numpy as np
 
-from ..accel.label_boxes import integer_labels, label_boxes
-from ..camera import Camera
-from ..errors import ParameterError, limits
-from ..io.label_colors import (
+from ...accel.label_boxes import integer_labels, label_boxes
+from ...camera import Camera
+from ...errors import ParameterError, limits
+from ...io.label_colors import (
     LabelStyle,
     describe,
     image_label_table,
@@ -46,14 +46,14 @@ from ..io.label_colors import (
     parse_color_table,
     read_color_table,
 )
-from ..models.smoothing import smooth as smooth_volume
-from ..render.compose import gather, nearest_hit, on_background, over_by_depth
-from ..render.frame import Frame
-from ..render.outputs import check_outputs
-from ..render.shading import Shading
-from ..render.template import RenderOptions, SceneTemplate
-from ..scene import Scene
-from ..volume import Volume
+from ...models.smoothing import smooth as smooth_volume
+from ...render.compose import gather, nearest_hit, on_background, over_by_depth
+from ...render.frame import Frame
+from ...render.outputs import check_outputs
+from ...render.shading import Shading
+from ...render.template import RenderOptions, SceneTemplate
+from ...scene import Scene
+from ...volume import Volume
 
 __all__ = ["LabelScene", "MARGIN", "DEFAULT_BUDGET", "label_volume"]
 
@@ -154,7 +154,7 @@ class LabelScene(SceneTemplate):
                  show: Iterable[int] | None = None, opacity: Any = 1.0,
                  budget: Any = DEFAULT_BUDGET, smooth: int | None = None, labels: bool = True,
                  **options: Any) -> None:
-        from ..models import MODELS
+        from ...models import MODELS
 
         if not labels:
             raise ParameterError("a LabelScene renders labels: labels must be True")

@@ -39,21 +39,21 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
-from ..errors import ParameterError, ReadError
-from ..io.omezarr import MultiscaleVolume
-from ..models import MODELS
-from ..render.defaults import auto_iso
-from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
-from ..volume import Volume
-from .cut.lod import Cut
-from .cut.octree import DEFAULT_BRICK, BrickOctree
-from .cut.policy import CUT_PRIORITIES, ErrorCut, check_cut
-from .cut.relevance import ValueFilter
-from .cut.stream import BrickStream, FrameBricks
-from .draw.cut_renderer import CutRenderer, Piece
-from .draw.seams import Seams
-from .store.budget import parse_bytes
+from ...camera import Camera
+from ...errors import ParameterError, ReadError
+from ...io.omezarr import MultiscaleVolume
+from ...models import MODELS
+from ...render.defaults import auto_iso
+from ...render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
+from ...volume import Volume
+from ..cut.lod import Cut
+from ..cut.octree import DEFAULT_BRICK, BrickOctree
+from ..cut.policy import CUT_PRIORITIES, ErrorCut, check_cut
+from ..cut.relevance import ValueFilter
+from ..cut.stream import BrickStream, FrameBricks
+from ..draw.cut_renderer import CutRenderer, Piece
+from ..draw.seams import Seams
+from ..store.budget import parse_bytes
 from .whole_level import WholeLevel
 
 __all__ = ["MultiscaleScene", "pieces_of", "render_brick", "RENDER_BRICK"]
@@ -203,7 +203,7 @@ class MultiscaleScene(SceneTemplate):
     whole_level : bool
         Draw a view whose level-of-detail cut is level 0 everywhere from level 0 read whole
         into memory, as an in-memory :class:`~splinecast.Scene` of it, when level 0 fits in
-        the budget (default; :mod:`.whole_level`): the same picture (to rounding) without the
+        the budget (default; :mod:`.scenes.whole_level`): the same picture (to rounding) without the
         per-brick costs. Frames that do not wait (``wait=False``) use it once it is read.
         ``False`` always draws bricks.
     **options

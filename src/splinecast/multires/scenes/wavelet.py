@@ -41,18 +41,18 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
-from ..errors import ParameterError
-from ..models import MODELS
-from ..render.defaults import auto_iso
-from ..render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
-from ..volume import Volume
-from .draw.cut_renderer import CutRenderer, Piece, gc_paused
-from .store.budget import parse_bytes
-from .wavelet.layout import WaveletLayout
-from .wavelet.lod import Selection, select
-from .wavelet.reconstruct import ChunkReconstructor
-from .wavelet.store import WaveletVolume
+from ...camera import Camera
+from ...errors import ParameterError
+from ...models import MODELS
+from ...render.defaults import auto_iso
+from ...render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
+from ...volume import Volume
+from ..draw.cut_renderer import CutRenderer, Piece, gc_paused
+from ..store.budget import parse_bytes
+from ..wavelet.layout import WaveletLayout
+from ..wavelet.lod import Selection, select
+from ..wavelet.reconstruct import ChunkReconstructor
+from ..wavelet.store import WaveletVolume
 
 __all__ = ["WaveletScene", "WaveletTree", "wavelet_pieces"]
 

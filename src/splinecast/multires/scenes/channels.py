@@ -35,17 +35,17 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
-from ..errors import ParameterError, limits
-from ..io.multichannel import MultichannelVolume
-from ..render.compose import additive, nearest_hit_over, on_background, window_ramp
-from ..render.defaults import auto_transfer_function, background_value, content_box
-from ..render.frame import Frame
-from ..render.modes import MODES, RenderMode
-from ..render.shading import Shading
-from ..render.template import RenderOptions, SceneTemplate
-from ..scene import Scene
-from ..transfer import TransferFunction, parse_color
+from ...camera import Camera
+from ...errors import ParameterError, limits
+from ...io.multichannel import MultichannelVolume
+from ...render.compose import additive, nearest_hit_over, on_background, window_ramp
+from ...render.defaults import auto_transfer_function, background_value, content_box
+from ...render.frame import Frame
+from ...render.modes import MODES, RenderMode
+from ...render.shading import Shading
+from ...render.template import RenderOptions, SceneTemplate
+from ...scene import Scene
+from ...transfer import TransferFunction, parse_color
 
 __all__ = ["Channel", "ChannelScene", "channel_color", "default_colors", "compositing"]
 

@@ -21,14 +21,14 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from ..camera import Camera
-from ..errors import ReadError
-from ..io.omezarr import MultiscaleVolume
-from ..scene import Scene
-from ..volume import Volume
-from .cut.lod import Cut, select_cut
-from .cut.relevance import ValueFilter
-from .cut.stream import BrickStream
+from ...camera import Camera
+from ...errors import ReadError
+from ...io.omezarr import MultiscaleVolume
+from ...scene import Scene
+from ...volume import Volume
+from ..cut.lod import Cut, select_cut
+from ..cut.relevance import ValueFilter
+from ..cut.stream import BrickStream
 
 __all__ = ["WholeLevel"]
 
