@@ -41,7 +41,7 @@ from ...io.multichannel import MultichannelVolume
 from ...render.compose import additive, nearest_hit_over, on_background, window_ramp
 from ...render.defaults import auto_transfer_function, background_value, content_box
 from ...render.frame import Frame
-from ...render.modes import MODES, RenderMode
+from ...render.modes import MODES, mode_name, with_option
 from ...render.shading import Shading
 from ...render.template import RenderOptions, SceneTemplate
 from ...scene import Scene
@@ -377,7 +377,7 @@ class ChannelScene(SceneTemplate):
         if not isinstance(camera, Camera):
             raise ParameterError(f"camera must be a splinecast.Camera, got "
                                  f"{type(camera).__name__}")
-        name = mode.name if isinstance(mode, RenderMode) else mode
+        name = mode_name(mode)
         if not isinstance(name, str) or name not in MODES:
             raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         for key in ("colormap", "colors"):
@@ -419,11 +419,8 @@ class ChannelScene(SceneTemplate):
             key, value = {"iso": ("iso", channel.iso), "dvr": ("tf", channel.tf)}[name]
         if name == "dvr" and value is None and kwargs.get("tf") is None:
             value = _coloured(auto_transfer_function(_info(scene)), channel.color)
-        if isinstance(mode, RenderMode):
-            if value is not None:
-                mode = dataclasses.replace(mode, **{key: value})
-        elif value is not None:
-            own[key] = value
+        if value is not None:
+            mode, own = with_option(mode, own, key, value)
         keep = {"stats"} & wanted
         if _projects(name):
             keep |= {"value", "depth"}
