@@ -50,17 +50,17 @@ from pathlib import Path
 import numpy as np
 
 import splinecast as sc
-from splinecast.multires.cut_histograms import (
+from splinecast.multires.cut.histograms import (
     Quantizer,
     coarsen_histograms,
     leaf_value_ranges,
     pyramid_histograms,
 )
-from splinecast.multires.cut_metric import CutMetric, cut_error
-from splinecast.multires.cut_select import greedy_cut, optimal_cut, optimal_update
-from splinecast.multires.cut_tree import regular_brick_tree
-from splinecast.multires.cut_update import CutUpdater
-from splinecast.multires.mean_pyramid import mean_downsample
+from splinecast.multires.cut.metric import CutMetric, cut_error
+from splinecast.multires.cut.select import greedy_cut, optimal_cut, optimal_update
+from splinecast.multires.cut.tree import regular_brick_tree
+from splinecast.multires.cut.update import CutUpdater
+from splinecast.multires.store.mean_pyramid import mean_downsample
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import MRI, describe  # noqa: E402
@@ -604,7 +604,7 @@ def delta_e(reference: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.nd
     """Per-pixel ΔE*uv (CIELUV distance) and CIEDE2000 between two sRGB images (..., 3)."""
     from skimage.color import deltaE_ciede2000, rgb2lab
 
-    from splinecast.multires.colour import srgb_to_luv
+    from splinecast.multires.cut.colour import srgb_to_luv
 
     a = np.clip(reference, 0.0, 1.0)
     b = np.clip(image, 0.0, 1.0)
@@ -642,7 +642,7 @@ def compare_images(name: str, quick: bool, tmp: Path, png: Path | None) -> dict:
     full_s = time.perf_counter() - t0
     covered = reference.rgba[..., 3] > 0.01
     mv = sc.read(path)
-    from splinecast.multires.octree import BrickOctree
+    from splinecast.multires.cut.octree import BrickOctree
 
     octree = BrickOctree(mv)
     finest = int(np.prod(octree.counts[0]))

@@ -32,9 +32,9 @@ from _machine import describe  # noqa: E402
 from bench_cut import MRI, synthetic  # noqa: E402
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.cut_policy import ErrorCut  # noqa: E402
-from splinecast.multires.hist_store import histogram_info  # noqa: E402
-from splinecast.multires.octree import BrickOctree  # noqa: E402
+from splinecast.multires.cut.octree import BrickOctree  # noqa: E402
+from splinecast.multires.cut.policy import ErrorCut  # noqa: E402
+from splinecast.multires.store.hist_store import histogram_info  # noqa: E402
 
 BRICK = 16
 

@@ -10,7 +10,7 @@ previous results.
   fresh process: wall time, peak RSS (``ru_maxrss``, which counts the source's mapped pages the
   build touched) and peak anonymous memory (sampled ``RssAnon``: what the build itself holds).
   Baseline in the same run: one plain pass over the source (read and sum, in the same slabs).
-- ``cache``: a :class:`~splinecast.multires.stream.BrickStream` with a byte budget renders the
+- ``cache``: a :class:`~splinecast.multires.cut.stream.BrickStream` with a byte budget renders the
   cut of several views to completion in a fresh process; the overhead is the peak anonymous
   memory above the process before the stream opened, minus the cache's own peak bytes.
 - ``render``: ``Scene(pyramid, budget=1GiB)`` (``--quick``: 4 MiB, so that level 0 does not fit
@@ -93,7 +93,7 @@ _CHILD = textwrap.dedent("""
     import numpy as np
     import splinecast as sc
     if job == "build":
-        from splinecast.multires.pyramid import build_pyramid
+        from splinecast.multires.store.pyramid import build_pyramid
         before = anon(); threading.Thread(target=sample, daemon=True).start()
         t = time.perf_counter()
         build_pyramid(args["source"], args["out"], overwrite=True, progress=False)
@@ -108,8 +108,8 @@ _CHILD = textwrap.dedent("""
         result = render_job(job, args, anon, sample, stop, peak)
         before = result.pop("before")
     else:
-        from splinecast.multires.stream import BrickStream
-        from splinecast.multires.relevance import ValueFilter
+        from splinecast.multires.cut.stream import BrickStream
+        from splinecast.multires.cut.relevance import ValueFilter
         mv = sc.read(args["out"])
         before = anon(); threading.Thread(target=sample, daemon=True).start()
         t = time.perf_counter(); frames = 0
@@ -242,7 +242,7 @@ def render_part(store: Path, budget: str, size: tuple[int, int], work: Path,
     """Both modes, the in-memory baseline and the image errors; the isosurface's memory
     above the budget at ``other_budgets``."""
     import splinecast as sc
-    from splinecast.multires.budget import parse_bytes
+    from splinecast.multires.store.budget import parse_bytes
 
     mv = sc.read(store)
     limit = parse_bytes(budget, "budget")
@@ -472,7 +472,7 @@ def main() -> None:
     else:
         results["cache"] = old.get("cache")
     if "render" in parts:
-        from splinecast.multires.budget import parse_bytes
+        from splinecast.multires.store.budget import parse_bytes
 
         if not store.exists():
             child("build", source=str(source), out=str(store))

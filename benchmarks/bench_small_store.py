@@ -35,7 +35,7 @@ sys.path.insert(0, str(HERE))
 from _machine import describe, median_ms, write_results  # noqa: E402
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.scenes.multiscale import MultiscaleScene  # noqa: E402
 
 ISO = 0.5
 IMAGE = (512, 512)

@@ -36,9 +36,9 @@ from pathlib import Path
 import numpy as np
 
 import splinecast as sc
-from splinecast.multires.wavelet_lod import select
-from splinecast.multires.wavelet_reconstruct import ChunkReconstructor
-from splinecast.multires.wavelet_transform import MemmapSink, decompose
+from splinecast.multires.wavelet.lod import select
+from splinecast.multires.wavelet.reconstruct import ChunkReconstructor
+from splinecast.multires.wavelet.transform import MemmapSink, decompose
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import describe, median_ms  # noqa: E402

@@ -392,7 +392,7 @@ def test_cli_channel_file_on_another_grid_is_one_line(npy_files, tmp_path, capsy
 
 
 def test_default_colours_are_napari_s():
-    from splinecast.multires.channel_scene import default_colors
+    from splinecast.multires.scenes.channels import default_colors
 
     assert default_colors(1) == [(1.0, 1.0, 1.0)]
     assert default_colors(2) == [(1.0, 0.0, 1.0), (0.0, 1.0, 0.0)]

@@ -295,7 +295,7 @@ def _check_label_colors(stated: str) -> None:
 def _check_label_opacity(stated: str) -> None:
     import inspect
 
-    from splinecast.multires.label_scene import LabelScene
+    from splinecast.multires.scenes.labels import LabelScene
 
     assert float(first(stated)) == inspect.signature(LabelScene).parameters["opacity"].default
 

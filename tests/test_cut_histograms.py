@@ -14,8 +14,8 @@ import pytest
 from cut_reference import smooth_volume, voxel_distortion
 
 import splinecast as sc
-from splinecast.multires.colour import classified_luv, distortion_table, srgb_to_luv
-from splinecast.multires.cut_histograms import (
+from splinecast.multires.cut.colour import classified_luv, distortion_table, srgb_to_luv
+from splinecast.multires.cut.histograms import (
     BrickHistograms,
     Quantizer,
     approximate,
@@ -25,9 +25,9 @@ from splinecast.multires.cut_histograms import (
     mean_pyramid_map,
     pyramid_histograms,
 )
-from splinecast.multires.cut_metric import histogram_distortion
-from splinecast.multires.cut_tree import regular_brick_tree
-from splinecast.multires.mean_pyramid import mean_downsample, mean_pyramid
+from splinecast.multires.cut.metric import histogram_distortion
+from splinecast.multires.cut.tree import regular_brick_tree
+from splinecast.multires.store.mean_pyramid import mean_downsample, mean_pyramid
 
 MNI = Path(__file__).resolve().parents[2] / "shared" / "data" / "mni152_t1_1mm.nii.gz"
 TF = sc.TransferFunction([(30, 0.0), (60, 0.05), (90, 0.1), (140, 0.6), (255, 0.9)],

@@ -15,8 +15,8 @@ import pytest
 from cut_reference import reference_priorities, smooth_volume
 
 import splinecast as sc
-from splinecast.multires.cut_histograms import Quantizer, leaf_value_ranges, pyramid_histograms
-from splinecast.multires.cut_metric import (
+from splinecast.multires.cut.histograms import Quantizer, leaf_value_ranges, pyramid_histograms
+from splinecast.multires.cut.metric import (
     ArrayMetric,
     CutMetric,
     cut_error,
@@ -24,8 +24,8 @@ from splinecast.multires.cut_metric import (
     importance,
     visible_nodes,
 )
-from splinecast.multires.cut_tree import BrickTree, regular_brick_tree
-from splinecast.multires.mean_pyramid import mean_pyramid
+from splinecast.multires.cut.tree import BrickTree, regular_brick_tree
+from splinecast.multires.store.mean_pyramid import mean_pyramid
 
 UNIT = (np.zeros((1, 3)), np.ones((1, 3)))
 

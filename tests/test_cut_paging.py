@@ -18,10 +18,10 @@ from cut_reference import (
     random_parents,
 )
 
-from splinecast.multires.cut_metric import ArrayMetric
-from splinecast.multires.cut_paging import ExtendedCut
-from splinecast.multires.cut_tree import BrickTree
-from splinecast.multires.cut_update import CutUpdater
+from splinecast.multires.cut.metric import ArrayMetric
+from splinecast.multires.cut.paging import ExtendedCut
+from splinecast.multires.cut.tree import BrickTree
+from splinecast.multires.cut.update import CutUpdater
 
 
 def _case(seed):

@@ -27,13 +27,13 @@ pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.colour import classified_luv, distortion_table  # noqa: E402
-from splinecast.multires.cut_histograms import Quantizer  # noqa: E402
-from splinecast.multires.cut_metric import histogram_distortion  # noqa: E402
-from splinecast.multires.cut_policy import octree_histograms, octree_tree  # noqa: E402
-from splinecast.multires.cut_select import optimal_cut  # noqa: E402
-from splinecast.multires.cut_tree import BrickTree  # noqa: E402
-from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.cut.colour import classified_luv, distortion_table  # noqa: E402
+from splinecast.multires.cut.histograms import Quantizer  # noqa: E402
+from splinecast.multires.cut.metric import histogram_distortion  # noqa: E402
+from splinecast.multires.cut.policy import octree_histograms, octree_tree  # noqa: E402
+from splinecast.multires.cut.select import optimal_cut  # noqa: E402
+from splinecast.multires.cut.tree import BrickTree  # noqa: E402
+from splinecast.multires.scenes.multiscale import MultiscaleScene  # noqa: E402
 
 B = 8
 TF = sc.TransferFunction([(-0.8, 0.0), (-0.2, 0.4), (0.2, 0.0), (0.7, 0.6)], domain=(-3.0, 3.0))

@@ -20,14 +20,14 @@ from cut_reference import (
     reference_greedy,
 )
 
-from splinecast.multires.cut_metric import ArrayMetric
-from splinecast.multires.cut_select import (
+from splinecast.multires.cut.metric import ArrayMetric
+from splinecast.multires.cut.select import (
     greedy_cut,
     optimal_cut,
     optimal_cut_errors,
     optimal_update,
 )
-from splinecast.multires.cut_tree import BrickTree
+from splinecast.multires.cut.tree import BrickTree
 
 # Fig. 2 of reference 002: a binary tree (G has a single child Q) with errors E at inner nodes.
 FIG2_NAMES = "A B C D E F G H I J K L P Q".split()

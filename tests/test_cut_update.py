@@ -20,13 +20,13 @@ from cut_reference import (
 from test_cut_select import FIG2_NAMES, fig2, names
 
 import splinecast as sc
-from splinecast.multires.cut_histograms import Quantizer, leaf_value_ranges, pyramid_histograms
-from splinecast.multires.cut_metric import ArrayMetric, CutMetric
-from splinecast.multires.cut_select import greedy_cut
-from splinecast.multires.cut_tree import BrickTree, regular_brick_tree
-from splinecast.multires.cut_update import CutUpdater
-from splinecast.multires.mean_pyramid import mean_pyramid
-from splinecast.multires.partial_queue import PartialQueue
+from splinecast.multires.cut.histograms import Quantizer, leaf_value_ranges, pyramid_histograms
+from splinecast.multires.cut.metric import ArrayMetric, CutMetric
+from splinecast.multires.cut.partial_queue import PartialQueue
+from splinecast.multires.cut.select import greedy_cut
+from splinecast.multires.cut.tree import BrickTree, regular_brick_tree
+from splinecast.multires.cut.update import CutUpdater
+from splinecast.multires.store.mean_pyramid import mean_pyramid
 
 
 def ids(*letters):
@@ -276,7 +276,7 @@ def test_fill_sets_a_large_split_aside_and_takes_a_smaller_one():
 def test_fill_frames_respect_the_budgets_and_settle_no_worse_than_the_paper_rule(seed):
     """Every frame valid within N and M; the settled cut is never worse than the paper rule's
     fixed point (the greedy cut) and never better than the optimum."""
-    from splinecast.multires.cut_select import optimal_cut
+    from splinecast.multires.cut.select import optimal_cut
 
     rng, parent, tree, visible = _case(300 + seed)
     error = block_monotone_errors(rng, parent)

@@ -26,11 +26,11 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
 from splinecast.errors import ParameterError  # noqa: E402
-from splinecast.multires.cut_histograms import Quantizer  # noqa: E402
-from splinecast.multires.cut_metric import CutMetric  # noqa: E402
-from splinecast.multires.cut_policy import octree_histograms, octree_tree  # noqa: E402
-from splinecast.multires.cut_select import greedy_cut  # noqa: E402
-from splinecast.multires.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut.histograms import Quantizer  # noqa: E402
+from splinecast.multires.cut.metric import CutMetric  # noqa: E402
+from splinecast.multires.cut.policy import octree_histograms, octree_tree  # noqa: E402
+from splinecast.multires.cut.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut.select import greedy_cut  # noqa: E402
 
 B = 8
 TF = sc.TransferFunction([(-0.8, 0.0), (-0.2, 0.4), (0.2, 0.0), (0.7, 0.6)], domain=(-3.0, 3.0))

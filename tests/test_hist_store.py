@@ -29,11 +29,11 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
 from splinecast.errors import ParameterError  # noqa: E402
-from splinecast.multires.colour import classified_luv, distortion_table  # noqa: E402
-from splinecast.multires.cut_metric import histogram_distortion  # noqa: E402
-from splinecast.multires.cut_policy import ErrorCut, octree_tree  # noqa: E402
-from splinecast.multires.hist_store import HIST2D, histogram_info  # noqa: E402
-from splinecast.multires.octree import BrickOctree  # noqa: E402
+from splinecast.multires.cut.colour import classified_luv, distortion_table  # noqa: E402
+from splinecast.multires.cut.metric import histogram_distortion  # noqa: E402
+from splinecast.multires.cut.octree import BrickOctree  # noqa: E402
+from splinecast.multires.cut.policy import ErrorCut, octree_tree  # noqa: E402
+from splinecast.multires.store.hist_store import HIST2D, histogram_info  # noqa: E402
 
 B = 8
 TF = sc.TransferFunction([(-0.8, 0.0), (-0.2, 0.4), (0.2, 0.0), (0.7, 0.6)], domain=(-3.0, 3.0))

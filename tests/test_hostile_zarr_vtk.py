@@ -71,7 +71,7 @@ def refused(args: list[str], capsys: pytest.CaptureFixture, folder: Path, *needl
 def store(tmp_path: Path) -> Path:
     """splinecast's own pyramid (Zarr v3, sharded, zstd), two levels; its root attributes do not
     store the value range, so ``info`` reads the coarsest level's chunk."""
-    from splinecast.multires.pyramid import build_pyramid
+    from splinecast.multires.store.pyramid import build_pyramid
 
     path = tmp_path / "v.ome.zarr"
     build_pyramid(sc.Volume(ramp(), spacing=SPACING), path, brick=4, workers=1, progress=False)
@@ -573,7 +573,7 @@ def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
     """A coarse level translated 50 voxels away would make bricks read outside its voxels."""
     import zarr
 
-    from splinecast.multires.octree import BrickOctree
+    from splinecast.multires.cut.octree import BrickOctree
 
     path = tmp_path / "v.zarr"
     root = zarr.open_group(str(path), mode="w", zarr_format=2)

@@ -23,13 +23,13 @@ pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.budget import parse_bytes  # noqa: E402
-from splinecast.multires.cache import BrickCache, BrickUnavailableWarning  # noqa: E402
-from splinecast.multires.lod import select_cut  # noqa: E402
-from splinecast.multires.octree import GHOST, BrickOctree  # noqa: E402
-from splinecast.multires.pyramid import build_pyramid  # noqa: E402
-from splinecast.multires.relevance import ValueFilter  # noqa: E402
-from splinecast.multires.stream import BrickStream  # noqa: E402
+from splinecast.multires.cut.lod import select_cut  # noqa: E402
+from splinecast.multires.cut.octree import GHOST, BrickOctree  # noqa: E402
+from splinecast.multires.cut.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut.stream import BrickStream  # noqa: E402
+from splinecast.multires.store.budget import parse_bytes  # noqa: E402
+from splinecast.multires.store.cache import BrickCache, BrickUnavailableWarning  # noqa: E402
+from splinecast.multires.store.pyramid import build_pyramid  # noqa: E402
 
 B = 8
 RADIUS = 17.0
@@ -418,7 +418,7 @@ def test_chunk_cache_reads_equal_the_store_and_reuse_decoded_chunks(sphere):
     """Windows read through the chunk cache equal the level's own reads (a second code path:
     zarr's selection), neighbours' windows reuse decoded chunks, and the cache stays within
     its bytes."""
-    from splinecast.multires.chunk_cache import ChunkCache
+    from splinecast.multires.store.chunk_cache import ChunkCache
 
     data, path = sphere
     mv = sc.read(path)
@@ -445,7 +445,7 @@ def test_chunk_cache_reads_equal_the_store_and_reuse_decoded_chunks(sphere):
 
 def test_chunk_cache_keeps_nothing_of_a_failed_read(sphere, tmp_path):
     from splinecast.errors import ReadError
-    from splinecast.multires.chunk_cache import ChunkCache
+    from splinecast.multires.store.chunk_cache import ChunkCache
 
     data, path = sphere
     level = sc.read(_damaged_copy(path, tmp_path, "0/c/0/0/0", 50, 300)).level(0)

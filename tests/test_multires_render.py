@@ -28,8 +28,8 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
 from splinecast.io.synthetic import sphere_sdf, torus_sdf  # noqa: E402
-from splinecast.multires.cache import BrickUnavailableWarning  # noqa: E402
-from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.scenes.multiscale import MultiscaleScene  # noqa: E402
+from splinecast.multires.store.cache import BrickUnavailableWarning  # noqa: E402
 
 MODELS = ["trilinear", "bspline1", "bspline2", "bspline3", "qss", "s31"]
 MODES = ["iso", "multi", "mip", "minip", "dvr"]
@@ -142,8 +142,8 @@ def _brick_maker(mv, model: str, tree):
     """``piece(level, index)``: the :class:`Piece` of one brick of levels 0-2, its array cut
     from the level read whole and padded by numpy with the model's border rule (independent of
     the cache)."""
-    from splinecast.multires.draw import Piece
-    from splinecast.multires.octree import GHOST
+    from splinecast.multires.cut.octree import GHOST
+    from splinecast.multires.draw.cut_renderer import Piece
 
     padded = {}
     for level in (0, 1, 2):
@@ -167,8 +167,8 @@ def _checkerboard_cut(mv, model: str):
     """A cut that puts levels 0, 1 and 2 side by side in every direction: level-2 bricks with an
     odd index sum stay whole, the others split into level-1 bricks, of which those with an even
     index sum split into level-0 bricks (arrays from :func:`_brick_maker`)."""
-    from splinecast.multires.draw import CutRenderer
-    from splinecast.multires.octree import BrickOctree
+    from splinecast.multires.cut.octree import BrickOctree
+    from splinecast.multires.draw.cut_renderer import CutRenderer
 
     tree = BrickOctree(mv)
     piece = _brick_maker(mv, model, tree)
@@ -240,7 +240,7 @@ def _orbit(vol, count: int = 4) -> list[sc.Camera]:
 def test_no_holes_where_levels_meet(shapes, model, shape):
     """Levels 0, 1, 2 side by side (faces, edges, corners): every ray through the solid's core
     hits the surface in front of the core, within the drawn levels' reconstruction error."""
-    from splinecast.multires.seams import Seams
+    from splinecast.multires.draw.seams import Seams
 
     vol, path = shapes[shape]
     sdf, depth = SHAPES[shape]
@@ -262,7 +262,7 @@ def test_no_holes_where_levels_meet(shapes, model, shape):
 
 def test_without_seam_treatment_the_same_cut_has_holes(shapes):
     """The check above can fail: drawn as they are, the bricks leave holes."""
-    from splinecast.multires.seams import Seams
+    from splinecast.multires.draw.seams import Seams
 
     vol, path = shapes["torus"]
     sdf, depth = SHAPES["torus"]
@@ -288,7 +288,7 @@ def test_reconstructions_agree_on_faces_between_levels(shapes, model):
     """Nested models (trilinear, bspline1, bspline3): after the restriction the finer and the
     coarser brick reconstruct the same values on every face, edge and corner they share. The
     others: the gap shrinks well below the untreated one."""
-    from splinecast.multires.seams import Seams
+    from splinecast.multires.draw.seams import Seams
 
     vol, path = shapes["torus"]
     pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), model)
@@ -406,7 +406,7 @@ def test_the_incremental_seam_plan_equals_a_plan_from_scratch(shapes, model):
     :class:`Seams` in turn, must give the plans of a new :class:`Seams` per cut, and reuse."""
     from dataclasses import replace
 
-    from splinecast.multires.seams import Seams
+    from splinecast.multires.draw.seams import Seams
     from splinecast.render.iso import Iso
 
     mv = sc.read(shapes["torus"][1])

@@ -17,8 +17,8 @@ pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.relevance import ValueFilter  # noqa: E402
-from splinecast.multires.stream import BrickStream  # noqa: E402
+from splinecast.multires.cut.relevance import ValueFilter  # noqa: E402
+from splinecast.multires.cut.stream import BrickStream  # noqa: E402
 
 RADIUS = 17.0
 
@@ -95,7 +95,7 @@ def test_a_steady_view_reuses_its_cut_and_launch_and_draws_the_same_image(sphere
 def test_the_render_brick_grows_to_64_only_where_level_0_keeps_8_bricks_per_axis():
     from types import SimpleNamespace
 
-    from splinecast.multires.scene import render_brick
+    from splinecast.multires.scenes.multiscale import render_brick
 
     def volume(brick, shape):
         return SimpleNamespace(brick=brick, levels=[SimpleNamespace(shape=shape)])
@@ -146,9 +146,9 @@ def test_merged_nodes_are_the_coarsest_whose_cut_bricks_share_the_drawn_ancestor
     not (brute force over the cut's boxes)."""
     from types import SimpleNamespace
 
-    from splinecast.multires.lod import select_cut
-    from splinecast.multires.octree import BrickOctree
-    from splinecast.multires.scene import _merged_nodes
+    from splinecast.multires.cut.lod import select_cut
+    from splinecast.multires.cut.octree import BrickOctree
+    from splinecast.multires.scenes.multiscale import _merged_nodes
 
     mv = sc.read(sphere)
     tree = BrickOctree(mv)

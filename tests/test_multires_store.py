@@ -20,8 +20,8 @@ import splinecast as sc  # noqa: E402
 from splinecast.cli import main  # noqa: E402
 from splinecast.io import SeveralVolumesWarning  # noqa: E402
 from splinecast.io.omezarr import MultiscaleVolume, open_zarr  # noqa: E402
-from splinecast.multires.octree import BrickOctree  # noqa: E402
-from splinecast.multires.pyramid import build_pyramid  # noqa: E402
+from splinecast.multires.cut.octree import BrickOctree  # noqa: E402
+from splinecast.multires.store.pyramid import build_pyramid  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -116,7 +116,7 @@ def test_coarse_levels_across_shards_and_reads(tmp_path, monkeypatch, read_bytes
     """Many shards per level, level 1 computed from a raw memory-mapped source (x fastest),
     and (read_bytes=1) every fine read split into single slabs: each path gives the documented
     filter of the level above, and level 0 the source."""
-    from splinecast.multires import pyramid
+    from splinecast.multires.store import pyramid
 
     if read_bytes is not None:
         monkeypatch.setattr(pyramid, "_READ_BYTES", read_bytes)
@@ -433,7 +433,7 @@ _CAPPED_BUILD = textwrap.dedent("""
     threading.stack_size(2**20)  # thread stacks count in RLIMIT_DATA: keep them small
     import resource, sys
     import numpy as np, zarr, dask.array  # imported before the cap: their size is not the build's
-    from splinecast.multires.pyramid import build_pyramid
+    from splinecast.multires.store.pyramid import build_pyramid
     build_pyramid(np.zeros((40, 40, 40), np.uint8), sys.argv[2] + ".warm", shard=64, workers=1,
                   progress=False)  # compiled code and zarr's threads, also before the cap
     cap = int(sys.argv[3])

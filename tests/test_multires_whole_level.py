@@ -1,4 +1,4 @@
-"""A multiscale scene holding level 0 whole (:mod:`splinecast.multires.whole_level`).
+"""A multiscale scene holding level 0 whole (:mod:`splinecast.multires.scenes.whole_level`).
 
 References:
 
@@ -23,8 +23,8 @@ from reference import smooth_noise
 pytest.importorskip("zarr", reason="the multires extra (zarr) is not installed")
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.cache import BrickUnavailableWarning  # noqa: E402
-from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.scenes.multiscale import MultiscaleScene  # noqa: E402
+from splinecast.multires.store.cache import BrickUnavailableWarning  # noqa: E402
 
 B = 8
 

@@ -22,7 +22,7 @@ pytest.importorskip("dask", reason="the multires extra (dask) is not installed")
 from frame_replay import replay  # noqa: E402
 
 import splinecast as sc  # noqa: E402
-from splinecast.multires.draw import screen_rect, screen_rects  # noqa: E402
+from splinecast.multires.draw.cut_renderer import screen_rect, screen_rects  # noqa: E402
 
 MODES = ["iso", "multi", "mip", "minip", "dvr"]
 
@@ -109,7 +109,7 @@ def test_seam_closure_inside_the_launch_equals_the_per_piece_closure(torus, mode
 
 def test_clip_planes_and_a_camera_tile(torus):
     """Clipped rays, and a tile of the image traced into its own state (a sort-last worker)."""
-    from splinecast.multires.scene import pieces_of
+    from splinecast.multires.scenes.multiscale import pieces_of
     from splinecast.render.iso import Iso
     from splinecast.render.segment import counters, new_state
 

@@ -1,5 +1,5 @@
 """Bricks changed at a level seam drawn as shells around their unchanged core
-(:mod:`splinecast.multires.seam_parts`).
+(:mod:`splinecast.multires.draw.seam_parts`).
 
 References: the split is checked by brute force (sampled points of every part against the
 changed elements; rays from the eye sampled densely for the order of the parts they cross), and
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from held_bytes import held_buffers
 
-from splinecast.multires.seam_parts import crop_range, part_order, split_box
+from splinecast.multires.draw.seam_parts import crop_range, part_order, split_box
 
 
 def _random_case(rng: np.random.Generator, radius: float):

@@ -1,9 +1,11 @@
 """The seam plan's fast parts against direct computations.
 
-- :func:`splinecast.multires.seams._within_reach` (a k-d tree per class of box sizes) against the
+- :func:`splinecast.multires.draw.seams._within_reach` (a k-d tree per class of box sizes) against
+the
   gap of every pair of boxes;
-- :func:`splinecast.multires.seams._subdivided` (composed per-axis subdivision matrices) against
-  the chain of 3D :func:`~splinecast.multires.seams.refine` steps it replaces;
+- :func:`splinecast.multires.draw.seams._subdivided` (composed per-axis subdivision matrices)
+against
+  the chain of 3D :func:`~splinecast.multires.draw.seams.refine` steps it replaces;
 - the incremental plan (changes reused while what they were computed from is the same) against a
   plan from scratch, frame by frame while bricks arrive (the scene test is in
   ``test_multires_render.py``).
@@ -16,7 +18,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from splinecast.multires.seams import _subdivided, _within_reach, refine
+from splinecast.multires.draw.seams import _subdivided, _within_reach, refine
 
 
 def _brute_force_pairs(q_lo, q_hi, lo, hi, radius):

@@ -29,7 +29,7 @@ def test_a_pyramid_shows_its_bricks_in_the_status_line(tmp_path, monkeypatch):
     from playwright.sync_api import sync_playwright
 
     from splinecast.io.omezarr import Level
-    from splinecast.multires.scene import MultiscaleScene
+    from splinecast.multires.scenes.multiscale import MultiscaleScene
 
     path = tmp_path / "ml.zarr"
     sc.build_pyramid(sc.demo("marschner-lobb", size=48), path, brick=16, progress=False)

@@ -29,7 +29,7 @@ pytest.importorskip("zarr")
 pytest.importorskip("aiohttp")
 
 from splinecast.io.omezarr import Level  # noqa: E402
-from splinecast.multires.scene import MultiscaleScene  # noqa: E402
+from splinecast.multires.scenes.multiscale import MultiscaleScene  # noqa: E402
 from splinecast.viewer.client import ServerError, ViewerClient  # noqa: E402
 from splinecast.viewer.data import shown  # noqa: E402
 from splinecast.viewer.renderer import FrameRenderer  # noqa: E402

@@ -207,7 +207,7 @@ def test_an_omezarr_time_axis_gets_the_slider_too(tmp_path):
     """An OME-Zarr image with a ``t`` axis (a one-level pyramid): another time point is opened
     as its own pyramid, and its screenshot equals that time point's complete render."""
     zarr = pytest.importorskip("zarr")
-    from splinecast.multires.scene import MultiscaleScene
+    from splinecast.multires.scenes.multiscale import MultiscaleScene
 
     values = np.moveaxis(_blobs(3), -1, 0).transpose(0, 3, 2, 1)  # t, z, y, x
     path = tmp_path / "series.zarr"

@@ -14,7 +14,7 @@ import pytest
 import pywt
 from scipy.interpolate import BSpline
 
-from splinecast.multires.wavelet_filters import spline_wavelet
+from splinecast.multires.wavelet.filters import spline_wavelet
 
 DEGREES = (1, 2, 3)
 # Table 4.1: (low taps, high taps, vanishing moments, pieces low, pieces high) of the

@@ -19,7 +19,7 @@ from fuzz.codecs import zstd_rle
 
 import splinecast as sc
 from splinecast.cli import main
-from splinecast.multires.wavelet_store import build_wavelet_pyramid
+from splinecast.multires.wavelet.store import build_wavelet_pyramid
 
 pytest.importorskip("zarr")
 

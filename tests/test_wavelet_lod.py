@@ -22,9 +22,9 @@ from splinecast.models.bspline import (
     knot_offset,
     local_value_gradient,
 )
-from splinecast.multires.wavelet_lod import WHOLE_CHUNK, Selection, select
-from splinecast.multires.wavelet_reconstruct import ChunkReconstructor
-from splinecast.multires.wavelet_transform import decompose, reconstruct
+from splinecast.multires.wavelet.lod import WHOLE_CHUNK, Selection, select
+from splinecast.multires.wavelet.reconstruct import ChunkReconstructor
+from splinecast.multires.wavelet.transform import decompose, reconstruct
 
 MODELS = {1: BSpline1Model, 2: BSpline2Model, 3: BSpline3Model}
 SHAPE = (29, 26, 23)

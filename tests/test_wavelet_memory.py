@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import splinecast as sc
-from splinecast.multires.wavelet_memory import Budget, SlotPool
-from splinecast.multires.wavelet_store import build_wavelet_pyramid
+from splinecast.multires.wavelet.memory import Budget, SlotPool
+from splinecast.multires.wavelet.store import build_wavelet_pyramid
 
 pytest.importorskip("zarr")
 

@@ -14,10 +14,10 @@ import pytest
 
 import splinecast as sc
 from splinecast.cli import main
-from splinecast.multires.wavelet_lod import select
-from splinecast.multires.wavelet_reconstruct import ChunkReconstructor
-from splinecast.multires.wavelet_store import WaveletVolume, build_wavelet_pyramid
-from splinecast.multires.wavelet_transform import decompose, level0_window, reconstruct
+from splinecast.multires.wavelet.lod import select
+from splinecast.multires.wavelet.reconstruct import ChunkReconstructor
+from splinecast.multires.wavelet.store import WaveletVolume, build_wavelet_pyramid
+from splinecast.multires.wavelet.transform import decompose, level0_window, reconstruct
 
 pytest.importorskip("zarr")
 

@@ -15,9 +15,9 @@ from scipy import ndimage
 
 import splinecast as sc
 from splinecast.models.bspline import BSpline1Model, BSpline2Model, BSpline3Model
-from splinecast.multires.wavelet_filters import spline_wavelet
-from splinecast.multires.wavelet_layout import WaveletLayout
-from splinecast.multires.wavelet_transform import (
+from splinecast.multires.wavelet.filters import spline_wavelet
+from splinecast.multires.wavelet.layout import WaveletLayout
+from splinecast.multires.wavelet.transform import (
     MemmapSink,
     decompose,
     level0_window,

@@ -429,7 +429,7 @@ def test_the_cli_prints_one_line_for_members_refused_at_once(tmp_path):
 def _pyramid_with_bomb(tmp_path: Path) -> tuple[Path, list[Path]]:
     """splinecast's pyramid of a sphere whose every level-0 chunk is a gibibyte bomb (the
     shard indexes kept valid): no level-0 brick can be read."""
-    from splinecast.multires.pyramid import build_pyramid
+    from splinecast.multires.store.pyramid import build_pyramid
 
     i, j, k = np.indices((16, 16, 16))
     data = (np.sqrt((i - 7.5) ** 2 + (j - 7.5) ** 2 + (k - 7.5) ** 2) * 10).astype(np.uint16)
@@ -446,7 +446,7 @@ def _pyramid_with_bomb(tmp_path: Path) -> tuple[Path, list[Path]]:
 
 
 def test_a_still_image_with_an_unreadable_brick(tmp_path):
-    from splinecast.multires.cache import BrickUnavailableWarning
+    from splinecast.multires.store.cache import BrickUnavailableWarning
 
     """render: exit 2 with one line naming the chunk and no image; with --allow-missing the
     image is written and the last line says it is incomplete; the API's frame says so too."""

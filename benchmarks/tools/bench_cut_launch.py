@@ -72,8 +72,8 @@ def run_plain(args) -> dict:
     import bench_multires as bm
 
     import splinecast as sc
-    from splinecast.multires.budget import parse_bytes
-    from splinecast.multires.pyramid import build_pyramid
+    from splinecast.multires.store.budget import parse_bytes
+    from splinecast.multires.store.pyramid import build_pyramid
 
     work = Path(args.workdir or tempfile.mkdtemp())
     work.mkdir(parents=True, exist_ok=True)

@@ -2,7 +2,7 @@
 
     python benchmarks/tools/bench_loader.py STORE.zarr [--budget 256MiB] [--src DIR]
 
-A :class:`~splinecast.multires.stream.BrickStream` at lod 1, 1024x768, zoom 2, load budget 64,
+A :class:`~splinecast.multires.cut.stream.BrickStream` at lod 1, 1024x768, zoom 2, load budget 64,
 isosurface filter at 128 (the synthetic volume of ``bench_multires.py``): frames until the cut
 is complete; prints wall and CPU seconds, frames, bricks loaded, cut bricks, and the decoded
 and reused chunks. ``--src`` imports splinecast from another source tree (a baseline).
@@ -25,8 +25,8 @@ def main() -> None:
     if args.src:
         sys.path.insert(0, args.src)
     import splinecast as sc
-    from splinecast.multires.relevance import ValueFilter
-    from splinecast.multires.stream import BrickStream
+    from splinecast.multires.cut.relevance import ValueFilter
+    from splinecast.multires.cut.stream import BrickStream
 
     mv = sc.read(args.store)
     wall, cpu, frames = time.perf_counter(), time.process_time(), 0

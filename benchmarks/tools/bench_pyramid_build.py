@@ -39,7 +39,7 @@ _CHILD = textwrap.dedent("""
     sys.path.insert(0, sys.argv[1])
     start_cpu, start = time.process_time(), time.perf_counter()
     import splinecast
-    from splinecast.multires import pyramid as P
+    from splinecast.multires.store import pyramid as P
     imported = time.process_time() - start_cpu
     tasks = collections.defaultdict(float)
     lock = threading.Lock()

@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 import splinecast as sc
-from splinecast.multires.wavelet_lod import select
-from splinecast.multires.wavelet_scene import wavelet_pieces
-from splinecast.multires.wavelet_store import build_wavelet_pyramid
+from splinecast.multires.scenes.wavelet import wavelet_pieces
+from splinecast.multires.wavelet.lod import select
+from splinecast.multires.wavelet.store import build_wavelet_pyramid
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _machine import describe, median_ms  # noqa: E402

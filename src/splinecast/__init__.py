@@ -19,7 +19,7 @@ from .io.multichannel import MultichannelVolume
 from .io.store_kinds import register_store_kind as _register_store_kind
 from .models import MODELS
 from .models.smoothing import smooth
-from .multires.channel_scene import Channel, ChannelScene
+from .multires.scenes.channels import Channel, ChannelScene
 from .preintegration import preintegrate
 from .render.aip import Aip
 from .render.defaults import (
@@ -47,12 +47,12 @@ __version__ = "0.1.0"
 #: Names loaded on first use, so that ``import splinecast`` never imports zarr, dask or the
 #: viewer's server.
 _LAZY = {
-    "build_pyramid": ("splinecast.multires.pyramid", "build_pyramid"),
+    "build_pyramid": ("splinecast.multires.store.pyramid", "build_pyramid"),
     "MultiscaleVolume": ("splinecast.io.omezarr", "MultiscaleVolume"),
-    "MultiscaleScene": ("splinecast.multires.scene", "MultiscaleScene"),
-    "LabelScene": ("splinecast.multires.label_scene", "LabelScene"),
-    "WaveletVolume": ("splinecast.multires.wavelet_store", "WaveletVolume"),
-    "WaveletScene": ("splinecast.multires.wavelet_scene", "WaveletScene"),
+    "MultiscaleScene": ("splinecast.multires.scenes.multiscale", "MultiscaleScene"),
+    "LabelScene": ("splinecast.multires.scenes.labels", "LabelScene"),
+    "WaveletVolume": ("splinecast.multires.wavelet.store", "WaveletVolume"),
+    "WaveletScene": ("splinecast.multires.scenes.wavelet", "WaveletScene"),
     "multires": ("splinecast.multires", None),
     "view": ("splinecast.viewer", "view"),
 }
@@ -60,7 +60,7 @@ _LAZY = {
 
 def _multiscale_scene(volume, *args, **kwargs):
     """``Scene(MultiscaleVolume, ...)``: the renderer of cuts (loaded with zarr on first use)."""
-    from .multires.scene import MultiscaleScene
+    from .multires.scenes.multiscale import MultiscaleScene
 
     return MultiscaleScene(volume, *args, **kwargs)
 
@@ -76,24 +76,24 @@ for _kind in ("splinecast.io.multichannel.MultichannelVolume", "builtins.list",
 
 def _wavelet_scene(volume, *args, **kwargs):
     """``Scene(WaveletVolume, ...)``: the spline-wavelet renderer (loaded on first use)."""
-    from .multires.wavelet_scene import WaveletScene
+    from .multires.scenes.wavelet import WaveletScene
 
     return WaveletScene(volume, *args, **kwargs)
 
 
 def _open_wavelet_store(path, root, attributes):
     """``read("x.zarr")`` of a spline-wavelet store: a lazy ``WaveletVolume``."""
-    from .multires.wavelet_store import open_wavelet_store
+    from .multires.wavelet.store import open_wavelet_store
 
     return open_wavelet_store(path, root, attributes)
 
 
-register_scene_type("splinecast.multires.wavelet_store.WaveletVolume", _wavelet_scene)
+register_scene_type("splinecast.multires.wavelet.store.WaveletVolume", _wavelet_scene)
 
 
 def _label_scene(volume, *args, **kwargs):
     """``Scene(volume, labels=True, ...)``: each label's surface in its colour (any volume)."""
-    from .multires.label_scene import LabelScene
+    from .multires.scenes.labels import LabelScene
 
     return LabelScene(volume, *args, **kwargs)
 

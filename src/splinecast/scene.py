@@ -7,11 +7,9 @@ pixel in compiled, multi-threaded code.
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -19,20 +17,11 @@ import numpy as np
 from .accel.active_cells import ActiveCells
 from .accel.minmax import BLOCK_SHIFTS
 from .camera import Camera
-from .errors import ParameterError, limits
+from .errors import ParameterError
 from .models import MODELS
-from .render.antialias import antialias, resolve_samples
-from .render.clipping import make_planes
-from .render.defaults import (
-    auto_iso,
-    content_box,
-)
-from .render.dvr import DVRSettings
-from .render.effects import SurfaceEffects, apply_effects
+from .render.defaults import content_box
 from .render.footprint import NO_FOOTPRINT
-from .render.frame import Frame
-from .render.modes import MODE_NAMES, ModeContext, RenderMode, build_mode
-from .render.outputs import OUTPUTS, check_outputs
+from .render.modes import MODE_NAMES
 from .render.segment import (
     make_grid,
     pixel_ranges,
@@ -40,39 +29,26 @@ from .render.segment import (
     screen_footprint,
     trace_pixels,
 )
-from .render.shading import Shading, normals_code
+from .render.template import (
+    RenderRequest,
+    SceneTemplate,
+    Traced,
+    check_iso,
+    finish_frame,
+    prepare_render,
+    whole_frame_tracer,
+)
 from .transfer import TransferFunction
 from .volume import Volume
 
+# The render template's parts are re-exported here, where they were defined before the template
+# had a module of its own.
 __all__ = ["Scene", "MODES", "check_iso", "RenderRequest", "prepare_render", "finish_frame",
-           "register_scene_type", "whole_frame_tracer"]
+           "register_scene_type", "whole_frame_tracer", "SceneTemplate", "Traced"]
 
 #: Names of the render modes accepted by :meth:`Scene.render` (the registry
 #: :data:`splinecast.render.modes.MODES` holds their classes).
 MODES = MODE_NAMES
-
-
-def check_iso(volume: Volume, iso: Any) -> float:
-    """Validate an isovalue for ``volume`` (``None`` means :func:`~splinecast.auto_iso`: its
-    ``metadata["default_iso"]``, else Otsu's threshold of the non-background values).
-
-    Raises
-    ------
-    ParameterError
-        If the isovalue is not a number or lies outside the data range.
-    """
-    if iso is None:
-        iso = auto_iso(volume)
-    try:
-        value = float(iso)
-    except (TypeError, ValueError):
-        raise ParameterError(f"iso must be a number, got {iso!r}") from None
-    lo, hi = volume.value_range
-    if not lo <= value <= hi:
-        raise ParameterError(
-            f"iso={value:g} is outside the data range [{lo:g}, {hi:g}] of {volume.name}"
-        )
-    return value
 
 
 #: Scene types for volumes other than :class:`Volume`: qualified class name of the volume ->
@@ -92,7 +68,8 @@ def register_scene_type(volume_class: str, factory: Callable[..., Any]) -> None:
     example ``"splinecast.io.omezarr.MultiscaleVolume"``, or :data:`LABELS` for the scene of
     ``Scene(volume, labels=True)``: the layers above this module register
     their scenes here (``splinecast/__init__.py`` registers
-    :class:`splinecast.multires.scene.MultiscaleScene`), so this module never imports them.
+    :class:`splinecast.multires.scenes.multiscale.MultiscaleScene`), so this module never imports
+    them.
     """
     _SCENE_TYPES[volume_class] = factory
 
@@ -105,7 +82,7 @@ def _scene_factory(volume: Any) -> Callable[..., Any] | None:
     return None
 
 
-class Scene:
+class Scene(SceneTemplate):
     """A volume, its reconstruction model, and the acceleration structure for rendering.
 
     Parameters
@@ -122,7 +99,7 @@ class Scene:
     labels : bool
         ``True``: ``volume`` is a label volume (a segmentation: 0 is the background, every
         other integer a region); each label's boundary is drawn as its own surface in its own
-        colour, and ``Scene`` returns a :class:`~splinecast.multires.label_scene.LabelScene`
+        colour, and ``Scene`` returns a :class:`~splinecast.multires.scenes.labels.LabelScene`
         (options ``colors``, ``show``, ``opacity``). Never guessed from the voxel type.
     **options
         Model options (for example ``prefilter=True`` for spline models), passed to the model.
@@ -175,7 +152,6 @@ class Scene:
         #: Counts and timings of the model's own isovalue change (models with work lists).
         self.iso_stats: dict[str, Any] = {}
         self._iso: float | None = None
-        self._table_cache: dict = {}  # the last pre-integration table (mode="dvr")
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -206,9 +182,6 @@ class Scene:
     def iso(self) -> float | None:
         """The isovalue the block flags are classified for (None before the first)."""
         return self._iso
-
-    def _check_iso(self, iso: Any) -> float:
-        return check_iso(self.volume, iso)
 
     def _iso_flags(self) -> tuple[np.ndarray, ...]:
         """Block flags of the current isovalue (the model's own work lists when it has them)."""
@@ -250,7 +223,7 @@ class Scene:
 
     def set_iso(self, iso: float) -> float:
         """Classify the blocks for a new isovalue; returns the time it took in ms."""
-        value = self._check_iso(iso)
+        value = self.check_iso(iso)
         start = time.perf_counter()
         self.hierarchy.classify(value)
         if self.active_cells is not None:
@@ -259,150 +232,10 @@ class Scene:
         self._iso = value
         return self.classify_ms
 
-    def render(
-        self,
-        camera: Camera,
-        mode: str | RenderMode = "iso",
-        iso: float | None = None,
-        method: str = "exact",
-        step: float = 0.25,
-        shading: Shading | None = None,
-        inside: str | None = None,
-        *,
-        clip: Any = None,
-        crop: Any = None,
-        colors: Any = None,
-        opacity: Any = None,
-        effects: SurfaceEffects | None = None,
-        window: Any = None,
-        colormap: Any = None,
-        tolerance: float = 0.0,
-        tf: TransferFunction | None = None,
-        dvr: DVRSettings | None = None,
-        outputs: Any = None,
-        normals: str = "smooth",
-        samples: int | None = None,
-    ) -> Frame:
-        """Render one image.
-
-        Parameters
-        ----------
-        camera : Camera
-            Viewpoint and image size.
-        mode : str or mode object
-            ``"iso"``: first-hit isosurface (or several translucent ones, see ``iso``);
-            ``"mip"`` / ``"minip"``: maximum / minimum intensity projection (``Frame.value``);
-            ``"dvr"``: direct volume rendering through ``tf``; any other name of the registry
-            :data:`splinecast.render.modes.MODES` (``"aip"``: average intensity projection,
-            :class:`~splinecast.Aip`). Or a mode object holding its options
-            (:class:`~splinecast.Iso`, :class:`~splinecast.MultiIso`,
-            :class:`~splinecast.Mip`, :class:`~splinecast.MinIp`, :class:`~splinecast.Dvr`,
-            ...): its options are then not passed as keywords too.
-        iso : float or list of float, optional
-            Isovalue in data units; default :func:`~splinecast.auto_iso` (the volume's
-            ``metadata["default_iso"]``, else Otsu's threshold of the histogram). A list
-            renders every crossing of every isovalue, composited front to back with ``colors``
-            and ``opacity``.
-        method : str
-            ``"exact"`` (analytic first root per cell, the default) or ``"sampled"`` (fixed step
-            plus bisection, the reference common viewers use). For MIP: analytic extrema per
-            cell, samples every ``step`` voxels, or ``"slices"``: samples where the ray crosses
-            every ``step``-th plane of voxels across its dominant axis (the fastest; see
-            :class:`splinecast.render.mip.Mip`).
-        step : float
-            Sampling step of the sampled method, in voxels (index units).
-        shading : Shading, optional
-            Colours and lighting.
-        inside : str, optional
-            ``"high"`` or ``"low"``: which side of the isovalue is the object's inside (decides
-            front and back faces and the normals' orientation). Default
-            :func:`~splinecast.auto_inside`: ``volume.metadata["inside"]``, else ``"low"`` for
-            isovalues below the background value (a negative isovalue of a signed map), else
-            ``"high"``.
-        clip : list of (nx, ny, nz, d), optional
-            Clip planes in world coordinates, each keeping ``nx*x + ny*y + nz*z + d >= 0``;
-            applied analytically to every ray (all modes, all models).
-        crop : (x0, x1, y0, y1, z0, z1), optional
-            Axis-aligned world-space box to keep.
-        colors, opacity : optional
-            One RGB and one opacity per isovalue when ``iso`` is a list.
-        effects : SurfaceEffects, optional
-            Procedural texture and cel shading of isosurfaces.
-        window, colormap : optional
-            The projections' display (the modes that read them: MIP, minIP, AIP): value window
-            ``(lo, hi)`` (default: the mode's ``default_window``, for MIP
-            :func:`~splinecast.auto_window`: percentiles of the volume's axis-aligned
-            projections, symmetric about 0 for signed data) and colormap (a name of
-            :mod:`splinecast.transfer`: any matplotlib or cmap name; default
-            :func:`~splinecast.auto_colormap`: ``"gray"``, a diverging map for signed data).
-            Pixels whose projected value is the background value
-            (:func:`~splinecast.background_value`) show the background colour.
-        tolerance : float
-            MIP/minIP with the exact method: how far a pixel may fall short of the exact
-            projection (below it for MIP, above for minIP), as a fraction of the window's
-            width (``1 / 255``: one level of an 8-bit image), for faster frames. Every pixel
-            keeps that bound and a value its ray meets; 0 (the default) is exact. See
-            :class:`splinecast.render.mip.Mip`.
-        tf : TransferFunction, optional
-            Transfer function of ``mode="dvr"`` (default
-            :func:`~splinecast.auto_transfer_function`, a ramp from the histogram).
-        dvr : DVRSettings, optional
-            Step, pre-integration, adaptive step, early termination, shading of ``mode="dvr"``
-            (default :data:`splinecast.render.dvr.DEFAULT_SETTINGS`: a sample every voxel from
-            the ray's entry, pre-integrated segments between them, rays stopped at opacity
-            1 - 2^-10).
-        outputs : list of str, optional
-            The Frame's buffers to fill, from ``"rgba"``, ``"depth"``, ``"position"``,
-            ``"normal"``, ``"face"``, ``"value"`` (the projections) and ``"stats"`` (the per-ray
-            counters); default all. The others are ``None`` in the Frame and cost nothing:
-            ``outputs=("rgba",)`` is what an image viewer needs, ``("rgba", "depth")`` what
-            compositing with other geometry needs. Summary numbers (``Frame.stats``) that
-            need a buffer that was not requested (``hits``: depth; ``mean_cells_visited``:
-            stats) are left out.
-        normals : str
-            Isosurfaces: ``"smooth"`` (default) shades every hit with the gradient of a smooth
-            field at the exact hit: the models that are only continuous (``trilinear``,
-            ``bspline1``), whose gradient jumps from cell to cell, with the cubic B-spline of
-            the voxels, the others with their own gradient. ``"exact"`` shades with the
-            model's own gradient (and ``Frame.normal`` holds it). Hits are the model's either
-            way (:mod:`splinecast.render.shading`).
-        samples : int, optional
-            Antialiasing: rays per pixel on the edges of the image (silhouettes, creases,
-            where front and back faces meet), the centre one included; the other pixels keep
-            their one ray (:mod:`splinecast.render.antialias`). ``1`` turns it off. Default:
-            :data:`~splinecast.render.antialias.DEFAULT_SAMPLES` for isosurfaces, 1 for MIP,
-            minIP and DVR. Only the colours are averaged: depth, position, normal and face
-            are the centre ray's. ``Frame.stats["antialiased"]`` counts the pixels traced
-            again.
-
-        Returns
-        -------
-        Frame
-
-        Examples
-        --------
-        >>> import splinecast as sc
-        >>> vol = sc.demo("sphere", size=32)
-        >>> cam = sc.Camera.orbit(vol, size=(64, 48))
-        >>> frame = sc.Scene(vol).render(cam, iso=0.0, outputs=("rgba", "depth"))
-        >>> frame.rgba.shape, frame.position is None
-        ((48, 64, 4), True)
-        """
-        request = prepare_render(
-            self.volume, camera, mode, iso, method, step, shading, inside, clip=clip,
-            crop=crop, colors=colors, opacity=opacity, effects=effects, window=window,
-            colormap=colormap, tf=tf, dvr=dvr, table_cache=self._table_cache,
-            check_iso=self._check_iso, model=self.model.name, outputs=outputs,
-            tolerance=tolerance, normals=normals, samples=samples)
-        return self.draw(request, camera)
-
-    def draw(self, request: RenderRequest, camera: Camera) -> Frame:
-        """Trace a validated request (:func:`prepare_render`) through this scene's grid.
-
-        :meth:`render` is :func:`prepare_render` then this; a scene of another kind that holds
-        this one (a multiscale scene drawing its finest level from memory) prepares the request
-        with its own automatic choices and draws it here.
-        """
+    def trace(self, request: RenderRequest, camera: Camera, **frame_options: Any) -> Traced:
+        """Trace a validated request (:func:`prepare_render`) through this scene's grid: the
+        piece of the render template (:class:`~splinecast.render.template.SceneTemplate`) an
+        in-memory scene supplies."""
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:
             classify_ms = 0.0
@@ -421,159 +254,7 @@ class Scene:
         tiles = screen_footprint(grid, setup, camera, setup.blocks(grid.hierarchy, flags))
         out, counters = render_grid(grid, setup, camera, planes, flags,
                                     count="stats" in request.outputs, footprint=tiles)
-        return finish_frame(request, out, counters, camera, start,
-                            _pixel_tracer(grid, camera, planes, flags, tiles))
-
-
-@dataclass
-class RenderRequest:
-    """A validated :meth:`Scene.render` call: the mode's host object and what the frame reports.
-
-    Attributes
-    ----------
-    setup : Iso, MultiIso, Mip or Dvr
-        The mode (:mod:`splinecast.render`), with its parameters and buffers.
-    planes : ndarray (m, 4)
-        Clip planes of ``clip`` and ``crop``.
-    stats : dict
-        The frame's statistics so far (mode, model, method, isovalue, ...).
-    iso : float or None
-        The isovalue of a single isosurface (``mode="iso"`` with one value), else ``None``.
-    shading : Shading
-    effects : SurfaceEffects or None
-    outputs : frozenset of str
-        The buffers the Frame keeps (:mod:`splinecast.render.outputs`); the mode may fill more
-        (surface effects need position, normal and face, antialiasing depth).
-    samples : int
-        Rays per edge pixel (:mod:`splinecast.render.antialias`; 1: none).
-    """
-
-    setup: Any
-    planes: np.ndarray
-    stats: dict[str, Any]
-    iso: float | None
-    shading: Shading
-    effects: SurfaceEffects | None
-    outputs: frozenset[str] = frozenset(OUTPUTS)
-    samples: int = 1
-
-
-def prepare_render(
-    volume: Any, camera: Camera, mode: str | RenderMode, iso: Any, method: str, step: float,
-    shading: Shading | None, inside: str | None, *, clip: Any, crop: Any, colors: Any,
-    opacity: Any, effects: SurfaceEffects | None, window: Any, colormap: Any,
-    tf: TransferFunction | None, dvr: DVRSettings | None, table_cache: dict,
-    check_iso: Any, model: str, outputs: Any = None, tolerance: float = 0.0,
-    normals: str = "smooth", samples: Any = None,
-) -> RenderRequest:
-    """Validate the arguments of :meth:`Scene.render` and build the mode (shared by every scene
-    type: in memory, multiresolution).
-
-    ``volume`` supplies the automatic choices (:mod:`splinecast.render.defaults`), the metadata
-    and the value range; ``check_iso(value)`` validates an isovalue (``None``: the automatic one).
-    ``outputs`` names the Frame's buffers (``None``: all); ``tolerance`` is MIP's
-    (:class:`~splinecast.render.mip.Mip`); ``normals`` the isosurfaces'
-    (:mod:`splinecast.render.shading`); ``samples`` the antialiasing's (``None``: the mode's
-    default, :func:`splinecast.render.antialias.resolve_samples`).
-    """
-    if not isinstance(camera, Camera):
-        raise ParameterError(f"camera must be a splinecast.Camera, got {type(camera).__name__}")
-    spec = build_mode(mode, {
-        "iso": iso, "method": method, "step": step, "inside": inside, "colors": colors,
-        "opacity": opacity, "window": window, "colormap": colormap, "tolerance": tolerance,
-        "tf": tf, "dvr": dvr})
-    limits.check_render(volume, camera)
-    spec.check_limits(volume)
-    normals_code(normals)  # checked for every mode: a typo is refused, not ignored
-    samples = resolve_samples(samples, spec.name)
-    if inside is not None and inside not in ("high", "low"):
-        raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
-    shading = shading or Shading()
-    if effects is not None and not isinstance(effects, SurfaceEffects):
-        raise ParameterError(f"effects must be a SurfaceEffects, got {type(effects).__name__}")
-    planes = make_planes(clip, crop)
-    wanted = check_outputs(outputs)
-    # Surface effects are applied on the host from the hit's position, normal and face.
-    filled = wanted | {"position", "normal", "face"} if (
-        effects is not None and effects.active) else wanted
-    if "rgba" not in wanted:
-        samples = 1  # nothing to antialias
-    elif samples > 1 and spec.name == "iso":
-        filled = filled | {"depth", "normal", "face"}  # the edges of the geometry
-    stats: dict[str, Any] = {"mode": spec.name, "model": model}
-    context = ModeContext(volume, check_iso, shading, effects, filled, table_cache,
-                          normals=normals, planes=len(planes))
-    setup, mode_stats, value = spec.setup(context)
-    stats.update(mode_stats)
-    return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples)
-
-
-def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Camera,
-                 start: float, trace: Callable[..., tuple] | None = None) -> Frame:
-    """The :class:`Frame` of a traced image: surface effects applied, antialiased (with
-    ``trace``), per-ray counts and the time since ``start`` (``time.perf_counter()``) in
-    ``stats``.
-
-    ``trace(camera, mask, mode)`` traces the pixels of ``camera``'s image where ``mask`` is
-    true with ``mode`` (a copy of the request's with fewer outputs) and returns its outputs
-    (:func:`splinecast.render.segment.trace_pixels`); without it the frame is not antialiased.
-    """
-    setup, stats, effects = request.setup, request.stats, request.effects
-    frame = setup.frame(out, counters, stats)
-    shaded = setup.effects_after_tracing and effects is not None and effects.active
-    if shaded:
-        apply_effects(camera.pixel_basis(), request.shading.as_array(), effects.as_array(),
-                      frame.position, frame.normal, frame.face, frame.rgba)
-    if trace is not None and request.samples > 1 and frame.rgba is not None:
-        stats["samples"] = request.samples
-        stats["antialiased"] = antialias(frame, camera, request.samples,
-                                         _sample_tracer(request, trace, shaded),
-                                         geometry=setup.name == "iso")
-    trace_ms = (time.perf_counter() - start) * 1e3
-    stats.update({
-        "width": camera.width,
-        "height": camera.height,
-        "rays": camera.width * camera.height,
-        "trace_ms": trace_ms,
-    })
-    wanted = request.outputs
-    if frame.depth is not None:
-        stats["hits"] = int(np.count_nonzero(np.isfinite(frame.depth)))
-    if "stats" in wanted:
-        visited, tested, skipped = counters
-        stats.update({
-            "mean_cells_visited": float(visited.mean()),
-            "mean_cells_tested": float(tested.mean()),
-            "mean_blocks_skipped": float(skipped.mean()),
-        })
-    else:
-        frame.cells_visited = frame.cells_tested = frame.blocks_skipped = None
-    # Buffers filled for the mode's own use (surface effects, antialiasing) but not requested.
-    for name in ("depth", "position", "normal", "face"):
-        if name not in wanted:
-            setattr(frame, name, None)
-    return frame
-
-
-def _sample_tracer(request: RenderRequest, trace: Callable[..., tuple],
-                   shaded: bool) -> Callable[[Camera, np.ndarray], Frame]:
-    """``trace`` as :func:`splinecast.render.antialias.antialias` calls it: a Frame of the
-    traced pixels (surface effects applied), from a copy of the request's mode that fills only
-    what antialiasing reads."""
-    sub = copy.copy(request.setup)
-    need = {"rgba", "depth", "normal", "face"} | ({"position"} if shaded else set())
-    sub.outputs = frozenset(need)
-    effects = request.effects
-
-    def samples(cam: Camera, mask: np.ndarray) -> Frame:
-        unused = np.empty(mask.shape, np.int32)  # per-ray counters: not gathered
-        frame = sub.frame(trace(cam, mask, sub), (unused, unused, unused), {})
-        if shaded:
-            apply_effects(cam.pixel_basis(), request.shading.as_array(), effects.as_array(),
-                          frame.position, frame.normal, frame.face, frame.rgba)
-        return frame
-
-    return samples
+        return Traced(out, counters, start, _pixel_tracer(grid, camera, planes, flags, tiles))
 
 
 def _pixel_tracer(grid: Any, camera: Camera, planes: np.ndarray, flags: Any,
@@ -593,12 +274,3 @@ def _pixel_tracer(grid: Any, camera: Camera, planes: np.ndarray, flags: Any,
     return trace
 
 
-def whole_frame_tracer(renderer: Any, pieces: Any, planes: np.ndarray) -> Callable[..., tuple]:
-    """:func:`finish_frame`'s ``trace`` for a scene drawn by a cut renderer
-    (:class:`splinecast.multires.draw.CutRenderer`) from ``pieces``: every pixel of the image
-    traced, whatever the mask (the launch has no per-pixel mask)."""
-
-    def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
-        return renderer.render(pieces, mode, cam, planes)[0]
-
-    return trace

@@ -293,7 +293,7 @@ def _ome_zarr(folder: Path) -> str:
     """An OME-Zarr 0.5 pyramid (Zarr v3, sharded, zstd) with splinecast's per-brick tables,
     written by splinecast's own builder: two levels of 4-voxel bricks."""
     import splinecast as sc
-    from splinecast.multires.pyramid import build_pyramid
+    from splinecast.multires.store.pyramid import build_pyramid
 
     build_pyramid(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN), folder / "v.ome.zarr",
                   brick=4, workers=1, progress=False)
@@ -394,7 +394,7 @@ def _wavelet(folder: Path) -> str:
     ``splinecast`` of kind ``wavelet``) written by splinecast's builder: two levels of 4-node
     chunks, so coarse, detail and hull arrays all exist."""
     import splinecast as sc
-    from splinecast.multires.wavelet_store import build_wavelet_pyramid
+    from splinecast.multires.wavelet.store import build_wavelet_pyramid
 
     build_wavelet_pyramid(sc.Volume(ramp(), spacing=SPACING, origin=ORIGIN),
                           folder / WAVELET_MAIN, degree=3, levels=2, chunk=4)

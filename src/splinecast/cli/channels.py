@@ -8,7 +8,7 @@ from typing import Any
 
 import splinecast as sc
 from splinecast.errors import limits
-from splinecast.multires.channel_scene import channel_color
+from splinecast.multires.scenes.channels import channel_color
 
 from ._common import numbers, read_options
 

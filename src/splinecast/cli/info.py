@@ -95,7 +95,7 @@ def _omero(channels: Any) -> None:
 def _multiscale(mv) -> int:
     """Describe a lazy multiscale volume from its metadata and stored tables (no voxel read,
     except the coarsest level when the store has no value range)."""
-    from splinecast.multires.budget import format_bytes
+    from splinecast.multires.store.budget import format_bytes
 
     lo, hi = mv.value_range
     exact = "" if mv.metadata.get("value_range_exact") else " (estimated from the coarsest level)"
@@ -119,7 +119,7 @@ def _multiscale(mv) -> int:
               "(--no-labels for the raw values)")
     if mv.brick:
         print(f"bricks:    {mv.brick}^3 cells, tables: {', '.join(mv.tables()) or 'none'}")
-    from splinecast.multires.hist_store import histogram_info
+    from splinecast.multires.store.hist_store import histogram_info
 
     hist = histogram_info(mv)
     if hist is not None:

@@ -1,7 +1,7 @@
 """``splinecast render FILE --labels``: every label of a segmentation as its own surface.
 
 The options (``--labels``, ``--show``, ``--label-colors``, ``--label-opacity``) and the render of
-a label volume through :class:`splinecast.multires.label_scene.LabelScene`. A store that says it
+a label volume through :class:`splinecast.multires.scenes.labels.LabelScene`. A store that says it
 is an OME-Zarr label image (``image-label`` metadata) renders as labels without ``--labels``
 (``--no-labels`` renders its raw values), as napari and Neuroglancer show such data as
 segmentations; any other volume renders as labels only when asked, whatever its voxel type.

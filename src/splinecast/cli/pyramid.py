@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     import splinecast as sc
-    from splinecast.multires.pyramid import build_pyramid
+    from splinecast.multires.store.pyramid import build_pyramid
 
     out = Path(args.output)
     if out.suffix.lower() != ".zarr":

@@ -67,7 +67,7 @@ class DistributedScene:
         ``labels=True``, to each label's indicator (a label volume is never averaged).
     labels : bool
         A label volume (sort-first): every worker opens ``Scene(volume, labels=True, ...)``
-        (:class:`~splinecast.multires.label_scene.LabelScene`) with the options ``colors`` (a
+        (:class:`~splinecast.multires.scenes.labels.LabelScene`) with the options ``colors`` (a
         path or a table), ``show``, ``opacity`` and ``budget``; the frame's ``label`` buffer is
         assembled with the others.
     **options

@@ -2,18 +2,19 @@
 workers, their partial images composited in visibility order on the workers.
 
 Shares of bricks
-    The level's bricks (:class:`~splinecast.multires.octree.BrickOctree`, ``B`` cells each) are
+    The level's bricks (:class:`~splinecast.multires.cut.octree.BrickOctree`, ``B`` cells each) are
     cut into ``P`` boxes of bricks by a k-d split (:func:`split_bricks`): the longest side of a
     box (in bricks) is cut in proportion to the number of parts on each side, recursively, until
     every part is one box. ``P`` is the number of workers (at most the number of bricks); part
     ``p`` is a :class:`Share`, pinned to worker ``p``. A worker opens the store itself, reads the
-    bricks of its share once (:func:`splinecast.multires.cache.read_bricks`: the chunks of its
+    bricks of its share once (:func:`splinecast.multires.store.cache.read_bricks`: the chunks of its
     bricks, and of the neighbouring chunks the two ghost layers reach into, which every model's
     support needs) and keeps them between renders, like the sort-first workers keep their scene.
 
 Partial images
     Each worker traces its bricks front to back per ray through the segment entry point
-    (:class:`~splinecast.multires.draw.CutRenderer`, the multiresolution renderer of a cut whose
+    (:class:`~splinecast.multires.draw.cut_renderer.CutRenderer`, the multiresolution renderer of a
+    cut whose
     bricks all come from this level) into the mode's per-pixel state, without finishing it: iso
     keeps the nearest hit and its gradient, MIP the extreme value and where, DVR the
     premultiplied colour and opacity, the depth where the opacity passed 1/2 and the segment
@@ -53,7 +54,8 @@ DVR depth
     another share.
 
 Defaults: the automatic isovalue, MIP window and transfer function come from the pyramid's
-coarsest level, read by the client (as :class:`~splinecast.multires.scene.MultiscaleScene` does);
+coarsest level, read by the client (as
+:class:`~splinecast.multires.scenes.multiscale.MultiscaleScene` does);
 the isovalue is checked against the level's value range (the union of the bricks' ranges the
 workers report). Pass them explicitly to reproduce a render of another scene.
 """
@@ -65,6 +67,7 @@ import os
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -77,15 +80,20 @@ from ..io import read
 from ..io.omezarr import MultiscaleVolume, is_zarr
 from ..io.remote import is_url
 from ..models import MODELS
-from ..multires.cache import read_bricks
-from ..multires.draw import CutRenderer, Piece, screen_rect
-from ..multires.octree import DEFAULT_BRICK, BrickOctree
+from ..multires.cut.octree import DEFAULT_BRICK, BrickOctree
+from ..multires.draw.cut_renderer import CutRenderer, Piece, screen_rect
+from ..multires.store.cache import read_bricks
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
-from ..scene import check_iso, finish_frame, prepare_render
+from ..render.template import (
+    RenderOptions,
+    SceneTemplate,
+    check_iso,
+    finish_frame,
+    prepare_render,
+)
 from ..volume import Volume
 from . import worker
-from .render_call import RENDER_SIGNATURE, render_options
 from .source import SceneSource, VolumeInfo
 
 if TYPE_CHECKING:
@@ -307,21 +315,21 @@ def _request(token: str, header: VolumeInfo, camera: Camera, options: dict[str, 
 
 
 def prepare_request(header: VolumeInfo, camera: Camera, options: dict[str, Any]) -> Any:
-    """:func:`splinecast.scene.prepare_render` of ``Scene.render`` options for a level."""
-    bound = RENDER_SIGNATURE.bind(None, camera, **options)
-    bound.apply_defaults()
-    args = dict(bound.arguments)
-    del args["self"], args["camera"]
+    """:func:`splinecast.render.template.prepare_render` of ``Scene.render`` options (the
+    fields of :class:`~splinecast.render.template.RenderOptions`, by name) for a level: on the
+    client to check them, on the workers to build the mode."""
+    opts = RenderOptions(**options)
     # The partial images of the shares hold no pixel's neighbours: no antialiasing.
-    if args.get("samples") not in (None, 1):
+    if opts.samples not in (None, 1):
         raise ParameterError("samples: sort-last frames are not antialiased (sort-first "
                              "frames are), pass samples=1 or leave it out")
-    args["samples"] = 1
     return prepare_render(
-        header, camera, args.pop("mode"), args.pop("iso"), args.pop("method"),
-        args.pop("step"), args.pop("shading"), args.pop("inside"), table_cache={},
-        check_iso=lambda v: check_iso(header, v), model=header.metadata.get("model", ""),
-        **args)
+        header, camera, opts.mode, opts.iso, opts.method, opts.step, opts.shading, opts.inside,
+        clip=opts.clip, crop=opts.crop, colors=opts.colors, opacity=opts.opacity,
+        effects=opts.effects, window=opts.window, colormap=opts.colormap, tf=opts.tf,
+        dvr=opts.dvr, table_cache={}, check_iso=lambda v: check_iso(header, v),
+        model=header.metadata.get("model", ""), outputs=opts.outputs, tolerance=opts.tolerance,
+        normals=opts.normals, samples=1)
 
 
 def prepare_share(share: Share) -> dict[str, Any] | SplinecastError:
@@ -517,13 +525,15 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
 
 
 # --------------------------------------------------------------------------- the client
-class SortLastScene:
+class SortLastScene(SceneTemplate):
     """One level of an OME-Zarr pyramid spread over the workers of a Dask cluster, rendered
     sort-last (bricks per worker, partial images composited in visibility order on the workers).
 
     Usually made by ``DistributedScene(store, client, model, strategy="sort-last", level=k)``;
-    ``render`` takes the arguments of :meth:`splinecast.Scene.render` and returns the same
-    :class:`Frame` as ``Scene(sc.read(store).level(k).to_volume(), model).render(...)``.
+    ``render`` is the render template's (:meth:`splinecast.Scene.render`: the same arguments)
+    and returns the same :class:`Frame` as
+    ``Scene(sc.read(store).level(k).to_volume(), model).render(...)`` (see
+    :meth:`render_frame`).
 
     Parameters
     ----------
@@ -660,8 +670,15 @@ class SortLastScene:
         return VolumeInfo(f"{volume.name} level {self.level}", lv.shape, str(lv.dtype),
                           lv.spacing, lv.origin, value_range, metadata)
 
-    def render(self, camera: Camera, *args: Any, **kwargs: Any) -> Frame:
-        """Render one image sort-last; arguments as :meth:`splinecast.Scene.render`.
+    def prepare(self, camera: Camera, options: RenderOptions) -> Any:
+        """The request of ``options``, checked on the client as the workers build it."""
+        return prepare_request(self.volume, camera, options.as_dict())
+
+    def render_frame(self, camera: Camera, options: RenderOptions,
+                     frame_options: Mapping[str, Any]) -> Frame:
+        """Render one image sort-last (the render template's step for a frame made on the
+        workers: each share traced where it lives, the frame finished by the last task with
+        :func:`~splinecast.render.template.finish_frame`).
 
         One task per share renders its partial image; ``P - 1`` tasks merge them up the k-d
         tree in visibility order for ``camera``; a last task makes the :class:`Frame`, the only
@@ -674,22 +691,22 @@ class SortLastScene:
         from dask.base import tokenize
 
         start = time.perf_counter()
-        options = render_options(camera, args, kwargs)
         # A user error fails here, on the client.
-        request = prepare_request(self.volume, camera, options)
-        token = tokenize(camera.pixel_basis().tolist(), camera.width, camera.height, options)
-        leaves = {s.part: self._submit(render_share, s, camera, options, self.volume, token,
+        request = self.prepare(camera, options)
+        shipped = options.as_dict()  # what the workers build their request from
+        token = tokenize(camera.pixel_basis().tolist(), camera.width, camera.height, shipped)
+        leaves = {s.part: self._submit(render_share, s, camera, shipped, self.volume, token,
                                        part=s.part) for s in self.shares}
         nodes: dict[int, Future] = {}
-        root = self._reduce(self.tree, leaves, camera, options, token, nodes)
+        root = self._reduce(self.tree, leaves, camera, shipped, token, nodes)
         depths: list[Future] = []
         if request.setup.refines_depth_after_compositing:
             prefixes: dict[int, Any] = {}
             self._opacity_in_front(self.tree, None, nodes, camera, prefixes)
-            depths = [self._submit(refine_dvr_depth, s, camera, options, self.volume, token,
+            depths = [self._submit(refine_dvr_depth, s, camera, shipped, self.volume, token,
                                    prefixes[s.part], leaves[s.part], part=s.part)
                       for s in self.shares if prefixes[s.part] is not None]
-        future = self._submit(finish_partial, root, camera, options, self.volume, token,
+        future = self._submit(finish_partial, root, camera, shipped, self.volume, token,
                               *depths)
         try:
             frame = future.result()

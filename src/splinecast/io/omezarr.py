@@ -17,7 +17,8 @@ Accepted:
   when they are named so; otherwise the order is NGFF's ``z, y, x`` (last index along x), the
   convention of napari, scikit-image and every Zarr writer in the field.
 
-splinecast's own per-brick tables live in the same group (see :mod:`splinecast.multires.tables`):
+splinecast's own per-brick tables live in the same group (see
+:mod:`splinecast.multires.store.tables`):
 ``splinecast/<table>/<level>`` arrays, described by the root attribute ``"splinecast"``. Other
 readers ignore them, as NGFF allows.
 """

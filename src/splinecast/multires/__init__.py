@@ -14,22 +14,22 @@ from typing import Any
 
 #: Public name -> module that defines it.
 _EXPORTS = {
-    "build_pyramid": "pyramid",
-    "BrickOctree": "octree",
-    "GHOST": "octree",
-    "BrickCache": "cache",
-    "Brick": "cache",
-    "BrickUnavailableWarning": "cache",
-    "select_cut": "lod",
-    "Cut": "lod",
-    "ValueFilter": "relevance",
-    "BrickStream": "stream",
-    "write_table": "tables",
-    "parse_bytes": "budget",
-    "MultiscaleScene": "scene",
-    "CutRenderer": "draw",
-    "Piece": "draw",
-    "Seams": "seams",
+    "build_pyramid": "store.pyramid",
+    "BrickOctree": "cut.octree",
+    "GHOST": "cut.octree",
+    "BrickCache": "store.cache",
+    "Brick": "store.cache",
+    "BrickUnavailableWarning": "store.cache",
+    "select_cut": "cut.lod",
+    "Cut": "cut.lod",
+    "ValueFilter": "cut.relevance",
+    "BrickStream": "cut.stream",
+    "write_table": "store.tables",
+    "parse_bytes": "store.budget",
+    "MultiscaleScene": "scenes.multiscale",
+    "CutRenderer": "draw.cut_renderer",
+    "Piece": "draw.cut_renderer",
+    "Seams": "draw.seams",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -42,7 +42,7 @@ class ModeHost:
 
     def first_hit_iso(self) -> float | None:
         """The isovalue of a first-hit isosurface, whose gaps at level boundaries are closed
-        (:class:`splinecast.multires.seams.IsoClosure`); None: no closure."""
+        (:class:`splinecast.multires.draw.seams.IsoClosure`); None: no closure."""
         return None
 
     def visible_transfer(self) -> TransferFunction | None:

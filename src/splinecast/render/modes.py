@@ -43,7 +43,7 @@ from .shading import Shading
 
 __all__ = ["RenderMode", "ModeContext", "Iso", "MultiIso", "Mip", "MinIp", "Dvr", "MODES",
            "MODE_NAMES", "RENDER_DEFAULTS", "build_mode", "modes_reading", "modes_with_method",
-           "register_mode", "all_methods"]
+           "register_mode", "all_methods", "mode_name", "with_option"]
 
 #: :meth:`splinecast.Scene.render`'s defaults of the keywords a mode reads: a keyword left at
 #: its default does not clash with a mode object that sets it.
@@ -465,3 +465,20 @@ def build_mode(mode: str | RenderMode, given: dict[str, Any]) -> RenderMode:
     if isinstance(mode, RenderMode):
         return mode
     return cls.from_options(**{k: v for k, v in given.items() if k in cls.keywords})
+
+
+def mode_name(mode: Any) -> Any:
+    """The registry name of ``mode``, given as a name or as a mode object (anything else is
+    returned as it is, for the caller's check to name it): the layers above ask this instead of
+    testing what ``mode`` is."""
+    return mode.name if isinstance(mode, RenderMode) else mode
+
+
+def with_option(mode: Any, keywords: dict[str, Any], key: str,
+                value: Any) -> tuple[Any, dict[str, Any]]:
+    """``mode`` and the render keywords that go with it, with the option ``key`` set to
+    ``value``: a mode object's field replaced (its options are not passed as keywords too),
+    else the keyword set (a copy of ``keywords``)."""
+    if isinstance(mode, RenderMode):
+        return dataclasses.replace(mode, **{key: value}), keywords
+    return mode, {**keywords, key: value}

@@ -21,7 +21,7 @@ type; a cut may hold two (a pyramid's bricks in the store's dtype and the float6
 bricks changed at a level seam), so the launch takes two lists, and ``which[p]`` says in which
 list and where piece ``p``'s pair is.
 
-The first-hit isosurface's seam closure (:class:`splinecast.multires.seams.IsoClosure`) runs
+The first-hit isosurface's seam closure (:class:`splinecast.multires.draw.seams.IsoClosure`) runs
 inside the launch too (``close``): per ray, where it left the last piece without a hit, the
 field there and that piece's level; entering a piece of another level at the same parameter
 with the field on the other side of the isovalue is a hit on the face. Other modes compile the
@@ -96,7 +96,8 @@ def tile_lists(rects: np.ndarray, height: int, width: int) -> tuple[np.ndarray, 
 def box_interval(basis, origin, spacing, lo, hi, closed, planes, row, col, width, height):
     """Parameter interval ``(t0, t1)`` of pixel ``(row, col)``'s ray inside the index box
     ``[lo, hi]`` (index ``v`` at ``origin + v * spacing``), clipped by ``planes``; ``t0 > t1``
-    when the ray misses it (also what :func:`splinecast.multires.probe.box_ranges` computes)."""
+    when the ray misses it (also what :func:`splinecast.multires.draw.probe.box_ranges`
+    computes)."""
     wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
     t0, t1 = clip_interval(planes, wx, wy, wz, ux, uy, uz)
     vx, dx = index_axis(wx, ux, origin[0], spacing[0])  # the index ray as grid_ray makes it
@@ -380,7 +381,7 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
                  final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
     """Trace every pixel through the pieces of a cut, front to back, in one launch.
 
-    All parameters are prepared by :class:`splinecast.multires.draw.CutRenderer`.
+    All parameters are prepared by :class:`splinecast.multires.draw.cut_renderer.CutRenderer`.
 
     Parameters
     ----------

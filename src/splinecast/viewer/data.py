@@ -27,8 +27,8 @@ from typing import Any
 from ..errors import ParameterError
 from ..io.multichannel import MultichannelVolume
 from ..models import MODELS
-from ..multires.channel_scene import ChannelScene
-from ..multires.label_scene import LabelScene
+from ..multires.scenes.channels import ChannelScene
+from ..multires.scenes.labels import LabelScene
 from ..render.modes import MODE_NAMES as MODES
 from ..scene import Scene
 from ..volume import Volume
@@ -233,7 +233,7 @@ def shown(data: Any, model: str | None = None, budget: Any = None,
         first one was read).
     labels : bool
         Show ``data`` (a Volume or a multiscale volume of integer labels) as a label volume:
-        each label its own surface (:class:`~splinecast.multires.label_scene.LabelScene`). A
+        each label its own surface (:class:`~splinecast.multires.scenes.labels.LabelScene`). A
         ``LabelScene`` given as ``data`` is one already.
     colors : path, mapping or list, optional
         With ``labels``: the labels' colour table (as ``Scene(vol, labels=True, colors=...)``).
@@ -287,9 +287,9 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
         return Shown("volume", data, data, tuple(MODELS), default_model=model or "trilinear")
     # Imported here: the viewer of an in-memory volume never loads zarr.
     from ..io.omezarr import MultiscaleVolume
-    from ..multires.scene import MultiscaleScene
-    from ..multires.wavelet_scene import WaveletScene
-    from ..multires.wavelet_store import WaveletVolume
+    from ..multires.scenes.multiscale import MultiscaleScene
+    from ..multires.scenes.wavelet import WaveletScene
+    from ..multires.wavelet.store import WaveletVolume
 
     if isinstance(data, MultiscaleScene | WaveletScene):
         if budget is not None or lod is not None:

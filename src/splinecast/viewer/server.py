@@ -97,7 +97,7 @@ class ViewerServer:
     allow_external : bool, optional
         How other time points of a time series are read (``splinecast.read(allow_external=)``).
     labels : bool
-        Show ``data`` as a label volume (:class:`~splinecast.multires.label_scene.LabelScene`):
+        Show ``data`` as a label volume (:class:`~splinecast.multires.scenes.labels.LabelScene`):
         ``hello.labels`` lists its labels, the state's ``labels`` chooses and fades them, and
         ``pick`` requests name the label under a pixel. A ``LabelScene`` is shown so anyway.
     colors : path, mapping or list, optional

@@ -1,0 +1,1 @@
+"""Drawing a cut: the cut renderer, the seams between levels, front-to-back order."""

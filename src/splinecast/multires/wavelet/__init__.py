@@ -1,0 +1,2 @@
+"""Spline-wavelet pyramids (Steinberger 2010): filters, transform, store, chunk selection and
+reconstruction."""
