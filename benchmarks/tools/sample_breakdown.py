@@ -44,29 +44,52 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 sys.path.insert(0, str(REPO / "benchmarks" / "tools"))
 from cycle_breakdown import _counter_rate, _rdtsc_intrinsic, _read_cost  # noqa: E402
 
-#: Probes of each pass: (anchor, text, where). ``_ph`` accumulates the phase's cycles.
+#: Probes of each pass: (anchor, text, where). ``_ph`` accumulates the phase's cycles; the
+#: anchors span two lines where one would also match inside the run loop (deeper indentation).
 _START = ("    t0, t1, ray = grid_ray(", "    _c0 = _rdtsc()\n    _ph = 0\n", "before")
+_S16, _S20, _S24, _S28, _S32 = (" " * n for n in (16, 20, 24, 28, 32))
 _PASSES: dict[str, tuple] = {
     "skip": (
-        ("                ci, cj, ck = _cells(ox, oy, oz, dx, dy, dz, ta, ncx, ncy, ncz)\n"
-         "                size = skip_size(", "                _cs = _rdtsc()\n", "before"),
-        ("                                ta = tb\n                                known = False\n"
-         "                                m += 1.0\n                                continue\n",
-         "                                _ph += _rdtsc() - _cs\n", "before"),
-        ("                if not known:\n                    va = value_at(",
-         "                _ph += _rdtsc() - _cs\n", "before"),
+        ("            open_i = open_j = open_k = -1\n            while True:\n",
+         _S16 + "_cs = _rdtsc()\n", "after"),
+        (_S32 + "ta = tb\n" + _S32 + "known = False\n" + _S32 + "m += 1.0\n" + _S32
+         + "continue\n", _S32 + "_ph += _rdtsc() - _cs\n", "before"),
+        (_S16 + "if not known:\n" + _S20 + "va = value_at(", _S16 + "_ph += _rdtsc() - _cs\n",
+         "before"),
+        # The run loop's block test (a run's last one, which ends it, is left out).
+        (_S24 + "ci, cj, ck = _cells(ox, oy, oz, dx, dy, dz, ta, ncx, ncy, ncz)\n" + _S24
+         + "if (ci >> shift) != open_i", _S24 + "_cs = _rdtsc()\n", "before"),
+        (_S24 + "bx, by, bz = ox + tb * dx, oy + tb * dy, oz + tb * dz\n" + _S24
+         + "if ahead_m == m:", _S24 + "_ph += _rdtsc() - _cs\n", "before"),
     ),
     "values": (
-        ("                if not known:\n                    va = value_at(",
-         "                _cv = _rdtsc()\n", "before"),
-        ("                length = (tb - ta) * speed\n", "                _ph += _rdtsc() - _cv\n",
+        (_S16 + "if not known:\n" + _S20 + "va = value_at(", _S16 + "_cv = _rdtsc()\n",
          "before"),
+        (_S16 + "if size == 0 and cache and tb < t_far:\n", _S16 + "_ph += _rdtsc() - _cv\n",
+         "before"),
+        (_S20 + "stop = False\n", _S20 + "_cv = _rdtsc()\n", "before"),
+        (_S20 + "while True:\n" + _S24 + "# The next sample's value first",
+         _S20 + "_ph += _rdtsc() - _cv\n", "before"),
+        (_S24 + "tc = anchor + (m + 1.0) * dt\n" + _S24 + "if ahead_of_model and tc < t_far:",
+         _S24 + "_cv = _rdtsc()\n", "before"),
+        (_S24 + "length = (tb - ta) * speed\n" + _S24 + "if length > 0.0:",
+         _S24 + "_ph += _rdtsc() - _cv\n", "before"),
+        (_S24 + "bx, by, bz = ox + tb * dx, oy + tb * dy, oz + tb * dz\n" + _S24
+         + "if ahead_m == m:", _S24 + "_cv = _rdtsc()\n", "before"),
+        (_S28 + "vb = value_at(grid, scr, bx, by, bz)\n" + _S28 + "evaluated += 1\n" + _S20
+         + "if stop:", _S24 + "_ph += _rdtsc() - _cv\n", "before_last_line"),
+        (_S16 + "end = tb >= t_far\n", _S16 + "_cv = _rdtsc()\n", "before"),
+        (_S16 + "length = (tb - ta) * speed\n" + _S16 + "if length > 0.0:",
+         _S16 + "_ph += _rdtsc() - _cv\n", "before"),
     ),
     "segment": (
-        ("                if length > 0.0:\n                    st = segment(",
-         "                _cg = _rdtsc()\n", "before"),
-        ("                if end or done(mode, st):\n                    break\n",
-         "                _ph += _rdtsc() - _cg\n", "before"),
+        (_S24 + "length = (tb - ta) * speed\n" + _S24 + "if length > 0.0:",
+         _S24 + "_cg = _rdtsc()\n", "before"),
+        (_S24 + "if done(mode, st):\n" + _S28 + "stop = True", _S24 + "_ph += _rdtsc() - _cg\n",
+         "before"),
+        (_S16 + "length = (tb - ta) * speed\n" + _S16 + "if length > 0.0:",
+         _S16 + "_cg = _rdtsc()\n", "before"),
+        (_S16 + "if end or done(mode, st):\n", _S16 + "_ph += _rdtsc() - _cg\n", "before"),
     ),
 }
 _END = "    return evaluated, taken, leaps\n"
@@ -79,7 +102,11 @@ def instrumented_source(source: str, phase: str) -> str:
         if source.count(anchor) != 1:
             raise ValueError(f"sample_breakdown: anchor not found once in sample_pixel: "
                              f"{anchor.strip()[:60]!r}")
-        source = source.replace(anchor, text + anchor if where == "before" else anchor + text)
+        if where == "before_last_line":  # after all but the anchor's last line
+            head, _, last = anchor.rpartition("\n")
+            source = source.replace(anchor, head + "\n" + text + last)
+        else:
+            source = source.replace(anchor, text + anchor if where == "before" else anchor + text)
     if source.count(_END) != 1:
         raise ValueError("sample_breakdown: sample_pixel's return not found once")
     return source.replace(_END, _NEW_END)
