@@ -17,7 +17,8 @@ model (the value is the model's ``value_at``, inlined into the pair's kernel):
   last sample inside that block, without evaluating the ones in between, whose segments lie
   wholly in the block and add nothing. A block it answered 0 for (the mode's ``answer_shift``
   block) is not asked about again while the samples stay in it, unless the mode ``asks_again``;
-* runs of samples in such blocks go through a loop of their own, which holds only the sample's
+* for a model whose value is a few loads, runs of samples in such blocks go through a loop of
+  their own, which holds only the sample's
   value, the mode's segment, the termination test and the block test (the same segments, the
   same values): with a dense transfer function nearly every sample is in one, and the
   round's leap and end-of-interval bookkeeping left the loop too large for the processor to
@@ -262,10 +263,12 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                 if not known:
                     va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
                     evaluated += 1
-                if size == 0 and cache and tb < t_far:
+                if size == 0 and cache and ahead_of_model and tb < t_far:
                     # A run of samples in blocks the mode asked for: a loop of its own, with
                     # only the sample's value, the segment and the block test in it (the same
-                    # segments as the rounds below, without their leaps and bookkeeping).
+                    # segments as the rounds below, without their leaps and bookkeeping). Only
+                    # for a model whose value is cheap: a costly value inlined at the loop's
+                    # extra call sites made s31 DVR 1.08-1.16x slower.
                     stop = False
                     bx, by, bz = ox + tb * dx, oy + tb * dy, oz + tb * dz
                     if ahead_m == m:
@@ -274,10 +277,10 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                         vb = value_at(grid, scr, bx, by, bz)
                         evaluated += 1
                     while True:
-                        # The next sample's value first, for a model whose value is cheap (as
-                        # below); the same expression as its tb below, so the same value.
+                        # The next sample's value first (as below); the same expression as its
+                        # tb below, so the same value.
                         tc = anchor + (m + 1.0) * dt
-                        if ahead_of_model and tc < t_far:
+                        if tc < t_far:
                             ahead = value_at(grid, scr, ox + tc * dx, oy + tc * dy, oz + tc * dz)
                             ahead_m = m + 1.0
                             evaluated += 1
