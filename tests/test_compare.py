@@ -266,6 +266,83 @@ def test_vtk_dvr_matches_the_dense_reference(dvr_case):
     assert reference.image_error(img, ref) < 0.02
 
 
+def test_dense_transfers_make_what_they_say_visible():
+    """"every voxel": opacity above 0 for every value above the lowest; "automatic": the
+    opacity splinecast's automatic transfer function gives, value for value."""
+    vol = sc.demo("marschner-lobb", size=32)
+    lo, hi = vol.value_range
+    dense = M.dense_transfers(vol)
+    values = np.linspace(lo, hi, 101)
+    every = np.interp(values, *np.asarray(dense["every voxel"]).T)
+    assert np.all(every[1:] > 0.0) and every[0] == 0.0
+    pts = np.asarray(dense["automatic"]).T
+    assert np.allclose(np.interp(values, *pts), sc.auto_transfer_function(vol).opacity(values))
+
+
+def test_splinecast_dense_dvr_rows_meet_the_reference_and_the_termination_bound():
+    """The dense rows' splinecast images: the defaults within 1/255 of the dense reference,
+    and VTK's termination changes no channel by more than what it leaves out, 255/32768
+    (the bound early termination gives: the rest of the ray carries at most 1 - A of light)."""
+    spec = scenes.ml(32)
+    vol = spec.make()
+    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(64, 48))
+    transfer = M.dense_transfers(vol)["every voxel"]
+    ref = reference.reference_dvr(vol, cam, transfer)
+    default = M.SplinecastVolume(vol, (64, 48), "dvr", spec.isos[0], 0.0,
+                                 transfer=transfer).image(cam)
+    assert reference.image_error(default, ref) < 1.0 / 255.0
+    # A volume of 32^3 holds too little of that opacity for rays to end (they stay below
+    # 0.95): an opaque ramp ends them, and the bound applies to any transfer function.
+    opaque = [(transfer[0][0], 0.0), (transfer[-1][0], 0.6)]
+    default, early = (M.SplinecastVolume(vol, (64, 48), "dvr", spec.isos[0], 0.0,
+                                         transfer=opaque, termination=t).image(cam)
+                      for t in (None, M.VTK_FIXED_POINT_TERMINATION))
+    gap = np.abs(early - default)
+    assert gap.max() <= 1.0 - M.VTK_FIXED_POINT_TERMINATION + 1e-6
+    assert gap.max() > 0.0  # the rays do end by opacity: the termination changed something
+
+
+def test_dense_dvr_rows_time_each_method_and_report_the_ratio_to_vtk():
+    _vtk_or_skip()
+    result = runner.run_dense_dvr_scene(scenes.ml(32), (64, 48), 1, log=lambda *_: None)
+    assert [t["transfer"] for t in result["transfers"]] == ["automatic", "every voxel"]
+    for t in result["transfers"]:
+        assert set(t["methods"]) == {k for k, _ in runner.DENSE_METHODS}
+        vtk = t["methods"]["vtk-fixed-point"]
+        for e in t["methods"].values():
+            assert e["frame_ms"] > 0
+            assert e["vtk_ms_over_ms"] == pytest.approx(vtk["frame_ms"] / e["frame_ms"])
+        # VTK's caster classifies each sample (no pre-integration): a coarser picture, but
+        # the same one (a wrong transfer function or colour would miss by far more).
+        assert vtk["mean_abs_error"] < 0.02
+
+
+def test_only_dense_merges_into_the_stored_results(tmp_path, monkeypatch):
+    stored = {"command": "python -m benchmarks.compare --quick", "notes": ["kept note"],
+              "iso": [], "volume": [{"scene": "kept", "mode": "dvr", "sizes": [],
+                                     "quality": {}, "skipped": {}}],
+              "memory": {}, "threads": {}, "vtk": {"available": False}, "machine": {}}
+    (tmp_path / "compare_quick.json").write_text(json.dumps(stored))
+
+    def fake(spec, size, repeats, log=print):
+        return {"scene": spec.label, "mode": "dvr", "step": 1.0, "skipped": {},
+                "termination": {"splinecast": 0.999, "vtk-fixed-point": 0.9922},
+                "transfers": [{"transfer": "automatic", "width": 128, "height": 128,
+                               "methods": {"splinecast": {"frame_ms": 5.0,
+                                                          "mean_abs_error": 0.001,
+                                                          "vtk_ms_over_ms": 2.0}}}]}
+
+    monkeypatch.setattr(runner, "run_dense_dvr_scene", fake)
+    run(quick=True, repeats=1, out=tmp_path, log=lambda *_: None, only_dense=True)
+    saved = json.loads((tmp_path / "compare_quick.json").read_text())
+    assert saved["volume"] == stored["volume"]
+    assert [r["scene"] for r in saved["dense_dvr"]] == ["marschner-lobb 64^3"]
+    text = (tmp_path / "compare_quick.md").read_text()
+    assert ("| marschner-lobb 64^3 | automatic | 128x128 | splinecast, default settings | "
+            "0.9990 | 0.0010 | 5 | 2.00 |") in text
+    assert "kept note" in text
+
+
 def test_only_volume_merges_into_the_stored_results(tmp_path, monkeypatch):
     stored = {"command": "python -m benchmarks.compare --quick", "notes": ["kept note"],
               "iso": [{"scene": "kept", "kind": "ml", "size": 64, "sizes": [], "methods": {},

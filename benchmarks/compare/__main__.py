@@ -34,12 +34,13 @@ def machine() -> dict[str, Any]:
 
 def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes: bool = True,
         log=print, only_volume: bool = False, scenes_only: list[str] | None = None,
-        sizes_only: list[tuple[int, int]] | None = None, stem: str | None = None
-        ) -> dict[str, Any]:
+        sizes_only: list[tuple[int, int]] | None = None, stem: str | None = None,
+        only_dense: bool = False) -> dict[str, Any]:
     """Run the suite and write its results; returns the results dictionary.
 
     ``only_volume``: run only MIP/DVR and merge them into the stored results of ``out`` (the
-    isosurface, quality and memory sections of the stored JSON are kept as they are).
+    isosurface, quality and memory sections of the stored JSON are kept as they are);
+    ``only_dense``: the DVR rows with dense transfer functions, merged the same way.
     ``scenes_only`` keeps the scenes whose label contains one of its strings, ``sizes_only``
     replaces the image sizes (a partial run on a busy machine; write it under another ``stem``).
     """
@@ -82,6 +83,8 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
         "memory": {}, "threads": {},
     }
     stem = stem or ("compare_quick" if quick else "compare")
+    if only_dense:
+        return run_only_dense(quick, repeats, out, stem, volume_scenes, log)
     if only_volume:
         return run_only_volume(quick, repeats, out, stem, volume_scenes, notes, log, start)
     error_images: dict[str, dict] = {}
@@ -94,6 +97,7 @@ def run(quick: bool, repeats: int, out: Path, memory: bool = True, volume_modes:
             results["threads"][ISO_LABELS_SHORT.get(k, k)] = info["threads"]
     if volume_modes:
         run_volume(volume_scenes, sizes[-1], repeats, results, log)
+        results["dense_dvr"] = run_dense(volume_scenes, quick, sizes[-1], repeats, log)
     results["notes"] += mode_notes(results["volume"], volume_modes)
     results["volume_quality_size"] = list(runner.QUALITY_SIZE)
     if memory:
@@ -123,6 +127,40 @@ def run_volume(volume_scenes, size: tuple[int, int], repeats: int, results: dict
             results["volume"].append(r)
             for k, t in r["threads"].items():
                 results["threads"][f"{k} {mode}"] = t
+
+
+#: The scenes of the dense-DVR rows (full suite; the quick suite uses its one volume scene).
+DENSE_SCENES = ("marschner-lobb 256^3", "MNI152")
+
+
+def run_dense(volume_scenes, quick: bool, size: tuple[int, int], repeats: int,
+              log=print) -> list[dict[str, Any]]:
+    """The dense-DVR rows (:func:`runner.run_dense_dvr_scene`) of the scenes that have them."""
+    rows = []
+    for spec in volume_scenes:
+        if quick or any(label in spec.label for label in DENSE_SCENES):
+            log(f"dense dvr: {spec.label}")
+            rows.append(runner.run_dense_dvr_scene(spec, size, repeats, log))
+    return rows
+
+
+def run_only_dense(quick: bool, repeats: int, out: Path, stem: str, volume_scenes,
+                   log=print) -> dict[str, Any]:
+    """Rerun the dense-DVR rows and merge them into the stored ``out/stem.json``."""
+    path = out / f"{stem}.json"
+    if not path.exists():
+        raise SystemExit(f"--only-dense needs the stored results {path}; run the full suite")
+    results = json.loads(path.read_text())
+    size = (128, 128) if quick else (1024, 768)
+    results["dense_dvr"] = run_dense(volume_scenes, quick, size, repeats, log)
+    note = ("Dense-DVR rows rerun alone (`python -m benchmarks.compare"
+            f"{' --quick' if quick else ''} --only-dense`) and merged into the stored results.")
+    results["notes"] = [n for n in results.get("notes", [])
+                        if not n.startswith("Dense-DVR rows rerun")] + [note]
+    results["machine"] = machine()
+    for written in report.write(results, None, out, stem):
+        log(f"wrote {written}")
+    return results
 
 
 def run_only_volume(quick: bool, repeats: int, out: Path, stem: str, volume_scenes,
@@ -188,6 +226,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-volume", action="store_true", help="skip MIP/DVR")
     parser.add_argument("--only-volume", action="store_true",
                         help="run only MIP/DVR and merge them into the stored results")
+    parser.add_argument("--only-dense", action="store_true",
+                        help="run only the DVR rows with dense transfer functions (MRI, "
+                        "Marschner-Lobb 256^3) and merge them into the stored results")
     parser.add_argument("--scenes", help="comma-separated parts of scene labels to keep "
                         "(e.g. 'marschner-lobb 256,MNI152')")
     parser.add_argument("--sizes", help="comma-separated image sizes, e.g. 1024x768")
@@ -210,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     run(args.quick, args.repeats, Path(args.out), memory=not args.no_memory,
         volume_modes=not args.no_volume, only_volume=args.only_volume,
         scenes_only=args.scenes.split(",") if args.scenes else None, sizes_only=sizes,
-        stem=args.stem)
+        stem=args.stem, only_dense=args.only_dense)
     return 0
 
 

@@ -532,6 +532,27 @@ def dvr_transfer(volume: sc.Volume, iso: float) -> list[tuple[float, float]]:
     return [(lo, 0.0), (iso - 0.05 * span, 0.0), (iso + 0.05 * span, 0.15), (hi, 0.6)]
 
 
+#: Opacity of a one-voxel slab that VTK's fixed-point caster stops a ray at: it ends a ray
+#: once the remaining transparency, in its 15-bit fixed point, falls below 0xff (of 0x7fff).
+VTK_FIXED_POINT_TERMINATION = 1.0 - 255.0 / 32768.0
+
+
+def dense_transfers(volume: sc.Volume) -> dict[str, list[tuple[float, float]]]:
+    """Dense DVR opacity control points ``(value, alpha per voxel)`` by name, the colour being
+    the suite's grey ramp over the data range (colour does not change the work).
+
+    ``"automatic"``: the opacity of :func:`splinecast.auto_transfer_function` (what
+    ``mode="dvr"`` shows without a transfer function: a ramp from the automatic isovalue to 0.1
+    at the 99.5th percentile of the values above it); ``"every voxel"``: a ramp from the lowest
+    value to 0.1 per voxel at the highest, so every voxel above the background's value is partly
+    visible and rays end by opacity, not by leaving the volume.
+    """
+    auto = sc.auto_transfer_function(volume)
+    lo, hi = volume.value_range
+    return {"automatic": [(float(v), float(a)) for v, a in auto.opacity_points],
+            "every voxel": [(float(lo), 0.0), (float(hi), 0.1)]}
+
+
 class VolumeMethod:
     """Base class of MIP / DVR methods."""
 
@@ -566,7 +587,9 @@ class SplinecastVolume(VolumeMethod):
     the same way (a larger "step", a larger tolerance, a faster frame).
     """
 
-    def __init__(self, volume, size, mode, iso, step, method: str = "exact") -> None:
+    def __init__(self, volume, size, mode, iso, step, method: str = "exact",
+                 transfer: list[tuple[float, float]] | None = None,
+                 termination: float | None = None) -> None:
         super().__init__(volume, size, mode, iso, step)
         self.name = f"splinecast {'' if method == 'exact' else method + ' '}{mode}"
         self.scene = sc.Scene(volume)
@@ -579,7 +602,8 @@ class SplinecastVolume(VolumeMethod):
         if mode == "dvr":
             from splinecast.transfer import TransferFunction
 
-            tf = TransferFunction(dvr_transfer(volume, iso), volume.value_range, "gray")
+            tf = TransferFunction(transfer or dvr_transfer(volume, iso), volume.value_range,
+                                  "gray")
             for key in ("transfer", "transfer_function", "tf"):
                 if key in params:
                     self.kwargs[key] = tf
@@ -598,6 +622,14 @@ class SplinecastVolume(VolumeMethod):
 
                 default = getattr(dvr_module, "DEFAULT_SETTINGS", dvr_module.DVRSettings())
                 self.kwargs["dvr"] = dataclasses.replace(default, step=step)
+            # ``termination``: the default settings with another early-termination opacity.
+            if termination is not None:
+                import dataclasses
+
+                from splinecast.render.dvr import DEFAULT_SETTINGS
+
+                base = self.kwargs.get("dvr", DEFAULT_SETTINGS)
+                self.kwargs["dvr"] = dataclasses.replace(base, termination=termination)
 
     def _render(self, cam: sc.Camera, outputs: Any = None) -> sc.Frame:
         return self.scene.render(cam, **self.kwargs, outputs=outputs)
@@ -630,7 +662,8 @@ class VtkVolume(VolumeMethod):
     splinecast's transfer function means.
     """
 
-    def __init__(self, volume, size, mode, iso, step, mapper: str) -> None:
+    def __init__(self, volume, size, mode, iso, step, mapper: str,
+                 transfer: list[tuple[float, float]] | None = None) -> None:
         super().__init__(volume, size, mode, iso, step)
         from vtkmodules.vtkCommonDataModel import vtkPiecewiseFunction
         from vtkmodules.vtkRenderingCore import (
@@ -673,7 +706,7 @@ class VtkVolume(VolumeMethod):
             opacity.AddPoint(lo, 1.0)
             opacity.AddPoint(hi, 1.0)
         else:
-            for value, alpha in dvr_transfer(volume, iso):
+            for value, alpha in transfer or dvr_transfer(volume, iso):
                 opacity.AddPoint(value, alpha)
         prop = vtkVolumeProperty()
         prop.SetColor(color)

@@ -283,3 +283,82 @@ def measure_memory(spec: SceneSpec, jobs: list[tuple[str, str, str, float]],
             else:
                 out[name] = {"error": (run.stderr.strip().splitlines() or ["?"])[-1][-300:]}
     return out
+
+
+# --------------------------------------------------------------------------- dense DVR
+
+#: The dense DVR rows' methods: (key, label). splinecast with no settings (its defaults), the
+#: same with VTK's early-termination opacity, and VTK's fixed-point caster at splinecast's
+#: default step.
+DENSE_METHODS = (
+    ("splinecast", "splinecast, default settings"),
+    ("splinecast-vtk-termination", "splinecast, default settings but VTK's termination"),
+    ("vtk-fixed-point", "VTK fixed-point CPU ray caster"),
+)
+
+
+def run_dense_dvr_scene(spec: SceneSpec, size: tuple[int, int], repeats: int,
+                        log=print) -> dict[str, Any]:
+    """DVR with dense transfer functions (:func:`methods.dense_transfers`) at one step.
+
+    Not matched by quality: every method samples every ``DEFAULT_SETTINGS.step`` voxels (one),
+    splinecast with its default settings (pre-integrated segments, early termination at
+    ``1 - 2^-10``) and once more with VTK's termination, VTK's fixed-point caster with early
+    termination built in (:data:`methods.VTK_FIXED_POINT_TERMINATION`). The error of each
+    against the dense reference (:func:`reference_dvr`, same opacity, grey ramp) is reported
+    beside the times. Frames follow camera rotations, methods interleaved.
+    """
+    from splinecast.render.dvr import DEFAULT_SETTINGS
+
+    volume = spec.make()
+    iso = spec.isos[0]
+    step = float(DEFAULT_SETTINGS.step)
+    qcam = _camera(volume, QUALITY_SIZE)
+    result: dict[str, Any] = {"scene": spec.label, "mode": "dvr", "step": step,
+                              "termination": {"splinecast": DEFAULT_SETTINGS.termination,
+                                              "splinecast-vtk-termination":
+                                                  M.VTK_FIXED_POINT_TERMINATION,
+                                              "vtk-fixed-point":
+                                                  M.VTK_FIXED_POINT_TERMINATION},
+                              "skipped": {}, "transfers": []}
+    vtk_reason = M.volume_requirements("vtk-fixed-point", "dvr")
+    if vtk_reason:
+        result["skipped"]["vtk-fixed-point"] = vtk_reason
+    for name, transfer in M.dense_transfers(volume).items():
+        def make(key: str, at: tuple[int, int], transfer=transfer) -> M.VolumeMethod:
+            if key == "vtk-fixed-point":
+                return M.VtkVolume(volume, at, "dvr", iso, step, "fixed-point", transfer=transfer)
+            termination = M.VTK_FIXED_POINT_TERMINATION if key != "splinecast" else None
+            return M.SplinecastVolume(volume, at, "dvr", iso, 0.0, transfer=transfer,
+                                      termination=termination)
+
+        keys = [k for k, _ in DENSE_METHODS if k not in result["skipped"]]
+        reference = reference_dvr(volume, qcam, transfer)
+        errors = {}
+        for key in keys:
+            probe = make(key, QUALITY_SIZE)
+            errors[key] = image_error(probe.image(qcam), reference)
+            probe.close()
+        active = {key: make(key, size) for key in keys}
+        for method in active.values():
+            method.frame(_camera(volume, size))  # warm-up
+        times: dict[str, list[float]] = {key: [] for key in active}
+        for r in range(repeats):
+            cam = _camera(volume, size, ROTATIONS[r % len(ROTATIONS)])
+            for key, method in active.items():
+                times[key].append(_timed(lambda m=method, c=cam: m.frame(c)))
+        threads = {key: m.threads() for key, m in active.items()}
+        for method in active.values():
+            method.close()
+        entry = {"transfer": name, "opacity": transfer, "width": size[0], "height": size[1],
+                 "methods": {key: {"frame_ms": statistics.median(t), "runs_ms": t,
+                                   "mean_abs_error": errors[key]} for key, t in times.items()},
+                 "threads": threads}
+        vtk = entry["methods"].get("vtk-fixed-point")
+        if vtk:
+            for e in entry["methods"].values():
+                e["vtk_ms_over_ms"] = vtk["frame_ms"] / e["frame_ms"]
+        result["transfers"].append(entry)
+        log(f"  {spec.label} dense DVR ({name}) {size[0]}x{size[1]} ms/frame: " + ", ".join(
+            f"{k} {v['frame_ms']:.0f}" for k, v in entry["methods"].items()))
+    return result

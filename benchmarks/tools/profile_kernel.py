@@ -67,7 +67,9 @@ def _worker(args: argparse.Namespace) -> None:
     for cam in cams:
         scene.render(cam, **kwargs, outputs=("rgba",))
     wanted = MODE_CLASSES[args.mode]
-    found = [(key, disp) for key, disp in driver._KERNELS.items() if key[1].__name__ == wanted]
+    # DVR's default sampling ("ray") runs the fixed-step loop under a class of its own.
+    found = [(key, disp) for key, disp in driver._KERNELS.items()
+             if key[1].__name__ in (wanted, wanted.replace("Mode", "RayMode"))]
     if not found:
         raise SystemExit(f"profile_kernel: no compiled band for mode {args.mode!r}")
     key, disp = found[0]

@@ -22,7 +22,10 @@ For empty-space skipping, :meth:`TransferFunction.visible_ranges` gives the valu
 non-zero opacity (exact, from the control points), and :meth:`TransferFunction.transparency_prefix`
 the prefix-sum table of Carmona & Froehlich 2011 (section 1.5): with ``t(i) = 1`` when table bin
 ``i`` is not fully transparent and ``T(i) = T(i-1) + t(i)``, a cell whose values lie in bins
-``a..b`` is fully transparent exactly when ``T(b + 1) == T(a)``.
+``a..b`` is fully transparent exactly when ``T(b + 1) == T(a)``;
+:meth:`TransferFunction.clear_ends` the values at or beyond which the opacity is zero, so that a
+range touching a visible interval only at such an end (a background of zeros under a ramp that
+starts at 0) counts as transparent.
 """
 
 from __future__ import annotations
@@ -354,6 +357,25 @@ class TransferFunction:
             else:
                 merged.append((a, b))
         return merged
+
+    def clear_ends(self) -> tuple[float, float]:
+        """Values ``(below, above)`` such that the opacity is zero at every value ``<= below``
+        and at every value ``>= above`` (exact, from the control points; ``-inf`` / ``inf``
+        when the opacity beyond the first / last point is not zero).
+
+        :meth:`visible_ranges` are closed, so a range that only touches one of these ends, such
+        as a background of zeros under a ramp starting at 0, meets them; these two values let
+        a renderer tell that range transparent.
+        """
+        p = self.opacity_points
+        zero = p[:, 1] <= 0
+        if zero.all():
+            return math.inf, -math.inf
+        first = int(np.argmin(zero))  # the first point with a non-zero opacity
+        last = len(zero) - 1 - int(np.argmin(zero[::-1]))
+        below = -math.inf if first == 0 else float(p[first - 1, 0])
+        above = math.inf if last == len(zero) - 1 else float(p[last + 1, 0])
+        return below, above
 
     def transparency_prefix(self, n: int = 1024) -> np.ndarray:
         """Prefix-sum table ``T`` (int64, length ``n + 1``) over ``n`` equal bins of the domain.
