@@ -262,3 +262,43 @@ class S3Server:
             if path.is_file():
                 key = f"{prefix}/{path.relative_to(folder).as_posix()}"
                 client.put_object(Bucket=bucket, Key=key, Body=path.read_bytes())
+
+
+class GCSServer:
+    """A Google Cloud Storage endpoint on 127.0.0.1 (a free port), in a thread: the pure-Python
+    ``gcp-storage-emulator`` (JSON API, media downloads with ``Range``), objects in memory.
+    ``start`` returns once it listens (the emulator's own ready event)."""
+
+    def __init__(self, bucket: str) -> None:
+        from gcp_storage_emulator.server import create_server
+
+        self.bucket = bucket
+        self._server = create_server("127.0.0.1", 0, in_memory=True, default_bucket=bucket)
+        self.endpoint = ""
+
+    def start(self) -> GCSServer:
+        self._server.start()
+        # Port 0 binds a free port; the emulator keeps the listening server on its API thread.
+        port = self._server._api._httpd.server_address[1]
+        self.endpoint = f"http://127.0.0.1:{port}"
+        return self
+
+    def stop(self) -> None:
+        self._server.stop()
+
+    def upload(self, folder: Path, prefix: str) -> None:
+        """Put every file under ``folder`` at ``prefix/<relative path>`` in the bucket (the JSON
+        API's media upload, through urllib: independent of the reader under test)."""
+        import urllib.parse
+        import urllib.request
+
+        for path in sorted(folder.rglob("*")):
+            if path.is_file():
+                name = f"{prefix}/{path.relative_to(folder).as_posix()}"
+                url = (f"{self.endpoint}/upload/storage/v1/b/{self.bucket}/o?uploadType=media"
+                       f"&name={urllib.parse.quote(name, safe='')}")
+                request = urllib.request.Request(url, data=path.read_bytes(), method="POST",
+                                                 headers={"Content-Type":
+                                                          "application/octet-stream"})
+                with urllib.request.urlopen(request, timeout=60) as answer:
+                    assert answer.status == 200, (name, answer.status)

@@ -456,6 +456,15 @@ def _make_filesystem(protocol: str, settings: RemoteSettings,
     elif "token" not in options and not _credentials_configured("gcs"):
         options["token"] = "anon"
     options.setdefault("requests_timeout", settings.timeout)
+    if options.get("token") == "anon" or options.get("endpoint_url") or os.environ.get(
+            "STORAGE_EMULATOR_HOST"):
+        # gcsfs's default class asks a gRPC control API for each bucket's layout (zonal or
+        # hierarchical) before reads, and asks again after every failure: anonymous clients
+        # are refused it and emulators do not serve it (against one, every read waited for that
+        # call's 60 s time-out). The JSON API of the core class reads every other bucket.
+        from gcsfs.core import GCSFileSystem
+
+        return GCSFileSystem(asynchronous=True, skip_instance_cache=True, **options)
     return fsspec.filesystem("gcs", asynchronous=True, skip_instance_cache=True, **options)
 
 
