@@ -298,6 +298,41 @@ def test_cli_movie_over_http_equals_the_local_movie(stores, tmp_path):
         assert (local / name).read_bytes() == (remote / name).read_bytes(), name
 
 
+def test_cancelling_the_token_stops_the_requests_in_flight(server, stores):
+    """A fetch inside ``cancellable(token)`` whose request the server holds: cancelling the
+    token from another thread closes the connection (the server sees its client leave) and the
+    fetch raises ReadCancelled; the filesystem serves the next fetch."""
+    import threading
+
+    from splinecast.io.cancel import CancelToken, ReadCancelled, cancellable
+    from splinecast.io.remote import Remote
+
+    remote = Remote(f"{server.url}/sphere.zarr")
+    key = "0/c/0/0/0"
+    server.faults.hold = f"/sphere.zarr/{key}"
+    token = CancelToken()
+    outcome: list[str] = []
+
+    def fetch() -> None:
+        with cancellable(token):
+            try:
+                remote.fetch(key, cap=1 << 20, cache=False)
+                outcome.append("answered")
+            except ReadCancelled:
+                outcome.append("cancelled")
+
+    thread = threading.Thread(target=fetch)
+    thread.start()
+    assert server.faults.held.wait(timeout=60)
+    token.cancel()
+    assert server.faults.dropped.wait(timeout=60)
+    thread.join(timeout=60)
+    assert outcome == ["cancelled"]
+    server.release()
+    data = remote.fetch(key, cap=1 << 20, cache=False)
+    assert data == (stores / "sphere.zarr" / key).read_bytes()
+
+
 @pytest.fixture(scope="module")
 def pyramid(tmp_path_factory) -> Path:
     """A four-level pyramid (64^3 float32 sphere, bricks of 8, shards of 16)."""
