@@ -97,7 +97,7 @@ def main() -> None:
     if not args.save:
         return
     sys.path.insert(0, str(HERE))
-    from _machine import describe, write_results
+    from _machine import write_results
 
     def cells(r: dict) -> list[str]:
         fin = r["final"]
