@@ -6,9 +6,14 @@ nothing is cached in memory; the disk cache is off):
 
 - ``open``: metadata, tables and the coarsest level (what the first image draws from);
 - ``level 0``: every chunk of the finest level;
-- ``render``: a complete iso render (``complete=True``) at ``--size`` from a fresh scene.
+- ``render``: a complete iso render (``complete=True``) at ``--size`` from a fresh scene;
+- ``view`` (``--parts view``): from a fresh store object and scene, the first image (drawn at
+  once from what is resident, ``wait=False``, as the viewer's first pass) and the complete view
+  (frames that wait for their load budget until the cut is complete), both timed from the
+  store's opening.
 
-Run: ``python benchmarks/bench_remote.py --size-volume 256 --latency 0.05 --bandwidth 100e6``.
+Run: ``python benchmarks/bench_remote.py --size-volume 256 --latency 0.05 --bandwidth 100e6``;
+an existing pyramid: ``--store P.zarr --iso 128 --size 1024x768 --parts view --budget 256MiB``.
 Nothing here is asserted: the numbers depend on the machine.
 """
 
@@ -47,8 +52,15 @@ def main() -> int:
     parser.add_argument("--bandwidth", type=float, default=100e6, help="bytes/s per response")
     parser.add_argument("--size", default="256x192", help="image WIDTHxHEIGHT")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--store", help="serve this pyramid instead of building one")
+    parser.add_argument("--iso", type=float, default=0.5)
+    parser.add_argument("--budget", default="2GiB", help="the scenes' budget (default 2GiB)")
+    parser.add_argument("--parts", default="open,level0,render", help="of open, level0, "
+                        "render, view")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
+    if "view" in args.parts:
+        return view_part(args, width, height)
     with tempfile.TemporaryDirectory() as folder:
         root = Path(folder)
         vol = sc.demo("marschner-lobb", size=args.size_volume)
@@ -68,10 +80,10 @@ def main() -> int:
 
                 def render(source=source):
                     mv = sc.read(source)
-                    scene = sc.Scene(mv)
+                    scene = sc.Scene(mv, budget=args.budget)
                     try:
                         camera = sc.Camera.orbit(mv, size=(width, height))
-                        return scene.render(camera, iso=0.5, complete=True)
+                        return scene.render(camera, iso=args.iso, complete=True)
                     finally:
                         scene.close()
 
@@ -88,6 +100,51 @@ def main() -> int:
             local, remote = rows
             print(f"{'ratio':8}{remote[1] / local[1]:10.1f}{remote[2] / local[2]:13.1f}"
                   f"{remote[3] / local[3]:12.1f}")
+    return 0
+
+
+def view_part(args: argparse.Namespace, width: int, height: int) -> int:
+    """First image and complete view, local and remote side by side (one warm-up each, then
+    ``--repeats`` runs alternated; medians)."""
+    store = Path(args.store).resolve() if args.store else None
+    if store is None:
+        raise SystemExit("--parts view needs --store")
+    faults = Faults(latency=args.latency, bandwidth=args.bandwidth)
+    with FileServer(store.parent, faults) as server:
+        sources = {"local": str(store), "remote": f"{server.url}/{store.name}"}
+
+        def view(source: str) -> tuple[float, float, int, int]:
+            start = time.perf_counter()
+            before = len(faults.log)
+            mv = sc.read(source)
+            with sc.Scene(mv, budget=args.budget) as scene:
+                camera = sc.Camera.orbit(mv, azimuth=30, elevation=25, size=(width, height),
+                                         zoom=1.3)
+                scene.render(camera, iso=args.iso, wait=False)
+                first = time.perf_counter() - start
+                frame = scene.render(camera, iso=args.iso, complete=True)
+                assert frame.stats["complete"]
+                return (first, time.perf_counter() - start, int(frame.stats["cut_bricks"]),
+                        len(faults.log) - before)
+
+        for source in sources.values():
+            view(source)  # warm-up: kernels compiled, connections open
+        runs: dict[str, list[tuple[float, float, int, int]]] = {k: [] for k in sources}
+        for _ in range(args.repeats):
+            for label, source in sources.items():
+                runs[label].append(view(source))
+    print(f"store {store.name} ({sc.read(store).levels[0].shape}), image {width}x{height}, "
+          f"budget {args.budget}; server: +{args.latency * 1e3:.0f} ms per request, "
+          f"{args.bandwidth / 1e6:.0f} MB/s per response; median of {args.repeats} after a "
+          "warm-up, local and remote alternated")
+    print(f"{'':8}{'first image (s)':>16}{'complete view (s)':>19}{'cut bricks':>12}"
+          f"{'requests':>10}")
+    med = {label: [statistics.median(r[i] for r in rows) for i in range(4)]
+           for label, rows in runs.items()}
+    for label, (first, complete, bricks, requests) in med.items():
+        print(f"{label:8}{first:16.2f}{complete:19.2f}{bricks:12.0f}{requests:10.0f}")
+    print(f"{'ratio':8}{med['remote'][0] / med['local'][0]:16.1f}"
+          f"{med['remote'][1] / med['local'][1]:19.1f}")
     return 0
 
 

@@ -29,7 +29,11 @@ class Faults:
     next ``count`` matching requests get ``kind``: ``404``, ``500``, ``403``, ``401``,
     ``"reset"`` (the connection closed before any answer), ``"short"`` (the body cut after
     half of its declared length), ``"slow"`` (a body that stalls for ``slow_seconds``),
-    ``"big"`` (a body of ``big_bytes`` without a Range, announced), ``"redirect:<url>"``."""
+    ``"big"`` (a body of ``big_bytes`` without a Range, announced), ``"redirect:<url>"``.
+
+    ``hold``: requests whose path holds this substring wait, unanswered, until
+    :meth:`FileServer.release`; ``held`` is set when one arrives and ``dropped`` when the client
+    of one goes away (the server sees the connection closed: its handler is cancelled)."""
 
     latency: float = 0.0
     bandwidth: float | None = None  # bytes per second per response
@@ -38,6 +42,11 @@ class Faults:
     big_bytes: int = 64 << 20
     ignore_range: bool = False
     log: list[tuple[str, str, str]] = field(default_factory=list)  # (method, path, range)
+    hold: str | None = None
+    held: threading.Event = field(default_factory=threading.Event)
+    dropped: threading.Event = field(default_factory=threading.Event)
+    held_log: list[str] = field(default_factory=list)
+    dropped_log: list[str] = field(default_factory=list)
     active: int = 0  # requests being answered now
     peak: int = 0  # most requests answered at once
     lock: threading.Lock = field(default_factory=threading.Lock)
@@ -63,6 +72,7 @@ class FileServer:
         self.faults = faults or Faults()
         self._ready = threading.Event()
         self._stop: asyncio.Event | None = None
+        self._released: asyncio.Event | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -84,7 +94,13 @@ class FileServer:
             raise self._error
         return self
 
+    def release(self) -> None:
+        """Answer the requests held by ``faults.hold`` (and hold no more)."""
+        if self._loop is not None and self._released is not None:
+            self._loop.call_soon_threadsafe(self._released.set)
+
     def stop(self) -> None:
+        self.release()
         if self._loop is not None and self._stop is not None:
             self._loop.call_soon_threadsafe(self._stop.set)
         if self._thread is not None:
@@ -106,9 +122,12 @@ class FileServer:
     async def _serve(self, sock: socket.socket) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
+        self._released = asyncio.Event()
         app = web.Application()
         app.router.add_route("*", "/{tail:.*}", self._handle)
-        runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        # A client closing its connection cancels the handler answering it (seen by `hold`).
+        runner = web.AppRunner(app, access_log=None, handle_signals=False,
+                               handler_cancellation=True)
         await runner.setup()
         site = web.SockSite(runner, sock)
         await site.start()
@@ -131,6 +150,16 @@ class FileServer:
         faults.log.append((request.method, path, request.headers.get("Range", "")))
         if faults.latency:
             await asyncio.sleep(faults.latency)
+        released = self._released
+        if faults.hold and faults.hold in path and released and not released.is_set():
+            faults.held_log.append(f"{request.method} {path}")
+            faults.held.set()
+            try:
+                await released.wait()
+            except asyncio.CancelledError:
+                faults.dropped_log.append(f"{request.method} {path}")
+                faults.dropped.set()
+                raise
         kind = faults.take(path)
         if kind in (404, 500, 403, 401, 503):
             return web.Response(status=kind, text="injected")
@@ -233,3 +262,43 @@ class S3Server:
             if path.is_file():
                 key = f"{prefix}/{path.relative_to(folder).as_posix()}"
                 client.put_object(Bucket=bucket, Key=key, Body=path.read_bytes())
+
+
+class GCSServer:
+    """A Google Cloud Storage endpoint on 127.0.0.1 (a free port), in a thread: the pure-Python
+    ``gcp-storage-emulator`` (JSON API, media downloads with ``Range``), objects in memory.
+    ``start`` returns once it listens (the emulator's own ready event)."""
+
+    def __init__(self, bucket: str) -> None:
+        from gcp_storage_emulator.server import create_server
+
+        self.bucket = bucket
+        self._server = create_server("127.0.0.1", 0, in_memory=True, default_bucket=bucket)
+        self.endpoint = ""
+
+    def start(self) -> GCSServer:
+        self._server.start()
+        # Port 0 binds a free port; the emulator keeps the listening server on its API thread.
+        port = self._server._api._httpd.server_address[1]
+        self.endpoint = f"http://127.0.0.1:{port}"
+        return self
+
+    def stop(self) -> None:
+        self._server.stop()
+
+    def upload(self, folder: Path, prefix: str) -> None:
+        """Put every file under ``folder`` at ``prefix/<relative path>`` in the bucket (the JSON
+        API's media upload, through urllib: independent of the reader under test)."""
+        import urllib.parse
+        import urllib.request
+
+        for path in sorted(folder.rglob("*")):
+            if path.is_file():
+                name = f"{prefix}/{path.relative_to(folder).as_posix()}"
+                url = (f"{self.endpoint}/upload/storage/v1/b/{self.bucket}/o?uploadType=media"
+                       f"&name={urllib.parse.quote(name, safe='')}")
+                request = urllib.request.Request(url, data=path.read_bytes(), method="POST",
+                                                 headers={"Content-Type":
+                                                          "application/octet-stream"})
+                with urllib.request.urlopen(request, timeout=60) as answer:
+                    assert answer.status == 200, (name, answer.status)

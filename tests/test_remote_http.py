@@ -296,3 +296,83 @@ def test_cli_movie_over_http_equals_the_local_movie(stores, tmp_path):
     assert len(names) == 3 and names == sorted(p.name for p in remote.iterdir())
     for name in names:
         assert (local / name).read_bytes() == (remote / name).read_bytes(), name
+
+
+def test_cancelling_the_token_stops_the_requests_in_flight(server, stores):
+    """A fetch inside ``cancellable(token)`` whose request the server holds: cancelling the
+    token from another thread closes the connection (the server sees its client leave) and the
+    fetch raises ReadCancelled; the filesystem serves the next fetch."""
+    import threading
+
+    from splinecast.io.cancel import CancelToken, ReadCancelled, cancellable
+    from splinecast.io.remote import Remote
+
+    remote = Remote(f"{server.url}/sphere.zarr")
+    key = "0/c/0/0/0"
+    server.faults.hold = f"/sphere.zarr/{key}"
+    token = CancelToken()
+    outcome: list[str] = []
+
+    def fetch() -> None:
+        with cancellable(token):
+            try:
+                remote.fetch(key, cap=1 << 20, cache=False)
+                outcome.append("answered")
+            except ReadCancelled:
+                outcome.append("cancelled")
+
+    thread = threading.Thread(target=fetch)
+    thread.start()
+    assert server.faults.held.wait(timeout=60)
+    token.cancel()
+    assert server.faults.dropped.wait(timeout=60)
+    thread.join(timeout=60)
+    assert outcome == ["cancelled"]
+    server.release()
+    data = remote.fetch(key, cap=1 << 20, cache=False)
+    assert data == (stores / "sphere.zarr" / key).read_bytes()
+
+
+@pytest.fixture(scope="module")
+def pyramid(tmp_path_factory) -> Path:
+    """A four-level pyramid (64^3 float32 sphere, bricks of 8, shards of 16)."""
+    root = tmp_path_factory.mktemp("pyramid")
+    vol = sc.demo("sphere", size=64)
+    vol = sc.Volume(vol.data.astype(np.float32), spacing=vol.spacing, origin=vol.origin)
+    sc.build_pyramid(vol, root / "sphere.zarr", brick=8, shard=16, progress=False)
+    return root
+
+
+def test_camera_move_cancels_the_reads_under_way(pyramid):
+    """A close-up of a corner wants level 0 there; the server holds every level-0 request
+    unanswered. Moving to the whole view (levels 1 and 2) stops the read under way: the server
+    sees the held request's connection closed, and the new view completes while level 0 is
+    still held (without the cancellation the loader waits on the held request and the new
+    view never gets its bricks). The new view equals the local store's render of it."""
+    options = dict(budget="64MiB", whole_level=False)
+    local = sc.read(pyramid / "sphere.zarr")
+    lo, hi = (np.asarray(b, float) for b in local.bounds)
+    corner = sc.Camera.orbit(local, azimuth=30, elevation=20, size=SIZE,
+                             fit=(lo, lo + (hi - lo) / 4))
+    whole = sc.Camera.orbit(local, azimuth=30, elevation=20, size=SIZE)
+    with sc.Scene(local, **options) as scene:
+        expected = scene.render(whole, iso=ISO, complete=True)
+    assert 0 not in expected.stats["cut_levels"]  # the whole view needs no level-0 brick
+
+    faults = Faults()
+    with FileServer(pyramid, faults) as srv:
+        scene = sc.Scene(sc.read(f"{srv.url}/sphere.zarr"), **options)
+        try:
+            faults.hold = "/sphere.zarr/0/"
+            first = scene.render(corner, iso=ISO, wait=False)
+            assert first.stats["cut_levels"] == {0: first.stats["cut_bricks"]}
+            assert faults.held.wait(timeout=120), "the close-up's level-0 read never started"
+            frame = scene.render(whole, iso=ISO, complete=True)
+            assert faults.dropped.wait(timeout=60), "the held request was not cancelled"
+            cancelled = scene.stream.cache.stats()["reads_cancelled"]
+        finally:
+            srv.release()
+            scene.close()
+    _same(frame, expected)
+    assert frame.stats["complete"] and cancelled >= 1
+    assert all("/sphere.zarr/0/" in entry for entry in faults.dropped_log)

@@ -2,8 +2,7 @@
 thread, on a free port), holding a pyramid written by ``splinecast pyramid`` and an image written
 by ome-zarr-py. Renders equal the local render of the same store bit for bit.
 
-Google Cloud Storage has no fake as easily started as moto; its filesystem (gcsfs) is not
-exercised against a server here.
+Google Cloud Storage is tested the same way against its emulator (tests/test_remote_gcs.py).
 """
 
 from __future__ import annotations

@@ -49,6 +49,7 @@ from typing import Any
 from urllib.parse import quote, unquote, urljoin, urlsplit, urlunsplit
 
 from ..errors import ReadError, limits
+from . import cancel
 
 __all__ = [
     "DiskCache",
@@ -349,6 +350,27 @@ def _credentials_configured(protocol: str) -> bool:
     return False
 
 
+async def _gather(token: cancel.CancelToken | None, coros: list[Any]) -> list[Any]:
+    """Run ``coros`` concurrently: on the first failure the others are cancelled; cancelling
+    ``token`` (from another thread) cancels them all and raises :class:`.cancel.ReadCancelled`."""
+    loop = asyncio.get_running_loop()
+    tasks = [asyncio.ensure_future(c) for c in coros]
+
+    def stop() -> None:  # called by the cancelling thread
+        loop.call_soon_threadsafe(lambda: [task.cancel() for task in tasks])
+
+    with token.hook(stop) if token is not None else contextlib.nullcontext():
+        try:
+            return list(await asyncio.gather(*tasks))
+        except BaseException:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            if token is not None and token.cancelled:
+                raise cancel.ReadCancelled() from None
+            raise
+
+
 def _zarr_loop_sync(coro: Any) -> Any:
     """Run ``coro`` on zarr-python's event loop (where the fsspec filesystem lives)."""
     from zarr.core.sync import sync
@@ -434,6 +456,15 @@ def _make_filesystem(protocol: str, settings: RemoteSettings,
     elif "token" not in options and not _credentials_configured("gcs"):
         options["token"] = "anon"
     options.setdefault("requests_timeout", settings.timeout)
+    if options.get("token") == "anon" or options.get("endpoint_url") or os.environ.get(
+            "STORAGE_EMULATOR_HOST"):
+        # gcsfs's default class asks a gRPC control API for each bucket's layout (zonal or
+        # hierarchical) before reads, and asks again after every failure: anonymous clients
+        # are refused it and emulators do not serve it (against one, every read waited for that
+        # call's 60 s time-out). The JSON API of the core class reads every other bucket.
+        from gcsfs.core import GCSFileSystem
+
+        return GCSFileSystem(asynchronous=True, skip_instance_cache=True, **options)
     return fsspec.filesystem("gcs", asynchronous=True, skip_instance_cache=True, **options)
 
 
@@ -653,6 +684,9 @@ class Remote:
         ``start`` ``None`` asks for the whole file, refused if larger than ``cap``; a range
         ``[start, stop)`` must come back whole. ``None`` in the result: the key does not exist.
 
+        Inside :func:`.cancel.cancellable`, cancelling the token cancels every request in
+        flight (their connections are closed) and raises :class:`.cancel.ReadCancelled`.
+
         Raises
         ------
         ReadError
@@ -660,6 +694,9 @@ class Remote:
         """
         if not requests:
             return []
+        token = cancel.current()
+        if token is not None:
+            token.check()
 
         async def run() -> list[bytes | None]:
             gate = asyncio.Semaphore(self.settings.concurrency)
@@ -669,14 +706,7 @@ class Remote:
                 async with gate:
                     return await self._fetch(*req, cache=cache)
 
-            tasks = [asyncio.ensure_future(one(r)) for r in requests]
-            try:
-                return list(await asyncio.gather(*tasks))
-            except BaseException:
-                for task in tasks:
-                    task.cancel()
-                await asyncio.gather(*tasks, return_exceptions=True)
-                raise
+            return await _gather(token, [one(r) for r in requests])
 
         return _zarr_loop_sync(run())
 
@@ -702,8 +732,11 @@ class Remote:
                         except _Missing:
                             return None
 
-                return list(await asyncio.gather(*(one(k) for k in todo)))
+                return await _gather(token, [one(k) for k in todo])
 
+            token = cancel.current()
+            if token is not None:
+                token.check()
             found = _zarr_loop_sync(run())
             with self._sizes_lock:
                 for key, size in zip(todo, found, strict=True):

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ParameterError, ReadError
+from ...io.cancel import CancelToken, ReadCancelled, cancellable
 from ...io.omezarr import MultiscaleVolume
 from ..cut.lod import Cut
 from ..cut.octree import BrickOctree
@@ -221,11 +222,15 @@ class BrickCache:
         #: :meth:`reserve`).
         self._reserved = 0
         self._inflight: set[Key] = set()
+        #: Cancels the read of ``_inflight`` (its requests in flight, over a network) when a
+        #: new request no longer needs it (see :meth:`_cancel_unneeded`).
+        self._read_token: CancelToken | None = None
         self._failed: dict[Key, str] = {}  # brick -> why it could not be read
         self._unreadable: list[Key] = []  # of the last resolved cut
         self._warnings: list[str] = []
         self._ranges: list[tuple[Key, float, float]] = []
-        self._counts = dict(loaded=0, loaded_frame=0, evicted=0, dropped=0, substituted=0)
+        self._counts = dict(loaded=0, loaded_frame=0, evicted=0, dropped=0, substituted=0,
+                            cancelled=0)
         self._stop = False
         self._thread: threading.Thread | None = None
         #: Frames being drawn (:meth:`drawing`); the loader starts no read while it is > 0.
@@ -250,9 +255,12 @@ class BrickCache:
             self._thread.start()
 
     def close(self, timeout: float = 10.0) -> None:
-        """Stop the loader thread and wait for it (a read in progress finishes first)."""
+        """Stop the loader thread and wait for it (a remote read in progress is cancelled, a
+        local one finishes first)."""
         with self._cond:
             self._stop = True
+            if self._read_token is not None:
+                self._read_token.cancel()
             self._cond.notify_all()
         if self._thread is not None:
             self._thread.join(timeout)
@@ -388,8 +396,21 @@ class BrickCache:
                 if not batch:  # the queue held only bricks read meanwhile: tell settle()
                     self._cond.notify_all()
                     continue
-            bricks, failures = self._read_safely(batch)
+                token = self._read_token = CancelToken()
+            with cancellable(token):
+                bricks, failures, cancelled = self._read_safely(batch)
             with self._cond:
+                self._read_token = None
+                if cancelled:
+                    # No longer wanted when it was stopped; a later request may want it again
+                    # (then it is queued, and stays needed).
+                    self._counts["cancelled"] += 1
+                    for key in batch:
+                        self._inflight.discard(key)
+                        if key not in self._queue:
+                            self._needed.discard(key)
+                    self._cond.notify_all()
+                    continue
                 for brick in bricks:
                     if self._insert(brick):
                         self._counts["loaded"] += 1
@@ -404,19 +425,24 @@ class BrickCache:
                     self._needed.discard(key)
                 self._cond.notify_all()
 
-    def _read_safely(self, batch: list[Key]) -> tuple[list[Brick], dict[Key, str]]:
+    def _read_safely(self, batch: list[Key]) -> tuple[list[Brick], dict[Key, str], bool]:
+        """The bricks read, the failures, and whether the read was cancelled (then nothing)."""
         try:
-            return self._read(batch), {}
+            return self._read(batch), {}, False
+        except ReadCancelled:
+            return [], {}, True
         except Exception:  # isolate the culprit: read the bricks one by one
             bricks, failures = [], {}
             for key in batch:
                 try:
                     bricks.extend(self._read([key]))
+                except ReadCancelled:
+                    return [], {}, True
                 except ReadError as exc:
                     failures[key] = str(exc)
                 except Exception as exc:  # never let the loader thread die
                     failures[key] = f"{type(exc).__name__}: {exc}"
-            return bricks, failures
+            return bricks, failures, False
 
     # ------------------------------------------------------------------ the rendering thread
     @contextmanager
@@ -468,7 +494,21 @@ class BrickCache:
                 ahead.append(key)
             self._prefetch = set(ahead)
             self._queue = wanted + [k for k in ahead if k not in self._bricks]
+            self._cancel_unneeded()
             self._cond.notify_all()
+
+    def _cancel_unneeded(self) -> None:
+        """Stop the read under way if the new request does not need its bricks (lock held).
+
+        A read is kept while one of its bricks is still to be read for the view, and while it
+        is read ahead with nothing for the view queued before it (stopping it would only start
+        it again). Only remote reads stop early (their requests in flight are cancelled); a
+        local read finishes, and its bricks land within the budget."""
+        token = self._read_token
+        if token is None or token.cancelled or self._inflight & self._needed:
+            return
+        if self._needed or not self._inflight & self._prefetch:
+            token.cancel()
 
     def _estimated_bytes(self, keys: list[Key]) -> list[int]:
         """Bytes each brick takes when resident (from the octree's windows)."""
@@ -513,9 +553,11 @@ class BrickCache:
 
     def clear(self) -> None:
         """Stop reading and evict every brick but the pinned ones (the scene is about to hold
-        the finest level whole, :mod:`.scenes.whole_level`, and gives it the budget). A read already
-        under way still lands, within the budget."""
+        the finest level whole, :mod:`.scenes.whole_level`, and gives it the budget). A remote
+        read already under way is cancelled; a local one still lands, within the budget."""
         with self._cond:
+            if self._read_token is not None:
+                self._read_token.cancel()
             self._queue.clear()
             self._needed.clear()
             self._keep = set()
@@ -662,7 +704,8 @@ class BrickCache:
         read), loaded (this frame / in total), substituted (last :meth:`resolve`), unreadable
         (of those substituted, bricks that could not be read: see :meth:`unreadable`),
         unavailable (bricks that could not be read, of any cut), evicted, dropped (did not
-        fit), complete (nothing substituted)."""
+        fit), reads_cancelled (reads stopped under way: a camera move no longer needed them),
+        complete (nothing substituted)."""
         with self._cond:
             return {
                 "resident": len(self._bricks),
@@ -679,6 +722,7 @@ class BrickCache:
                 "unavailable": len(self._failed),
                 "evicted": self._counts["evicted"],
                 "dropped": self._counts["dropped"],
+                "reads_cancelled": self._counts["cancelled"],
                 "chunks_decoded": self.chunks.misses,
                 "chunks_reused": self.chunks.hits,
             }
