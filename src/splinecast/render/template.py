@@ -413,6 +413,9 @@ def _render_of(cls: type[SceneTemplate]) -> Callable[..., Frame]:
         return template(self, camera, *args, **kwargs)
 
     render.__qualname__ = f"{cls.__qualname__}.render"
+    # The signature below is the one to show; without this, tools that read the source of the
+    # wrapped function (Sphinx's preserved defaults) pair the template's defaults with it.
+    del render.__wrapped__
     signature = inspect.signature(template)
     params = []
     for p in signature.parameters.values():

@@ -4,16 +4,15 @@
 cache with its loader thread, and the per-frame sequence
 
 1. the cut for the camera and the cut's share of the budget: :func:`.cut.lod.select_cut`
-(screen-space
-   level of detail ``lod``), or the ``selector`` a caller passes (the error-metric cut of
-   :mod:`.cut.policy`): every policy shares the cache, its loader and the substitution below;
+   (screen-space level of detail ``lod``), or the ``selector`` a caller passes (the error-metric
+   cut of :mod:`.cut.policy`): every policy shares the cache, its loader and the substitution
+   below;
 2. :meth:`.store.cache.BrickCache.request_cut` (the loader starts reading, coarse levels first);
 3. :meth:`.store.cache.BrickCache.wait` for at most ``loads_per_frame`` bricks;
 4. :meth:`.store.cache.BrickCache.resolve`: every brick of the cut, or its finest resident ancestor.
 
 The renderer then traces each :class:`~.store.cache.DrawItem`'s brick over the cut's box ``n``
-(front to
-back per ray) and reports ``FrameBricks.stats`` in ``frame.stats``.
+(front to back per ray) and reports ``FrameBricks.stats`` in ``frame.stats``.
 """
 
 from __future__ import annotations

@@ -13,9 +13,9 @@ frame it
    updated from the previous frame's cut; :mod:`.cut.policy`) in DVR and MIP/minIP, and the
    level-of-detail cut in the isosurface modes;
 2. turns the cut into :class:`~.draw.cut_renderer.Piece` s and fixes the seams between levels
-(:mod:`.draw.seams`);
-3. traces the pieces front to back per ray (:class:`~.draw.cut_renderer.CutRenderer`) in the mode of
-   :meth:`~splinecast.Scene.render`, with the same options and the same :class:`Frame`.
+   (:mod:`.draw.seams`);
+3. traces the pieces front to back per ray (:class:`~.draw.cut_renderer.CutRenderer`) in the mode
+   of :meth:`~splinecast.Scene.render`, with the same options and the same :class:`Frame`.
 
 ``frame.stats`` adds the stream's counts (``complete``, ``substituted``, ``resident``,
 ``loaded_this_frame``, ``cut_bricks``, ``cut_levels``, ...) and the renderer's (``pieces``,
@@ -203,7 +203,7 @@ class MultiscaleScene(SceneTemplate):
     whole_level : bool
         Draw a view whose level-of-detail cut is level 0 everywhere from level 0 read whole
         into memory, as an in-memory :class:`~splinecast.Scene` of it, when level 0 fits in
-        the budget (default; :mod:`.scenes.whole_level`): the same picture (to rounding) without the
+        the budget (default; :mod:`.whole_level`): the same picture (to rounding) without the
         per-brick costs. Frames that do not wait (``wait=False``) use it once it is read.
         ``False`` always draws bricks.
     **options

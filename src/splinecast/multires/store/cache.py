@@ -553,7 +553,7 @@ class BrickCache:
 
     def clear(self) -> None:
         """Stop reading and evict every brick but the pinned ones (the scene is about to hold
-        the finest level whole, :mod:`.scenes.whole_level`, and gives it the budget). A remote
+        the finest level whole, :mod:`.whole_level`, and gives it the budget). A remote
         read already under way is cancelled; a local one still lands, within the budget."""
         with self._cond:
             if self._read_token is not None:

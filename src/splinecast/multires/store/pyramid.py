@@ -1,7 +1,7 @@
 """Building an OME-Zarr 0.5 brick pyramid from any volume, chunk by chunk, in bounded memory.
 
 Downsampling (the choice decides the NGFF translation; see also :mod:`.cut.octree`)
--------------------------------------------------------------------------------
+-----------------------------------------------------------------------------------
 Vertex-centred (:mod:`.store.downsample`): coarse voxel ``c`` sits exactly on fine voxel ``2 c`` and
 holds the binomial average ``(f[2c-1] + 2 f[2c] + f[2c+1]) / 4`` along every halved axis (the
 separable 3x3x3 ``[1, 2, 1] / 4`` filter, exact for linear data, zero response at the fine Nyquist
