@@ -1,5 +1,6 @@
 """Servers on 127.0.0.1 for the remote-reading tests and benchmark: an aiohttp file server with
-injected latency, bandwidth cap and faults, and moto's S3 endpoint.
+injected latency, bandwidth cap and faults, moto's S3 endpoint and a GCS emulator; and the one
+render those tests compare between a remote store and its local copy.
 
 The HTTP server serves a folder read-only with single byte ranges (``Range: bytes=a-b``,
 ``bytes=-n``) and HEAD. Faults are set per test through :class:`Faults`; each takes effect for
@@ -302,3 +303,16 @@ class GCSServer:
                                                           "application/octet-stream"})
                 with urllib.request.urlopen(request, timeout=60) as answer:
                     assert answer.status == 200, (name, answer.status)
+
+
+def render_complete(volume: Any, size: tuple[int, int] = (32, 32), iso: float = 0.0) -> Any:
+    """The isosurface of ``volume`` from one fixed camera, its pyramid's cut complete (the render
+    every remote test compares with the same store read from disk); the scene is closed after."""
+    import splinecast as sc
+
+    scene = sc.Scene(volume)
+    try:
+        camera = sc.Camera.orbit(volume, azimuth=30, elevation=20, size=size)
+        return scene.render(camera, iso=iso, complete=True)
+    finally:
+        scene.close()

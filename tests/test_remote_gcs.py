@@ -22,6 +22,7 @@ pytest.importorskip("gcsfs", reason="remote reading needs the remote extra")
 pytest.importorskip("gcp_storage_emulator",
                     reason="the GCS tests need gcp-storage-emulator (the test extra)")
 from remote_servers import GCSServer  # noqa: E402
+from remote_servers import render_complete as _render  # noqa: E402
 
 BUCKET = "volumes"
 SIZE = (32, 32)
@@ -46,16 +47,6 @@ def gcs(tmp_path_factory):
         yield server, root
     finally:
         server.stop()
-
-
-def _render(volume) -> sc.Frame:
-    scene = sc.Scene(volume)
-    try:
-        camera = sc.Camera.orbit(volume, azimuth=30, elevation=20, size=SIZE)
-        return scene.render(camera, iso=0.0, complete=True)
-    finally:
-        if hasattr(scene, "close"):
-            scene.close()
 
 
 def test_render_over_gcs_equals_local(gcs):

@@ -21,6 +21,7 @@ from splinecast.errors import ReadError
 
 pytest.importorskip("fsspec", reason="remote reading needs the remote extra")
 from remote_servers import Faults, FileServer  # noqa: E402
+from remote_servers import render_complete as _render  # noqa: E402
 
 ISO = 0.0
 SIZE = (32, 32)
@@ -74,16 +75,6 @@ def _write_ngff(path: Path, mv, zarr_format: int) -> None:
 def server(stores):
     with FileServer(stores, Faults()) as srv:
         yield srv
-
-
-def _render(volume) -> sc.Frame:
-    scene = sc.Scene(volume)
-    try:
-        camera = sc.Camera.orbit(volume, azimuth=30, elevation=20, size=SIZE)
-        return scene.render(camera, iso=ISO, complete=True)
-    finally:
-        if hasattr(scene, "close"):
-            scene.close()
 
 
 def _same(a: sc.Frame, b: sc.Frame) -> None:

@@ -21,6 +21,7 @@ from splinecast.errors import ReadError
 pytest.importorskip("s3fs", reason="remote reading needs the remote extra")
 pytest.importorskip("moto.server", reason="the S3 tests need moto[server] (the test extra)")
 from remote_servers import S3Server  # noqa: E402
+from remote_servers import render_complete as _render  # noqa: E402
 
 BUCKET = "volumes"
 SIZE = (32, 32)
@@ -69,16 +70,6 @@ def s3(tmp_path_factory):
 
 def _options(server: S3Server) -> dict:
     return {"endpoint_url": server.endpoint, "key": "testing", "secret": "testing"}
-
-
-def _render(volume) -> sc.Frame:
-    scene = sc.Scene(volume)
-    try:
-        camera = sc.Camera.orbit(volume, azimuth=30, elevation=20, size=SIZE)
-        return scene.render(camera, iso=0.0, complete=True)
-    finally:
-        if hasattr(scene, "close"):
-            scene.close()
 
 
 @pytest.mark.parametrize("name", ["cli.zarr", "omezarr.zarr"])
