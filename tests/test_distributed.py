@@ -8,6 +8,7 @@ One cluster serves the whole module (starting one costs seconds).
 
 from __future__ import annotations
 
+import inspect
 import os
 import signal
 from pathlib import Path
@@ -118,6 +119,45 @@ def test_tiled_render_equals_the_local_render(scenes, volume, model, mode):
         assert st[key] == pytest.approx(local.stats[key], rel=1e-12), key
     if mode == "dvr":  # per-ray count not kept in the frame: a ray-weighted mean of the tiles
         assert st["mean_samples"] == pytest.approx(local.stats["mean_samples"], rel=1e-12)
+
+
+@pytest.mark.parametrize("mode", [sc.Iso(0.5), sc.Mip(window=(0.2, 0.9)),
+                                  sc.Dvr(TF, sc.DVRSettings(step=0.5))],
+                         ids=["iso", "mip", "dvr"])
+def test_sort_first_is_the_render_template_and_equals_scene_render_bit_for_bit(
+        scenes, volume, mode):
+    """``DistributedScene.render`` is the template's (the scene is a ``SceneTemplate`` whose
+    frame is made by the workers' scenes): the same camera and mode object give the in-memory
+    ``Scene.render``'s frame bit for bit, every buffer and the mode's statistics."""
+    from splinecast.render.template import SceneTemplate
+
+    scene = scenes["trilinear"]
+    assert isinstance(scene, SceneTemplate)
+    params = inspect.signature(type(scene).render).parameters
+    assert list(params)[:4] == ["self", "camera", "mode", "iso"]
+    assert params["mode"].default == "iso"
+    assert {k: params[k].default for k in ("tile_size", "image_only", "on_tile")} == {
+        "tile_size": "auto", "image_only": False, "on_tile": None}
+    cam = sc.Camera.orbit(volume, azimuth=-50, elevation=30, size=(56, 40))
+    local = sc.Scene(volume).render(cam, mode)
+    frame = scene.render(cam, mode, tile_size=16)
+    assert_frames_equal(frame, local)
+    for key, value in local.stats.items():
+        if not key.endswith("_ms") and not key.startswith("mean_"):
+            assert frame.stats[key] == value, key
+    assert frame.stats["tiles"] == 4 * 3
+
+
+def test_sort_first_refuses_bad_arguments_on_the_client(scenes, volume):
+    scene = scenes["trilinear"]
+    cam = sc.Camera.orbit(volume, size=(16, 16))
+    with pytest.raises(TypeError, match=r"DistributedScene.render\(\) got an unexpected "
+                                        r"keyword argument 'tile'"):
+        scene.render(cam, tile=16)
+    with pytest.raises(sc.ParameterError, match="camera must be a splinecast.Camera"):
+        scene.render("camera")
+    with pytest.raises(TypeError):
+        list(scene.render_many([cam], isovalue=0.5))
 
 
 def test_tiles_stream_as_they_complete_and_cover_the_image_once(scenes, volume):

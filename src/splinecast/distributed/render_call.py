@@ -1,10 +1,12 @@
 """A distributed ``render`` call's arguments, checked on the client as a local render checks them.
 
-Both strategies (sort-first, :mod:`splinecast.distributed.scene`, and sort-last,
-:mod:`splinecast.distributed.sort_last`) accept exactly the arguments of
-:meth:`splinecast.Scene.render` after the camera and ship them to the workers as keywords; binding
-them here, before any task is submitted, makes a wrong name or count fail on the client with
-Python's own message.
+``render`` of both strategies is the render template's
+(:meth:`splinecast.render.template.SceneTemplate.render`), which gathers its arguments into a
+:class:`~splinecast.render.template.RenderOptions` on the client. The sort-first scene's other
+entry points (:meth:`~splinecast.distributed.DistributedScene.render_tiles`,
+:meth:`~splinecast.distributed.DistributedScene.render_many`) take the same arguments after the
+camera; binding them here, before any task is submitted, makes a wrong name or count fail on the
+client with Python's own message, and gives the workers the same ``RenderOptions``.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 
 from ..camera import Camera
 from ..errors import ParameterError
+from ..render.template import RenderOptions
 from ..scene import Scene
 
 __all__ = ["RENDER_SIGNATURE", "render_options"]
@@ -22,8 +25,9 @@ __all__ = ["RENDER_SIGNATURE", "render_options"]
 RENDER_SIGNATURE = inspect.signature(Scene.render)
 
 
-def render_options(camera: Camera, args: tuple, kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``Scene.render``'s arguments after ``camera``, as keywords.
+def render_options(camera: Camera, args: tuple, kwargs: dict[str, Any],
+                   default_mode: str = "iso") -> RenderOptions:
+    """``Scene.render``'s arguments after ``camera``, as the template gathers them.
 
     Parameters
     ----------
@@ -31,11 +35,13 @@ def render_options(camera: Camera, args: tuple, kwargs: dict[str, Any]) -> dict[
         The camera of the render.
     args, kwargs
         The remaining positional and keyword arguments of the call.
+    default_mode : str
+        The mode when none is given (the scene kind's ``default_mode``).
 
     Returns
     -------
-    dict
-        Every argument given, by name (defaults are not filled in).
+    RenderOptions
+        The arguments, the signature's defaults for those not given.
 
     Raises
     ------
@@ -49,4 +55,6 @@ def render_options(camera: Camera, args: tuple, kwargs: dict[str, Any]) -> dict[
     bound = RENDER_SIGNATURE.bind(None, camera, *args, **kwargs)
     options = dict(bound.arguments)
     del options["self"], options["camera"]
-    return options
+    if options.get("mode") is None:
+        options["mode"] = default_mode
+    return RenderOptions(**options)

@@ -5,6 +5,13 @@ frame as it completes; a batch of frames (a camera path, a sweep) is one task pe
 volume is never shipped through the task graph: every worker opens the :class:`SceneSource`
 itself, once, and keeps the prepared scene (:mod:`.worker`).
 
+``render`` is the render template's (:class:`~splinecast.render.template.SceneTemplate`): its
+arguments are gathered and checked on the client as every scene kind's are, and the frame is
+made elsewhere, so the scene overrides the template's step for a frame
+(:meth:`DistributedScene.render_frame`): every tile is the workers' scene's own
+``render_frame`` of the same :class:`~splinecast.render.template.RenderOptions` for the tile's
+camera, and the tiles are pasted together.
+
 Sort-last: ``DistributedScene(store, client, model, strategy="sort-last", level=k)`` returns a
 :class:`~.sort_last.SortLastScene` instead (bricks of one pyramid level per worker, partial images
 composited on the workers), with the same ``render``.
@@ -17,7 +24,8 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,6 +33,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import ParameterError, SplinecastError
 from ..render.frame import Frame
+from ..render.template import RenderOptions, SceneTemplate
 from . import worker
 from .render_call import render_options
 from .shots import Shot, as_shots
@@ -41,7 +50,7 @@ __all__ = ["DistributedScene", "STRATEGIES"]
 #: (bricks of one level of an OME-Zarr pyramid, :mod:`.sort_last`).
 STRATEGIES = ("sort-first", "sort-last")
 
-class DistributedScene:
+class DistributedScene(SceneTemplate):
     """A volume and model prepared on every worker of a Dask cluster, rendered like a Scene.
 
     Parameters
@@ -174,23 +183,24 @@ class DistributedScene:
                 f"workers={len(self.client.nthreads())})")
 
     # ------------------------------------------------------------------ one frame, by tiles
-    def render(self, camera: Camera, *args: Any, tile_size: int | str = "auto",
-               image_only: bool = False,
-               on_tile: Callable[[Tile, Frame | np.ndarray], None] | None = None,
-               **kwargs: Any) -> Frame | np.ndarray:
-        """Render one image, cut into tiles rendered on the workers.
+    #: The frame options of a sort-first render (see :meth:`render_frame`).
+    frame_options = MappingProxyType({"tile_size": "auto", "image_only": False,
+                                      "on_tile": None})
 
-        Takes the arguments of :meth:`splinecast.Scene.render` and returns the same
-        :class:`Frame`, equal array by array to the local render. Statistics are merged as
+    def render_frame(self, camera: Camera, options: RenderOptions,
+                     frame_options: Mapping[str, Any]) -> Frame | np.ndarray:
+        """Render one image, cut into tiles rendered on the workers: the render template's step
+        for a frame made elsewhere (``render`` is :meth:`splinecast.Scene.render`, with the
+        frame options below).
+
+        Every tile is the workers' scene's own ``render_frame`` of ``options`` for the tile's
+        camera (:meth:`splinecast.Camera.tile`), so the assembled :class:`Frame` equals the
+        local render array by array. Statistics are merged as
         :func:`~splinecast.distributed.tiles.merge_stats` says, plus ``wall_ms`` (client-side
         time of the whole render) and ``tiles``.
 
-        Parameters
-        ----------
-        camera : Camera
-            Viewpoint and image size.
-        *args, **kwargs
-            Everything else :meth:`Scene.render` takes (``mode``, ``iso``, ``tf``, ...).
+        Frame options:
+
         tile_size : int or "auto"
             Tile edge in pixels; ``"auto"`` gives every worker thread about four tiles
             (see :func:`~splinecast.distributed.tiles.auto_tile_size`, a multiple of 16).
@@ -205,9 +215,12 @@ class DistributedScene:
             Called as ``on_tile(tile, frame)`` with each tile as it arrives (its 8-bit image
             with ``image_only``), for progressive display; see also :meth:`render_tiles`.
         """
+        if not isinstance(camera, Camera):  # checked here: the workers' template checks it late
+            raise ParameterError(f"camera must be a splinecast.Camera, got "
+                                 f"{type(camera).__name__}")
         start = time.perf_counter()
-        tiles = self.render_tiles(camera, *args, tile_size=tile_size, image_only=image_only,
-                                  **kwargs)
+        image_only, on_tile = frame_options["image_only"], frame_options["on_tile"]
+        tiles = self._tiles(camera, options, frame_options["tile_size"], image_only)
         if image_only:
             image = np.empty((camera.height, camera.width, 4), np.uint8)
         else:
@@ -233,7 +246,12 @@ class DistributedScene:
         Tiles are scheduled from the image centre outwards. Leaving the loop early cancels the
         tiles not yet rendered. Arguments as for :meth:`render`.
         """
-        options = render_options(camera, args, kwargs)
+        options = render_options(camera, args, kwargs, self.default_mode)
+        return self._tiles(camera, options, tile_size, image_only)
+
+    def _tiles(self, camera: Camera, options: RenderOptions, tile_size: int | str,
+               image_only: bool) -> Iterator[tuple[Tile, Frame | np.ndarray]]:
+        """The tasks of ``camera``'s tiles, yielded as they complete (see :meth:`render_tiles`)."""
         if tile_size == "auto":
             tile_size = auto_tile_size(camera.width, camera.height, self.threads)
         tiles = tile_grid(camera, tile_size)
@@ -275,7 +293,8 @@ class DistributedScene:
         from distributed import as_completed
 
         shots = as_shots(cameras, **kwargs)
-        requests = [(s.camera, render_options(s.camera, (), dict(s.options))) for s in shots]
+        requests = [(s.camera, render_options(s.camera, (), dict(s.options), self.default_mode))
+                    for s in shots]
         window = in_flight or 4 * self.threads
         running = as_completed()
         index: dict[str, int] = {}  # future key -> frame number, for the futures in flight

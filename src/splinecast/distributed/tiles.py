@@ -173,6 +173,8 @@ class FrameCanvas:
 #: Statistics recomputed from the assembled per-ray arrays (exactly the local render's numbers).
 _FROM_ARRAYS = {"mean_cells_visited": "cells_visited", "mean_cells_tested": "cells_tested",
                 "mean_blocks_skipped": "blocks_skipped"}
+#: Counts of pixels that add up over the tiles (each tile counts its own pixels).
+_SUMMED = ("antialiased",)
 
 
 def merge_stats(tile_stats: list[tuple[Tile, dict[str, Any]]], arrays: dict[str, np.ndarray],
@@ -187,6 +189,7 @@ def merge_stats(tile_stats: list[tuple[Tile, dict[str, Any]]], arrays: dict[str,
       ``mean_samples``): means weighted by each tile's ray count;
     * numbers under keys ending in ``_ms``: summed over tiles, i.e. the total work time spent
       in the tasks (not the wall time, which the caller adds as ``wall_ms``);
+    * ``antialiased`` (pixels traced again for antialiasing): summed over tiles;
     * everything else (mode, model, isovalue, window, counts of the prepared model, ...) is the
       same for every tile and taken from the first.
     """
@@ -199,6 +202,8 @@ def merge_stats(tile_stats: list[tuple[Tile, dict[str, Any]]], arrays: dict[str,
         numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for _, v in values)
         if key.endswith("_ms") and numeric:
             merged[key] = float(sum(v for _, v in values))
+        elif key in _SUMMED and numeric:
+            merged[key] = int(sum(v for _, v in values))
         elif key.startswith("mean_") and numeric and key not in _FROM_ARRAYS:
             merged[key] = float(sum(n * v for n, v in values) / rays)
         else:

@@ -12,15 +12,16 @@ per-isovalue state (its block classification) consistent.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections import OrderedDict
-from typing import Any
 
 import numpy as np
 
 from ..camera import Camera
 from ..errors import SplinecastError
 from ..render.frame import Frame
+from ..render.template import RenderOptions
 from ..scene import Scene
 from .source import SceneSource, VolumeInfo
 from .tiles import Tile
@@ -101,19 +102,23 @@ def forget(source: SceneSource) -> bool:
         return _scenes.pop(source, None) is not None
 
 
-def render_tile(source: SceneSource, camera: Camera, tile: Tile, options: dict[str, Any],
+def render_tile(source: SceneSource, camera: Camera, tile: Tile, options: RenderOptions,
                 image_only: bool = False) -> tuple[Tile, Frame | np.ndarray]:
-    """Render the ``tile`` window of ``camera``'s image with ``Scene.render(**options)``."""
+    """Render the ``tile`` window of ``camera``'s image with the scene's render template."""
     return tile, render_shot(source, tile.camera(camera), options, image_only)
 
 
-def render_shot(source: SceneSource, camera: Camera, options: dict[str, Any],
+def render_shot(source: SceneSource, camera: Camera, options: RenderOptions,
                 image_only: bool = False) -> Frame | np.ndarray:
-    """Render one image; with ``image_only`` return just its 8-bit RGBA colours, which is all
-    a movie or a display needs and 1/18 of the frame's buffers."""
-    if image_only:  # colour is all that is kept: the other buffers are not even filled
-        options = {"outputs": ("rgba",), **options}
+    """Render one image: the prepared scene's ``render_frame`` (the render template's step for
+    a frame, as its ``render`` calls it) of ``options``; with ``image_only`` return just its
+    8-bit RGBA colours, which is all a movie or a display needs and 1/18 of the frame's
+    buffers."""
+    if image_only and options.outputs is None:
+        # Colour is all that is kept: the other buffers are not even filled.
+        options = dataclasses.replace(options, outputs=("rgba",))
     with _lock:
         _use_worker_threads()
-        frame = _scene(source).render(camera, **options)
+        scene = _scene(source)
+        frame = scene.render_frame(camera, options, scene.check_frame_options({}))
     return frame.to_uint8() if image_only else frame
