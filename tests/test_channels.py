@@ -9,6 +9,8 @@ volume, the code path every other test checks):
 - iso: a depth test done by the test: each pixel takes the colour of the single-channel render
   whose depth is smallest.
 - DVR: the single-channel renders on a transparent background, summed by the test.
+- A mode defined here with a compositing rule of its own (the "lighten" blend): the
+  single-channel projections through their windows, their per-pixel maximum taken by the test.
 
 Files holding channels are written by ome-zarr-py (with its ``omero`` display metadata),
 tifffile and vtk from arrays the test holds.
@@ -16,8 +18,10 @@ tifffile and vtk from arrays the test holds.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -25,6 +29,8 @@ from PIL import Image
 
 import splinecast as sc
 from splinecast.cli import main
+from splinecast.multires.scenes.channels import compositing
+from splinecast.render.compose import ADDITIVE, NEAREST_HIT, Composite, Compositing
 
 SIZE = (40, 32)
 BG = (0.07, 0.07, 0.09, 1.0)
@@ -170,10 +176,80 @@ def test_dvr_adds_the_single_channel_renderings(pair, camera):
     np.testing.assert_allclose(frame.rgba[..., :3], expected, atol=2e-6)
 
 
+def test_a_dvr_mode_object_keeps_its_transfer_function(pair, camera):
+    """A ``Dvr(tf)`` object's transfer function is the channels' as the ``tf`` keyword is
+    (not replaced by each channel's automatic one)."""
+    tf = sc.TransferFunction([(0.2, 0.0), (0.9, 0.4)], (0.2, 0.9),
+                             colormap=[(0, 1, 0.5, 0), (1, 1, 0.5, 0)])
+    scene = sc.Scene(pair)
+    by_object = scene.render(camera, sc.Dvr(tf))
+    np.testing.assert_array_equal(by_object.rgba, scene.render(camera, "dvr", tf=tf).rgba)
+    assert not np.array_equal(by_object.rgba, scene.render(camera, "dvr").rgba)
+
+
 def test_dvr_default_transfer_function_takes_the_channel_colour(pair, camera):
     frame = sc.Scene([pair[0]], colors=["red"]).render(camera, "dvr")
     assert frame.rgba[..., 0].max() > 0.3
     np.testing.assert_allclose(frame.rgba[..., 1:3].max(), BG[2], atol=1e-6)
+
+
+# --------------------------------------------------------------------------- a mode's rule
+class Lighten(Compositing):
+    """A rule written by the test: per pixel and component, the brightest channel's value
+    (the "lighten" blend), the nearest depth."""
+
+    name = "lighten"
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[int, frozenset[str]]] = []
+
+    def reads(self, wanted):
+        return frozenset({"position"} & wanted)
+
+    def combine(self, layers, frames, wanted):
+        self.calls.append((len(layers), frozenset(n for n in ("value", "position", "rgba")
+                                                  if getattr(frames[0], n) is not None)))
+        return Composite(np.max(layers, axis=0), np.min([f.depth for f in frames], axis=0))
+
+
+@dataclasses.dataclass(frozen=True)
+class LightenMip(sc.Mip):
+    """MIP whose channels combine by the test's rule (a mode object of a class that is not in
+    the registry: the channel scene asks its class, not its name)."""
+
+    compositing: ClassVar[Compositing] = Lighten()
+
+
+def test_a_mode_s_declared_rule_composites_the_channels(pair, camera):
+    colors, windows = [(1.0, 0.2, 0.0), (0.3, 0.6, 1.0)], [(0.1, 0.9), (0.2, 1.6)]
+    scene = sc.Scene(pair, colors=colors, windows=windows)
+    rule = LightenMip.compositing
+    frame = scene.render(camera, LightenMip(), outputs=("rgba", "depth"))
+    assert frame.stats["compositing"] == "lighten" and frame.stats["mode"] == "mip"
+    assert rule.calls == [(2, frozenset({"value"}))]  # a projection: layers from the values
+    singles = [sc.Scene(v).render(camera, "mip", window=w, outputs=("value", "depth"))
+               for v, w in zip(pair, windows, strict=True)]
+    layers = [_ramp(f.value, w, c) for f, w, c in zip(singles, windows, colors, strict=True)]
+    met = np.any([np.isfinite(f.value) for f in singles], axis=0)
+    expected = np.where(met[..., None], np.maximum(*layers), np.asarray(BG[:3]))
+    np.testing.assert_allclose(frame.rgba[..., :3], expected, atol=2e-6)
+    # Not the additive composite: where both channels show, the sum differs from the maximum.
+    both = np.all([lay.sum(axis=-1) > 0.2 for lay in layers], axis=0)
+    assert both.any()
+    assert np.abs(frame.rgba[both][:, :3] - np.minimum(sum(layers), 1.0)[both]).max() > 0.1
+    np.testing.assert_array_equal(frame.depth, np.minimum(singles[0].depth, singles[1].depth))
+    # The buffers the rule reads are rendered for it when the frame asks for them.
+    scene.render(camera, LightenMip(), outputs=("rgba", "position"))
+    assert rule.calls[-1] == (2, frozenset({"value", "position"}))
+
+
+def test_the_built_in_modes_declare_their_rules():
+    from splinecast.render.modes import MODES
+
+    assert MODES["iso"].compositing is NEAREST_HIT and sc.MultiIso.compositing is NEAREST_HIT
+    for name in ("mip", "minip", "aip", "dvr"):
+        assert MODES[name].compositing is ADDITIVE, name
+    assert compositing("iso") == "nearest hit" and compositing(sc.Dvr()) == "additive"
 
 
 # --------------------------------------------------------------------------- bad input

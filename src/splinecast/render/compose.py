@@ -26,12 +26,19 @@ Projections and volumes, order-independent:
 * :func:`additive`: colours summed and clipped, opacities joined as independent coverages
   (``1 - prod(1 - a)``): napari's additive blending and Fiji's "Composite", where a pixel in
   two channels shows the sum of their colours (red + green = yellow).
+
+Which of these a multichannel frame uses is the render mode's to say: every mode declares a
+:class:`Compositing` rule (:attr:`splinecast.render.modes.RenderMode.compositing`), how the frames
+it renders per channel combine into one image. :data:`ADDITIVE` (the default: projections,
+volume rendering) and :data:`NEAREST_HIT` (surfaces) are the rules of the built-in modes; a mode
+of one's own may declare another (a subclass of :class:`Compositing`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,7 +49,8 @@ from ..errors import ParameterError
 from .frame import Frame
 
 __all__ = ["nearest_hit", "gather", "over_by_depth", "nearest_hit_over", "window_ramp",
-           "additive", "on_background"]
+           "additive", "on_background", "Composite", "Compositing", "Additive", "NearestHit",
+           "ADDITIVE", "NEAREST_HIT"]
 
 
 
@@ -329,3 +337,105 @@ def on_background(rgba: np.ndarray, background: Any) -> np.ndarray:
     out[..., :3] = np.clip(rgba[..., :3] + rest * bg[:3] * bg[3], 0.0, 1.0)
     out[..., 3:] = np.clip(rgba[..., 3:] + rest * bg[3], 0.0, 1.0)
     return out
+
+
+# --------------------------------------------------------------------------- a mode's rule
+@dataclass
+class Composite:
+    """What a :class:`Compositing` rule makes of the channels' frames.
+
+    Attributes
+    ----------
+    rgba : ndarray (height, width, 4)
+        The premultiplied composite, without the background (:func:`on_background` puts it
+        under once).
+    depth : ndarray (height, width)
+        The composite's depth (``inf`` where nothing was drawn).
+    position, normal, face : ndarray, optional
+        Buffers of the frame that the rule chooses per pixel (a surface's), else None.
+    """
+
+    rgba: np.ndarray
+    depth: np.ndarray
+    position: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    face: np.ndarray | None = None
+
+
+class Compositing:
+    """How the frames of one camera rendered separately, one per channel, combine into one
+    image: a render mode's declared capability
+    (:attr:`splinecast.render.modes.RenderMode.compositing`), which the multichannel scene
+    (:class:`~splinecast.multires.scenes.channels.ChannelScene`) asks instead of testing which
+    mode it renders.
+
+    Each channel is rendered alone on a transparent background and turned into a premultiplied
+    RGBA *layer* in its colour (a projection's values through the channel's window; the others'
+    colours as rendered); the rule gets the layers and the frames, in the channels' order.
+    """
+
+    #: The rule's name, reported in ``Frame.stats["compositing"]``.
+    name: str = ""
+
+    def reads(self, wanted: frozenset[str]) -> frozenset[str]:
+        """Buffers of every channel's frame the rule reads besides its layer and ``depth``,
+        when the composite's buffers ``wanted`` are asked for (default: none)."""
+        return frozenset()
+
+    def combine(self, layers: Sequence[np.ndarray], frames: Sequence[Frame],
+                wanted: frozenset[str]) -> Composite:
+        """The composite of the channels' ``layers`` (premultiplied RGBA, one per frame, at
+        least one) and their ``frames`` (with ``depth`` and the buffers of :meth:`reads`)."""
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"<compositing {self.name!r}>"
+
+
+class Additive(Compositing):
+    """Colours summed and clipped (:func:`additive`), the depth the nearest of the channels':
+    napari's additive blending, whatever the channels' order."""
+
+    name = "additive"
+
+    def combine(self, layers: Sequence[np.ndarray], frames: Sequence[Frame],
+                wanted: frozenset[str]) -> Composite:
+        """:func:`additive` of the layers."""
+        return Composite(additive(layers), np.min([f.depth for f in frames], axis=0))
+
+
+class NearestHit(Compositing):
+    """A depth test (:func:`nearest_hit_over`): each pixel shows the channel hit nearest, and
+    the position, normal and face are that channel's, as opaque objects hide one another."""
+
+    name = "nearest hit"
+
+    def reads(self, wanted: frozenset[str]) -> frozenset[str]:
+        """The surface buffers asked for: they are taken from the nearest channel."""
+        return frozenset({"position", "normal", "face"} & wanted)
+
+    def combine(self, layers: Sequence[np.ndarray], frames: Sequence[Frame],
+                wanted: frozenset[str]) -> Composite:
+        """:func:`nearest_hit_over` of the layers by the frames' depths."""
+        rgba, nearest = nearest_hit_over(layers, [f.depth for f in frames])
+        hit = nearest >= 0
+
+        def chosen(name: str) -> np.ndarray | None:
+            """The buffer of the channel hit nearest (a miss's: the first channel's)."""
+            if name not in wanted:
+                return None
+            buffers = [getattr(f, name) for f in frames]
+            picked = buffers[0].copy()
+            for k, buffer in enumerate(buffers[1:], start=1):
+                mine = hit & (nearest == k)
+                picked[mine] = buffer[mine]
+            return picked
+
+        return Composite(rgba, np.min([f.depth for f in frames], axis=0), chosen("position"),
+                         chosen("normal"), chosen("face"))
+
+
+#: The rule of projections and volume rendering (:class:`Additive`).
+ADDITIVE = Additive()
+#: The rule of surfaces (:class:`NearestHit`).
+NEAREST_HIT = NearestHit()

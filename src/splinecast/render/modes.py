@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import ParameterError, limits
 from ..transfer import TransferFunction
+from .compose import ADDITIVE, NEAREST_HIT, Compositing
 from .defaults import (
     auto_colormap,
     auto_inside,
@@ -43,7 +44,8 @@ from .shading import Shading
 
 __all__ = ["RenderMode", "ModeContext", "Iso", "MultiIso", "Mip", "MinIp", "Dvr", "MODES",
            "MODE_NAMES", "RENDER_DEFAULTS", "build_mode", "modes_reading", "modes_with_method",
-           "register_mode", "all_methods", "mode_name", "with_option"]
+           "register_mode", "all_methods", "mode_name", "mode_class", "with_option",
+           "option_value"]
 
 #: :meth:`splinecast.Scene.render`'s defaults of the keywords a mode reads: a keyword left at
 #: its default does not clash with a mode object that sets it.
@@ -101,6 +103,11 @@ class RenderMode:
     keywords: ClassVar[tuple[str, ...]] = ()
     #: What the mode shows, in a few words (the command line's and the viewer's menus).
     summary: ClassVar[str] = ""
+    #: How the frames it renders per channel (each alone, in the channel's colour) combine into
+    #: a multichannel image (:class:`~splinecast.render.compose.Compositing`): by default
+    #: :data:`~splinecast.render.compose.ADDITIVE`, napari's additive blending, whatever the
+    #: channels' order; surfaces declare :data:`~splinecast.render.compose.NEAREST_HIT`.
+    compositing: ClassVar[Compositing] = ADDITIVE
 
     @classmethod
     def default_window(cls, volume: Any) -> tuple[float, float] | None:
@@ -179,6 +186,7 @@ class Iso(RenderMode):
     keywords: ClassVar[tuple[str, ...]] = ("iso", "method", "step", "inside", "colors",
                                            "opacity", "normals", "effects")
     summary: ClassVar[str] = "isosurface(s)"
+    compositing: ClassVar[Compositing] = NEAREST_HIT
 
     iso: float | None = None
     method: str = "exact"
@@ -238,6 +246,7 @@ class MultiIso(RenderMode):
     name: ClassVar[str] = "iso"
     methods: ClassVar[tuple[str, ...]] = Iso.methods
     keywords: ClassVar[tuple[str, ...]] = Iso.keywords
+    compositing: ClassVar[Compositing] = NEAREST_HIT
 
     iso: Sequence[float] = ()
     colors: Any = None
@@ -474,6 +483,23 @@ def mode_name(mode: Any) -> Any:
     return mode.name if isinstance(mode, RenderMode) else mode
 
 
+def mode_class(mode: Any) -> type[RenderMode]:
+    """The class of ``mode``, given as a registry name or as a mode object (whose class need
+    not be registered): what the layers above ask a mode's capabilities of
+    (:attr:`RenderMode.keywords`, :attr:`RenderMode.compositing`, ...).
+
+    Raises
+    ------
+    ParameterError
+        Neither a mode object nor a name of :data:`MODES`.
+    """
+    if isinstance(mode, RenderMode):
+        return type(mode)
+    if isinstance(mode, str) and mode in MODES:
+        return MODES[mode]
+    raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+
+
 def with_option(mode: Any, keywords: dict[str, Any], key: str,
                 value: Any) -> tuple[Any, dict[str, Any]]:
     """``mode`` and the render keywords that go with it, with the option ``key`` set to
@@ -482,3 +508,11 @@ def with_option(mode: Any, keywords: dict[str, Any], key: str,
     if isinstance(mode, RenderMode):
         return dataclasses.replace(mode, **{key: value}), keywords
     return mode, {**keywords, key: value}
+
+
+def option_value(mode: Any, keywords: dict[str, Any], key: str) -> Any:
+    """The value of the option ``key`` that a render of ``mode`` with the render keywords
+    ``keywords`` uses: a mode object's field, else the keyword (None: not given)."""
+    if isinstance(mode, RenderMode):
+        return mode.options().get(key)
+    return keywords.get(key)

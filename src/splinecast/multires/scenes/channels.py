@@ -3,8 +3,10 @@
 A :class:`ChannelScene` holds one scene per channel (:class:`splinecast.Scene` of each
 channel's volume: in memory or a lazy OME-Zarr pyramid) and a :class:`Channel` of display
 settings per channel: colour, MIP window, isovalue, DVR transfer function, visibility. A frame
-renders every visible channel alone, on a transparent background, and composites them
-(:mod:`splinecast.render.compose`); the background is put under the composite once:
+renders every visible channel alone, on a transparent background, and composites them by the
+rule the mode declares (:attr:`splinecast.render.modes.RenderMode.compositing`, a
+:class:`~splinecast.render.compose.Compositing`); the background is put under the composite once.
+The built-in modes' rules:
 
 - ``mip`` / ``minip``: each channel's projected value through its window onto a black-to-colour
   ramp, the channels **added** and clipped (napari's additive blending, Fiji's "Composite"): a
@@ -16,6 +18,12 @@ renders every visible channel alone, on a transparent background, and composites
   several fields at once.
 - ``iso``: each channel's isosurface in its colour, each pixel showing the **nearest hit** of
   any channel (a depth test): surfaces hide one another as opaque objects do.
+
+The scene asks the mode, never its name: a mode's channel settings are the :class:`Channel`
+fields among the keywords it reads (``window``, ``iso``, ``tf``); a mode that reads ``window``
+is coloured from its projected values (``Frame.value``) through the channel's window; one that
+reads ``tf`` gets the channel's colour in its automatic transfer function; surfaces take it as
+their shading's front colour.
 
 ``Scene(volumes)`` with a list of volumes, or with the
 :class:`~splinecast.io.multichannel.MultichannelVolume` that ``read(path, channel=[0, 2])``
@@ -38,10 +46,10 @@ import numpy as np
 from ...camera import Camera
 from ...errors import ParameterError, limits
 from ...io.multichannel import MultichannelVolume
-from ...render.compose import additive, nearest_hit_over, on_background, window_ramp
+from ...render.compose import Composite, on_background, window_ramp
 from ...render.defaults import auto_transfer_function, background_value, content_box
 from ...render.frame import Frame
-from ...render.modes import MODES, mode_name, with_option
+from ...render.modes import RenderMode, mode_class, option_value, with_option
 from ...render.shading import Shading
 from ...render.template import RenderOptions, SceneTemplate
 from ...scene import Scene
@@ -50,16 +58,23 @@ from ...transfer import TransferFunction, parse_color
 __all__ = ["Channel", "ChannelScene", "channel_color", "default_colors", "compositing"]
 
 
-def _projects(name: str) -> bool:
-    """Whether mode ``name`` projects a value per ray through a window (mip, minip, aip):
-    asked of the mode registry, so a new projection composites as these do."""
-    return "window" in MODES[name].keywords
+#: The :class:`Channel` fields that are render keywords: a channel's own value of those its
+#: mode reads (``RenderMode.keywords``) is passed to the channel's render.
+_SETTINGS = ("window", "iso", "tf")
 
 
-def compositing(name: str) -> str:
-    """How mode ``name`` composites its channels: ``"nearest hit"`` for surfaces,
-    ``"additive"`` for projections and volume rendering."""
-    return "nearest hit" if name == "iso" else "additive"
+def _projects(mode: type[RenderMode]) -> bool:
+    """Whether ``mode`` projects a value per ray through a window (mip, minip, aip): asked of
+    the mode's keywords, so a new projection is coloured as these are."""
+    return "window" in mode.keywords
+
+
+def compositing(mode: str | RenderMode) -> str:
+    """The name of the rule by which ``mode`` (a name or a mode object) composites its
+    channels (:attr:`splinecast.render.modes.RenderMode.compositing`): ``"nearest hit"`` for
+    surfaces, ``"additive"`` for projections and volume rendering."""
+    return mode_class(mode).compositing.name
+
 
 #: Colours of channels without one of their own, as napari gives them: one channel white
 #: (the plain grey ramp), two magenta and green (told apart with any colour vision), more the
@@ -377,9 +392,7 @@ class ChannelScene(SceneTemplate):
         if not isinstance(camera, Camera):
             raise ParameterError(f"camera must be a splinecast.Camera, got "
                                  f"{type(camera).__name__}")
-        name = mode_name(mode)
-        if not isinstance(name, str) or name not in MODES:
-            raise ParameterError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        kind = mode_class(mode)
         for key in ("colormap", "colors"):
             if kwargs.get(key) is not None:
                 raise ParameterError(f"{key} does not apply to a multichannel render: each "
@@ -397,85 +410,69 @@ class ChannelScene(SceneTemplate):
         shown = [i for i, c in enumerate(settings) if c.visible]
         frames, stats = [], []
         for i in shown:
-            frame = self._render_channel(settings[i], i, camera, mode, name, shading, wanted,
+            frame = self._render_channel(settings[i], i, camera, mode, kind, shading, wanted,
                                          kwargs)
             frames.append(frame)
             stats.append({"index": self.volume.indices[i], "label": settings[i].label,
                           **frame.stats})
-        return self._composite(name, shown, settings, frames, stats, camera, shading, wanted,
+        return self._composite(kind, shown, settings, frames, stats, camera, shading, wanted,
                                start)
 
-    def _render_channel(self, channel: Channel, i: int, camera: Camera, mode: Any, name: str,
-                        shading: Shading, wanted: frozenset[str], kwargs: dict[str, Any]
-                        ) -> Frame:
+    def _render_channel(self, channel: Channel, i: int, camera: Camera, mode: Any,
+                        kind: type[RenderMode], shading: Shading, wanted: frozenset[str],
+                        kwargs: dict[str, Any]) -> Frame:
         """Channel ``i`` alone (with the settings ``channel``), on a transparent background,
-        with the buffers compositing needs."""
+        in its colour, with the buffers compositing needs."""
         scene = self.scenes[i]
-        clear = dataclasses.replace(shading, background=(0.0, 0.0, 0.0, 0.0))
+        # The channel's colour on surfaces (the other modes do not read the shading's colours).
+        clear = dataclasses.replace(shading, background=(0.0, 0.0, 0.0, 0.0),
+                                    front_color=channel.color,
+                                    back_color=tuple(0.6 * c for c in channel.color))
         own = dict(kwargs)
-        if _projects(name):
-            key, value = "window", channel.window
-        else:
-            key, value = {"iso": ("iso", channel.iso), "dvr": ("tf", channel.tf)}[name]
-        if name == "dvr" and value is None and kwargs.get("tf") is None:
-            value = _coloured(auto_transfer_function(_info(scene)), channel.color)
-        if value is not None:
-            mode, own = with_option(mode, own, key, value)
-        keep = {"stats"} & wanted
-        if _projects(name):
-            keep |= {"value", "depth"}
-        elif name == "iso":
-            keep |= {"rgba", "depth"} | ({"position", "normal", "face"} & wanted)
-            clear = dataclasses.replace(clear, front_color=channel.color,
-                                        back_color=tuple(0.6 * c for c in channel.color))
-        else:
-            keep |= {"rgba", "depth"}
+        for key in _SETTINGS:
+            if key not in kind.keywords:
+                continue
+            value = getattr(channel, key)
+            if key == "tf" and value is None and option_value(mode, kwargs, "tf") is None:
+                value = _coloured(auto_transfer_function(_info(scene)), channel.color)
+            if value is not None:
+                mode, own = with_option(mode, own, key, value)
+        keep = ({"stats"} & wanted) | {"depth"} | kind.compositing.reads(wanted)
+        keep |= {"value"} if _projects(kind) else {"rgba"}
         return scene.render(camera, mode, shading=clear, outputs=tuple(sorted(keep)),
                             **_accepted(scene, own))
 
-    def _composite(self, name: str, shown: list[int], settings: list[Channel],
+    def _layer(self, kind: type[RenderMode], i: int, channel: Channel, frame: Frame
+               ) -> np.ndarray:
+        """Channel ``i``'s frame as a premultiplied RGBA layer in its colour: a projection's
+        values through its window (pixels of background only left transparent), else the
+        colours as rendered."""
+        if not _projects(kind):
+            return frame.rgba
+        info = _info(self.scenes[i])
+        lo, hi = (float(v) for v in info.value_range)
+        empty = np.abs(frame.value - background_value(info)) <= 1e-9 * max(hi - lo, 1e-300)
+        return window_ramp(frame.value, frame.stats["window"], channel.color, empty)
+
+    def _composite(self, kind: type[RenderMode], shown: list[int], settings: list[Channel],
                    frames: list[Frame], stats: list[dict], camera: Camera, shading: Shading,
                    wanted: frozenset[str], start: float) -> Frame:
+        """The channels' frames combined by the mode's rule, over the background."""
         height, width = camera.height, camera.width
-        depth = np.full((height, width), np.inf)
-        position = normal = face = None
-        if not frames:
-            layer = np.zeros((height, width, 4))
-        elif _projects(name):
-            layers = []
-            for i, frame in zip(shown, frames, strict=True):
-                info = _info(self.scenes[i])
-                lo, hi = (float(v) for v in info.value_range)
-                empty = np.abs(frame.value - background_value(info)) <= 1e-9 * max(hi - lo,
-                                                                                      1e-300)
-                layers.append(window_ramp(frame.value, frame.stats["window"],
-                                          settings[i].color, empty))
-            layer = additive(layers)
-            depth = np.min([f.depth for f in frames], axis=0)
-        elif name == "dvr":
-            layer = additive([f.rgba for f in frames])
-            depth = np.min([f.depth for f in frames], axis=0)
+        rule = kind.compositing
+        if frames:
+            layers = [self._layer(kind, i, settings[i], frame)
+                      for i, frame in zip(shown, frames, strict=True)]
+            composite = rule.combine(layers, frames, wanted)
         else:
-            layer, nearest = nearest_hit_over([f.rgba for f in frames],
-                                              [f.depth for f in frames])
-            depth = np.min([f.depth for f in frames], axis=0)
-            hit = nearest >= 0
-
-            def chosen(attribute: str) -> np.ndarray | None:
-                """The buffer of the channel hit nearest (a miss's: the first channel's)."""
-                if attribute not in wanted:
-                    return None
-                buffers = [getattr(f, attribute) for f in frames]
-                picked = buffers[0].copy()
-                for k, buffer in enumerate(buffers[1:], start=1):
-                    mine = hit & (nearest == k)
-                    picked[mine] = buffer[mine]
-                return picked
-
-            position, normal, face = chosen("position"), chosen("normal"), chosen("face")
+            composite = Composite(np.zeros((height, width, 4)), np.full((height, width), np.inf))
+        depth = composite.depth
+        position, normal, face = (getattr(composite, n) if n in wanted else None
+                                  for n in ("position", "normal", "face"))
+        layer = composite.rgba
         rgba = on_background(layer, shading.background) if "rgba" in wanted else None
         frame_stats: dict[str, Any] = {
-            "mode": name, "compositing": compositing(name), "channels": stats,
+            "mode": kind.name, "compositing": rule.name, "channels": stats,
             "width": width, "height": height, "rays": width * height * len(frames),
             "trace_ms": (time.perf_counter() - start) * 1e3,
             "hits": int(np.count_nonzero(np.isfinite(depth))),
