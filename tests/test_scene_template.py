@@ -127,3 +127,19 @@ def test_the_template_gives_each_kind_its_signature(volume):
         OneGridScene(volume).render(cam, iso=1e9)
     with pytest.raises(sc.ParameterError, match="camera"):
         OneGridScene(volume).render("camera")
+
+
+def test_every_kind_closes_through_the_template(volume):
+    """``close()`` and ``with`` come with the template (nothing to release by default), so the
+    command line and the viewer close any scene without asking which kind it is."""
+    cam = sc.Camera.orbit(volume, size=(8, 8))
+    with OneGridScene(volume) as scene:
+        assert scene.render(cam, iso=0.0).hit.any()
+    scene.close()  # again: closing holds nothing, so it may be repeated
+    kinds = [sc.Scene(volume), sc.Scene([volume, volume]),
+             sc.Scene(sc.Volume((volume.data > 0).astype(np.uint8)), labels=True)]
+    for kind in kinds:
+        assert isinstance(kind, SceneTemplate)
+        with kind as entered:
+            assert entered is kind
+    assert "close" not in vars(sc.Scene) and "close" in vars(SceneTemplate)

@@ -211,16 +211,6 @@ class Scene(SceneTemplate):
         shift = self.model.shift
         return lo_cells - shift - 1e-6, hi_cells - shift + 1e-6
 
-    def close(self) -> None:
-        """Nothing to release (no loader thread); here so that every scene ``sc.Scene`` returns
-        is closed and used in ``with`` the same way."""
-
-    def __enter__(self) -> Scene:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
     def set_iso(self, iso: float) -> float:
         """Classify the blocks for a new isovalue; returns the time it took in ms."""
         value = self.check_iso(iso)

@@ -199,7 +199,7 @@ def _time_frames(args: argparse.Namespace, points: list[int], shots: list[Shot],
         try:
             yield from render_locally(scene, [shot], image_only=image_only)
         finally:
-            if scene is not first and hasattr(scene, "close"):
+            if scene is not first:
                 scene.close()
 
 
@@ -333,8 +333,7 @@ def run(args: argparse.Namespace) -> int:
             if args.smooth:
                 read = sc.smooth(read, args.smooth)
             scene = sc.Scene(read, model=args.model, **options)
-            if hasattr(scene, "close"):  # a pyramid's loader thread stops at the end
-                stack.callback(scene.close)
+            stack.callback(scene.close)  # a pyramid's loader thread stops at the end
             volume = scene.volume
             where = "in this process"
         else:

@@ -138,8 +138,7 @@ def warm_combination(combination: Combination) -> tuple[Combination, float, floa
             for options in _render_options(combination.mode, volume):
                 scene.render(camera, outputs=("rgba",), **options, **extra)
         finally:
-            if hasattr(scene, "close"):
-                scene.close()
+            scene.close()
     return combination, compiled[0], time.perf_counter() - start
 
 

@@ -172,12 +172,6 @@ class DistributedScene(SceneTemplate):
         render: workers would open the source again)."""
         self.client.run(worker.forget, self.source)
 
-    def __enter__(self) -> DistributedScene:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def __repr__(self) -> str:
         return (f"DistributedScene({self.source.location!r}, model={self.source.model!r}, "
                 f"workers={len(self.client.nthreads())})")

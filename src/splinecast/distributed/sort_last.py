@@ -761,12 +761,6 @@ class SortLastScene(SceneTemplate):
         """Let every worker drop its shares (memory is freed; rendering reads them again)."""
         self.client.run(forget_shares, list(self.shares))
 
-    def __enter__(self) -> SortLastScene:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def __repr__(self) -> str:
         return (f"SortLastScene({self.source.location!r}, model={self.source.model!r}, "
                 f"level={self.level}, bricks={'x'.join(map(str, self.counts))}, "

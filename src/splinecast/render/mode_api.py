@@ -98,7 +98,9 @@ divided by it for world units) and the parameter where the ray enters the volume
 methods' and DVR's sample grid starts there, so every brick samples at the same places).
 A mode module registers its functions with :func:`register`; each mode also states how two
 partial results of one ray combine (its ``combine`` kernel), which is what brick-parallel and
-distributed compositing use.
+distributed compositing use. How finished frames of several channels combine is declared on the
+mode's user-side class instead (:attr:`splinecast.render.modes.RenderMode.compositing`, a
+:class:`splinecast.render.compose.Compositing`).
 """
 
 from __future__ import annotations

@@ -15,9 +15,11 @@ channels) derives from :class:`SceneTemplate`, which owns the public ``render`` 
 
 A scene kind supplies only the pieces of the middle step (the :class:`SceneTemplate` protocol: a
 ``trace`` method, the volume its defaults come from, how it checks an isovalue, its own frame
-options); a kind whose frames are made elsewhere (sort-last: finished on a Dask worker with the
-same :func:`finish_frame`) or composited from other scenes' frames overrides
-:meth:`SceneTemplate.render_frame` instead.
+options); a kind whose frames are made elsewhere (sort-first Dask: tiles made by the workers'
+scenes with their own ``render_frame``; sort-last: finished on a Dask worker with the same
+:func:`finish_frame`) or composited from other scenes' frames overrides
+:meth:`SceneTemplate.render_frame` instead. Every kind has :meth:`SceneTemplate.close` (and
+``with``): callers close any scene without asking which kind it is.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -163,6 +165,8 @@ class SceneTemplate:
         ``defaults_volume``.
     ``model``
         The reconstruction model (``stats["model"]`` reports its name).
+    ``close()``
+        What the kind releases when closed (a loader thread); default nothing.
     :attr:`frame_options`, :attr:`default_mode`, :attr:`default_samples`
         The kind's own keywords of a frame with their defaults (by default ``trace``'s
         keyword-only parameters), the mode of ``render(camera)`` and the antialiasing samples
@@ -213,6 +217,18 @@ class SceneTemplate:
     def trace(self, request: RenderRequest, camera: Camera, **frame_options: Any) -> Traced:
         """Trace ``camera``'s rays in the mode of ``request`` through the kind's grids."""
         raise NotImplementedError(f"{type(self).__name__} does not trace frames itself")
+
+    # ------------------------------------------------------------------ lifetime
+    def close(self) -> None:
+        """Release what the scene holds (a pyramid's loader thread, the workers' memory of a
+        Dask scene); by default nothing. Every kind has it, so a caller closes any scene, or
+        uses it in ``with``, without asking which kind it holds."""
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # ------------------------------------------------------------------ the template
     def render(

@@ -159,8 +159,9 @@ class Shown:
         return {"wait": False}
 
     def close_scene(self, scene: Any) -> None:
-        """Release a scene the viewer made (a pyramid's loader thread); pinned ones are kept."""
-        if scene is not self.pinned and hasattr(scene, "close"):
+        """Release a scene the viewer made (a pyramid's loader thread); pinned ones are kept,
+        and ``None`` (no scene made yet) is left alone."""
+        if scene is not None and scene is not self.pinned:
             scene.close()
 
     def description(self) -> dict[str, Any]:

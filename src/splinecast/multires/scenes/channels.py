@@ -279,12 +279,6 @@ class ChannelScene(SceneTemplate):
         for scene in self.scenes:
             scene.close()
 
-    def __enter__(self) -> ChannelScene:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
     def __len__(self) -> int:
         return len(self.channels)
 

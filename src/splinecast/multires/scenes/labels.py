@@ -318,15 +318,6 @@ class LabelScene(SceneTemplate):
             self._check_present([value], "label")
         return self.styles[int(value)]
 
-    def close(self) -> None:
-        """Nothing to release; here so every scene is closed and used in ``with`` alike."""
-
-    def __enter__(self) -> LabelScene:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
     # ------------------------------------------------------------------ rendering
     #: The options of ``render`` a label scene reads; the others must keep their defaults.
     _READS = frozenset(("mode", "opacity", "shading", "clip", "crop", "normals", "samples",

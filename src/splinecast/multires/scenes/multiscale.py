@@ -485,12 +485,6 @@ class MultiscaleScene(SceneTemplate):
         """Stop the loader thread (the scene cannot render afterwards)."""
         self.stream.close()
 
-    def __enter__(self) -> MultiscaleScene:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
     def __repr__(self) -> str:
         levels = np.asarray(self.stream.octree.levels).tolist()
         return (f"MultiscaleScene({self.volume.name!r}, model={self.model.name!r}, "

@@ -262,16 +262,6 @@ class WaveletScene(SceneTemplate):
         if not (math.isfinite(value) and value >= 0):
             raise ParameterError(f"lod must be a number of radians >= 0, got {lod!r}")
 
-    def close(self) -> None:
-        """Nothing to release (no loader thread); here so that every scene ``sc.Scene`` returns
-        is closed and used in ``with`` the same way."""
-
-    def __enter__(self) -> WaveletScene:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """World-space corners of the volume."""
