@@ -103,7 +103,10 @@ def band_order(n_bands: int) -> np.ndarray:
     return np.argsort(key, kind="stable").astype(np.int64)
 
 
-@jit(inline="always")
+# Called, not inlined: this and the untraced-pixel helpers below serve tiles and pixels where no
+# ray is traced (rare next to the rays), and as calls they compile once for every model instead
+# of once per (model, mode) band, where their inlined copies made a large share of the code.
+@jit(_nrt=False)
 def _unseen(footprint, row_a, row_b, col_a, col_b, ty0, tx0):
     """Whether every footprint tile that full-image rows ``[row_a, row_b)`` x columns
     ``[col_a, col_b)`` overlap is empty (``ty0``, ``tx0``: the footprint's first tile)."""
@@ -265,7 +268,7 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
             while end < c1 and _unseen(footprint, r0 + row0, r1 + row0, end + col0,
                                        min(c1, end + tile) + col0, ty0, tx0):
                 end = min(c1, end + tile)
-            finish(mode, out, r0, tc0, state_new(mode), _NO_RAY)
+            _finish_fresh(mode, out, r0, tc0)
             copy_pixel(out, r0, tc0, r0, r1, tc0, end)
             tc0 = end
             continue
@@ -281,15 +284,8 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
                     if t_lo > t_hi:
                         # Nothing the mode can see projects here: no ray to set up.
                         if store or final:
-                            st = state_load(mode, state, row, col) if load else state_new(mode)
-                            if store:
-                                state_store(mode, state, row, col, st)
-                            if final:
-                                # A state from an earlier grid may need the ray; a fresh one
-                                # does not (the mode API's contract for finish).
-                                ray = (_bare_ray(basis, row, col, width, height) if load
-                                       else _NO_RAY)
-                                finish(mode, out, row, col, st, ray)
+                            _pass_untraced(mode, state, out, basis, row, col, width, height,
+                                           load, store, final)
                         continue
                 nv, nt, ns = _trace_pixel(
                     grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi,
@@ -423,6 +419,31 @@ def _bare_ray(basis, row, col, width, height):
     return (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
 
 
+@jit(_nrt=False)
+def _finish_fresh(mode, out, row, col):
+    """Write pixel ``(row, col)``'s outputs from a fresh state (no ray: the mode API's contract
+    for ``finish`` of a fresh state)."""
+    finish(mode, out, row, col, state_new(mode), _NO_RAY)
+
+
+@jit(_nrt=False)
+def _pass_untraced(mode, state, out, basis, row, col, width, height, load, store, final):
+    """A pixel whose ray meets nothing the mode can see: its state passed on (``store``) and
+    its outputs written from it (``final``) without tracing."""
+    st = state_load(mode, state, row, col) if load else state_new(mode)
+    if store:
+        state_store(mode, state, row, col, st)
+    if final:
+        # A state from an earlier grid may need the ray; a fresh one does not.
+        ray = _bare_ray(basis, row, col, width, height) if load else _NO_RAY
+        finish(mode, out, row, col, st, ray)
+
+
+#: :func:`.rays.grid_ray` as a call in the pair's band: a ray's set-up, once per pixel, costs
+#: little next to its walk, and called it compiles once for every pair instead of in each.
+_grid_ray_called = rebound(grid_ray, {}, "called", inline="never", _nrt=False)
+
+
 @jit(parallel=True)
 def reset_state(mode, state, height, width):
     """Fill the state arrays with fresh states (no segment traced yet)."""
@@ -467,6 +488,7 @@ def pair_band(grid_class: type, mode_class: type) -> Any:
         if bind is None:
             band = _trace_band
         else:
+            bind = {**bind, "grid_ray": _grid_ray_called}
             suffix = f"{grid_class.__name__}_{mode_class.__name__}"
             if mode_api.sampled_of(mode_class):
                 pixel = bound_sample_pixel(bind, suffix)

@@ -153,6 +153,14 @@ def _watches_skips(mode):
 def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     if mode.method != 1:
         return st
+    # A call, not inlined: the pixel loop has four places where a stretch is skipped, and the
+    # sampled method's work copied into each made a tenth of every isosurface kernel's code.
+    return _skip_sampled(mode, grid, scratch, st, ray, t0, t1, lo, hi)
+
+
+@jit()
+def _skip_sampled(mode, grid, scratch, st, ray, t0, t1, lo, hi):
+    """:func:`_on_skip` of the sampled method."""
     # A stretch without the isovalue lies on one side of it: one sample gives the sign of all
     # its samples (the range gives it without a sample when known); a change against the
     # previous sample is refined.
