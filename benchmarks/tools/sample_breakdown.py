@@ -65,7 +65,7 @@ _PASSES: dict[str, tuple] = {
     "values": (
         (_S16 + "if not known:\n" + _S20 + "va = value_at(", _S16 + "_cv = _rdtsc()\n",
          "before"),
-        (_S16 + "if size == 0 and cache and ahead_of_model and tb < t_far:\n",
+        (_S16 + "if _LOOK_AHEAD and size == 0 and cache and ahead_of_model and tb < t_far:\n",
          _S16 + "_ph += _rdtsc() - _cv\n",
          "before"),
         (_S20 + "stop = False\n", _S20 + "_cv = _rdtsc()\n", "before"),

@@ -52,6 +52,8 @@ Per cell, in the order a driver uses them:
     reads of the segment in front of it, so the two memory-bound reads overlap. Worth it for a
     model whose ``value_at`` is a few loads and little arithmetic (trilinear);
     one whose value is costly loses the early value a ray that stops never uses. Default False.
+    Called once in Python with ``grid=None`` when a pair's kernel is made, so the code of the
+    other case is left out of it.
 
 And once per grid: ``cell_count(grid) -> (nx, ny, nz)`` and ``new_scratch(grid)`` (per-thread
 buffers, allocated once per band of rows). A model module defines these for its grid class and

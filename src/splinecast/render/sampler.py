@@ -73,6 +73,11 @@ from .rays import grid_ray
 __all__ = ["sample_pixel", "bound_sample_pixel"]
 
 
+#: Whether :func:`sample_pixel` compiles the look-ahead code (its model's ``look_ahead`` may be
+#: true); :func:`bound_sample_pixel` binds the pair's constant in its copy.
+_LOOK_AHEAD = True
+
+
 @jit(inline="always")
 def _cell(p: float, n: int) -> int:
     """The cell holding coordinate ``p``, clamped into ``[0, n - 1]``."""
@@ -203,7 +208,10 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
             m = math.floor((ta - anchor) / dt) + 1.0
             va = 0.0
             known = False  # whether va holds the value at ta (taken when first needed)
-            ahead_of_model = look_ahead(grid)
+            # A constant of the pair's loop (bound_sample_pixel): for a model that does not
+            # look ahead, the run loop below and the early values are not compiled at all (a
+            # third of a sampled kernel's code).
+            ahead_of_model = look_ahead(grid) if _LOOK_AHEAD else False
             ahead = 0.0  # the value at sample number ahead_m (taken early; see below)
             ahead_m = -1.0
             lows, highs = blocks[3], blocks[4]
@@ -263,7 +271,7 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                 if not known:
                     va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
                     evaluated += 1
-                if size == 0 and cache and ahead_of_model and tb < t_far:
+                if _LOOK_AHEAD and size == 0 and cache and ahead_of_model and tb < t_far:
                     # A run of samples in blocks the mode asked for: a loop of its own, with
                     # only the sample's value, the segment and the block test in it (the same
                     # segments as the rounds below, without their leaps and bookkeeping). Only
@@ -327,7 +335,7 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                 # whose value is cheap: its voxel loads then overlap them (both wait on memory).
                 # The same expression as its tb on the next round, so the same value.
                 tc = anchor + (m + 1.0) * dt
-                if ahead_of_model and not end and tc < t_far:
+                if _LOOK_AHEAD and ahead_of_model and not end and tc < t_far:
                     ahead = value_at(grid, scr, ox + tc * dx, oy + tc * dy, oz + tc * dz)
                     ahead_m = m + 1.0
                     evaluated += 1
@@ -353,6 +361,10 @@ def bound_sample_pixel(bindings: dict, suffix: str) -> Any:
     and in its helpers that call hooks (:func:`splinecast._jit.rebound` binds the names of one
     function only; a helper left unbound would call each hook through its stub, a real call
     rather than inlined code)."""
+    # The model's look_ahead is a constant (models.pieces): known here, the code of the other
+    # case is left out of the pair's kernel when it compiles.
+    hook = bindings.get("look_ahead")
+    bindings = {**bindings, "_LOOK_AHEAD": hook is not None and bool(hook.py_func(None))}
     where = rebound(_sample_grid, bindings, suffix)
     on_plane = rebound(_on_plane, bindings, suffix)
     planes = rebound(_plane_samples, {**bindings, "_on_plane": on_plane}, suffix)
