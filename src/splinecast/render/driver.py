@@ -439,11 +439,6 @@ def _pass_untraced(mode, state, out, basis, row, col, width, height, load, store
         finish(mode, out, row, col, st, ray)
 
 
-#: :func:`.rays.grid_ray` as a call in the pair's band: a ray's set-up, once per pixel, costs
-#: little next to its walk, and called it compiles once for every pair instead of in each.
-_grid_ray_called = rebound(grid_ray, {}, "called", inline="never", _nrt=False)
-
-
 @jit(parallel=True)
 def reset_state(mode, state, height, width):
     """Fill the state arrays with fresh states (no segment traced yet)."""
@@ -488,7 +483,6 @@ def pair_band(grid_class: type, mode_class: type) -> Any:
         if bind is None:
             band = _trace_band
         else:
-            bind = {**bind, "grid_ray": _grid_ray_called}
             suffix = f"{grid_class.__name__}_{mode_class.__name__}"
             if mode_api.sampled_of(mode_class):
                 pixel = bound_sample_pixel(bind, suffix)
