@@ -310,14 +310,19 @@ class GCSServer:
                     assert answer.status == 200, (name, answer.status)
 
 
-def render_complete(volume: Any, size: tuple[int, int] = (32, 32), iso: float = 0.0) -> Any:
+def render_complete(volume: Any, size: tuple[int, int] = (32, 32), iso: float = 0.0,
+                    after: Any = None) -> Any:
     """The isosurface of ``volume`` from one fixed camera, its pyramid's cut complete (the render
-    every remote test compares with the same store read from disk); the scene is closed after."""
+    every remote test compares with the same store read from disk); ``after(scene)`` is called
+    on the scene once rendered, then the scene is closed."""
     import splinecast as sc
 
     scene = sc.Scene(volume)
     try:
         camera = sc.Camera.orbit(volume, azimuth=30, elevation=20, size=size)
-        return scene.render(camera, iso=iso, complete=True)
+        frame = scene.render(camera, iso=iso, complete=True)
+        if after is not None:
+            after(scene)
+        return frame
     finally:
         scene.close()
