@@ -518,3 +518,45 @@ def test_merged_request_failure_gives_the_same_error(stores, kind, monkeypatch):
         assert all(w in merged and w in alone for w in words)
     else:
         assert merged == alone
+
+
+@pytest.mark.parametrize("damage", ["past the data", "over its neighbour"])
+def test_damaged_shard_index_gives_the_local_error_over_http(stores, tmp_path, damage):
+    """A shard whose index points past its data, or gives an inner chunk the bytes of its
+    neighbour too (two zstd frames: twice the chunk's size, refused before decompressing):
+    read over HTTP with merged requests, the error is the one the same store gives on disk
+    (one line naming the inner chunk), the store's location aside."""
+    import google_crc32c
+
+    store = tmp_path / "bad.zarr"
+    shutil.copytree(stores / "sphere.zarr", store)
+    shard = store / "0/c/1/1/1"
+    raw = bytearray(shard.read_bytes())
+    at = len(raw) - (16 * 8 + 4)
+    index = np.frombuffer(bytes(raw[at:-4]), dtype="<u8").reshape(-1, 2).copy()
+    first = int(np.argmin(index[:, 0]))
+    if damage == "past the data":
+        index[first, 0] = at + 1  # the index's own bytes are not the data's
+    else:
+        after = int(np.flatnonzero(index[:, 0] == index[first].sum())[0])
+        index[first, 1] += index[after, 1]
+    body = index.astype("<u8").tobytes()
+    raw[at:] = body + google_crc32c.value(body).to_bytes(4, "little")
+    shard.write_bytes(bytes(raw))
+
+    def error(source) -> str:
+        level = sc.read(source).levels[0]
+        with pytest.raises(ReadError) as err:
+            level.read((0, 0, 0), level.shape)
+        return str(err.value)
+
+    local = error(store)
+    with FileServer(tmp_path, Faults()) as srv:
+        remote = error(f"{srv.url}/bad.zarr")
+        ranges = [r for m, p, r in srv.faults.log if p.endswith("/0/c/1/1/1") and m == "GET"]
+    # The index is checked before any chunk is asked for; else its chunks are one request.
+    assert len(ranges) == (1 if damage == "past the data" else 2)
+    assert "\n" not in remote and "(1, 1, 1)" not in remote  # an inner chunk, not the shard
+    assert remote.replace(f"{srv.url}/bad.zarr", "STORE") == local.replace(str(store), "STORE")
+    words = "outside the shard's data" if damage == "past the data" else "declares"
+    assert words in remote
