@@ -104,6 +104,27 @@ def main() -> int:
     return 0
 
 
+def _kinds(root: Path, log: list[tuple[str, str, str]]) -> dict[str, int]:
+    """The server's requests by kind: HEAD (a shard's size), metadata, shard index (a range
+    ending at the file's end) and chunk data (any other range)."""
+    out = {"HEAD": 0, "metadata": 0, "index": 0, "chunk data": 0}
+    sizes: dict[str, int] = {}
+    for method, path, header in log:
+        if method == "HEAD":
+            out["HEAD"] += 1
+        elif (path.endswith(("zarr.json", ".zattrs", ".zarray", ".zgroup"))
+              or "/splinecast/" in path):  # (splinecast's tables)
+            out["metadata"] += 1
+        else:
+            if path not in sizes:
+                sizes[path] = (root / path.lstrip("/")).stat().st_size
+            end = header.rsplit("-", 1)[-1]
+            tail = (end.isdigit() and int(end) == sizes[path] - 1
+                    and not header.startswith("bytes=0-"))
+            out["index" if tail else "chunk data"] += 1
+    return out
+
+
 def view_part(args: argparse.Namespace, width: int, height: int) -> int:
     """First image and complete view, local and remote side by side (one warm-up each, then
     ``--repeats`` runs alternated; medians)."""
@@ -111,6 +132,7 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
     if store is None:
         raise SystemExit("--parts view needs --store")
     faults = Faults(latency=args.latency, bandwidth=args.bandwidth)
+    kinds: dict[str, int] = {}
     with FileServer(store.parent, faults) as server:
         sources = {"local": str(store), "remote": f"{server.url}/{store.name}"}
 
@@ -125,6 +147,8 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
                 first = time.perf_counter() - start
                 frame = scene.render(camera, iso=args.iso, complete=True)
                 assert frame.stats["complete"]
+                kinds.clear()
+                kinds.update(_kinds(store.parent, faults.log[before:]))
                 return (first, time.perf_counter() - start, int(frame.stats["cut_bricks"]),
                         len(faults.log) - before, int(frame.stats.get("remote_requests", 0)))
 
@@ -145,6 +169,8 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
     for label, (first, complete, bricks, requests, counted) in med.items():
         print(f"{label:8}{first:16.2f}{complete:19.2f}{bricks:12.0f}{requests:10.0f}"
               f"{counted:9.0f}")
+    print("requests of the last remote run by kind: "
+          + ", ".join(f"{n} {kind}" for kind, n in kinds.items()))
     if args.repeats > 1:
         for label, rows in runs.items():
             print(f"{label} runs, complete view (s): "

@@ -560,3 +560,29 @@ def test_damaged_shard_index_gives_the_local_error_over_http(stores, tmp_path, d
     assert remote.replace(f"{srv.url}/bad.zarr", "STORE") == local.replace(str(store), "STORE")
     words = "outside the shard's data" if damage == "past the data" else "declares"
     assert words in remote
+
+
+def test_shard_indexes_are_fetched_once_per_level(tmp_path):
+    """A level of 125 shards read twice through the same reader: the second read asks for no
+    shard index and no size again (both kept, as a view read ring by ring needs), only the
+    chunks; both equal the store read from disk."""
+    vol = sc.demo("sphere", size=80)
+    vol = sc.Volume(vol.data.astype(np.float32), spacing=vol.spacing, origin=vol.origin)
+    sc.build_pyramid(vol, tmp_path / "many.zarr", brick=8, shard=16, progress=False)
+    local = sc.read(tmp_path / "many.zarr").levels[0]
+    expected = local.read((0, 0, 0), local.shape)
+    shards = list(tmp_path.glob("many.zarr/0/c/*/*/*"))
+    assert len(shards) == 125
+    faults = Faults()
+    with FileServer(tmp_path, faults) as srv:
+        level = sc.read(f"{srv.url}/many.zarr").levels[0]
+        assert np.array_equal(level.read((0, 0, 0), level.shape), expected)
+        before = len(faults.log)
+        assert np.array_equal(level.read((0, 0, 0), level.shape), expected)
+        again = faults.log[before:]
+    tail = 16 * 8 + 4  # the index: 8 entries and its checksum, at the end of each shard
+    sizes = {"/" + p.relative_to(tmp_path).as_posix(): p.stat().st_size for p in shards}
+    assert all(m == "GET" for m, _, _ in again) and len(again) == len(shards)
+    for _, path, header in again:
+        assert not header.endswith(f"-{sizes[path] - 1}"), (path, header)  # not the index
+        assert int(header.rsplit("-", 1)[1]) < sizes[path] - tail
