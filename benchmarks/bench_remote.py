@@ -112,9 +112,9 @@ def _kinds(root: Path, log: list[tuple[str, str, str]]) -> dict[str, int]:
     for method, path, header in log:
         if method == "HEAD":
             out["HEAD"] += 1
-        elif (path.endswith(("zarr.json", ".zattrs", ".zarray", ".zgroup"))
-              or "/splinecast/" in path):  # (splinecast's tables)
-            out["metadata"] += 1
+        elif (path.endswith(("zarr.json", ".zattrs", ".zarray", ".zgroup", ".zmetadata"))
+              or "/splinecast/" in path or not (root / path.lstrip("/")).is_file()):
+            out["metadata"] += 1  # (with splinecast's tables, and names looked for, absent)
         else:
             if path not in sizes:
                 sizes[path] = (root / path.lstrip("/")).stat().st_size
