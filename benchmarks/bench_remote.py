@@ -10,7 +10,8 @@ nothing is cached in memory; the disk cache is off):
 - ``view`` (``--parts view``): from a fresh store object and scene, the first image (drawn at
   once from what is resident, ``wait=False``, as the viewer's first pass) and the complete view
   (frames that wait for their load budget until the cut is complete), both timed from the
-  store's opening.
+  store's opening. ``requests`` is what the server saw, ``counted`` the frame's
+  ``stats["remote_requests"]`` (the reader's own count, retries included).
 
 Run: ``python benchmarks/bench_remote.py --size-volume 256 --latency 0.05 --bandwidth 100e6``;
 an existing pyramid: ``--store P.zarr --iso 128 --size 1024x768 --parts view --budget 256MiB``.
@@ -103,6 +104,27 @@ def main() -> int:
     return 0
 
 
+def _kinds(root: Path, log: list[tuple[str, str, str]]) -> dict[str, int]:
+    """The server's requests by kind: HEAD (a shard's size), metadata, shard index (a range
+    ending at the file's end) and chunk data (any other range)."""
+    out = {"HEAD": 0, "metadata": 0, "index": 0, "chunk data": 0}
+    sizes: dict[str, int] = {}
+    for method, path, header in log:
+        if method == "HEAD":
+            out["HEAD"] += 1
+        elif (path.endswith(("zarr.json", ".zattrs", ".zarray", ".zgroup", ".zmetadata"))
+              or "/splinecast/" in path or not (root / path.lstrip("/")).is_file()):
+            out["metadata"] += 1  # (with splinecast's tables, and names looked for, absent)
+        else:
+            if path not in sizes:
+                sizes[path] = (root / path.lstrip("/")).stat().st_size
+            end = header.rsplit("-", 1)[-1]
+            tail = (end.isdigit() and int(end) == sizes[path] - 1
+                    and not header.startswith("bytes=0-"))
+            out["index" if tail else "chunk data"] += 1
+    return out
+
+
 def view_part(args: argparse.Namespace, width: int, height: int) -> int:
     """First image and complete view, local and remote side by side (one warm-up each, then
     ``--repeats`` runs alternated; medians)."""
@@ -110,10 +132,11 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
     if store is None:
         raise SystemExit("--parts view needs --store")
     faults = Faults(latency=args.latency, bandwidth=args.bandwidth)
+    kinds: dict[str, int] = {}
     with FileServer(store.parent, faults) as server:
         sources = {"local": str(store), "remote": f"{server.url}/{store.name}"}
 
-        def view(source: str) -> tuple[float, float, int, int]:
+        def view(source: str) -> tuple[float, float, int, int, int]:
             start = time.perf_counter()
             before = len(faults.log)
             mv = sc.read(source)
@@ -124,12 +147,14 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
                 first = time.perf_counter() - start
                 frame = scene.render(camera, iso=args.iso, complete=True)
                 assert frame.stats["complete"]
+                kinds.clear()
+                kinds.update(_kinds(store.parent, faults.log[before:]))
                 return (first, time.perf_counter() - start, int(frame.stats["cut_bricks"]),
-                        len(faults.log) - before)
+                        len(faults.log) - before, int(frame.stats.get("remote_requests", 0)))
 
         for source in sources.values():
             view(source)  # warm-up: kernels compiled, connections open
-        runs: dict[str, list[tuple[float, float, int, int]]] = {k: [] for k in sources}
+        runs: dict[str, list[tuple[float, float, int, int, int]]] = {k: [] for k in sources}
         for _ in range(args.repeats):
             for label, source in sources.items():
                 runs[label].append(view(source))
@@ -138,11 +163,18 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
           f"{args.bandwidth / 1e6:.0f} MB/s per response; median of {args.repeats} after a "
           "warm-up, local and remote alternated")
     print(f"{'':8}{'first image (s)':>16}{'complete view (s)':>19}{'cut bricks':>12}"
-          f"{'requests':>10}")
-    med = {label: [statistics.median(r[i] for r in rows) for i in range(4)]
+          f"{'requests':>10}{'counted':>9}")
+    med = {label: [statistics.median(r[i] for r in rows) for i in range(5)]
            for label, rows in runs.items()}
-    for label, (first, complete, bricks, requests) in med.items():
-        print(f"{label:8}{first:16.2f}{complete:19.2f}{bricks:12.0f}{requests:10.0f}")
+    for label, (first, complete, bricks, requests, counted) in med.items():
+        print(f"{label:8}{first:16.2f}{complete:19.2f}{bricks:12.0f}{requests:10.0f}"
+              f"{counted:9.0f}")
+    print("requests of the last remote run by kind: "
+          + ", ".join(f"{n} {kind}" for kind, n in kinds.items()))
+    if args.repeats > 1:
+        for label, rows in runs.items():
+            print(f"{label} runs, complete view (s): "
+                  + ", ".join(f"{r[1]:.2f}" for r in rows))
     print(f"{'ratio':8}{med['remote'][0] / med['local'][0]:16.1f}"
           f"{med['remote'][1] / med['local'][1]:19.1f}")
     return 0

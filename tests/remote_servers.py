@@ -29,7 +29,8 @@ class Faults:
     """What the server does wrong. ``rules`` maps a path substring to ``[kind, count]``: the
     next ``count`` matching requests get ``kind``: ``404``, ``500``, ``403``, ``401``,
     ``"reset"`` (the connection closed before any answer), ``"short"`` (the body cut after
-    half of its declared length), ``"slow"`` (a body that stalls for ``slow_seconds``),
+    half of its declared length), ``"truncate"`` (a whole answer of half the bytes asked, as
+    from a file shorter than its index says), ``"slow"`` (a body that stalls for ``slow_seconds``),
     ``"big"`` (a body of ``big_bytes`` without a Range, announced), ``"redirect:<url>"``.
 
     ``hold``: requests whose path holds this substring wait, unanswered, until
@@ -204,6 +205,10 @@ class FileServer:
         headers = {"Accept-Ranges": "bytes"}
         if status == 206:
             headers["Content-Range"] = f"bytes {start}-{max(stop - 1, start)}/{size}"
+        if kind == "truncate":
+            stop = start + (stop - start) // 2
+            if status == 206:
+                headers["Content-Range"] = f"bytes {start}-{max(stop - 1, start)}/{size}"
         response = web.StreamResponse(status=status, headers=headers)
         response.content_length = stop - start
         await response.prepare(request)
@@ -305,14 +310,19 @@ class GCSServer:
                     assert answer.status == 200, (name, answer.status)
 
 
-def render_complete(volume: Any, size: tuple[int, int] = (32, 32), iso: float = 0.0) -> Any:
+def render_complete(volume: Any, size: tuple[int, int] = (32, 32), iso: float = 0.0,
+                    after: Any = None) -> Any:
     """The isosurface of ``volume`` from one fixed camera, its pyramid's cut complete (the render
-    every remote test compares with the same store read from disk); the scene is closed after."""
+    every remote test compares with the same store read from disk); ``after(scene)`` is called
+    on the scene once rendered, then the scene is closed."""
     import splinecast as sc
 
     scene = sc.Scene(volume)
     try:
         camera = sc.Camera.orbit(volume, azimuth=30, elevation=20, size=size)
-        return scene.render(camera, iso=iso, complete=True)
+        frame = scene.render(camera, iso=iso, complete=True)
+        if after is not None:
+            after(scene)
+        return frame
     finally:
         scene.close()

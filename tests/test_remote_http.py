@@ -367,3 +367,222 @@ def test_camera_move_cancels_the_reads_under_way(pyramid):
     _same(frame, expected)
     assert frame.stats["complete"] and cancelled >= 1
     assert all("/sphere.zarr/0/" in entry for entry in faults.dropped_log)
+
+
+# --------------------------------------------------------------------------- merged range requests
+def test_coalesce_spans_hold_every_range_and_are_maximal():
+    """Random byte ranges: each lies whole in the span it is given; a span is no longer than
+    the cap unless it is one range; two neighbouring spans could not have been joined (gap or
+    cap); cap 0 leaves every range its own span."""
+    from splinecast.io.remote import coalesce
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        n = int(rng.integers(1, 40))
+        starts = rng.integers(0, 5000, n)
+        ranges = [(int(a), int(a + rng.integers(1, 400))) for a in starts]
+        gap, cap = int(rng.integers(0, 300)), int(rng.integers(1, 3000))
+        spans, owner = coalesce(ranges, gap, cap)
+        for (a, b), k in zip(ranges, owner, strict=True):
+            assert spans[k][0] <= a and b <= spans[k][1]
+        members = [[r for r, k in zip(ranges, owner, strict=True) if k == j]
+                   for j in range(len(spans))]
+        for (a, b), inside in zip(spans, members, strict=True):
+            assert inside and a == min(r[0] for r in inside) and b == max(r[1] for r in inside)
+            assert b - a <= cap or len(inside) == 1
+        for (a0, b0), (a1, b1) in zip(spans, spans[1:], strict=False):
+            assert a0 <= a1
+            assert a1 - b0 > gap or max(b0, b1) - a0 > cap
+        alone, owner0 = coalesce(ranges, gap, 0)
+        assert sorted(alone) == sorted(ranges) and len(set(owner0)) == len(ranges)
+
+
+def _shard_index(path: Path, count: int) -> np.ndarray:
+    """(offset, length) of each inner chunk of a shard file, read by the test itself: the
+    index at the end of the file (16 bytes per chunk, then a 4-byte crc32c)."""
+    raw = path.read_bytes()[-(16 * count + 4):-4]
+    index = np.frombuffer(raw, dtype="<u8").reshape(-1, 2)
+    return index[index[:, 0] != np.iinfo(np.uint64).max]
+
+
+def _data_gets(log, name: str) -> dict[str, list[str]]:
+    """The server's GETs of a store's chunk files (not metadata), by path: their ranges."""
+    out: dict[str, list[str]] = {}
+    for method, path, header in log:
+        if method == "GET" and f"/{name}/" in path and not path.endswith(("zarr.json",
+                                                                           ".zattrs")):
+            out.setdefault(path, []).append(header)
+    return out
+
+
+def test_level_read_asks_each_shard_once_for_its_chunks(stores, monkeypatch):
+    """Reading a whole sharded level: the server sees, per shard, its index and one range for
+    all its inner chunks (the bytes from its first chunk to the end of its last, taken from the
+    index by the test); with merging off, one range per inner chunk. Both read what the local
+    store holds."""
+    name = "sphere.zarr"
+    local = sc.read(stores / name).levels[0]
+    expected = local.read((0, 0, 0), local.shape)
+    count = 8  # inner chunks per shard: (16 / 8)^3
+    seen = {}
+    for merge in ("8MiB", "0"):
+        monkeypatch.setenv("SPLINECAST_REMOTE_COALESCE_BYTES", merge)
+        faults = Faults()
+        with FileServer(stores, faults) as srv:
+            level = sc.read(f"{srv.url}/{name}").levels[0]
+            assert np.array_equal(level.read((0, 0, 0), level.shape), expected)
+            assert level.reader.source.remote.requests == len(faults.log)  # the reader's count
+        seen[merge] = _data_gets(faults.log, f"{name}/0")
+    shards = sorted(stores.glob(f"{name}/0/c/*/*/*"))
+    assert len(shards) == 27 and set(seen["8MiB"]) == set(seen["0"])
+    for shard in shards:
+        path = "/" + shard.relative_to(stores).as_posix()
+        index = _shard_index(shard, count)
+        first, last = int(index[:, 0].min()), int((index[:, 0] + index[:, 1]).max())
+        tail = f"bytes={shard.stat().st_size - (16 * count + 4)}-{shard.stat().st_size - 1}"
+        merged, alone = seen["8MiB"][path], seen["0"][path]
+        assert sorted(merged) == sorted([tail, f"bytes={first}-{last - 1}"]), path
+        assert sorted(alone) == sorted([tail] + [f"bytes={int(o)}-{int(o + n) - 1}"
+                                                 for o, n in index]), path
+
+
+def test_render_over_http_merged_equals_local_with_fewer_requests(stores, monkeypatch):
+    """The complete render of the sharded store over HTTP equals the local render bit for bit
+    with and without merging; merging cuts the range requests the server sees, and the loader's
+    ``remote_requests``, once it has nothing left to read, equals the server's count."""
+    name = "sphere.zarr"
+    local = _render(sc.read(stores / name))
+    assert local.stats["remote_requests"] == 0
+    ranged = {}
+    for merge in ("8MiB", "0"):
+        monkeypatch.setenv("SPLINECAST_REMOTE_COALESCE_BYTES", merge)
+        faults = Faults(latency=0.01)
+        counted: list[tuple[int, int]] = []
+
+        def settled(scene, faults=faults, counted=counted):
+            assert scene.stream.cache.settle(timeout=120)  # the read-ahead done too
+            counted.append((scene.stream.cache.stats()["remote_requests"], len(faults.log)))
+
+        with FileServer(stores, faults) as srv:
+            frame = _render(sc.read(f"{srv.url}/{name}"), after=settled)
+        _same(frame, local)
+        assert frame.stats["complete"] and 0 < frame.stats["remote_requests"] <= len(faults.log)
+        assert counted[0][0] == counted[0][1]
+        ranged[merge] = sum(len(v) for v in _data_gets(faults.log, name).values())
+    assert ranged["8MiB"] < ranged["0"]
+
+
+def _read_with_fault(stores, kind, monkeypatch, merge: str) -> tuple[object, list]:
+    """Read the whole level 0 of the sharded store once (sizes and shard indexes are then
+    known), inject ``kind`` for the next request to the middle shard and read it again: the
+    data read (or the error raised) and the server's log of that second read."""
+    monkeypatch.setenv("SPLINECAST_REMOTE_COALESCE_BYTES", merge)
+    monkeypatch.setenv("SPLINECAST_REMOTE_RETRIES", "2")
+    faults = Faults()
+    with FileServer(stores, faults) as srv:
+        level = sc.read(f"{srv.url}/sphere.zarr").levels[0]
+        level.read((0, 0, 0), level.shape)
+        before = len(faults.log)
+        faults.add("/sphere.zarr/0/c/1/1/1", kind, count=1 if kind in ("short", 503) else 99)
+        try:
+            outcome: object = level.read((0, 0, 0), level.shape)
+        except ReadError as exc:
+            outcome = str(exc).replace(srv.url, "URL")
+        return outcome, faults.log[before:]
+
+
+@pytest.mark.parametrize("kind", ["short", 503])
+def test_merged_request_cut_short_is_retried(stores, kind, monkeypatch):
+    """A merged request whose body is cut short (or that meets a server error) is retried as a
+    single chunk's request is, and the level equals the local one."""
+    local = sc.read(stores / "sphere.zarr").levels[0]
+    data, log = _read_with_fault(stores, kind, monkeypatch, "8MiB")
+    assert np.array_equal(data, local.read((0, 0, 0), local.shape))
+    mine = [r for m, p, r in log if p.endswith("/0/c/1/1/1")]
+    index = _shard_index(stores / "sphere.zarr/0/c/1/1/1", 8)
+    span = f"bytes={int(index[:, 0].min())}-{int((index[:, 0] + index[:, 1]).max()) - 1}"
+    assert mine == [span, span]  # the merged range, cut, then asked again
+
+
+@pytest.mark.parametrize("kind", [403, 404, 500, "truncate"])
+def test_merged_request_failure_gives_the_same_error(stores, kind, monkeypatch):
+    """A merged request refused, missing, failing for good or answered with fewer bytes than
+    asked: one line naming the shard's URL, the same as without merging (where the failing
+    request is a single chunk's)."""
+    merged, _ = _read_with_fault(stores, kind, monkeypatch, "8MiB")
+    alone, _ = _read_with_fault(stores, kind, monkeypatch, "0")
+    assert isinstance(merged, str) and isinstance(alone, str)
+    assert "URL/sphere.zarr/0/c/1/1/1" in merged and "\n" not in merged
+    if kind == "truncate":  # which chunk comes up short first depends on the requests
+        words = "asked", "received (the file is shorter than its index or listing says)"
+        assert all(w in merged and w in alone for w in words)
+    else:
+        assert merged == alone
+
+
+@pytest.mark.parametrize("damage", ["past the data", "over its neighbour"])
+def test_damaged_shard_index_gives_the_local_error_over_http(stores, tmp_path, damage):
+    """A shard whose index points past its data, or gives an inner chunk the bytes of its
+    neighbour too (two zstd frames: twice the chunk's size, refused before decompressing):
+    read over HTTP with merged requests, the error is the one the same store gives on disk
+    (one line naming the inner chunk), the store's location aside."""
+    import google_crc32c
+
+    store = tmp_path / "bad.zarr"
+    shutil.copytree(stores / "sphere.zarr", store)
+    shard = store / "0/c/1/1/1"
+    raw = bytearray(shard.read_bytes())
+    at = len(raw) - (16 * 8 + 4)
+    index = np.frombuffer(bytes(raw[at:-4]), dtype="<u8").reshape(-1, 2).copy()
+    first = int(np.argmin(index[:, 0]))
+    if damage == "past the data":
+        index[first, 0] = at + 1  # the index's own bytes are not the data's
+    else:
+        after = int(np.flatnonzero(index[:, 0] == index[first].sum())[0])
+        index[first, 1] += index[after, 1]
+    body = index.astype("<u8").tobytes()
+    raw[at:] = body + google_crc32c.value(body).to_bytes(4, "little")
+    shard.write_bytes(bytes(raw))
+
+    def error(source) -> str:
+        level = sc.read(source).levels[0]
+        with pytest.raises(ReadError) as err:
+            level.read((0, 0, 0), level.shape)
+        return str(err.value)
+
+    local = error(store)
+    with FileServer(tmp_path, Faults()) as srv:
+        remote = error(f"{srv.url}/bad.zarr")
+        ranges = [r for m, p, r in srv.faults.log if p.endswith("/0/c/1/1/1") and m == "GET"]
+    # The index is checked before any chunk is asked for; else its chunks are one request.
+    assert len(ranges) == (1 if damage == "past the data" else 2)
+    assert "\n" not in remote and "(1, 1, 1)" not in remote  # an inner chunk, not the shard
+    assert remote.replace(f"{srv.url}/bad.zarr", "STORE") == local.replace(str(store), "STORE")
+    words = "outside the shard's data" if damage == "past the data" else "declares"
+    assert words in remote
+
+
+def test_shard_indexes_are_fetched_once_per_level(tmp_path):
+    """A level of 125 shards read twice through the same reader: the second read asks for no
+    shard index and no size again (both kept, as a view read ring by ring needs), only the
+    chunks; both equal the store read from disk."""
+    vol = sc.demo("sphere", size=80)
+    vol = sc.Volume(vol.data.astype(np.float32), spacing=vol.spacing, origin=vol.origin)
+    sc.build_pyramid(vol, tmp_path / "many.zarr", brick=8, shard=16, progress=False)
+    local = sc.read(tmp_path / "many.zarr").levels[0]
+    expected = local.read((0, 0, 0), local.shape)
+    shards = list(tmp_path.glob("many.zarr/0/c/*/*/*"))
+    assert len(shards) == 125
+    faults = Faults()
+    with FileServer(tmp_path, faults) as srv:
+        level = sc.read(f"{srv.url}/many.zarr").levels[0]
+        assert np.array_equal(level.read((0, 0, 0), level.shape), expected)
+        before = len(faults.log)
+        assert np.array_equal(level.read((0, 0, 0), level.shape), expected)
+        again = faults.log[before:]
+    tail = 16 * 8 + 4  # the index: 8 entries and its checksum, at the end of each shard
+    sizes = {"/" + p.relative_to(tmp_path).as_posix(): p.stat().st_size for p in shards}
+    assert all(m == "GET" for m, _, _ in again) and len(again) == len(shards)
+    for _, path, header in again:
+        assert not header.endswith(f"-{sizes[path] - 1}"), (path, header)  # not the index
+        assert int(header.rsplit("-", 1)[1]) < sizes[path] - tail

@@ -24,7 +24,10 @@ What every request goes through (:class:`Remote`):
   removed) for a refusal, 401/403/404, a time-out or exhausted retries.
 
 Many requests are in flight at once (:meth:`Remote.fetch_many`, bounded by
-``SPLINECAST_REMOTE_CONCURRENCY``), and fetched chunk bytes can be kept in a bounded local disk
+``SPLINECAST_REMOTE_CONCURRENCY``). The byte ranges a batch wants from one file (the inner chunks
+of a shard) are merged into few requests (:func:`coalesce`, :meth:`Remote.fetch_ranges`): over a
+network each request costs a round trip, and a shard's neighbouring chunks lie side by side in
+it. Fetched chunk bytes can be kept in a bounded local disk
 cache (:class:`DiskCache`, ``SPLINECAST_CACHE_DIR`` and ``SPLINECAST_CACHE_SIZE``), least
 recently used first out. Cached bytes are decoded with the same bounds as fresh ones.
 """
@@ -57,6 +60,7 @@ __all__ = [
     "RemoteSettings",
     "RemoteSource",
     "check_url",
+    "coalesce",
     "is_url",
     "download",
     "open_remote_group",
@@ -73,6 +77,8 @@ ENV_DEADLINE = "SPLINECAST_REMOTE_DEADLINE"
 ENV_RETRIES = "SPLINECAST_REMOTE_RETRIES"
 ENV_CONCURRENCY = "SPLINECAST_REMOTE_CONCURRENCY"
 ENV_REDIRECT_HOSTS = "SPLINECAST_REMOTE_REDIRECT_HOSTS"
+ENV_COALESCE_GAP = "SPLINECAST_REMOTE_COALESCE_GAP"
+ENV_COALESCE_BYTES = "SPLINECAST_REMOTE_COALESCE_BYTES"
 #: Zarr metadata file names (v2, v3, consolidated): small JSON, validated before zarr sees it.
 _METADATA = frozenset(("zarr.json", ".zgroup", ".zarray", ".zattrs", ".zmetadata"))
 _MAX_REDIRECTS = 5
@@ -177,6 +183,20 @@ def _env_number(name: str, default: float, lo: float, hi: float) -> float:
     return value
 
 
+def _env_bytes(name: str, default: int) -> int:
+    """A byte count (``"256KiB"``) from the environment; ``0`` is accepted (off)."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    if text == "0":
+        return 0
+    try:
+        return limits.parse_bytes(text, name)
+    except Exception:
+        raise ReadError(f"{name}={limits.shorten(text)} is not a byte count (such as "
+                        "256KiB, or 0)") from None
+
+
 @dataclass(frozen=True)
 class RemoteSettings:
     """How requests are made; defaults from the environment (:meth:`from_env`).
@@ -201,6 +221,11 @@ class RemoteSettings:
         Folder of the disk cache of fetched chunks (none by default).
     cache_bytes : int
         Most bytes the disk cache holds.
+    coalesce_gap : int
+        Most bytes between two byte ranges of one file that one request still fetches together
+        (the bytes between are fetched and dropped).
+    coalesce_bytes : int
+        Most bytes one merged request asks for (0: every range is its own request).
     """
 
     timeout: float = 30.0
@@ -212,6 +237,11 @@ class RemoteSettings:
     anon: bool | None = None
     cache_dir: str | None = None
     cache_bytes: int = 2 << 30
+    # A round trip costs what tens of kilobytes of transfer cost on a slow link and megabytes
+    # on a fast one: a small gap is always worth fetching; the cap keeps a merged answer short
+    # enough that several shards' requests still share the bandwidth in parallel.
+    coalesce_gap: int = 256 << 10
+    coalesce_bytes: int = 8 << 20
 
     @classmethod
     def from_env(cls) -> RemoteSettings:
@@ -230,6 +260,8 @@ class RemoteSettings:
             anon=True if anon_text in ("1", "true", "yes") else None,
             cache_dir=os.environ.get(ENV_CACHE_DIR) or None,
             cache_bytes=limits.parse_bytes(size, ENV_CACHE_SIZE) if size else 2 << 30,
+            coalesce_gap=_env_bytes(ENV_COALESCE_GAP, 256 << 10),
+            coalesce_bytes=_env_bytes(ENV_COALESCE_BYTES, 8 << 20),
         )
 
 
@@ -321,6 +353,39 @@ def _disk_cache(settings: RemoteSettings) -> DiskCache | None:
     if key not in _CACHES:
         _CACHES[key] = DiskCache(key[0], settings.cache_bytes)
     return _CACHES[key]
+
+
+# --------------------------------------------------------------------------- merging ranges
+def coalesce(ranges: Sequence[tuple[int, int]], max_gap: int, max_bytes: int
+             ) -> tuple[list[tuple[int, int]], list[int]]:
+    """Merge byte ranges ``[start, stop)`` of one file into few spans.
+
+    Ranges taken by their start are joined to the span before while the gap to it is at most
+    ``max_gap`` bytes and the span stays at most ``max_bytes`` long; a range longer than that
+    is a span of its own (``max_bytes`` 0: no merging). Overlapping ranges join too.
+
+    Returns
+    -------
+    spans : list of (int, int)
+        ``[start, stop)`` of each span, in file order.
+    owner : list of int
+        For each range (in the order given), the span that holds it whole.
+    """
+    order = sorted(range(len(ranges)), key=lambda i: ranges[i])
+    spans: list[list[int]] = []
+    owner = [0] * len(ranges)
+    for i in order:
+        a, b = (int(v) for v in ranges[i])
+        if spans:
+            last = spans[-1]
+            stop = max(b, last[1])
+            if a - last[1] <= max_gap and stop - last[0] <= max_bytes:
+                last[1] = stop
+                owner[i] = len(spans) - 1
+                continue
+        spans.append([a, b])
+        owner[i] = len(spans) - 1
+    return [(a, b) for a, b in spans], owner
 
 
 # --------------------------------------------------------------------------- requests
@@ -660,10 +725,14 @@ class Remote:
             await asyncio.sleep(pause)
             delay *= 2
 
+    def _ident(self, key: str | None, start: int | None, stop: int | None, cap: int) -> str:
+        """What the disk cache files a request's bytes under."""
+        return f"{self.url_of(key)}\0{start}\0{stop}\0{cap}"
+
     async def _fetch(self, key: str | None, start: int | None, stop: int | None, cap: int,
                      cache: bool) -> bytes | None:
         url = self.url_of(key)
-        ident = f"{url}\0{start}\0{stop}\0{cap}"
+        ident = self._ident(key, start, stop, cap)
         if cache and self.cache is not None:
             kept = await asyncio.to_thread(self.cache.get, ident)
             if kept is not None:
@@ -709,6 +778,69 @@ class Remote:
             return await _gather(token, [one(r) for r in requests])
 
         return _zarr_loop_sync(run())
+
+    def fetch_ranges(self, requests: Sequence[tuple[str | None, int | None, int | None, int]]
+                     ) -> list[bytes | None]:
+        """:meth:`fetch_many` with the byte ranges of each file merged into few requests.
+
+        The ranges asked of one file are merged by :func:`coalesce` (with the settings'
+        ``coalesce_gap`` and ``coalesce_bytes``); each merged request is capped at its own
+        length and must come back whole, as a single range's request must, and its bytes are
+        then cut into the ranges asked. Requests for whole files are made as they are. Requests
+        to different files (and the merged requests of one) are all in flight at once. With the
+        disk cache, each range is looked up and kept on its own, as :meth:`fetch_many` does.
+
+        Returns
+        -------
+        list of bytes or None
+            For each request, its bytes (a range shorter than asked if the file's answer was:
+            the caller checks lengths), ``None`` if the file does not exist.
+        """
+        out: list[bytes | None] = [None] * len(requests)
+        todo: list[int] = []
+        for i, (key, start, stop, cap) in enumerate(requests):
+            kept = (self.cache.get(self._ident(key, start, stop, cap))
+                    if self.cache is not None else None)
+            if kept is not None:
+                out[i] = kept
+            else:
+                todo.append(i)
+        # The ranges of each file, merged; whole files asked as they are.
+        asked: list[tuple[str | None, int | None, int | None, int]] = []
+        parts: list[list[tuple[int, int]]] = []  # per request asked: (request, offset in it)
+        by_file: dict[str | None, list[int]] = {}
+        for i in todo:
+            key, start, _, _ = requests[i]
+            if start is None:
+                asked.append(requests[i])
+                parts.append([(i, 0)])
+            else:
+                by_file.setdefault(key, []).append(i)
+        settings = self.settings
+        for key, members in by_file.items():
+            spans, owner = coalesce([(requests[i][1], requests[i][2]) for i in members],
+                                    settings.coalesce_gap, settings.coalesce_bytes)
+            first = len(asked)
+            for a, b in spans:
+                asked.append((key, a, b, b - a))
+                parts.append([])
+            for i, span in zip(members, owner, strict=True):
+                parts[first + span].append((i, requests[i][1] - spans[span][0]))  # type: ignore
+        total = sum(r[3] if r[1] is None else r[2] - r[1] for r in asked)  # type: ignore
+        limits.check_memory(total, f"{len(todo)} chunks fetched at once", self.url, ReadError)
+        fetched = self.fetch_many(asked, cache=False)
+        for j, cut in enumerate(parts):
+            data, fetched[j] = fetched[j], None  # a merged answer is dropped once cut up
+            for i, at in cut:
+                key, start, stop, cap = requests[i]
+                if data is None:
+                    continue
+                piece = data if start is None else data[at:at + stop - start]  # type: ignore
+                out[i] = piece
+                whole = start is None or len(piece) == stop - start  # type: ignore[operator]
+                if self.cache is not None and whole:
+                    self.cache.put(self._ident(key, start, stop, cap), piece)
+        return out
 
     def fetch(self, key: str | None, start: int | None = None, stop: int | None = None, *,
               cap: int, cache: bool = True) -> bytes | None:
@@ -769,8 +901,10 @@ class RemoteSource:
     """The byte source :class:`~.zarr_chunks.ChunkReader` reads a remote store's chunks from.
 
     :meth:`prefetch` fetches the requests of a batch of chunks concurrently into a memo of the
-    calling thread; :meth:`read` and :meth:`whole` then serve them, and :meth:`forget` drops
-    them after the batch is decoded (peak memory: one batch of encoded chunks).
+    calling thread (the byte ranges of one shard merged into few requests,
+    :meth:`Remote.fetch_ranges`); :meth:`read` and :meth:`whole` then serve them, and
+    :meth:`forget` drops them after the batch is decoded (peak memory: one batch of encoded
+    chunks).
     """
 
     #: Chunks (or shards) per batch of concurrent requests.
@@ -810,10 +944,7 @@ class RemoteSource:
     def prefetch(self, requests: Sequence[tuple[str, int | None, int | None, int]]) -> None:
         memo = self._memo()
         todo = [r for r in dict.fromkeys(requests) if (r[0], r[1], r[2]) not in memo]
-        total = sum(r[3] if r[1] is None else r[2] - r[1] for r in todo)  # type: ignore
-        limits.check_memory(total, f"{len(todo)} chunks fetched at once", self.remote.url,
-                            ReadError)
-        for req, data in zip(todo, self.remote.fetch_many(todo), strict=True):
+        for req, data in zip(todo, self.remote.fetch_ranges(todo), strict=True):
             memo[(req[0], req[1], req[2])] = data
 
     def forget(self) -> None:

@@ -71,8 +71,10 @@ LZMA_MEMLIMIT = 80 << 20
 #: An empty entry of a shard index (offset and length both 2^64 - 1).
 _EMPTY = (1 << 64) - 1
 #: Parsed shard indexes kept per reader (a brick read touches one shard many times): at most
-#: this many, and this many bytes.
-_INDEX_CACHE = 64
+#: this many, and this many bytes. A view's bricks are read centre first, in rings that cross
+#: every shard of the view again and again: the cache holds a whole level's worth (a 1024^3
+#: level in 128^3 shards has 512), or over a network each ring fetched the indexes again.
+_INDEX_CACHE = 4096
 _INDEX_CACHE_BYTES = 16 << 20
 
 _ZSTD_MAGIC = 0xFD2FB528
@@ -697,6 +699,7 @@ class ChunkReader:
             raise ReadError(f"{label}: fill value {limits.shorten(fill)} is not a "
                             f"{self.dtype}") from None
         self._indexes: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        self._index_bytes = 0
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ files
@@ -906,10 +909,12 @@ class ChunkReader:
         index[empty] = _EMPTY
         if stamp is not None:
             with self._lock:
-                self._indexes[(key, stamp)] = index
-                while len(self._indexes) > _INDEX_CACHE or sum(
-                        v.nbytes for v in self._indexes.values()) > _INDEX_CACHE_BYTES:
-                    self._indexes.popitem(last=False)
+                if (key, stamp) not in self._indexes:
+                    self._indexes[(key, stamp)] = index
+                    self._index_bytes += index.nbytes
+                while (len(self._indexes) > _INDEX_CACHE
+                       or self._index_bytes > _INDEX_CACHE_BYTES):
+                    self._index_bytes -= self._indexes.popitem(last=False)[1].nbytes
         return index
 
     def _read_shard(self, unit: tuple[int, ...], lo: tuple, hi: tuple, out: np.ndarray) -> None:

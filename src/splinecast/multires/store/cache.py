@@ -163,6 +163,18 @@ def read_bricks(volume: MultiscaleVolume, octree: BrickOctree, keys: list[Key],
     return out
 
 
+def _remotes_of(volume: MultiscaleVolume) -> list[Any]:
+    """The network locations (:class:`~splinecast.io.remote.Remote`) the volume's levels are
+    read from, each once (the levels of a store share one); none for a store on disk."""
+    found: dict[int, Any] = {}
+    for level in getattr(volume, "levels", ()):
+        source = getattr(getattr(level, "reader", None), "source", None)
+        remote = getattr(source, "remote", None)
+        if remote is not None:
+            found[id(remote)] = remote
+    return list(found.values())
+
+
 class BrickCache:
     """Resident bricks of a multiscale volume within a byte budget, filled by a loader thread.
 
@@ -206,6 +218,7 @@ class BrickCache:
         #: eighth of the budget, at most :data:`CHUNK_CACHE_MAX` bytes, outside the budget
         #: (part of the fixed overhead).
         self.chunks = ChunkCache(min(CHUNK_CACHE_MAX, self.budget // 8))
+        self._remotes = _remotes_of(volume)
         self._cond = threading.Condition()
         self._bricks: OrderedDict[Key, Brick] = OrderedDict()  # least recently used first
         self._bytes = 0
@@ -705,7 +718,8 @@ class BrickCache:
         (of those substituted, bricks that could not be read: see :meth:`unreadable`),
         unavailable (bricks that could not be read, of any cut), evicted, dropped (did not
         fit), reads_cancelled (reads stopped under way: a camera move no longer needed them),
-        complete (nothing substituted)."""
+        complete (nothing substituted), remote_requests (requests made to the store over a
+        network since it was opened, retries included; 0 for a store on disk)."""
         with self._cond:
             return {
                 "resident": len(self._bricks),
@@ -725,6 +739,7 @@ class BrickCache:
                 "reads_cancelled": self._counts["cancelled"],
                 "chunks_decoded": self.chunks.misses,
                 "chunks_reused": self.chunks.hits,
+                "remote_requests": sum(remote.requests for remote in self._remotes),
             }
 
     def __repr__(self) -> str:
