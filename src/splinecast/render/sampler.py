@@ -210,7 +210,7 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
             known = False  # whether va holds the value at ta (taken when first needed)
             # A constant of the pair's loop (bound_sample_pixel): for a model that does not
             # look ahead, the run loop below and the early values are not compiled at all (a
-            # third of a sampled kernel's code).
+            # fifth of the s31 DVR kernel's code).
             ahead_of_model = look_ahead(grid) if _LOOK_AHEAD else False
             ahead = 0.0  # the value at sample number ahead_m (taken early; see below)
             ahead_m = -1.0
