@@ -25,6 +25,7 @@ work on such large functions.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import pickle
@@ -67,8 +68,8 @@ except ImportError:  # pragma: no cover
 _INDEX_FORMAT = "splinecast-keys-1"
 
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
-           "call_with_first_classes", "package_stamp", "reporting_compiles", "CompileNeeded",
-           "forbidding_compiles"]
+           "call_with_first_classes", "bind_first_class", "bind_first_classes", "package_stamp",
+           "reporting_compiles", "CompileNeeded", "forbidding_compiles"]
 
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -443,6 +444,14 @@ def call_with_first_class(kernel: Any, callee: Any, callee_types: Callable[[tupl
     dispatcher cannot fingerprint a first-class value and would type every argument in Python
     at each call (0.7 ms per render of a small image, against 0.1 ms for all the rest).
     """
+    return bind_first_class(kernel, callee, callee_types, args)()
+
+
+def bind_first_class(kernel: Any, callee: Any, callee_types: Callable[[tuple], tuple],
+                     args: tuple) -> Callable[[], Any]:
+    """:func:`call_with_first_class` made ready but not called: a function of no arguments
+    that runs ``kernel(callee, *args)``, to run it on several threads at once
+    (:func:`splinecast.render.work_queue.run_on_threads`)."""
     key = (kernel, callee, tuple(_fingerprint(a) for a in args))
     entry = _CALLS.get(key)
     if entry is None:
@@ -452,7 +461,7 @@ def call_with_first_class(kernel: Any, callee: Any, callee_types: Callable[[tupl
         _compile_taking_first_class(kernel, argtypes)
         entry = _CALLS[key] = (value, kernel.overloads[argtypes].entry_point)
     value, compiled = entry
-    return compiled(value, *args)
+    return functools.partial(compiled, value, *args)
 
 
 def call_with_first_classes(kernel: Any, make_values: Callable[[tuple], tuple],
@@ -465,6 +474,13 @@ def call_with_first_classes(kernel: Any, make_values: Callable[[tuple], tuple],
     one function for every call (a module-level one), as it is part of the key the values and
     the kernel's compiled entry point are found again by.
     """
+    return bind_first_classes(kernel, make_values, args)()
+
+
+def bind_first_classes(kernel: Any, make_values: Callable[[tuple], tuple],
+                       args: tuple) -> Callable[[], Any]:
+    """:func:`call_with_first_classes` made ready but not called (as
+    :func:`bind_first_class`)."""
     key = (kernel, make_values, tuple(_fingerprint(a) for a in args))
     entry = _CALLS.get(key)
     if entry is None:
@@ -474,7 +490,7 @@ def call_with_first_classes(kernel: Any, make_values: Callable[[tuple], tuple],
         _compile_taking_first_class(kernel, argtypes)
         entry = _CALLS[key] = (values, kernel.overloads[argtypes].entry_point)
     values, compiled = entry
-    return compiled(*values, *args)
+    return functools.partial(compiled, *values, *args)
 
 
 class _CompileReporter(_event.Listener):

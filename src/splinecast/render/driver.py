@@ -32,13 +32,12 @@ independently (on other workers) give partial states that the mode's ``combine``
 order. Models and modes are resolved from the grid's and the mode's tuple classes: the one loop
 written here is copied once per (model, mode) pair with the pair's hooks inlined into it at
 Numba's IR level (no call, no reference counting per hook), compiled once and cached on disk
-under its own name (:func:`pair_band`). The parallel image loop around it is one function for
-every pair: it takes the pair's band as a first-class function
-(:func:`splinecast._jit.call_with_first_class`).
+under its own name (:func:`pair_band`). The image loop around it takes the pair's band as a
+first-class function (:func:`splinecast._jit.bind_first_class`), so it compiles without it.
 
-Work is spread over threads in bands of ``band_rows`` rows: each thread takes the next band of
-the order ``bands`` (a permutation that mixes busy and empty parts of the image) when it is free
-(:mod:`.work_queue`), and traverses it in tiles of ``tile`` columns so neighbouring rays reuse
+Work is spread over threads in bands of ``band_rows`` rows: each thread (:mod:`.work_queue`)
+takes the next band of the order ``bands`` (a permutation that mixes busy and empty parts of the
+image) when it is free, and traverses it in tiles of ``tile`` columns so neighbouring rays reuse
 the model's per-thread caches.
 """
 
@@ -51,7 +50,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import call_with_first_class, inlined, jit, rebound
+from .._jit import bind_first_class, inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step_cached
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
@@ -79,7 +78,7 @@ from .mode_api import (
 from .outputs import copy_pixel
 from .rays import grid_ray, pixel_ray
 from .sampler import bound_sample_pixel
-from .work_queue import take
+from .work_queue import run_on_threads, take
 
 __all__ = ["trace", "pair_band", "pair_bindings", "finalize", "reset_state", "band_order",
            "scratch_types", "GEOM_SIZE"]
@@ -339,8 +338,9 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
     """
     args = (grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,
             band_rows, tile, load, store, final, count, visited, tested, skipped,
-            max(1, min(numba.get_num_threads(), len(bands))))
-    call_with_first_class(_trace_image, pair_band(type(grid), type(mode)), _band_types, args)
+            np.zeros(1, np.int64))
+    work = bind_first_class(_trace_image, pair_band(type(grid), type(mode)), _band_types, args)
+    run_on_threads(work, max(1, min(numba.get_num_threads(), len(bands))))
 
 
 def scratch_types(grid_kind: Any, mode_kind: Any) -> tuple[Any, Any]:
@@ -369,32 +369,30 @@ def _scratch_probe(grid, mode):
     return new_scratch(grid), mode_scratch(mode)
 
 
-@jit(parallel=True)
+@jit()
 def _trace_image(band, grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint,
                  bands, band_rows, tile, load, store, final, count, visited, tested, skipped,
-                 threads):
-    """:func:`trace` compiled: ``band`` is the pair's :func:`_trace_band` as a first-class
-    function (:func:`splinecast._jit.call_with_first_class`), so this one function serves every
-    pair and compiles without the band's code (the parallel loop's library would link and
-    optimize it again)."""
+                 next_band):
+    """One thread's share of :func:`trace`: ``band`` is the pair's :func:`_trace_band` as a
+    first-class function (:func:`splinecast._jit.bind_first_class`), so this function compiles
+    without the band's code (its caller's library would link and optimize it again).
+
+    Each thread that runs it (:func:`.work_queue.run_on_threads`) takes the next band in the
+    order ``bands`` when it is free (``next_band``: the shared counter): bands differ in cost by
+    orders of magnitude, and a split fixed in advance left one thread waiting for the other."""
     height, width = visited.shape
     # The first column as a variable: a constant argument is typed as a literal, which would
     # compile a band of its own instead of the one the cut renderer shares (.pieces_driver).
     first = width - width
-    # Each of the ``threads`` takes the next band in the order ``bands`` when it is free
-    # (:mod:`.work_queue`): bands differ in cost by orders of magnitude, and a split fixed in
-    # advance left one thread waiting for the other.
-    next_band = np.zeros(1, np.int64)
-    for _ in prange(threads):
-        while True:
-            b = take(next_band)
-            if b >= bands.shape[0]:
-                break
-            r0 = bands[b] * band_rows
-            band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0,
-                 min(height, r0 + band_rows), first, width, tile, load, store, final, count,
-                 visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
-                 np.empty(8), np.empty(8, np.int64))
+    while True:
+        b = take(next_band)
+        if b >= bands.shape[0]:
+            break
+        r0 = bands[b] * band_rows
+        band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0,
+             min(height, r0 + band_rows), first, width, tile, load, store, final, count,
+             visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
+             np.empty(8), np.empty(8, np.int64))
 
 
 @jit(parallel=True)

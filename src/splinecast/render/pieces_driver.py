@@ -35,15 +35,15 @@ from typing import Any
 
 import numba
 import numpy as np
-from numba import prange
 
-from .._jit import call_with_first_classes, first_class, jit, overload_jit
+from .._jit import bind_first_classes, first_class, jit, overload_jit
 from ..models.pieces import new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
 from .driver import pair_band, scratch_types
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import grid_point, index_axis, pixel_ray
+from .work_queue import run_on_threads, take
 
 __all__ = ["trace_pieces", "tile_lists", "box_interval", "TILE"]
 
@@ -357,23 +357,25 @@ def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis
     return hits
 
 
-@jit(parallel=True)
+@jit()
 def _launch(tile_fn, band_a, band_b, grids_a, grids_b, which, mode, state, out, basis, geoms,
             boxes, closed, rects, levels, origin0, spacing0, planes, t_range, tiles, tile_start,
             tile_pieces, fresh, final, close, exit_t, exit_piece, exit_level, visited, tested,
-            skipped):
-    """:func:`trace_pieces` compiled: ``tile_fn`` is the pair's :func:`_trace_tile` as a
-    first-class function, so this one function serves every pair and compiles without the
-    tile's code (the parallel loop's library would link and optimize it all again)."""
-    hits = np.zeros(tiles.shape[0], np.int64)
-    # The parallel loop only hands out tiles: its body stays a single call (small parallel
-    # passes and compile time, as in the driver).
-    for n in prange(tiles.shape[0]):
-        hits[n] = tile_fn(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis,
-                          geoms, boxes, closed, rects, levels, origin0, spacing0, planes, t_range,
-                          tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
-                          close, exit_t, exit_piece, exit_level, visited, tested, skipped)
-    return hits.sum()
+            skipped, next_tile):
+    """One thread's share of :func:`trace_pieces`: it takes the next tile (``next_tile``: the
+    counter the threads share, :mod:`.work_queue`) until none is left and returns the
+    closure's hits. ``tile_fn`` is the pair's :func:`_trace_tile` as a first-class function,
+    so this function compiles without the tile's code."""
+    hits = 0
+    while True:
+        n = take(next_tile)
+        if n >= tiles.shape[0]:
+            break
+        hits += tile_fn(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis,
+                        geoms, boxes, closed, rects, levels, origin0, spacing0, planes, t_range,
+                        tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
+                        close, exit_t, exit_piece, exit_level, visited, tested, skipped)
+    return hits
 
 
 def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects,
@@ -438,7 +440,8 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     """
     args = (grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects, levels,
             origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh, final,
-            close, exit_t, exit_piece, exit_level, visited, tested, skipped)
+            close, exit_t, exit_piece, exit_level, visited, tested, skipped,
+            np.zeros(1, np.int64))
     # A list of grids that is empty (the float64 copies at level seams in most frames; the
     # float32 list of a float64 store) calls no band: a stub of the band's signature stands in
     # for it, compiled in a moment where the band would take as long as the other's.
@@ -448,7 +451,8 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
         functions = _launch_functions_b
     else:
         functions = _launch_functions
-    return call_with_first_classes(_launch, functions, args)
+    work = bind_first_classes(_launch, functions, args)
+    return sum(run_on_threads(work, max(1, min(numba.get_num_threads(), len(tiles)))))
 
 
 @jit()
@@ -492,7 +496,7 @@ def _launch_functions(kinds: tuple, stub_a: bool = False, stub_b: bool = False) 
     bands = (first_class(_no_band if stub_a else band, _band_types(grids_a.item_type, kinds)),
              first_class(_no_band if stub_b else band, _band_types(grids_b.item_type, kinds)))
     tile_types = (*(numba.typeof(b) for b in bands), *kinds[:16], *kinds[17:19], numba.int64,
-                  numba.int64, *kinds[19:])
+                  numba.int64, *kinds[19:28])
     return (first_class(_trace_tile, tile_types), *bands)
 
 

@@ -1,28 +1,43 @@
-"""A shared counter that threads take work items from: dynamic scheduling for parallel loops.
+"""Work shared by threads: a counter they take items from, and the threads that run it.
 
-Numba's parallel loop hands each thread one contiguous range of iterations fixed in advance.
-When the items cost very different amounts (bands of an image where a small object covers a
-few of them), a thread that drew the cheap ones waits at the end for the other. With
-:func:`take`, a loop over the threads instead lets each take the next item as it becomes free::
+Compiled image loops run on ordinary threads (:func:`run_on_threads`): each runs the same
+compiled function, which takes the next item from a shared counter (:func:`take`) until none is
+left. The compiled code releases the GIL, so the threads run at once::
 
     counter = np.zeros(1, np.int64)
-    for _ in prange(threads):
-        while True:
-            item = take(counter)
-            if item >= n_items:
-                break
-            ...
+    while True:                 # inside the compiled function
+        item = take(counter)
+        if item >= n_items:
+            break
+        ...
+
+Why not Numba's parallel loop: it compiles a second library for the loop's body for every
+argument type (a second or two per model, mode and data type, on the first render of each), and
+it hands each thread a range of iterations fixed in advance, so a thread that drew the cheap
+bands of an image waited at the end for the other. Taking items as each thread becomes free
+balances that, and a function without a parallel loop compiles in a fraction of the time.
 
 Numba has no atomic operations on the CPU; :func:`take` is LLVM's ``atomicrmw add``.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
+import threading
+from collections.abc import Callable
+from typing import TypeVar
+
+import numba
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-__all__ = ["take"]
+__all__ = ["take", "run_on_threads"]
+
+T = TypeVar("T")
+
+_pool: concurrent.futures.ThreadPoolExecutor | None = None
+_pool_lock = threading.Lock()
 
 
 @intrinsic
@@ -36,8 +51,54 @@ def take(typingctx, counter):
     def codegen(context, builder, signature, args):
         array = context.make_array(signature.args[0])(context, builder, args[0])
         # Monotonic order: the counter only hands out distinct numbers; the items' data is
-        # published by the parallel loop's own barrier.
+        # published when the threads are joined (:func:`run_on_threads`).
         return builder.atomic_rmw("add", array.data, ir.Constant(ir.IntType(64), 1),
                                   "monotonic")
 
     return types.int64(counter), codegen
+
+
+def _shared_pool() -> concurrent.futures.ThreadPoolExecutor:
+    global _pool
+    with _pool_lock:
+        if _pool is None:
+            # As many helpers as Numba may use threads, less the caller's own.
+            _pool = concurrent.futures.ThreadPoolExecutor(
+                max_workers=max(1, numba.config.NUMBA_NUM_THREADS - 1),
+                thread_name_prefix="splinecast-trace")
+        return _pool
+
+
+def run_on_threads(work: Callable[[], T], threads: int) -> list[T]:
+    """Run ``work`` on ``threads`` threads at once and return each one's result.
+
+    ``work`` is a compiled function that releases the GIL and takes its items from a shared
+    counter (:func:`take`); one copy runs on the calling thread, the others on a pool shared by
+    every caller. A copy that starts after the items are all taken returns at once, so a busy
+    pool only costs time, never a wait on another caller's work: copies still queued when the
+    caller's own copy ends are cancelled.
+
+    Parameters
+    ----------
+    work : callable
+        The call to run (no arguments).
+    threads : int
+        How many copies to run (1: only the caller's).
+
+    Returns
+    -------
+    list
+        The results of the copies that ran, the caller's first.
+    """
+    if threads <= 1:
+        return [work()]
+    futures = [_shared_pool().submit(work) for _ in range(threads - 1)]
+    try:
+        results = [work()]
+    finally:
+        # Every copy still running must end before the caller reads what they wrote.
+        for future in futures:
+            future.cancel()
+        concurrent.futures.wait(futures)
+    results.extend(f.result() for f in futures if not f.cancelled())
+    return results
