@@ -228,25 +228,13 @@ def _piece_tile(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_l
                          exit_level, ended, tr0, tc0, visited, tested, skipped, scr, cuts, tags)
 
 
-# Without Numba's reference counting, as the driver's band (:func:`.driver._trace_band`): the
-# closure's hooks take the mode's state tuple and would count every array in it at each call.
-# Nothing here allocates; the closure's evaluation of another piece's grid, which does, is
-# compiled with counting (:func:`_exit_value`). No Python entry: unboxing the typed lists of
-# its arguments needs counting.
-@jit(_nrt=False, no_cpython_wrapper=True)
-def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
-                  origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
-                  grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
-                  tc0, visited, tested, skipped, scr, cuts, tags):
-    """The pixel loop of :func:`_piece_tile` (``scr``, ``cuts``, ``tags``: its buffers).
-
-    Three passes over the rectangle: each ray's interval in the piece's box (empty for a ray
-    that ended in a piece in front or misses the box) and the closure's test on entry; the
-    pair's compiled band over the rectangle, which traces exactly the rays with an interval
-    (the driver's per-pixel unit, compiled once per model, mode and types and shared with the
-    in-memory renderer); then the closure's note on exit and which rays ended here."""
-    height, width = visited.shape
-    hits = 0
+@jit()
+def _box_intervals(basis, origin0, spacing0, box_lo, box_hi, closed, planes, t_range, ended,
+                   tr0, tc0, r0, r1, c0, c1, width, height):
+    """Each ray's interval in a piece's box over the rectangle ``[r0, r1) x [c0, c1)``, into
+    ``t_range`` (empty for a ray that ended in a piece in front or misses the box); returns
+    how many rays have one. A function of its own, called per piece: the same for every model
+    and mode, it compiles once instead of once in each pair's tile function."""
     traced = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
@@ -260,17 +248,45 @@ def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box
                                   col, width, height)
             t_range[row, col, 0] = t0
             t_range[row, col, 1] = t1
-            if t0 > t1:
-                continue  # the ray misses the box: the driver would leave its state alone
-            traced += 1
-            # The closure's cheap test first (a ray leaving a piece of another level right
-            # here): calls with this many arguments cost more than the rest of a short ray.
-            if close and exit_t[row, col] == t0 and exit_level[row, col] != level:
-                hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
-                                      level, kernel, scr, geom, grids_a, grids_b, which, geoms,
-                                      exit_t, exit_piece, exit_level)
+            if t0 <= t1:  # else the ray misses the box: the driver would leave its state alone
+                traced += 1
+    return traced
+
+
+# Without Numba's reference counting, as the driver's band (:func:`.driver._trace_band`): the
+# closure's hooks take the mode's state tuple and would count every array in it at each call.
+# Nothing here allocates; the closure's evaluation of another piece's grid, which does, is
+# compiled with counting (:func:`_exit_value`). No Python entry: unboxing the typed lists of
+# its arguments needs counting.
+@jit(_nrt=False, no_cpython_wrapper=True)
+def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
+                  origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
+                  grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
+                  tc0, visited, tested, skipped, scr, cuts, tags):
+    """The pixel loop of :func:`_piece_tile` (``scr``, ``cuts``, ``tags``: its buffers).
+
+    Three passes over the rectangle: each ray's interval in the piece's box
+    (:func:`_box_intervals`) and the closure's test on entry; the
+    pair's compiled band over the rectangle, which traces exactly the rays with an interval
+    (the driver's per-pixel unit, compiled once per model, mode and types and shared with the
+    in-memory renderer); then the closure's note on exit and which rays ended here."""
+    height, width = visited.shape
+    traced = _box_intervals(basis, origin0, spacing0, box_lo, box_hi, closed, planes, t_range,
+                            ended, tr0, tc0, r0, r1, c0, c1, width, height)
     if traced == 0:
-        return hits, 0
+        return 0, 0
+    hits = 0
+    if close:
+        for row in range(r0, r1):
+            for col in range(c0, c1):
+                t0 = t_range[row, col, 0]
+                t1 = t_range[row, col, 1]
+                # The closure's cheap test first (a ray leaving a piece of another level right
+                # here): calls with this many arguments cost more than the rest of a short ray.
+                if t0 <= t1 and exit_t[row, col] == t0 and exit_level[row, col] != level:
+                    hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
+                                          level, kernel, scr, geom, grids_a, grids_b, which,
+                                          geoms, exit_t, exit_piece, exit_level)
     # Flags as values of the launch's own arguments, not constants: a constant argument would
     # be typed as a literal and compile the band again instead of sharing the in-memory one.
     yes = tr0 >= 0
