@@ -172,6 +172,19 @@ class SceneTemplate:
         keyword-only parameters), the mode of ``render(camera)`` and the antialiasing samples
         when ``samples`` is not given.
 
+    What the front ends (the command line, the viewer) ask of any scene, answered here with
+    the defaults of a kind holding its data in memory, so they never test which kind they hold:
+
+    :attr:`modes`
+        The modes the kind renders (None: every mode of the registry).
+    :attr:`model_name`
+        The name of the reconstruction model.
+    :attr:`tile_shape`
+        The grid of pixel tiles the kind traces as units (a window of the image on it renders
+        the whole image's pixels).
+    :meth:`bricks_loaded`
+        How many bricks the kind has read from storage (None: it reads none).
+
     Each subclass gets a ``render`` whose signature (``inspect.signature``, ``help``) shows its
     default mode and its own frame options; the code behind it is this class's.
     """
@@ -185,6 +198,10 @@ class SceneTemplate:
     default_samples: ClassVar[int | None] = None
     #: Whether ``render`` passes other keywords on (a scene of scenes, whose parts take them).
     passes_options: ClassVar[bool] = False
+    #: The names of the modes the kind renders, :attr:`default_mode` among them (None: every
+    #: mode of the registry :data:`~splinecast.render.modes.MODES`); the command line and the
+    #: viewer offer these.
+    modes: ClassVar[tuple[str, ...] | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -205,6 +222,27 @@ class SceneTemplate:
     def check_iso(self, iso: Any) -> float:
         """An isovalue checked against the data range (``None``: the automatic one)."""
         return check_iso(self.defaults_volume, iso)
+
+    @property
+    def model_name(self) -> str:
+        """The name of the reconstruction model (:data:`splinecast.models.MODELS`' key; default
+        the name of ``self.model``)."""
+        return self.model.name  # type: ignore[attr-defined]
+
+    @property
+    def tile_shape(self) -> tuple[int, int]:
+        """Columns and rows of the tiles the kind traces as units, on the image's own grid: a
+        window of the image (:meth:`Camera.tile`) whose first column and row are multiples of
+        these renders exactly the whole image's pixels. Columns 0: a tile spans whole rows.
+        Default ``(0, 1)``: every ray is its own (a kind that shares work between the rays of a
+        tile says so, :attr:`splinecast.Scene.tile_shape`)."""
+        return (0, 1)
+
+    def bricks_loaded(self) -> int | None:
+        """How many bricks the scene has read from storage so far (a pyramid's scene reads them
+        as frames need them), safe to ask from any thread; None (the default) for a kind that
+        reads none while it renders."""
+        return None
 
     @property
     def table_cache(self) -> dict:
