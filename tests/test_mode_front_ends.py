@@ -28,6 +28,7 @@ from PIL import Image
 import splinecast as sc
 from splinecast.cli import _build_parser, main
 from splinecast.cli.render import check_render_args, model_options
+from splinecast.render.antialias import DEFAULT_SAMPLES, resolve_samples
 from splinecast.render.compose import ADDITIVE, NEAREST_HIT
 from splinecast.render.modes import MODES, RenderMode, register_mode
 from splinecast.render.template import SceneTemplate
@@ -177,6 +178,16 @@ def test_every_model_declares_the_options_it_is_made_with():
             cls(vol, **{option: default})
     assert {"prefilter", "root_finder", "iterations"} <= set(sc.MODELS["bspline3"].option_names)
     assert sc.MODELS["trilinear"].option_names == ()
+
+
+def test_antialiasing_by_default_follows_the_modes_that_draw_surfaces(monkeypatch):
+    assert resolve_samples(None, "iso") == resolve_samples(None, sc.MultiIso) == DEFAULT_SAMPLES
+    assert resolve_samples(None, sc.Aip()) == resolve_samples(None, "mip") == 1
+    monkeypatch.setattr(sc.Aip, "surfaces", True)
+    assert resolve_samples(None, "aip") == DEFAULT_SAMPLES
+    render = _build_parser()._subparsers._group_actions[0].choices["render"]
+    assert f"(default {DEFAULT_SAMPLES} for --mode iso/aip," in " ".join(
+        render.format_help().split())
 
 
 @pytest.fixture(scope="module")

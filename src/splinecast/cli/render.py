@@ -250,10 +250,13 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="isosurface shading: smooth, the gradient of a smooth field at "
                              "the exact hit (the cubic B-spline of the voxels for trilinear and "
                              "bspline1), or exact, the model's own gradient (default smooth)")
+    surfaces = "/".join(name for name, cls in MODE_CLASSES.items() if cls.surfaces)
     render.add_argument("--samples", type=sample_count,
                         help="antialiasing: rays per pixel on the edges of the image, the "
-                             "centre one included, 1 to 64 (default 5 for --mode iso, 1 = off "
-                             "for the other modes and for multiscale volumes)")
+                             f"centre one included, 1 to {sc.render.antialias.MAX_SAMPLES} "
+                             f"(default {sc.render.antialias.DEFAULT_SAMPLES} for --mode "
+                             f"{surfaces}, 1 = off for the other modes and for multiscale "
+                             "volumes)")
 
 
 def reads(args: argparse.Namespace) -> tuple[str, ...]:

@@ -112,6 +112,11 @@ class RenderMode:
     #: ``"minimum"``, ``"mean"``), None for a mode that is not a projection of the values. The
     #: command line names it when every ray kept the background value (nothing drawn).
     projection: ClassVar[str | None] = None
+    #: Whether the mode draws surfaces (first hits with a depth, a normal and a face): a frame
+    #: is then antialiased by default (:func:`~splinecast.render.antialias.resolve_samples`),
+    #: its edges found from the geometry as well as the colours; other modes take one ray per
+    #: pixel unless ``samples`` is given.
+    surfaces: ClassVar[bool] = False
 
     @classmethod
     def default_window(cls, volume: Any) -> tuple[float, float] | None:
@@ -191,6 +196,7 @@ class Iso(RenderMode):
                                            "opacity", "normals", "effects")
     summary: ClassVar[str] = "isosurface(s)"
     compositing: ClassVar[Compositing] = NEAREST_HIT
+    surfaces: ClassVar[bool] = True
 
     iso: float | None = None
     method: str = "exact"
@@ -251,6 +257,7 @@ class MultiIso(RenderMode):
     methods: ClassVar[tuple[str, ...]] = Iso.methods
     keywords: ClassVar[tuple[str, ...]] = Iso.keywords
     compositing: ClassVar[Compositing] = NEAREST_HIT
+    surfaces: ClassVar[bool] = True
 
     iso: Sequence[float] = ()
     colors: Any = None

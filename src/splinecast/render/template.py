@@ -505,6 +505,9 @@ class RenderRequest:
         (surface effects need position, normal and face, antialiasing depth).
     samples : int
         Rays per edge pixel (:mod:`splinecast.render.antialias`; 1: none).
+    surfaces : bool
+        Whether the mode draws surfaces (:attr:`RenderMode.surfaces`): antialiasing finds
+        their edges from the geometry too.
     """
 
     setup: Any
@@ -515,6 +518,7 @@ class RenderRequest:
     effects: SurfaceEffects | None
     outputs: frozenset[str] = frozenset(OUTPUTS)
     samples: int = 1
+    surfaces: bool = False
 
 
 def prepare_render(
@@ -544,7 +548,7 @@ def prepare_render(
     limits.check_render(volume, camera)
     spec.check_limits(volume)
     normals_code(normals)  # checked for every mode: a typo is refused, not ignored
-    samples = resolve_samples(samples, spec.name)
+    samples = resolve_samples(samples, spec)
     if inside is not None and inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
     shading = shading or Shading()
@@ -557,14 +561,15 @@ def prepare_render(
         effects is not None and effects.active) else wanted
     if "rgba" not in wanted:
         samples = 1  # nothing to antialias
-    elif samples > 1 and spec.name == "iso":
+    elif samples > 1 and spec.surfaces:
         filled = filled | {"depth", "normal", "face"}  # the edges of the geometry
     stats: dict[str, Any] = {"mode": spec.name, "model": model}
     context = ModeContext(volume, check_iso, shading, effects, filled, table_cache,
                           normals=normals, planes=len(planes))
     setup, mode_stats, value = spec.setup(context)
     stats.update(mode_stats)
-    return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples)
+    return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples,
+                         spec.surfaces)
 
 
 def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Camera,
@@ -587,7 +592,7 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
         stats["samples"] = request.samples
         stats["antialiased"] = antialias(frame, camera, request.samples,
                                          _sample_tracer(request, trace, shaded),
-                                         geometry=setup.name == "iso")
+                                         geometry=request.surfaces)
     trace_ms = (time.perf_counter() - start) * 1e3
     stats.update({
         "width": camera.width,
