@@ -170,8 +170,8 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
                              " (default exact)")
     render.add_argument("--step", type=finite,
                         help="sampling step in voxels for --method sampled/slices (default "
-                             "0.25) and --mode dvr (default 0.25 when another DVR option is "
-                             "given)")
+                             f"0.25) and --mode {_reading('dvr')} (default 0.25 when another "
+                             "DVR option is given)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default: the volume's, "
                              "else low for isovalues below the background value, e.g. negative "
@@ -205,7 +205,7 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                                        for name, cls in MODE_CLASSES.items())
                         + f" (default {DEFAULT_MODE})")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
-    render.add_argument("--tf", help="transfer function JSON file (--mode dvr)")
+    render.add_argument("--tf", help=f"transfer function JSON file (--mode {_reading('tf')})")
     render.add_argument("--colormap",
                         help=f"colormap of --mode {_reading('colormap')}, any matplotlib or "
                              "cmap name "
