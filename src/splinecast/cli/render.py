@@ -55,8 +55,8 @@ __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "mode
 DEFAULT_MODE = sc.Scene.default_mode
 
 #: Options only some modes read: flag -> (attribute, the ``Scene.render`` keyword it becomes).
-#: Given with a mode that does not read that keyword (:attr:`~splinecast.render.modes.
-#: RenderMode.keywords`) they would be ignored without a word, so
+#: Given with a mode that does not read that keyword
+#: (:attr:`~splinecast.render.modes.RenderMode.keywords`) they would be ignored without a word, so
 #: :func:`_refuse_ignored_options` refuses them instead. The keyword ``dvr`` is the
 #: :class:`~splinecast.DVRSettings` the DVR options make (:func:`dvr_settings`).
 _MODE_ONLY = {
@@ -260,9 +260,9 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
 
 
 def reads(args: argparse.Namespace) -> tuple[str, ...]:
-    """The ``Scene.render`` keywords ``--mode`` reads (:attr:`~splinecast.render.modes.
-    RenderMode.keywords`): the one question the options ask of the mode, so a mode the
-    registry adds is offered its options without a change here."""
+    """The ``Scene.render`` keywords ``--mode`` reads
+    (:attr:`~splinecast.render.modes.RenderMode.keywords`): the one question the options ask
+    of the mode, so a mode the registry adds is offered its options without a change here."""
     return mode_class(args.mode).keywords
 
 
