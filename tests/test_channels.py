@@ -404,6 +404,42 @@ def test_cli_mip_of_channel_files_is_the_composite_of_single_renders(npy_files, 
     np.testing.assert_allclose(got, expected, atol=0.5 / 255 + 1e-6)
 
 
+def test_cli_aip_takes_a_window_per_channel_and_the_shared_window(npy_files, tmp_path, capsys):
+    """``--channel-window`` follows the mode (every mode with a window, aip too), and
+    ``--window`` is the window of a channel given none of its own."""
+    a, b, _ = npy_files
+    png = tmp_path / "aip.png"
+    code, out, err = _run(["render", str(a), "--channel-file", str(b), "--mode", "aip",
+                           "--size", "40x32", "--fit", "box", "--channel-colors", "red,00FF00",
+                           "--window", "0.05,0.3", "--channel-window", "auto,0.1:0.9",
+                           "-o", str(png)], capsys)
+    assert code == 0, err
+    assert "channel 1 'b.npy': #00ff00, window 0.1..0.9" in err
+    volumes = [sc.read(a), sc.read(b)]
+    camera = sc.Camera.orbit(volumes[0], azimuth=30, elevation=20, size=(40, 32))
+    windows, colors = [(0.05, 0.3), (0.1, 0.9)], [(1, 0, 0), (0, 1, 0)]
+    values = [sc.Scene(v).render(camera, "aip", window=w, outputs=("value",)).value
+              for v, w in zip(volumes, windows, strict=True)]
+    summed = np.minimum(sum(_ramp(v, w, c) for v, w, c in zip(values, windows, colors,
+                                                              strict=True)), 1.0)
+    met = np.isfinite(values[0]) | np.isfinite(values[1])
+    expected = np.where(met[..., None], summed, np.asarray(BG[:3]))
+    got = np.asarray(Image.open(png), np.float64)[..., :3] / 255.0
+    np.testing.assert_allclose(got, expected, atol=0.5 / 255 + 1e-6)
+
+
+@pytest.mark.parametrize("mode", ["iso", "dvr"])
+def test_cli_channel_window_is_refused_for_a_mode_without_a_window(mode, npy_files, tmp_path,
+                                                                  capsys):
+    a, b, _ = npy_files
+    png = tmp_path / "bad.png"
+    code, _, err = _run(["render", str(a), "--channel-file", str(b), "--mode", mode,
+                         "--channel-window", "0:1,0:1", "-o", str(png)], capsys)
+    assert code == 2 and err.count("\n") == 1 and not png.exists()
+    assert (f"--channel-window does not apply to --mode {mode} (only to --mode "
+            f"{'/'.join(sc.render.modes.modes_reading('window'))})") in err, err
+
+
 def test_cli_iso_takes_one_isovalue_per_channel(npy_files, tmp_path, capsys):
     a, b, _ = npy_files
     png = tmp_path / "iso.png"

@@ -9,6 +9,7 @@ from typing import Any
 import splinecast as sc
 from splinecast.errors import limits
 from splinecast.multires.scenes.channels import channel_color
+from splinecast.render.modes import modes_by_compositing, modes_reading
 
 from ._common import numbers, read_options
 
@@ -22,20 +23,26 @@ CHANNEL_OPTIONS = {"--channel-colors": "channel_colors", "--channel-window": "ch
 
 def add_channel_options(parser: argparse.ArgumentParser) -> None:
     """``--channel-colors``, ``--channel-window``, ``--channel-iso`` and ``--channel-file``."""
+    # What each mode shows of several channels and which take a window or an isovalue per
+    # channel: the registry's answers, so a mode added to it is described too.
+    shows = "; ".join(f"{', '.join(names)}: {rule.summary}"
+                      for rule, names in modes_by_compositing().items())
+    windowed, isos = "/".join(modes_reading("window")), "/".join(modes_reading("iso"))
     group = parser.add_argument_group(
-        "channels (with --channel 0,2 or all, or --channel-file: rendered together; mip, minip "
-        "and dvr add the channels' colours, iso shows the nearest channel's surface)")
+        f"channels (with --channel 0,2 or all, or --channel-file: rendered together; {shows})")
     group.add_argument("--channel-colors", metavar="C1,C2,...",
                        help="one colour per channel, comma-separated: names (red, lime, "
                             "magenta, ...) or hex RRGGBB / #RRGGBB; 'auto' or no option: the "
                             "file's OME-Zarr omero colour, else magenta, green for two "
                             "channels, else cyan, yellow, magenta, red, green, blue in turn")
     group.add_argument("--channel-window", metavar="LO:HI,...",
-                       help="one MIP/minIP window per channel, comma-separated LO:HI pairs; "
+                       help=f"one window per channel for --mode {windowed}, comma-separated "
+                            "LO:HI pairs; "
                             "'auto' or no option: the file's omero window, else the "
                             "automatic window of the channel")
     group.add_argument("--channel-iso", metavar="V1,V2,...",
-                       help="one isovalue per channel for --mode iso, comma-separated; 'auto' "
+                       help=f"one isovalue per channel for --mode {isos}, comma-separated; "
+                            "'auto' "
                             "or no option: --iso if given, else the automatic isovalue of the "
                             "channel")
     group.add_argument("--channel-file", action="append", metavar="FILE",

@@ -73,7 +73,7 @@ def check_label_args(args: argparse.Namespace, labels: bool, multiscale: bool = 
             if value is not None:
                 raise sc.ParameterError(f"{flag} applies to --labels only")
         return
-    if args.mode != "iso":
+    if args.mode not in (sc.LabelScene.modes or ()):
         raise sc.ParameterError(f"--mode {args.mode} does not apply to --labels (labels render "
                                 "as surfaces)")
     for flag, (attribute, default) in _NOT_FOR_LABELS.items():

@@ -37,6 +37,7 @@ from splinecast.distributed import (
     render_locally,
 )
 from splinecast.io.omezarr import MultiscaleVolume, is_zarr
+from splinecast.render.modes import modes_reading
 
 from ._common import (
     add_input_options,
@@ -56,6 +57,8 @@ from .render import (
     mode_kwargs,
     model_options,
     orbit_options,
+    output_stem,
+    reads,
     warn_incomplete,
 )
 
@@ -208,8 +211,9 @@ def _iso_sweep(args: argparse.Namespace) -> tuple[float, float] | None:
     if args.iso is None or ":" not in args.iso:
         return None
     sweep = _range(args.iso, "--iso")
-    if args.mode != "iso" or "," in args.iso:
-        raise sc.ParameterError("--iso V0:V1 sweeps one isosurface: use it with --mode iso")
+    if "iso" not in reads(args) or "," in args.iso:
+        raise sc.ParameterError("--iso V0:V1 sweeps one isosurface: use it with --mode "
+                                + "/".join(modes_reading("iso")))
     args.iso = repr(sweep[0])
     return sweep
 
@@ -266,8 +270,7 @@ def run(args: argparse.Namespace) -> int:
     """Render the movie ``args.output``."""
     # Validate every option and the output before any work, so a mistake writes nothing.
     if args.output is None:
-        args.output = str(derived_output(args.file, "" if args.mode == "iso" else args.mode,
-                                         ".mp4"))
+        args.output = str(derived_output(args.file, output_stem(args.mode), ".mp4"))
     width, height = check_render_args(args)
     over_time = _slice(args.timepoints) if args.timepoints is not None else None
     if over_time is not None:

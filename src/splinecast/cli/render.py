@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import inspect
 import math
 import time
 import warnings
@@ -15,7 +14,13 @@ import numpy as np
 import splinecast as sc
 from splinecast.errors import did_you_mean, limits
 from splinecast.render.defaults import WINDOW_PERCENTILES
-from splinecast.render.modes import MODE_NAMES, all_methods, modes_reading, modes_with_method
+from splinecast.render.modes import (
+    MODE_NAMES,
+    all_methods,
+    mode_class,
+    modes_reading,
+    modes_with_method,
+)
 from splinecast.render.modes import MODES as MODE_CLASSES
 from splinecast.transfer import DIVERGING, MENU
 
@@ -44,12 +49,16 @@ from .labels import add_label_options, check_label_args, run_labels, wants_label
 
 __all__ = ["add_parser", "run", "add_render_options", "check_render_args", "model_options",
            "mode_kwargs", "orbit_options", "sampled_step", "dvr_settings", "SAMPLED_STEP",
-           "DVR_FALLBACK", "sample_count"]
+           "DVR_FALLBACK", "sample_count", "DEFAULT_MODE", "output_stem", "reads"]
+
+#: The mode of ``--mode`` when it is not given: the scenes' own default.
+DEFAULT_MODE = sc.Scene.default_mode
 
 #: Options only some modes read: flag -> (attribute, the ``Scene.render`` keyword it becomes).
-#: Given with a mode that does not read that keyword (:func:`~splinecast.render.modes.
-#: modes_reading`) they would be ignored without a word, so :func:`_refuse_ignored_options`
-#: refuses them instead.
+#: Given with a mode that does not read that keyword
+#: (:attr:`~splinecast.render.modes.RenderMode.keywords`) they would be ignored without a word, so
+#: :func:`_refuse_ignored_options` refuses them instead. The keyword ``dvr`` is the
+#: :class:`~splinecast.DVRSettings` the DVR options make (:func:`dvr_settings`).
 _MODE_ONLY = {
     "--iso": ("iso", "iso"),
     "--opacity": ("opacity", "opacity"),
@@ -161,8 +170,8 @@ def add_render_options(render: argparse.ArgumentParser) -> None:
                              " (default exact)")
     render.add_argument("--step", type=finite,
                         help="sampling step in voxels for --method sampled/slices (default "
-                             "0.25) and --mode dvr (default 0.25 when another DVR option is "
-                             "given)")
+                             f"0.25) and --mode {_reading('dvr')} (default 0.25 when another "
+                             "DVR option is given)")
     render.add_argument("--inside", choices=("high", "low"),
                         help="which side of the isovalue is the object (default: the volume's, "
                              "else low for isovalues below the background value, e.g. negative "
@@ -191,12 +200,12 @@ def _modes(method: str) -> str:
 
 def _add_mode_options(render: argparse.ArgumentParser) -> None:
     """Options of the render modes beyond the single isosurface."""
-    render.add_argument("--mode", default="iso", choices=MODE_NAMES,
+    render.add_argument("--mode", default=DEFAULT_MODE, choices=MODE_NAMES,
                         help="; ".join(f"{name}: {cls.summary}"
                                        for name, cls in MODE_CLASSES.items())
-                        + " (default iso)")
+                        + f" (default {DEFAULT_MODE})")
     render.add_argument("--opacity", help="one opacity per --iso value, comma-separated")
-    render.add_argument("--tf", help="transfer function JSON file (--mode dvr)")
+    render.add_argument("--tf", help=f"transfer function JSON file (--mode {_reading('tf')})")
     render.add_argument("--colormap",
                         help=f"colormap of --mode {_reading('colormap')}, any matplotlib or "
                              "cmap name "
@@ -241,10 +250,40 @@ def _add_mode_options(render: argparse.ArgumentParser) -> None:
                         help="isosurface shading: smooth, the gradient of a smooth field at "
                              "the exact hit (the cubic B-spline of the voxels for trilinear and "
                              "bspline1), or exact, the model's own gradient (default smooth)")
+    surfaces = "/".join(name for name, cls in MODE_CLASSES.items() if cls.surfaces)
     render.add_argument("--samples", type=sample_count,
                         help="antialiasing: rays per pixel on the edges of the image, the "
-                             "centre one included, 1 to 64 (default 5 for --mode iso, 1 = off "
-                             "for the other modes and for multiscale volumes)")
+                             f"centre one included, 1 to {sc.render.antialias.MAX_SAMPLES} "
+                             f"(default {sc.render.antialias.DEFAULT_SAMPLES} for --mode "
+                             f"{surfaces}, 1 = off for the other modes and for multiscale "
+                             "volumes)")
+
+
+def reads(args: argparse.Namespace) -> tuple[str, ...]:
+    """The ``Scene.render`` keywords ``--mode`` reads
+    (:attr:`~splinecast.render.modes.RenderMode.keywords`): the one question the options ask
+    of the mode, so a mode the registry adds is offered its options without a change here."""
+    return mode_class(args.mode).keywords
+
+
+def output_stem(mode: str) -> str:
+    """The mode's part of an output name derived from the input's: none for
+    :data:`DEFAULT_MODE` (``NAME.png``), else the mode's name (``NAME-mip.png``)."""
+    return "" if mode == DEFAULT_MODE else mode
+
+
+def _several_isos(args: argparse.Namespace) -> bool:
+    """Whether the options ask for several isosurfaces (a list of isovalues, or opacities)."""
+    return "iso" in reads(args) and bool(args.opacity or (args.iso and "," in args.iso))
+
+
+def _steps(args: argparse.Namespace) -> bool:
+    """Whether the render samples with ``--step``: a sampled ``--method`` of a mode reading
+    ``step`` (not several isosurfaces, always exact), or a mode reading the DVR settings,
+    whose step ``--step`` is."""
+    keywords = reads(args)
+    return "dvr" in keywords or (
+        "step" in keywords and args.method != "exact" and not _several_isos(args))
 
 
 def _refuse_ignored_options(args: argparse.Namespace) -> None:
@@ -258,7 +297,7 @@ def _refuse_ignored_options(args: argparse.Namespace) -> None:
         if given(attribute) and args.mode not in modes:
             raise sc.ParameterError(f"{flag} does not apply to --mode {args.mode} "
                                     f"(only to --mode {'/'.join(modes)})")
-    several = args.mode == "iso" and (args.opacity or (args.iso and "," in args.iso))
+    several = _several_isos(args)
     slices = modes_with_method("slices")
     if args.method == "slices" and args.mode not in slices:
         raise sc.ParameterError(f"--method slices applies to --mode {'/'.join(slices)} only, "
@@ -266,8 +305,9 @@ def _refuse_ignored_options(args: argparse.Namespace) -> None:
     if several and args.method != "exact":
         raise sc.ParameterError("--method sampled takes a single --iso value "
                                 "(several isosurfaces are always exact)")
-    if given("step") and args.mode != "dvr" and (args.method == "exact" or several):
-        raise sc.ParameterError("--step applies to --method sampled/slices and --mode dvr only")
+    if given("step") and not _steps(args):
+        raise sc.ParameterError("--step applies to --method sampled/slices and --mode "
+                                f"{_reading('dvr')} only")
     if given("texture_scale") and not args.texture:
         raise sc.ParameterError("--texture-scale needs --texture")
     if given("table_layout") and not args.adaptive:
@@ -306,10 +346,10 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
     :mod:`splinecast.render.defaults` (a distributed scene's ``VolumeInfo`` carries those).
     """
     kwargs: dict = {"mode": args.mode}
-    reads = MODE_CLASSES[args.mode].keywords  # the Scene.render keywords the mode reads
+    keywords = reads(args)  # every question below is the mode's, never its name
     if args.samples is not None:
         kwargs["samples"] = args.samples
-    if "normals" in reads:
+    if "normals" in keywords:
         kwargs["normals"] = args.normals
     notes: list[str] = []
     clip = [numbers(c, "--clip", 4) for c in args.clip]
@@ -317,10 +357,13 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
         kwargs["clip"] = clip
     if args.crop:
         kwargs["crop"] = numbers(args.crop, "--crop", 6)
-    isos = numbers(args.iso, "--iso") if "iso" in reads else None
+    isos = numbers(args.iso, "--iso") if "iso" in keywords else None
     shading, _ = _shading(args, isos)
     kwargs.update(shading)
-    if "window" in reads:  # the projections
+    if "method" in keywords and not _several_isos(args):  # several isosurfaces: always exact
+        kwargs["method"] = args.method
+        kwargs["step"] = sampled_step(args)
+    if "window" in keywords:  # the projections
         if args.colormap is not None:
             kwargs["colormap"] = sc.transfer.check_colormap(args.colormap, "--colormap")
         else:
@@ -338,11 +381,7 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
                    "percentiles of the volume's axis-aligned projections")
             notes.append("window {:g}..{:g} (automatic: {}; set --window LO,HI)".format(
                 *kwargs["window"], how))
-        if "method" in reads:
-            kwargs["method"] = args.method
-            kwargs["step"] = sampled_step(args)
-        return kwargs, notes
-    if "tf" in reads:
+    if "tf" in keywords:
         if args.tf:
             kwargs["tf"] = sc.TransferFunction.load(args.tf)
         else:
@@ -351,10 +390,23 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
             notes.append(f"transfer function: opacity 0 at {v0:g} rising to {a1:g} per voxel at "
                       f"{v1:g}, {tf.colormap} colours (automatic, from the histogram; set "
                       "--tf FILE.json)")
+    if "dvr" in keywords:
         settings = dvr_settings(args)
         if settings is not None:  # else Scene.render's own default (dvr= not passed)
             kwargs["dvr"] = settings
-        return kwargs, notes
+    if "iso" in keywords:
+        notes += _iso_kwargs(args, vol, isos, kwargs)
+    if "effects" in keywords and (args.texture or args.shading == "cel"):
+        kwargs["effects"] = sc.SurfaceEffects(texture=args.texture, scale=args.texture_scale,
+                                              cel_bands=4 if args.shading == "cel" else 0)
+    return kwargs, notes
+
+
+def _iso_kwargs(args: argparse.Namespace, vol: sc.Volume, isos: list[float] | None,
+                kwargs: dict) -> list[str]:
+    """Add the isovalue(s) (and opacities) of a mode that reads ``iso`` to ``kwargs``;
+    returns what was chosen automatically."""
+    notes: list[str] = []
     if isos is not None and (len(isos) > 1 or args.opacity):
         kwargs["iso"] = [sc.check_iso(vol, v) for v in isos]
         if args.opacity:
@@ -369,18 +421,13 @@ def mode_kwargs(args: argparse.Namespace, vol: sc.Volume) -> tuple[dict, list[st
                 how = (f"automatic: Otsu's threshold of the absolute values of signed data; "
                        f"--iso=-{t:g},{t:g} shows both signs")
             notes.append(f"iso {kwargs['iso']:g} ({how}; set --iso)")
-        kwargs["method"] = args.method
-        kwargs["step"] = sampled_step(args)
     if args.inside is None and vol.metadata.get("inside") is None:
         inside = sc.auto_inside(vol, kwargs["iso"])
         if inside == "low":
             notes.append(f"inside low (automatic: the isovalues lie below the background value "
                          f"{sc.background_value(vol):g}, so the object is the values below "
                          "them; set --inside)")
-    if args.texture or args.shading == "cel":
-        kwargs["effects"] = sc.SurfaceEffects(texture=args.texture, scale=args.texture_scale,
-                                              cel_bands=4 if args.shading == "cel" else 0)
-    return kwargs, notes
+    return notes
 
 
 def sample_count(text: str) -> int:
@@ -420,9 +467,9 @@ def _fit(args: argparse.Namespace, vol: sc.Volume, kwargs: dict) -> object:
     """``Camera.orbit``'s ``fit``: the box of what the mode shows, or ``"box"``."""
     if args.fit == "box":
         return "box"
-    if args.mode == "dvr":
+    if kwargs.get("tf") is not None:  # a mode reading a transfer function frames what it shows
         return sc.content_box(vol, tf=kwargs["tf"])
-    # MIP/minIP frame the object the automatic isovalue finds.
+    # The projections frame the object the automatic isovalue finds.
     return sc.content_box(vol, iso=kwargs.get("iso"), inside=args.inside)
 
 
@@ -440,7 +487,7 @@ def check_render_args(args: argparse.Namespace) -> tuple[int, int]:
     limits.check_finite_number(args.zoom, "--zoom", lo=1e-6, hi=1e6)
     if args.distance is not None:
         limits.check_finite_number(args.distance, "--distance", lo=0, lo_open=True)
-    if args.step is not None and (args.method != "exact" or args.mode == "dvr"):
+    if args.step is not None and (args.method != "exact" or "dvr" in reads(args)):
         limits.check_finite_number(args.step, "--step (voxels)", lo=limits.MIN_STEP)
     if args.iterations is not None:
         limits.check_count(args.iterations, "--iterations", hi=limits.MAX_ROOT_ITERATIONS)
@@ -463,7 +510,7 @@ def model_options(args: argparse.Namespace) -> dict:
             f"{did_you_mean(args.model, sc.MODELS)}"
         )
     options = {}
-    accepted = inspect.signature(sc.MODELS[args.model]).parameters
+    accepted = sc.MODELS[args.model].option_names
     for name, flag in (("root_finder", "--root-finder"), ("iterations", "--iterations"),
                        ("prefilter", "--prefilter")):
         value = getattr(args, name)
@@ -521,8 +568,7 @@ def run(args: argparse.Namespace) -> int:
     # Validate every option and output path before any work, so a mistake writes nothing.
     derived = args.output is None
     if derived:
-        args.output = str(derived_output(args.file, "" if args.mode == "iso" else args.mode,
-                                         ".png"))
+        args.output = str(derived_output(args.file, output_stem(args.mode), ".png"))
     check_output(args.output, IMAGE_SUFFIXES, "-o")
     if args.depth:
         check_output(args.depth, ".npy", "--depth")
@@ -556,7 +602,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model is None and wavelet:
         args.model = f"bspline{vol.degree}"
     _refuse_multiscale_options(args, multiscale, wavelet)
-    if args.method != "exact" or (args.mode == "dvr" and args.step is not None):
+    if args.method != "exact" or ("dvr" in reads(args) and args.step is not None):
         limits.check_step(sampled_step(args), "--step", vol.shape)
     with contextlib.ExitStack() as stack:
         options = model_options(args)
@@ -627,8 +673,8 @@ def run(args: argparse.Namespace) -> int:
                 read = f"{st['loaded']} read, {st['unavailable']} unreadable"
             log(args, f"cut ({policy}): {st['cut_bricks']} bricks ({levels}), {read}, {state}")
         background = kwargs.get("shading", sc.Shading()).background
-        if args.mode in ("mip", "minip") and np.all(frame.rgba == np.float32(background)):
-            what = "minimum" if args.mode == "minip" else "maximum"
+        what = mode_class(args.mode).projection
+        if what is not None and np.all(frame.rgba == np.float32(background)):
             log(args, f"nothing drawn: every ray's {what} is the background value "
                       f"{sc.background_value(info):g} (a ray enters through the background; "
                       "--crop or --clip can leave it out)")
@@ -655,11 +701,12 @@ def _refuse_channel_conflicts(args: argparse.Namespace) -> None:
     if args.iso and "," in args.iso:
         raise sc.ParameterError("--iso takes one value for several channels (--channel-iso "
                                 "gives one per channel)")
-    if args.channel_iso is not None and args.mode != "iso":
-        raise sc.ParameterError(f"--channel-iso does not apply to --mode {args.mode}")
-    if args.channel_window is not None and args.mode not in ("mip", "minip"):
-        raise sc.ParameterError(f"--channel-window does not apply to --mode {args.mode} "
-                                "(only to --mode mip/minip)")
+    # The channel scene gives each channel its own value of the settings the mode reads.
+    for flag, value, keyword in (("--channel-iso", args.channel_iso, "iso"),
+                                 ("--channel-window", args.channel_window, "window")):
+        if value is not None and keyword not in reads(args):
+            raise sc.ParameterError(f"{flag} does not apply to --mode {args.mode} "
+                                    f"(only to --mode {_reading(keyword)})")
 
 
 def _channel_kwargs(args: argparse.Namespace) -> dict:
@@ -677,22 +724,23 @@ def _channel_kwargs(args: argparse.Namespace) -> dict:
             args.background, "--background", alpha=True))
     if args.inside is not None:
         kwargs["inside"] = args.inside
-    if args.mode in ("mip", "minip"):
+    keywords = reads(args)
+    if "method" in keywords:
         kwargs.update(method=args.method, step=sampled_step(args))
-        if args.tolerance:
-            kwargs["tolerance"] = args.tolerance
-        if args.window:
-            kwargs["window"] = numbers(args.window, "--window", 2)
-    elif args.mode == "dvr":
-        if args.tf:
-            kwargs["tf"] = sc.TransferFunction.load(args.tf)
+    if "normals" in keywords:
+        kwargs["normals"] = args.normals
+    if "tolerance" in keywords and args.tolerance:
+        kwargs["tolerance"] = args.tolerance
+    if "window" in keywords and args.window:
+        kwargs["window"] = numbers(args.window, "--window", 2)
+    if "tf" in keywords and args.tf:
+        kwargs["tf"] = sc.TransferFunction.load(args.tf)
+    if "dvr" in keywords:
         settings = dvr_settings(args)
         if settings is not None:
             kwargs["dvr"] = settings
-    else:
-        kwargs.update(method=args.method, step=sampled_step(args), normals=args.normals)
-        if args.iso:
-            kwargs["iso"] = numbers(args.iso, "--iso", 1)[0]  # type: ignore[index]
+    if "iso" in keywords and args.iso:
+        kwargs["iso"] = numbers(args.iso, "--iso", 1)[0]  # type: ignore[index]
     return kwargs
 
 
@@ -703,7 +751,7 @@ def _run_channels(args: argparse.Namespace, volumes: sc.MultichannelVolume, read
     if any(isinstance(v, sc.WaveletVolume) for v in volumes):
         raise sc.ParameterError(f"{args.file}: a wavelet store holds one channel")
     _refuse_multiscale_options(args, multiscale)
-    if args.method != "exact" or (args.mode == "dvr" and args.step is not None):
+    if args.method != "exact" or ("dvr" in reads(args) and args.step is not None):
         limits.check_step(sampled_step(args), "--step", volumes.shape)
     settings = channel_settings(args, len(volumes))
     kwargs = _channel_kwargs(args)
@@ -723,7 +771,7 @@ def _run_channels(args: argparse.Namespace, volumes: sc.MultichannelVolume, read
             colour = "#" + "".join(f"{round(255 * c):02x}" for c in channel.color)
             state = "" if channel.visible else " (hidden: inactive in the file's metadata)"
             window = (f", window {channel.window[0]:g}..{channel.window[1]:g}"
-                      if channel.window and args.mode in ("mip", "minip") else "")
+                      if channel.window and "window" in reads(args) else "")
             log(args, f"channel {index} {channel.label!r}: {colour}{window}{state}")
         mode = kwargs.pop("mode")
         fit: object = "box"

@@ -28,6 +28,7 @@ from ._common import (
     uncaptured,
 )
 from .labels import wants_labels
+from .render import DEFAULT_MODE
 
 __all__ = ["add_parser", "run"]
 
@@ -40,8 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--model",
                       help=f"initial reconstruction ({', '.join(sc.MODELS)}; default trilinear; "
                            "bspline<d> for a degree-d wavelet store, the only model it renders)")
-    view.add_argument("--mode", default="iso", choices=MODE_NAMES,
-                      help="initial render mode (default iso)")
+    view.add_argument("--mode", default=DEFAULT_MODE, choices=MODE_NAMES,
+                      help=f"initial render mode (default {DEFAULT_MODE})")
     view.add_argument("--iso", help="initial isovalue(s) in data units, comma-separated "
                       "(default: the volume's, else Otsu's threshold of the non-background "
                       "histogram, as render)")
@@ -144,7 +145,7 @@ def _check_label_options(args: argparse.Namespace, labels: bool, isos: object) -
         if args.label_colors is not None:
             raise sc.ParameterError("--label-colors applies to --labels only")
         return
-    if args.mode != "iso":
+    if args.mode not in (sc.LabelScene.modes or ()):
         raise sc.ParameterError(f"--mode {args.mode} does not apply to --labels (labels show "
                                 "as surfaces)")
     for flag, value in (("--iso", isos), ("--lod", args.lod)):

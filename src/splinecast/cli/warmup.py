@@ -30,7 +30,7 @@ import numpy as np
 
 import splinecast as sc
 from splinecast.errors import ParameterError
-from splinecast.render.modes import MODE_NAMES
+from splinecast.render.modes import MODE_NAMES, mode_class
 
 __all__ = ["add_parser", "run", "Combination", "warm_combination", "combinations"]
 
@@ -109,10 +109,10 @@ def tiny_volume(dtype: str, size: int = 6) -> sc.Volume:
 def _render_options(mode: str, volume: Any) -> list[dict[str, Any]]:
     """The renders that compile a mode's kernels: the defaults, and for isosurfaces also
     several isovalues (a kernel of its own)."""
-    if mode != "iso":
+    if "iso" not in mode_class(mode).keywords:
         return [{"mode": mode}]
     lo, hi = volume.value_range
-    return [{"mode": "iso"}, {"mode": "iso", "iso": [lo + (hi - lo) / 3, lo + 2 * (hi - lo) / 3]}]
+    return [{"mode": mode}, {"mode": mode, "iso": [lo + (hi - lo) / 3, lo + 2 * (hi - lo) / 3]}]
 
 
 def warm_combination(combination: Combination) -> tuple[Combination, float, float]:

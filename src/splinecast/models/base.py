@@ -15,6 +15,7 @@ because this package imports nothing above it.
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
@@ -105,6 +106,18 @@ class ReconstructionModel:
     #: Seconds a first render's kernels typically take to compile from an empty cache on a
     #: 2-core machine (an order of magnitude, shown to users while they wait).
     typical_compile_s: ClassVar[int] = 60
+    #: The model options the class takes (``Scene(volume, model, **options)``): what the
+    #: command line's ``--root-finder``, ``--iterations`` and ``--prefilter`` may set. Unless a
+    #: class declares them, the keywords of its constructor after the volume.
+    option_names: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "option_names" not in cls.__dict__:
+            # Written once, in the signature users read (help(MODELS[name])).
+            parameters = list(inspect.signature(cls.__init__).parameters.values())[2:]
+            cls.option_names = tuple(p.name for p in parameters if p.kind in (
+                p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY))
 
     @classmethod
     def brick_refusal(cls, options: dict[str, Any]) -> BrickRefusal | None:

@@ -278,6 +278,7 @@ class Aip(RenderMode):
     name: ClassVar[str] = "aip"
     keywords: ClassVar[tuple[str, ...]] = ("window", "colormap")
     summary: ClassVar[str] = "average intensity projection"
+    projection: ClassVar[str | None] = "mean"
 
     window: Any = None
     colormap: Any = None

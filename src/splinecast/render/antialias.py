@@ -39,6 +39,7 @@ import numpy as np
 
 from .._jit import jit
 from ..errors import ParameterError
+from .modes import RenderMode, mode_class
 
 __all__ = ["DEFAULT_SAMPLES", "MAX_SAMPLES", "CONTRAST", "CREASE", "check_samples",
            "resolve_samples", "sample_offsets", "edge_mask", "antialias"]
@@ -336,9 +337,12 @@ def _blend_corners(centres, mask, traced, at, out):
                 out[row, col, ch] = 0.5 * np.float64(centres[row, col, ch]) + 0.125 * corners
 
 
-def resolve_samples(samples: Any, mode: str) -> int:
+def resolve_samples(samples: Any, mode: str | RenderMode | type[RenderMode]) -> int:
     """The sample count of a render: ``samples`` checked, or by default
-    :data:`DEFAULT_SAMPLES` for isosurfaces and 1 (off) for the other modes."""
+    :data:`DEFAULT_SAMPLES` for a mode drawing surfaces (:attr:`RenderMode.surfaces`: the
+    isosurfaces) and 1 (off) for the other modes; ``mode`` is a name of the registry, a mode
+    object or its class."""
     if samples is None:
-        return DEFAULT_SAMPLES if mode == "iso" else 1
+        kind = mode if isinstance(mode, type) else mode_class(mode)
+        return DEFAULT_SAMPLES if kind.surfaces else 1
     return check_samples(samples)

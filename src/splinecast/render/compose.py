@@ -376,6 +376,9 @@ class Compositing:
 
     #: The rule's name, reported in ``Frame.stats["compositing"]``.
     name: str = ""
+    #: What the composite shows, in a few words (the command line's help and the viewer's
+    #: note on several channels say it of each mode).
+    summary: str = ""
 
     def reads(self, wanted: frozenset[str]) -> frozenset[str]:
         """Buffers of every channel's frame the rule reads besides its layer and ``depth``,
@@ -397,6 +400,7 @@ class Additive(Compositing):
     napari's additive blending, whatever the channels' order."""
 
     name = "additive"
+    summary = "the sum of the channels' colours"
 
     def combine(self, layers: Sequence[np.ndarray], frames: Sequence[Frame],
                 wanted: frozenset[str]) -> Composite:
@@ -409,6 +413,7 @@ class NearestHit(Compositing):
     the position, normal and face are that channel's, as opaque objects hide one another."""
 
     name = "nearest hit"
+    summary = "the nearest channel's surface"
 
     def reads(self, wanted: frozenset[str]) -> frozenset[str]:
         """The surface buffers asked for: they are taken from the nearest channel."""

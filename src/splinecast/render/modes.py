@@ -45,7 +45,7 @@ from .shading import Shading
 __all__ = ["RenderMode", "ModeContext", "Iso", "MultiIso", "Mip", "MinIp", "Dvr", "MODES",
            "MODE_NAMES", "RENDER_DEFAULTS", "build_mode", "modes_reading", "modes_with_method",
            "register_mode", "all_methods", "mode_name", "mode_class", "with_option",
-           "option_value"]
+           "option_value", "modes_by_compositing"]
 
 #: :meth:`splinecast.Scene.render`'s defaults of the keywords a mode reads: a keyword left at
 #: its default does not clash with a mode object that sets it.
@@ -108,6 +108,15 @@ class RenderMode:
     #: :data:`~splinecast.render.compose.ADDITIVE`, napari's additive blending, whatever the
     #: channels' order; surfaces declare :data:`~splinecast.render.compose.NEAREST_HIT`.
     compositing: ClassVar[Compositing] = ADDITIVE
+    #: What a projection keeps of the values along each ray, in a word (``"maximum"``,
+    #: ``"minimum"``, ``"mean"``), None for a mode that is not a projection of the values. The
+    #: command line names it when every ray kept the background value (nothing drawn).
+    projection: ClassVar[str | None] = None
+    #: Whether the mode draws surfaces (first hits with a depth, a normal and a face): a frame
+    #: is then antialiased by default (:func:`~splinecast.render.antialias.resolve_samples`),
+    #: its edges found from the geometry as well as the colours; other modes take one ray per
+    #: pixel unless ``samples`` is given.
+    surfaces: ClassVar[bool] = False
 
     @classmethod
     def default_window(cls, volume: Any) -> tuple[float, float] | None:
@@ -187,6 +196,7 @@ class Iso(RenderMode):
                                            "opacity", "normals", "effects")
     summary: ClassVar[str] = "isosurface(s)"
     compositing: ClassVar[Compositing] = NEAREST_HIT
+    surfaces: ClassVar[bool] = True
 
     iso: float | None = None
     method: str = "exact"
@@ -247,6 +257,7 @@ class MultiIso(RenderMode):
     methods: ClassVar[tuple[str, ...]] = Iso.methods
     keywords: ClassVar[tuple[str, ...]] = Iso.keywords
     compositing: ClassVar[Compositing] = NEAREST_HIT
+    surfaces: ClassVar[bool] = True
 
     iso: Sequence[float] = ()
     colors: Any = None
@@ -291,6 +302,7 @@ class Mip(RenderMode):
     methods: ClassVar[tuple[str, ...]] = ("exact", "sampled", "slices")
     keywords: ClassVar[tuple[str, ...]] = ("window", "colormap", "method", "step", "tolerance")
     summary: ClassVar[str] = "maximum intensity projection"
+    projection: ClassVar[str | None] = "maximum"
 
     window: Any = None
     colormap: Any = None
@@ -329,6 +341,7 @@ class MinIp(Mip):
 
     name: ClassVar[str] = "minip"
     summary: ClassVar[str] = "minimum intensity projection"
+    projection: ClassVar[str | None] = "minimum"
 
 
 @dataclass(frozen=True)
@@ -438,6 +451,16 @@ def modes_with_method(method: str) -> tuple[str, ...]:
 def modes_reading(keyword: str) -> tuple[str, ...]:
     """Names of the modes that read :meth:`splinecast.Scene.render`'s ``keyword``."""
     return tuple(name for name, cls in MODES.items() if keyword in cls.keywords)
+
+
+def modes_by_compositing() -> dict[Compositing, tuple[str, ...]]:
+    """The names of the registered modes by the rule that composites their channels
+    (:attr:`RenderMode.compositing`), rules and names in the registry's order: what the
+    command line's help says of several channels."""
+    out: dict[Compositing, tuple[str, ...]] = {}
+    for name, cls in MODES.items():
+        out[cls.compositing] = (*out.get(cls.compositing, ()), name)
+    return out
 
 
 def _same(value: Any, default: Any) -> bool:

@@ -172,6 +172,19 @@ class SceneTemplate:
         keyword-only parameters), the mode of ``render(camera)`` and the antialiasing samples
         when ``samples`` is not given.
 
+    What the front ends (the command line, the viewer) ask of any scene, answered here with
+    the defaults of a kind holding its data in memory, so they never test which kind they hold:
+
+    :attr:`modes`
+        The modes the kind renders (None: every mode of the registry).
+    :attr:`model_name`
+        The name of the reconstruction model.
+    :attr:`tile_shape`
+        The grid of pixel tiles the kind traces as units (a window of the image on it renders
+        the whole image's pixels).
+    :meth:`bricks_loaded`
+        How many bricks the kind has read from storage (None: it reads none).
+
     Each subclass gets a ``render`` whose signature (``inspect.signature``, ``help``) shows its
     default mode and its own frame options; the code behind it is this class's.
     """
@@ -185,6 +198,10 @@ class SceneTemplate:
     default_samples: ClassVar[int | None] = None
     #: Whether ``render`` passes other keywords on (a scene of scenes, whose parts take them).
     passes_options: ClassVar[bool] = False
+    #: The names of the modes the kind renders, :attr:`default_mode` among them (None: every
+    #: mode of the registry :data:`~splinecast.render.modes.MODES`); the command line and the
+    #: viewer offer these.
+    modes: ClassVar[tuple[str, ...] | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -205,6 +222,27 @@ class SceneTemplate:
     def check_iso(self, iso: Any) -> float:
         """An isovalue checked against the data range (``None``: the automatic one)."""
         return check_iso(self.defaults_volume, iso)
+
+    @property
+    def model_name(self) -> str:
+        """The name of the reconstruction model (:data:`splinecast.models.MODELS`' key; default
+        the name of ``self.model``)."""
+        return self.model.name  # type: ignore[attr-defined]
+
+    @property
+    def tile_shape(self) -> tuple[int, int]:
+        """Columns and rows of the tiles the kind traces as units, on the image's own grid: a
+        window of the image (:meth:`Camera.tile`) whose first column and row are multiples of
+        these renders exactly the whole image's pixels. Columns 0: a tile spans whole rows.
+        Default ``(0, 1)``: every ray is its own (a kind that shares work between the rays of a
+        tile says so, :attr:`splinecast.Scene.tile_shape`)."""
+        return (0, 1)
+
+    def bricks_loaded(self) -> int | None:
+        """How many bricks the scene has read from storage so far (a pyramid's scene reads them
+        as frames need them), safe to ask from any thread; None (the default) for a kind that
+        reads none while it renders."""
+        return None
 
     @property
     def table_cache(self) -> dict:
@@ -467,6 +505,9 @@ class RenderRequest:
         (surface effects need position, normal and face, antialiasing depth).
     samples : int
         Rays per edge pixel (:mod:`splinecast.render.antialias`; 1: none).
+    surfaces : bool
+        Whether the mode draws surfaces (:attr:`RenderMode.surfaces`): antialiasing finds
+        their edges from the geometry too.
     """
 
     setup: Any
@@ -477,6 +518,7 @@ class RenderRequest:
     effects: SurfaceEffects | None
     outputs: frozenset[str] = frozenset(OUTPUTS)
     samples: int = 1
+    surfaces: bool = False
 
 
 def prepare_render(
@@ -506,7 +548,7 @@ def prepare_render(
     limits.check_render(volume, camera)
     spec.check_limits(volume)
     normals_code(normals)  # checked for every mode: a typo is refused, not ignored
-    samples = resolve_samples(samples, spec.name)
+    samples = resolve_samples(samples, spec)
     if inside is not None and inside not in ("high", "low"):
         raise ParameterError(f"inside must be 'high' or 'low', got {inside!r}")
     shading = shading or Shading()
@@ -519,14 +561,15 @@ def prepare_render(
         effects is not None and effects.active) else wanted
     if "rgba" not in wanted:
         samples = 1  # nothing to antialias
-    elif samples > 1 and spec.name == "iso":
+    elif samples > 1 and spec.surfaces:
         filled = filled | {"depth", "normal", "face"}  # the edges of the geometry
     stats: dict[str, Any] = {"mode": spec.name, "model": model}
     context = ModeContext(volume, check_iso, shading, effects, filled, table_cache,
                           normals=normals, planes=len(planes))
     setup, mode_stats, value = spec.setup(context)
     stats.update(mode_stats)
-    return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples)
+    return RenderRequest(setup, planes, stats, value, shading, effects, wanted, samples,
+                         spec.surfaces)
 
 
 def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Camera,
@@ -549,7 +592,7 @@ def finish_frame(request: RenderRequest, out: tuple, counters: tuple, camera: Ca
         stats["samples"] = request.samples
         stats["antialiased"] = antialias(frame, camera, request.samples,
                                          _sample_tracer(request, trace, shaded),
-                                         geometry=setup.name == "iso")
+                                         geometry=request.surfaces)
     trace_ms = (time.perf_counter() - start) * 1e3
     stats.update({
         "width": camera.width,

@@ -284,7 +284,7 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
                                  "data only")
         if isinstance(data, Scene):
             return Shown("volume", data.volume, data.volume, tuple(MODELS), pinned=data,
-                         default_model=model or data.model.name)
+                         default_model=model or data.model_name)
         return Shown("volume", data, data, tuple(MODELS), default_model=model or "trilinear")
     # Imported here: the viewer of an in-memory volume never loads zarr.
     from ..io.omezarr import MultiscaleVolume
@@ -295,16 +295,16 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
     if isinstance(data, MultiscaleScene | WaveletScene):
         if budget is not None or lod is not None:
             raise ParameterError("budget and lod are the scene's own: pass a volume to set them")
-        _only_model(model, data.model.name, data.volume.name)
+        _only_model(model, data.model_name, data.volume.name)
         kind = "multiscale" if isinstance(data, MultiscaleScene) else "wavelet"
-        return Shown(kind, data.preview, data.volume, (data.model.name,), pinned=data,
-                     default_model=data.model.name)
+        return Shown(kind, data.preview, data.volume, (data.model_name,), pinned=data,
+                     default_model=data.model_name)
     if isinstance(data, WaveletVolume):
         if budget is not None:
             raise ParameterError(f"budget does not apply to the wavelet store {data.name}")
         scene = WaveletScene(data, model=model, lod=lod)  # reads the coarsest level only
-        return Shown("wavelet", scene.preview, data, (scene.model.name,), pinned=scene,
-                     default_model=scene.model.name)
+        return Shown("wavelet", scene.preview, data, (scene.model_name,), pinned=scene,
+                     default_model=scene.model_name)
     if isinstance(data, MultiscaleVolume):
         # Bricks always (whole_level=False): reading a whole level inside a frame would stop the
         # frames until it is read, where bricks let the page refine while they arrive.
@@ -312,7 +312,7 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
                    "lod": DEFAULT_LOD if lod is None else lod, "whole_level": False}
         scene = MultiscaleScene(data, model=model or "trilinear", **options)  # coarsest level
         return Shown("multiscale", scene.preview, data, tuple(MODELS), initial=scene,
-                     scene_options=options, default_model=scene.model.name)
+                     scene_options=options, default_model=scene.model_name)
     if isinstance(data, list | tuple):
         data = MultichannelVolume(data)
     if isinstance(data, MultichannelVolume | ChannelScene):
@@ -334,19 +334,19 @@ def _channels(data: Any, model: str | None, budget: Any, lod: float | None) -> S
                    "lod": DEFAULT_LOD if lod is None else lod, "whole_level": False}
     if isinstance(data, ChannelScene):
         scene, pinned = data, data
-        _only_model(model, data.model.name, volumes.name)
-        models: tuple[str, ...] = (data.model.name,)
+        _only_model(model, data.model_name, volumes.name)
+        models: tuple[str, ...] = (data.model_name,)
     else:
         scene, pinned = ChannelScene(volumes, model=model or "trilinear", **options), None
         models = tuple(MODELS)
     first = scene.scenes[0]
-    volume = getattr(first, "preview", None) or first.volume
+    volume = first.defaults_volume  # a pyramid's coarsest level, else the volume
     described = [{"label": c.label, "color": _hex(c.color),
                   "window": None if c.window is None else list(c.window),
                   "iso": c.iso, "visible": c.visible} for c in scene.channels]
     return Shown("channels", volume, volumes, models, pinned=pinned,
                  initial=None if pinned is not None else scene, scene_options=options,
-                 default_model=scene.model.name, channels=described,
+                 default_model=scene.model_name, channels=described,
                  layered_pyramids=pyramids)
 
 
@@ -374,8 +374,9 @@ def _labels(data: Any, model: str | None, budget: Any, lod: float | None,
     described = [{"value": int(v), "name": scene.style(v).name, "color": _hex(
         scene.style(v).rgba[:3])} for v in scene.labels]
     volume = scene.volume
-    return Shown("labels", volume, volume, models, modes=("iso",), pinned=pinned,
-                 initial=None if pinned is not None else scene, scene_options=options,
+    return Shown("labels", volume, volume, models, modes=LabelScene.modes or MODES,
+                 pinned=pinned, initial=None if pinned is not None else scene,
+                 scene_options=options,
                  default_model=scene.model_name, labels=described)
 
 

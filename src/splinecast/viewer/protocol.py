@@ -51,8 +51,9 @@ PROTOCOL_VERSION = 1
 #: ``timepoint``, the frame header's ``timepoint``). 5: several channels (``hello.channels``,
 #: the state's ``channels``). 6: ``hello.mode_keywords`` (which controls each mode reads),
 #: ``hello.auto_window`` for every mode with a window. 7: label volumes (``hello.labels``, the
-#: state's ``labels``, ``pick`` requests answered by ``pick`` messages).
-PROTOCOL_MINOR = 7
+#: state's ``labels``, ``pick`` requests answered by ``pick`` messages). 8:
+#: ``hello.mode_compositing`` (what each mode shows of several channels).
+PROTOCOL_MINOR = 8
 #: Largest text message accepted from a client (bytes); larger ones close the connection.
 MAX_MESSAGE_BYTES = 64 * 1024
 #: Request types a client may send.
@@ -199,6 +200,8 @@ def hello_message(volume: Volume, defaults: dict[str, Any], limits: dict[str, An
                         for mode in modes_reading("window")},
         # The render keywords each mode reads: the page shows the controls of those.
         "mode_keywords": {mode: list(MODE_CLASSES[mode].keywords) for mode in modes},
+        # What each mode shows of several channels (the page's note on the channels).
+        "mode_compositing": {mode: MODE_CLASSES[mode].compositing.summary for mode in modes},
         "limits": limits,
     }
 

@@ -107,7 +107,7 @@ class FrameRenderer:
         self._scenes: OrderedDict[tuple[str, int], Any] = OrderedDict()
         first = self.shown.timepoint
         if self.shown.initial is not None:
-            self._scenes[(_model_name(self.shown.initial), first)] = self.shown.initial
+            self._scenes[(self.shown.initial.model_name, first)] = self.shown.initial
         # The current time point and its data; a time point loaded aside, waiting to be used:
         # (time point, data, {model: scene}) (the lock guards it and the current one).
         self._current: tuple[int, Any] = (first, self.shown.data)
@@ -119,7 +119,7 @@ class FrameRenderer:
 
     # ------------------------------------------------------------------------------ scenes
     def _pinned_for(self, model: str, timepoint: int) -> bool:
-        return (self._pinned is not None and _model_name(self._pinned) == model
+        return (self._pinned is not None and self._pinned.model_name == model
                 and timepoint == self.shown.timepoint)
 
     def has_scene(self, model: str, timepoint: int | None = None) -> bool:
@@ -223,11 +223,11 @@ class FrameRenderer:
         out = {}
         scenes = list(self._scenes.items())
         if self._pinned is not None:
-            scenes.append(((_model_name(self._pinned),), self._pinned))
+            scenes.append(((self._pinned.model_name,), self._pinned))
         for (model, *_), scene in scenes:
-            stream = getattr(scene, "stream", None)
-            if stream is not None:
-                out[model] = int(stream.cache.stats()["loaded"])
+            loaded = scene.bricks_loaded()
+            if loaded is not None:
+                out[model] = loaded
         return out
 
     def close(self) -> None:
@@ -333,7 +333,7 @@ class FrameRenderer:
             camera = resized_camera(camera, width, height)
         # Stripes start on the scene's grid of tiles, so they assemble into exactly the
         # whole image's pixels (Scene.tile_shape).
-        align = getattr(scene, "tile_shape", (0, 1))[1]
+        align = scene.tile_shape[1]
         rows = self._stripe_rows(request, step, camera.width, camera.height, align)
         # The viewer shows colour only: no depth, position, normal or per-ray counters.
         options = {"outputs": ("rgba",), **request.options, **self._pass_options(request, step),
@@ -404,12 +404,6 @@ class FrameRenderer:
         align = max(1, int(align))
         rows = max(align, rows - rows % align)
         return max(1, min(height, rows))
-
-
-def _model_name(scene: Any) -> str:
-    """The model a scene renders (a label scene names it; other scenes hold the model)."""
-    name = getattr(scene, "model_name", None)
-    return name if isinstance(name, str) else scene.model.name
 
 
 def _tiny_volume(volume: Volume) -> Volume:

@@ -184,11 +184,10 @@ def _per_channel(values: Any, count: int, name: str) -> list[Any]:
     return list(values)
 
 
-def _info(scene: Any) -> Any:
-    """What answers a channel's automatic choices: a multiscale scene's coarse preview (its
-    voxels in memory), else the scene's volume."""
-    preview = getattr(scene, "preview", None)
-    return preview if preview is not None else scene.volume
+def _info(scene: SceneTemplate) -> Any:
+    """What answers a channel's automatic choices (:attr:`SceneTemplate.defaults_volume`): a
+    multiscale scene's coarse preview (its voxels in memory), else the scene's volume."""
+    return scene.defaults_volume
 
 
 class ChannelScene(SceneTemplate):
@@ -291,7 +290,7 @@ class ChannelScene(SceneTemplate):
     def tile_shape(self) -> tuple[int, int]:
         """Tiles every channel's scene traces as units (see :attr:`splinecast.Scene.tile_shape`):
         a window of the image on their grid renders exactly the whole image's pixels."""
-        shapes = [getattr(s, "tile_shape", (0, 1)) for s in self.scenes]
+        shapes = [s.tile_shape for s in self.scenes]
         columns = math.lcm(*(max(1, int(c)) for c, _ in shapes)) if any(
             c for c, _ in shapes) else 0
         return columns, math.lcm(*(max(1, int(r)) for _, r in shapes))

@@ -31,7 +31,7 @@ from collections import OrderedDict
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
 from types import MappingProxyType
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -167,7 +167,7 @@ class LabelScene(SceneTemplate):
         name = str(self.volume.metadata.get("name", "the volume"))
         self.data = integer_labels(self.volume.data, name)
         self.labels, self._lo, self._hi = label_boxes(self.data)
-        self.model_name = model
+        self._model_name = model
         self.options = options
         if smooth is not None and smooth not in (3, 5):
             raise ParameterError(f"smooth must be 3 or 5 (the Gaussian's size), got {smooth!r}")
@@ -323,6 +323,14 @@ class LabelScene(SceneTemplate):
     _READS = frozenset(("mode", "opacity", "shading", "clip", "crop", "normals", "samples",
                         "outputs", "inside"))
     frame_options = MappingProxyType({"show": None})
+    #: The labels' surfaces are the one mode of a label scene.
+    modes: ClassVar[tuple[str, ...] | None] = ("iso",)
+
+    @property
+    def model_name(self) -> str:
+        """The model reconstructing each label's indicator (the scene holds no model itself:
+        each label's scene has its own)."""
+        return self._model_name
 
     def render_frame(self, camera: Camera, options: RenderOptions,
                      frame_options: Mapping[str, Any]) -> Frame:
@@ -355,9 +363,10 @@ class LabelScene(SceneTemplate):
             label hit, ``label`` its value (0 on a miss), ``stats["labels"]`` the labels drawn.
         """
         mode, inside = options.mode, options.inside
-        if mode != "iso":
-            raise ParameterError(f"label volumes render their labels' surfaces (mode 'iso'), "
-                                 f"not mode {mode!r}")
+        modes = self.modes or ()
+        if mode not in modes:
+            raise ParameterError(f"label volumes render their labels' surfaces (mode "
+                                 f"{' or '.join(map(repr, modes))}), not mode {mode!r}")
         if inside is not None and inside != "high":
             raise ParameterError("inside does not apply to label volumes (a label is inside "
                                  "where the voxels hold it)")

@@ -481,6 +481,10 @@ class MultiscaleScene(SceneTemplate):
             bricks.stats["cut_policy"] = "lod"
         return bricks
 
+    def bricks_loaded(self) -> int:
+        """Bricks read from the store so far (the cache counts them under its lock)."""
+        return int(self.stream.cache.stats()["loaded"])
+
     def close(self) -> None:
         """Stop the loader thread (the scene cannot render afterwards)."""
         self.stream.close()

@@ -474,8 +474,14 @@
       if (!channels) return;
       $("section-channels").hidden = false;
       $("panel").classList.add("single-hidden");
+      // What each mode shows of the channels, as the server's registry says it (1.8): the
+      // modes grouped by their rule's words, e.g. "iso: the nearest channel's surface".
+      const shows = new Map();
+      for (const [mode, summary] of Object.entries(this.hello.mode_compositing || {})) {
+        if (summary) shows.set(summary, [...(shows.get(summary) || []), mode]);
+      }
       $("channels-note").textContent =
-        "mip, minip and dvr add the channels' colours; iso shows the nearest surface";
+        [...shows].map(([summary, modes]) => `${modes.join(", ")}: ${summary}`).join("; ");
       if (!Array.isArray(this.state.channels)) this.state.channels = structuredClone(this.hello.defaults.channels);
       const list = $("channels");
       list.replaceChildren();
