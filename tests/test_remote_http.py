@@ -621,18 +621,22 @@ def _level0_bricks(source, faults=None, reads=None) -> tuple[dict, dict]:
 
 
 def test_loader_keeps_several_reads_in_flight(one_shard, monkeypatch):
-    """The server holds the requests to level 0's file until two are held at once: the
-    loader finishes only if it reads two batches at the same time (the server sees them, and
-    so does the cache's ``reads_peak``). With ``reads=1`` the server never sees two at once (a
-    control of the measure). Either way the bricks equal those read from the store on disk."""
+    """The server holds the requests for level 0's chunks (not its index, which reads asking
+    for it at once share) until two are held at once: the loader finishes only if it reads two
+    batches at the same time (the server sees them, and so does the cache's ``reads_peak``).
+    The reads that start together share one request for the shard's index (with 50 ms per
+    request, the server never answers two at once). With ``reads=1`` the server never sees two
+    requests at once (a control of the measure). Either way the bricks equal those read from
+    the store on disk."""
     monkeypatch.setenv("SPLINECAST_REMOTE_COALESCE_GAP", "16MiB")  # one range per read
     expected, local = _level0_bricks(one_shard / "one.zarr")
     assert local["reads_peak"] == 1  # a store on disk: one read at a time
     watch = "/one.zarr/0/c/"  # the shard, not the metadata
-    faults = Faults(hold=watch, release_at=2, watch=watch)
+    faults = Faults(latency=0.05, hold=watch, release_at=2, hold_suffix=False, watch=watch)
     with FileServer(one_shard, faults) as srv:
         got, stats = _level0_bricks(f"{srv.url}/one.zarr", faults)
     assert faults.watch_peak >= 2 and stats["reads_peak"] >= 2
+    assert faults.suffix_peak == 1
     assert stats["reads_peak"] <= 8  # SPLINECAST_REMOTE_READS' default
     alone = Faults(latency=0.01, watch=watch)
     with FileServer(one_shard, alone) as srv:

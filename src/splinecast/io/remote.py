@@ -577,6 +577,8 @@ class Remote:
         self.cache = _disk_cache(self.settings)
         self._sizes: OrderedDict[str, int | None] = OrderedDict()
         self._sizes_lock = threading.Lock()
+        #: Suffix requests in flight and how many wait for each (see :meth:`_shared_tail`).
+        self._tails: dict[tuple[str, int], list[Any]] = {}
         #: Whether the server answers suffix ranges (None: not asked yet).
         self.suffix_ranges: bool | None = None if self.protocol in ("http", "https") else False
         #: Requests made (attempts) and retried, for benchmarks and tests.
@@ -923,13 +925,11 @@ class Remote:
             gate = asyncio.Semaphore(self.settings.concurrency)
 
             async def one(key: str) -> Any:
-                url = self.url_of(key)
                 async with gate:
                     if self.suffix_ranges is False:
                         return no
                     try:
-                        return await self._retrying(
-                            lambda: self._http_once(url, None, None, n, tail=n), url)
+                        return await self._shared_tail(key, n)
                     except _Missing:
                         return None
                     except _NoSuffix:
@@ -953,6 +953,27 @@ class Remote:
             while len(self._sizes) > 65536:
                 self._sizes.popitem(last=False)
         return out
+
+    async def _shared_tail(self, key: str, n: int) -> tuple[int, bytes]:
+        """The suffix request of ``key``, shared by every read asking for it at once (the
+        loader's reads in flight often want the same shard's index): one request, awaited by
+        each; cancelled when every read waiting for it is (on the event loop only)."""
+        ident = (key, n)
+        shared = self._tails.get(ident)
+        if shared is None:
+            url = self.url_of(key)
+            task = asyncio.ensure_future(self._retrying(
+                lambda: self._http_once(url, None, None, n, tail=n), url))
+            shared = self._tails[ident] = [task, 0]
+            task.add_done_callback(lambda _: self._tails.pop(ident, None))
+        task = shared[0]
+        shared[1] += 1
+        try:
+            return await asyncio.shield(task)
+        finally:
+            shared[1] -= 1
+            if not shared[1] and not task.done():
+                task.cancel()  # no read wants it any more
 
     def knows_size(self, key: str | None) -> bool:
         """Whether the size of ``key`` is remembered (no request needed)."""
