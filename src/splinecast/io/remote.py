@@ -27,7 +27,11 @@ Many requests are in flight at once (:meth:`Remote.fetch_many`, bounded by
 ``SPLINECAST_REMOTE_CONCURRENCY``). The byte ranges a batch wants from one file (the inner chunks
 of a shard) are merged into few requests (:func:`coalesce`, :meth:`Remote.fetch_ranges`): over a
 network each request costs a round trip, and a shard's neighbouring chunks lie side by side in
-it. Fetched chunk bytes can be kept in a bounded local disk
+it. A shard's index and size come from one suffix range request (:meth:`Remote.fetch_tails`,
+HTTP; a HEAD and a range where the server does not answer suffix ranges), shared by the reads
+that want it at once. A scene's brick loader makes several reads at once
+(``SPLINECAST_REMOTE_READS``, see :mod:`splinecast.multires.store.cache`). Fetched chunk bytes
+can be kept in a bounded local disk
 cache (:class:`DiskCache`, ``SPLINECAST_CACHE_DIR`` and ``SPLINECAST_CACHE_SIZE``), least
 recently used first out. Cached bytes are decoded with the same bounds as fresh ones.
 """
