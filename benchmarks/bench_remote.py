@@ -11,7 +11,10 @@ nothing is cached in memory; the disk cache is off):
   once from what is resident, ``wait=False``, as the viewer's first pass) and the complete view
   (frames that wait for their load budget until the cut is complete), both timed from the
   store's opening. ``requests`` is what the server saw, ``counted`` the frame's
-  ``stats["remote_requests"]`` (the reader's own count, retries included).
+  ``stats["remote_requests"]`` (the reader's own count, retries included), ``reads`` the most
+  loader reads in flight at once (``stats["reads_peak"]``). ``--baseline-reads 1`` times the
+  remote store a second time in the same run with ``SPLINECAST_REMOTE_READS=1`` (one loader
+  read at a time), alternated with the others.
 
 Run: ``python benchmarks/bench_remote.py --size-volume 256 --latency 0.05 --bandwidth 100e6``;
 an existing pyramid: ``--store P.zarr --iso 128 --size 1024x768 --parts view --budget 256MiB``.
@@ -21,6 +24,7 @@ Nothing here is asserted: the numbers depend on the machine.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import tempfile
@@ -58,6 +62,8 @@ def main() -> int:
     parser.add_argument("--budget", default="2GiB", help="the scenes' budget (default 2GiB)")
     parser.add_argument("--parts", default="open,level0,render", help="of open, level0, "
                         "render, view")
+    parser.add_argument("--baseline-reads", type=int, default=0, help="with --parts view: "
+                        "also time the remote store with SPLINECAST_REMOTE_READS set to this")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     if "view" in args.parts:
@@ -107,7 +113,7 @@ def main() -> int:
 def _kinds(root: Path, log: list[tuple[str, str, str]]) -> dict[str, int]:
     """The server's requests by kind: HEAD (a shard's size), metadata, shard index (a range
     ending at the file's end) and chunk data (any other range)."""
-    out = {"HEAD": 0, "metadata": 0, "index": 0, "chunk data": 0}
+    out = {"HEAD": 0, "metadata": 0, "index": 0, "chunk data": 0}  # an index: bytes=-n too
     sizes: dict[str, int] = {}
     for method, path, header in log:
         if method == "HEAD":
@@ -119,8 +125,9 @@ def _kinds(root: Path, log: list[tuple[str, str, str]]) -> dict[str, int]:
             if path not in sizes:
                 sizes[path] = (root / path.lstrip("/")).stat().st_size
             end = header.rsplit("-", 1)[-1]
-            tail = (end.isdigit() and int(end) == sizes[path] - 1
-                    and not header.startswith("bytes=0-"))
+            tail = header.startswith("bytes=-") or (
+                end.isdigit() and int(end) == sizes[path] - 1
+                and not header.startswith("bytes=0-"))
             out["index" if tail else "chunk data"] += 1
     return out
 
@@ -135,11 +142,23 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
     kinds: dict[str, int] = {}
     with FileServer(store.parent, faults) as server:
         sources = {"local": str(store), "remote": f"{server.url}/{store.name}"}
+        if args.baseline_reads:
+            sources[f"remote, {args.baseline_reads} read"] = sources["remote"]
 
-        def view(source: str) -> tuple[float, float, int, int, int]:
+        def view(label: str) -> tuple[float, float, int, int, int, int]:
+            source = sources[label]
             start = time.perf_counter()
             before = len(faults.log)
-            mv = sc.read(source)
+            kept = os.environ.get("SPLINECAST_REMOTE_READS")
+            if label.startswith("remote, "):
+                os.environ["SPLINECAST_REMOTE_READS"] = str(args.baseline_reads)
+            try:
+                mv = sc.read(source)  # (the remote settings are read here)
+            finally:
+                if kept is None:
+                    os.environ.pop("SPLINECAST_REMOTE_READS", None)
+                else:
+                    os.environ["SPLINECAST_REMOTE_READS"] = kept
             with sc.Scene(mv, budget=args.budget) as scene:
                 camera = sc.Camera.orbit(mv, azimuth=30, elevation=25, size=(width, height),
                                          zoom=1.3)
@@ -147,36 +166,40 @@ def view_part(args: argparse.Namespace, width: int, height: int) -> int:
                 first = time.perf_counter() - start
                 frame = scene.render(camera, iso=args.iso, complete=True)
                 assert frame.stats["complete"]
-                kinds.clear()
-                kinds.update(_kinds(store.parent, faults.log[before:]))
+                if label == "remote":
+                    kinds.clear()
+                    kinds.update(_kinds(store.parent, faults.log[before:]))
                 return (first, time.perf_counter() - start, int(frame.stats["cut_bricks"]),
-                        len(faults.log) - before, int(frame.stats.get("remote_requests", 0)))
+                        len(faults.log) - before, int(frame.stats.get("remote_requests", 0)),
+                        int(frame.stats.get("reads_peak", 1)))
 
-        for source in sources.values():
-            view(source)  # warm-up: kernels compiled, connections open
-        runs: dict[str, list[tuple[float, float, int, int, int]]] = {k: [] for k in sources}
+        for label in sources:
+            view(label)  # warm-up: kernels compiled, connections open
+        runs: dict[str, list[tuple[float, float, int, int, int, int]]] = {k: [] for k in sources}
         for _ in range(args.repeats):
-            for label, source in sources.items():
-                runs[label].append(view(source))
+            for label in sources:
+                runs[label].append(view(label))
     print(f"store {store.name} ({sc.read(store).levels[0].shape}), image {width}x{height}, "
           f"budget {args.budget}; server: +{args.latency * 1e3:.0f} ms per request, "
           f"{args.bandwidth / 1e6:.0f} MB/s per response; median of {args.repeats} after a "
           "warm-up, local and remote alternated")
-    print(f"{'':8}{'first image (s)':>16}{'complete view (s)':>19}{'cut bricks':>12}"
-          f"{'requests':>10}{'counted':>9}")
-    med = {label: [statistics.median(r[i] for r in rows) for i in range(5)]
+    print(f"{'':16}{'first image (s)':>16}{'complete view (s)':>19}{'cut bricks':>12}"
+          f"{'requests':>10}{'counted':>9}{'reads':>7}")
+    med = {label: [statistics.median(r[i] for r in rows) for i in range(6)]
            for label, rows in runs.items()}
-    for label, (first, complete, bricks, requests, counted) in med.items():
-        print(f"{label:8}{first:16.2f}{complete:19.2f}{bricks:12.0f}{requests:10.0f}"
-              f"{counted:9.0f}")
+    for label, (first, complete, bricks, requests, counted, reads) in med.items():
+        print(f"{label:16}{first:16.2f}{complete:19.2f}{bricks:12.0f}{requests:10.0f}"
+              f"{counted:9.0f}{reads:7.0f}")
     print("requests of the last remote run by kind: "
           + ", ".join(f"{n} {kind}" for kind, n in kinds.items()))
     if args.repeats > 1:
         for label, rows in runs.items():
             print(f"{label} runs, complete view (s): "
                   + ", ".join(f"{r[1]:.2f}" for r in rows))
-    print(f"{'ratio':8}{med['remote'][0] / med['local'][0]:16.1f}"
-          f"{med['remote'][1] / med['local'][1]:19.1f}")
+    for label in med:
+        if label != "local":
+            print(f"{'ratio' + label[6:]:16}{med[label][0] / med['local'][0]:16.1f}"
+                  f"{med[label][1] / med['local'][1]:19.1f}")
     return 0
 
 

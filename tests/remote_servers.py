@@ -34,8 +34,14 @@ class Faults:
     ``"big"`` (a body of ``big_bytes`` without a Range, announced), ``"redirect:<url>"``.
 
     ``hold``: requests whose path holds this substring wait, unanswered, until
-    :meth:`FileServer.release`; ``held`` is set when one arrives and ``dropped`` when the client
-    of one goes away (the server sees the connection closed: its handler is cancelled)."""
+    :meth:`FileServer.release` (or, with ``release_at``, until that many are held at once);
+    ``held`` is set when one arrives and ``dropped`` when the client of one goes away (the
+    server sees the connection closed: its handler is cancelled); ``hold_suffix`` false lets
+    suffix ranges (shard indexes) through. ``watch``: requests whose path
+    holds this substring are counted while answered, their most at once in ``watch_peak``.
+    ``no_suffix``: how a suffix range (``bytes=-n``) is answered by a server that does not
+    support them: ``416`` or ``"whole"`` (200 with the whole file); ``suffix_peak``: most suffix
+    ranges answered at once."""
 
     latency: float = 0.0
     bandwidth: float | None = None  # bytes per second per response
@@ -49,6 +55,15 @@ class Faults:
     dropped: threading.Event = field(default_factory=threading.Event)
     held_log: list[str] = field(default_factory=list)
     dropped_log: list[str] = field(default_factory=list)
+    release_at: int = 0
+    hold_suffix: bool = True  # whether suffix ranges (shard indexes) are held too
+    held_now: int = 0
+    watch: str | None = None
+    watch_active: int = 0
+    watch_peak: int = 0
+    no_suffix: int | str | None = None
+    suffix_active: int = 0  # suffix ranges being answered now
+    suffix_peak: int = 0
     active: int = 0  # requests being answered now
     peak: int = 0  # most requests answered at once
     lock: threading.Lock = field(default_factory=threading.Lock)
@@ -139,12 +154,24 @@ class FileServer:
 
     async def _handle(self, request: web.Request) -> web.StreamResponse:
         faults = self.faults
+        watched = faults.watch is not None and faults.watch in request.path
+        suffix = request.headers.get("Range", "").startswith("bytes=-")
         faults.active += 1
         faults.peak = max(faults.peak, faults.active)
+        if watched:
+            faults.watch_active += 1
+            faults.watch_peak = max(faults.watch_peak, faults.watch_active)
+        if suffix:
+            faults.suffix_active += 1
+            faults.suffix_peak = max(faults.suffix_peak, faults.suffix_active)
         try:
             return await self._answer(request)
         finally:
             faults.active -= 1
+            if watched:
+                faults.watch_active -= 1
+            if suffix:
+                faults.suffix_active -= 1
 
     async def _answer(self, request: web.Request) -> web.StreamResponse:
         faults = self.faults
@@ -153,15 +180,22 @@ class FileServer:
         if faults.latency:
             await asyncio.sleep(faults.latency)
         released = self._released
-        if faults.hold and faults.hold in path and released and not released.is_set():
+        suffix = request.headers.get("Range", "").startswith("bytes=-")
+        if (faults.hold and faults.hold in path and released and not released.is_set()
+                and (faults.hold_suffix or not suffix)):
             faults.held_log.append(f"{request.method} {path}")
             faults.held.set()
+            faults.held_now += 1
+            if faults.release_at and faults.held_now >= faults.release_at:
+                released.set()
             try:
                 await released.wait()
             except asyncio.CancelledError:
                 faults.dropped_log.append(f"{request.method} {path}")
                 faults.dropped.set()
                 raise
+            finally:
+                faults.held_now -= 1
         kind = faults.take(path)
         if kind in (404, 500, 403, 401, 503):
             return web.Response(status=kind, text="injected")
@@ -190,6 +224,10 @@ class FileServer:
         size = target.stat().st_size
         start, stop, status = 0, size, 200
         header = request.headers.get("Range")
+        if header and faults.no_suffix is not None and header.strip().startswith("bytes=-"):
+            if faults.no_suffix == 416:
+                return web.Response(status=416)
+            header = None  # the whole file
         if header and not faults.ignore_range:
             match = _RANGE.match(header.strip())
             if match is None:

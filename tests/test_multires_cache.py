@@ -569,3 +569,29 @@ def test_requests_go_coarse_first_then_nearest_the_centre_of_the_screen(sphere, 
     distances = [away(k) for k in finest]
     assert len(finest) > 20
     assert all(b >= a - 1e-12 for a, b in zip(distances, distances[1:], strict=False))
+
+
+@pytest.mark.parametrize("waiting, cancelled", [(0, []), (1, [1]), (2, [1, 0]), (5, [1, 0])])
+def test_reads_ahead_give_their_places_to_the_view_only_as_needed(sphere, waiting, cancelled):
+    """Two reads ahead under way (``reads=2``, started in order 0, 1) and a new request whose
+    view needs ``waiting`` bricks no read has started: the reads ahead started last are stopped
+    until as many places are free as such bricks (at most every place), never more; a read of
+    bricks the request no longer wants at all is always stopped, one of a brick the view needs
+    never. (The rule the test states, on the cache's bookkeeping: no loader thread runs.)"""
+    from splinecast.io.cancel import CancelToken
+    from splinecast.multires.store.cache import _Read
+
+    _, path = sphere
+    cache = BrickCache(sc.read(path), "64MiB", start=False, reads=2)
+    level0 = [(0, int(i), int(j), int(k)) for i, j, k in np.indices((2, 2, 2)).reshape(3, -1).T]
+    ahead = [level0[0:1], level0[1:2]]
+    reads = [_Read(keys, CancelToken(), 0) for keys in ahead]
+    cache._reads = list(reads)
+    cache._inflight = {k for keys in ahead for k in keys}
+    cache.request(level0[2:2 + waiting], prefetch=level0[0:2])
+    assert [n for n in (1, 0) if reads[n].token.cancelled] == cancelled
+    # A read no longer wanted at all is stopped; one of a brick the view needs is kept.
+    reads = [_Read(keys, CancelToken(), 0) for keys in ahead]
+    cache._reads = list(reads)
+    cache.request([level0[0]], prefetch=[])
+    assert not reads[0].token.cancelled and reads[1].token.cancelled

@@ -416,10 +416,10 @@ def _data_gets(log, name: str) -> dict[str, list[str]]:
 
 
 def test_level_read_asks_each_shard_once_for_its_chunks(stores, monkeypatch):
-    """Reading a whole sharded level: the server sees, per shard, its index and one range for
-    all its inner chunks (the bytes from its first chunk to the end of its last, taken from the
-    index by the test); with merging off, one range per inner chunk. Both read what the local
-    store holds."""
+    """Reading a whole sharded level: the server sees, per shard, no HEAD, one suffix range for
+    its index (which gives its size too) and one range for all its inner chunks (the bytes from
+    its first chunk to the end of its last, taken from the index by the test); with merging
+    off, one range per inner chunk. Both read what the local store holds."""
     name = "sphere.zarr"
     local = sc.read(stores / name).levels[0]
     expected = local.read((0, 0, 0), local.shape)
@@ -432,6 +432,7 @@ def test_level_read_asks_each_shard_once_for_its_chunks(stores, monkeypatch):
             level = sc.read(f"{srv.url}/{name}").levels[0]
             assert np.array_equal(level.read((0, 0, 0), level.shape), expected)
             assert level.reader.source.remote.requests == len(faults.log)  # the reader's count
+        assert not [entry for entry in faults.log if entry[0] == "HEAD"]
         seen[merge] = _data_gets(faults.log, f"{name}/0")
     shards = sorted(stores.glob(f"{name}/0/c/*/*/*"))
     assert len(shards) == 27 and set(seen["8MiB"]) == set(seen["0"])
@@ -439,7 +440,7 @@ def test_level_read_asks_each_shard_once_for_its_chunks(stores, monkeypatch):
         path = "/" + shard.relative_to(stores).as_posix()
         index = _shard_index(shard, count)
         first, last = int(index[:, 0].min()), int((index[:, 0] + index[:, 1]).max())
-        tail = f"bytes={shard.stat().st_size - (16 * count + 4)}-{shard.stat().st_size - 1}"
+        tail = f"bytes=-{16 * count + 4}"  # the index with its size: one suffix range
         merged, alone = seen["8MiB"][path], seen["0"][path]
         assert sorted(merged) == sorted([tail, f"bytes={first}-{last - 1}"]), path
         assert sorted(alone) == sorted([tail] + [f"bytes={int(o)}-{int(o + n) - 1}"
@@ -586,3 +587,94 @@ def test_shard_indexes_are_fetched_once_per_level(tmp_path):
     for _, path, header in again:
         assert not header.endswith(f"-{sizes[path] - 1}"), (path, header)  # not the index
         assert int(header.rsplit("-", 1)[1]) < sizes[path] - tail
+
+
+# --------------------------------------------------------------------------- reads in flight
+@pytest.fixture(scope="module")
+def one_shard(tmp_path_factory) -> Path:
+    """A pyramid (64^3 float32 sphere, bricks of 8) whose level 0 is one shard file: a loader
+    read of a batch of bricks asks that file one request at a time (its index with its size,
+    then its chunks merged into one range), so requests to it at once are reads at once."""
+    root = tmp_path_factory.mktemp("one")
+    vol = sc.demo("sphere", size=64)
+    vol = sc.Volume(vol.data.astype(np.float32), spacing=vol.spacing, origin=vol.origin)
+    sc.build_pyramid(vol, root / "one.zarr", brick=8, shard=64, progress=False)
+    assert len([p for p in (root / "one.zarr/0").rglob("*") if p.is_file()
+                and p.name != "zarr.json"]) == 1
+    return root
+
+
+def _level0_bricks(source, faults=None, reads=None) -> tuple[dict, dict]:
+    """Every level-0 brick of ``source`` read by a brick cache's loader (one request for them
+    all, in C order: 64 batches of 8 siblings), and the cache's stats."""
+    from splinecast.multires.store.cache import BrickCache
+
+    with BrickCache(sc.read(source), "64MiB", reads=reads) as cache:
+        counts = cache.octree.counts[0]
+        keys = [(0, *map(int, idx)) for idx in np.indices(counts).reshape(3, -1).T]
+        assert len(keys) == 512
+        cache.request(keys)
+        if faults is not None and faults.hold:
+            assert faults.held.wait(timeout=60), "no read of level 0 started"
+        assert cache.settle(timeout=120), "the loader did not finish (one read at a time?)"
+        return {key: cache.get(key).data for key in keys}, cache.stats()
+
+
+def test_loader_keeps_several_reads_in_flight(one_shard, monkeypatch):
+    """The server holds the requests for level 0's chunks (not its index, which reads asking
+    for it at once share) until two are held at once: the loader finishes only if it reads two
+    batches at the same time (the server sees them, and so does the cache's ``reads_peak``).
+    The reads that start together share one request for the shard's index (with 50 ms per
+    request, the server never answers two at once). With ``reads=1`` the server never sees two
+    requests at once (a control of the measure). Either way the bricks equal those read from
+    the store on disk."""
+    monkeypatch.setenv("SPLINECAST_REMOTE_COALESCE_GAP", "16MiB")  # one range per read
+    expected, local = _level0_bricks(one_shard / "one.zarr")
+    assert local["reads_peak"] == 1  # a store on disk: one read at a time
+    watch = "/one.zarr/0/c/"  # the shard, not the metadata
+    faults = Faults(latency=0.05, hold=watch, release_at=2, hold_suffix=False, watch=watch)
+    with FileServer(one_shard, faults) as srv:
+        got, stats = _level0_bricks(f"{srv.url}/one.zarr", faults)
+    assert faults.watch_peak >= 2 and stats["reads_peak"] >= 2
+    assert faults.suffix_peak == 1
+    assert stats["reads_peak"] <= 8  # SPLINECAST_REMOTE_READS' default
+    alone = Faults(latency=0.01, watch=watch)
+    with FileServer(one_shard, alone) as srv:
+        single, stats = _level0_bricks(f"{srv.url}/one.zarr", reads=1)
+    assert alone.watch_peak == 1 and stats["reads_peak"] == 1
+    for key, data in expected.items():
+        assert np.array_equal(got[key], data) and np.array_equal(single[key], data), key
+
+
+def test_bad_reads_setting_gives_one_line(one_shard, monkeypatch):
+    monkeypatch.setenv("SPLINECAST_REMOTE_READS", "0")
+    with FileServer(one_shard, Faults()) as srv, pytest.raises(ReadError) as err:
+        sc.read(f"{srv.url}/one.zarr")
+    assert "SPLINECAST_REMOTE_READS=0 must be within 1..256" in str(err.value)
+
+
+# --------------------------------------------------------------------------- suffix ranges
+@pytest.mark.parametrize("answer", [416, "whole"])
+def test_shard_index_without_suffix_ranges(stores, answer):
+    """A server that answers a suffix range with 416, or with the whole file (200): the reader
+    then asks each shard's size (HEAD) and index (a range to the file's end), as before, and
+    tries no more suffix ranges on that store; the levels equal the local ones."""
+    name = "sphere.zarr"
+    local = sc.read(stores / name)
+    faults = Faults(no_suffix=answer)
+    with FileServer(stores, faults) as srv:
+        remote = sc.read(f"{srv.url}/{name}")
+        logs = []
+        for a, b in zip(remote.levels[:2], local.levels[:2], strict=True):
+            before = len(faults.log)
+            assert np.array_equal(a.read((0, 0, 0), a.shape), b.read((0, 0, 0), b.shape))
+            logs.append(faults.log[before:])
+    for n, log in enumerate(logs):
+        shards = sorted(stores.glob(f"{name}/{n}/c/*/*/*"))
+        sizes = {"/" + p.relative_to(stores).as_posix(): p.stat().st_size for p in shards}
+        suffix = [path for _, path, r in log if r.startswith("bytes=-")]
+        heads = sorted(path for method, path, _ in log if method == "HEAD")
+        tails = sorted(path for method, path, r in log if path in sizes and method == "GET"
+                       and r.endswith(f"-{sizes[path] - 1}"))
+        assert heads == tails == sorted(sizes), n  # one HEAD and one index range per shard
+        assert sorted(suffix) == (sorted(sizes) if n == 0 else []), n  # tried once only

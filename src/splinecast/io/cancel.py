@@ -1,9 +1,10 @@
 """Stopping a read that is under way because its result is no longer wanted.
 
-A brick loader reads one batch of bricks at a time; over a network that read is many requests
-in flight. When the camera moves and the new view needs none of those bricks, waiting for them
-to arrive holds the connections (and the loader) that the new view's bricks need. The loader
-runs its read inside :func:`cancellable` with a :class:`CancelToken`; the rendering thread calls
+A brick loader reads batches of bricks, over a network several at once, each read many
+requests in flight. When the camera moves and the new view needs none of a read's bricks,
+waiting for them to arrive holds the connections (and the loader's place) that the new view's
+bricks need. Each read runs inside :func:`cancellable` with its :class:`CancelToken` (the token
+is the calling thread's: every loader thread has its own); the rendering thread calls
 :meth:`CancelToken.cancel`, and every request the read has in flight is cancelled on its event
 loop (the connection is closed, so the server stops sending), after which the read raises
 :class:`ReadCancelled` in the loader's thread.

@@ -27,7 +27,11 @@ Many requests are in flight at once (:meth:`Remote.fetch_many`, bounded by
 ``SPLINECAST_REMOTE_CONCURRENCY``). The byte ranges a batch wants from one file (the inner chunks
 of a shard) are merged into few requests (:func:`coalesce`, :meth:`Remote.fetch_ranges`): over a
 network each request costs a round trip, and a shard's neighbouring chunks lie side by side in
-it. Fetched chunk bytes can be kept in a bounded local disk
+it. A shard's index and size come from one suffix range request (:meth:`Remote.fetch_tails`,
+HTTP; a HEAD and a range where the server does not answer suffix ranges), shared by the reads
+that want it at once. A scene's brick loader makes several reads at once
+(``SPLINECAST_REMOTE_READS``, see :mod:`splinecast.multires.store.cache`). Fetched chunk bytes
+can be kept in a bounded local disk
 cache (:class:`DiskCache`, ``SPLINECAST_CACHE_DIR`` and ``SPLINECAST_CACHE_SIZE``), least
 recently used first out. Cached bytes are decoded with the same bounds as fresh ones.
 """
@@ -76,6 +80,7 @@ ENV_TIMEOUT = "SPLINECAST_REMOTE_TIMEOUT"
 ENV_DEADLINE = "SPLINECAST_REMOTE_DEADLINE"
 ENV_RETRIES = "SPLINECAST_REMOTE_RETRIES"
 ENV_CONCURRENCY = "SPLINECAST_REMOTE_CONCURRENCY"
+ENV_READS = "SPLINECAST_REMOTE_READS"
 ENV_REDIRECT_HOSTS = "SPLINECAST_REMOTE_REDIRECT_HOSTS"
 ENV_COALESCE_GAP = "SPLINECAST_REMOTE_COALESCE_GAP"
 ENV_COALESCE_BYTES = "SPLINECAST_REMOTE_COALESCE_BYTES"
@@ -212,7 +217,10 @@ class RemoteSettings:
     backoff : float
         Seconds before the first retry; doubled at each (with jitter).
     concurrency : int
-        Requests in flight at once.
+        Requests in flight at once, per read.
+    reads : int
+        Reads a brick loader makes at once (each a batch of sibling bricks, its requests in
+        flight together): over a network a read mostly waits for its round trips.
     redirect_hosts : tuple of str
         Hosts an HTTP redirect may lead to besides the store's own.
     anon : bool or None
@@ -233,6 +241,9 @@ class RemoteSettings:
     retries: int = 4
     backoff: float = 0.1
     concurrency: int = 32
+    # Over a 50 ms link a read of a batch is two or three round trips, so eight reads at once
+    # keep the link busy without holding many batches' buffers (bounded by the budget too).
+    reads: int = 8
     redirect_hosts: tuple[str, ...] = ()
     anon: bool | None = None
     cache_dir: str | None = None
@@ -256,6 +267,7 @@ class RemoteSettings:
             deadline=_env_number(ENV_DEADLINE, 120.0, 0.01, 86400.0),
             retries=int(_env_number(ENV_RETRIES, 4, 0, 20)),
             concurrency=int(_env_number(ENV_CONCURRENCY, 32, 1, 1024)),
+            reads=int(_env_number(ENV_READS, 8, 1, 256)),
             redirect_hosts=hosts,
             anon=True if anon_text in ("1", "true", "yes") else None,
             cache_dir=os.environ.get(ENV_CACHE_DIR) or None,
@@ -395,6 +407,14 @@ class _Missing(Exception):
 
 class _Transient(Exception):
     """A failure that may pass on another attempt."""
+
+
+class _NoSuffix(Exception):
+    """The server does not answer a suffix range (``bytes=-n``) with the file's last bytes and
+    its size: the size is asked for on its own instead."""
+
+
+_CONTENT_RANGE = re.compile(r"^bytes (\d{1,20})-(\d{1,20})/(\d{1,20})$")
 
 
 def _credentials_configured(protocol: str) -> bool:
@@ -561,6 +581,10 @@ class Remote:
         self.cache = _disk_cache(self.settings)
         self._sizes: OrderedDict[str, int | None] = OrderedDict()
         self._sizes_lock = threading.Lock()
+        #: Suffix requests in flight and how many wait for each (see :meth:`_shared_tail`).
+        self._tails: dict[tuple[str, int], list[Any]] = {}
+        #: Whether the server answers suffix ranges (None: not asked yet).
+        self.suffix_ranges: bool | None = None if self.protocol in ("http", "https") else False
         #: Requests made (attempts) and retried, for benchmarks and tests.
         self.requests = 0
         self.retried = 0
@@ -588,13 +612,18 @@ class Remote:
         return await self._object_once(url, start, stop, cap)
 
     async def _http_once(self, url: str, start: int | None, stop: int | None, cap: int,
-                         method: str = "GET") -> Any:
+                         method: str = "GET", tail: int | None = None) -> Any:
+        """One attempt. ``tail``: ask for the file's last ``tail`` bytes with one suffix range
+        and return ``(size, bytes)``, the size from the answer's ``Content-Range``
+        (:class:`_NoSuffix` if the server does not answer so)."""
         session = await self.fs.set_session()
         kw = dict(self.fs.kwargs)
         headers = dict(kw.pop("headers", None) or {})
         for drop in ("allow_redirects", "timeout"):
             kw.pop(drop, None)
-        if method == "GET":
+        if method == "GET" and tail is not None:
+            headers["Range"] = f"bytes=-{tail}"
+        elif method == "GET":
             # A whole file is asked for with a range one byte beyond its cap: a file larger
             # than it can be is recognised without reading it whole.
             first, last = (0, cap) if start is None else (start, stop - 1)  # type: ignore[operator]
@@ -614,6 +643,8 @@ class Remote:
                     raise ReadError(f"{redact(url)}: access denied (HTTP {status}); check the "
                                     "credentials or whether the data is public")
                 if status == 416:
+                    if tail is not None:
+                        raise _NoSuffix()
                     return b""
                 if status == 429 or status >= 500:
                     raise _Transient(f"HTTP {status}")
@@ -621,30 +652,52 @@ class Remote:
                     raise ReadError(f"{redact(url)}: unexpected HTTP {status}")
                 if method == "HEAD":
                     return r.content_length
+                if tail is not None:
+                    return await self._tail_body(url, r, tail)
                 ranged = status == 206
                 # A server that ignores Range sends the whole file: then the file's own bound
                 # applies (a range inside a file is at most `cap` beyond its end).
                 limit = cap if (start is None or not ranged) else stop - start  # type: ignore
-                length = r.content_length
-                if length is not None and length > limit:
-                    raise ReadError(f"{redact(url)}: the server sends {length} bytes, more than "
-                                    f"the {limit} this request can take; refused unread")
-                body = bytearray()
-                while True:
-                    piece = await r.content.read(min(1 << 20, limit + 1 - len(body)))
-                    if not piece:
-                        break
-                    body += piece
-                    if len(body) > limit:
-                        raise ReadError(f"{redact(url)}: the server sends more than the {limit} "
-                                        "bytes this request can take; refused")
-                if length is not None and len(body) != length:
-                    raise _Transient(f"the body ended after {len(body)} of {length} bytes")
-                data = bytes(body)
+                data = await self._body(url, r, limit)
                 if start is not None and not ranged:
                     data = data[start:stop]
                 return data
         raise ReadError(f"{redact(url)}: more than {_MAX_REDIRECTS} redirects")
+
+    async def _body(self, url: str, r: Any, limit: int) -> bytes:
+        """The body of answer ``r``, refused (unread if announced) beyond ``limit`` bytes."""
+        length = r.content_length
+        if length is not None and length > limit:
+            raise ReadError(f"{redact(url)}: the server sends {length} bytes, more than "
+                            f"the {limit} this request can take; refused unread")
+        body = bytearray()
+        while True:
+            piece = await r.content.read(min(1 << 20, limit + 1 - len(body)))
+            if not piece:
+                break
+            body += piece
+            if len(body) > limit:
+                raise ReadError(f"{redact(url)}: the server sends more than the {limit} "
+                                "bytes this request can take; refused")
+        if length is not None and len(body) != length:
+            raise _Transient(f"the body ended after {len(body)} of {length} bytes")
+        return bytes(body)
+
+    async def _tail_body(self, url: str, r: Any, tail: int) -> tuple[int, bytes]:
+        """``(size, bytes)`` of the answer ``r`` to a suffix range of ``tail`` bytes: a 206
+        whose ``Content-Range`` gives the file's size and a range ending at its end, of the
+        bytes received. Anything else (a 200 with the whole file, no size) raises
+        :class:`_NoSuffix`, its body unread."""
+        match = _CONTENT_RANGE.match(r.headers.get("Content-Range", "").strip())
+        if r.status != 206 or match is None:
+            raise _NoSuffix()
+        first, last, size = (int(v) for v in match.groups())
+        if last != size - 1 or first != max(0, size - tail):
+            raise _NoSuffix()
+        data = await self._body(url, r, tail)
+        if len(data) != last - first + 1:
+            raise _Transient(f"{len(data)} bytes received for a range of {last - first + 1}")
+        return size, data
 
     def _redirect(self, url: str, current: str, location: str | None) -> str:
         if not location:
@@ -704,7 +757,7 @@ class Remote:
             try:
                 async with asyncio.timeout(min(settings.timeout * 4, max(left, 0.001))):
                     return await what()
-            except (_Missing, ReadError):
+            except (_Missing, _NoSuffix, ReadError):
                 raise
             except TimeoutError:
                 reason = f"timed out after {min(settings.timeout * 4, max(left, 0.001)):.3g} s"
@@ -847,6 +900,90 @@ class Remote:
         """One request (see :meth:`fetch_many`)."""
         return self.fetch_many([(key, start, stop, cap)], cache=cache)[0]
 
+    def fetch_tails(self, keys: Sequence[str], n: int) -> dict[str, bytes | None]:
+        """The last ``n`` bytes of each file, with its size, one request each (HTTP only).
+
+        Each file is asked for with a suffix range (``Range: bytes=-n``), whose answer gives
+        the file's size in its ``Content-Range``: a shard's index and size in one round trip,
+        where a HEAD and a range took two. The sizes are remembered as :meth:`sizes` does (a
+        missing file as ``None``). A file shorter than ``n`` bytes comes whole. Where the server
+        does not answer suffix ranges so (416, the whole file, no size), nothing more is asked
+        that way of this location and the files not answered are left out: the caller asks
+        their sizes and ranges as before. The disk cache is not used (what it keeps is filed
+        by byte offsets, which need the size).
+
+        Returns
+        -------
+        dict
+            For each file answered, its last bytes (``None``: the file does not exist).
+        """
+        todo = list(dict.fromkeys(keys))
+        if not todo or self.suffix_ranges is False:
+            return {}
+        token = cancel.current()
+        if token is not None:
+            token.check()
+        no = object()
+
+        async def run() -> list[Any]:
+            gate = asyncio.Semaphore(self.settings.concurrency)
+
+            async def one(key: str) -> Any:
+                async with gate:
+                    if self.suffix_ranges is False:
+                        return no
+                    try:
+                        return await self._shared_tail(key, n)
+                    except _Missing:
+                        return None
+                    except _NoSuffix:
+                        self.suffix_ranges = False
+                        return no
+
+            return await _gather(token, [one(k) for k in todo])
+
+        answers = _zarr_loop_sync(run())
+        out: dict[str, bytes | None] = {}
+        with self._sizes_lock:
+            for key, found in zip(todo, answers, strict=True):
+                if found is no:
+                    continue
+                if found is None:
+                    self._sizes[key] = None
+                    out[key] = None
+                else:
+                    self._sizes[key], out[key] = found
+                    self.suffix_ranges = True
+            while len(self._sizes) > 65536:
+                self._sizes.popitem(last=False)
+        return out
+
+    async def _shared_tail(self, key: str, n: int) -> tuple[int, bytes]:
+        """The suffix request of ``key``, shared by every read asking for it at once (the
+        loader's reads in flight often want the same shard's index): one request, awaited by
+        each; cancelled when every read waiting for it is (on the event loop only)."""
+        ident = (key, n)
+        shared = self._tails.get(ident)
+        if shared is None:
+            url = self.url_of(key)
+            task = asyncio.ensure_future(self._retrying(
+                lambda: self._http_once(url, None, None, n, tail=n), url))
+            shared = self._tails[ident] = [task, 0]
+            task.add_done_callback(lambda _: self._tails.pop(ident, None))
+        task = shared[0]
+        shared[1] += 1
+        try:
+            return await asyncio.shield(task)
+        finally:
+            shared[1] -= 1
+            if not shared[1] and not task.done():
+                task.cancel()  # no read wants it any more
+
+    def knows_size(self, key: str | None) -> bool:
+        """Whether the size of ``key`` is remembered (no request needed)."""
+        with self._sizes_lock:
+            return key in self._sizes
+
     def sizes(self, keys: Sequence[str | None]) -> list[int | None]:
         """Sizes in bytes of ``keys`` (``None``: missing), asked concurrently and remembered
         (a store is taken not to change while it is open)."""
@@ -940,6 +1077,18 @@ class RemoteSource:
 
     def prefetch_sizes(self, keys: Sequence[str]) -> None:
         self.remote.sizes(keys)
+
+    def prefetch_tails(self, keys: Sequence[str], n: int) -> None:
+        """Fetch the last ``n`` bytes of the files ``keys`` (shard indexes) and their sizes with
+        one request each (:meth:`Remote.fetch_tails`), into the memo as the ranges
+        ``[size - n, size)`` :meth:`read` is then asked for; what the server does not answer so
+        is left for :meth:`prefetch_sizes` and :meth:`prefetch`."""
+        memo = self._memo()
+        todo = [key for key in keys if not self.remote.knows_size(key)]
+        for key, data in self.remote.fetch_tails(todo, n).items():
+            size = self.remote.sizes([key])[0]
+            if data is not None and size is not None and size >= n and len(data) == n:
+                memo[(key, size - n, size)] = data
 
     def prefetch(self, requests: Sequence[tuple[str, int | None, int | None, int]]) -> None:
         memo = self._memo()

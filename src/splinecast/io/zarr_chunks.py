@@ -774,13 +774,19 @@ class ChunkReader:
     def _prefetch_shards(self, batch: list[tuple[int, ...]], keys: list[str], lo: tuple,
                          hi: tuple) -> None:
         """Sizes, then indexes, then the inner chunks the box needs: three rounds of concurrent
-        requests for a batch of shards. Whatever is wrong is left for :meth:`_read_shard` to
-        report in its usual words."""
+        requests for a batch of shards, two where the source fetches an index at a shard's end
+        and its size with one request (a suffix range over HTTP). Whatever is wrong is left for
+        :meth:`_read_shard` to report in its usual words."""
         shard = self.plan.shard
         assert shard is not None
         source = self.source
-        source.prefetch_sizes(keys)
         n = shard.index_bytes
+        tails = getattr(source, "prefetch_tails", None)
+        if tails is not None and shard.at_end:
+            with self._lock:
+                unknown = [key for key in keys if (key, source.stamp(key)) not in self._indexes]
+            tails(unknown, n)
+        source.prefetch_sizes(keys)
         bound = shard.count * max_encoded_bytes(shard.inner.nbytes) + n
         indexes = []
         for key in keys:

@@ -28,6 +28,15 @@ when zarr's threads decoded them; the loader thread does now). Measured at 2048^
 the first DVR image drawn at once from the coarsest level took 1.5 s with the loader reading
 beside it and 0.8-1.2 s without. Frames that wait for their load budget let the read-ahead run
 beside their trace, which makes a cut complete in fewer frames.
+
+Reads in flight: from a store on disk one loader thread reads one batch at a time (the read is
+decompression, bound by the cores). From a store over a network a read mostly waits for its
+round trips, so several loader threads read batches at once (``reads``, by default the
+store's ``SPLINECAST_REMOTE_READS``), each taking the next batch in the request's order (the
+view's bricks, centre first and coarse to fine, then the read-ahead); they start new reads only
+while the transient buffers of those in flight stay within :data:`READS_SHARE` of the budget.
+A camera move cancels each read whose bricks the new view does not need (see
+:meth:`BrickCache._cancel_unneeded`).
 """
 
 from __future__ import annotations
@@ -51,7 +60,7 @@ from .budget import format_bytes, parse_bytes
 from .chunk_cache import ChunkCache
 
 __all__ = ["Brick", "BrickCache", "BrickUnavailableWarning", "DrawItem", "BORDERS", "read_bricks",
-           "CHUNK_CACHE_MAX"]
+           "CHUNK_CACHE_MAX", "READS_SHARE"]
 
 #: Steps of :meth:`BrickCache.reserve`, as a share of the budget.
 RESERVE_STEP = 1 / 32
@@ -64,6 +73,11 @@ RESERVE_MAX = 1 / 2
 
 #: Most bytes of decoded store chunks a brick cache keeps besides its budget.
 CHUNK_CACHE_MAX = 64 * 2**20
+
+#: Share of the budget the transient buffers of the reads in flight beyond the first may take
+#: (each: the union window of its bricks and their padded copies, estimated as twice the
+#: bricks' bytes).
+READS_SHARE = 1 / 8
 
 Key = tuple[int, int, int, int]
 #: Ghost filling beyond a level's ends, as the models pad a whole volume: ``"edge"`` repeats the
@@ -175,6 +189,15 @@ def _remotes_of(volume: MultiscaleVolume) -> list[Any]:
     return list(found.values())
 
 
+@dataclass(eq=False)
+class _Read:
+    """One batch of bricks being read by a loader thread, and what stops it."""
+
+    keys: list[Key]
+    token: CancelToken
+    nbytes: int  # estimated transient bytes
+
+
 class BrickCache:
     """Resident bricks of a multiscale volume within a byte budget, filled by a loader thread.
 
@@ -190,7 +213,12 @@ class BrickCache:
     loads_per_frame : int
         Load budget M: :meth:`wait` returns after this many bricks were read in the frame.
     start : bool
-        Start the loader thread now (else call :meth:`start`).
+        Start the loader threads now (else call :meth:`start`).
+    reads : int, optional
+        Most batches read at once, each by its own loader thread. Default: 1 for a store on
+        disk (reading is decompressing, bound by the cores), the store's
+        :attr:`~splinecast.io.remote.RemoteSettings.reads` over a network (a read mostly waits
+        for its round trips).
 
     Raises
     ------
@@ -203,7 +231,8 @@ class BrickCache:
 
     def __init__(self, volume: MultiscaleVolume, budget: Any = "1GiB", *,
                  octree: BrickOctree | None = None, border: str = "edge",
-                 loads_per_frame: int = 64, start: bool = True) -> None:
+                 loads_per_frame: int = 64, start: bool = True, reads: int | None = None
+                 ) -> None:
         if border not in BORDERS:
             raise ParameterError(f"border must be one of {', '.join(BORDERS)}, got {border!r}")
         if not isinstance(loads_per_frame, int) or loads_per_frame < 1:
@@ -219,6 +248,12 @@ class BrickCache:
         #: (part of the fixed overhead).
         self.chunks = ChunkCache(min(CHUNK_CACHE_MAX, self.budget // 8))
         self._remotes = _remotes_of(volume)
+        if reads is None:
+            reads = max((int(getattr(r.settings, "reads", 1)) for r in self._remotes), default=1)
+        if not isinstance(reads, int) or reads < 1:
+            raise ParameterError(f"reads must be a positive integer, got {reads!r}")
+        #: Most batches read at once (loader threads).
+        self.reads = reads
         self._cond = threading.Condition()
         self._bricks: OrderedDict[Key, Brick] = OrderedDict()  # least recently used first
         self._bytes = 0
@@ -235,9 +270,13 @@ class BrickCache:
         #: :meth:`reserve`).
         self._reserved = 0
         self._inflight: set[Key] = set()
-        #: Cancels the read of ``_inflight`` (its requests in flight, over a network) when a
-        #: new request no longer needs it (see :meth:`_cancel_unneeded`).
-        self._read_token: CancelToken | None = None
+        #: The reads under way, in the order they started (the request's priority order); each
+        #: token cancels its read's requests in flight, over a network, when a new request no
+        #: longer needs its bricks (see :meth:`_cancel_unneeded`).
+        self._reads: list[_Read] = []
+        self._reading_bytes = 0
+        #: Most reads seen under way at once.
+        self.peak_reads = 0
         self._failed: dict[Key, str] = {}  # brick -> why it could not be read
         self._unreadable: list[Key] = []  # of the last resolved cut
         self._warnings: list[str] = []
@@ -245,7 +284,7 @@ class BrickCache:
         self._counts = dict(loaded=0, loaded_frame=0, evicted=0, dropped=0, substituted=0,
                             cancelled=0)
         self._stop = False
-        self._thread: threading.Thread | None = None
+        self._threads: list[threading.Thread] = []
         #: Frames being drawn (:meth:`drawing`); the loader starts no read while it is > 0.
         self._drawing = 0
         #: Whether reads wait while a frame is drawn (``False``: they run beside the trace).
@@ -261,26 +300,28 @@ class BrickCache:
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
-        """Start the loader thread (once)."""
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="splinecast-brick-loader",
-                                            daemon=True)
-            self._thread.start()
+        """Start the loader threads (once)."""
+        if not self._threads:
+            self._threads = [threading.Thread(target=self._run, daemon=True,
+                                              name=f"splinecast-brick-loader-{n}")
+                             for n in range(self.reads)]
+            for thread in self._threads:
+                thread.start()
 
     def close(self, timeout: float = 10.0) -> None:
-        """Stop the loader thread and wait for it (a remote read in progress is cancelled, a
-        local one finishes first)."""
+        """Stop the loader threads and wait for them (remote reads in progress are cancelled,
+        a local one finishes first)."""
         with self._cond:
             self._stop = True
-            if self._read_token is not None:
-                self._read_token.cancel()
+            for read in self._reads:
+                read.token.cancel()
             self._cond.notify_all()
-        if self._thread is not None:
-            self._thread.join(timeout)
+        for thread in self._threads:
+            thread.join(timeout)
 
     @property
     def running(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        return any(thread.is_alive() for thread in self._threads)
 
     def __enter__(self) -> BrickCache:
         return self
@@ -375,7 +416,9 @@ class BrickCache:
         """The next wanted brick and its queued siblings (read together)."""
         while self._queue:
             key = self._queue.pop(0)
-            if key in self._bricks or key in self._failed or key in self._inflight:
+            if key in self._inflight:
+                continue  # still needed: its read under way discards it when it lands
+            if key in self._bricks or key in self._failed:
                 self._needed.discard(key)
                 continue
             parent = self.octree.parent(key)
@@ -390,10 +433,21 @@ class BrickCache:
             return batch
         return []
 
+    def _may_start(self) -> bool:
+        """Whether a loader thread may start a read now (lock held): something queued, no
+        frame being drawn, fewer than :attr:`reads` reads under way, and room for one more
+        batch's transient buffers (the first read always has it)."""
+        if not self._queue or self._drawing or len(self._reads) >= self.reads:
+            return False
+        if not self._reads:
+            return True
+        room = int(self.budget * READS_SHARE) - self._reading_bytes
+        return 16 * self._estimated_bytes(self._queue[:1])[0] <= room
+
     def _run(self) -> None:
         while True:
             with self._cond:
-                while not self._stop and (not self._queue or self._drawing):
+                while not self._stop and not self._may_start():
                     self._cond.wait()
                 if self._stop:
                     return
@@ -405,15 +459,19 @@ class BrickCache:
                     self._needed.clear()
                     self._cond.notify_all()
                     continue
-                self._inflight.update(batch)
                 if not batch:  # the queue held only bricks read meanwhile: tell settle()
                     self._cond.notify_all()
                     continue
-                token = self._read_token = CancelToken()
-            with cancellable(token):
+                self._inflight.update(batch)
+                read = _Read(batch, CancelToken(), 2 * sum(self._estimated_bytes(batch)))
+                self._reads.append(read)
+                self._reading_bytes += read.nbytes
+                self.peak_reads = max(self.peak_reads, len(self._reads))
+            with cancellable(read.token):
                 bricks, failures, cancelled = self._read_safely(batch)
             with self._cond:
-                self._read_token = None
+                self._reads.remove(read)
+                self._reading_bytes -= read.nbytes
                 if cancelled:
                     # No longer wanted when it was stopped; a later request may want it again
                     # (then it is queued, and stays needed).
@@ -511,17 +569,32 @@ class BrickCache:
             self._cond.notify_all()
 
     def _cancel_unneeded(self) -> None:
-        """Stop the read under way if the new request does not need its bricks (lock held).
+        """Stop the reads under way that the new request does not need (lock held).
 
-        A read is kept while one of its bricks is still to be read for the view, and while it
-        is read ahead with nothing for the view queued before it (stopping it would only start
-        it again). Only remote reads stop early (their requests in flight are cancelled); a
-        local read finishes, and its bricks land within the budget."""
-        token = self._read_token
-        if token is None or token.cancelled or self._inflight & self._needed:
-            return
-        if self._needed or not self._inflight & self._prefetch:
-            token.cancel()
+        A read is kept while one of its bricks is still to be read for the view. A read of
+        bricks the request neither needs nor reads ahead is stopped. A read ahead is kept
+        unless the view's bricks that no read has started yet need its place: then the reads
+        ahead started last are stopped until there are as many free places as such bricks (or
+        every place is free); stopping more would only start them again. Only remote reads
+        stop early (their requests in flight are cancelled); a local read finishes, and its
+        bricks land within the budget."""
+        live = [read for read in self._reads if not read.token.cancelled]
+        waiting = len(self._needed - self._inflight)
+        free = self.reads - len(live)
+        ahead = []
+        for read in live:
+            if self._needed.intersection(read.keys):
+                continue
+            if self._prefetch.intersection(read.keys):
+                ahead.append(read)
+            else:
+                read.token.cancel()
+                free += 1
+        for read in reversed(ahead):  # the last started, last in priority, first
+            if free >= min(waiting, self.reads):
+                break
+            read.token.cancel()
+            free += 1
 
     def _estimated_bytes(self, keys: list[Key]) -> list[int]:
         """Bytes each brick takes when resident (from the octree's windows)."""
@@ -569,8 +642,8 @@ class BrickCache:
         the finest level whole, :mod:`.whole_level`, and gives it the budget). A remote
         read already under way is cancelled; a local one still lands, within the budget."""
         with self._cond:
-            if self._read_token is not None:
-                self._read_token.cancel()
+            for read in self._reads:
+                read.token.cancel()
             self._queue.clear()
             self._needed.clear()
             self._keep = set()
@@ -719,7 +792,8 @@ class BrickCache:
         unavailable (bricks that could not be read, of any cut), evicted, dropped (did not
         fit), reads_cancelled (reads stopped under way: a camera move no longer needed them),
         complete (nothing substituted), remote_requests (requests made to the store over a
-        network since it was opened, retries included; 0 for a store on disk)."""
+        network since it was opened, retries included; 0 for a store on disk), reads_peak
+        (most batches seen read at once, at most :attr:`reads`)."""
         with self._cond:
             return {
                 "resident": len(self._bricks),
@@ -740,6 +814,7 @@ class BrickCache:
                 "chunks_decoded": self.chunks.misses,
                 "chunks_reused": self.chunks.hits,
                 "remote_requests": sum(remote.requests for remote in self._remotes),
+                "reads_peak": self.peak_reads,
             }
 
     def __repr__(self) -> str:
