@@ -4,8 +4,8 @@ The short fuzzing run (``tests/fuzz``) renders hundreds of hostile inputs in fre
 each loading the compiled kernels from the disk cache. Run first, it finds that cache empty and
 its processes compile the kernels while the other worker compiles the same ones for its own
 tests (535 s of one worker in a cold run, against 26 s when it ran last); run last, the rest of
-the suite has compiled them. The order is kept otherwise (``--dist worksteal`` hands each worker its half of
-the tests in this order).
+the suite has compiled them. The order is kept otherwise (``--dist worksteal`` hands each
+worker its half of the tests in this order).
 """
 
 from __future__ import annotations
