@@ -1,4 +1,4 @@
-"""Suite-wide test order.
+"""Suite-wide test order and threads.
 
 The short fuzzing run (``tests/fuzz``) renders hundreds of hostile inputs in fresh processes,
 each loading the compiled kernels from the disk cache. Run first, it finds that cache empty and
@@ -10,9 +10,16 @@ worker its half of the tests in this order).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+
+# The test run's workers share the cores (one per core), so a thread that waits for work must
+# sleep, not spin: OpenMP's threads (Numba's parallel loops outside the frame loops) otherwise
+# spin after every parallel region and take the CPU the other worker compiles on. Set before
+# any parallel region runs (OpenMP reads it when it starts); a value given outside is kept.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 _LAST = Path(__file__).resolve().parent / "fuzz"
 

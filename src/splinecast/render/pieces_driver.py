@@ -211,24 +211,6 @@ def _closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exi
 
 
 @jit()
-def _piece_tile(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
-                origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
-                grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0, tc0,
-                visited, tested, skipped):
-    """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns the closure's hits
-    and the number of rays that ended in it (marked in the tile's ``ended``)."""
-    # Model scratch per piece: some models cache cells of their grid in it. Allocated here,
-    # with reference counting; the pixels run without (:func:`_piece_pixels`).
-    scr = new_scratch(kernel)
-    cuts = np.empty(8)
-    tags = np.empty(8, np.int64)
-    return _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi,
-                         closed, origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece,
-                         level, close, grids_a, grids_b, which, geoms, exit_t, exit_piece,
-                         exit_level, ended, tr0, tc0, visited, tested, skipped, scr, cuts, tags)
-
-
-@jit()
 def _box_intervals(basis, origin0, spacing0, box_lo, box_hi, closed, planes, t_range, ended,
                    tr0, tc0, r0, r1, c0, c1, width, height):
     """Each ray's interval in a piece's box over the rectangle ``[r0, r1) x [c0, c1)``, into
@@ -263,7 +245,9 @@ def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box
                   origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
                   grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
                   tc0, visited, tested, skipped, scr, cuts, tags):
-    """The pixel loop of :func:`_piece_tile` (``scr``, ``cuts``, ``tags``: its buffers).
+    """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns the closure's hits
+    and the number of rays that ended in it (marked in the tile's ``ended``). ``scr``,
+    ``cuts``, ``tags``: the band's buffers, allocated by the caller (:func:`_trace_tile`).
 
     Three passes over the rectangle: each ray's interval in the piece's box
     (:func:`_box_intervals`) and the closure's test on entry; the
@@ -321,6 +305,11 @@ def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis
     tr1 = min(tr0 + TILE, height)
     tc1 = min(tc0 + TILE, width)
     mscr = mode_scratch(mode)
+    # The band's buffers, and below a model scratch per piece (some models cache cells of their
+    # grid in it): allocated here, with reference counting; the pixels run without it
+    # (:func:`_piece_pixels`).
+    cuts = np.empty(8)
+    tags = np.empty(8, np.int64)
     # Rays of the tile that ended (``done``) are left out of the pieces behind, and the tile
     # stops when all have: a first hit near the front otherwise still pays every piece's
     # interval and state round trip behind it.
@@ -348,19 +337,21 @@ def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis
             continue
         if which[p, 0] == 0:
             pair_a = grids_a[which[p, 1]]
-            h, e = _piece_tile(band_a, pair_a[0], pair_a[1], mode, mscr, state, out, basis,
-                               geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0,
-                               planes, t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
-                               grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
-                               tr0, tc0, visited, tested, skipped)
+            h, e = _piece_pixels(band_a, pair_a[0], pair_a[1], mode, mscr, state, out, basis,
+                                 geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0,
+                                 spacing0, planes, t_range, r0, r1, c0, c1, p, levels[p], close,
+                                 grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level,
+                                 ended, tr0, tc0, visited, tested, skipped,
+                                 new_scratch(pair_a[0]), cuts, tags)
         else:
             # Another name than above: the two lists may hold different types.
             pair_b = grids_b[which[p, 1]]
-            h, e = _piece_tile(band_b, pair_b[0], pair_b[1], mode, mscr, state, out, basis,
-                               geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0, spacing0,
-                               planes, t_range, r0, r1, c0, c1, p, levels[p], close, grids_a,
-                               grids_b, which, geoms, exit_t, exit_piece, exit_level, ended,
-                               tr0, tc0, visited, tested, skipped)
+            h, e = _piece_pixels(band_b, pair_b[0], pair_b[1], mode, mscr, state, out, basis,
+                                 geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0,
+                                 spacing0, planes, t_range, r0, r1, c0, c1, p, levels[p], close,
+                                 grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level,
+                                 ended, tr0, tc0, visited, tested, skipped,
+                                 new_scratch(pair_b[0]), cuts, tags)
         hits += h
         alive -= e
     if final:
