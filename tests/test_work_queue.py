@@ -1,8 +1,9 @@
-"""``render.work_queue``: compiled loops shared by threads through a counter.
+"""``render.work_queue``: the shared counter and the threads that run compiled loops on it.
 
-References: a count per item kept by the test (every item taken exactly once), a barrier that
-only opens when the copies run at the same time, and events that show the caller waits for a
-copy still running before it reports a failure."""
+References: a count per item kept by the test (every item taken exactly once, whichever thread
+takes it), the images of one thread (the frames of every thread must equal them), a barrier
+that only opens when the copies run at the same time, and events that show the caller waits
+for a copy still running before it reports a failure."""
 
 from __future__ import annotations
 
@@ -11,9 +12,75 @@ import threading
 import numba
 import numpy as np
 import pytest
+from numba import njit, prange
 
+import splinecast as sc
 from splinecast._jit import jit
 from splinecast.render.work_queue import run_on_threads, take
+
+
+@njit(parallel=True)
+def _take_all(n_items, taken_by):
+    counter = np.zeros(1, np.int64)
+    for worker in prange(taken_by.shape[0]):
+        while True:
+            item = take(counter)
+            if item >= n_items:
+                break
+            # A little work: the threads run side by side and contend for the counter all the
+            # time (a counter that is not atomic then hands out some numbers twice).
+            x = 0.0
+            for i in range(5 + item % 7):
+                x += np.sin(i * 0.001 + item)
+            taken_by[worker, item] += 1 + (x > 1e300)
+
+
+def test_every_item_is_taken_exactly_once():
+    n, workers = 200_000, max(2, numba.get_num_threads())
+    taken_by = np.zeros((workers, n), np.int64)  # a row per worker: no shared writes
+    _take_all(n, taken_by)
+    assert np.all(taken_by.sum(axis=0) == 1)
+    if numba.get_num_threads() > 1:
+        assert np.count_nonzero(taken_by.sum(axis=1)) > 1, "one worker took every item"
+
+
+def test_frames_with_every_thread_equal_frames_with_one():
+    vol = sc.demo("torus", size=40)
+    cam = sc.Camera.orbit(vol, azimuth=25, elevation=15, size=(96, 72))
+    scene = sc.Scene(vol)
+    threads = numba.get_num_threads()
+    many = scene.render(cam, iso=vol.metadata["default_iso"])
+    numba.set_num_threads(1)
+    try:
+        one = scene.render(cam, iso=vol.metadata["default_iso"])
+    finally:
+        numba.set_num_threads(threads)
+    assert np.isfinite(one.depth).sum() > 100
+    for name in ("rgba", "depth", "normal", "cells_visited"):
+        assert np.array_equal(getattr(one, name), getattr(many, name), equal_nan=True), name
+
+
+def test_pyramid_frames_with_every_thread_equal_frames_with_one(tmp_path):
+    """The cut's tiles are taken by the threads as they become free: the image is the one a
+    single thread draws, also where pieces of several levels meet (a small budget)."""
+    pytest.importorskip("zarr")
+    vol = sc.demo("marschner-lobb", size=48)
+    sc.build_pyramid(vol, tmp_path / "p.zarr", brick=16, progress=False)
+    cam = sc.Camera.orbit(vol, azimuth=35, elevation=20, size=(96, 72))
+    threads = numba.get_num_threads()
+    frames = []
+    for n in (threads, 1):
+        numba.set_num_threads(n)
+        try:
+            with sc.Scene(sc.read(tmp_path / "p.zarr"), budget="300KiB") as scene:
+                frames.append(scene.render(cam, iso=0.5))
+        finally:
+            numba.set_num_threads(threads)
+    many, one = frames
+    assert len(one.stats["cut_levels"]) > 1  # levels meet in the cut
+    assert np.isfinite(one.depth).sum() > 100
+    for name in ("rgba", "depth", "normal"):
+        assert np.array_equal(getattr(one, name), getattr(many, name), equal_nan=True), name
 
 
 @jit()
@@ -29,7 +96,7 @@ def _count_items(counter, seen):
 
 
 @pytest.mark.parametrize("threads", [1, 2, 4])
-def test_every_item_is_taken_exactly_once(threads):
+def test_run_on_threads_takes_every_item_exactly_once(threads):
     seen = np.zeros(20000, np.int64)
     counter = np.zeros(1, np.int64)
     results = run_on_threads(lambda: _count_items(counter, seen), threads)
