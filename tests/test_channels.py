@@ -382,6 +382,21 @@ def npy_files(tmp_path_factory, pair) -> tuple[Path, Path, Path]:
     return paths
 
 
+def _assert_additive_composite(png, files, mode, windows, colors=((1, 0, 0), (0, 1, 0))):
+    """The command line's PNG of two channels is the sum of each file's own single-channel
+    ``mode`` render, windowed and coloured by the test (background where neither is met)."""
+    volumes = [sc.read(f) for f in files]
+    camera = sc.Camera.orbit(volumes[0], azimuth=30, elevation=20, size=(40, 32))
+    values = [sc.Scene(v).render(camera, mode, window=w, outputs=("value",)).value
+              for v, w in zip(volumes, windows, strict=True)]
+    summed = np.minimum(sum(_ramp(v, w, c) for v, w, c in zip(values, windows, colors,
+                                                              strict=True)), 1.0)
+    met = np.isfinite(values[0]) | np.isfinite(values[1])
+    expected = np.where(met[..., None], summed, np.asarray(BG[:3]))
+    got = np.asarray(Image.open(png), np.float64)[..., :3] / 255.0
+    np.testing.assert_allclose(got, expected, atol=0.5 / 255 + 1e-6)
+
+
 def test_cli_mip_of_channel_files_is_the_composite_of_single_renders(npy_files, tmp_path,
                                                                        capsys):
     a, b, _ = npy_files
@@ -391,17 +406,7 @@ def test_cli_mip_of_channel_files_is_the_composite_of_single_renders(npy_files, 
                            "--channel-window", "0.1:0.9,0.2:1.6", "-o", str(png)], capsys)
     assert code == 0, err
     assert "channel 0 'a.npy': #ff0000, window 0.1..0.9" in err
-    volumes = [sc.read(a), sc.read(b)]
-    camera = sc.Camera.orbit(volumes[0], azimuth=30, elevation=20, size=(40, 32))
-    windows, colors = [(0.1, 0.9), (0.2, 1.6)], [(1, 0, 0), (0, 1, 0)]
-    values = [sc.Scene(v).render(camera, "mip", window=w, outputs=("value",)).value
-              for v, w in zip(volumes, windows, strict=True)]
-    summed = np.minimum(sum(_ramp(v, w, c) for v, w, c in zip(values, windows, colors,
-                                                              strict=True)), 1.0)
-    met = np.isfinite(values[0]) | np.isfinite(values[1])
-    expected = np.where(met[..., None], summed, np.asarray(BG[:3]))
-    got = np.asarray(Image.open(png), np.float64)[..., :3] / 255.0
-    np.testing.assert_allclose(got, expected, atol=0.5 / 255 + 1e-6)
+    _assert_additive_composite(png, [a, b], "mip", [(0.1, 0.9), (0.2, 1.6)])
 
 
 def test_cli_aip_takes_a_window_per_channel_and_the_shared_window(npy_files, tmp_path, capsys):
@@ -415,17 +420,7 @@ def test_cli_aip_takes_a_window_per_channel_and_the_shared_window(npy_files, tmp
                            "-o", str(png)], capsys)
     assert code == 0, err
     assert "channel 1 'b.npy': #00ff00, window 0.1..0.9" in err
-    volumes = [sc.read(a), sc.read(b)]
-    camera = sc.Camera.orbit(volumes[0], azimuth=30, elevation=20, size=(40, 32))
-    windows, colors = [(0.05, 0.3), (0.1, 0.9)], [(1, 0, 0), (0, 1, 0)]
-    values = [sc.Scene(v).render(camera, "aip", window=w, outputs=("value",)).value
-              for v, w in zip(volumes, windows, strict=True)]
-    summed = np.minimum(sum(_ramp(v, w, c) for v, w, c in zip(values, windows, colors,
-                                                              strict=True)), 1.0)
-    met = np.isfinite(values[0]) | np.isfinite(values[1])
-    expected = np.where(met[..., None], summed, np.asarray(BG[:3]))
-    got = np.asarray(Image.open(png), np.float64)[..., :3] / 255.0
-    np.testing.assert_allclose(got, expected, atol=0.5 / 255 + 1e-6)
+    _assert_additive_composite(png, [a, b], "aip", [(0.05, 0.3), (0.1, 0.9)])
 
 
 @pytest.mark.parametrize("mode", ["iso", "dvr"])
