@@ -429,6 +429,38 @@ def test_appended_raw_size_header(vti, capsys, size, needles):
     refused(["info", str(vti)], capsys, vti.parent, str(vti), "array 'v'", *needles)
 
 
+def _appended_tag(data: bytes) -> bytes:
+    start = data.find(b"<AppendedData")
+    return data[start:data.find(b">", start) + 1]
+
+
+@pytest.mark.parametrize("damage", ["duplicated element", "text before the mark", "no mark"])
+def test_appended_data_must_start_with_its_mark(vti, capsys, damage):
+    # VTK reads the arrays from the end of the file when the first character after the tag is
+    # not '_' (a duplicated, self-closing <AppendedData/> before the real one aborted the
+    # process in its decoder); a check that searched for the next '_' passed such files on.
+    data = vti.read_bytes()
+    tag = _appended_tag(data)
+    if damage == "duplicated element":
+        data = data.replace(tag, tag[:-1] + b" />\n  </PointData>\n  " + tag, 1)
+    elif damage == "text before the mark":
+        data = data.replace(tag, tag + b"x", 1)
+    else:
+        at = data.find(b"_", data.find(tag))
+        data = data[:at] + b"=" + data[at + 1:]
+    vti.write_bytes(data)
+    refused(["info", str(vti)], capsys, vti.parent, str(vti),
+            "the appended data does not start with the '_' mark")
+
+
+def test_white_space_before_the_appended_mark_is_read(vti):
+    data = vti.read_bytes()
+    tag = _appended_tag(data)
+    at = data.find(b"_", data.find(tag))
+    vti.write_bytes(data[:data.find(tag) + len(tag)] + b"\r\n\t " + data[at:])
+    np.testing.assert_array_equal(sc.read(vti).data, ramp())
+
+
 def test_truncated_appended_data(vti, capsys):
     vti.write_bytes(vti.read_bytes()[:-40])
     refused(["info", str(vti)], capsys, vti.parent, str(vti), "truncated: array 'v' needs 240")

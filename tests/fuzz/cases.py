@@ -227,6 +227,10 @@ def _effects(rng: random.Random, folder: Path) -> list[str]:
             *(["--shading", "cel"] if rng.random() < 0.5 else [])]
 
 
+#: Files a render may write: the CLI's image formats and ``--depth``'s array.
+OUTPUT_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".npy")
+
+
 def _outputs(rng: random.Random, folder: Path) -> list[str]:
     option = rng.choice(["-o", "--depth"])
     value = _pick(rng, ["out.jpg", "no/such/dir/out.png", "x" * 300 + ".png",
@@ -298,8 +302,10 @@ def build_case(number: int, run_seed: int, seeds: dict[str, Seed], root: Path) -
         if scenario is _iso or scenario is _geometry or scenario is _sampled:
             argv = ["render", "demo:sphere?size=10", "-o", "out.png", "--size", SMALL,
                     "--quiet"] + extra
+        # What a successful run may write: the image (argparse keeps the last -o, in any of
+        # the CLI's image formats) and a depth array.
         outputs = ["out.png", *[a.split("=", 1)[-1] for a in extra
-                                if a.lower().endswith((".png", ".npy"))]]
+                                if a.lower().endswith(OUTPUT_SUFFIXES)]]
         return Case(number, target, argv, [scenario.__name__.strip("_")], folder, outputs,
                     sentinel_region)
     seed = seeds[target]

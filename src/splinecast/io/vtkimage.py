@@ -299,10 +299,16 @@ def _check_vti_header(path: Path, label: str) -> bytes:
     encoding = _attributes(raw[appended_at:tag_end]).get("encoding")
     if encoding not in ("raw", "base64"):
         raise ReadError(f"{label}: unknown AppendedData encoding {limits.shorten(encoding)}")
-    underscore = raw.find(b"_", tag_end)
-    if underscore < 0:
-        raise ReadError(f"{label}: the appended data has no '_' start mark")
-    data_start = underscore + 1
+    # VTK takes the first character after the tag that is not white space as the start mark
+    # and, if it is not '_', reads the arrays from the end of the file (garbage that can crash
+    # its decoder): so must the check, instead of searching for the next '_'.
+    mark = tag_end + 1
+    while mark < len(raw) and raw[mark] in b" \t\r\n":
+        mark += 1
+    if tag_end < 0 or mark >= len(raw) or raw[mark] != ord("_"):
+        raise ReadError(f"{label}: the appended data does not start with the '_' mark right "
+                        "after <AppendedData>")
+    data_start = mark + 1
     for offset, expected, name in appended:
         at = data_start + offset
         if encoding == "raw":
