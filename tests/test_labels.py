@@ -499,6 +499,10 @@ def test_distributed_labels_equal_the_local_render(vol, camera, label_file, tmp_
         scene = DistributedScene(label_file, client, labels=True, colors=table, show=[3, 5],
                                  opacity={5: 0.5})
         frame = scene.render(cam, tile_size=16)
+        # The workers' label scenes render surfaces only: the client refuses another mode.
+        assert scene.modes == ("iso",)
+        with pytest.raises(sc.ParameterError, match=r"\(mode 'iso'\), not mode 'mip'"):
+            scene.render(cam, "mip", tile_size=16)
     assert frame.stats["tiles"] > 4
     np.testing.assert_array_equal(frame.label, local.label)
     np.testing.assert_array_equal(frame.depth, local.depth)

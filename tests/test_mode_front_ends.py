@@ -270,3 +270,37 @@ def test_every_scene_kind_answers_the_front_ends_questions():
     bare = Bare()
     assert (bare.model_name, bare.tile_shape, bare.bricks_loaded(), bare.modes) == (
         "trilinear", (0, 1), None, None)
+
+
+def test_the_template_refuses_a_mode_the_scene_kind_does_not_declare():
+    """A kind declaring ``modes`` renders those, by name or as mode objects, and the template
+    refuses any other before tracing, naming the mode and the ones allowed; what it accepts is
+    the frame of a kind declaring nothing."""
+
+    class IsoOnly(sc.Scene):
+        """An in-memory scene that declares one mode and nothing else of its own."""
+
+        modes: ClassVar[tuple[str, ...] | None] = ("iso",)
+
+    vol = sc.demo("sphere", size=12)
+    camera = sc.Camera.orbit(vol, size=(16, 12))
+    scene = IsoOnly(vol)
+    for mode in ("mip", sc.Mip(), "dvr"):
+        with pytest.raises(sc.ParameterError) as refused:
+            scene.render(camera, mode)
+        name = mode if isinstance(mode, str) else mode.name
+        assert str(refused.value) == (f"IsoOnly renders its own modes (mode 'iso'), "
+                                      f"not mode {name!r}")
+    expected = sc.Scene(vol).render(camera, "iso", iso=0.0)
+    accepted = [scene.render(camera, "iso", iso=0.0), scene.render(camera, sc.Iso(iso=0.0)),
+                scene.render(camera, iso=0.0)]  # the last: the default mode, declared
+    for frame in accepted:
+        np.testing.assert_array_equal(frame.rgba, expected.rgba)
+        np.testing.assert_array_equal(frame.depth, expected.depth)
+
+    class Reasoned(IsoOnly):
+        modes_reason: ClassVar[str | None] = "this kind draws surfaces"
+
+    with pytest.raises(sc.ParameterError, match=r"^this kind draws surfaces \(mode 'iso'\), "
+                                                r"not mode 'mip'$"):
+        Reasoned(vol).render(camera, "mip")

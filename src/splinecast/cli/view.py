@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{vol.dtype} in {seconds:.2f} s")
     elif isinstance(vol, sc.Volume):
         read = f"read {vol.name}: {vol.shape} {vol.dtype} in {seconds:.2f} s"
-    elif server.shown.kind == "wavelet":
+    elif isinstance(vol, sc.WaveletVolume):
         read = (f"opened {vol.name}: degree-{vol.degree} wavelet store, {vol.layout.levels} "
                 f"levels, {vol.shape} in {seconds:.2f} s (coarsest level read)")
     else:

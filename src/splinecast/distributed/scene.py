@@ -32,6 +32,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import ParameterError, SplinecastError
+from ..multires.scenes.labels import LabelScene
 from ..render.frame import Frame
 from ..render.template import RenderOptions, SceneTemplate
 from . import worker
@@ -161,6 +162,18 @@ class DistributedScene(SceneTemplate):
             others = f" (also on {n} other worker{'s' if n > 1 else ''})" if n else ""
             raise type(errors[0])(f"{errors[0]}{others}")
         return results[0]
+
+    # The modes of the workers' scene kind (a label volume's: its labels' surfaces): ``render``
+    # refuses another mode here, before any tile is sent to a worker.
+    @property
+    def modes(self) -> tuple[str, ...] | None:  # type: ignore[override]
+        """The modes the workers' scenes render (a label volume's, or every mode)."""
+        return LabelScene.modes if self.source.labels is not None else None
+
+    @property
+    def modes_reason(self) -> str | None:  # type: ignore[override]
+        """Why only :attr:`modes` (a label volume's reason), for the message refusing another."""
+        return LabelScene.modes_reason if self.source.labels is not None else None
 
     @property
     def threads(self) -> int:

@@ -45,7 +45,7 @@ from .defaults import auto_iso
 from .dvr import DVRSettings
 from .effects import SurfaceEffects, apply_effects
 from .frame import Frame
-from .modes import ModeContext, RenderMode, build_mode
+from .modes import ModeContext, RenderMode, build_mode, mode_name
 from .outputs import OUTPUTS, check_outputs
 from .shading import Shading, normals_code
 
@@ -176,7 +176,8 @@ class SceneTemplate:
     the defaults of a kind holding its data in memory, so they never test which kind they hold:
 
     :attr:`modes`
-        The modes the kind renders (None: every mode of the registry).
+        The modes the kind renders (None: every mode of the registry); ``render`` refuses
+        another one (:meth:`check_mode`).
     :attr:`model_name`
         The name of the reconstruction model.
     :attr:`tile_shape`
@@ -200,8 +201,11 @@ class SceneTemplate:
     passes_options: ClassVar[bool] = False
     #: The names of the modes the kind renders, :attr:`default_mode` among them (None: every
     #: mode of the registry :data:`~splinecast.render.modes.MODES`); the command line and the
-    #: viewer offer these.
+    #: viewer offer these, and ``render`` refuses any other (:meth:`check_mode`).
     modes: ClassVar[tuple[str, ...] | None] = None
+    #: What the kind renders, in words: the start of the message refusing a mode not in
+    #: :attr:`modes` (None: "<class name> renders its own modes").
+    modes_reason: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -222,6 +226,21 @@ class SceneTemplate:
     def check_iso(self, iso: Any) -> float:
         """An isovalue checked against the data range (``None``: the automatic one)."""
         return check_iso(self.defaults_volume, iso)
+
+    def check_mode(self, mode: Any) -> Any:
+        """``mode`` (a name or a mode object), refused unless the kind renders it.
+
+        Raises
+        ------
+        ParameterError
+            The kind declares :attr:`modes` and ``mode`` is not one of them.
+        """
+        allowed = self.modes
+        if allowed is not None and mode_name(mode) not in allowed:
+            reason = self.modes_reason or f"{type(self).__name__} renders its own modes"
+            raise ParameterError(f"{reason} (mode {' or '.join(map(repr, allowed))}), "
+                                 f"not mode {mode_name(mode)!r}")
+        return mode
 
     @property
     def model_name(self) -> str:
@@ -405,10 +424,12 @@ class SceneTemplate:
         >>> frame.rgba.shape, frame.position is None
         ((48, 64, 4), True)
         """
+        # The mode is checked here, before the kind's own step: every kind refuses a mode it
+        # does not declare, whatever frame it makes.
         options = RenderOptions(
-            self.default_mode if mode is None else mode, iso, method, step, shading, inside,
-            clip, crop, colors, opacity, effects, window, colormap, tolerance, tf, dvr, outputs,
-            normals, samples)
+            self.check_mode(self.default_mode if mode is None else mode), iso, method, step,
+            shading, inside, clip, crop, colors, opacity, effects, window, colormap, tolerance,
+            tf, dvr, outputs, normals, samples)
         return self.render_frame(camera, options, self.check_frame_options(frame_options))
 
     def check_frame_options(self, given: Mapping[str, Any]) -> dict[str, Any]:

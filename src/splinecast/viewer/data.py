@@ -10,9 +10,10 @@
   volume itself, or the lazy multiscale / wavelet volume (level 0's placement).
 * ``models`` and ``modes`` - exactly what the page may choose (a wavelet store renders only its
   ``bspline<degree>``; a scene passed in by the caller only its own model).
+* ``kind`` - what the viewer does differently for this kind of data (:mod:`.kinds`: stripes or
+  whole frames, how long a pass waits for bricks, scenes kept, picking, ...).
 * :meth:`Shown.make_scene` - the scene of another model, when that is offered.
-* :meth:`Shown.render_options` - per pass, how long a multiscale frame waits for bricks.
-* :meth:`Shown.bricks` - the brick counts of a frame for the frame header and the status line.
+* :func:`bricks_header` - the brick counts of a frame for the frame header and the status line.
 * ``timepoints`` and :meth:`Shown.read_timepoint` - a time series read from a file (a 4D NIfTI,
   an OME-Zarr image with a ``t`` axis, a TIFF with T): how many time points it holds, and
   another one read from the same file (same channel).
@@ -32,15 +33,14 @@ from ..multires.scenes.labels import LabelScene
 from ..render.modes import MODE_NAMES as MODES
 from ..scene import Scene
 from ..volume import Volume
+from .kinds import ChannelPyramids, Channels, DataKind, InMemory, Labels, Multiscale, Wavelet
 
-__all__ = ["Shown", "shown", "DEFAULT_BUDGET", "DEFAULT_LOD", "FULL_WAIT_S"]
+__all__ = ["Shown", "shown", "DEFAULT_BUDGET", "DEFAULT_LOD"]
 
 #: Brick cache of a pyramid the viewer opens itself (the default of ``splinecast render``).
 DEFAULT_BUDGET = "2GiB"
 #: Level of detail of a pyramid the viewer opens itself (pixels per voxel; as ``render``).
 DEFAULT_LOD = 1.0
-#: Longest wait (s) of a full frame for the bricks of its cut; later bricks come as refreshes.
-FULL_WAIT_S = 0.5
 
 
 @dataclass
@@ -49,7 +49,8 @@ class Shown:
 
     Attributes
     ----------
-    kind : {"volume", "multiscale", "wavelet"}
+    kind : DataKind
+        What the viewer does differently for this kind of data (:mod:`.kinds`).
     volume : Volume
         In memory: values, defaults and histogram (a multiresolution scene's coarsest level).
     geometry : object
@@ -75,7 +76,7 @@ class Shown:
         ``reader(t)`` reads time point ``t`` of the file (a Volume, or a lazy multiscale volume).
     """
 
-    kind: str  # "volume", "multiscale", "wavelet" or "channels"
+    kind: DataKind
     volume: Volume
     geometry: Any
     models: tuple[str, ...]
@@ -87,47 +88,26 @@ class Shown:
     timepoints: int = 1
     timepoint: int = 0
     reader: Callable[[int], Any] | None = None
-    #: Several channels (``kind="channels"``): each one's label, colour (``#rrggbb``), window
-    #: and visibility as its scene starts (the state's ``channels``), and whether the channels
-    #: are pyramids.
+    #: Several channels: each one's label, colour (``#rrggbb``), window and visibility as its
+    #: scene starts (the state's ``channels``).
     channels: list[dict[str, Any]] | None = None
-    layered_pyramids: bool = False
-    #: A label volume (``kind="labels"``): each label's value, name and colour (``#rrggbb``),
-    #: as ``hello.labels`` lists them, and the colour table given (kept for the label scenes of
-    #: other models).
+    #: A label volume: each label's value, name and colour (``#rrggbb``), as ``hello.labels``
+    #: lists them.
     labels: list[dict[str, Any]] | None = None
 
     @property
-    def multiresolution(self) -> bool:
-        """Whether the data is a pyramid or a wavelet store (rendered without stripes)."""
-        if self.kind == "channels":
-            return self.layered_pyramids
-        return self.kind != "volume"
-
-    @property
-    def max_scenes(self) -> int:
-        """Scenes kept at once: one brick cache at a time for a pyramid (its budget is RAM),
-        one set of channel scenes (each holds a scene per channel)."""
-        return 1 if self.kind in ("multiscale", "channels", "labels") else 2
-
-    @property
     def data(self) -> Any:
-        """What the viewer's own scenes of the first time point are made of."""
-        return self.volume if self.kind == "volume" else self.geometry
+        """What the viewer's own scenes of the first time point are made of: the full-resolution
+        data (for a volume in memory, the volume itself)."""
+        return self.geometry
 
     def make_scene(self, model: str, data: Any = None) -> Any:
         """A new scene of ``model`` (one the page may choose) of ``data`` (a time point read by
         :meth:`read_timepoint`; default: the first one shown)."""
         if model not in self.models:
             raise ParameterError(f"model must be one of {', '.join(self.models)}, got {model!r}")
-        data = self.data if data is None else data
-        if self.kind == "volume":
-            return Scene(data, model=model)
-        if self.kind == "labels":
-            return LabelScene(data, model=model, **self.scene_options)
-        if self.kind == "channels":
-            return ChannelScene(data, model=model, **self.scene_options)
-        return Scene(data, model=model, **self.scene_options)
+        return self.kind.make_scene(self.data if data is None else data, model,
+                                    self.scene_options)
 
     def read_timepoint(self, timepoint: int) -> Any:
         """Time point ``timepoint`` of the file, read again from it (same channel)."""
@@ -138,47 +118,17 @@ class Shown:
                                  f"time point), got {timepoint!r}")
         return self.reader(timepoint)
 
-    def render_options(self, step: str) -> dict[str, Any]:
-        """Extra keyword arguments of ``scene.render`` for a pass (``interactive``, ``coarse``,
-        ``full``, ``refresh`` or ``screenshot``).
-
-        A pyramid's reduced and refresh frames draw what is resident at once (the loader goes on
-        reading); a full frame waits up to :data:`FULL_WAIT_S` for its cut; a screenshot waits
-        for the whole cut (a still image, as ``splinecast render``).
-        """
-        if self.kind == "channels" and self.layered_pyramids:
-            # A scene per channel, each with its own loader: no refresh as bricks arrive, so a
-            # full frame waits for every channel's cut, a reduced one draws what is resident.
-            return {"complete": True} if step in ("full", "screenshot") else {"wait": False}
-        if self.kind != "multiscale":
-            return {}
-        if step == "screenshot":
-            return {"complete": True}
-        if step == "full":
-            return {"wait": True, "timeout": FULL_WAIT_S}
-        return {"wait": False}
-
     def close_scene(self, scene: Any) -> None:
         """Release a scene the viewer made (a pyramid's loader thread); pinned ones are kept,
         and ``None`` (no scene made yet) is left alone."""
         if scene is not None and scene is not self.pinned:
             scene.close()
 
-    def description(self) -> dict[str, Any]:
-        """The ``hello`` message's ``multires`` entry (None for an in-memory volume)."""
-        if self.kind == "multiscale":
-            scene = self.pinned or self.initial
-            budget = scene.budget if scene is not None else self.scene_options.get("budget")
-            lod = scene.lod if scene is not None else self.scene_options.get("lod")
-            return {"kind": "multiscale", "levels": len(self.geometry.levels),
-                    "budget": budget, "lod": lod,
-                    "preview_shape": list(self.volume.shape)}
-        if self.kind == "wavelet":
-            lod = self.pinned.lod if self.pinned is not None else self.scene_options.get("lod")
-            return {"kind": "wavelet", "degree": self.geometry.degree,
-                    "levels": self.geometry.layout.levels, "lod": lod,
-                    "preview_shape": list(self.volume.shape)}
-        return None  # type: ignore[return-value]
+    def description(self) -> dict[str, Any] | None:
+        """The ``hello`` message's ``multires`` entry (None for data that is not
+        multiresolution): :meth:`.kinds.DataKind.description`."""
+        scene = self.pinned if self.pinned is not None else self.initial
+        return self.kind.description(self.geometry, self.volume, scene, self.scene_options)
 
 
 def bricks_header(stats: dict[str, Any]) -> dict[str, Any] | None:
@@ -250,7 +200,7 @@ def shown(data: Any, model: str | None = None, budget: Any = None,
     if colors is not None:
         raise ParameterError("colors applies to label volumes (labels=True) only")
     out = _classify(data, model, budget, lod)
-    if out.kind not in ("wavelet", "channels"):  # (channels: one time point)
+    if out.kind.time_series:
         _time_series(out, allow_external)
     return out
 
@@ -283,9 +233,9 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
             raise ParameterError("budget and lod apply to multiresolution (OME-Zarr or wavelet) "
                                  "data only")
         if isinstance(data, Scene):
-            return Shown("volume", data.volume, data.volume, tuple(MODELS), pinned=data,
+            return Shown(InMemory(), data.volume, data.volume, tuple(MODELS), pinned=data,
                          default_model=model or data.model_name)
-        return Shown("volume", data, data, tuple(MODELS), default_model=model or "trilinear")
+        return Shown(InMemory(), data, data, tuple(MODELS), default_model=model or "trilinear")
     # Imported here: the viewer of an in-memory volume never loads zarr.
     from ..io.omezarr import MultiscaleVolume
     from ..multires.scenes.multiscale import MultiscaleScene
@@ -296,14 +246,14 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
         if budget is not None or lod is not None:
             raise ParameterError("budget and lod are the scene's own: pass a volume to set them")
         _only_model(model, data.model_name, data.volume.name)
-        kind = "multiscale" if isinstance(data, MultiscaleScene) else "wavelet"
+        kind = Multiscale() if isinstance(data, MultiscaleScene) else Wavelet()
         return Shown(kind, data.preview, data.volume, (data.model_name,), pinned=data,
                      default_model=data.model_name)
     if isinstance(data, WaveletVolume):
         if budget is not None:
             raise ParameterError(f"budget does not apply to the wavelet store {data.name}")
         scene = WaveletScene(data, model=model, lod=lod)  # reads the coarsest level only
-        return Shown("wavelet", scene.preview, data, (scene.model_name,), pinned=scene,
+        return Shown(Wavelet(), scene.preview, data, (scene.model_name,), pinned=scene,
                      default_model=scene.model_name)
     if isinstance(data, MultiscaleVolume):
         # Bricks always (whole_level=False): reading a whole level inside a frame would stop the
@@ -311,7 +261,7 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
         options = {"budget": DEFAULT_BUDGET if budget is None else budget,
                    "lod": DEFAULT_LOD if lod is None else lod, "whole_level": False}
         scene = MultiscaleScene(data, model=model or "trilinear", **options)  # coarsest level
-        return Shown("multiscale", scene.preview, data, tuple(MODELS), initial=scene,
+        return Shown(Multiscale(), scene.preview, data, tuple(MODELS), initial=scene,
                      scene_options=options, default_model=scene.model_name)
     if isinstance(data, list | tuple):
         data = MultichannelVolume(data)
@@ -344,10 +294,9 @@ def _channels(data: Any, model: str | None, budget: Any, lod: float | None) -> S
     described = [{"label": c.label, "color": _hex(c.color),
                   "window": None if c.window is None else list(c.window),
                   "iso": c.iso, "visible": c.visible} for c in scene.channels]
-    return Shown("channels", volume, volumes, models, pinned=pinned,
-                 initial=None if pinned is not None else scene, scene_options=options,
-                 default_model=scene.model_name, channels=described,
-                 layered_pyramids=pyramids)
+    return Shown(ChannelPyramids() if pyramids else Channels(), volume, volumes, models,
+                 pinned=pinned, initial=None if pinned is not None else scene,
+                 scene_options=options, default_model=scene.model_name, channels=described)
 
 
 def _labels(data: Any, model: str | None, budget: Any, lod: float | None,
@@ -374,7 +323,7 @@ def _labels(data: Any, model: str | None, budget: Any, lod: float | None,
     described = [{"value": int(v), "name": scene.style(v).name, "color": _hex(
         scene.style(v).rgba[:3])} for v in scene.labels]
     volume = scene.volume
-    return Shown("labels", volume, volume, models, modes=LabelScene.modes or MODES,
+    return Shown(Labels(), volume, volume, models, modes=LabelScene.modes or MODES,
                  pinned=pinned, initial=None if pinned is not None else scene,
                  scene_options=options,
                  default_model=scene.model_name, labels=described)

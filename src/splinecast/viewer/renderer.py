@@ -9,7 +9,8 @@ Stripes are windows of the full image (:meth:`Camera.tile`): their rays are bit-
 full image's, so a frame assembled from stripes equals ``Scene.render`` of the whole camera. They
 exist so a slow frame can be given up between stripes when the user has already moved on.
 Multiresolution scenes are rendered whole: their cut (and a wavelet store's ε) depends on the
-camera's whole image, which a stripe's camera would change.
+camera's whole image, which a stripe's camera would change (the kind of data on display says
+so, :attr:`.kinds.DataKind.stripes`; label volumes are rendered whole too).
 
 A time series (``Shown.timepoints`` > 1) keys scenes by (model, time point). Another time point
 is read and prepared aside (:meth:`FrameRenderer.load_timepoint`, on any thread) while the
@@ -113,7 +114,7 @@ class FrameRenderer:
         self._current: tuple[int, Any] = (first, self.shown.data)
         self._incoming: tuple[int, Any, dict[str, Any]] | None = None
         self._lock = threading.Lock()
-        self._max_scenes = max(1, min(int(max_scenes), self.shown.max_scenes))
+        self._max_scenes = max(1, min(int(max_scenes), self.shown.kind.max_scenes))
         # Milliseconds per pixel of recent renders, by (model, mode, several isovalues).
         self._cost: dict[tuple[str, str, bool], float] = {}
 
@@ -202,7 +203,7 @@ class FrameRenderer:
             scene = self._scenes.get(key)
         if scene is None:
             budget = max(self._max_scenes - (self._pinned is not None), 1)
-            if self.shown.multiresolution:  # one brick cache at a time: close before opening
+            if self.shown.kind.close_before_open:  # e.g. one brick cache at a time
                 self._drop_scenes(budget - 1)
                 scene = self.shown.make_scene(model, data)
             else:  # made first: a model whose kernels are not ready drops nothing
@@ -283,18 +284,15 @@ class FrameRenderer:
 
         ``abort`` is asked between stripes. ``step`` names the pass (``interactive``,
         ``coarse``, ``full``, ``refresh``, ``screenshot``): how long a pyramid's frame waits for
-        bricks (:meth:`.data.Shown.render_options`), and for MIP / minIP whether it is a preview
+        bricks (:meth:`.kinds.DataKind.render_options`), and for MIP / minIP whether it is a preview
         sampled on planes (:data:`PREVIEW_MIP`). Errors of the request (a combination of
         model and mode the library refuses, an isovalue outside the range) raise ParameterError.
         Without ``compile``, kernels come from memory or the disk cache only, and a render that
         would compile one raises :class:`splinecast._jit.CompileNeeded` instead (see
-        :meth:`warm`); multiresolution data always may compile.
+        :meth:`warm`); data whose kernels :meth:`warm` does not cover
+        (:attr:`.kinds.DataKind.warm_covers`: pyramids, channels, labels) always may compile.
         """
-        # Several channels render each channel's scene in turn: warming one tiny scene need not
-        # cover every kernel they use, so they may compile (as pyramids may).
-        # Label volumes too: each label's scene is a float32 indicator, whatever the labels'
-        # voxel type, so the tiny volume of :meth:`warm` would not stand for it.
-        if compile or self.shown.multiresolution or self.shown.kind in ("channels", "labels"):
+        if compile or not self.shown.kind.warm_covers:
             return self._render(request, scale, abort, step)
         with forbidding_compiles():
             return self._render(request, scale, abort, step)
@@ -337,7 +335,7 @@ class FrameRenderer:
         rows = self._stripe_rows(request, step, camera.width, camera.height, align)
         # The viewer shows colour only: no depth, position, normal or per-ray counters.
         options = {"outputs": ("rgba",), **request.options, **self._pass_options(request, step),
-                   **self.shown.render_options(step)}
+                   **self.shown.kind.render_options(step)}
         image = np.empty((camera.height, camera.width, 4), np.uint8)
         parts: list[tuple[int, dict[str, Any]]] = []
         for row0 in range(0, camera.height, rows):
@@ -370,7 +368,7 @@ class FrameRenderer:
         ParameterError
             The data is not a label volume, or the pixel is outside the image.
         """
-        if self.shown.kind != "labels":
+        if not self.shown.kind.picks_labels:
             raise ParameterError("pick: the data on display is not a label volume")
         camera = request.camera
         col, row = int(np.floor(x)), int(np.floor(y))
@@ -389,9 +387,7 @@ class FrameRenderer:
     def _stripe_rows(self, request: RenderRequest, step: str, width: int, height: int,
                      align: int = 1) -> int:
         """Rows per stripe: about :data:`STRIPE_MS` of work, a multiple of ``align``."""
-        if self.shown.multiresolution or self.shown.kind == "labels":
-            # A label scene traces each label in the window its box projects to: rendered
-            # whole, so the frame is LabelScene.render of the whole camera as it is.
+        if not self.shown.kind.stripes:  # rendered whole (.kinds.DataKind.stripes)
             return height
         if self._stripe_rows_fixed is not None:
             rows = self._stripe_rows_fixed

@@ -191,7 +191,7 @@ class ViewerServer:
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
         await self._runner.setup()
         await web.SockSite(self._runner, sock).start()
-        if self.shown.kind == "multiscale":
+        if self.shown.kind.refreshes_with_bricks:
             self._watcher = asyncio.create_task(self._watch_bricks())
         return self.url
 

@@ -49,6 +49,7 @@ from ...io.label_colors import (
 from ...models.smoothing import smooth as smooth_volume
 from ...render.compose import gather, nearest_hit, on_background, over_by_depth
 from ...render.frame import Frame
+from ...render.modes import mode_name
 from ...render.outputs import check_outputs
 from ...render.shading import Shading
 from ...render.template import RenderOptions, SceneTemplate
@@ -323,8 +324,9 @@ class LabelScene(SceneTemplate):
     _READS = frozenset(("mode", "opacity", "shading", "clip", "crop", "normals", "samples",
                         "outputs", "inside"))
     frame_options = MappingProxyType({"show": None})
-    #: The labels' surfaces are the one mode of a label scene.
+    #: The labels' surfaces are the one mode of a label scene (the template refuses others).
     modes: ClassVar[tuple[str, ...] | None] = ("iso",)
+    modes_reason: ClassVar[str | None] = "label volumes render their labels' surfaces"
 
     @property
     def model_name(self) -> str:
@@ -341,7 +343,8 @@ class LabelScene(SceneTemplate):
         ``render`` options a label scene reads:
 
         mode : str
-            ``"iso"`` (the labels' surfaces), the only mode of label scenes.
+            ``"iso"`` (the labels' surfaces), the only mode of label scenes (:attr:`modes`:
+            ``render`` refuses another one), by name.
         show : iterable of int, optional
             Labels to draw this frame (default: the scene's ``show``).
         opacity : float or mapping, optional
@@ -363,10 +366,9 @@ class LabelScene(SceneTemplate):
             label hit, ``label`` its value (0 on a miss), ``stats["labels"]`` the labels drawn.
         """
         mode, inside = options.mode, options.inside
-        modes = self.modes or ()
-        if mode not in modes:
-            raise ParameterError(f"label volumes render their labels' surfaces (mode "
-                                 f"{' or '.join(map(repr, modes))}), not mode {mode!r}")
+        if not isinstance(mode, str):  # a mode object's options are not the labels'
+            raise ParameterError(f"label volumes take mode {mode_name(mode)!r} by name, not "
+                                 f"as a mode object ({type(mode).__name__})")
         if inside is not None and inside != "high":
             raise ParameterError("inside does not apply to label volumes (a label is inside "
                                  "where the voxels hold it)")
