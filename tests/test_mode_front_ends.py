@@ -33,6 +33,7 @@ from splinecast.render.compose import ADDITIVE, NEAREST_HIT
 from splinecast.render.modes import MODES, RenderMode, register_mode
 from splinecast.render.template import SceneTemplate
 from splinecast.viewer.client import ViewerClient
+from splinecast.viewer.data import shown
 from splinecast.viewer.server import ViewerServer
 
 ML = "demo:marschner-lobb?size=16"  # values in [0, 1]
@@ -304,3 +305,6 @@ def test_the_template_refuses_a_mode_the_scene_kind_does_not_declare():
     with pytest.raises(sc.ParameterError, match=r"^this kind draws surfaces \(mode 'iso'\), "
                                                 r"not mode 'mip'$"):
         Reasoned(vol).render(camera, "mip")
+    # The viewer offers a scene given to it only the modes its kind declares.
+    assert shown(scene).modes == ("iso",)
+    assert shown(sc.Scene(vol)).modes == tuple(MODES)

@@ -233,7 +233,9 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
             raise ParameterError("budget and lod apply to multiresolution (OME-Zarr or wavelet) "
                                  "data only")
         if isinstance(data, Scene):
-            return Shown(InMemory(), data.volume, data.volume, tuple(MODELS), pinned=data,
+            # A scene given by the caller offers the modes its kind declares (all by default).
+            return Shown(InMemory(), data.volume, data.volume, tuple(MODELS),
+                         modes=data.modes or MODES, pinned=data,
                          default_model=model or data.model_name)
         return Shown(InMemory(), data, data, tuple(MODELS), default_model=model or "trilinear")
     # Imported here: the viewer of an in-memory volume never loads zarr.
@@ -247,8 +249,8 @@ def _classify(data: Any, model: str | None, budget: Any, lod: float | None) -> S
             raise ParameterError("budget and lod are the scene's own: pass a volume to set them")
         _only_model(model, data.model_name, data.volume.name)
         kind = Multiscale() if isinstance(data, MultiscaleScene) else Wavelet()
-        return Shown(kind, data.preview, data.volume, (data.model_name,), pinned=data,
-                     default_model=data.model_name)
+        return Shown(kind, data.preview, data.volume, (data.model_name,),
+                     modes=data.modes or MODES, pinned=data, default_model=data.model_name)
     if isinstance(data, WaveletVolume):
         if budget is not None:
             raise ParameterError(f"budget does not apply to the wavelet store {data.name}")
