@@ -16,6 +16,7 @@ os.environ["NUMBA_THREADING_LAYER"] = "workqueue"
 os.environ["NUMBA_NUM_THREADS"] = "1"
 
 import argparse  # noqa: E402
+import gc  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import shutil  # noqa: E402
@@ -131,6 +132,12 @@ def main(argv: list[str] | None = None) -> int:
         import splinecast as sc
 
         warm_up([(s.folder, s.main) for s in seeds.values()], sc.MODELS)
+    # Every case runs in a fork of this process. The CLI collects garbage after a failure, and
+    # a collection in a child walks (and copies, page by page) the whole heap of the parent,
+    # which compiling the kernels in the warm-up makes large: seconds per case instead of
+    # milliseconds. The parent's objects are frozen out of the children's collections.
+    gc.collect()
+    gc.freeze()
     warm_seconds = time.monotonic() - start
     print(f"fuzz: {len(seeds)} formats ({', '.join(seeds)}), warm-up {warm_seconds:.1f} s, "
           f"root {root}", flush=True)
