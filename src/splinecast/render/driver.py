@@ -76,7 +76,7 @@ from .mode_api import (
     watches_skips,
 )
 from .outputs import copy_pixel
-from .rays import grid_ray, pixel_ray
+from .rays import Ray, grid_ray, pixel_ray
 from .sampler import bound_sample_pixel
 from .work_queue import run_on_threads, take
 
@@ -128,7 +128,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
         st = entry_left_out(mode, grid, scr, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz)
     t0 = max(t0, t_lo)
     t1 = min(t1, t_hi)
-    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     visited = 0
     tested = 0
     skipped = 0
@@ -407,14 +408,14 @@ def finalize(mode, state, out, basis):
 
 
 #: The ray passed to ``finish`` for a pixel never traced whose state is fresh.
-_NO_RAY = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+_NO_RAY = Ray(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
 
 
 @jit(inline="always")
 def _bare_ray(basis, row, col, width, height):
-    """The mode API's ray tuple with only the world ray set: what ``finish`` reads."""
+    """The mode API's :class:`~.rays.Ray` with only the world ray set: what ``finish`` reads."""
     wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-    return (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+    return Ray(wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
 
 
 @jit(_nrt=False)

@@ -15,6 +15,7 @@ The results differ from the divisions' by rounding only. The cell walk keeps div
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -24,7 +25,37 @@ from .clipping import clip_interval
 #: Below this, a direction component's reciprocal could overflow: the slab test divides.
 _TINY = 1e-300
 
-__all__ = ["pixel_ray", "index_axis", "grid_ray", "grid_point", "slab"]
+__all__ = ["Ray", "pixel_ray", "index_axis", "grid_ray", "grid_point", "slab"]
+
+Ray = namedtuple("Ray", (
+    "world_x", "world_y", "world_z", "world_dx", "world_dy", "world_dz",
+    "index_x", "index_y", "index_z", "index_dx", "index_dy", "index_dz",
+    "spacing_x", "spacing_y", "spacing_z", "anchor",
+))
+Ray.__doc__ = """The ray the driver hands a mode's hooks (:mod:`.mode_api`), for one pixel and grid.
+
+Sixteen floats. Numba types it as a tuple of one type, the machine layout of a plain tuple, so
+the names cost nothing per ray; compiled code builds one by calling the class.
+
+Attributes
+----------
+world_x, world_y, world_z : float
+    World origin of the ray (the camera's eye, or the pixel's point for a parallel camera).
+world_dx, world_dy, world_dz : float
+    Unit world direction: the ray parameter ``t`` is the world distance from the origin.
+index_x, index_y, index_z : float
+    The origin in the grid's traversal space (voxel index of the grid's level plus the model's
+    shift, minus the grid's offset): the point at ``t`` is ``index + t * index_d``.
+index_dx, index_dy, index_dz : float
+    The direction in that space: the world direction divided by the spacing.
+spacing_x, spacing_y, spacing_z : float
+    The voxel spacing of the grid's level: an index-space gradient divided by it is in world
+    units.
+anchor : float
+    The parameter where the ray enters the rendered domain, the same for every grid: the
+    sampled methods and DVR start their samples there, so every brick samples at the same
+    places.
+"""
 
 
 @jit(inline="always")
@@ -84,8 +115,8 @@ def grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, nc
 
     Returns ``(t0, t1, ray)``: the interval of the ray kept by the clip ``planes``, the rendered
     domain and the pixel's ``t_range`` (when not empty), empty (``t0 > t1``) when nothing is
-    left, and the mode API's ``ray`` tuple (:mod:`.mode_api`), whose last entry, the anchor of
-    the sample grids, is where the ray enters the domain: the same for every grid.
+    left, and the mode API's :class:`Ray`, whose ``anchor`` (where the sample grids start) is
+    where the ray enters the domain: the same for every grid.
     """
     wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
     sx, sy, sz = geom[3], geom[4], geom[5]
@@ -109,8 +140,7 @@ def grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, nc
             or (dy == 0.0 and oy == ncy and geom[8] + ncy < geom[17])
             or (dz == 0.0 and oz == ncz and geom[9] + ncz < geom[18])):
         t1 = -math.inf
-    ray = (wx, wy, wz, ux, uy, uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)
-    return t0, t1, ray
+    return t0, t1, Ray(wx, wy, wz, ux, uy, uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)
 
 
 @jit(inline="always")
