@@ -68,7 +68,7 @@ from .mode_api import (
     state_store,
     wants,
 )
-from .rays import grid_ray
+from .rays import GEOM_OFFSET, GEOM_SHIFT, grid_ray
 
 __all__ = ["sample_pixel", "bound_sample_pixel"]
 
@@ -111,7 +111,8 @@ def _sample_grid(mode, geom, ray):
         if abs(dz) > abs(da):
             axis, da, oa = 2, dz, ray.index_z
         if da != 0.0:
-            plane0 = geom[6] - geom[7 + axis]  # voxel plane 0 of the level, in the grid
+            # Voxel plane 0 of the level, in the grid.
+            plane0 = geom[GEOM_SHIFT] - geom[GEOM_OFFSET + axis]
             anchor = (plane0 - oa) / da
             return anchor, step / abs(da), axis, plane0, step if da > 0.0 else -step
     speed = math.sqrt(dx * dx + dy * dy + dz * dz)
