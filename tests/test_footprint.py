@@ -23,6 +23,7 @@ from splinecast.render import segment
 from splinecast.render.footprint import FOOTPRINT_SHIFT, block_footprint
 from splinecast.render.iso import Iso
 from splinecast.render.mip import Mip
+from splinecast.render.rays import GEOM_ORIGIN, GEOM_SIZE, GEOM_SPACING
 
 SHIFT = 2  # blocks of 4 cells
 
@@ -53,8 +54,9 @@ def test_every_ray_meeting_an_active_block_meets_it_inside_its_tiles_interval(vi
     blocks = tuple(-(-n // edge) for n in n_cells)
     # About as many active boxes at either size (a fifth of the 4-cell blocks).
     active = (rng.random(blocks) < 0.2 * (edge / 4) ** 3).astype(np.uint8)
-    geom = np.zeros(19)
-    geom[0:3], geom[3:6] = vol.origin, vol.spacing
+    geom = np.zeros(GEOM_SIZE)
+    geom[GEOM_ORIGIN:GEOM_ORIGIN + 3] = vol.origin
+    geom[GEOM_SPACING:GEOM_SPACING + 3] = vol.spacing
     fp = block_footprint(cam.pixel_basis(), geom, n_cells, active, shift, cam.width, cam.height)
     origins, directions = cam.rays()
     col0, row0 = (int(v) for v in cam.pixel_basis()[16:18])  # a tile's place in the image
@@ -119,8 +121,9 @@ def test_blocks_behind_the_eye_cover_no_tile():
     origin, spacing = np.asarray(vol.origin), np.asarray(vol.spacing)
     centre = origin + 0.5 * np.asarray(n_cells) * spacing
     eye = centre + (0.0, 0.0, -30.0)
-    geom = np.zeros(19)
-    geom[0:3], geom[3:6] = vol.origin, vol.spacing
+    geom = np.zeros(GEOM_SIZE)
+    geom[GEOM_ORIGIN:GEOM_ORIGIN + 3] = vol.origin
+    geom[GEOM_SPACING:GEOM_SPACING + 3] = vol.spacing
     active = np.ones(tuple(-(-n // 4) for n in n_cells), np.uint8)
     for ortho in (False, True):
         cam = sc.Camera(eye, eye + (0.3, -0.2, -1.0), size=(40, 32), fov=70, ortho=ortho,

@@ -15,7 +15,27 @@ import numpy as np
 
 from .errors import ParameterError
 
-__all__ = ["Camera", "parse_size", "FIT_MARGIN"]
+__all__ = [
+    "Camera", "parse_size", "FIT_MARGIN", "BASIS_EYE", "BASIS_FORWARD", "BASIS_RIGHT", "BASIS_UP",
+    "BASIS_HALF_WIDTH", "BASIS_HALF_HEIGHT", "BASIS_ORTHO", "BASIS_COL0", "BASIS_ROW0",
+    "BASIS_FULL_WIDTH", "BASIS_FULL_HEIGHT", "BASIS_SUBPIXEL", "BASIS_SIZE",
+]
+
+# Where each quantity lies in :meth:`Camera.pixel_basis` (a flat float64 array, what compiled
+# kernels take): the vectors are x, y, z from their offset on.
+BASIS_EYE = 0  #: the eye's world position (3)
+BASIS_FORWARD = 3  #: unit viewing direction (3)
+BASIS_RIGHT = 6  #: unit image right (3)
+BASIS_UP = 9  #: unit image up (3)
+BASIS_HALF_WIDTH = 12  #: half the full image's window, at unit distance (world units if ortho)
+BASIS_HALF_HEIGHT = 13
+BASIS_ORTHO = 14  #: 1.0 for an orthographic camera, else 0.0 (offset 15 holds 0.0)
+BASIS_COL0 = 16  #: column of the camera's first pixel in the full image
+BASIS_ROW0 = 17  #: row of the camera's first pixel in the full image
+BASIS_FULL_WIDTH = 18  #: the full image's width in pixels
+BASIS_FULL_HEIGHT = 19  #: the full image's height in pixels
+BASIS_SUBPIXEL = 20  #: the rays' shift inside their pixels, columns then rows (2)
+BASIS_SIZE = 22  #: length of the array
 
 
 def parse_size(size: Any) -> tuple[int, int]:
@@ -301,7 +321,7 @@ class Camera:
         lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         corners = np.array([[(lo, hi)[(n >> a) & 1][a] for a in range(3)] for n in range(8)])
         basis = self.pixel_basis()
-        half_w, half_h = basis[12], basis[13]
+        half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
         col_base, row_base, full_w, full_h = self.region
         v = corners - self.position
         z = v @ self.forward
@@ -348,11 +368,12 @@ class Camera:
     def pixel_basis(self) -> np.ndarray:
         """Packed ray parameters for compiled kernels that generate rays per pixel.
 
-        Returns 22 float64: eye (3), forward (3), right (3), up (3), half width and half height
-        of the full image's window (at unit distance for perspective, in world units for
-        orthographic), an orthographic flag, 0, then the column and row of this camera's first
-        pixel in the full image and the full image's width and height (see :meth:`tile`), and
-        the rays' shift inside their pixels (:meth:`shifted`; 0, 0 through the centres).
+        Returns 22 float64 (at the offsets the module's ``BASIS_*`` constants name): eye (3),
+        forward (3), right (3), up (3), half width and half height of the full image's window
+        (at unit distance for perspective, in world units for orthographic), an orthographic
+        flag, 0, then the column and row of this camera's first pixel in the full image and the
+        full image's width and height (see :meth:`tile`), and the rays' shift inside their
+        pixels (:meth:`shifted`; 0, 0 through the centres).
         :meth:`rays` and the kernels follow the same formula: pixel ``(row, col)`` has screen
         coordinates ``sx = ((col + col0 + 0.5 + dx) / full_width * 2 - 1) * half_w`` and
         ``sy = (1 - (row + row0 + 0.5 + dy) / full_height * 2) * half_h``.
@@ -378,8 +399,10 @@ class Camera:
         """
         w, h = self.width, self.height
         basis = self.pixel_basis()
-        half_w, half_h = basis[12], basis[13]
-        col0, row0, full_w, full_h, dx, dy = basis[16:22]
+        half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
+        col0, row0 = basis[BASIS_COL0], basis[BASIS_ROW0]
+        full_w, full_h = basis[BASIS_FULL_WIDTH], basis[BASIS_FULL_HEIGHT]
+        dx, dy = basis[BASIS_SUBPIXEL], basis[BASIS_SUBPIXEL + 1]
         xs = ((np.arange(w) + col0 + 0.5 + dx) / full_w * 2.0 - 1.0) * half_w
         ys = (1.0 - (np.arange(h) + row0 + 0.5 + dy) / full_h * 2.0) * half_h
         sx = xs[None, :, None]

@@ -128,9 +128,9 @@ def _finish(mode, out, row, col, st, ray):
     if depth.shape[0] != 0:
         depth[row, col] = math.inf if missed else t
     if position.shape[0] != 0:
-        position[row, col, 0] = math.nan if missed else ray[0] + t * ray[3]
-        position[row, col, 1] = math.nan if missed else ray[1] + t * ray[4]
-        position[row, col, 2] = math.nan if missed else ray[2] + t * ray[5]
+        position[row, col, 0] = math.nan if missed else ray.world_x + t * ray.world_dx
+        position[row, col, 1] = math.nan if missed else ray.world_y + t * ray.world_dy
+        position[row, col, 2] = math.nan if missed else ray.world_z + t * ray.world_dz
 
 
 register(AipMode, state_new=_state_new, state_load=_state_load, state_store=_state_store,

@@ -3,15 +3,17 @@
 :func:`trace` is the segment entry point of the renderer. It traces the rays of an image (or of
 a tile of it, see :meth:`splinecast.Camera.tile`) through one *grid*: a model's kernel grid
 (:mod:`splinecast.models.pieces`) covering the whole volume or one brick of it with its ghost
-layers, placed in the volume by ``geom``:
+layers, placed in the volume by ``geom``, a float64 array of ``GEOM_SIZE`` read at the offsets
+:mod:`.rays` names (three entries x, y, z from the offsets of vectors):
 
 ====================  ========================================================================
-``geom[0:3]``         world position of voxel ``(0, 0, 0)`` of the grid's level
-``geom[3:6]``         the level's voxel spacing (level 0's spacing times the level's scale)
-``geom[6]``           the model's shift: the traversal walks cells in ``voxel index + shift``
-``geom[7:10]``        the grid's index offset: its cell 0 is cell ``offset`` of the level
-``geom[10:16]``       the rendered domain in the level's voxel index space (lo xyz, hi xyz)
-``geom[16:19]``       the level's cells per axis (a grid that ends before them has neighbours)
+``GEOM_ORIGIN``       world position of voxel ``(0, 0, 0)`` of the grid's level
+``GEOM_SPACING``      the level's voxel spacing (level 0's spacing times the level's scale)
+``GEOM_SHIFT``        the model's shift: the traversal walks cells in ``voxel index + shift``
+``GEOM_OFFSET``       the grid's index offset: its cell 0 is cell ``offset`` of the level
+``GEOM_LO``           the rendered domain's low corner in the level's voxel index space
+``GEOM_HI``           the rendered domain's high corner
+``GEOM_CELLS``        the level's cells per axis (a grid that ends before them has neighbours)
 ====================  ========================================================================
 
 Each ray is clipped by the clip ``planes``, the domain, when ``t_range`` is not empty, its
@@ -52,6 +54,7 @@ from numba import prange
 
 from .._jit import bind_first_class, inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step_cached
+from ..camera import BASIS_COL0, BASIS_ROW0
 from ..models import pieces as model_api
 from ..models.pieces import cell_count, cell_load, cell_pieces, new_scratch, piece_poly, piece_range
 from . import mode_api
@@ -76,7 +79,7 @@ from .mode_api import (
     watches_skips,
 )
 from .outputs import copy_pixel
-from .rays import grid_ray, pixel_ray
+from .rays import GEOM_SIZE, Ray, grid_ray, pixel_ray
 from .sampler import bound_sample_pixel
 from .work_queue import run_on_threads, take
 
@@ -85,9 +88,6 @@ __all__ = ["trace", "pair_band", "pair_bindings", "finalize", "reset_state", "ba
 
 #: (grid class, mode class) -> the pair's :func:`_trace_band`.
 _KERNELS: dict[tuple[type, type], Any] = {}
-
-#: Length of the ``geom`` array.
-GEOM_SIZE = 19
 
 
 def band_order(n_bands: int) -> np.ndarray:
@@ -128,7 +128,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
         st = entry_left_out(mode, grid, scr, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz)
     t0 = max(t0, t_lo)
     t1 = min(t1, t_hi)
-    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     visited = 0
     tested = 0
     skipped = 0
@@ -246,7 +247,7 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
     footed = footprint.shape[0] > 0
     t_lo, t_hi = -math.inf, math.inf
     # The footprint's tiles are the full image's (a tile camera's pixels start at col0, row0).
-    col0, row0 = int(basis[16]), int(basis[17])
+    col0, row0 = int(basis[BASIS_COL0]), int(basis[BASIS_ROW0])
     tx0, ty0 = col0 >> FOOTPRINT_SHIFT, row0 >> FOOTPRINT_SHIFT
     # A whole image's fresh pixels where nothing projects get the outputs of one of them: the
     # mode finishes a fresh state there without a ray, and the pixel is copied over the run
@@ -407,14 +408,14 @@ def finalize(mode, state, out, basis):
 
 
 #: The ray passed to ``finish`` for a pixel never traced whose state is fresh.
-_NO_RAY = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+_NO_RAY = Ray(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
 
 
 @jit(inline="always")
 def _bare_ray(basis, row, col, width, height):
-    """The mode API's ray tuple with only the world ray set: what ``finish`` reads."""
+    """The mode API's :class:`~.rays.Ray` with only the world ray set: what ``finish`` reads."""
     wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-    return (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+    return Ray(wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
 
 
 @jit(_nrt=False)

@@ -409,7 +409,8 @@ def _shaded_over(mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, 
         gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
                               ay + s * (by - ay), az + s * (bz - az))
         factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
-                               ray[12], ray[13], ray[14], ray[3], ray[4], ray[5])
+                               ray.spacing_x, ray.spacing_y, ray.spacing_z,
+                               ray.world_dx, ray.world_dy, ray.world_dz)
     return _composite(acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, factor, t)
 
 
@@ -462,11 +463,18 @@ def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, a
 
 
 @jit(inline="always")
+def _index_speed(ray):
+    """Voxels the ray crosses per world unit along it (the length of its index direction)."""
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@jit(inline="always")
 def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az, bx, by,
                     bz, ray, st):
     """``sampling="pieces"``: the piece cut into ``ceil(L / h)`` equal segments."""
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
-    dnorm = math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
+    dnorm = _index_speed(ray)
     span = t1 - t0
     length = span * dnorm
     if not length > 0.0:
@@ -506,8 +514,8 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         return _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az,
                                bx, by, bz, ray, st)
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
-    anchor = ray[15]
-    dnorm = math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
+    anchor = ray.anchor
+    dnorm = _index_speed(ray)
     dt = mode.h0 / dnorm  # the base step in world units
     steps = mode.table.shape[0]
     span = t1 - t0
@@ -561,8 +569,10 @@ def _finish(mode, out, row, col, st, ray):
     if depth.shape[0] != 0:
         depth[row, col] = t
     if position.shape[0] != 0:
-        for c in range(3):
-            position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
+        hit = t < math.inf
+        position[row, col, 0] = ray.world_x + t * ray.world_dx if hit else math.nan
+        position[row, col, 1] = ray.world_y + t * ray.world_dy if hit else math.nan
+        position[row, col, 2] = ray.world_z + t * ray.world_dz if hit else math.nan
     if samples.shape[0] != 0:
         samples[row, col] = st[5]
 
@@ -599,8 +609,9 @@ def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
         factor = 1.0
         if mode.shade:
             _, gx, gy, gz = value_gradient_at(grid, scratch, x, y, z)
-            factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz, ray[12],
-                                   ray[13], ray[14], ray[3], ray[4], ray[5])
+            factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz, ray.spacing_x,
+                                   ray.spacing_y, ray.spacing_z, ray.world_dx, ray.world_dy,
+                                   ray.world_dz)
         acc_r, acc_g, acc_b, acc_a, t_half = _composite(acc_r, acc_g, acc_b, acc_a, t_half, r,
                                                         g, b, a, factor, tb)
     return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next

@@ -44,6 +44,20 @@ import numba
 import numpy as np
 
 from .._jit import jit
+from ..camera import (
+    BASIS_COL0,
+    BASIS_EYE,
+    BASIS_FORWARD,
+    BASIS_FULL_HEIGHT,
+    BASIS_FULL_WIDTH,
+    BASIS_HALF_HEIGHT,
+    BASIS_HALF_WIDTH,
+    BASIS_ORTHO,
+    BASIS_RIGHT,
+    BASIS_ROW0,
+    BASIS_UP,
+)
+from .rays import GEOM_OFFSET, GEOM_ORIGIN, GEOM_SHIFT, GEOM_SPACING
 from .work_queue import run_on_threads, take
 
 __all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "ENTRY_ONLY", "MAX_PROJECTED_BLOCKS",
@@ -117,7 +131,7 @@ def block_footprint(basis: np.ndarray, geom: np.ndarray, n_cells: Any, active: n
     """
     ncx, ncy, ncz = (int(n) for n in n_cells)
     active = np.ascontiguousarray(active)
-    col0, row0 = int(basis[16]), int(basis[17])
+    col0, row0 = int(basis[BASIS_COL0]), int(basis[BASIS_ROW0])
     tiles_x = ((col0 + width - 1) >> FOOTPRINT_SHIFT) - (col0 >> FOOTPRINT_SHIFT) + 1
     tiles_y = ((row0 + height - 1) >> FOOTPRINT_SHIFT) - (row0 >> FOOTPRINT_SHIFT) + 1
     # The blocks are projected in ``parts`` slabs of block rows, one interval image each,
@@ -151,7 +165,7 @@ def _project(basis, geom, active, shift, ncx, ncy, ncz, width, height, slabs, ne
     in that slab's interval image."""
     parts = slabs.shape[0]
     edge = 1 << shift
-    ortho = basis[14] != 0.0
+    ortho = basis[BASIS_ORTHO] != 0.0
     cells = (ncx, ncy, ncz)
     nbx, nby, nbz = active.shape
     per_part = (nbx + parts - 1) // parts
@@ -172,8 +186,10 @@ def _project(basis, geom, active, shift, ncx, ncy, ncz, width, height, slabs, ne
                         # The block's cells in the traversal space, then in the world.
                         x0 = index[a] * edge
                         x1 = min(x0 + edge, cells[a])
-                        w0 = geom[a] + (x0 - geom[6] + geom[7 + a]) * geom[3 + a]
-                        w1 = geom[a] + (x1 - geom[6] + geom[7 + a]) * geom[3 + a]
+                        origin, spacing = geom[GEOM_ORIGIN + a], geom[GEOM_SPACING + a]
+                        model_shift, offset = geom[GEOM_SHIFT], geom[GEOM_OFFSET + a]
+                        w0 = origin + (x0 - model_shift + offset) * spacing
+                        w1 = origin + (x1 - model_shift + offset) * spacing
                         lo[a] = min(w0, w1)
                         hi[a] = max(w0, w1)
                     _cover(slab, basis, ortho, lo, hi, width, height)
@@ -183,7 +199,7 @@ def _project(basis, geom, active, shift, ncx, ncy, ncz, width, height, slabs, ne
 def _cover(out, basis, ortho, lo, hi, width, height):
     """Widen the intervals of the tiles box ``[lo, hi]`` (world) projects onto (pixels and
     tiles counted in the full image, the camera's window of it kept)."""
-    ex, ey, ez = basis[0], basis[1], basis[2]
+    ex, ey, ez = basis[BASIS_EYE], basis[BASIS_EYE + 1], basis[BASIS_EYE + 2]
     sx_lo = sy_lo = math.inf
     sx_hi = sy_hi = -math.inf
     t_near = math.inf
@@ -194,9 +210,10 @@ def _cover(out, basis, ortho, lo, hi, width, height):
         qx = (hi[0] if c & 1 else lo[0]) - ex
         qy = (hi[1] if c & 2 else lo[1]) - ey
         qz = (hi[2] if c & 4 else lo[2]) - ez
-        depth = qx * basis[3] + qy * basis[4] + qz * basis[5]
-        across = qx * basis[6] + qy * basis[7] + qz * basis[8]
-        above = qx * basis[9] + qy * basis[10] + qz * basis[11]
+        f, r, u = BASIS_FORWARD, BASIS_RIGHT, BASIS_UP
+        depth = qx * basis[f] + qy * basis[f + 1] + qz * basis[f + 2]
+        across = qx * basis[r] + qy * basis[r + 1] + qz * basis[r + 2]
+        above = qx * basis[u] + qy * basis[u + 1] + qz * basis[u + 2]
         if depth < 0.0:
             behind += 1
         if ortho:
@@ -229,13 +246,14 @@ def _cover(out, basis, ortho, lo, hi, width, height):
     # The full image's tiles the camera's window overlaps. A block widens every one of them
     # its screen box meets, also where the box misses the window's own pixels, so a tile
     # camera gets the full image's intervals.
-    col0, row0 = int(basis[16]), int(basis[17])
+    col0, row0 = int(basis[BASIS_COL0]), int(basis[BASIS_ROW0])
     tx0, tx1 = col0 >> FOOTPRINT_SHIFT, (col0 + width - 1) >> FOOTPRINT_SHIFT
     ty0, ty1 = row0 >> FOOTPRINT_SHIFT, (row0 + height - 1) >> FOOTPRINT_SHIFT
     if not whole_screen:
         # Screen coordinates to pixel columns and rows of the full image (Camera.pixel_basis's
         # formula inverted), widened by a pixel, then to tiles.
-        half_w, half_h, full_w, full_h = basis[12], basis[13], basis[18], basis[19]
+        half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
+        full_w, full_h = basis[BASIS_FULL_WIDTH], basis[BASIS_FULL_HEIGHT]
         col_lo = (sx_lo / half_w + 1.0) * 0.5 * full_w - 0.5 - 1.0
         col_hi = (sx_hi / half_w + 1.0) * 0.5 * full_w - 0.5 + 1.0
         row_lo = (1.0 - sy_hi / half_h) * 0.5 * full_h - 0.5 - 1.0

@@ -98,7 +98,9 @@ def _done(mode, st):
 @jit()
 def _hit(mode, grid, scratch, ray, t):
     """State of a hit at ``t`` found by sampling: the shading gradient at that point."""
-    x, y, z = ray[6] + t * ray[9], ray[7] + t * ray[10], ray[8] + t * ray[11]
+    x = ray.index_x + t * ray.index_dx
+    y = ray.index_y + t * ray.index_dy
+    z = ray.index_z + t * ray.index_dz
     _, gx, gy, gz = value_gradient_at(grid, scratch, x, y, z)
     return _hit_state(mode, grid, scratch, ray, t, x, y, z, gx, gy, gz)
 
@@ -109,16 +111,17 @@ def _hit_state(mode, grid, scratch, ray, t, x, y, z, gx, gy, gz):
     own index-space gradient is ``g``: the world shading gradient, and in place of the sampled
     method's last sample (done with once there is a hit), the model's own derivative along the
     ray, whose sign says which side the ray enters (:func:`.pixels.store_hit`)."""
-    slope = gx * ray[9] + gy * ray[10] + gz * ray[11]  # = world gradient . unit ray
-    hx, hy, hz = smooth_gradient(mode.normals, grid, scratch, ray, x, y, z, gx / ray[12],
-                                 gy / ray[13], gz / ray[14])
+    # = world gradient . unit ray
+    slope = gx * ray.index_dx + gy * ray.index_dy + gz * ray.index_dz
+    hx, hy, hz = smooth_gradient(mode.normals, grid, scratch, ray, x, y, z, gx / ray.spacing_x,
+                                 gy / ray.spacing_y, gz / ray.spacing_z)
     return t, hx, hy, hz, math.nan, slope
 
 
 @jit()
 def _sample(grid, scratch, ray, t, iso):
-    v, _, _, _ = value_gradient_at(grid, scratch, ray[6] + t * ray[9], ray[7] + t * ray[10],
-                                   ray[8] + t * ray[11])
+    v, _, _, _ = value_gradient_at(grid, scratch, ray.index_x + t * ray.index_dx,
+                                   ray.index_y + t * ray.index_dy, ray.index_z + t * ray.index_dz)
     return v - iso
 
 
@@ -139,7 +142,8 @@ def _bisect(mode, grid, scratch, ray, ta, ga, tb, gb):
 @jit()
 def _dt(mode, ray):
     """The sampling step in world units along this ray."""
-    return mode.step / math.sqrt(ray[9] * ray[9] + ray[10] * ray[10] + ray[11] * ray[11])
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
+    return mode.step / math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 # Only the sampled method watches what is skipped (``_watches_skips``); the exact method's
@@ -164,7 +168,7 @@ def _skip_sampled(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     # A stretch without the isovalue lies on one side of it: one sample gives the sign of all
     # its samples (the range gives it without a sample when known); a change against the
     # previous sample is refined.
-    anchor = ray[15]
+    anchor = ray.anchor
     dt = _dt(mode, ray)
     ts = anchor + math.ceil((t0 - anchor) / dt) * dt
     if ts > t1:
@@ -203,7 +207,7 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
 @jit()
 def _consume_sampled(mode, grid, scratch, poly, t0, t1, ray, st):
     iso = mode.iso
-    anchor = ray[15]
+    anchor = ray.anchor
     dt = _dt(mode, ray)
     m = math.ceil((t0 - anchor) / dt)
     ts = anchor + m * dt
@@ -239,9 +243,9 @@ def _finish(mode, out, row, col, st, ray):
     if st[0] == math.inf:
         store_miss(row, col, mode.shading, rgba, depth, position, normal, face)
     else:
-        store_hit(row, col, st[0], ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], st[1], st[2],
-                  st[3], mode.inside_high, mode.shading, rgba, depth, position, normal, face,
-                  st[5])
+        store_hit(row, col, st[0], ray.world_x, ray.world_y, ray.world_z, ray.world_dx,
+                  ray.world_dy, ray.world_dz, st[1], st[2], st[3], mode.inside_high,
+                  mode.shading, rgba, depth, position, normal, face, st[5])
 
 
 register(IsoMode,

@@ -144,7 +144,8 @@ def _ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0
     ray does meet, so the largest of them bounds the answer from below as well. On an MRI the
     block minima are background and bound little; a value taken where the maximum may be lets
     the walk leap most blocks in front of it."""
-    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     lower = st[2]
     t_previous = mscratch[0]
     if mode.coherent != 0.0 and t_previous == t_previous:
@@ -196,7 +197,8 @@ def _entry_left_out(mode, grid, scratch, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, 
     entry into the grid lies outside, the value there is the first of the largest values left
     out, the one the walk or the samples would have kept (they keep the first of equal
     values)."""
-    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     ta, tb = clip_to_box(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
     if ta <= tb and (ta < t_lo or ta > t_hi):
         v = mode.sign * value_at(grid, scratch, ox + ta * dx, oy + ta * dy, oz + ta * dz)
@@ -287,9 +289,9 @@ def _finish(mode, out, row, col, st, ray):
         if depth.shape[0] != 0:
             depth[row, col] = t
         if position.shape[0] != 0:
-            position[row, col, 0] = ray[0] + t * ray[3]
-            position[row, col, 1] = ray[1] + t * ray[4]
-            position[row, col, 2] = ray[2] + t * ray[5]
+            position[row, col, 0] = ray.world_x + t * ray.world_dx
+            position[row, col, 1] = ray.world_y + t * ray.world_dy
+            position[row, col, 2] = ray.world_z + t * ray.world_dz
 
 
 @jit()

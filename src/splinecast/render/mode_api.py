@@ -90,12 +90,14 @@ blocks, decide whether a stretch between two leapt blocks can be left out):
     grid's interval), the model's values ``va`` and ``vb`` there, its length in voxels, and
     ``(x, y, z)``, the point at ``tb`` in the grid's traversal space (for a gradient).
 
-plus ``mode_scratch(mode)`` (per-thread buffers, made once per band of rays). ``ray`` is the
-tuple ``(wx, wy, wz, ux, uy, uz, ox, oy, oz, dx, dy, dz, sx, sy, sz, anchor)``: world origin
-and unit direction, the same ray in the grid's traversal space (``o + t d``, the parameter
-``t`` staying the world distance), the spacing of the grid's level (index-space gradients are
-divided by it for world units) and the parameter where the ray enters the volume (the sampled
-methods' and DVR's sample grid starts there, so every brick samples at the same places).
+plus ``mode_scratch(mode)`` (per-thread buffers, made once per band of rays). ``ray`` is a
+:class:`Ray` (exported here, defined in :mod:`.rays`), a named tuple of sixteen floats read by
+field name: the world origin and unit direction (``world_x`` ... ``world_dz``), the same ray in
+the grid's traversal space (``index_x`` ... ``index_dz``: the point ``index + t * index_d``, the
+parameter ``t`` staying the world distance), the spacing of the grid's level (``spacing_x``
+... ``spacing_z``: index-space gradients are divided by it for world units) and ``anchor``, the
+parameter where the ray enters the volume (the sampled methods' and DVR's sample grid starts
+there, so every brick samples at the same places).
 A mode module registers its functions with :func:`register`; each mode also states how two
 partial results of one ray combine (its ``combine`` kernel), which is what brick-parallel and
 distributed compositing use. How finished frames of several channels combine is declared on the
@@ -111,9 +113,10 @@ import numpy as np
 
 from .._jit import jit, overload_jit
 from ..accel.minmax import BLOCK_SHIFTS, inactive_block_size
+from .rays import Ray
 
 __all__ = [
-    "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
+    "Ray", "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
     "never", "hooks_of", "sampled_of", "sample_step", "sample_planes", "segment", "asks_again",

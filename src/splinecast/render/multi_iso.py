@@ -123,7 +123,8 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         hit_s[g + 1] = s_h
         hit_q[g + 1] = q_h
     acc_r, acc_g, acc_b, acc_a, t_first, fnx, fny, fnz, face, layers, last_t, last_q = st
-    wx, wy, wz, ux, uy, uz = ray[0], ray[1], ray[2], ray[3], ray[4], ray[5]
+    wx, wy, wz = ray.world_x, ray.world_y, ray.world_z
+    ux, uy, uz = ray.world_dx, ray.world_dy, ray.world_dz
     for h in range(count):
         q = hit_q[h]
         s = hit_s[h]
@@ -134,9 +135,9 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
         px, py, pz = ax + s * (bx - ax), ay + s * (by - ay), az + s * (bz - az)
         gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, px, py, pz)
         # Which side the ray enters: the model's own derivative along the ray.
-        slope = gx * ray[9] + gy * ray[10] + gz * ray[11]
+        slope = gx * ray.index_dx + gy * ray.index_dy + gz * ray.index_dz
         gx, gy, gz = smooth_gradient(mode.normals, grid, scratch, ray, i + px, j + py, k + pz,
-                                     gx / ray[12], gy / ray[13], gz / ray[14])
+                                     gx / ray.spacing_x, gy / ray.spacing_y, gz / ray.spacing_z)
         norm = math.sqrt(gx * gx + gy * gy + gz * gz)
         if norm > 0.0:
             scale = (-1.0 if mode.inside_high else 1.0) / norm
@@ -181,8 +182,10 @@ def _finish(mode, out, row, col, st, ray):
     if layers.shape[0] != 0:
         layers[row, col] = st[9]
     if position.shape[0] != 0:
-        for c in range(3):
-            position[row, col, c] = ray[c] + t * ray[3 + c] if t < math.inf else math.nan
+        hit = t < math.inf
+        position[row, col, 0] = ray.world_x + t * ray.world_dx if hit else math.nan
+        position[row, col, 1] = ray.world_y + t * ray.world_dy if hit else math.nan
+        position[row, col, 2] = ray.world_z + t * ray.world_dz if hit else math.nan
     if normal.shape[0] != 0:
         normal[row, col, 0] = st[5]
         normal[row, col, 1] = st[6]

@@ -42,7 +42,7 @@ from .clipping import box_slab, clip_interval
 from .driver import pair_band, scratch_types
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
-from .rays import grid_point, index_axis, pixel_ray
+from .rays import GEOM_SPACING, Ray, grid_point, index_axis, pixel_ray
 from .work_queue import run_on_threads, take
 
 __all__ = ["trace_pieces", "tile_lists", "box_interval", "TILE"]
@@ -115,7 +115,7 @@ def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
     (the point as :func:`.rays.grid_point` computes it)."""
     x, y, z = grid_point(geom, basis, row, col, width, height, t)
     v, gx, gy, gz = value_gradient_at(kernel, scr, x, y, z)
-    return v, gx / geom[3], gy / geom[4], gz / geom[5]
+    return v, gx / geom[GEOM_SPACING], gy / geom[GEOM_SPACING + 1], gz / geom[GEOM_SPACING + 2]
 
 
 # The closure reads and writes the isosurface mode's state (depth, world gradient): it is
@@ -359,7 +359,7 @@ def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis
         for row in range(tr0, tr1):
             for col in range(tc0, tc1):
                 wx, wy, wz, ux, uy, uz = pixel_ray(basis, row, col, width, height)
-                ray = (wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+                ray = Ray(wx, wy, wz, ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
                 finish(mode, out, row, col, state_load(mode, state, row, col), ray)
     return hits
 

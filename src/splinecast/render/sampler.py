@@ -68,7 +68,7 @@ from .mode_api import (
     state_store,
     wants,
 )
-from .rays import grid_ray
+from .rays import GEOM_OFFSET, GEOM_SHIFT, grid_ray
 
 __all__ = ["sample_pixel", "bound_sample_pixel"]
 
@@ -101,21 +101,22 @@ def _sample_grid(mode, geom, ray):
     domain. On planes (the mode's ``sample_planes``): where the ray crosses the voxel planes
     ``m * step`` of the grid's level across its dominant axis ``axis``, at traversal coordinate
     ``plane0 + m * plane_step`` there."""
-    dx, dy, dz = ray[9], ray[10], ray[11]
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     step = sample_step(mode)
     if sample_planes(mode):
         axis = 0
-        da = dx
+        da, oa = dx, ray.index_x
         if abs(dy) > abs(da):
-            axis, da = 1, dy
+            axis, da, oa = 1, dy, ray.index_y
         if abs(dz) > abs(da):
-            axis, da = 2, dz
+            axis, da, oa = 2, dz, ray.index_z
         if da != 0.0:
-            plane0 = geom[6] - geom[7 + axis]  # voxel plane 0 of the level, in the grid
-            anchor = (plane0 - ray[6 + axis]) / da
+            # Voxel plane 0 of the level, in the grid.
+            plane0 = geom[GEOM_SHIFT] - geom[GEOM_OFFSET + axis]
+            anchor = (plane0 - oa) / da
             return anchor, step / abs(da), axis, plane0, step if da > 0.0 else -step
     speed = math.sqrt(dx * dx + dy * dy + dz * dz)
-    return ray[15], step / speed if speed > 0.0 else math.inf, -1, 0.0, 0.0
+    return ray.anchor, step / speed if speed > 0.0 else math.inf, -1, 0.0, 0.0
 
 
 @jit(inline="always")
@@ -136,11 +137,11 @@ def _plane_samples(grid, mode, st, scr, ray, ta, t_far, speed, anchor, dt, axis,
                    plane_step):
     """The samples on planes of one ray's interval ``[ta, t_far]``, every one taken (see the
     module's docstring). Returns ``(st, evaluated, taken, leaps)``."""
-    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     # The two other axes, in order, and whether the planes are planes of voxels.
-    ia = 1 if axis == 0 else 0
-    ib = 1 if axis == 2 else 2
-    oa, da, ob, db = ray[6 + ia], ray[9 + ia], ray[6 + ib], ray[9 + ib]
+    oa, da = (oy, dy) if axis == 0 else (ox, dx)
+    ob, db = (oy, dy) if axis == 2 else (oz, dz)
     lattice = plane0 == math.floor(plane0) and plane_step == math.floor(plane_step)
     m = math.floor((ta - anchor) / dt) + 1.0  # the first sample after ta
     va = value_at(grid, scr, ox + ta * dx, oy + ta * dy, oz + ta * dz)
@@ -179,7 +180,8 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
     same arguments as :func:`.driver._trace_pixel`). Returns (samples evaluated, segments
     taken, blocks leapt)."""
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
-    ox, oy, oz, dx, dy, dz = ray[6], ray[7], ray[8], ray[9], ray[10], ray[11]
+    ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
+    dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     anchor, dt, axis, plane0, plane_step = _sample_grid(mode, geom, ray)
     st = state_load(mode, state, row, col) if load else state_new(mode)
     if (t_lo > t0 or t_hi < t0) and t0 <= t1 and not done(mode, st):

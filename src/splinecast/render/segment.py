@@ -38,6 +38,7 @@ from .footprint import (
     fill_box,
     footprint_level,
 )
+from .rays import GEOM_CELLS, GEOM_HI, GEOM_LO, GEOM_OFFSET, GEOM_ORIGIN, GEOM_SHIFT, GEOM_SPACING
 
 __all__ = ["Grid", "make_grid", "brick_grid", "render_grid", "new_state", "trace_segment",
            "finish_state", "combine_states", "counters", "screen_footprint", "trace_pixels",
@@ -83,8 +84,9 @@ class Grid:
         (the level's voxel index space): rays are clipped to it by the driver's slab test,
         which costs less per ray than clip planes."""
         geom = self.geom.copy()
-        geom[10:13] = np.maximum(geom[10:13], np.asarray(lo, np.float64))
-        geom[13:16] = np.minimum(geom[13:16], np.asarray(hi, np.float64))
+        low, high = slice(GEOM_LO, GEOM_LO + 3), slice(GEOM_HI, GEOM_HI + 3)
+        geom[low] = np.maximum(geom[low], np.asarray(lo, np.float64))
+        geom[high] = np.minimum(geom[high], np.asarray(hi, np.float64))
         return Grid(self.kernel, self.hierarchy, geom, self.n_cells, self.band_rows, self.tile)
 
 
@@ -147,20 +149,21 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
     vol = model.volume
     lo, hi = model.domain() if domain is None else domain
     geom = np.empty(GEOM_SIZE)
-    geom[0:3] = vol.origin if level_origin is None else level_origin
-    geom[3:6] = vol.spacing if level_spacing is None else level_spacing
-    geom[6] = model.shift
-    geom[7:10] = offset
-    geom[10:13] = lo
-    geom[13:16] = hi
-    geom[16:19] = (np.asarray(offset) + n_cells) if level_cells is None else level_cells
+    geom[GEOM_ORIGIN:GEOM_ORIGIN + 3] = vol.origin if level_origin is None else level_origin
+    geom[GEOM_SPACING:GEOM_SPACING + 3] = vol.spacing if level_spacing is None else level_spacing
+    geom[GEOM_SHIFT] = model.shift
+    geom[GEOM_OFFSET:GEOM_OFFSET + 3] = offset
+    geom[GEOM_LO:GEOM_LO + 3] = lo
+    geom[GEOM_HI:GEOM_HI + 3] = hi
+    cells = (np.asarray(offset) + n_cells) if level_cells is None else level_cells
+    geom[GEOM_CELLS:GEOM_CELLS + 3] = cells
     if whole:
         kernel = model.kernel_grid()
     elif model.shading_halo:
         if halo is None:
             # The array's elements are the level's prepared values from ``offset`` on; those
             # of the level itself are real (a pyramid brick's ghosts beyond its ends are not).
-            last_cell = np.asarray(geom[16:19], np.int64) + int(model.support) - 1
+            last_cell = np.asarray(cells, np.int64) + int(model.support) - 1
             first = np.asarray(offset, np.int64)
             real_lo = np.clip(-first, 0, np.asarray(arr.shape) - 1)
             real_hi = np.clip(last_cell - first, 0, np.asarray(arr.shape) - 1)

@@ -136,4 +136,4 @@ def smooth_gradient(normals, grid, scratch, ray, x, y, z, gx, gy, gz):
     if normals != 1 or not separate_shading(grid):
         return gx, gy, gz
     hx, hy, hz = shading_gradient_at(grid, scratch, x, y, z)
-    return hx / ray[12], hy / ray[13], hz / ray[14]
+    return hx / ray.spacing_x, hy / ray.spacing_y, hz / ray.spacing_z

@@ -35,7 +35,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...camera import Camera
+from ...camera import (
+    BASIS_COL0,
+    BASIS_EYE,
+    BASIS_FORWARD,
+    BASIS_FULL_HEIGHT,
+    BASIS_FULL_WIDTH,
+    BASIS_HALF_HEIGHT,
+    BASIS_HALF_WIDTH,
+    BASIS_ORTHO,
+    BASIS_RIGHT,
+    BASIS_ROW0,
+    BASIS_UP,
+    Camera,
+)
 from ...errors import ParameterError
 from .octree import BrickOctree
 from .relevance import ValueFilter
@@ -104,8 +117,10 @@ class Cut:
 
 def _window(camera: Camera) -> tuple[np.ndarray, float, float, float, float, bool]:
     basis = camera.pixel_basis()
-    half_w, half_h, ortho = basis[12], basis[13], basis[14] > 0.5
-    col0, row0, full_w, full_h = basis[16:20]
+    half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
+    ortho = basis[BASIS_ORTHO] > 0.5
+    col0, row0 = basis[BASIS_COL0], basis[BASIS_ROW0]
+    full_w, full_h = basis[BASIS_FULL_WIDTH], basis[BASIS_FULL_HEIGHT]
     sx0 = (col0 / full_w * 2 - 1) * half_w
     sx1 = ((col0 + camera.width) / full_w * 2 - 1) * half_w
     sy1 = (1 - row0 / full_h * 2) * half_h
@@ -117,7 +132,8 @@ def view_planes(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Half-spaces ``n . p + d >= 0`` (normals (5, 3), offsets (5,)) bounding what the camera
     (or tile) sees: four sides and the eye plane."""
     basis, sx0, sx1, sy0, sy1, ortho = _window(camera)
-    eye, f, r, u = basis[0:3], basis[3:6], basis[6:9], basis[9:12]
+    eye, f = basis[BASIS_EYE:BASIS_EYE + 3], basis[BASIS_FORWARD:BASIS_FORWARD + 3]
+    r, u = basis[BASIS_RIGHT:BASIS_RIGHT + 3], basis[BASIS_UP:BASIS_UP + 3]
     if ortho:
         normals = np.array([r, -r, u, -u, f])
         offsets = np.array([-sx0, sx1, -sy0, sy1, 0.0]) + np.array(
@@ -140,12 +156,12 @@ def projected_voxels(octree: BrickOctree, level: int, world_lo: np.ndarray, worl
                      camera: Camera) -> np.ndarray:
     """Pixels covered by one voxel of ``level`` in each box (n, 3), seen from ``camera``."""
     basis, _, _, _, _, ortho = _window(camera)
-    half_h, full_h = basis[13], basis[19]
+    half_h, full_h = basis[BASIS_HALF_HEIGHT], basis[BASIS_FULL_HEIGHT]
     pixel = 2.0 * half_h / full_h  # world size of a pixel at unit distance (or anywhere, ortho)
     voxel = octree.voxel_size(level)
     if ortho:
         return np.full(len(world_lo), voxel / pixel)
-    eye = basis[0:3]
+    eye = basis[BASIS_EYE:BASIS_EYE + 3]
     nearest = np.clip(eye, world_lo, world_hi)
     distance = np.linalg.norm(nearest - eye, axis=1)
     with np.errstate(divide="ignore"):

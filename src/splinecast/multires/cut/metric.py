@@ -49,6 +49,19 @@ import numpy as np
 from numba import prange
 
 from ..._jit import jit
+from ...camera import (
+    BASIS_COL0,
+    BASIS_EYE,
+    BASIS_FORWARD,
+    BASIS_FULL_HEIGHT,
+    BASIS_FULL_WIDTH,
+    BASIS_HALF_HEIGHT,
+    BASIS_HALF_WIDTH,
+    BASIS_ORTHO,
+    BASIS_RIGHT,
+    BASIS_ROW0,
+    BASIS_UP,
+)
 from ...errors import ParameterError
 from ...transfer import TransferFunction
 from .colour import distortion_table
@@ -133,10 +146,12 @@ def frustum_planes(camera: Any) -> np.ndarray:
     camera) and the plane through the eye facing forward (no far plane: rays are unbounded).
     """
     basis = camera.pixel_basis()
-    eye, forward, right, up = basis[0:3], basis[3:6], basis[6:9], basis[9:12]
-    half_w, half_h, ortho = basis[12], basis[13], basis[14] != 0.0
-    col0, row0 = basis[16], basis[17]
-    full_w, full_h = basis[18], basis[19]
+    eye, forward = basis[BASIS_EYE:BASIS_EYE + 3], basis[BASIS_FORWARD:BASIS_FORWARD + 3]
+    right, up = basis[BASIS_RIGHT:BASIS_RIGHT + 3], basis[BASIS_UP:BASIS_UP + 3]
+    half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
+    ortho = basis[BASIS_ORTHO] != 0.0
+    col0, row0 = basis[BASIS_COL0], basis[BASIS_ROW0]
+    full_w, full_h = basis[BASIS_FULL_WIDTH], basis[BASIS_FULL_HEIGHT]
     x_lo = (col0 / full_w * 2.0 - 1.0) * half_w
     x_hi = ((col0 + camera.width) / full_w * 2.0 - 1.0) * half_w
     y_hi = (1.0 - row0 / full_h * 2.0) * half_h

@@ -58,10 +58,24 @@ import numpy as np
 from numba.typed import List
 
 from ..._jit import jit
-from ...camera import Camera
+from ...camera import (
+    BASIS_COL0,
+    BASIS_EYE,
+    BASIS_FORWARD,
+    BASIS_FULL_HEIGHT,
+    BASIS_FULL_WIDTH,
+    BASIS_HALF_HEIGHT,
+    BASIS_HALF_WIDTH,
+    BASIS_ORTHO,
+    BASIS_RIGHT,
+    BASIS_ROW0,
+    BASIS_UP,
+    Camera,
+)
 from ...render.clipping import NO_PLANES
 from ...render.driver import GEOM_SIZE, band_order, finalize, reset_state
 from ...render.pieces_driver import TILE, tile_lists, trace_pieces
+from ...render.rays import GEOM_OFFSET
 from ...render.segment import Grid, counters, make_grid, trace_segment
 from .order import eye_index, front_to_back
 from .probe import box_ranges, sample_grid
@@ -194,9 +208,12 @@ def screen_rect(camera: Camera, lo: np.ndarray, hi: np.ndarray) -> tuple[int, in
     """Pixel rectangle ``(col0, row0, width, height)`` of ``camera``'s image that the world box
     ``[lo, hi]`` can project to (one pixel of margin), or ``None`` if it projects outside."""
     basis = camera.pixel_basis()
-    eye, fwd, right, up = basis[0:3], basis[3:6], basis[6:9], basis[9:12]
-    half_w, half_h, ortho = basis[12], basis[13], basis[14] != 0.0
-    col0, row0, full_w, full_h = basis[16:20]
+    eye, fwd = basis[BASIS_EYE:BASIS_EYE + 3], basis[BASIS_FORWARD:BASIS_FORWARD + 3]
+    right, up = basis[BASIS_RIGHT:BASIS_RIGHT + 3], basis[BASIS_UP:BASIS_UP + 3]
+    half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
+    ortho = basis[BASIS_ORTHO] != 0.0
+    col0, row0 = basis[BASIS_COL0], basis[BASIS_ROW0]
+    full_w, full_h = basis[BASIS_FULL_WIDTH], basis[BASIS_FULL_HEIGHT]
     corners = np.array([[(lo, hi)[(b >> a) & 1][a] for a in range(3)] for b in range(8)]) - eye
     sx, sy = corners @ right, corners @ up
     if not ortho:
@@ -229,9 +246,12 @@ def screen_rects(camera: Camera, lo: np.ndarray,
         Whether the box can project into the image (``rects`` is meaningless where not).
     """
     basis = camera.pixel_basis()
-    eye, fwd, right, up = basis[0:3], basis[3:6], basis[6:9], basis[9:12]
-    half_w, half_h, ortho = basis[12], basis[13], basis[14] != 0.0
-    col0, row0, full_w, full_h = basis[16:20]
+    eye, fwd = basis[BASIS_EYE:BASIS_EYE + 3], basis[BASIS_FORWARD:BASIS_FORWARD + 3]
+    right, up = basis[BASIS_RIGHT:BASIS_RIGHT + 3], basis[BASIS_UP:BASIS_UP + 3]
+    half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
+    ortho = basis[BASIS_ORTHO] != 0.0
+    col0, row0 = basis[BASIS_COL0], basis[BASIS_ROW0]
+    full_w, full_h = basis[BASIS_FULL_WIDTH], basis[BASIS_FULL_HEIGHT]
     n = len(lo)
     pick = np.array([[(b >> a) & 1 for a in range(3)] for b in range(8)], dtype=bool)
     corners = np.where(pick[None], np.asarray(hi, np.float64)[:, None, :],
@@ -383,7 +403,7 @@ class CutRenderer:
             array = change.apply(array)
         grid = self.grid(piece.level, array, first)
         local = (self.levels[piece.level].from_level0(points) + self.model.shift
-                 - grid.geom[7:10])
+                 - grid.geom[GEOM_OFFSET:GEOM_OFFSET + 3])
         out = np.empty(len(local))
         sample_grid(grid.kernel, np.ascontiguousarray(local), out)
         return out

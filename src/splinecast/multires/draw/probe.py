@@ -19,7 +19,7 @@ from numba import prange
 from ..._jit import jit
 from ...models.pieces import new_scratch, value_gradient_at
 from ...render.pieces_driver import box_interval
-from ...render.rays import grid_point
+from ...render.rays import GEOM_SPACING, grid_point
 
 __all__ = ["box_ranges", "sample_grid", "grid_values_at"]
 
@@ -111,6 +111,6 @@ def grid_values_at(grid, geom: np.ndarray, basis: np.ndarray, t: np.ndarray, wan
             x, y, z = grid_point(geom, basis, row, col, width, height, t[row, col])
             v, gx, gy, gz = value_gradient_at(grid, scratch, x, y, z)
             value[row, col] = v
-            gradient[row, col, 0] = gx / geom[3]
-            gradient[row, col, 1] = gy / geom[4]
-            gradient[row, col, 2] = gz / geom[5]
+            gradient[row, col, 0] = gx / geom[GEOM_SPACING]
+            gradient[row, col, 1] = gy / geom[GEOM_SPACING + 1]
+            gradient[row, col, 2] = gz / geom[GEOM_SPACING + 2]

@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 
+from ...render.rays import GEOM_OFFSET
 from .probe import grid_values_at, sample_grid
 
 __all__ = ["Seams", "Change", "IsoClosure", "refine"]
@@ -325,7 +326,8 @@ class Seams:
         fine, coarse = renderer.levels[level], renderer.levels[source.level]
         points = coarse.from_level0((where - fine.offset) / fine.scale) + self.model.shift
         out = np.empty(len(points))
-        sample_grid(grid.kernel, np.ascontiguousarray(points - grid.geom[7:10]), out)
+        offset = grid.geom[GEOM_OFFSET:GEOM_OFFSET + 3]
+        sample_grid(grid.kernel, np.ascontiguousarray(points - offset), out)
         return out
 
 
