@@ -627,6 +627,40 @@ def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
     assert any("level 1 skipped: its voxels do not cover level 0" in n for n in tree.notes)
 
 
+@pytest.mark.parametrize("scale", [[1.0, 0.375, 0.25], [0.5, 0.1875, 0.125], [2.0, 0.75, 0.25]])
+def test_a_level_finer_than_level_0_is_left_out(tmp_path, scale):
+    """Level 1's scale half or a quarter of level 0's on some axis (a store whose scale was lost
+    or damaged): the level is left out with a note, and the store still renders from level 0,
+    instead of failing in the power of two its factor was rounded to."""
+    import zarr
+
+    from splinecast.multires.cut.octree import BrickOctree
+
+    path = tmp_path / "v.zarr"
+    root = zarr.open_group(str(path), mode="w", zarr_format=2)
+    data = np.ascontiguousarray(ramp().transpose(2, 1, 0))
+    for level, block in enumerate((data, data[::2, ::2, ::2])):
+        arr = root.create_array(str(level), shape=block.shape, dtype=block.dtype,
+                                chunks=(4, 4, 4))
+        arr[...] = block
+    root.attrs["multiscales"] = [{
+        "version": "0.4", "axes": [{"name": a, "type": "space"} for a in "zyx"],
+        "datasets": [
+            {"path": "0", "coordinateTransformations": [
+                {"type": "scale", "scale": [2.0, 0.75, 0.5]}]},
+            {"path": "1", "coordinateTransformations": [{"type": "scale", "scale": scale}]}]}]
+    volume = sc.read(path)
+    tree = BrickOctree(volume, brick=4)
+    assert tree.levels == [0]
+    assert any(n.startswith("level 1 skipped") for n in tree.notes), tree.notes
+    camera = sc.Camera.orbit(volume, size=(16, 12))
+    with sc.Scene(volume, budget="64MiB", lod=1.0) as scene:
+        frame = scene.render(camera, iso=40.0, complete=True)
+    # Level 0 alone, in memory: the same voxels, spacing and origin.
+    expected = sc.Scene(volume.levels[0].to_volume()).render(camera, iso=40.0, samples=1)
+    np.testing.assert_array_equal(np.isfinite(frame.depth), np.isfinite(expected.depth))
+
+
 def test_whole_extent_counts_even_when_the_piece_is_small(vti, capsys, monkeypatch):
     """VTK allocates the output for the whole extent: a huge WholeExtent around the original
     small piece must be refused before VTK aborts on std::bad_alloc (fuzz #15210)."""

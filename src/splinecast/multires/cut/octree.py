@@ -100,7 +100,15 @@ class BrickOctree:
         levels, factors, scales, offsets = [0], [np.ones(3, np.int64)], [np.ones(3)], [np.zeros(3)]
         for level in volume.levels[1:]:
             ratio = np.asarray(level.spacing) / spacing0
-            factor = 2 ** np.round(np.log2(np.maximum(ratio, 1e-9))).astype(np.int64)
+            # The power of two nearest the ratio, kept within 1 .. 2^62 so that a level finer
+            # than level 0 or absurdly coarse (a damaged store) fails the test below instead of
+            # the integer power.
+            if not np.all(np.isfinite(ratio) & (ratio > 0)):
+                self.notes.append(f"level {level.index} skipped: scale {ratio.tolist()} x level 0 "
+                                  "is not a positive number per axis")
+                continue
+            exponent = np.clip(np.round(np.log2(np.maximum(ratio, 1e-9))), 0, 62)
+            factor = 2 ** exponent.astype(np.int64)
             step = factor // factors[-1]
             if (np.any(np.abs(ratio / factor - 1) > 0.25) or np.any(factor < factors[-1])
                     or np.any((step != 1) & (step != 2)) or np.all(step == 1)):
