@@ -601,13 +601,11 @@ def test_scene_source_carries_the_permission_to_workers(outside_header):
         assert pickle.loads(pickle.dumps(source)).allow_external is True
 
 
-def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
-    """A coarse level translated 50 voxels away would make bricks read outside its voxels."""
+def _two_level_store(path: Path, level_1: list[dict]) -> Path:
+    """An OME-Zarr store of the ramp (level 0, scale 2 x 0.75 x 0.5 in z y x) and its 2x
+    subsampling as level 1, placed by the coordinate transformations ``level_1``."""
     import zarr
 
-    from splinecast.multires.cut.octree import BrickOctree
-
-    path = tmp_path / "v.zarr"
     root = zarr.open_group(str(path), mode="w", zarr_format=2)
     data = np.ascontiguousarray(ramp().transpose(2, 1, 0))
     for level, block in enumerate((data, data[::2, ::2, ::2])):
@@ -619,9 +617,17 @@ def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
         "datasets": [
             {"path": "0", "coordinateTransformations": [
                 {"type": "scale", "scale": [2.0, 0.75, 0.5]}]},
-            {"path": "1", "coordinateTransformations": [
-                {"type": "scale", "scale": [4.0, 1.5, 1.0]},
-                {"type": "translation", "translation": [0.0, 0.0, 50.0]}]}]}]
+            {"path": "1", "coordinateTransformations": level_1}]}]
+    return path
+
+
+def test_a_level_that_does_not_cover_level_0_is_left_out(tmp_path):
+    """A coarse level translated 50 voxels away would make bricks read outside its voxels."""
+    from splinecast.multires.cut.octree import BrickOctree
+
+    path = _two_level_store(tmp_path / "v.zarr", [
+        {"type": "scale", "scale": [4.0, 1.5, 1.0]},
+        {"type": "translation", "translation": [0.0, 0.0, 50.0]}])
     tree = BrickOctree(sc.read(path), brick=4)
     assert tree.levels == [0]
     assert any("level 1 skipped: its voxels do not cover level 0" in n for n in tree.notes)
@@ -632,23 +638,9 @@ def test_a_level_finer_than_level_0_is_left_out(tmp_path, scale):
     """Level 1's scale half or a quarter of level 0's on some axis (a store whose scale was lost
     or damaged): the level is left out with a note, and the store still renders from level 0,
     instead of failing in the power of two its factor was rounded to."""
-    import zarr
-
     from splinecast.multires.cut.octree import BrickOctree
 
-    path = tmp_path / "v.zarr"
-    root = zarr.open_group(str(path), mode="w", zarr_format=2)
-    data = np.ascontiguousarray(ramp().transpose(2, 1, 0))
-    for level, block in enumerate((data, data[::2, ::2, ::2])):
-        arr = root.create_array(str(level), shape=block.shape, dtype=block.dtype,
-                                chunks=(4, 4, 4))
-        arr[...] = block
-    root.attrs["multiscales"] = [{
-        "version": "0.4", "axes": [{"name": a, "type": "space"} for a in "zyx"],
-        "datasets": [
-            {"path": "0", "coordinateTransformations": [
-                {"type": "scale", "scale": [2.0, 0.75, 0.5]}]},
-            {"path": "1", "coordinateTransformations": [{"type": "scale", "scale": scale}]}]}]
+    path = _two_level_store(tmp_path / "v.zarr", [{"type": "scale", "scale": scale}])
     volume = sc.read(path)
     tree = BrickOctree(volume, brick=4)
     assert tree.levels == [0]
