@@ -12,36 +12,45 @@ from pathlib import Path
 # any parallel region runs (OpenMP reads it when it starts); a value given outside is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-#: Test files that take longest in all (from an empty kernel cache on two cores), longest
-#: first. The workers take whole files (``--dist loadfile``) in the order the collection gives
-#: them, so these go first and short files fill the end: a long file started last would leave
-#: the other worker idle until it ends. (Left to itself, pytest-xdist orders files by their
-#: number of tests, which put a fuzzing run, a wheel build and the docs build, one test each,
-#: last.) Files not listed follow by number of tests, most first.
+#: The 30 test files that took longest in all (one run from an empty kernel cache on two cores),
+#: longest first. The workers take whole files (``--dist loadfile``) in the order the collection
+#: gives them, so these go first and short files fill the end: a long file started last would
+#: leave the other worker idle until it ends. (Left to itself, pytest-xdist orders files by
+#: their number of tests, which put a fuzzing run, a wheel build and the docs build, one test
+#: each, last.) Files not listed follow by number of tests, most first. Their times shift with
+#: the order (the first test to need a kernel compiles it); remeasure with
+#: ``pytest --durations=0`` when the suite changes much.
 LONGEST_FILES = (
-    "test_cli_options.py",
     "test_multires_render.py",
+    "test_cli_options.py",
+    "test_hostile_zarr_vtk.py",
+    "test_wavelet_hostile.py",
+    "test_wavelet_render.py",
+    "test_viewer_server.py",
+    "test_sample_breakdown.py",
+    "test_seam_parts.py",
+    "fuzz/test_short_run.py",
+    "test_labels.py",
+    "test_toy_model.py",
+    "test_aip.py",
+    "test_packaging.py",
     "test_mip.py",
     "test_hostile_input.py",
-    "test_wavelet_render.py",
-    "test_bricks.py",
-    "fuzz/test_short_run.py",
-    "test_packaging.py",
-    "test_viewer_server.py",
-    "test_docs.py",
-    "test_sample_breakdown.py",
-    "test_cli_warmup.py",
-    "test_zarr_bounded.py",
+    "test_remote_http.py",
+    "test_dvr_ray.py",
     "test_viewer_prepare.py",
-    "test_labels.py",
-    "test_pair_kernels.py",
-    "test_cycle_breakdown.py",
-    "test_notebook.py",
-    "test_floor_kernel.py",
-    "test_viewer_browser_channels.py",
-    "test_viewer_browser_labels.py",
-    "test_viewer_browser_multires.py",
-    "test_viewer_browser_time.py",
+    "test_docs.py",
+    "test_cli_warmup.py",
+    "test_movie.py",
+    "test_cli.py",
+    "test_pieces_driver.py",
+    "test_cut_render.py",
+    "test_timepoints.py",
+    "test_type6_analytic.py",
+    "test_bricks.py",
+    "test_viewer_multires.py",
+    "test_cli_habits.py",
+    "test_compare.py",
 )
 
 
