@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import subprocess
+import weakref
 import sys
 
 import numpy as np
@@ -105,6 +107,47 @@ def test_nan_in_data_is_a_clear_error(tmp_path, capsys):
     code, _, err = run(["render", str(path), "--iso", "0", "-o", str(tmp_path / "o.png")], capsys)
     assert code == 2 and "NaN" in err and "nan.npy" in err
     assert not (tmp_path / "o.png").exists()
+
+
+class _Cycle:
+    """An object in a reference cycle: only the cycle collector frees it."""
+
+    def __init__(self) -> None:
+        self.me = self
+
+
+def test_a_failure_collects_its_own_garbage_and_not_the_callers(monkeypatch, capsys):
+    from splinecast.cli import COMMANDS
+
+    made: list[weakref.ref] = []
+
+    def failing_run(args):
+        made.append(weakref.ref(_Cycle()))
+        raise sc.SplinecastError("broken on purpose")
+
+    monkeypatch.setattr(COMMANDS["info"], "run", failing_run)
+    enabled = gc.isenabled()
+    gc.disable()  # no automatic collection may interfere
+    try:
+        callers = weakref.ref(_Cycle())
+        assert gc.get_freeze_count() == 0
+        code, _, err = run(["info", "demo:sphere"], capsys)
+        assert code == 2 and "broken on purpose" in err
+        assert made and made[0]() is None  # the command's garbage: collected before returning
+        assert callers() is not None  # the caller's heap was not walked
+        assert gc.get_freeze_count() == 0  # and is collectable again
+        gc.collect()
+        assert callers() is None
+        # A caller that froze its own objects keeps them frozen.
+        gc.freeze()
+        frozen = gc.get_freeze_count()
+        assert run(["info", "demo:sphere"], capsys)[0] == 2
+        # (a frozen object whose last reference goes is still freed: allow for a few)
+        assert frozen * 0.99 < gc.get_freeze_count() <= frozen
+    finally:
+        gc.unfreeze()
+        if enabled:
+            gc.enable()
 
 
 def test_argparse_errors_are_one_line_status_2():

@@ -55,6 +55,13 @@ def main(argv: list[str] | None = None) -> int:
     ours = logging.getLogger("splinecast")
     level = ours.level
     code = 1  # until the command returns
+    # What exists before the command is not its garbage: frozen, it is left out of the collection
+    # after a failure below, which otherwise walks the caller's whole heap (seconds in a process
+    # that has compiled many kernels, per failed call). A caller that froze objects itself keeps
+    # its own arrangement.
+    freezing = gc.get_freeze_count() == 0
+    if freezing:
+        gc.freeze()
     with captured_output() as captured:
         args.captured = captured  # a long-running command releases it (the viewer's server)
         if verbose:  # splinecast's debug lines too (what zarr's event loop dropped, ...)
@@ -73,6 +80,8 @@ def main(argv: list[str] | None = None) -> int:
                 # What the failure left behind (tasks of zarr's event loop that failed beside
                 # the one reported) is collected now, inside the capture, not at exit.
                 gc.collect()
+            if freezing:
+                gc.unfreeze()
             ours.setLevel(level)
     lines = captured.ours() if code == 0 and not getattr(args, "quiet", False) else []
     if code == 0 and getattr(args, "quiet", False):
