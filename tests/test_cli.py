@@ -5,8 +5,8 @@ from __future__ import annotations
 import gc
 import json
 import subprocess
-import weakref
 import sys
+import weakref
 
 import numpy as np
 import pytest
