@@ -57,7 +57,7 @@ import numba
 import numpy as np
 from numba.typed import List
 
-from ..._jit import jit
+from ..._jit import jit, overload_jit
 from ...camera import (
     BASIS_COL0,
     BASIS_EYE,
@@ -96,10 +96,24 @@ SERIAL_CELLS = 32**3
 @jit()
 def _typed_list_of(item: Any) -> Any:
     """An empty typed List whose items have ``item``'s Numba type."""
-    items = List()
-    items.append(item)
-    items.pop()
-    return items
+    return _empty_list_like(item)
+
+
+def _empty_list_like(item: Any) -> Any:
+    """An empty typed List for items like ``item`` (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload_jit(_empty_list_like)
+def _empty_list_like_impl(item: Any) -> Any:
+    # The item's type is known here, at compile time: the list is made empty of that type
+    # directly, which compiles in half the time of appending an item and popping it again.
+    item_type = item
+
+    def empty(item: Any) -> Any:
+        return List.empty_list(item_type)
+
+    return empty
 
 
 @jit()
