@@ -102,8 +102,10 @@ def _done(mode, st):
 
 
 @jit()
-def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
+def _consume(mode, mscratch, grid, scratch, piece, ray, st):
+    ctx, i, j, k, tag, poly = piece.ctx, piece.i, piece.j, piece.k, piece.tag, piece.poly
+    lo, hi, t0, t1 = piece.lo, piece.hi, piece.t0, piece.t1
+    ax, ay, az, bx, by, bz = piece.ax, piece.ay, piece.az, piece.bx, piece.by, piece.bz
     hit_s, hit_q = mscratch
     count = 0
     for q in range(mode.isos.shape[0]):
