@@ -209,7 +209,7 @@ def _trace_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, 
                 # with only the walk's state live in it.
                 while size > 0:
                     t_end, inside, ci, cj, ck, t_next, crossings = walk_step_cached(
-                        ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, size,
+                        (ox, oy, oz), (dx, dy, dz), cells, ci, cj, ck, t, t_far, size,
                         crossings)
                     skipped += 1
                     if watches_skips(mode):
@@ -223,7 +223,7 @@ def _trace_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, 
                 open_i, open_j = ci >> shift, cj >> shift
                 open_k = ck >> shift
             t_end, inside, ni, nj, nk, t_next, crossings = walk_step_cached(
-                ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, 1, crossings)
+                (ox, oy, oz), (dx, dy, dz), cells, ci, cj, ck, t, t_far, 1, crossings)
             if t_end >= t:
                 visited += 1
                 ctx = cell_load(grid, scr, ci, cj, ck)
@@ -235,7 +235,8 @@ def _trace_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, 
                     ex = ox + t_end * dx - ci - ax
                     ey = oy + t_end * dy - cj - ay
                     ez = oz + t_end * dz - ck - az
-                    n = cell_pieces(grid, scr, ctx, ci, cj, ck, ax, ay, az, ex, ey, ez, cuts, tags)
+                    n = cell_pieces(grid, scr, ctx, (ci, cj, ck), (ax, ay, az), (ex, ey, ez),
+                                    cuts, tags)
                     for p in range(n):
                         s0 = cuts[p]
                         s1 = cuts[p + 1]
@@ -249,8 +250,8 @@ def _trace_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, 
                             continue
                         pax, pay, paz = ax + s0 * ex, ay + s0 * ey, az + s0 * ez
                         pbx, pby, pbz = ax + s1 * ex, ay + s1 * ey, az + s1 * ez
-                        poly = piece_poly(grid, scr, ctx, ci, cj, ck, tag, pax, pay, paz,
-                                          pbx, pby, pbz)
+                        poly = piece_poly(grid, scr, ctx, (ci, cj, ck), tag, (pax, pay, paz),
+                                          (pbx, pby, pbz))
                         piece = RayPiece(ctx, ci, cj, ck, tag, poly, lo, hi, tp0, tp1, pax,
                                          pay, paz, pbx, pby, pbz)
                         st = consume(mode, mscr, grid, scr, piece, ray, st)

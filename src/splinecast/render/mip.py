@@ -172,8 +172,8 @@ def _ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0
         bi, bj, bk = np.uint64(ci >> 4), np.uint64(cj >> 4), np.uint64(ck >> 4)
         lower = max(lower, g1_min[bi, bj, bk])
         block_top = g1_max[bi, bj, bk]
-        t_end, inside, ci, cj, ck, t_next = walk_step(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz,
-                                                      ci, cj, ck, t, t_far, 16)
+        t_end, inside, ci, cj, ck, t_next = walk_step((ox, oy, oz), (dx, dy, dz),
+                                                      (ncx, ncy, ncz), ci, cj, ck, t, t_far, 16)
         if block_top > top:
             top, ta, tb = block_top, t, t_end
         t = t_next

@@ -146,9 +146,10 @@ def _consume(mode, mscratch, grid, scratch, piece, ray, st):
             nxw, nyw, nzw = gx * scale, gy * scale, gz * scale
         else:
             nxw, nyw, nzw = -ux, -uy, -uz
-        cr, cg, cb = surface_rgb(mode.shading, mode.effects, mode.colors[q, 0],
-                                 mode.colors[q, 1], mode.colors[q, 2], nxw, nyw, nzw, ux, uy, uz,
-                                 wx + th * ux, wy + th * uy, wz + th * uz)
+        cr, cg, cb = surface_rgb(mode.shading, mode.effects,
+                                 (mode.colors[q, 0], mode.colors[q, 1], mode.colors[q, 2]),
+                                 (nxw, nyw, nzw), (ux, uy, uz),
+                                 (wx + th * ux, wy + th * uy, wz + th * uz))
         w = (1.0 - acc_a) * mode.opacity[q]
         acc_r += w * cr
         acc_g += w * cg
