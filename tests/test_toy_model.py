@@ -56,7 +56,7 @@ def _cell_load(grid, scratch, i, j, k):
 
 
 @jit()
-def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+def _piece_poly(grid, scratch, ctx, cell, tag, a, b):
     return PowerCubic(ctx[0], 0.0, 0.0, 0.0)
 
 

@@ -36,10 +36,11 @@ def _walks(o, d, n, size_draws):
             size = size_draws[step]
             if which == 0:
                 t_end, inside, ni, nj, nk, t_next = walk_step(
-                    ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, size)
+                    (ox, oy, oz), (dx, dy, dz), (nx, ny, nz), ci, cj, ck, t, t_far, size)
             else:
                 t_end, inside, ni, nj, nk, t_next, planes = walk_step_cached(
-                    ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, size, planes)
+                    (ox, oy, oz), (dx, dy, dz), (nx, ny, nz), ci, cj, ck, t, t_far, size,
+                    planes)
             out[step, 0] = t_end
             out[step, 1] = 1.0 if inside else 0.0
             out[step, 2], out[step, 3], out[step, 4] = ni, nj, nk

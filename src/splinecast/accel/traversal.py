@@ -175,10 +175,12 @@ def walk_begin(
 
 @jit(inline="always")
 def walk_step(
-    ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, nx: int, ny: int, nz: int,
-    ci: int, cj: int, ck: int, t: float, t_far: float, size: int,
+    origin: tuple, direction: tuple, cells: tuple, ci: int, cj: int, ck: int, t: float,
+    t_far: float, size: int,
 ) -> tuple[float, bool, int, int, int, float]:
-    """Leave the aligned block of ``size`` cells around cell ``(ci, cj, ck)``, entered at ``t``.
+    """Leave the aligned block of ``size`` cells around cell ``(ci, cj, ck)``, entered at ``t``,
+    of the ray ``origin + t direction`` (``(x, y, z)`` tuples) through a grid of ``cells``
+    (``(nx, ny, nz)``).
 
     Returns ``(t_end, more, i, j, k, t_next)``: the block's segment is ``[t, t_end]`` (clipped to
     the grid), ``more`` tells whether the ray goes on into cell ``(i, j, k)`` at ``t_next``.
@@ -187,11 +189,11 @@ def walk_step(
         inside, i, j, k, t, t_far = walk_begin(...)
         while inside:
             size = <1 for a cell to process, or the edge of an empty block to leap over>
-            t_end, inside, ni, nj, nk, t_next = walk_step(..., i, j, k, t, t_far, size)
+            t_end, inside, ni, nj, nk, t_next = walk_step(o, d, n, i, j, k, t, t_far, size)
             <process the segment [t, t_end] of cell or block (i, j, k)>
             i, j, k, t = ni, nj, nk, t_next
     """
-    return walk_step_cached(ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, size,
+    return walk_step_cached(origin, direction, cells, ci, cj, ck, t, t_far, size,
                             _NO_CROSSINGS)[:6]
 
 
@@ -213,8 +215,8 @@ def _axis_exit_cached(c: int, o: float, d: float, size: int, plane_c: int,
 
 @jit(inline="always")
 def walk_step_cached(
-    ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, nx: int, ny: int, nz: int,
-    ci: int, cj: int, ck: int, t: float, t_far: float, size: int, crossings: tuple,
+    origin: tuple, direction: tuple, cells: tuple, ci: int, cj: int, ck: int, t: float,
+    t_far: float, size: int, crossings: tuple,
 ) -> tuple:
     """:func:`walk_step` with each axis's last plane and its parameter carried from step to
     step (``crossings``: ``(px, tx, py, ty, pz, tz)``; a walk starts with planes that never
@@ -222,6 +224,9 @@ def walk_step_cached(
     repeated. The parameters are the same divisions of the same numbers, so the walk is
     identical (``tests/test_walk_cached.py``). Returns :func:`walk_step`'s tuple and the
     updated ``crossings``."""
+    ox, oy, oz = origin
+    dx, dy, dz = direction
+    nx, ny, nz = cells
     px, tx = _axis_exit_cached(ci, ox, dx, size, crossings[0], crossings[1])
     py, ty = _axis_exit_cached(cj, oy, dy, size, crossings[2], crossings[3])
     pz, tz = _axis_exit_cached(ck, oz, dz, size, crossings[4], crossings[5])
@@ -275,6 +280,6 @@ def walk_cells(
         count += 1
         # The renderer's step (tests/test_traversal.py checks it against exact crossings).
         _, inside, ci, cj, ck, t, crossings = walk_step_cached(
-            ox, oy, oz, dx, dy, dz, nx, ny, nz, ci, cj, ck, t, t_far, 1, crossings
+            (ox, oy, oz), (dx, dy, dz), (nx, ny, nz), ci, cj, ck, t, t_far, 1, crossings
         )
     return out[:count]

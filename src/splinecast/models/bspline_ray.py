@@ -155,9 +155,13 @@ def compose_naive(
 
 @jit()
 def _segment(
-    coeffs: np.ndarray, d: int, i: int, j: int, k: int, ax: float, ay: float, az: float,
-    bx: float, by: float, bz: float, form: int, out: np.ndarray,
+    coeffs: np.ndarray, d: int, cell: tuple, a: tuple, b: tuple, form: int, out: np.ndarray,
 ) -> None:
+    """:func:`segment_polynomial` into ``out`` (``cell``: ``(i, j, k)``; ``a``, ``b``: the
+    local end points as ``(x, y, z)`` tuples; ``form``: an entry of :data:`FORMS`)."""
+    i, j, k = cell
+    ax, ay, az = a
+    bx, by, bz = b
     tensor = np.empty((4, 4, 4))
     tmp = np.empty((4, 4, 4))
     matrix = SB_MATRIX[d] if form == 0 else POWER_MATRIX[d]
@@ -212,7 +216,8 @@ def segment_polynomial(
     a = np.asarray(entry, dtype=np.float64)
     b = np.asarray(exit, dtype=np.float64)
     i, j, k = (int(c) for c in cell)
-    _segment(coeffs, int(degree), i, j, k, a[0], a[1], a[2], b[0], b[1], b[2], FORMS[form], out)
+    _segment(coeffs, int(degree), (i, j, k), (float(a[0]), float(a[1]), float(a[2])),
+             (float(b[0]), float(b[1]), float(b[2])), FORMS[form], out)
     return out
 
 
@@ -319,12 +324,13 @@ def _cached_cell(grid, scratch, i, j, k):
 
 
 @jit(inline="always")
-def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+def _cell_pieces(grid, scratch, ctx, cell, a, e, cuts, tags):
     """The whole cell is one piece; its tag is the cell's entry in the cell cache, which holds
     its range (``piece_range``) and transform (``piece_poly`` builds the polynomial from it only
     for a piece a mode asks for)."""
     cuts[0] = 0.0
     cuts[1] = 1.0
+    i, j, k = cell
     tags[0] = _cached_cell(grid, scratch, i, j, k)
     return 1
 
@@ -336,8 +342,10 @@ def _piece_range(grid, scratch, ctx, i, j, k, tag):
 
 
 @jit()
-def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+def _piece_poly(grid, scratch, ctx, cell, tag, a, b):
     """The segment's polynomial from the cell's cached transform (``tag``), into ``scratch[6]``."""
+    ax, ay, az = a
+    bx, by, bz = b
     d = grid.degree
     basis, inner, middle, inv = scratch[2], scratch[3], scratch[4], scratch[5]
     poly = scratch[6]

@@ -16,15 +16,17 @@ Per cell, in the order a driver uses them:
     Whatever the model reads once per cell, as a tuple whose first two entries are a
     conservative range ``(lo, hi)`` of the reconstruction on the cell (``lo > hi``: the cell
     cannot contribute).
-``cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags) -> n``
-    The segment ``a + s e`` (``s in [0, 1]``, local cell coordinates in ``[0, 1]^3``) cut into
-    ``n`` pieces at ``cuts[0] = 0 < ... < cuts[n] = 1`` with a model tag per piece (the
-    tetrahedron for the type-6 splines; trilinear and B-splines have one piece).
+``cell_pieces(grid, scratch, ctx, cell, a, e, cuts, tags) -> n``
+    The segment ``a + s e`` (``s in [0, 1]``, local cell coordinates in ``[0, 1]^3``; ``a`` and
+    ``e`` are ``(x, y, z)`` tuples) through ``cell``, the tuple ``(i, j, k)``, cut into ``n``
+    pieces at ``cuts[0] = 0 < ... < cuts[n] = 1`` with a model tag per piece (the tetrahedron
+    for the type-6 splines; trilinear and B-splines have one piece).
 ``piece_range(grid, scratch, ctx, i, j, k, tag) -> (lo, hi)``
     A conservative range of the piece's polynomial, before it is built.
-``piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz) -> poly``
-    The reconstruction along the piece from local point ``a`` to ``b``, a univariate polynomial
-    of :mod:`splinecast.roots.pieces` in the model's natural form.
+``piece_poly(grid, scratch, ctx, cell, tag, a, b) -> poly``
+    The reconstruction along piece ``tag`` of ``cell`` (``(i, j, k)``) from local point ``a``
+    to ``b`` (``(x, y, z)`` tuples), a univariate polynomial of :mod:`splinecast.roots.pieces`
+    in the model's natural form.
 ``gradient(grid, scratch, ctx, i, j, k, tag, x, y, z) -> (gx, gy, gz)``
     Gradient at local point ``(x, y, z)`` of the cell, per unit of the grid's index space.
 ``value_gradient_at(grid, scratch, x, y, z) -> (v, gx, gy, gz)``
@@ -153,13 +155,13 @@ def _cell_load(grid, scratch, i, j, k):
     return None if f is None else f.py_func
 
 
-def cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+def cell_pieces(grid, scratch, ctx, cell, a, e, cuts, tags):
     """Cut a cell's segment into pieces; returns their number (compiled code only)."""
     raise NotImplementedError
 
 
 @overload_jit(cell_pieces, inline="never")
-def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+def _cell_pieces(grid, scratch, ctx, cell, a, e, cuts, tags):
     f = _impl(grid, "cell_pieces")
     return None if f is None else f.py_func
 
@@ -175,13 +177,13 @@ def _piece_range(grid, scratch, ctx, i, j, k, tag):
     return None if f is None else f.py_func
 
 
-def piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+def piece_poly(grid, scratch, ctx, cell, tag, a, b):
     """The piece's polynomial from local point ``a`` to ``b`` (compiled code only)."""
     raise NotImplementedError
 
 
 @overload_jit(piece_poly, inline="never")
-def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+def _piece_poly(grid, scratch, ctx, cell, tag, a, b):
     f = _impl(grid, "piece_poly")
     return None if f is None else f.py_func
 
@@ -301,7 +303,7 @@ def _shading_gradient_at(grid, scratch, x, y, z):
 # Hooks shared by the models whose cell is a single piece (trilinear, B-splines).
 
 @jit()
-def whole_cell(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+def whole_cell(grid, scratch, ctx, cell, a, e, cuts, tags):
     """``cell_pieces`` of a model whose whole cell is one polynomial piece."""
     cuts[0] = 0.0
     cuts[1] = 1.0

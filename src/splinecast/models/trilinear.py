@@ -108,8 +108,13 @@ def local_gradient(k1, k2, k3, k4, k5, k6, k7, x, y, z):
 
 
 @jit(inline="always")
-def ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7, ax, ay, az, ex, ey, ez):
-    """Power-form coefficients ``(c3, c2, c1, c0)`` of the interpolant along ``a + s e``."""
+def ray_cubic(k, a, e):
+    """Power-form coefficients ``(c3, c2, c1, c0)`` of the interpolant along ``a + s e``
+    (``a``, ``e``: ``(x, y, z)`` tuples) from the cell's monomial coefficients ``k``, the
+    tuple ``(k0, ..., k7)`` of :func:`corner_monomials`."""
+    k0, k1, k2, k3, k4, k5, k6, k7 = k
+    ax, ay, az = a
+    ex, ey, ez = e
     c0 = local_value(k0, k1, k2, k3, k4, k5, k6, k7, ax, ay, az)
     gx, gy, gz = local_gradient(k1, k2, k3, k4, k5, k6, k7, ax, ay, az)
     c1 = gx * ex + gy * ey + gz * ez
@@ -180,10 +185,10 @@ def _cell_load(grid, scratch, i, j, k):
 
 
 @jit()
-def _piece_poly(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
-    k0, k1, k2, k3, k4, k5, k6, k7 = corner_monomials(ctx)
-    c3, c2, c1, c0 = ray_cubic(k0, k1, k2, k3, k4, k5, k6, k7,
-                               ax, ay, az, bx - ax, by - ay, bz - az)
+def _piece_poly(grid, scratch, ctx, cell, tag, a, b):
+    ax, ay, az = a
+    bx, by, bz = b
+    c3, c2, c1, c0 = ray_cubic(corner_monomials(ctx), a, (bx - ax, by - ay, bz - az))
     return PowerCubic(c0, c1, c2, c3)
 
 

@@ -173,17 +173,21 @@ def value_gradient(
 
 @jit(inline="always")
 def ray_bernstein(
-    c: np.ndarray, degree: int, steps: np.ndarray, bary: np.ndarray, tet: int,
-    ax: float, ay: float, az: float, bx: float, by: float, bz: float,
-    b10a: np.ndarray, b10b: np.ndarray, b4a: np.ndarray, b4b: np.ndarray, b4c: np.ndarray,
+    c: np.ndarray, degree: int, steps: np.ndarray, bary: np.ndarray, tet: int, a: tuple,
+    b: tuple, work: tuple,
 ) -> tuple[float, float, float, float]:
-    """Univariate Bernstein coefficients of the patch on the segment from ``a`` to ``b``.
+    """Univariate Bernstein coefficients of the patch on the segment from ``a`` to ``b`` (local
+    points, ``(x, y, z)`` tuples); ``work`` holds the blossoms' buffers ``(b10a, b10b, b4a,
+    b4b, b4c)``.
 
     The restriction of a degree-``d`` polynomial to a segment is a degree-``d`` polynomial in the
     segment parameter whose ``k``-th Bernstein coefficient is the blossom evaluated ``d - k``
     times at ``a`` and ``k`` times at ``b`` (barycentric coordinates of the end points). For a
     quadratic the fourth returned value is 0.
     """
+    ax, ay, az = a
+    bx, by, bz = b
+    b10a, b10b, b4a, b4b, b4c = work
     t = bary[tet]
     a0 = t[0, 0] * ax + t[0, 1] * ay + t[0, 2] * az + t[0, 3]
     a1 = t[1, 0] * ax + t[1, 1] * ay + t[1, 2] * az + t[1, 3]

@@ -160,10 +160,13 @@ def _load_tet(grid, scratch, slot, i, j, k, tet):
 
 
 @jit(inline="always")
-def _cell_pieces(grid, scratch, ctx, i, j, k, ax, ay, az, ex, ey, ez, cuts, tags):
+def _cell_pieces(grid, scratch, ctx, cell, a, e, cuts, tags):
     """Cut the cube's segment into tetrahedron pieces and give each its range
     (``scratch[5][piece]``); the polynomials are built only for the pieces a mode asks for
     (``piece_poly``), so a ray that ends early never pays for the pieces behind its hit."""
+    i, j, k = cell
+    ax, ay, az = a
+    ex, ey, ez = e
     n = split_cube_segment(ax - 0.5, ay - 0.5, az - 0.5, ex, ey, ez, cuts)
     ranges = scratch[5]
     for p in range(n):
@@ -198,7 +201,10 @@ def _piece_range(grid, scratch, ctx, i, j, k, tag):
 
 
 @jit()
-def _piece_poly3(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+def _piece_poly3(grid, scratch, ctx, cell, tag, a, b):
+    i, j, k = cell
+    ax, ay, az = a
+    bx, by, bz = b
     tet = tag & 31
     c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
     a0, a1, a2, a3 = barycentric(grid.bary, tet, ax - 0.5, ay - 0.5, az - 0.5)
@@ -208,7 +214,10 @@ def _piece_poly3(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
 
 
 @jit()
-def _piece_poly2(grid, scratch, ctx, i, j, k, tag, ax, ay, az, bx, by, bz):
+def _piece_poly2(grid, scratch, ctx, cell, tag, a, b):
+    i, j, k = cell
+    ax, ay, az = a
+    bx, by, bz = b
     tet = tag & 31
     c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
     a0, a1, a2, a3 = barycentric(grid.bary, tet, ax - 0.5, ay - 0.5, az - 0.5)

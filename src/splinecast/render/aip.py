@@ -103,14 +103,13 @@ def _wants(mode, st, lo, hi):
 
 
 @jit()
-def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
+def _consume(mode, mscratch, grid, scratch, piece, ray, st):
     """Add the piece's exact integral ``(t1 - t0) * mean(poly on [0, 1])`` and its length."""
     mean = 0.0
     for n in range(_S.shape[0]):
-        mean += _W[n] * poly_value(poly, _S[n])
-    length = t1 - t0
-    return st[0] + mean * length, st[1] + length, min(st[2], t0)
+        mean += _W[n] * poly_value(piece.poly, _S[n])
+    length = piece.t1 - piece.t0
+    return st[0] + mean * length, st[1] + length, min(st[2], piece.t0)
 
 
 @jit()

@@ -46,11 +46,12 @@ the model's per-thread caches.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from typing import Any
 
 import numba
 import numpy as np
-from numba import prange
+from numba import prange, types
 
 from .._jit import bind_first_class, inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step_cached
@@ -79,12 +80,61 @@ from .mode_api import (
     watches_skips,
 )
 from .outputs import copy_pixel
-from .rays import GEOM_SIZE, Ray, grid_ray, pixel_ray
+from .rays import GEOM_SIZE, Ray, RayPiece, grid_ray, pixel_ray
 from .sampler import bound_sample_pixel
 from .work_queue import run_on_threads, take
 
 __all__ = ["trace", "pair_band", "pair_bindings", "finalize", "reset_state", "band_order",
-           "scratch_types", "GEOM_SIZE"]
+           "scratch_types", "GEOM_SIZE", "RaySetup", "Rect", "Passes", "Counters", "Buffers",
+           "Bands", "Pixel", "band_types"]
+
+# The argument groups of the pixel loop (compiled code reads them by field name; numba passes a
+# named tuple as its fields, so grouping costs nothing per call).
+
+RaySetup = namedtuple("RaySetup", ("basis", "geom", "planes", "t_range", "footprint"))
+RaySetup.__doc__ = """What sets up each pixel's ray through one grid and limits its interval.
+
+Attributes
+----------
+basis : ndarray
+    :meth:`Camera.pixel_basis` of the image (or tile).
+geom : ndarray, shape (GEOM_SIZE,)
+    Placement of the grid (module docstring).
+planes : ndarray, shape (m, 4)
+    Clip planes.
+t_range : ndarray, shape (height, width, 2) or (0, 0, 2)
+    Per-ray parameter interval, or none (empty: the ray is left alone).
+footprint : ndarray, shape (tiles_y, tiles_x, 2) or (0, 0, 2)
+    Per-tile parameter interval of the blocks the mode can see (:mod:`.footprint`), or none.
+"""
+
+Rect = namedtuple("Rect", ("r0", "r1", "c0", "c1", "tile"))
+Rect.__doc__ = """Rows ``[r0, r1)`` x columns ``[c0, c1)`` of the image, traced ``tile``
+columns at a time (integers)."""
+
+Passes = namedtuple("Passes", ("load", "store", "final", "count"))
+Passes.__doc__ = """What a trace does besides tracing (booleans): read the state arrays at the
+start (``load``), write them at the end (``store``), write the outputs (``final``), increment
+the per-ray statistics (``count``)."""
+
+Counters = namedtuple("Counters", ("visited", "tested", "skipped"))
+Counters.__doc__ = """Per-ray statistics, int32 arrays of shape (height, width): cells walked,
+cells whose pieces were built, blocks leapt (or a sampled mode's samples, segments and leaps).
+Their shape is the image's."""
+
+Buffers = namedtuple("Buffers", ("model", "mode", "cuts", "tags"))
+Buffers.__doc__ = """One thread's scratch buffers for the pixel loop: the model's scratch
+(:func:`splinecast.models.pieces.new_scratch`), the mode's (``mode_scratch``), and the piece
+boundaries (float64) and tags (int64) of one cell."""
+
+Bands = namedtuple("Bands", ("order", "rows", "tile", "counter"))
+Bands.__doc__ = """How the image loop hands out its work: bands of ``rows`` rows in the order
+``order`` (int64 array), each traced ``tile`` columns at a time, the next one taken from the
+shared one-element int64 array ``counter`` (:func:`.work_queue.take`)."""
+
+Pixel = namedtuple("Pixel", ("row", "col", "width", "height"))
+Pixel.__doc__ = """Pixel ``(row, col)`` of an image (or tile) of ``width`` x ``height``
+(integers)."""
 
 #: (grid class, mode class) -> the pair's :func:`_trace_band`.
 _KERNELS: dict[tuple[type, type], Any] = {}
@@ -118,10 +168,15 @@ def _unseen(footprint, row_a, row_b, col_a, col_b, ty0, tx0):
 
 
 @jit(inline="always")
-def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi, load,
-                 store, final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
-    """Trace one pixel's ray inside ``[t_lo, t_hi]``; returns (cells visited, cells tested,
-    blocks skipped)."""
+def _trace_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, window, cells):
+    """Trace one pixel's ray inside ``window``, ``(t_lo, t_hi)``; ``cells`` is the grid's
+    ``cell_count``. Returns (cells visited, cells tested, blocks skipped)."""
+    basis, geom, planes, t_range = setup.basis, setup.geom, setup.planes, setup.t_range
+    load, store, final = passes.load, passes.store, passes.final
+    scr, mscr, cuts, tags = buffers.model, buffers.mode, buffers.cuts, buffers.tags
+    row, col, width, height = pixel
+    t_lo, t_hi = window
+    ncx, ncy, ncz = cells
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
     st = state_load(mode, state, row, col) if load else state_new(mode)
     if (t_lo > t0 or t_hi < t0) and t0 <= t1 and not done(mode, st):
@@ -154,7 +209,7 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                 # with only the walk's state live in it.
                 while size > 0:
                     t_end, inside, ci, cj, ck, t_next, crossings = walk_step_cached(
-                        ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, size,
+                        (ox, oy, oz), (dx, dy, dz), cells, ci, cj, ck, t, t_far, size,
                         crossings)
                     skipped += 1
                     if watches_skips(mode):
@@ -168,7 +223,7 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                 open_i, open_j = ci >> shift, cj >> shift
                 open_k = ck >> shift
             t_end, inside, ni, nj, nk, t_next, crossings = walk_step_cached(
-                ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, ci, cj, ck, t, t_far, 1, crossings)
+                (ox, oy, oz), (dx, dy, dz), cells, ci, cj, ck, t, t_far, 1, crossings)
             if t_end >= t:
                 visited += 1
                 ctx = cell_load(grid, scr, ci, cj, ck)
@@ -180,7 +235,8 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                     ex = ox + t_end * dx - ci - ax
                     ey = oy + t_end * dy - cj - ay
                     ez = oz + t_end * dz - ck - az
-                    n = cell_pieces(grid, scr, ctx, ci, cj, ck, ax, ay, az, ex, ey, ez, cuts, tags)
+                    n = cell_pieces(grid, scr, ctx, (ci, cj, ck), (ax, ay, az), (ex, ey, ez),
+                                    cuts, tags)
                     for p in range(n):
                         s0 = cuts[p]
                         s1 = cuts[p + 1]
@@ -194,10 +250,11 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                             continue
                         pax, pay, paz = ax + s0 * ex, ay + s0 * ey, az + s0 * ez
                         pbx, pby, pbz = ax + s1 * ex, ay + s1 * ey, az + s1 * ez
-                        poly = piece_poly(grid, scr, ctx, ci, cj, ck, tag, pax, pay, paz,
-                                          pbx, pby, pbz)
-                        st = consume(mode, mscr, grid, scr, ctx, ci, cj, ck, tag, poly, lo, hi,
-                                     tp0, tp1, pax, pay, paz, pbx, pby, pbz, ray, st)
+                        poly = piece_poly(grid, scr, ctx, (ci, cj, ck), tag, (pax, pay, paz),
+                                          (pbx, pby, pbz))
+                        piece = RayPiece(ctx, ci, cj, ck, tag, poly, lo, hi, tp0, tp1, pax,
+                                         pay, paz, pbx, pby, pbz)
+                        st = consume(mode, mscr, grid, scr, piece, ray, st)
                         if done(mode, st):
                             break
                     if asks_again(mode):
@@ -224,12 +281,10 @@ def _trace_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
 # counts. Functions it calls inherit that (numba passes ``nrt`` on to callees that do not set it),
 # so one that allocates must be compiled with ``_nrt=True`` (none of the band's does).
 @jit(_nrt=False)
-def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0, r1,
-                c0, c1, tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts,
-                tags):
-    """Trace the pixels of rows ``[r0, r1)`` x columns ``[c0, c1)``, ``tile`` columns at a time
-    (one thread's work item); ``scr``, ``mscr``, ``cuts`` and ``tags`` are the thread's scratch
-    buffers.
+def _trace_band(grid, mode, blocks, state, out, setup, rect, passes, counters, buffers):
+    """Trace the pixels of ``rect`` (a :class:`Rect`; one thread's work item) with the rays of
+    ``setup`` (:class:`RaySetup`); ``buffers`` are the thread's scratch buffers
+    (:class:`Buffers`).
 
     This is also the one-launch cut renderer's per-piece unit (:mod:`.pieces_driver`), which
     calls the pair's compiled band instead of inlining its own copy of the pixel loop: both
@@ -241,8 +296,12 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
     rays of each of its tiles to the tile's interval; the pixels of a tile it leaves empty are
     not traced (their states are passed on, and finished with ``final``).
     """
+    basis, t_range, footprint = setup.basis, setup.t_range, setup.footprint
+    r0, r1, c0, c1, tile = rect
+    load, store, final, count = passes
+    visited, tested, skipped = counters
     height, width = visited.shape
-    ncx, ncy, ncz = cell_count(grid)
+    cells = cell_count(grid)
     ranged = t_range.shape[0] > 0
     footed = footprint.shape[0] > 0
     t_lo, t_hi = -math.inf, math.inf
@@ -262,7 +321,7 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
         # only on the rays of its own tile, so any window of the image whose edges lie on tile
         # and band boundaries (Camera.tile, the viewer's stripes, Dask's tiles) renders the
         # same pixels as the whole image, whatever a mode does with its scratch.
-        tile_begin(mode, mscr)
+        tile_begin(mode, buffers.mode)
         if fresh and _unseen(footprint, r0 + row0, r1 + row0, tc0 + col0, tc1 + col0, ty0, tx0):
             end = tc1
             while end < c1 and _unseen(footprint, r0 + row0, r1 + row0, end + col0,
@@ -288,9 +347,8 @@ def _trace_band(grid, mode, blocks, state, out, basis, geom, planes, t_range, fo
                                            load, store, final)
                         continue
                 nv, nt, ns = _trace_pixel(
-                    grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi,
-                    load, store, final, scr, mscr, cuts, tags, row, col, width, height, ncx,
-                    ncy, ncz,
+                    grid, mode, blocks, state, out, setup, passes, buffers,
+                    Pixel(row, col, width, height), (t_lo, t_hi), cells,
                 )
                 if count:
                     visited[row, col] += nv
@@ -337,10 +395,12 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
     """
-    args = (grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,
-            band_rows, tile, load, store, final, count, visited, tested, skipped,
-            np.zeros(1, np.int64))
-    work = bind_first_class(_trace_image, pair_band(type(grid), type(mode)), _band_types, args)
+    args = (grid, mode, blocks, state, out, RaySetup(basis, geom, planes, t_range, footprint),
+            Bands(bands, int(band_rows), int(tile), np.zeros(1, np.int64)),
+            Passes(bool(load), bool(store), bool(final), bool(count)),
+            Counters(visited, tested, skipped))
+    work = bind_first_class(_trace_image, pair_band(type(grid), type(mode)), _image_band_types,
+                            args)
     run_on_threads(work, max(1, min(numba.get_num_threads(), len(bands))))
 
 
@@ -355,13 +415,26 @@ def scratch_types(grid_kind: Any, mode_kind: Any) -> tuple[Any, Any]:
     return tuple(scratch.signature.return_type)
 
 
-def _band_types(kinds: tuple) -> tuple:
+def band_types(grid_kind: Any, mode_kind: Any, blocks_kind: Any, state_kind: Any,
+               out_kind: Any, setup_kind: Any, passes_kind: Any, counters_kind: Any) -> tuple:
+    """The argument types of a (model, mode) pair's band (:func:`_trace_band`) from the Numba
+    types of its grid, mode, block hierarchy, state arrays, outputs, :class:`RaySetup`,
+    :class:`Passes` and :class:`Counters`: its :class:`Rect` of int64 and its :class:`Buffers`
+    are made by the caller."""
+    scr, mscr = scratch_types(grid_kind, mode_kind)
+    index = numba.int64  # the rectangle's rows and columns, computed in the loop
+    rect = types.BaseTuple.from_types((index,) * len(Rect._fields), Rect)
+    buffers = types.BaseTuple.from_types((scr, mscr, numba.float64[::1], numba.int64[::1]),
+                                         Buffers)
+    return (grid_kind, mode_kind, blocks_kind, state_kind, out_kind, setup_kind, rect,
+            passes_kind, counters_kind, buffers)
+
+
+def _image_band_types(kinds: tuple) -> tuple:
     """The argument types of the band :func:`_trace_image` calls, from the Numba types ``kinds``
     of its own arguments (after the band)."""
-    scr, mscr = scratch_types(kinds[0], kinds[1])
-    index = numba.int64  # the rectangle's rows and columns, computed in the loop
-    return (*kinds[:10], index, index, index, index, kinds[12], *kinds[13:17], *kinds[17:20],
-            scr, mscr, numba.float64[::1], numba.int64[::1])
+    grid, mode, blocks, state, out, setup, _, passes, counters = kinds
+    return band_types(grid, mode, blocks, state, out, setup, passes, counters)
 
 
 @jit(no_cpython_wrapper=True)
@@ -371,29 +444,27 @@ def _scratch_probe(grid, mode):
 
 
 @jit()
-def _trace_image(band, grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint,
-                 bands, band_rows, tile, load, store, final, count, visited, tested, skipped,
-                 next_band):
+def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, counters):
     """One thread's share of :func:`trace`: ``band`` is the pair's :func:`_trace_band` as a
     first-class function (:func:`splinecast._jit.bind_first_class`), so this function compiles
     without the band's code (its caller's library would link and optimize it again).
 
     Each thread that runs it (:func:`.work_queue.run_on_threads`) takes the next band in the
-    order ``bands`` when it is free (``next_band``: the shared counter): bands differ in cost by
-    orders of magnitude, and a split fixed in advance left one thread waiting for the other."""
-    height, width = visited.shape
+    order ``bands.order`` when it is free (``bands.counter``: the shared counter; a
+    :class:`Bands`): bands differ in cost by orders of magnitude, and a split fixed in advance
+    left one thread waiting for the other."""
+    height, width = counters.visited.shape
     # The first column as a variable: a constant argument is typed as a literal, which would
     # compile a band of its own instead of the one the cut renderer shares (.pieces_driver).
     first = width - width
     while True:
-        b = take(next_band)
-        if b >= bands.shape[0]:
+        b = take(bands.counter)
+        if b >= bands.order.shape[0]:
             break
-        r0 = bands[b] * band_rows
-        band(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0,
-             min(height, r0 + band_rows), first, width, tile, load, store, final, count,
-             visited, tested, skipped, new_scratch(grid), mode_scratch(mode),
-             np.empty(8), np.empty(8, np.int64))
+        r0 = bands.order[b] * bands.rows
+        band(grid, mode, blocks, state, out, setup,
+             Rect(r0, min(height, r0 + bands.rows), first, width, bands.tile), passes, counters,
+             Buffers(new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64)))
 
 
 @jit(parallel=True)

@@ -400,14 +400,17 @@ def _done(mode, st):
 
 
 @jit(inline="always")
-def _shaded_over(mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray, acc_r,
-                 acc_g, acc_b, acc_a, t_half, r, g, b, a, t):
-    """One segment's colour composited behind the ray's, shaded (when asked) with the gradient
-    at the point ``s`` of the piece from ``(ax, ay, az)`` to ``(bx, by, bz)``."""
+def _shaded_over(mode, grid, scratch, piece, s, ray, acc, colour, t):
+    """One segment's colour ``colour`` (premultiplied ``(r, g, b, a)``) composited behind the
+    ray's, ``acc`` (``(acc_r, acc_g, acc_b, acc_a, t_half)``, returned updated), shaded (when
+    asked) with the gradient at the point ``s`` of the piece (a :class:`.rays.RayPiece`)."""
+    acc_r, acc_g, acc_b, acc_a, t_half = acc
+    r, g, b, a = colour
     factor = 1.0
     if mode.shade:
-        gx, gy, gz = gradient(grid, scratch, ctx, i, j, k, tag, ax + s * (bx - ax),
-                              ay + s * (by - ay), az + s * (bz - az))
+        ax, ay, az, bx, by, bz = piece.ax, piece.ay, piece.az, piece.bx, piece.by, piece.bz
+        gx, gy, gz = gradient(grid, scratch, piece.ctx, piece.i, piece.j, piece.k, piece.tag,
+                              ax + s * (bx - ax), ay + s * (by - ay), az + s * (bz - az))
         factor = _shade_factor(True, mode.ambient, mode.diffuse, gx, gy, gz,
                                ray.spacing_x, ray.spacing_y, ray.spacing_z,
                                ray.world_dx, ray.world_dy, ray.world_dz)
@@ -415,14 +418,17 @@ def _shaded_over(mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, 
 
 
 @jit(inline="always")
-def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, az, bx, by, bz,
-               ray, n, seg, va, acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next):
-    """The pieces sampling with a 2D table: ``n`` segments of ``seg`` voxels.
+def _pieces_2d(mode, grid, scratch, piece, ray, n, seg, va, st):
+    """The pieces sampling with a 2D table: ``n`` segments of ``seg`` voxels of the piece (a
+    :class:`.rays.RayPiece`) whose value at its start is ``va``, into the state ``st``.
 
     The same integral as :func:`_classify_od`, written out for the common case: the table's
     cell and weights are found once per segment, its opacity is read first (a transparent
     segment reads nothing else), and nothing is called that would not be inlined.
     """
+    acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
+    poly, t0 = piece.poly, piece.t0
+    span = piece.t1 - piece.t0
     table = mode.table
     nt = table.shape[1]
     top = nt - 1.0
@@ -455,8 +461,8 @@ def _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, a
             f = a2 / a
             r, g, b, a = r * f, g * f, b * f, a2
         acc_r, acc_g, acc_b, acc_a, t_half = _shaded_over(
-            mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray,
-            acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, t0 + s * span)
+            mode, grid, scratch, piece, s, ray, (acc_r, acc_g, acc_b, acc_a, t_half),
+            (r, g, b, a), t0 + s * span)
         if acc_a >= mode.term:
             break
     return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
@@ -470,10 +476,10 @@ def _index_speed(ray):
 
 
 @jit(inline="always")
-def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az, bx, by,
-                    bz, ray, st):
+def _consume_pieces(mode, grid, scratch, piece, ray, st):
     """``sampling="pieces"``: the piece cut into ``ceil(L / h)`` equal segments."""
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
+    poly, t0, t1 = piece.poly, piece.t0, piece.t1
     dnorm = _index_speed(ray)
     span = t1 - t0
     length = span * dnorm
@@ -487,9 +493,7 @@ def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay
     seg = length / n
     va = poly_value(poly, 0.0)
     if mode.pi_mode == 1:
-        return _pieces_2d(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, span, ax, ay, az,
-                          bx, by, bz, ray, n, seg, va, acc_r, acc_g, acc_b, acc_a, t_half,
-                          samples, t_next)
+        return _pieces_2d(mode, grid, scratch, piece, ray, n, seg, va, st)
     for m in range(1, n + 1):
         s = m / n
         vb = poly_value(poly, s)
@@ -499,8 +503,8 @@ def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay
         samples += 1
         if a > 0.0:
             acc_r, acc_g, acc_b, acc_a, t_half = _shaded_over(
-                mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray,
-                acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, t0 + s * span)
+                mode, grid, scratch, piece, s, ray, (acc_r, acc_g, acc_b, acc_a, t_half),
+                (r, g, b, a), t0 + s * span)
             if acc_a >= mode.term:
                 break
         va = vb
@@ -508,12 +512,11 @@ def _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay
 
 
 @jit()
-def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
+def _consume(mode, mscratch, grid, scratch, piece, ray, st):
     if mode.pieces:
-        return _consume_pieces(mode, grid, scratch, ctx, i, j, k, tag, poly, t0, t1, ax, ay, az,
-                               bx, by, bz, ray, st)
+        return _consume_pieces(mode, grid, scratch, piece, ray, st)
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
+    poly, t0, t1 = piece.poly, piece.t0, piece.t1
     anchor = ray.anchor
     dnorm = _index_speed(ray)
     dt = mode.h0 / dnorm  # the base step in world units
@@ -541,8 +544,8 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
                                    length)
             if a > 0.0:
                 acc_r, acc_g, acc_b, acc_a, t_half = _shaded_over(
-                    mode, grid, scratch, ctx, i, j, k, tag, s, ax, ay, az, bx, by, bz, ray,
-                    acc_r, acc_g, acc_b, acc_a, t_half, r, g, b, a, tb)
+                    mode, grid, scratch, piece, s, ray, (acc_r, acc_g, acc_b, acc_a, t_half),
+                    (r, g, b, a), tb)
         if not sample or acc_a >= mode.term:
             break
         samples += 1
@@ -583,9 +586,11 @@ def _sample_step(mode):
 
 
 @jit()
-def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
+def _segment(mode, grid, scratch, st, ray, stretch):
     """``sampling="ray"``: the stretch between two samples, composited behind the ray's colour
     (shaded with the model's gradient at its back end, ``(x, y, z)``)."""
+    tb, va, vb, length = stretch.tb, stretch.va, stretch.vb, stretch.length
+    x, y, z = stretch.x, stretch.y, stretch.z
     acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next = st
     samples += 1
     if mode.pi_mode == 1 and abs(length - mode.h0) <= 1e-9 * mode.h0:

@@ -150,11 +150,15 @@ def checker3(x: float, y: float, z: float, scale: float) -> int:
 
 
 @jit(inline="always")
-def surface_rgb(shading: np.ndarray, effects: np.ndarray, r: float, g: float, b: float,
-                nx: float, ny: float, nz: float, ux: float, uy: float, uz: float,
-                px: float, py: float, pz: float) -> tuple:
+def surface_rgb(shading: np.ndarray, effects: np.ndarray, rgb: tuple, n: tuple, u: tuple,
+                p: tuple) -> tuple:
     """Shaded colour of a surface point with base colour ``rgb``, unit normal ``n`` seen along
-    ``u``, at world position ``p`` (headlight Blinn-Phong of :mod:`.shading` plus effects)."""
+    ``u``, at world position ``p`` (headlight Blinn-Phong of :mod:`.shading` plus effects; each
+    a tuple of three floats)."""
+    r, g, b = rgb
+    nx, ny, nz = n
+    ux, uy, uz = u
+    px, py, pz = p
     kind = int(effects[0])
     if kind == 1:
         if checker3(px, py, pz, effects[1]) == 1:
@@ -193,9 +197,9 @@ def apply_effects(basis: np.ndarray, shading: np.ndarray, effects: np.ndarray,
             _, _, _, ux, uy, uz = pixel_ray(basis, row, col, width, height)
             base = 0 if f > 0 else 3
             r, g, b = surface_rgb(
-                shading, effects, shading[base], shading[base + 1], shading[base + 2],
-                normal[row, col, 0], normal[row, col, 1], normal[row, col, 2], ux, uy, uz,
-                position[row, col, 0], position[row, col, 1], position[row, col, 2])
+                shading, effects, (shading[base], shading[base + 1], shading[base + 2]),
+                (normal[row, col, 0], normal[row, col, 1], normal[row, col, 2]), (ux, uy, uz),
+                (position[row, col, 0], position[row, col, 1], position[row, col, 2]))
             rgba[row, col, 0] = r
             rgba[row, col, 1] = g
             rgba[row, col, 2] = b

@@ -191,8 +191,10 @@ def _skip_sampled(mode, grid, scratch, st, ray, t0, t1, lo, hi):
 
 
 @jit()
-def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
+def _consume(mode, mscratch, grid, scratch, piece, ray, st):
+    ctx, i, j, k, tag, poly = piece.ctx, piece.i, piece.j, piece.k, piece.tag, piece.poly
+    t0, t1 = piece.t0, piece.t1
+    ax, ay, az, bx, by, bz = piece.ax, piece.ay, piece.az, piece.bx, piece.by, piece.bz
     if mode.method == 0:
         s = poly_first_root(poly, mode.iso)
         if s == s:  # not NaN
@@ -243,9 +245,8 @@ def _finish(mode, out, row, col, st, ray):
     if st[0] == math.inf:
         store_miss(row, col, mode.shading, rgba, depth, position, normal, face)
     else:
-        store_hit(row, col, st[0], ray.world_x, ray.world_y, ray.world_z, ray.world_dx,
-                  ray.world_dy, ray.world_dz, st[1], st[2], st[3], mode.inside_high,
-                  mode.shading, rgba, depth, position, normal, face, st[5])
+        store_hit(row, col, st[0], ray, st[1], st[2], st[3], mode.inside_high, mode.shading,
+                  out, st[5])
 
 
 register(IsoMode,

@@ -172,8 +172,8 @@ def _ray_begin(mode, grid, scratch, mscratch, blocks, st, ray, ncx, ncy, ncz, t0
         bi, bj, bk = np.uint64(ci >> 4), np.uint64(cj >> 4), np.uint64(ck >> 4)
         lower = max(lower, g1_min[bi, bj, bk])
         block_top = g1_max[bi, bj, bk]
-        t_end, inside, ci, cj, ck, t_next = walk_step(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz,
-                                                      ci, cj, ck, t, t_far, 16)
+        t_end, inside, ci, cj, ck, t_next = walk_step((ox, oy, oz), (dx, dy, dz),
+                                                      (ncx, ncy, ncz), ci, cj, ck, t, t_far, 16)
         if block_top > top:
             top, ta, tb = block_top, t, t_end
         t = t_next
@@ -237,8 +237,8 @@ def _wants(mode, st, lo, hi):
 
 
 @jit()
-def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
+def _consume(mode, mscratch, grid, scratch, piece, ray, st):
+    poly, t0, t1 = piece.poly, piece.t0, piece.t1
     best, where = st[0], st[1]
     # The convex hull of the piece's control points bounds it: a piece that cannot beat the
     # running maximum needs no roots of its derivative (most tested cells of a bright volume).
@@ -305,8 +305,9 @@ def _sample_planes(mode):
 
 
 @jit()
-def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
+def _segment(mode, grid, scratch, st, ray, stretch):
     """The sampled method: the stretch between two samples; its values there."""
+    ta, tb, va, vb = stretch.ta, stretch.tb, stretch.va, stretch.vb
     best, where = st[0], st[1]
     a = mode.sign * va
     if a > best:

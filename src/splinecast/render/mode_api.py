@@ -30,11 +30,13 @@ arrays*. The driver (:mod:`.driver`) calls, per ray:
 ``on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi)`` -> ``st``
     A stretch of the ray left out (a leapt block, ``lo`` NaN; or a cell or piece with range
     ``[lo, hi]`` that ``wants`` refused); only the sampled methods take notice.
-``consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1, ...)`` -> ``st``
-    (the arguments end with ``ax, ay, az, bx, by, bz, ray, st``). A piece: ray parameters
-    ``[t0, t1]``, the model's polynomial ``poly`` in ``s in [0, 1]``, local cell points ``a``
-    (entry) and ``b`` (exit). Gradients come from :func:`splinecast.models.pieces.gradient`
-    (resolved for the grid's model at compile time).
+``consume(mode, mscratch, grid, scratch, piece, ray, st)`` -> ``st``
+    A piece, a :class:`RayPiece` (exported here, defined in :mod:`.rays`) read by field name:
+    the model's cell context ``ctx``, the cell ``i, j, k`` and the piece's ``tag`` in it, the
+    model's polynomial ``poly`` in ``s in [0, 1]``, its value range ``[lo, hi]``, ray
+    parameters ``[t0, t1]``, local cell points ``ax, ay, az`` (entry) and ``bx, by, bz``
+    (exit). Gradients come from :func:`splinecast.models.pieces.gradient` (resolved for the
+    grid's model at compile time).
 ``done(mode, st)`` -> ``bool``
     Early termination.
 ``ray_end(mode, grid, scratch, st, ray, t_far)`` -> ``st``
@@ -85,9 +87,10 @@ blocks, decide whether a stretch between two leapt blocks can be left out):
     axis (the index axis along which it moves fastest), as slice-based renderers sample. On a
     plane through voxels the trilinear model reads 4 voxels instead of 8
     (:func:`splinecast.models.pieces.value_on_plane`).
-``segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z)`` -> ``st``
-    The stretch ``[ta, tb]`` of the ray between two samples (or a sample and an end of the
-    grid's interval), the model's values ``va`` and ``vb`` there, its length in voxels, and
+``segment(mode, grid, scratch, st, ray, stretch)`` -> ``st``
+    A :class:`Stretch` (exported here, defined in :mod:`.rays`) read by field name: the
+    stretch ``[ta, tb]`` of the ray between two samples (or a sample and an end of the grid's
+    interval), the model's values ``va`` and ``vb`` there, its ``length`` in voxels, and
     ``(x, y, z)``, the point at ``tb`` in the grid's traversal space (for a gradient).
 
 plus ``mode_scratch(mode)`` (per-thread buffers, made once per band of rays). ``ray`` is a
@@ -113,10 +116,11 @@ import numpy as np
 
 from .._jit import jit, overload_jit
 from ..accel.minmax import BLOCK_SHIFTS, inactive_block_size
-from .rays import Ray
+from .rays import Ray, RayPiece, Stretch
 
 __all__ = [
-    "Ray", "no_scratch", "unchanged_begin", "unchanged_skip", "unchanged_end", "flagged_block_size",
+    "Ray", "RayPiece", "Stretch", "no_scratch", "unchanged_begin", "unchanged_skip",
+    "unchanged_end", "flagged_block_size",
     "register", "state_new", "state_load", "state_store", "mode_scratch", "ray_begin",
     "skip_size", "wants", "on_skip", "consume", "done", "ray_end", "finish", "watches_skips",
     "never", "hooks_of", "sampled_of", "sample_step", "sample_planes", "segment", "asks_again",
@@ -255,15 +259,13 @@ def _on_skip(mode, grid, scratch, st, ray, t0, t1, lo, hi):
     return None if f is None else f.py_func
 
 
-def consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-            ax, ay, az, bx, by, bz, ray, st):
-    """Take one ray piece into the state (compiled code only)."""
+def consume(mode, mscratch, grid, scratch, piece, ray, st):
+    """Take one ray piece (a :class:`RayPiece`) into the state (compiled code only)."""
     raise NotImplementedError
 
 
 @overload_jit(consume, inline="never")
-def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
+def _consume(mode, mscratch, grid, scratch, piece, ray, st):
     f = _impl(mode, "consume")
     return None if f is None else f.py_func
 
@@ -379,13 +381,14 @@ def _sample_planes(mode):
     return None if f is None else f.py_func
 
 
-def segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
-    """Take the stretch of a ray between two samples into the state (compiled code only)."""
+def segment(mode, grid, scratch, st, ray, stretch):
+    """Take the stretch of a ray between two samples (a :class:`Stretch`) into the state
+    (compiled code only)."""
     raise NotImplementedError
 
 
 @overload_jit(segment, inline="never")
-def _segment(mode, grid, scratch, st, ray, ta, tb, va, vb, length, x, y, z):
+def _segment(mode, grid, scratch, st, ray, stretch):
     f = _impl(mode, "segment")
     return None if f is None else f.py_func
 

@@ -102,8 +102,10 @@ def _done(mode, st):
 
 
 @jit()
-def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0, t1,
-             ax, ay, az, bx, by, bz, ray, st):
+def _consume(mode, mscratch, grid, scratch, piece, ray, st):
+    ctx, i, j, k, tag, poly = piece.ctx, piece.i, piece.j, piece.k, piece.tag, piece.poly
+    lo, hi, t0, t1 = piece.lo, piece.hi, piece.t0, piece.t1
+    ax, ay, az, bx, by, bz = piece.ax, piece.ay, piece.az, piece.bx, piece.by, piece.bz
     hit_s, hit_q = mscratch
     count = 0
     for q in range(mode.isos.shape[0]):
@@ -144,9 +146,10 @@ def _consume(mode, mscratch, grid, scratch, ctx, i, j, k, tag, poly, lo, hi, t0,
             nxw, nyw, nzw = gx * scale, gy * scale, gz * scale
         else:
             nxw, nyw, nzw = -ux, -uy, -uz
-        cr, cg, cb = surface_rgb(mode.shading, mode.effects, mode.colors[q, 0],
-                                 mode.colors[q, 1], mode.colors[q, 2], nxw, nyw, nzw, ux, uy, uz,
-                                 wx + th * ux, wy + th * uy, wz + th * uz)
+        cr, cg, cb = surface_rgb(mode.shading, mode.effects,
+                                 (mode.colors[q, 0], mode.colors[q, 1], mode.colors[q, 2]),
+                                 (nxw, nyw, nzw), (ux, uy, uz),
+                                 (wx + th * ux, wy + th * uy, wz + th * uz))
         w = (1.0 - acc_a) * mode.opacity[q]
         acc_r += w * cr
         acc_g += w * cg

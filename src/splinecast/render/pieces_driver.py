@@ -31,6 +31,7 @@ closure away.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from typing import Any
 
 import numba
@@ -39,13 +40,44 @@ import numpy as np
 from .._jit import bind_first_classes, first_class, jit, overload_jit
 from ..models.pieces import new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
-from .driver import pair_band, scratch_types
+from .driver import Buffers, Counters, Passes, Pixel, RaySetup, Rect, band_types, pair_band
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import GEOM_SPACING, Ray, grid_point, index_axis, pixel_ray
 from .work_queue import run_on_threads, take
 
-__all__ = ["trace_pieces", "tile_lists", "box_interval", "TILE"]
+__all__ = ["trace_pieces", "tile_lists", "box_interval", "TILE", "Cut", "View", "Tiles",
+           "FrameEnds", "Seam", "TileRays"]
+
+# The launch's argument groups (numba passes a named tuple as its fields; :func:`trace_pieces`
+# describes each field).
+
+Cut = namedtuple("Cut", ("grids_a", "grids_b", "which", "geoms", "boxes", "closed", "rects",
+                         "levels", "origin0", "spacing0"))
+Cut.__doc__ = """The pieces of a cut: their grids (two typed lists), placements, boxes and the
+boxes' index space, screen rectangles and levels (:func:`trace_pieces`' parameters of those
+names)."""
+
+View = namedtuple("View", ("basis", "planes", "t_range"))
+View.__doc__ = """The image's rays: the camera's pixel basis, the clip planes, and each ray's
+interval in the piece being traced (work space, shape (height, width, 2))."""
+
+Tiles = namedtuple("Tiles", ("order", "start", "pieces", "counter"))
+Tiles.__doc__ = """The screen tiles: first row and column of each (``order``, in the order handed
+out), the pieces overlapping each (``start``, ``pieces``: :func:`tile_lists`), and the shared
+one-element int64 counter the threads take the next tile from (:func:`.work_queue.take`)."""
+
+FrameEnds = namedtuple("FrameEnds", ("fresh", "final"))
+FrameEnds.__doc__ = """Whether the launch resets the states first (``fresh``) and writes the
+outputs at the end (``final``), tile by tile (booleans)."""
+
+Seam = namedtuple("Seam", ("close", "exit_t", "exit_piece", "exit_level"))
+Seam.__doc__ = """The isosurface's seam closure: whether it runs (``close``), and per pixel where
+the ray left the last piece without a hit, that piece and its level (work arrays)."""
+
+TileRays = namedtuple("TileRays", ("row0", "col0", "ended"))
+TileRays.__doc__ = """One tile of :data:`TILE` pixels: its first row and column, and which of its
+rays ended (``done``) in a piece already traced (bool array (TILE, TILE))."""
 
 #: Edge in pixels of the square screen tiles the launch hands out to threads: small enough for
 #: a balanced split of a 256x192 image over a few threads, large enough that a tile's pixels
@@ -123,10 +155,10 @@ def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
 # for every piece; the field there is evaluated only when the ray enters a piece of another
 # level at that parameter (few rays: the seams), from the piece it left.
 
-def closure_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel,
-                  scr, geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
-    """Before a piece: a hit on its entry face if the field jumps across the isovalue there
-    (compiled code only); returns 1 for a hit, else 0."""
+def closure_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
+    """Before piece number ``piece`` of ``cut``, whose grid is ``kernel`` (scratch ``scr``):
+    a hit on its entry face if the field jumps across the isovalue there (compiled code only);
+    returns 1 for a hit, else 0."""
     raise NotImplementedError
 
 
@@ -153,14 +185,16 @@ def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, heigh
 
 
 @jit()
-def _iso_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, scr,
-               geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+def _iso_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
     # The caller checked that the ray left a piece of another level at t_in.
+    row, col, width, height = pixel
+    geom = cut.geoms[piece]
     depth, gradient = state[0], state[1]
     if not (t_in <= t_out and depth[row, col] == math.inf):
         return 0
-    before = _exit_value(grids_a, grids_b, which, geoms, exit_piece[row, col], basis, row, col,
-                         width, height, t_in) - mode.iso
+    before = _exit_value(cut.grids_a, cut.grids_b, cut.which, cut.geoms,
+                         seam.exit_piece[row, col], basis, row, col, width, height,
+                         t_in) - mode.iso
     v, gx, gy, gz = _field_at(kernel, scr, geom, basis, row, col, width, height, t_in)
     g = v - mode.iso
     if g == 0.0 or (g < 0.0) != (before < 0.0):
@@ -183,8 +217,7 @@ def _iso_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_pi
 
 
 @jit()
-def _no_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel, scr,
-              geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+def _no_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
     return 0
 
 
@@ -199,8 +232,7 @@ def _is_iso(mode) -> bool:
 
 
 @overload_jit(closure_enter, inline="never")
-def _closure_enter(mode, state, basis, row, col, width, height, t_in, t_out, level, kernel,
-                   scr, geom, grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level):
+def _closure_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
     return (_iso_enter if _is_iso(mode) else _no_enter).py_func
 
 
@@ -211,12 +243,15 @@ def _closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exi
 
 
 @jit()
-def _box_intervals(basis, origin0, spacing0, box_lo, box_hi, closed, planes, t_range, ended,
-                   tr0, tc0, r0, r1, c0, c1, width, height):
-    """Each ray's interval in a piece's box over the rectangle ``[r0, r1) x [c0, c1)``, into
-    ``t_range`` (empty for a ray that ended in a piece in front or misses the box); returns
-    how many rays have one. A function of its own, called per piece: the same for every model
-    and mode, it compiles once instead of once in each pair's tile function."""
+def _box_intervals(view, origin0, spacing0, box_lo, box_hi, closed, tile, rect, width, height):
+    """Each ray's interval in a piece's box ``[box_lo, box_hi]`` (in the index space placed by
+    ``origin0`` and ``spacing0``) over the rectangle ``rect``, into ``view.t_range`` (empty for
+    a ray that ended in a piece in front, ``tile.ended``, or misses the box); returns how many
+    rays have one. A function of its own, called per piece: the same for every model and mode,
+    it compiles once instead of once in each pair's tile function."""
+    basis, planes, t_range = view
+    tr0, tc0, ended = tile
+    r0, r1, c0, c1 = rect.r0, rect.r1, rect.c0, rect.c1
     traced = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
@@ -241,22 +276,27 @@ def _box_intervals(basis, origin0, spacing0, box_lo, box_hi, closed, planes, t_r
 # compiled with counting (:func:`_exit_value`). No Python entry: unboxing the typed lists of
 # its arguments needs counting.
 @jit(_nrt=False, no_cpython_wrapper=True)
-def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box_lo, box_hi, closed,
-                  origin0, spacing0, planes, t_range, r0, r1, c0, c1, piece, level, close,
-                  grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level, ended, tr0,
-                  tc0, visited, tested, skipped, scr, cuts, tags):
-    """Trace the pixels ``[r0, r1) x [c0, c1)`` through one piece; returns the closure's hits
-    and the number of rays that ended in it (marked in the tile's ``ended``). ``scr``,
-    ``cuts``, ``tags``: the band's buffers, allocated by the caller (:func:`_trace_tile`).
+def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, seam, counters,
+                  buffers):
+    """Trace the pixels of ``rect`` (a :class:`.driver.Rect` inside ``tile``) through piece
+    number ``piece`` of ``cut``, whose ``(kernel, blocks)`` is ``pair``; returns the closure's
+    hits and the number of rays that ended in it (marked in ``tile.ended``). ``buffers``: the
+    band's, allocated by the caller (:func:`_trace_tile`).
 
     Three passes over the rectangle: each ray's interval in the piece's box
     (:func:`_box_intervals`) and the closure's test on entry; the
     pair's compiled band over the rectangle, which traces exactly the rays with an interval
     (the driver's per-pixel unit, compiled once per model, mode and types and shared with the
     in-memory renderer); then the closure's note on exit and which rays ended here."""
-    height, width = visited.shape
-    traced = _box_intervals(basis, origin0, spacing0, box_lo, box_hi, closed, planes, t_range,
-                            ended, tr0, tc0, r0, r1, c0, c1, width, height)
+    kernel, blocks = pair[0], pair[1]
+    basis, t_range = view.basis, view.t_range
+    r0, r1, c0, c1 = rect.r0, rect.r1, rect.c0, rect.c1
+    tr0, tc0, ended = tile
+    close, exit_t, exit_piece, exit_level = seam
+    level = cut.levels[piece]
+    height, width = counters.visited.shape
+    traced = _box_intervals(view, cut.origin0, cut.spacing0, cut.boxes[piece, 0],
+                            cut.boxes[piece, 1], cut.closed[piece], tile, rect, width, height)
     if traced == 0:
         return 0, 0
     hits = 0
@@ -268,16 +308,16 @@ def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box
                 # The closure's cheap test first (a ray leaving a piece of another level right
                 # here): calls with this many arguments cost more than the rest of a short ray.
                 if t0 <= t1 and exit_t[row, col] == t0 and exit_level[row, col] != level:
-                    hits += closure_enter(mode, state, basis, row, col, width, height, t0, t1,
-                                          level, kernel, scr, geom, grids_a, grids_b, which,
-                                          geoms, exit_t, exit_piece, exit_level)
+                    hits += closure_enter(mode, state, basis, Pixel(row, col, width, height),
+                                          t0, t1, piece, kernel, buffers.model, cut, seam)
     # Flags as values of the launch's own arguments, not constants: a constant argument would
     # be typed as a literal and compile the band again instead of sharing the in-memory one.
     yes = tr0 >= 0
     # No footprint (an empty view of t_range: a C array like the in-memory renderer's, so the
     # band compiled for it serves here too).
-    band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, t_range[:0], r0, r1, c0,
-         c1, c1 - c0, yes, yes, not yes, yes, visited, tested, skipped, scr, mscr, cuts, tags)
+    band(kernel, mode, blocks, state, out,
+         RaySetup(basis, cut.geoms[piece], view.planes, t_range, t_range[:0]), rect,
+         Passes(yes, yes, not yes, yes), counters, buffers)
     n_ended = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
@@ -295,13 +335,15 @@ def _piece_pixels(band, kernel, blocks, mode, mscr, state, out, basis, geom, box
 
 
 @jit()
-def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
-                closed, rects,
-                levels, origin0, spacing0, planes, t_range, tile_start, tile_pieces, tr0, tc0,
-                fresh, final, close, exit_t, exit_piece, exit_level, visited, tested, skipped):
-    """One thread's work item: the pieces overlapping one tile, in order (the tile's states
-    reset first when ``fresh``, its outputs written at the end when ``final``)."""
-    height, width = visited.shape
+def _trace_tile(band_a, band_b, mode, state, out, cut, view, tiles, n, ends, seam, counters):
+    """One thread's work item: the pieces overlapping tile number ``n`` of ``tiles``, in order
+    (the tile's states reset first when ``ends.fresh``, its outputs written at the end when
+    ``ends.final``)."""
+    tr0, tc0 = tiles.order[n, 0], tiles.order[n, 1]
+    fresh, final = ends
+    rects, which = cut.rects, cut.which
+    basis = view.basis
+    height, width = counters.visited.shape
     tr1 = min(tr0 + TILE, height)
     tc1 = min(tc0 + TILE, width)
     mscr = mode_scratch(mode)
@@ -314,6 +356,7 @@ def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis
     # stops when all have: a first hit near the front otherwise still pays every piece's
     # interval and state round trip behind it.
     ended = np.zeros((TILE, TILE), np.bool_)
+    tile_rays = TileRays(tr0, tc0, ended)
     alive = 0
     for row in range(tr0, tr1):
         for col in range(tc0, tc1):
@@ -325,33 +368,28 @@ def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis
                 alive += 1
     hits = 0
     tile = (tr0 // TILE) * ((width + TILE - 1) // TILE) + tc0 // TILE
-    for q in range(tile_start[tile], tile_start[tile + 1]):
+    for q in range(tiles.start[tile], tiles.start[tile + 1]):
         if alive == 0:
             break
-        p = tile_pieces[q]
+        p = tiles.pieces[q]
         c0 = max(rects[p, 0], tc0)
         r0 = max(rects[p, 1], tr0)
         c1 = min(rects[p, 2], tc1)
         r1 = min(rects[p, 3], tr1)
         if c0 >= c1 or r0 >= r1:
             continue
+        rect = Rect(r0, r1, c0, c1, c1 - c0)
         if which[p, 0] == 0:
-            pair_a = grids_a[which[p, 1]]
-            h, e = _piece_pixels(band_a, pair_a[0], pair_a[1], mode, mscr, state, out, basis,
-                                 geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0,
-                                 spacing0, planes, t_range, r0, r1, c0, c1, p, levels[p], close,
-                                 grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level,
-                                 ended, tr0, tc0, visited, tested, skipped,
-                                 new_scratch(pair_a[0]), cuts, tags)
+            pair_a = cut.grids_a[which[p, 1]]
+            h, e = _piece_pixels(band_a, pair_a, mode, state, out, cut, view, p, rect,
+                                 tile_rays, seam, counters,
+                                 Buffers(new_scratch(pair_a[0]), mscr, cuts, tags))
         else:
             # Another name than above: the two lists may hold different types.
-            pair_b = grids_b[which[p, 1]]
-            h, e = _piece_pixels(band_b, pair_b[0], pair_b[1], mode, mscr, state, out, basis,
-                                 geoms[p], boxes[p, 0], boxes[p, 1], closed[p], origin0,
-                                 spacing0, planes, t_range, r0, r1, c0, c1, p, levels[p], close,
-                                 grids_a, grids_b, which, geoms, exit_t, exit_piece, exit_level,
-                                 ended, tr0, tc0, visited, tested, skipped,
-                                 new_scratch(pair_b[0]), cuts, tags)
+            pair_b = cut.grids_b[which[p, 1]]
+            h, e = _piece_pixels(band_b, pair_b, mode, state, out, cut, view, p, rect,
+                                 tile_rays, seam, counters,
+                                 Buffers(new_scratch(pair_b[0]), mscr, cuts, tags))
         hits += h
         alive -= e
     if final:
@@ -365,23 +403,18 @@ def _trace_tile(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis
 
 
 @jit()
-def _launch(tile_fn, band_a, band_b, grids_a, grids_b, which, mode, state, out, basis, geoms,
-            boxes, closed, rects, levels, origin0, spacing0, planes, t_range, tiles, tile_start,
-            tile_pieces, fresh, final, close, exit_t, exit_piece, exit_level, visited, tested,
-            skipped, next_tile):
-    """One thread's share of :func:`trace_pieces`: it takes the next tile (``next_tile``: the
-    counter the threads share, :mod:`.work_queue`) until none is left and returns the
+def _launch(tile_fn, band_a, band_b, mode, state, out, cut, view, tiles, ends, seam, counters):
+    """One thread's share of :func:`trace_pieces`: it takes the next tile (``tiles.counter``:
+    the counter the threads share, :mod:`.work_queue`) until none is left and returns the
     closure's hits. ``tile_fn`` is the pair's :func:`_trace_tile` as a first-class function,
     so this function compiles without the tile's code."""
     hits = 0
     while True:
-        n = take(next_tile)
-        if n >= tiles.shape[0]:
+        n = take(tiles.counter)
+        if n >= tiles.order.shape[0]:
             break
-        hits += tile_fn(band_a, band_b, grids_a, grids_b, which, mode, state, out, basis,
-                        geoms, boxes, closed, rects, levels, origin0, spacing0, planes, t_range,
-                        tile_start, tile_pieces, tiles[n, 0], tiles[n, 1], fresh, final,
-                        close, exit_t, exit_piece, exit_level, visited, tested, skipped)
+        hits += tile_fn(band_a, band_b, mode, state, out, cut, view, tiles, n, ends, seam,
+                        counters)
     return hits
 
 
@@ -445,10 +478,12 @@ def trace_pieces(grids_a, grids_b, which, mode, state, out, basis, geoms, boxes,
     int
         Rays the closure ended on a face.
     """
-    args = (grids_a, grids_b, which, mode, state, out, basis, geoms, boxes, closed, rects, levels,
-            origin0, spacing0, planes, t_range, tiles, tile_start, tile_pieces, fresh, final,
-            close, exit_t, exit_piece, exit_level, visited, tested, skipped,
-            np.zeros(1, np.int64))
+    args = (mode, state, out,
+            Cut(grids_a, grids_b, which, geoms, boxes, closed, rects, levels, origin0, spacing0),
+            View(basis, planes, t_range), Tiles(tiles, tile_start, tile_pieces,
+                                                np.zeros(1, np.int64)),
+            FrameEnds(bool(fresh), bool(final)), Seam(bool(close), exit_t, exit_piece, exit_level),
+            Counters(visited, tested, skipped))
     # A list of grids that is empty (the float64 copies at level seams in most frames; the
     # float32 list of a float64 store) calls no band: a stub of the band's signature stands in
     # for it, compiled in a moment where the band would take as long as the other's.
@@ -480,9 +515,7 @@ def _launch_functions_b(kinds: tuple) -> tuple:
 
 
 @jit()
-def _no_band(kernel, mode, blocks, state, out, basis, geom, planes, t_range, footprint, r0, r1,
-             c0, c1, tile, load, store, final, count, visited, tested, skipped, scr, mscr, cuts,
-             tags):
+def _no_band(kernel, mode, blocks, state, out, setup, rect, passes, counters, buffers):
     """Stands for the band of an empty list of grids (never called)."""
     return None
 
@@ -497,26 +530,24 @@ def _launch_functions(kinds: tuple, stub_a: bool = False, stub_b: bool = False) 
     (linked in, its library was optimized and translated again with the whole band in it, for
     every pair and grid type: the costliest compiles of a pyramid's first frame). One tile
     function serves every pair; its compiled code differs by the argument types only."""
-    grids_a, grids_b, _, mode = kinds[:4]
+    mode, cut = kinds[0], kinds[3]
+    grids_a, grids_b = cut.types[0], cut.types[1]
     grid_class = grids_a.item_type[0].instance_class
     band = pair_band(grid_class, mode.instance_class)
     bands = (first_class(_no_band if stub_a else band, _band_types(grids_a.item_type, kinds)),
              first_class(_no_band if stub_b else band, _band_types(grids_b.item_type, kinds)))
-    tile_types = (*(numba.typeof(b) for b in bands), *kinds[:16], *kinds[17:19], numba.int64,
-                  numba.int64, *kinds[19:28])
+    tile_types = (*(numba.typeof(b) for b in bands), *kinds[:6], numba.int64, *kinds[6:])
     return (first_class(_trace_tile, tile_types), *bands)
 
 
 def _band_types(pair: Any, kinds: tuple) -> tuple:
     """The argument types of the band :func:`_piece_pixels` calls for the grids of a list
     whose items (``(kernel, blocks)``) have the Numba type ``pair``, from the types ``kinds``
-    of :func:`trace_pieces`' arguments."""
-    kernel, blocks = pair[0], pair[1]
-    mode, state, out, basis, geoms = kinds[3], kinds[4], kinds[5], kinds[6], kinds[7]
-    planes, t_range, visited, tested, skipped = kinds[14], kinds[15], *kinds[25:28]
-    scr, mscr = scratch_types(kernel, mode)
-    index, flag = numba.int64, numba.boolean
+    of :func:`_launch`'s arguments after the functions."""
+    mode, state, out, cut, view, _, _, _, counters = kinds
+    geoms = cut.types[cut.fields.index("geoms")]
+    basis, planes, t_range = view.types
     geom = geoms.copy(ndim=1, layout="C")  # a row of the pieces' placements
-    return (kernel, mode, blocks, state, out, basis, geom, planes, t_range, t_range,
-            index, index, index, index, index, flag, flag, flag, flag, visited, tested, skipped,
-            scr, mscr, numba.float64[::1], numba.int64[::1])
+    setup = numba.types.BaseTuple.from_types((basis, geom, planes, t_range, t_range), RaySetup)
+    passes = numba.types.BaseTuple.from_types((numba.boolean,) * len(Passes._fields), Passes)
+    return band_types(pair[0], mode, pair[1], state, out, setup, passes, counters)

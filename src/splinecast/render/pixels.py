@@ -39,12 +39,12 @@ def store_miss(
 
 @jit(inline="always")
 def store_hit(
-    row: int, col: int, t: float, wx: float, wy: float, wz: float, ux: float, uy: float,
-    uz: float, gx: float, gy: float, gz: float, inside_high: bool, shading: np.ndarray,
-    rgba: np.ndarray, depth: np.ndarray, position: np.ndarray, normal: np.ndarray,
-    face: np.ndarray, slope: float = math.nan,
+    row: int, col: int, t: float, ray: tuple, gx: float, gy: float, gz: float,
+    inside_high: bool, shading: np.ndarray, out: tuple, slope: float = math.nan,
 ) -> None:
-    """Store a hit at ray parameter ``t`` with world-space shading gradient ``g``.
+    """Store a hit at parameter ``t`` of ``ray`` (a :class:`.rays.Ray`; its world origin and
+    direction are read) with world-space shading gradient ``g`` into ``out``, the buffers
+    ``(rgba, depth, position, normal, face)``.
 
     The stored normal is the unit *outward* normal: ``-g/|g|`` when the object is where values
     are high, ``+g/|g|`` when it is where they are low. A zero gradient gets a normal facing the
@@ -53,6 +53,9 @@ def store_hit(
     when the object is where values are high, where it falls otherwise; without a slope (NaN),
     where the normal faces the ray. Buffers with no rows were not asked for and are left alone.
     """
+    wx, wy, wz = ray.world_x, ray.world_y, ray.world_z
+    ux, uy, uz = ray.world_dx, ray.world_dy, ray.world_dz
+    rgba, depth, position, normal, face = out
     if depth.shape[0] != 0:
         depth[row, col] = t
     if position.shape[0] != 0:

@@ -39,9 +39,9 @@ from .clipping import clip_interval
 #: Below this, a direction component's reciprocal could overflow: the slab test divides.
 _TINY = 1e-300
 
-__all__ = ["Ray", "pixel_ray", "index_axis", "grid_ray", "grid_point", "slab", "GEOM_ORIGIN",
-           "GEOM_SPACING", "GEOM_SHIFT", "GEOM_OFFSET", "GEOM_LO", "GEOM_HI", "GEOM_CELLS",
-           "GEOM_SIZE"]
+__all__ = ["Ray", "RayPiece", "Stretch", "pixel_ray", "index_axis", "grid_ray", "grid_point",
+           "slab", "GEOM_ORIGIN", "GEOM_SPACING", "GEOM_SHIFT", "GEOM_OFFSET", "GEOM_LO", "GEOM_HI",
+           "GEOM_CELLS", "GEOM_SIZE"]
 
 # Where each quantity lies in the driver's ``geom`` array, which places a grid in the volume
 # (:mod:`.driver` describes it): the vectors are x, y, z from their offset on.
@@ -82,6 +82,52 @@ anchor : float
     The parameter where the ray enters the rendered domain, the same for every grid: the
     sampled methods and DVR start their samples there, so every brick samples at the same
     places.
+"""
+
+
+RayPiece = namedtuple("RayPiece", (
+    "ctx", "i", "j", "k", "tag", "poly", "lo", "hi", "t0", "t1",
+    "ax", "ay", "az", "bx", "by", "bz",
+))
+RayPiece.__doc__ = """One piece of a ray in one cell, as a model yields it and a mode consumes it
+(:mod:`.mode_api`'s ``consume``).
+
+Attributes
+----------
+ctx : tuple
+    The model's context of the cell (``cell_load``; ``ctx[0], ctx[1]`` its value range).
+i, j, k : int
+    The cell, in the grid's traversal space.
+tag : int
+    Which piece of the cell (the model's ``cell_pieces``: a tetrahedron of a type-6 spline).
+poly : tuple
+    The model's reconstruction along the piece, a polynomial in ``s in [0, 1]``
+    (``piece_poly``).
+lo, hi : float
+    A conservative range of the piece's values (``piece_range``).
+t0, t1 : float
+    The ray parameters of the piece's ends.
+ax, ay, az : float
+    Where the ray enters the piece, in the cell's local coordinates (``s = 0``).
+bx, by, bz : float
+    Where it leaves the piece (``s = 1``).
+"""
+
+
+Stretch = namedtuple("Stretch", ("ta", "tb", "va", "vb", "length", "x", "y", "z"))
+Stretch.__doc__ = """The stretch of a ray between two samples of the fixed-step loop (or a sample
+and an end of the grid's interval), as a sampled mode's ``segment`` takes it (:mod:`.mode_api`).
+
+Attributes
+----------
+ta, tb : float
+    The ray parameters of its ends.
+va, vb : float
+    The model's values there.
+length : float
+    Its length in voxels.
+x, y, z : float
+    The point at ``tb`` in the grid's traversal space (for a gradient).
 """
 
 

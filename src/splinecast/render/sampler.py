@@ -48,6 +48,7 @@ handed to the mode, blocks leapt.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from typing import Any
 
 from .._jit import jit, rebound
@@ -68,7 +69,7 @@ from .mode_api import (
     state_store,
     wants,
 )
-from .rays import GEOM_OFFSET, GEOM_SHIFT, grid_ray
+from .rays import GEOM_OFFSET, GEOM_SHIFT, Stretch, grid_ray
 
 __all__ = ["sample_pixel", "bound_sample_pixel"]
 
@@ -92,10 +93,14 @@ def _cells(ox, oy, oz, dx, dy, dz, t, ncx, ncy, ncz):
     return _cell(ox + t * dx, ncx), _cell(oy + t * dy, ncy), _cell(oz + t * dz, ncz)
 
 
+#: Where a ray's samples lie (:func:`_sample_grid`).
+SampleGrid = namedtuple("SampleGrid", ("anchor", "dt", "axis", "plane0", "plane_step"))
+
+
 @jit(inline="always")
 def _sample_grid(mode, geom, ray):
-    """Where the ray's samples lie: ``(anchor, dt, axis, plane0, plane_step)``, sample ``m``
-    lying at ``t = anchor + m * dt``.
+    """Where the ray's samples lie: a :class:`SampleGrid` ``(anchor, dt, axis, plane0,
+    plane_step)``, sample ``m`` lying at ``t = anchor + m * dt``.
 
     Along the ray (``axis`` -1): every ``sample_step`` voxels from the ray's entry into the
     domain. On planes (the mode's ``sample_planes``): where the ray crosses the voxel planes
@@ -114,9 +119,10 @@ def _sample_grid(mode, geom, ray):
             # Voxel plane 0 of the level, in the grid.
             plane0 = geom[GEOM_SHIFT] - geom[GEOM_OFFSET + axis]
             anchor = (plane0 - oa) / da
-            return anchor, step / abs(da), axis, plane0, step if da > 0.0 else -step
+            return SampleGrid(anchor, step / abs(da), axis, plane0,
+                              step if da > 0.0 else -step)
     speed = math.sqrt(dx * dx + dy * dy + dz * dz)
-    return ray.anchor, step / speed if speed > 0.0 else math.inf, -1, 0.0, 0.0
+    return SampleGrid(ray.anchor, step / speed if speed > 0.0 else math.inf, -1, 0.0, 0.0)
 
 
 @jit(inline="always")
@@ -133,10 +139,11 @@ def _on_plane(grid, scr, axis, lattice, p, a, b):
 
 
 @jit(inline="always")
-def _plane_samples(grid, mode, st, scr, ray, ta, t_far, speed, anchor, dt, axis, plane0,
-                   plane_step):
-    """The samples on planes of one ray's interval ``[ta, t_far]``, every one taken (see the
-    module's docstring). Returns ``(st, evaluated, taken, leaps)``."""
+def _plane_samples(grid, mode, st, scr, ray, ta, t_far, speed, samples):
+    """The samples on planes (``samples``, a :class:`SampleGrid`) of one ray's interval
+    ``[ta, t_far]``, every one taken (see the module's docstring). Returns ``(st, evaluated,
+    taken, leaps)``."""
+    anchor, dt, axis, plane0, plane_step = samples
     ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
     dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
     # The two other axes, in order, and whether the planes are planes of voxels.
@@ -154,8 +161,8 @@ def _plane_samples(grid, mode, st, scr, ray, ta, t_far, speed, anchor, dt, axis,
         vb = _on_plane(grid, scr, axis, lattice, plane0 + m * plane_step, oa + tb * da,
                        ob + tb * db)
         evaluated += 1
-        st = segment(mode, grid, scr, st, ray, ta, tb, va, vb, (tb - ta) * speed,
-                     ox + tb * dx, oy + tb * dy, oz + tb * dz)
+        st = segment(mode, grid, scr, st, ray, Stretch(ta, tb, va, vb, (tb - ta) * speed,
+                                                       ox + tb * dx, oy + tb * dy, oz + tb * dz))
         taken += 1
         if done(mode, st):
             return st, evaluated, taken, 0
@@ -167,22 +174,28 @@ def _plane_samples(grid, mode, st, scr, ray, ta, t_far, speed, anchor, dt, axis,
         bx, by, bz = ox + t_far * dx, oy + t_far * dy, oz + t_far * dz
         vb = value_at(grid, scr, bx, by, bz)
         evaluated += 1
-        st = segment(mode, grid, scr, st, ray, ta, t_far, va, vb, (t_far - ta) * speed,
-                     bx, by, bz)
+        st = segment(mode, grid, scr, st, ray,
+                     Stretch(ta, t_far, va, vb, (t_far - ta) * speed, bx, by, bz))
         taken += 1
     return st, evaluated, taken, 0
 
 
 @jit(inline="always")
-def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t_lo, t_hi, load,
-                 store, final, scr, mscr, cuts, tags, row, col, width, height, ncx, ncy, ncz):
+def sample_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, window, cells):
     """Sample one pixel's ray through ``grid`` (the driver's per-ray unit for sampled modes;
     same arguments as :func:`.driver._trace_pixel`). Returns (samples evaluated, segments
     taken, blocks leapt)."""
+    basis, geom, planes, t_range = setup.basis, setup.geom, setup.planes, setup.t_range
+    load, store, final = passes.load, passes.store, passes.final
+    scr = buffers.model
+    row, col, width, height = pixel
+    t_lo, t_hi = window
+    ncx, ncy, ncz = cells
     t0, t1, ray = grid_ray(basis, geom, planes, t_range, row, col, width, height, ncx, ncy, ncz)
     ox, oy, oz = ray.index_x, ray.index_y, ray.index_z
     dx, dy, dz = ray.index_dx, ray.index_dy, ray.index_dz
-    anchor, dt, axis, plane0, plane_step = _sample_grid(mode, geom, ray)
+    samples = _sample_grid(mode, geom, ray)
+    anchor, dt, axis, plane0, plane_step = samples
     st = state_load(mode, state, row, col) if load else state_new(mode)
     if (t_lo > t0 or t_hi < t0) and t0 <= t1 and not done(mode, st):
         st = entry_left_out(mode, grid, scr, st, ray, t0, t1, t_lo, t_hi, ncx, ncy, ncz)
@@ -204,8 +217,7 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
         speed = math.sqrt(dx * dx + dy * dy + dz * dz)
         if ta <= t_far and speed > 0.0 and axis >= 0:
             st, evaluated, taken, leaps = _plane_samples(
-                grid, mode, st, scr, ray, ta, t_far, speed, anchor, dt, axis, plane0,
-                plane_step)
+                grid, mode, st, scr, ray, ta, t_far, speed, samples)
         elif ta <= t_far and speed > 0.0:
             m = math.floor((ta - anchor) / dt) + 1.0
             va = 0.0
@@ -296,8 +308,8 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                             evaluated += 1
                         length = (tb - ta) * speed
                         if length > 0.0:
-                            st = segment(mode, grid, scr, st, ray, ta, tb, va, vb, length, bx,
-                                         by, bz)
+                            st = segment(mode, grid, scr, st, ray,
+                                         Stretch(ta, tb, va, vb, length, bx, by, bz))
                             taken += 1
                         if done(mode, st):
                             stop = True
@@ -343,7 +355,8 @@ def sample_pixel(grid, mode, blocks, state, out, basis, geom, planes, t_range, t
                     evaluated += 1
                 length = (tb - ta) * speed
                 if length > 0.0:
-                    st = segment(mode, grid, scr, st, ray, ta, tb, va, vb, length, bx, by, bz)
+                    st = segment(mode, grid, scr, st, ray,
+                                 Stretch(ta, tb, va, vb, length, bx, by, bz))
                     taken += 1
                 if end or done(mode, st):
                     break

@@ -44,6 +44,7 @@ a dict a store writes next to the bricks.
 
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 from typing import Any
 
@@ -251,10 +252,19 @@ def _taps(n, lo, m, a, c):
     return i0, w
 
 
+#: The quantizer of the histograms' values (its ``lo`` and ``scale``) and bins per axis.
+_Quant = namedtuple("_Quant", ("lo", "scale", "bins"))
+
+#: The output arrays of the sparse histograms: keys and counts.
+_Out = namedtuple("_Out", ("keys", "counts"))
+
+
 @jit(nogil=True)
-def _one_brick(source, coarse, lo, hi, ax, cx, qlo, qscale, bins, dense, touched,
-               out_keys, out_counts, out_at):
-    """Count the pairs of one brick into ``dense`` and write them, sorted, at ``out_at``."""
+def _one_brick(source, coarse, lo, hi, ax, cx, quant, dense, touched, out, out_at):
+    """Count the pairs of one brick into ``dense`` and write them, sorted, at ``out_at`` of
+    ``out`` (:class:`_Out`); ``quant`` is the :class:`_Quant` of the values."""
+    qlo, qscale, bins = quant
+    out_keys, out_counts = out
     top = float(bins - 1)
     n0, n1, n2 = coarse.shape
     # Per-axis taps of the trilinear interpolation that gives eq. (1)'s b_i.
@@ -299,16 +309,17 @@ def _one_brick(source, coarse, lo, hi, ax, cx, qlo, qscale, bins, dense, touched
 
 
 @jit(parallel=True, nogil=True)
-def _brick_batch(source, coarse, lo, hi, ax, cx, qlo, qscale, bins, out_at, out_keys,
-                 out_counts, nnz, nchunks):
-    """Histograms of bricks ``lo[b]..hi[b]`` (source ranges), one thread per chunk of bricks."""
+def _brick_batch(source, coarse, lo, hi, ax, cx, quant, out_at, out, nnz, nchunks):
+    """Histograms of bricks ``lo[b]..hi[b]`` (source ranges), one thread per chunk of bricks
+    (``quant``: a :class:`_Quant`, ``out``: an :class:`_Out`)."""
+    bins = quant.bins
     nb = lo.shape[0]
     for chunk in prange(nchunks):
         dense = np.zeros(bins * bins, np.int64)
         touched = np.empty(bins * bins, np.int64)
         for b in range(chunk, nb, nchunks):
-            nnz[b] = _one_brick(source, coarse, lo[b], hi[b], ax, cx, qlo, qscale, bins, dense,
-                                touched, out_keys, out_counts, out_at[b])
+            nnz[b] = _one_brick(source, coarse, lo[b], hi[b], ax, cx, quant, dense, touched,
+                                out, out_at[b])
 
 
 @jit(parallel=True, nogil=True)
@@ -439,8 +450,9 @@ def pyramid_histograms(levels: list[np.ndarray], brick: int, quantizer: Quantize
         coarse = np.ascontiguousarray(levels[lv])
 
         def run(start, stop, out_at, keys, counts, nnz, lo=lo, hi=hi, a=a, c=c, coarse=coarse):
-            _brick_batch(source, coarse, lo[start:stop], hi[start:stop], a, c, quantizer.lo,
-                         quantizer.scale, bins, out_at, keys, counts, nnz, nthreads)
+            _brick_batch(source, coarse, lo[start:stop], hi[start:stop], a, c,
+                         _Quant(quantizer.lo, quantizer.scale, bins), out_at,
+                         _Out(keys, counts), nnz, nthreads)
 
         parts.extend(_run_batched(sizes, run))
     nnz, keys, counts = _compact(parts, _key_dtype(bins), _count_dtype(source.size))
@@ -480,8 +492,9 @@ def box_histograms(source: np.ndarray, coarse: np.ndarray, lo: np.ndarray, hi: n
     nthreads = numba.get_num_threads()
 
     def run(start, stop, out_at, keys, counts, nnz):
-        _brick_batch(source, coarse, lo[start:stop], hi[start:stop], a, c, quantizer.lo,
-                     quantizer.scale, bins, out_at, keys, counts, nnz, nthreads)
+        _brick_batch(source, coarse, lo[start:stop], hi[start:stop], a, c,
+                     _Quant(quantizer.lo, quantizer.scale, bins), out_at, _Out(keys, counts), nnz,
+                     nthreads)
 
     parts = _run_batched(sizes, run) if len(lo) else []
     nnz, keys, counts = (_compact(parts, _key_dtype(bins), _count_dtype(source.size)) if parts

@@ -365,12 +365,14 @@ def _er_cached(child_start, children, visible, fixed, imp, b):
 
 
 @jit(nogil=True)
-def _priorities(parent, child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
-                fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view, prio, prio_at,
-                epoch, improved, stack, nodes, out):
+def _priorities(s, tf, view, epoch, improved, nodes, out):
     """Monotone priorities ``min(P_raw(b), P(parent))`` of ``nodes`` (P_raw = ER, or E for the
     naive priority), stale ancestors first, in three passes: list the stale nodes parents first,
-    fill the E of each and of its visible children, then ER and P."""
+    fill the E of each and of its visible children, then ER and P. ``s`` is the metric's
+    :class:`_State`, unpacked once here (see above); ``tf``, ``view``, ``epoch``: the current
+    epochs, ``improved``: the improved priority (ER) rather than the naive one (E)."""
+    (parent, child_start, children, visible, box_min, box_max, offsets, keys, counts, table,
+     viewing, _, raw, raw_at, fixed, fixed_at, imp, imp_at, prio, prio_at, stack) = s
     todo = np.empty(nodes.shape[0] * (stack.shape[0] + 1), np.int64)
     n = 0
     for i in range(nodes.shape[0]):
@@ -411,9 +413,7 @@ def _map_nodes(s, nodes, what, out):
      viewing, epochs, raw, raw_at, fixed, fixed_at, imp, imp_at, prio, prio_at, stack) = s
     tf, view, epoch, improved = epochs[0], epochs[1], epochs[2], epochs[3]
     if what == 0:
-        _priorities(parent, child_start, children, visible, offsets, keys, counts, table, raw,
-                    raw_at, fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view,
-                    prio, prio_at, epoch, improved, stack, nodes, out)
+        _priorities(s, tf, view, epoch, improved, nodes, out)
         return
     for i in range(nodes.shape[0]):
         b = nodes[i]

@@ -31,6 +31,7 @@ Memory
 from __future__ import annotations
 
 import time
+from collections import namedtuple
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -79,14 +80,23 @@ def _owner_bits(active: np.ndarray) -> np.ndarray:
     return bits
 
 
+#: The resident details of one level, as :func:`_reconstruct_one` reads them: the block table,
+#: the blocks, the per-axis lengths of the coarse and detail bands, and the active chunks.
+_Details = namedtuple("_Details", ("table", "blocks", "coarse_len", "detail_len", "active"))
+
+#: How a level is synthesized: chunk edge ``k``, the bricks' ``pad``, the low- and high-pass
+#: synthesis filters (taps and first index) and the boundary rules of the coarse and detail bands.
+_Synthesis = namedtuple("_Synthesis", ("k", "pad", "p_taps", "p_start", "g_taps", "g_start",
+                                       "coarse_rule", "detail_rule"))
+
+
 @jit()
 def _reconstruct_one(
-    child: np.ndarray, parent: np.ndarray, out: np.ndarray, table: np.ndarray,
-    blocks: np.ndarray, coarse_len: np.ndarray, detail_len: np.ndarray, active: np.ndarray,
-    k: int, pad: int, p_taps: np.ndarray, p_start: int, g_taps: np.ndarray, g_start: int,
-    coarse_rule: int, detail_rule: int, owners_used: np.ndarray,
+    child: np.ndarray, parent: np.ndarray, out: np.ndarray, details: tuple, synthesis: tuple,
+    owners_used: np.ndarray,
 ) -> int:
-    """One brick ``out`` of chunk ``child`` from its ``parent`` brick and masked details.
+    """One brick ``out`` of chunk ``child`` from its ``parent`` brick and masked details
+    (``details``: a :class:`_Details`; ``synthesis``: the level's :class:`_Synthesis`).
 
     The details are resident blocks of :data:`DETAIL_BLOCK` nodes per axis: ``table[bx, by, bz]``
     is the slot of ``blocks`` holding block ``(bx, by, bz)`` of the level's seven subbands (in
@@ -95,6 +105,8 @@ def _reconstruct_one(
     number of details gathered from an owner outside that 3x3x3 neighbourhood or from a block
     that is not resident (0 by design).
     """
+    table, blocks, coarse_len, detail_len, active = details
+    k, pad, p_taps, p_start, g_taps, g_start, coarse_rule, detail_rule = synthesis
     size = out.shape[0]
     p_stop = p_start + p_taps.shape[0] - 1
     g_stop = g_start + g_taps.shape[0] - 1
@@ -210,19 +222,14 @@ def _reconstruct_one(
 @jit(parallel=True)
 def _reconstruct_chunks(
     children: np.ndarray, parent_slot: np.ndarray, parents: np.ndarray, out_slot: np.ndarray,
-    out: np.ndarray, table: np.ndarray, blocks: np.ndarray, coarse_len: np.ndarray,
-    detail_len: np.ndarray,
-    active: np.ndarray, k: int, pad: int, p_taps: np.ndarray, p_start: int,
-    g_taps: np.ndarray, g_start: int, coarse_rule: int, detail_rule: int,
-    owners_used: np.ndarray,
+    out: np.ndarray, details: tuple, synthesis: tuple, owners_used: np.ndarray,
 ) -> int:
     """:func:`_reconstruct_one` for every child, in parallel; returns the summed stray count."""
     stray = np.zeros(children.shape[0], np.int64)
     for q in prange(children.shape[0]):
         stray[q] = _reconstruct_one(
-            children[q], parents[parent_slot[q]], out[out_slot[q]], table, blocks, coarse_len,
-            detail_len, active, k, pad, p_taps, p_start, g_taps, g_start, coarse_rule,
-            detail_rule, owners_used[q])
+            children[q], parents[parent_slot[q]], out[out_slot[q]], details, synthesis,
+            owners_used[q])
     return int(stray.sum())
 
 
@@ -476,12 +483,13 @@ class ChunkReconstructor:
                     numba.set_num_threads(1)
                 pool = self._bricks.array
                 try:
-                    stray = _reconstruct_chunks(
-                        children, parent_slot, pool, out_slot, pool, self._table[j + 1],
-                        self._blocks.array, np.asarray(lay.length(j + 1), np.int64),
-                        np.asarray(lay.detail_length(j + 1), np.int64), active, k, pad,
-                        self._p[0], self._p[1], self._g[0], self._g[1], lay.coarse_rule,
-                        lay.detail_rule, owners)
+                    details = _Details(self._table[j + 1], self._blocks.array,
+                                       np.asarray(lay.length(j + 1), np.int64),
+                                       np.asarray(lay.detail_length(j + 1), np.int64), active)
+                    synthesis = _Synthesis(k, pad, self._p[0], self._p[1], self._g[0],
+                                           self._g[1], lay.coarse_rule, lay.detail_rule)
+                    stray = _reconstruct_chunks(children, parent_slot, pool, out_slot, pool,
+                                                details, synthesis, owners)
                 finally:
                     numba.set_num_threads(threads)
                 if stray:
