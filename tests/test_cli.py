@@ -130,6 +130,8 @@ def test_a_failure_collects_its_own_garbage_and_not_the_callers(monkeypatch, cap
     gc.disable()  # no automatic collection may interfere
     try:
         callers = weakref.ref(_Cycle())
+        gc.freeze()
+        gc.unfreeze()  # moved to the oldest generation (the young ones are collected first)
         assert gc.get_freeze_count() == 0
         code, _, err = run(["info", "demo:sphere"], capsys)
         assert code == 2 and "broken on purpose" in err
@@ -148,6 +150,26 @@ def test_a_failure_collects_its_own_garbage_and_not_the_callers(monkeypatch, cap
         gc.unfreeze()
         if enabled:
             gc.enable()
+
+
+def test_a_serving_command_releases_the_frozen_objects(monkeypatch, capsys):
+    from splinecast.cli import COMMANDS
+    from splinecast.cli._common import uncaptured
+
+    counts = {}
+
+    def serving_run(args):
+        counts["command"] = gc.get_freeze_count()
+        with uncaptured(args):
+            counts["serving"] = gc.get_freeze_count()
+        return 0
+
+    monkeypatch.setattr(COMMANDS["info"], "run", serving_run)
+    assert gc.get_freeze_count() == 0
+    assert run(["info", "demo:sphere"], capsys)[0] == 0
+    assert counts["command"] > 0  # the command ran with what existed before it frozen
+    assert counts["serving"] == 0  # a server does not keep it frozen for its whole life
+    assert gc.get_freeze_count() == 0
 
 
 def test_argparse_errors_are_one_line_status_2():

@@ -89,3 +89,21 @@ def test_a_program_that_froze_objects_keeps_them_frozen(collector_held):
     _SEEN.pop()
     # (a frozen object whose last reference goes is still freed: allow for a few)
     assert frozen * 0.99 < gc.get_freeze_count() <= frozen
+
+
+def test_a_compile_inside_a_scope_freezes_what_the_scope_made(collector_held):
+    from splinecast._jit import collecting_only_new_objects
+
+    with collecting_only_new_objects():
+        at_start = gc.get_freeze_count()
+        assert at_start > 0
+        made = [_Cycle() for _ in range(1000)]  # made inside the outer scope
+        _SEEN.append({"before": weakref.ref(made[0])})
+        assert _new_kernel()(3.5) == 4.5  # a float: typed anew (the int's typing is kept)
+        seen = _SEEN.pop()
+        # The compile froze what the scope had made, so its collections did not walk it ...
+        assert seen["frozen"] >= at_start + len(made)
+        assert not seen["inside_alive"]
+        # ... and left it frozen for the outer scope to release.
+        assert gc.get_freeze_count() >= at_start + len(made)
+    assert gc.get_freeze_count() == 0

@@ -70,7 +70,8 @@ _INDEX_FORMAT = "splinecast-keys-1"
 
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
            "call_with_first_classes", "bind_first_class", "bind_first_classes", "package_stamp",
-           "reporting_compiles", "CompileNeeded", "forbidding_compiles"]
+           "reporting_compiles", "CompileNeeded", "forbidding_compiles",
+           "collecting_only_new_objects"]
 
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -252,41 +253,54 @@ def _compile_once(dispatcher: Any, index_path: str) -> None:
     dispatcher.compile = compile
 
 
-#: Compiles in progress (under numba's compiler lock, so one thread at a time counts).
-_COMPILING = [0]
-#: CPU seconds of a compile after which :func:`_collecting_only_new_objects` collects at once.
+#: Open scopes of :func:`collecting_only_new_objects`, in any thread (they nest; the
+#: outermost one's exit releases what they froze).
+_SCOPES = [0]
+_SCOPES_LOCK = threading.RLock()
+#: CPU seconds of a compile after which its scope collects at once (:func:`_prepared`).
 _COLLECT_AFTER = 2.0
 
 
 @contextlib.contextmanager
-def _collecting_only_new_objects() -> Iterator[None]:
-    """Keep Python's cyclic garbage collector to the objects made from here on (outermost
-    compile only; held under numba's compiler lock).
+def collecting_only_new_objects(collect_after: float | None = None) -> Iterator[None]:
+    """Keep Python's cyclic garbage collector to the objects made inside the block.
 
-    A compile makes millions of short-lived objects, and the full collections they trigger
-    each walked the whole heap: every object of the process, the code of every kernel compiled
+    A compile makes millions of short-lived objects, and the full collections they trigger each
+    walked the whole heap: every object of the process, the code of every kernel compiled
     before included. That was 13-14% of a cold first frame (trilinear iso: 3.9 of 30.5 s of
-    CPU; adding s31 iso: 11.5 of 84 s) and more in a process that compiles many kernels.
-    Frozen (:func:`gc.freeze`), what existed before the compile is left out of those walks;
-    it is unfrozen after, so it is collected as before. A program that froze objects itself
-    keeps its own arrangement.
+    CPU; adding s31 iso: 11.5 of 84 s) and more in a process that compiles many kernels; a
+    failed command line collects after itself and walked it too. Frozen (:func:`gc.freeze`),
+    what existed before the block is left out of those walks (the young garbage of what ran
+    before is collected first: it is not to be kept).
+
+    Scopes nest (a compile inside a command): an inner one freezes again, so what the outer
+    block made so far joins the frozen objects, and leaves them frozen; the outermost releases
+    everything (:func:`gc.unfreeze`) when it ends, and it is collected as before. Objects a
+    program froze itself, outside any scope, are left alone: no scope freezes or releases then.
+
+    Parameters
+    ----------
+    collect_after : float, optional
+        CPU seconds after which the end of the block collects at once: the objects made inside
+        it (an inner scope), or the garbage that waited among the frozen ones (the outermost),
+        so a long block does not leave the peak memory higher.
     """
-    outermost = _COMPILING[0] == 0 and gc.get_freeze_count() == 0
-    _COMPILING[0] += 1
-    if outermost:
-        gc.collect(1)  # the young garbage of what ran before first: it is not to be kept
-        gc.freeze()
-        start = time.process_time()
+    with _SCOPES_LOCK:
+        ours = _SCOPES[0] > 0 or gc.get_freeze_count() == 0
+        if ours:
+            gc.collect(1)
+            gc.freeze()
+            _SCOPES[0] += 1
+    start = time.process_time()
     try:
         yield
     finally:
-        _COMPILING[0] -= 1
-        if outermost:
-            gc.unfreeze()
-            # Garbage among the frozen objects waited for the compile; after a long one (the
-            # render kernels: seconds) one full collection frees it at once, a small cost next
-            # to the compile, so the peak memory stays as it was (short compiles skip it).
-            if time.process_time() - start > _COLLECT_AFTER:
+        if ours:
+            with _SCOPES_LOCK:
+                _SCOPES[0] -= 1
+                if _SCOPES[0] == 0:
+                    gc.unfreeze()
+            if collect_after is not None and time.process_time() - start > collect_after:
                 gc.collect()
 
 
@@ -347,14 +361,15 @@ def _lock_cache(dispatcher: Any) -> Any:
 
 
 def _collect_only_new_objects_while_compiling(dispatcher: Any) -> Any:
-    """Make ``dispatcher``'s compiles run under :func:`_collecting_only_new_objects`."""
+    """Make ``dispatcher``'s compiles run under :func:`collecting_only_new_objects`."""
     original = dispatcher.compile
 
     def compile(sig: Any) -> Any:  # noqa: A001 - the dispatcher's own method name
         args, _ = sigutils.normalize_signature(sig)
         if tuple(args) in dispatcher.overloads:
             return original(sig)
-        with global_compiler_lock, _collecting_only_new_objects():
+        # Under numba's compiler lock: nested compiles are inner scopes of the outermost.
+        with global_compiler_lock, collecting_only_new_objects(_COLLECT_AFTER):
             return original(sig)
 
     dispatcher.compile = compile

@@ -14,11 +14,13 @@ splinecast's own warnings (flipped axes, uneven slices) are printed after a succ
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import logging
 import sys
 
 import splinecast as sc
+from splinecast._jit import collecting_only_new_objects
 from splinecast.errors.limits import printable
 
 from . import info, movie, pyramid, render, view, warmup
@@ -55,15 +57,14 @@ def main(argv: list[str] | None = None) -> int:
     ours = logging.getLogger("splinecast")
     level = ours.level
     code = 1  # until the command returns
-    # What exists before the command is not its garbage: frozen, it is left out of the collection
-    # after a failure below, which otherwise walks the caller's whole heap (seconds in a process
-    # that has compiled many kernels, per failed call). A caller that froze objects itself keeps
-    # its own arrangement.
-    freezing = gc.get_freeze_count() == 0
-    if freezing:
-        gc.freeze()
+    # What exists before the command is not its garbage: left out of the collection after a
+    # failure below, which otherwise walks the caller's whole heap (seconds in a process that
+    # has compiled many kernels, per failed call), and of the compiles' collections.
+    collector = contextlib.ExitStack()
+    collector.enter_context(collecting_only_new_objects())
     with captured_output() as captured:
         args.captured = captured  # a long-running command releases it (the viewer's server)
+        args.release_collector = collector.close  # and this (:func:`_common.uncaptured`)
         if verbose:  # splinecast's debug lines too (what zarr's event loop dropped, ...)
             ours.setLevel(logging.DEBUG)
         try:
@@ -80,8 +81,7 @@ def main(argv: list[str] | None = None) -> int:
                 # What the failure left behind (tasks of zarr's event loop that failed beside
                 # the one reported) is collected now, inside the capture, not at exit.
                 gc.collect()
-            if freezing:
-                gc.unfreeze()
+            collector.close()
             ours.setLevel(level)
     lines = captured.ours() if code == 0 and not getattr(args, "quiet", False) else []
     if code == 0 and getattr(args, "quiet", False):

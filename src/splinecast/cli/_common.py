@@ -350,7 +350,12 @@ def captured_output() -> Iterator[Captured]:
 
 def uncaptured(args: argparse.Namespace) -> AbstractContextManager[None]:
     """The block runs outside the capture of :func:`main <splinecast.cli.main>` (a no-op when
-    the command was not started by it): see :meth:`Captured.released`."""
+    the command was not started by it): see :meth:`Captured.released`. A command that serves
+    for long (the viewer) also ends :func:`main`'s scope of the garbage collector here: what it
+    froze stays frozen while the scope is open, which for a server would be its whole life."""
+    release_collector = getattr(args, "release_collector", None)
+    if release_collector is not None:
+        release_collector()
     captured = getattr(args, "captured", None)
     return captured.released() if captured is not None else nullcontext()
 
