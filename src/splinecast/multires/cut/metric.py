@@ -302,50 +302,77 @@ class _State(NamedTuple):
     stack: np.ndarray
 
 
-# The per-node functions take plain arrays, unpacked from the state once per kernel call, and test
-# the caches in line; only a cache miss calls a (non-inlined) fill function. Compiled loops that
-# pass arrays into inlined helpers or pull them out of a tuple on every iteration pay reference-
-# count updates for each, ~100 ns per node. The argument groups are always the same:
-# D = (child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
-# fixed_at, tf) and I = (box_min, box_max, viewing, imp, imp_at, view).
+class _Distortion(NamedTuple):
+    """The arrays D and D* are made from: the tree's children and visibility, the histograms
+    and the transparency table, and the two caches with their epochs."""
+
+    child_start: np.ndarray
+    children: np.ndarray
+    visible: np.ndarray
+    offsets: np.ndarray
+    keys: np.ndarray
+    counts: np.ndarray
+    table: np.ndarray
+    raw: np.ndarray
+    raw_at: np.ndarray
+    fixed: np.ndarray
+    fixed_at: np.ndarray
+
+
+class _Importance(NamedTuple):
+    """The arrays I is made from: the boxes, the view vector, and the cache with its epochs."""
+
+    box_min: np.ndarray
+    box_max: np.ndarray
+    viewing: np.ndarray
+    imp: np.ndarray
+    imp_at: np.ndarray
+
+
+# The per-node functions test the caches in line; only a cache miss calls a (non-inlined) fill
+# function. They take the state's arrays in the two groups above, made once per kernel call.
+# Reading an array out of a tuple costs reference-count updates in compiled code that counts
+# them (~100 ns per node for these groups), so the per-node fill function is compiled without
+# counting (it allocates nothing), and the inlined helpers below are only reached through it
+# or on a cache miss.
 @jit(nogil=True, inline="always")
-def _raw_fill(offsets, keys, counts, table, raw, raw_at, tf, b):
-    """D(b) from the histogram (eq. 1), stored in the cache."""
-    raw[b] = _node_distortion(offsets, keys, counts, table, b)
-    raw_at[b] = tf
-    return raw[b]
+def _raw_fill(d, tf, b):
+    """D(b) from the histogram (eq. 1), stored in the cache ``d.raw``."""
+    d.raw[b] = _node_distortion(d.offsets, d.keys, d.counts, d.table, b)
+    d.raw_at[b] = tf
+    return d.raw[b]
 
 
 @jit(nogil=True, inline="always")
-def _fixed_fill(child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
-                fixed_at, tf, b):
+def _fixed_fill(d, tf, b):
     """D*(b) = max(D(b), sum of the visible children's D): the fix-up of section 3.2.1."""
+    child_start, children, visible, raw, raw_at = (d.child_start, d.children, d.visible, d.raw,
+                                                    d.raw_at)
     below = 0.0
     for t in range(child_start[b], child_start[b + 1]):
         k = children[t]
         if visible[k]:
-            below += raw[k] if raw_at[k] == tf else _raw_fill(offsets, keys, counts, table,
-                                                              raw, raw_at, tf, k)
-    own = raw[b] if raw_at[b] == tf else _raw_fill(offsets, keys, counts, table, raw, raw_at,
-                                                   tf, b)
-    fixed[b] = max(own, below)
-    fixed_at[b] = tf
-    return fixed[b]
+            below += raw[k] if raw_at[k] == tf else _raw_fill(d, tf, k)
+    own = raw[b] if raw_at[b] == tf else _raw_fill(d, tf, b)
+    d.fixed[b] = max(own, below)
+    d.fixed_at[b] = tf
+    return d.fixed[b]
 
 
-@jit(nogil=True)
-def _fill_family(child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
-                 fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view, b):
-    """Make D* and I of ``b`` and of its visible children valid (E = D* I, eq. 7)."""
+@jit(nogil=True, _nrt=False)
+def _fill_family(d, i, tf, view, b):
+    """Make D* and I of ``b`` and of its visible children valid (E = D* I, eq. 7); ``d`` and
+    ``i`` are the :class:`_Distortion` and :class:`_Importance` arrays."""
+    child_start, children, visible, fixed_at = d.child_start, d.children, d.visible, d.fixed_at
+    imp, imp_at = i.imp, i.imp_at
     for t in range(child_start[b], child_start[b + 1] + 1):
         k = children[t] if t < child_start[b + 1] else b   # the children, then b itself
         if k != b and not visible[k]:
             continue
         if fixed_at[k] != tf:
-            _fixed_fill(child_start, children, visible, offsets, keys, counts, table, raw,
-                        raw_at, fixed, fixed_at, tf, k)
+            _fixed_fill(d, tf, k)
         if imp_at[k] != view:  # in line: a call per node would cost more than the formula
-            imp[k] = _importance_one(box_min, box_max, k, viewing)
+            imp[k] = _importance_one(i.box_min, i.box_max, k, i.viewing)
             imp_at[k] = view
 
 
@@ -373,6 +400,9 @@ def _priorities(s, tf, view, epoch, improved, nodes, out):
     epochs, ``improved``: the improved priority (ER) rather than the naive one (E)."""
     (parent, child_start, children, visible, box_min, box_max, offsets, keys, counts, table,
      viewing, _, raw, raw_at, fixed, fixed_at, imp, imp_at, prio, prio_at, stack) = s
+    d = _Distortion(child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
+                    fixed, fixed_at)
+    i_groups = _Importance(box_min, box_max, viewing, imp, imp_at)
     todo = np.empty(nodes.shape[0] * (stack.shape[0] + 1), np.int64)
     n = 0
     for i in range(nodes.shape[0]):
@@ -388,8 +418,7 @@ def _priorities(s, tf, view, epoch, improved, nodes, out):
             prio_at[stack[top]] = -2  # queued
             n += 1
     for j in range(n):
-        _fill_family(child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
-                     fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at, view, todo[j])
+        _fill_family(d, i_groups, tf, view, todo[j])
     for j in range(n):
         b = todo[j]
         p = _er_cached(child_start, children, visible, fixed, imp, b)
@@ -412,34 +441,32 @@ def _map_nodes(s, nodes, what, out):
     (parent, child_start, children, visible, box_min, box_max, offsets, keys, counts, table,
      viewing, epochs, raw, raw_at, fixed, fixed_at, imp, imp_at, prio, prio_at, stack) = s
     tf, view, epoch, improved = epochs[0], epochs[1], epochs[2], epochs[3]
+    d = _Distortion(child_start, children, visible, offsets, keys, counts, table, raw, raw_at,
+                    fixed, fixed_at)
+    i_groups = _Importance(box_min, box_max, viewing, imp, imp_at)
     if what == 0:
         _priorities(s, tf, view, epoch, improved, nodes, out)
         return
     for i in range(nodes.shape[0]):
         b = nodes[i]
         if what == 3:
-            out[i] = raw[b] if raw_at[b] == tf else _raw_fill(offsets, keys, counts, table, raw,
-                                                              raw_at, tf, b)
+            out[i] = raw[b] if raw_at[b] == tf else _raw_fill(d, tf, b)
         elif what == 2 or what == 1:
-            d = fixed[b] if fixed_at[b] == tf else _fixed_fill(
-                child_start, children, visible, offsets, keys, counts, table, raw, raw_at, fixed,
-                fixed_at, tf, b)
+            fixed_b = fixed[b] if fixed_at[b] == tf else _fixed_fill(d, tf, b)
             if what == 2:
-                out[i] = d
+                out[i] = fixed_b
             else:
                 if imp_at[b] != view:
                     imp[b] = _importance_one(box_min, box_max, b, viewing)
                     imp_at[b] = view
-                out[i] = d * imp[b]
+                out[i] = fixed_b * imp[b]
         elif what == 4:
             if imp_at[b] != view:
                 imp[b] = _importance_one(box_min, box_max, b, viewing)
                 imp_at[b] = view
             out[i] = imp[b]
         else:
-            _fill_family(child_start, children, visible, offsets, keys, counts, table, raw,
-                         raw_at, fixed, fixed_at, tf, box_min, box_max, viewing, imp, imp_at,
-                         view, b)
+            _fill_family(d, i_groups, tf, view, b)
             out[i] = _er_cached(child_start, children, visible, fixed, imp, b)
 
 
