@@ -62,7 +62,9 @@ def main(argv: list[str] | None = None) -> int:
     # has compiled many kernels, per failed call), and of the compiles' collections.
     collector = contextlib.ExitStack()
     collector.enter_context(collecting_only_new_objects())
-    with captured_output() as captured:
+    # The collector's scope is closed below inside the capture; ``with`` closes it too if the
+    # capture could not start (closing twice does nothing).
+    with collector, captured_output() as captured:
         args.captured = captured  # a long-running command releases it (the viewer's server)
         args.release_collector = collector.close  # and this (:func:`_common.uncaptured`)
         if verbose:  # splinecast's debug lines too (what zarr's event loop dropped, ...)
