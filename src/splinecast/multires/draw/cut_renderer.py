@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import contextlib
 import gc
-import math
 import time
 from collections.abc import Callable, Hashable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
@@ -221,30 +220,11 @@ class LevelGeometry:
 def screen_rect(camera: Camera, lo: np.ndarray, hi: np.ndarray) -> tuple[int, int, int, int] | None:
     """Pixel rectangle ``(col0, row0, width, height)`` of ``camera``'s image that the world box
     ``[lo, hi]`` can project to (one pixel of margin), or ``None`` if it projects outside."""
-    basis = camera.pixel_basis()
-    eye, fwd = basis[BASIS_EYE:BASIS_EYE + 3], basis[BASIS_FORWARD:BASIS_FORWARD + 3]
-    right, up = basis[BASIS_RIGHT:BASIS_RIGHT + 3], basis[BASIS_UP:BASIS_UP + 3]
-    half_w, half_h = basis[BASIS_HALF_WIDTH], basis[BASIS_HALF_HEIGHT]
-    ortho = basis[BASIS_ORTHO] != 0.0
-    col0, row0 = basis[BASIS_COL0], basis[BASIS_ROW0]
-    full_w, full_h = basis[BASIS_FULL_WIDTH], basis[BASIS_FULL_HEIGHT]
-    corners = np.array([[(lo, hi)[(b >> a) & 1][a] for a in range(3)] for b in range(8)]) - eye
-    sx, sy = corners @ right, corners @ up
-    if not ortho:
-        depth = corners @ fwd
-        if np.all(depth <= 0):
-            return None
-        if np.any(depth <= 1e-9 * (np.abs(sx) + np.abs(sy) + 1.0)):
-            return 0, 0, camera.width, camera.height  # the box reaches the eye plane
-        sx, sy = sx / depth, sy / depth
-    cols = (sx / half_w + 1.0) * 0.5 * full_w - 0.5 - col0
-    rows = (1.0 - sy / half_h) * 0.5 * full_h - 0.5 - row0
-    c0 = max(int(math.floor(cols.min())) - 1, 0)
-    c1 = min(int(math.ceil(cols.max())) + 2, camera.width)
-    r0 = max(int(math.floor(rows.min())) - 1, 0)
-    r1 = min(int(math.ceil(rows.max())) + 2, camera.height)
-    if c0 >= c1 or r0 >= r1:
+    rects, seen = screen_rects(camera, np.asarray(lo, np.float64)[None],
+                               np.asarray(hi, np.float64)[None])
+    if not seen[0]:
         return None
+    c0, r0, c1, r1 = (int(v) for v in rects[0])
     return c0, r0, c1 - c0, r1 - r0
 
 
