@@ -15,7 +15,7 @@ holds an exclusive lock on the index while it saves and writes the data file bef
 entry that names it. Loading needs no lock: both files are replaced atomically by numba; a file
 damaged some other way (cut short, overwritten) reads as missing and is rewritten. And a
 process about to compile a signature another process is compiling waits for it and loads its
-result instead of compiling the same code at the same time (:func:`_compile_once`).
+result instead of compiling the same code at the same time (:func:`_compile_lock`).
 
 Compiling is slow mostly because of inlining (the render hooks are inlined at Numba's IR level, see
 :func:`overload_jit`); :mod:`.speedups` removes the largest avoidable parts of numba's own
@@ -220,8 +220,10 @@ def _compile_lock_path(index_path: str, args: tuple) -> str:
     return f"{index_path}.{digest}.compiling"
 
 
-def _compile_once(dispatcher: Any, index_path: str) -> None:
-    """Make ``dispatcher`` compile each signature under a lock shared by all processes.
+def _compile_lock(index_path: str, args: tuple, stack: contextlib.ExitStack) -> bool:
+    """Take the lock of compiling ``args`` for the function whose cache index is
+    ``index_path``, shared by all processes, into ``stack``; False if the cache folder cannot
+    be written (then nothing is saved either, and nothing is locked).
 
     A render kernel takes a minute to compile. Processes that start at once (the test suite's
     workers, a Dask cluster's workers, two viewers) often need the same kernel at about the
@@ -231,26 +233,16 @@ def _compile_once(dispatcher: Any, index_path: str) -> None:
     process never wait for each other on it; nested compiles take locks in the order of the
     call graph, which has no cycles, so two processes cannot wait for each other.
     """
-    original = dispatcher.compile
-
-    def compile(sig: Any) -> Any:  # noqa: A001 - the dispatcher's own method name
-        args, _ = sigutils.normalize_signature(sig)
-        if tuple(args) in dispatcher.overloads:
-            return original(sig)
-        if getattr(_FORBIDDEN, "depth", 0):
-            return _load_or_refuse(dispatcher, sig, tuple(args))
-        path = _compile_lock_path(index_path, tuple(args))
-        with global_compiler_lock, contextlib.ExitStack() as stack:
-            if path not in _HELD:
-                try:
-                    stack.enter_context(_locked(path))
-                except OSError:  # a cache folder we cannot write to: no saving either
-                    return original(sig)
-                stack.callback(_HELD.discard, path)
-                _HELD.add(path)
-            return original(sig)
-
-    dispatcher.compile = compile
+    path = _compile_lock_path(index_path, args)
+    if path in _HELD:  # an outer compile of this process holds it
+        return True
+    try:
+        stack.enter_context(_locked(path))
+    except OSError:
+        return False
+    stack.callback(_HELD.discard, path)
+    _HELD.add(path)
+    return True
 
 
 #: Open scopes of :func:`collecting_only_new_objects`, in any thread (they nest; the
@@ -346,7 +338,9 @@ def _load_or_refuse(dispatcher: Any, sig: Any, args: tuple) -> Any:
         return cres.entry_point
 
 
-def _lock_cache(dispatcher: Any) -> Any:
+def _lock_cache(dispatcher: Any) -> str | None:
+    """Make ``dispatcher``'s disk cache safe for several processes and stale-proof; returns
+    its index path where compiles can be locked across processes (else None)."""
     cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
     if _LockedIndexFile is not None and type(cache_file) is IndexDataCacheFile:
         # Same state, safer ``save``: the subclass adds only what each index load sets.
@@ -356,28 +350,36 @@ def _lock_cache(dispatcher: Any) -> Any:
             _PACKAGE_STAMP.append(package_stamp(PACKAGE_ROOT))
         cache_file._source_stamp = (cache_file._source_stamp, _PACKAGE_STAMP[0])
     if fcntl is not None and cache_file is not None and hasattr(cache_file, "_index_path"):
-        _compile_once(dispatcher, cache_file._index_path)
-    return dispatcher
+        return cache_file._index_path
+    return None
 
 
-def _collect_only_new_objects_while_compiling(dispatcher: Any) -> Any:
-    """Make ``dispatcher``'s compiles run under :func:`collecting_only_new_objects`."""
+def _prepared(dispatcher: Any) -> Any:
+    """``dispatcher`` with its cache made safe (:func:`_lock_cache`) and its compiles wrapped:
+    a signature already compiled goes straight to numba; a new one is compiled under numba's
+    compiler lock, :func:`collecting_only_new_objects` (nested compiles are inner scopes of the
+    outermost) and, for a cached function, the lock shared by processes
+    (:func:`_compile_lock`), or only loaded from the disk cache under
+    :func:`forbidding_compiles`."""
+    index_path = _lock_cache(dispatcher)
     original = dispatcher.compile
 
     def compile(sig: Any) -> Any:  # noqa: A001 - the dispatcher's own method name
         args, _ = sigutils.normalize_signature(sig)
-        if tuple(args) in dispatcher.overloads:
+        args = tuple(args)
+        if args in dispatcher.overloads:
             return original(sig)
-        # Under numba's compiler lock: nested compiles are inner scopes of the outermost.
         with global_compiler_lock, collecting_only_new_objects(_COLLECT_AFTER):
-            return original(sig)
+            if index_path is None:
+                return original(sig)
+            if getattr(_FORBIDDEN, "depth", 0):
+                return _load_or_refuse(dispatcher, sig, args)
+            with contextlib.ExitStack() as stack:
+                _compile_lock(index_path, args, stack)
+                return original(sig)
 
     dispatcher.compile = compile
     return dispatcher
-
-
-def _prepared(dispatcher: Any) -> Any:
-    return _collect_only_new_objects_while_compiling(_lock_cache(dispatcher))
 
 
 def jit(function: Callable | None = None, **options: Any) -> Any:
