@@ -38,6 +38,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import numba
+import numpy as np
 from numba import njit
 from numba._dispatcher import compute_fingerprint
 from numba.core import event as _event
@@ -71,7 +72,7 @@ _INDEX_FORMAT = "splinecast-keys-1"
 __all__ = ["jit", "overload_jit", "inlined", "rebound", "first_class", "call_with_first_class",
            "call_with_first_classes", "bind_first_class", "bind_first_classes", "package_stamp",
            "reporting_compiles", "CompileNeeded", "forbidding_compiles",
-           "collecting_only_new_objects"]
+           "collecting_only_new_objects", "read_only"]
 
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -380,6 +381,19 @@ def _prepared(dispatcher: Any) -> Any:
 
     dispatcher.compile = compile
     return dispatcher
+
+
+def read_only(value: Any) -> Any:
+    """``value`` as a read-only view (no copy) when it is a writable array, else unchanged.
+
+    Numba compiles a separate specialization for a read-only array (a memory-mapped file, a
+    cached or broadcast array) and a writable one of the same type. A compiled function that
+    only reads an argument, handed read-only views always, compiles once for both.
+    """
+    if isinstance(value, np.ndarray) and value.flags.writeable:
+        value = value.view()
+        value.flags.writeable = False
+    return value
 
 
 def jit(function: Callable | None = None, **options: Any) -> Any:

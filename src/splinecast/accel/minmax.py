@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numba import prange
 
-from .._jit import jit
+from .._jit import jit, read_only
 
 __all__ = ["BLOCK_SHIFTS", "PAIR_SHIFT", "MinMaxHierarchy", "inactive_block_size",
            "packed_pair_flags", "inactive_pair_size", "neighbourhood"]
@@ -272,7 +272,8 @@ class MinMaxHierarchy:
 
     def __init__(self, coeffs: np.ndarray, n_cells: tuple[int, int, int], support: int) -> None:
         self.n_cells = tuple(int(n) for n in n_cells)
-        lo, hi, self._pair_levels = _finest_ranges(coeffs, support,
+        # Read-only views: one compiled function for the arrays of files and of memory.
+        lo, hi, self._pair_levels = _finest_ranges(read_only(coeffs), support,
                                                     np.asarray(self.n_cells, np.int64))
         self._levels_from(lo, hi)
         self.iso: float | None = None

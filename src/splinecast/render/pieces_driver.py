@@ -334,7 +334,9 @@ def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, se
     return hits, n_ended
 
 
-@jit()
+# No Python entry: called only through its address (:func:`_launch_functions`), and the entry's
+# unboxing of these arguments is a sizeable share of the function's compile.
+@jit(no_cpython_wrapper=True)
 def _trace_tile(band_a, band_b, mode, state, out, cut, view, tiles, n, ends, seam, counters):
     """One thread's work item: the pieces overlapping tile number ``n`` of ``tiles``, in order
     (the tile's states reset first when ``ends.fresh``, its outputs written at the end when

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, read_only
 from ..accel.active_cells import CubeBoundHierarchy, block_ranges
 from ..accel.minmax import BLOCK_SHIFTS, PAIR_SHIFT, MinMaxHierarchy
 from ..errors import ParameterError
@@ -90,13 +90,6 @@ class Grid:
         return Grid(self.kernel, self.hierarchy, geom, self.n_cells, self.band_rows, self.tile)
 
 
-def _read_only(value: Any) -> Any:
-    if isinstance(value, np.ndarray) and value.flags.writeable:
-        value = value.view()
-        value.flags.writeable = False
-    return value
-
-
 def read_only_kernel(kernel: tuple) -> tuple:
     """``kernel`` with every array replaced by a read-only view of it (no copy).
 
@@ -105,14 +98,14 @@ def read_only_kernel(kernel: tuple) -> tuple:
     handing them read-only views always makes one compiled kernel serve both, which halves the
     compilation a session (and the test suite) pays for mixing files and arrays.
     """
-    return type(kernel)(*(_read_only(field) for field in kernel))
+    return type(kernel)(*(read_only(field) for field in kernel))
 
 
 def _hierarchy(model: Any, array: np.ndarray, n_cells: tuple[int, int, int]) -> Any:
     if model.cube_bounded:
         lo, hi = model.cube_bounds_of(array)
         return CubeBoundHierarchy(*block_ranges(lo, hi), n_cells)
-    return MinMaxHierarchy(_read_only(array), n_cells, model.support)
+    return MinMaxHierarchy(read_only(array), n_cells, model.support)
 
 
 def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 0),

@@ -52,7 +52,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from ..._jit import jit
+from ..._jit import jit, read_only
 from ...errors import ParameterError
 from .tree import BrickGrid, regular_brick_tree, segment_indices
 
@@ -442,15 +442,14 @@ def pyramid_histograms(levels: list[np.ndarray], brick: int, quantizer: Quantize
         (np.zeros(tree_grid.level_offsets[1], np.int64), np.zeros(0, np.int64),
          np.zeros(0, np.int64))]
     for lv in range(1, tree_grid.levels):
-        a, c = (mean_pyramid_map(lv) if maps is None else
-                (np.asarray(maps[lv][0], np.float64), np.asarray(maps[lv][1], np.float64)))
+        a, c = (mean_pyramid_map(lv) if maps is None else (maps[lv][0], maps[lv][1]))
         idx = np.indices(tree_grid.level_bricks[lv]).reshape(3, -1).T
         lo, hi = tree_grid.footprint(lv, idx)
         sizes = np.minimum(np.prod(hi - lo, axis=1), bins * bins)
-        coarse = np.ascontiguousarray(levels[lv])
+        lo, hi, a, c, coarse = _batch_arrays(lo, hi, a, c, levels[lv])
 
         def run(start, stop, out_at, keys, counts, nnz, lo=lo, hi=hi, a=a, c=c, coarse=coarse):
-            _brick_batch(source, coarse, lo[start:stop], hi[start:stop], a, c,
+            _brick_batch(read_only(source), coarse, lo[start:stop], hi[start:stop], a, c,
                          _Quant(quantizer.lo, quantizer.scale, bins), out_at,
                          _Out(keys, counts), nnz, nthreads)
 
@@ -458,6 +457,18 @@ def pyramid_histograms(levels: list[np.ndarray], brick: int, quantizer: Quantize
     nnz, keys, counts = _compact(parts, _key_dtype(bins), _count_dtype(source.size))
     offsets = np.concatenate([[0], np.cumsum(nnz)]).astype(np.int64)
     return BrickHistograms(offsets, keys, counts, quantizer)
+
+
+def _batch_arrays(lo: Any, hi: Any, a: Any, c: Any, coarse: np.ndarray) -> tuple:
+    """The read arguments of :func:`_brick_batch` in one form whatever the caller's arrays are
+    (C order, read-only views; a pyramid map's cached or broadcast arrays are read-only, a
+    footprint may be in Fortran order): each form would compile the function once more."""
+    lo = np.ascontiguousarray(lo, np.int64).reshape(-1, 3)
+    hi = np.ascontiguousarray(hi, np.int64).reshape(-1, 3)
+    a = np.ascontiguousarray(np.broadcast_to(np.asarray(a, np.float64), (3,)))
+    c = np.ascontiguousarray(np.broadcast_to(np.asarray(c, np.float64), (3,)))
+    return (read_only(lo), read_only(hi), read_only(a), read_only(c),
+            read_only(np.ascontiguousarray(coarse)))
 
 
 def box_histograms(source: np.ndarray, coarse: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -482,17 +493,13 @@ def box_histograms(source: np.ndarray, coarse: np.ndarray, lo: np.ndarray, hi: n
     BrickHistograms
         One entry range per brick, in the order of ``lo``.
     """
-    lo = np.ascontiguousarray(lo, np.int64).reshape(-1, 3)
-    hi = np.ascontiguousarray(hi, np.int64).reshape(-1, 3)
-    a = np.ascontiguousarray(np.broadcast_to(np.asarray(a, np.float64), (3,)))
-    c = np.ascontiguousarray(np.broadcast_to(np.asarray(c, np.float64), (3,)))
+    lo, hi, a, c, coarse = _batch_arrays(lo, hi, a, c, coarse)
     bins = quantizer.bins
     sizes = np.minimum(np.prod(np.maximum(hi - lo, 0), axis=1), bins * bins)
-    coarse = np.ascontiguousarray(coarse)
     nthreads = numba.get_num_threads()
 
     def run(start, stop, out_at, keys, counts, nnz):
-        _brick_batch(source, coarse, lo[start:stop], hi[start:stop], a, c,
+        _brick_batch(read_only(source), coarse, lo[start:stop], hi[start:stop], a, c,
                      _Quant(quantizer.lo, quantizer.scale, bins), out_at, _Out(keys, counts), nnz,
                      nthreads)
 

@@ -48,7 +48,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import prange
 
-from ..._jit import jit
+from ..._jit import jit, read_only
 from ...camera import (
     BASIS_COL0,
     BASIS_EYE,
@@ -267,7 +267,9 @@ def importance(box_min: np.ndarray, box_max: np.ndarray, interest: Any = None,
     box_min = np.ascontiguousarray(box_min, np.float64).reshape(-1, 3)
     box_max = np.ascontiguousarray(box_max, np.float64).reshape(-1, 3)
     out = np.empty(box_min.shape[0])
-    _importance_boxes(box_min, box_max, _view_vector(interest, region, eye, t), out)
+    # Read-only views: a tree's boxes are read-only, a caller's may not be (one compile for both).
+    _importance_boxes(read_only(box_min), read_only(box_max),
+                      _view_vector(interest, region, eye, t), out)
     return out
 
 
