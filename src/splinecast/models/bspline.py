@@ -9,7 +9,9 @@ Coefficients
     By default the voxel values *are* the coefficients ``a`` (smoothing reconstruction, the
     thesis' choice: the surface does not pass through the samples, it is a low-pass of them).
     With ``prefilter=True`` they are first converted to interpolating coefficients
-    (``scipy.ndimage.spline_filter`` with ``mode="mirror"``), so ``f(v) = data[v]`` at every voxel.
+    (``scipy.ndimage.spline_filter`` with ``mode="mirror"``), so ``f(v) = data[v]`` at every voxel
+    (to the voxels' precision: the coefficients are computed in float64 and stored as float32
+    for float32 and 8/16-bit voxels, as float64 otherwise).
 
 Boundary
     Outside the volume the coefficients are mirrored about the first and last voxel without
@@ -52,7 +54,7 @@ from ..roots.first_root import DEFAULT_ITERATIONS, POWER_FORM_FINDERS, finder_id
 from ..volume import Volume
 from .base import BrickRefusal, ReconstructionModel
 from .shading_field import whole_halo
-from .storage import kernel_array
+from .storage import coefficient_dtype, kernel_array
 from .validation import require_renderable
 
 __all__ = [
@@ -336,9 +338,11 @@ class BSplineModel(ReconstructionModel):
         if self.prefilter and d > 1:
             from scipy import ndimage  # lazy: scipy is an optional extra ("spline")
 
+            # Computed in float64, stored at the voxels' precision (float32 for float32 and
+            # 8/16-bit data): the float32 kernels serve it, at half the memory.
             data = ndimage.spline_filter(
                 np.asarray(data, dtype=np.float64), order=d, output=np.float64, mode="mirror"
-            )
+            ).astype(coefficient_dtype(data.dtype), copy=False)
         else:
             data = kernel_array(data)  # one kernel for 8/16-bit integers and float32 (exact)
         pad = pad_width(d)

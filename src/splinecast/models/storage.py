@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors.limits import memory_limit
 
-__all__ = ["MAX_CONVERTED_BYTES", "kernel_dtype", "kernel_array"]
+__all__ = ["MAX_CONVERTED_BYTES", "kernel_dtype", "kernel_array", "coefficient_dtype"]
 
 #: Largest float32 copy made to share kernels (512 MiB: a 512^3 volume); larger volumes keep
 #: their element type, where memory matters more than one compile.
@@ -40,3 +40,17 @@ def kernel_dtype(dtype: np.dtype, voxels: int) -> np.dtype:
 def kernel_array(data: np.ndarray) -> np.ndarray:
     """``data`` as a C-contiguous array of :func:`kernel_dtype` (no copy when it already is)."""
     return np.ascontiguousarray(data, dtype=kernel_dtype(data.dtype, int(data.size)))
+
+
+def coefficient_dtype(dtype: np.dtype) -> np.dtype:
+    """The element type of values computed from voxels of ``dtype`` (a prefilter's output,
+    clamped padding of a type-6 spline): float32 for float32 and 8- or 16-bit integer voxels,
+    whose precision float32 holds, float64 otherwise.
+
+    The filters compute in float64; storing their result at the voxels' own precision halves
+    its memory for float32 and integer data and lets it share the kernels compiled for float32
+    volumes instead of compiling float64 ones on first use.
+    """
+    dtype = np.dtype(dtype)
+    exact_in_float32 = dtype.kind in "ui" and dtype.itemsize <= 2 or dtype == np.float32
+    return np.dtype(np.float32) if exact_in_float32 else np.dtype(np.float64)

@@ -14,7 +14,8 @@ Border
     half a voxel more on each side than the trilinear box.
 Storage
     The padded data are kept as float32 when that is exact (8/16-bit integers, float32) and as
-    float64 otherwise (or after the prefilter), to keep the number of compiled variants small.
+    float64 otherwise, to keep the number of compiled variants small; the prefilter computes in
+    float64 and stores its result in the same type (the voxels' precision).
 Bounds
     Per cube, the exact range of its coefficients (float32, rounded outward and widened by the
     rounding tolerance), computed once per volume by the scheme's verified averaging chain
@@ -38,6 +39,7 @@ from .._jit import jit
 from ..errors import ParameterError
 from ..volume import Volume
 from .base import ActiveCellClassifier, ReconstructionModel
+from .storage import coefficient_dtype
 from .type6_geometry import (
     Type6Program,
     Type6Tables,
@@ -556,11 +558,6 @@ def rounding_tolerance(pad: np.ndarray, program) -> float:
     return RELATIVE_ROUNDING * max(scale, 1e-300)
 
 
-def _pad_dtype(dtype: np.dtype) -> np.dtype:
-    exact_in_float32 = dtype.kind in "ui" and dtype.itemsize <= 2 or dtype == np.float32
-    return np.dtype(np.float32) if exact_in_float32 else np.dtype(np.float64)
-
-
 def laplacian_prefilter(pad: np.ndarray) -> np.ndarray:
     """``f - (1/8) Delta_h f`` with the 7-point Laplacian in index units, on the padded grid.
 
@@ -592,7 +589,8 @@ def laplacian_prefilter_brick(data: np.ndarray, first: np.ndarray,
     Returns
     -------
     (ndarray, ndarray)
-        The prefiltered values (float64) and the level index of their first element.
+        The prefiltered values (in :func:`~.storage.coefficient_dtype` of the brick's type, as
+        the whole volume's) and the level index of their first element.
     """
     f = data.astype(np.float64)
     core = f[1:-1, 1:-1, 1:-1]
@@ -602,7 +600,8 @@ def laplacian_prefilter_brick(data: np.ndarray, first: np.ndarray,
     first = first + 1
     index = [np.clip(first[a] + np.arange(out.shape[a]), 0, shape[a] - 1) - first[a]
              for a in range(3)]
-    return np.ascontiguousarray(out[np.ix_(*index)]), first
+    return (np.ascontiguousarray(out[np.ix_(*index)], dtype=coefficient_dtype(data.dtype)),
+            first)
 
 
 class Type6Model(ReconstructionModel):
@@ -651,9 +650,10 @@ class Type6Model(ReconstructionModel):
         self.precompute = bool(precompute)
         self.root_finder = root_finder
         pad = np.pad(np.asarray(volume.data), 1, mode="edge")
+        stored = coefficient_dtype(pad.dtype)  # the voxels' precision, also when prefiltered
         if self.prefilter:
             pad = laplacian_prefilter(pad)
-        self.pad = np.ascontiguousarray(pad, dtype=_pad_dtype(pad.dtype))
+        self.pad = np.ascontiguousarray(pad, dtype=stored)
         self.n_cells = tuple(int(n) for n in volume.shape)
         self.tables_arrays = (
             np.ascontiguousarray(tables.tet_points),
