@@ -10,8 +10,12 @@ WebSocket client (`splinecast.viewer.client.ViewerClient`) drives it:
   page sends on pointer-up); latency to the full-resolution PNG frame.
 
 Baseline, measured in the same run before the server starts: ``Scene.render`` of the full-size
-frame in this process (median after warm-up), so ``release / direct`` is the viewer's overhead
-(protocol, PNG encoding, transfer, scheduling). Once, the same is measured through the real page
+frame in this process (median after warm-up) with the options the viewer derives from the same
+state (``splinecast.viewer.state.parse_state``: its DVR settings, its default isovalue normals,
+colour output only, as the viewer renders), so ``release / direct`` is the viewer's overhead
+(waiting for the drag's frame in flight, stripes, protocol, PNG encoding, transfer,
+scheduling). The release frame's header splits the server's part: render (stripes and the 8-bit
+conversion included) and PNG encoding. Once, the same is measured through the real page
 in headless Chromium (Playwright), from the page's own frame log.
 
 Scenes: Marschner-Lobb 256^3 (trilinear and s31 isosurfaces) and the MNI152 MRI from
@@ -52,6 +56,7 @@ import numpy as np
 
 import splinecast as sc
 from splinecast.viewer.client import ViewerClient
+from splinecast.viewer.state import default_state, parse_state
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import MRI, describe  # noqa: E402
@@ -93,19 +98,14 @@ def direct_render_ms(scene_spec: dict, size: tuple[int, int], repeats: int) -> f
     """Median Scene.render time of the first viewer frame's state, in this process."""
     vol = sc.read(scene_spec["source"])
     scene = sc.Scene(vol, model=scene_spec["model"])
-    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size)
-    options: dict = {"mode": scene_spec["mode"]}
-    if scene_spec["mode"] == "iso":
-        options["iso"] = scene_spec["state"]["iso"]
-    else:
-        options["tf"] = sc.TransferFunction.from_dict(scene_spec["state"]["tf"])
-        # The viewer's DVR defaults: 0.5-voxel step, 2D table, termination at 0.99.
-        options["dvr"] = sc.DVRSettings(step=0.5, termination=0.99)
-    scene.render(cam, **options)  # compile and warm up
+    defaults = default_state(vol, model=scene_spec["model"], mode=scene_spec["mode"])
+    request = parse_state({**scene_spec["state"], "size": list(size)}, vol, defaults)
+    options = {"outputs": ("rgba",), **request.options}
+    scene.render(request.camera, **options)  # compile and warm up
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        scene.render(cam, **options)
+        scene.render(request.camera, **options)
         times.append((time.perf_counter() - start) * 1e3)
     return statistics.median(times)
 
@@ -173,18 +173,26 @@ async def measure(url: str, state: dict, drag_s: float, releases: int) -> dict:
         drag_render += [f.header["render_ms"] for f in frames]
         fps.append(len(frames) / duration)
         scales += [f.header["scale"] for f in frames]
-        release_render = []
+        release_render, render_only, encode_only, stripes = [], [], [], []
         for _ in range(releases):
             frames, azimuth, duration = await drag(client, state, 0.4, azimuth)
             ident = await client.render({**state, "camera": {"azimuth": azimuth}})
             final = await client.frame(ident)
             release_ms.append((final.received - client.sent_at(ident)) * 1e3)
             release_render.append(final.header["render_ms"] + final.header["encode_ms"])
+            render_only.append(final.header["render_ms"])
+            encode_only.append(final.header["encode_ms"])
+            stripes.append(final.header["stats"].get("stripes"))
         return {"drag_latency_ms": percentiles(drag_latency),
                 "drag_render_ms": percentiles(drag_render), "drag_fps": statistics.mean(fps),
-                "drag_scales": sorted(set(scales)), "release_ms": percentiles(release_ms),
+                "drag_scales": sorted(set(scales)),
+                "drag_scale_shares": {str(s): scales.count(s) / len(scales)
+                                      for s in sorted(set(scales))},
+                "release_ms": percentiles(release_ms),
                 "release_samples_ms": release_ms,
-                "release_render_encode_ms": percentiles(release_render)}
+                "release_render_encode_ms": percentiles(release_render),
+                "release_server_render_ms": percentiles(render_only),
+                "release_encode_ms": percentiles(encode_only), "release_stripes": stripes}
 
 
 def browser_once(spec: dict, size: tuple[int, int], drag_s: float, releases: int) -> dict:
@@ -384,22 +392,29 @@ def write_markdown(result: dict, path: Path) -> None:
         "",
         f"Image {w}x{h}. Dragging: interactive requests at {POINTER_HZ:g} Hz; latency from a "
         "request to the reduced JPEG frame showing it; fps = reduced frames received per "
-        "second. Release: latency from the final request to the full-resolution PNG frame. "
-        "Direct: `Scene.render` of the full frame in one process (median after warm-up), "
-        "measured in the same run.",
+        "second; reduced scales: the share of the drag's frames at each scale. Release: latency "
+        "from the final request (sent after a 0.4 s drag, so a drag frame may still be in "
+        "flight) to the full-resolution PNG frame; the server's render (stripes and the 8-bit "
+        "conversion included) and PNG encoding of it. Direct: `Scene.render` of the full frame "
+        "in one process with the options the viewer derives from the same state, colour only "
+        "(median after warm-up), measured in the same run.",
         "",
         "| scene | drag p50 ms | drag p95 ms | server render p50 ms (drag) | drag fps | "
-        "reduced scales | release p50 ms | release p95 ms | server render+encode p50 ms "
-        "(release) | direct ms | release / direct |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "reduced scales | release p50 ms | release p95 ms | server render p50 ms (release) | "
+        "PNG encode p50 ms | direct ms | release / direct |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in result["scenes"]:
         d, r = row["drag_latency_ms"], row["release_ms"]
-        scales = ", ".join(f"1/{round(1 / s)}" for s in row["drag_scales"])
+        shares = row.get("drag_scale_shares") or {}
+        scales = ", ".join(
+            f"1/{round(1 / s)}" + (f" ({shares[str(s)]:.0%})" if str(s) in shares else "")
+            for s in sorted(row["drag_scales"], reverse=True))
         lines.append(
             f"| {row['name']} | {d['p50']:.0f} | {d['p95']:.0f} | "
             f"{row['drag_render_ms']['p50']:.0f} | {row['drag_fps']:.1f} | {scales} | "
-            f"{r['p50']:.0f} | {r['p95']:.0f} | {row['release_render_encode_ms']['p50']:.0f} | "
+            f"{r['p50']:.0f} | {r['p95']:.0f} | {row['release_server_render_ms']['p50']:.0f} | "
+            f"{row['release_encode_ms']['p50']:.0f} | "
             f"{row['direct_ms']:.0f} | {r['p50'] / row['direct_ms']:.2f} |")
     b = result.get("browser")
     if b:
