@@ -44,7 +44,7 @@ __all__ = ["FrameRenderer", "RenderedImage"]
 #: Longest render time of a stripe: the longest a superseded frame keeps the render thread
 #: busy. A frame expected to take longer is cut into as few even stripes as keep each below it;
 #: each stripe adds a call's fixed cost and its antialiased border (a 1024x768 isosurface in two
-#: stripes takes 8-15% longer than whole), so a frame that fits is rendered whole.
+#: stripes takes 8-17% longer than whole), so a frame that fits is rendered whole.
 STRIPE_MS = 250.0
 #: Stripe height when nothing is known yet about the cost of a frame.
 _FIRST_STRIPE_ROWS = 128
