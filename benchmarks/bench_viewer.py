@@ -9,9 +9,14 @@ WebSocket client (`splinecast.viewer.client.ViewerClient`) drives it:
 * **release:** after a short drag, the request of the final state (``interactive: false``, as the
   page sends on pointer-up); latency to the full-resolution PNG frame.
 
-Baseline, measured in the same run before the server starts: ``Scene.render`` of the full-size
-frame in this process (median after warm-up), so ``release / direct`` is the viewer's overhead
-(protocol, PNG encoding, transfer, scheduling). Once, the same is measured through the real page
+Baseline, interleaved with the releases (once before each, while the server is idle, so both
+see the same load of a shared machine): ``Scene.render`` of the full-size frame in this process
+(median; compiled and warmed up first) with the options the viewer derives from the same state
+(``splinecast.viewer.state.parse_state``: its DVR settings, its normals, colour output only, as
+the viewer renders), so ``release / direct`` is the viewer's overhead
+(waiting for the drag's frame in flight, stripes, protocol, PNG encoding, transfer,
+scheduling). The release frame's header splits the server's part: render (stripes and the 8-bit
+conversion included) and PNG encoding. Once, the same is measured through the real page
 in headless Chromium (Playwright), from the page's own frame log.
 
 Scenes: Marschner-Lobb 256^3 (trilinear and s31 isosurfaces) and the MNI152 MRI from
@@ -46,12 +51,14 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 import splinecast as sc
 from splinecast.viewer.client import ViewerClient
+from splinecast.viewer.state import default_state, parse_state
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import MRI, describe  # noqa: E402
@@ -89,25 +96,23 @@ def scenes(quick: bool) -> list[dict]:
     return out
 
 
-def direct_render_ms(scene_spec: dict, size: tuple[int, int], repeats: int) -> float:
-    """Median Scene.render time of the first viewer frame's state, in this process."""
+def direct_renderer(scene_spec: dict, size: tuple[int, int]) -> Callable[[], float]:
+    """A function timing one ``Scene.render`` (ms) of the first viewer frame's state, in this
+    process (compiled and warmed up first)."""
     vol = sc.read(scene_spec["source"])
     scene = sc.Scene(vol, model=scene_spec["model"])
-    cam = sc.Camera.orbit(vol, azimuth=30, elevation=20, size=size)
-    options: dict = {"mode": scene_spec["mode"]}
-    if scene_spec["mode"] == "iso":
-        options["iso"] = scene_spec["state"]["iso"]
-    else:
-        options["tf"] = sc.TransferFunction.from_dict(scene_spec["state"]["tf"])
-        # The viewer's DVR defaults: 0.5-voxel step, 2D table, termination at 0.99.
-        options["dvr"] = sc.DVRSettings(step=0.5, termination=0.99)
-    scene.render(cam, **options)  # compile and warm up
-    times = []
-    for _ in range(repeats):
+    defaults = default_state(vol, model=scene_spec["model"], mode=scene_spec["mode"])
+    request = parse_state({**scene_spec["state"], "size": list(size)}, vol, defaults)
+    options = {"outputs": ("rgba",), **request.options}
+    scene.render(request.camera, **options)  # compile and warm up
+    scene.render(request.camera, **options)
+
+    def once() -> float:
         start = time.perf_counter()
-        scene.render(cam, **options)
-        times.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(times)
+        scene.render(request.camera, **options)
+        return (time.perf_counter() - start) * 1e3
+
+    return once
 
 
 class Server:
@@ -162,7 +167,10 @@ async def drag(client: ViewerClient, state: dict, seconds: float, azimuth: float
     return frames, azimuth, time.perf_counter() - start
 
 
-async def measure(url: str, state: dict, drag_s: float, releases: int) -> dict:
+async def measure(url: str, state: dict, drag_s: float, releases: int,
+                  direct: Callable[[], float]) -> dict:
+    """Drag and release through the server at ``url``; before each release's drag, one direct
+    render in this process (``direct``), so both see the same load of a shared machine."""
     async with ViewerClient(url) as client:
         ident = await client.render(state)  # warm-up: scene preparation, compilation
         await client.frame(ident)
@@ -173,18 +181,28 @@ async def measure(url: str, state: dict, drag_s: float, releases: int) -> dict:
         drag_render += [f.header["render_ms"] for f in frames]
         fps.append(len(frames) / duration)
         scales += [f.header["scale"] for f in frames]
-        release_render = []
+        release_render, render_only, encode_only, stripes, direct_ms = [], [], [], [], []
         for _ in range(releases):
+            direct_ms.append(direct())  # the server is idle: its last frame has arrived
             frames, azimuth, duration = await drag(client, state, 0.4, azimuth)
             ident = await client.render({**state, "camera": {"azimuth": azimuth}})
             final = await client.frame(ident)
             release_ms.append((final.received - client.sent_at(ident)) * 1e3)
             release_render.append(final.header["render_ms"] + final.header["encode_ms"])
+            render_only.append(final.header["render_ms"])
+            encode_only.append(final.header["encode_ms"])
+            stripes.append(final.header["stats"].get("stripes"))
         return {"drag_latency_ms": percentiles(drag_latency),
                 "drag_render_ms": percentiles(drag_render), "drag_fps": statistics.mean(fps),
-                "drag_scales": sorted(set(scales)), "release_ms": percentiles(release_ms),
+                "drag_scales": sorted(set(scales)),
+                "drag_scale_shares": {str(s): scales.count(s) / len(scales)
+                                      for s in sorted(set(scales))},
+                "release_ms": percentiles(release_ms),
                 "release_samples_ms": release_ms,
-                "release_render_encode_ms": percentiles(release_render)}
+                "release_render_encode_ms": percentiles(release_render),
+                "release_server_render_ms": percentiles(render_only),
+                "release_encode_ms": percentiles(encode_only), "release_stripes": stripes,
+                "direct_ms": statistics.median(direct_ms), "direct_samples_ms": direct_ms}
 
 
 def browser_once(spec: dict, size: tuple[int, int], drag_s: float, releases: int) -> dict:
@@ -384,23 +402,33 @@ def write_markdown(result: dict, path: Path) -> None:
         "",
         f"Image {w}x{h}. Dragging: interactive requests at {POINTER_HZ:g} Hz; latency from a "
         "request to the reduced JPEG frame showing it; fps = reduced frames received per "
-        "second. Release: latency from the final request to the full-resolution PNG frame. "
-        "Direct: `Scene.render` of the full frame in one process (median after warm-up), "
-        "measured in the same run.",
+        "second; reduced scales: the share of the drag's frames at each scale. Release: latency "
+        "from the final request (sent after a 0.4 s drag, so a drag frame may still be in "
+        "flight) to the full-resolution PNG frame; the server's render (stripes and the 8-bit "
+        "conversion included) and PNG encoding of it. Direct: `Scene.render` of the full frame "
+        "in the benchmark's process with the options the viewer derives from the same state, "
+        "colour only, once before each release (median), so both see the same load. Load: the "
+        "machine's 1-minute load average before and after the scene's run.",
         "",
         "| scene | drag p50 ms | drag p95 ms | server render p50 ms (drag) | drag fps | "
-        "reduced scales | release p50 ms | release p95 ms | server render+encode p50 ms "
-        "(release) | direct ms | release / direct |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "reduced scales | release p50 ms | release p95 ms | server render p50 ms (release) | "
+        "PNG encode p50 ms | direct ms | release / direct | load |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in result["scenes"]:
         d, r = row["drag_latency_ms"], row["release_ms"]
-        scales = ", ".join(f"1/{round(1 / s)}" for s in row["drag_scales"])
+        shares = row.get("drag_scale_shares") or {}
+        scales = ", ".join(
+            f"1/{round(1 / s)}" + (f" ({max(shares[str(s)], 0.01):.0%})" if str(s) in shares
+                                   else "")
+            for s in sorted(row["drag_scales"], reverse=True))
         lines.append(
             f"| {row['name']} | {d['p50']:.0f} | {d['p95']:.0f} | "
             f"{row['drag_render_ms']['p50']:.0f} | {row['drag_fps']:.1f} | {scales} | "
-            f"{r['p50']:.0f} | {r['p95']:.0f} | {row['release_render_encode_ms']['p50']:.0f} | "
-            f"{row['direct_ms']:.0f} | {r['p50'] / row['direct_ms']:.2f} |")
+            f"{r['p50']:.0f} | {r['p95']:.0f} | {row['release_server_render_ms']['p50']:.0f} | "
+            f"{row['release_encode_ms']['p50']:.0f} | "
+            f"{row['direct_ms']:.0f} | {r['p50'] / row['direct_ms']:.2f} | "
+            f"{', '.join(f'{v:g}' for v in row.get('load', []))} |")
     b = result.get("browser")
     if b:
         lines += ["", f"Through the page in headless Chromium ({result['browser_scene']}):", ""]
@@ -428,7 +456,7 @@ def main() -> None:
     size = (512, 384) if args.quick else (1024, 768)
     drag_s = 1.5 if args.quick else 8.0
     releases = 3 if args.quick else 10
-    repeats = 3 if args.quick else 7
+    repeats = 3 if args.quick else 7  # the pyramid case's fresh servers
     command = "python benchmarks/bench_viewer.py" + (" --quick" if args.quick else "")
     note = ("Percentiles over one run; on a shared machine (other jobs running) the timings are "
             "noisy.")
@@ -447,16 +475,17 @@ def main() -> None:
     specs = scenes(args.quick)
     for spec in specs:
         print(f"{spec['name']}: direct render ...", file=sys.stderr, flush=True)
-        direct = direct_render_ms(spec, size, repeats)
+        direct = direct_renderer(spec, size)
         print(f"{spec['name']}: viewer ...", file=sys.stderr, flush=True)
+        load = os.getloadavg()[0]
         server = Server(spec)
         try:
             state = {**spec["state"], "size": list(size)}
-            row = asyncio.run(measure(server.url, state, drag_s, releases))
+            row = asyncio.run(measure(server.url, state, drag_s, releases, direct))
         finally:
             server.stop()
         row.update(name=spec["name"], source=spec["source"], model=spec["model"],
-                   mode=spec["mode"], direct_ms=direct)
+                   mode=spec["mode"], load=[round(load, 1), round(os.getloadavg()[0], 1)])
         rows.append(row)
         print(json.dumps(row), file=sys.stderr, flush=True)
     result = {"command": command, "note": note, "machine": describe(), "size": list(size),

@@ -472,6 +472,54 @@ def test_striped_render_equals_whole_render_and_can_be_abandoned(vol):
     assert len(calls) == 1  # asked after the first stripe, then stopped
 
 
+@pytest.mark.parametrize(("expected_ms", "stripes"), [(240.0, 1), (700.0, 3)])
+def test_a_frame_is_cut_into_the_fewest_stripes_of_stripe_ms(vol, expected_ms, stripes):
+    """A frame expected to take STRIPE_MS or less is rendered whole (each stripe costs a call's
+    fixed part and its antialiased border); a longer one in the fewest even stripes of at most
+    STRIPE_MS each. Either way the image is Scene.render's."""
+    from splinecast.viewer.renderer import STRIPE_MS
+
+    assert expected_ms / stripes <= STRIPE_MS < expected_ms / (stripes - 1 or 0.5)
+    request = parse_state({"size": [64, 80], "camera": {"elevation": 50.0}}, vol,
+                          default_state(vol))
+    renderer = FrameRenderer(vol)
+    renderer._learn(request, "full", 64 * 80, expected_ms)  # as if such a frame had been seen
+    image = renderer.render(request)
+    assert image.stats["stripes"] == stripes
+    np.testing.assert_array_equal(image.rgba, reference(vol, {"elevation": 50.0},
+                                                        size=(64, 80), iso=0.5))
+
+
+@pytest.mark.parametrize(("fixed_ms", "per_pixel_ms"), [(6.0, 1.1e-4), (15.0, 1.3e-4),
+                                                        (2.0, 4e-4)])
+def test_drag_scale_recovers_from_a_slow_first_frame(vol, fixed_ms, per_pixel_ms):
+    """The drag's scale follows the frames it renders, at any size: after a first reduced frame
+    slowed by loading kernels (the smallest scale then looks necessary), the frames at that
+    scale, and each one after, teach the cost model until the drag settles at the largest scale
+    whose frames take Session.interactive_ms at most. A frame's time has a fixed part per call
+    and a part per pixel; the reference is the smallest divisor whose frame fits, by that
+    formula."""
+    session = Session(FrameRenderer(vol), None, None, None, default_state(vol), 10**8)
+    request = parse_state({"size": [1024, 768]}, vol, default_state(vol))
+
+    def pixels(divisor):
+        return round(1024 / divisor) * round(768 / divisor)
+
+    def frame_ms(divisor):
+        return fixed_ms + per_pixel_ms * pixels(divisor)
+
+    fits = [k for k in range(1, 9) if frame_ms(k) <= session.interactive_ms]
+    assert fits and fits[0] > 1  # the reference: full frames would not fit
+    session.renderer._learn(request, "interactive", pixels(2), 3000.0)  # kernels loading
+    chosen = []
+    for _ in range(12):
+        divisor = session._divisor(request, session.interactive_ms, 2, "interactive")
+        chosen.append(divisor)
+        session.renderer._learn(request, "interactive", pixels(divisor), frame_ms(divisor))
+    assert chosen[0] == 8
+    assert chosen[-6:] == [fits[0]] * 6, chosen
+
+
 @pytest.mark.parametrize("rows", [5, 12, 37])
 def test_striped_mip_with_a_tolerance_equals_the_whole_render(vol, rows):
     """A MIP with a tolerance reports, per pixel, one of the values within it, chosen by what

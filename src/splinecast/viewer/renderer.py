@@ -20,6 +20,7 @@ of the others. So at most two time points are held: the current one and the one 
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import OrderedDict
@@ -40,13 +41,17 @@ from .state import RenderRequest, resized_camera
 
 __all__ = ["FrameRenderer", "RenderedImage"]
 
-#: Render time a stripe aims at: the longest a superseded frame keeps the render thread busy.
-STRIPE_MS = 150.0
+#: Longest render time of a stripe: the longest a superseded frame keeps the render thread
+#: busy. A frame expected to take longer is cut into as few even stripes as keep each below it;
+#: each stripe adds a call's fixed cost and its antialiased border (a 1024x768 isosurface in two
+#: stripes takes 8-17% longer than whole), so a frame that fits is rendered whole.
+STRIPE_MS = 250.0
 #: Stripe height when nothing is known yet about the cost of a frame.
 _FIRST_STRIPE_ROWS = 128
 _MIN_STRIPE_ROWS = 32
-#: Smaller images are dominated by fixed costs per call and teach the cost model nothing.
-_MIN_LEARN_PIXELS = 32_768
+#: Two frames in a row whose pixel counts differ by this factor or more tell the cost model the
+#: fixed part of a frame's time (the line through both); closer sizes only its per-pixel part.
+_SIZES_APART = 1.5
 #: The passes shown only until the full frame replaces them (a drag's reduced frames, the coarse
 #: frame before a slow full one).
 PREVIEW_PASSES = ("interactive", "coarse")
@@ -77,6 +82,26 @@ class RenderedImage:
     stats: dict[str, Any] = field(default_factory=dict)
     render_ms: float = 0.0
     scale: float = 1.0
+
+
+@dataclass
+class _Cost:
+    """Render time of one kind of frame (:meth:`FrameRenderer._cost_key`), modelled as
+    ``fixed + per_pixel * pixels`` milliseconds, and the last frame it learned from.
+
+    The fixed part (each call's set-up: the blocks' screen footprint, starting the threads)
+    dominates small frames: a drag's frames at 1/8 scale take far more than 1/64 of a full
+    one. A per-pixel cost alone, learned from them, overestimates every larger frame, and a drag
+    that once fell to the smallest scale would stay there.
+    """
+
+    per_pixel: float
+    fixed: float
+    pixels: int
+    ms: float
+
+    def estimate(self, pixels: float) -> float:
+        return self.fixed + self.per_pixel * pixels
 
 
 class FrameRenderer:
@@ -115,8 +140,8 @@ class FrameRenderer:
         self._incoming: tuple[int, Any, dict[str, Any]] | None = None
         self._lock = threading.Lock()
         self._max_scenes = max(1, min(int(max_scenes), self.shown.kind.max_scenes))
-        # Milliseconds per pixel of recent renders, by (model, mode, several isovalues).
-        self._cost: dict[tuple[str, str, bool], float] = {}
+        # Cost of recent renders, by (model, mode, several isovalues, preview options).
+        self._cost: dict[tuple, _Cost] = {}
 
     # ------------------------------------------------------------------------------ scenes
     def _pinned_for(self, model: str, timepoint: int) -> bool:
@@ -260,21 +285,36 @@ class FrameRenderer:
                     step: str = "full") -> float | None:
         """Expected render time of pass ``step`` at ``scale`` from recent renders of the same
         kind (None if there were none)."""
-        per_pixel = self._cost.get(self._cost_key(request, step))
-        if per_pixel is None:
+        cost = self._cost.get(self._cost_key(request, step))
+        if cost is None:
             return None
-        return per_pixel * request.camera.width * request.camera.height * scale * scale
+        return cost.estimate(request.camera.width * request.camera.height * scale * scale)
 
     def _learn(self, request: RenderRequest, step: str, pixels: int, ms: float) -> None:
-        if pixels < _MIN_LEARN_PIXELS:
-            return
+        """Update the cost of ``request``'s kind of frame with a frame of ``pixels`` that took
+        ``ms``. Every frame teaches, whatever its size: the pass whose scale the model chooses
+        must be able to correct it (a drag's smallest frames included)."""
+        pixels = max(int(pixels), 1)
         key = self._cost_key(request, step)
-        measured = ms / max(pixels, 1)
-        previous = self._cost.get(key)
-        if previous is None or measured < previous / 4:  # first runs include compilation
-            self._cost[key] = measured
+        cost = self._cost.get(key)
+        if cost is None:
+            self._cost[key] = _Cost(ms / pixels, 0.0, pixels, ms)
+            return
+        (small, small_ms), (large, large_ms) = sorted(((cost.pixels, cost.ms), (pixels, ms)))
+        if large >= _SIZES_APART * small and large_ms > small_ms:
+            # The line through the last two frames (a drag changing its scale, a window
+            # resized): how the time grows with the size, and what a frame costs anyway.
+            slope = (large_ms - small_ms) / (large - small)
+            fixed = min(max(0.0, small_ms - slope * small), 0.5 * ms)
+            per_pixel = (ms - fixed) / pixels
         else:
-            self._cost[key] = 0.5 * (previous + measured)
+            # A frame takes longer than its fixed part: at most half of it is taken as fixed
+            # when the last change of size is old news.
+            fixed = min(cost.fixed, 0.5 * ms)
+            per_pixel = (ms - fixed) / pixels
+            if per_pixel >= cost.per_pixel / 4:  # else the earlier frames included compiling
+                per_pixel = 0.5 * (cost.per_pixel + per_pixel)
+        self._cost[key] = _Cost(per_pixel, fixed, pixels, ms)
 
     # -------------------------------------------------------------------------- rendering
     def render(self, request: RenderRequest, scale: float = 1.0,
@@ -336,16 +376,20 @@ class FrameRenderer:
         # The viewer shows colour only: no depth, position, normal or per-ray counters.
         options = {"outputs": ("rgba",), **request.options, **self._pass_options(request, step),
                    **self.shown.kind.render_options(step)}
-        image = np.empty((camera.height, camera.width, 4), np.uint8)
+        image = None
         parts: list[tuple[int, dict[str, Any]]] = []
         for row0 in range(0, camera.height, rows):
             if abort is not None and parts and abort():
                 return None
             height = min(rows, camera.height - row0)
-            window = camera if height == camera.height else camera.tile(
-                0, row0, camera.width, height)
-            frame = scene.render(window, **options)
-            image[row0:row0 + height] = frame.to_uint8()
+            if height == camera.height:  # whole: the frame's own pixels, no copy
+                frame = scene.render(camera, **options)
+                image = _to_uint8(frame)
+            else:
+                frame = scene.render(camera.tile(0, row0, camera.width, height), **options)
+                if image is None:
+                    image = np.empty((camera.height, camera.width, 4), np.uint8)
+                image[row0:row0 + height] = _to_uint8(frame)
             parts.append((height, frame.stats))
         render_ms = (time.perf_counter() - start) * 1e3
         self._learn(request, step, camera.width * camera.height, render_ms)
@@ -386,17 +430,22 @@ class FrameRenderer:
 
     def _stripe_rows(self, request: RenderRequest, step: str, width: int, height: int,
                      align: int = 1) -> int:
-        """Rows per stripe: about :data:`STRIPE_MS` of work, a multiple of ``align``."""
+        """Rows per stripe: the fewest even stripes of at most :data:`STRIPE_MS` of work each,
+        a multiple of ``align`` rows."""
         if not self.shown.kind.stripes:  # rendered whole (.kinds.DataKind.stripes)
             return height
         if self._stripe_rows_fixed is not None:
             rows = self._stripe_rows_fixed
         else:
-            per_pixel = self._cost.get(self._cost_key(request, step))
-            if per_pixel is None:
+            cost = self._cost.get(self._cost_key(request, step))
+            if cost is None:
                 rows = _FIRST_STRIPE_ROWS
             else:
-                rows = max(_MIN_STRIPE_ROWS, int(STRIPE_MS / max(per_pixel * width, 1e-9)))
+                stripes = max(1, math.ceil(cost.estimate(width * height) / STRIPE_MS))
+                # Rounded up to the alignment, so the stripes are no more than that many.
+                step_rows = max(1, int(align))
+                rows = max(_MIN_STRIPE_ROWS,
+                           math.ceil(height / stripes / step_rows) * step_rows)
         align = max(1, int(align))
         rows = max(align, rows - rows % align)
         return max(1, min(height, rows))
@@ -411,6 +460,21 @@ def _tiny_volume(volume: Volume) -> Volume:
                    lo, hi).astype(volume.dtype)
     data.flat[0], data.flat[-1] = lo, hi
     return Volume(data, spacing=volume.spacing, origin=volume.origin)
+
+
+def _to_uint8(frame: Any) -> np.ndarray:
+    """``frame.to_uint8()``, converted in place where the colour buffer allows: it is this
+    render's own and dropped after, so the temporary float images ``to_uint8`` makes (three of
+    the frame's size, about 10 ms of a 1024x768 frame on a busy machine) are not needed."""
+    rgba = frame.rgba
+    if (rgba is None or rgba.dtype.kind != "f" or not rgba.flags.writeable
+            or not rgba.flags.owndata):
+        return frame.to_uint8()
+    # The arithmetic of Frame.to_uint8, step by step in the buffer (the same values).
+    np.clip(rgba, 0.0, 1.0, out=rgba)
+    rgba *= 255.0
+    rgba += 0.5
+    return rgba.astype(np.uint8)
 
 
 def _merge_stats(parts: list[tuple[int, dict[str, Any]]], width: int,

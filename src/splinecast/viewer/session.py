@@ -5,9 +5,11 @@ Scheduling rules (the interaction model of the issue):
 * **One frame in flight, the newest request wins.** A request waiting for the render thread is
   replaced by a newer one; a frame being rendered is abandoned at its next stripe boundary when a
   newer request arrives (:mod:`.renderer`). A superseded request gets no frame.
-* **Dragging:** ``"interactive": true`` requests are rendered at a reduced scale chosen from the
-  cost of recent frames (aiming at :attr:`Session.interactive_ms`, 40 ms, since a request may
-  also wait for the frame in flight) and sent as JPEG.
+* **Dragging:** ``"interactive": true`` requests are rendered at scale ``1/k``, the largest
+  whose frame is expected to take :attr:`Session.interactive_ms` (40 ms, since a request may
+  also wait for the frame in flight) at most, and sent as JPEG. The expectation comes from the
+  drag's own recent frames (a fixed part per frame and a part per pixel,
+  :meth:`.renderer.FrameRenderer.estimate_ms`), so the scale follows the view's cost both ways.
 * **Settling:** :attr:`Session.settle_s` (0.3 s) after the last interactive request, the same state
   is rendered at full resolution and sent as PNG (lossless). A request with
   ``"interactive": false`` (a click, a typed value) skips the wait.
@@ -296,12 +298,14 @@ class Session:
 
     def _divisor(self, request: RenderRequest, target_ms: float, default: int,
                  step: str) -> int:
-        """``k`` such that pass ``step`` at ``1/k`` of the full size takes about
-        ``target_ms``."""
-        estimate = self.renderer.estimate_ms(request, step=step)
-        if estimate is None:
+        """The smallest ``k`` (at most 8) such that pass ``step`` at ``1/k`` of the full size is
+        expected to take ``target_ms`` at most; ``default`` before any frame of its kind."""
+        if self.renderer.estimate_ms(request, step=step) is None:
             return default
-        return min(_MAX_DIVISOR, max(1, math.ceil(math.sqrt(estimate / target_ms))))
+        for divisor in range(1, _MAX_DIVISOR):
+            if self.renderer.estimate_ms(request, 1.0 / divisor, step) <= target_ms:
+                return divisor
+        return _MAX_DIVISOR
 
     async def _serve(self, job: _Job) -> None:
         generation = self._generation
