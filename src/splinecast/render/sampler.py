@@ -53,7 +53,7 @@ from typing import Any
 
 from .._jit import jit, rebound
 from ..accel.traversal import axis_exit, clip_to_box
-from ..models.pieces import look_ahead, value_at, value_on_plane
+from ..models.pieces import look_ahead, prefetch_at, value_at, value_on_plane
 from .mode_api import (
     answer_shift,
     asks_again,
@@ -77,6 +77,9 @@ __all__ = ["sample_pixel", "bound_sample_pixel"]
 #: Whether :func:`sample_pixel` compiles the look-ahead code (its model's ``look_ahead`` may be
 #: true); :func:`bound_sample_pixel` binds the pair's constant in its copy.
 _LOOK_AHEAD = True
+
+#: How many samples beyond the look-ahead's the run loop prefetches the voxels of.
+_PREFETCH = 14.0
 
 
 @jit(inline="always")
@@ -306,6 +309,8 @@ def sample_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, 
                             ahead = value_at(grid, scr, ox + tc * dx, oy + tc * dy, oz + tc * dz)
                             ahead_m = m + 1.0
                             evaluated += 1
+                            tp = tc + _PREFETCH * dt
+                            prefetch_at(grid, scr, ox + tp * dx, oy + tp * dy, oz + tp * dz)
                         length = (tb - ta) * speed
                         if length > 0.0:
                             st = segment(mode, grid, scr, st, ray,
