@@ -16,22 +16,24 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-__all__ = ["prefetch3"]
+__all__ = ["prefetch"]
 
 
 @intrinsic
-def prefetch3(typingctx: Any, array: Any, i: Any, j: Any, k: Any) -> Any:
-    """Prefetch ``array[i, j, k]`` (a 3D array, indices in range, non-negative) into every
-    level of the cache (``llvm.prefetch``: read, high locality, data)."""
-    if not (isinstance(array, types.Array) and array.ndim == 3
-            and all(isinstance(t, types.Integer) for t in (i, j, k))):
+def prefetch(typingctx: Any, array: Any, index: Any) -> Any:
+    """Prefetch ``array[index]`` (``index`` a tuple of one non-negative integer per axis, in
+    range) into every level of the cache (``llvm.prefetch``: read, high locality, data)."""
+    if not (isinstance(array, types.Array) and isinstance(index, types.BaseTuple)
+            and len(index) == array.ndim
+            and all(isinstance(t, types.Integer) for t in index)):
         return None
 
     def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        arrty = signature.args[0]
+        arrty, idxty = signature.args
         arr = context.make_array(arrty)(context, builder, args[0])
+        values = cgutils.unpack_tuple(builder, args[1], len(idxty))
         index = [context.cast(builder, v, t, types.intp)
-                 for v, t in zip(args[1:], signature.args[1:], strict=True)]
+                 for v, t in zip(values, idxty, strict=True)]
         ptr = cgutils.get_item_pointer(context, builder, arrty, arr, index, wraparound=False)
         byte_ptr = ir.IntType(8).as_pointer()
         i32 = ir.IntType(32)
@@ -40,4 +42,4 @@ def prefetch3(typingctx: Any, array: Any, i: Any, j: Any, k: Any) -> Any:
         builder.call(fn, [builder.bitcast(ptr, byte_ptr), i32(0), i32(3), i32(1)])
         return context.get_dummy_value()
 
-    return types.void(array, i, j, k), codegen
+    return types.void(array, index), codegen

@@ -21,7 +21,7 @@ from collections import namedtuple
 import numpy as np
 
 from .._jit import jit
-from .._jit.prefetch import prefetch3
+from .._jit.prefetch import prefetch
 from ..roots.pieces import PowerCubic
 from ..volume import Volume
 from .base import ReconstructionModel
@@ -292,10 +292,10 @@ def _prefetch_at(grid, scratch, x, y, z):
     j = np.uint64(min(int(min(max(y, 0.0), float(ny))), ny - 1))
     k = np.uint64(min(int(min(max(z, 0.0), float(nz))), nz - 1))
     i1, j1 = i + np.uint64(1), j + np.uint64(1)
-    prefetch3(data, i, j, k)
-    prefetch3(data, i1, j, k)
-    prefetch3(data, i, j1, k)
-    prefetch3(data, i1, j1, k)
+    prefetch(data, (i, j, k))
+    prefetch(data, (i1, j, k))
+    prefetch(data, (i, j1, k))
+    prefetch(data, (i1, j1, k))
 
 
 @jit()
