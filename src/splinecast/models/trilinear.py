@@ -24,6 +24,7 @@ from .._jit import jit
 from .._jit.prefetch import prefetch
 from ..roots.pieces import PowerCubic
 from ..volume import Volume
+from ._trilinear_vector import cell_value
 from .base import ReconstructionModel
 from .pieces import cell_range, register, whole_cell
 from .shading_field import SHADING_HALO, halo_gradient, whole_halo
@@ -224,20 +225,10 @@ def _value_at(grid, scratch, x, y, z):
     # out the negative-index wrap-around it would otherwise add to each of the eight reads.
     ci, cj, ck = min(int(x), nx - 1), min(int(y), ny - 1), min(int(z), nz - 1)
     u, v, w = x - ci, y - cj, z - ck
-    i, j, k = np.uint64(ci), np.uint64(cj), np.uint64(ck)
-    i1, j1, k1 = i + np.uint64(1), j + np.uint64(1), k + np.uint64(1)
-    # In float64 before any difference: the data may be unsigned integers.
-    d000, d100 = np.float64(data[i, j, k]), np.float64(data[i1, j, k])
-    d010, d110 = np.float64(data[i, j1, k]), np.float64(data[i1, j1, k])
-    d001, d101 = np.float64(data[i, j, k1]), np.float64(data[i1, j, k1])
-    d011, d111 = np.float64(data[i, j1, k1]), np.float64(data[i1, j1, k1])
-    c00 = d000 + u * (d100 - d000)
-    c10 = d010 + u * (d110 - d010)
-    c01 = d001 + u * (d101 - d001)
-    c11 = d011 + u * (d111 - d011)
-    c0 = c00 + v * (c10 - c00)
-    c1 = c01 + v * (c11 - c01)
-    return c0 + w * (c1 - c0)
+    # Along the first axis, then the second, then the third, each voxel converted to float64
+    # before any difference (the data may be unsigned integers); the rows' two voxels along
+    # the third axis as the two lanes of a vector (the same operations per lane).
+    return cell_value(data, np.uint64(ci), np.uint64(cj), np.uint64(ck), u, v, w)
 
 
 @jit(inline="always")
