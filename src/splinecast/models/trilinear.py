@@ -279,9 +279,12 @@ def _prefetch_at(grid, scratch, x, y, z):
     voxels lie side by side along the last axis)."""
     data = grid.data
     nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
-    i = np.uint64(min(int(min(max(x, 0.0), float(nx))), nx - 1))
-    j = np.uint64(min(int(min(max(y, 0.0), float(ny))), ny - 1))
-    k = np.uint64(min(int(min(max(z, 0.0), float(nz))), nz - 1))
+    # Clamped as unsigned integers, without the float clamps of the read: a point below 0 (or
+    # not a number) truncates to a negative integer, which as unsigned is above the top and is
+    # clamped to it; a prefetch of the wrong voxels only costs its hint.
+    i = min(np.uint64(int(x)), np.uint64(nx - 1))
+    j = min(np.uint64(int(y)), np.uint64(ny - 1))
+    k = min(np.uint64(int(z)), np.uint64(nz - 1))
     i1, j1 = i + np.uint64(1), j + np.uint64(1)
     prefetch(data, (i, j, k))
     prefetch(data, (i1, j, k))
