@@ -270,6 +270,40 @@ def test_taking_values_one_sample_early_changes_nothing():
             assert (counts[0] >= counts_p[0]).all() and counts[0].sum() > counts_p[0].sum()
 
 
+def test_prefetching_voxels_changes_nothing():
+    """The trilinear model prefetches the voxels of a sample ahead (``prefetch_at``): the same
+    hooks registered for a twin grid class without it (the default, nothing) give
+    bit-identical colours, depths and counts, with leaps, early termination and steps that do
+    and do not divide the volume (prefetches near and beyond the grid's far faces)."""
+    from collections import namedtuple
+
+    from splinecast.models import pieces
+    from splinecast.models.trilinear import TrilinearGrid
+
+    plain_class = namedtuple("TrilinearGridNoPrefetch", TrilinearGrid._fields)
+    hooks = {k: v for k, v in pieces.hooks_of(TrilinearGrid).items() if k != "prefetch_at"}
+    assert len(hooks) < len(pieces.hooks_of(TrilinearGrid))
+    pieces.register(plain_class, **hooks)
+    vol = sc.demo("marschner-lobb", size=40)
+    grid = sc.Scene(vol).grid
+    plain = grid.with_kernel(plain_class(*grid.kernel))
+    lo, hi = vol.value_range
+    tf = sc.TransferFunction([(lo, 0.0), (lo + 0.2 * (hi - lo), 0.02), (hi, 0.2)],
+                             domain=(lo, hi))
+    cams = [sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(48, 36)),
+            sc.Camera.orbit(vol, azimuth=-70, elevation=50, size=(40, 30), zoom=1.6)]
+    for step, termination in ((1.0, 1.0 - 2.0**-10), (0.7, None), (2.5, 0.9)):
+        setup = Dvr(tf, sc.DVRSettings(step=step, sampling="ray", termination=termination))
+        for cam in cams:
+            (rgba, depth, *_), counts = render_grid(grid, setup, cam)
+            (rgba_p, depth_p, *_), counts_p = render_grid(plain, setup, cam)
+            assert rgba[..., 3].max() > 0.5
+            np.testing.assert_array_equal(rgba, rgba_p)
+            np.testing.assert_array_equal(depth, depth_p)
+            for c, c_p in zip(counts, counts_p, strict=True):
+                np.testing.assert_array_equal(c, c_p)
+
+
 def test_clear_ends_are_where_the_opacity_is_zero_to_the_end():
     """Against the opacity sampled densely: zero at every value up to ``below`` and from
     ``above`` on, and not zero just inside each (so neither end could be wider)."""

@@ -66,9 +66,15 @@ def _worker() -> None:
             volume = spec.make()
             loaded[name] = (spec, volume, sc.Scene(volume))
         spec, volume, scene = loaded[name]
-        tf = (sc.TransferFunction(M.dvr_transfer(volume, spec.isos[0]), volume.value_range,
-                                  "gray")
-              if req["tf"] == "suite" else sc.auto_transfer_function(volume))
+        if req["tf"] == "suite":
+            tf = sc.TransferFunction(M.dvr_transfer(volume, spec.isos[0]), volume.value_range,
+                                     "gray")
+        elif req["tf"] == "every":
+            # The comparison suite's dense "every voxel" opacity (M.dense_transfers).
+            tf = sc.TransferFunction(M.dense_transfers(volume)["every voxel"],
+                                     volume.value_range, "gray")
+        else:
+            tf = sc.auto_transfer_function(volume)
         dvr = None if req["settings"] is None else sc.DVRSettings(**req["settings"])
         cam = sc.Camera.orbit(volume, azimuth=30.0, elevation=20.0, size=tuple(req["size"]))
         kwargs = dict(mode="dvr", tf=tf, dvr=dvr, shading=black, outputs=("rgba",))
@@ -116,7 +122,9 @@ def main() -> None:
     ap.add_argument("--old", help="checkout of the baseline build")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--scenes", default="ml256,mri")
-    ap.add_argument("--tfs", default="suite,auto")
+    ap.add_argument("--tfs", default="suite,auto",
+                    help="transfer functions: suite, auto (the automatic one), every (the "
+                    "suite's dense ramp over the whole range)")
     ap.add_argument("--size", default="1024x768")
     ap.add_argument("--stem", default="dvr_speed")
     ap.add_argument("--cases", default="",

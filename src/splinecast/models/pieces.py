@@ -56,6 +56,11 @@ Per cell, in the order a driver uses them:
     one whose value is costly loses the early value a ray that stops never uses. Default False.
     Called once in Python with ``grid=None`` when a pair's kernel is made, so the code of the
     other case is left out of it.
+``prefetch_at(grid, scratch, x, y, z) -> None`` (optional)
+    Ask the processor for the memory ``value_at`` at that point will read, without waiting for
+    it (a software prefetch): the fixed-step loop of a model that looks ahead calls it a few
+    samples before it takes the value, so a read that misses the caches overlaps the samples
+    in between. Default: nothing.
 
 And once per grid: ``cell_count(grid) -> (nx, ny, nz)`` and ``new_scratch(grid)`` (per-thread
 buffers, allocated once per band of rows). A model module defines these for its grid class and
@@ -72,6 +77,7 @@ __all__ = [
     "register", "hooks_of", "called_of", "cell_count", "new_scratch", "cell_load", "cell_pieces",
     "piece_range", "piece_poly", "gradient", "value_gradient_at", "value_at", "whole_cell",
     "cell_range", "look_ahead", "value_on_plane", "separate_shading", "shading_gradient_at",
+    "prefetch_at",
 ]
 
 #: Kernel grid class -> {hook name: compiled function}.
@@ -82,7 +88,7 @@ _NAMES = ("cell_count", "new_scratch", "cell_load", "cell_pieces", "piece_range"
           "gradient", "value_gradient_at")
 #: Hooks a model may leave out (the stub then derives them from the others).
 _OPTIONAL = ("value_at", "look_ahead", "value_on_plane", "separate_shading",
-             "shading_gradient_at")
+             "shading_gradient_at", "prefetch_at")
 
 
 def register(grid_class: type, called: tuple[str, ...] = (), **hooks: Any) -> None:
@@ -263,6 +269,23 @@ def _look_ahead(grid):
         return None
     f = _impl(grid, "look_ahead")
     return _no_look_ahead if f is None else f.py_func
+
+
+def prefetch_at(grid, scratch, x, y, z):
+    """Prefetch what ``value_at`` reads at a point (compiled code only)."""
+    raise NotImplementedError
+
+
+def _no_prefetch(grid, scratch, x, y, z):
+    return None
+
+
+@overload_jit(prefetch_at, inline="never")
+def _prefetch_at(grid, scratch, x, y, z):
+    if getattr(grid, "instance_class", None) not in _HOOKS:
+        return None
+    f = _impl(grid, "prefetch_at")
+    return _no_prefetch if f is None else f.py_func
 
 
 def separate_shading(grid):

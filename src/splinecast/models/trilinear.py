@@ -21,8 +21,10 @@ from collections import namedtuple
 import numpy as np
 
 from .._jit import jit
+from .._jit.prefetch import prefetch
 from ..roots.pieces import PowerCubic
 from ..volume import Volume
+from ._trilinear_vector import cell_value
 from .base import ReconstructionModel
 from .pieces import cell_range, register, whole_cell
 from .shading_field import SHADING_HALO, halo_gradient, whole_halo
@@ -223,20 +225,10 @@ def _value_at(grid, scratch, x, y, z):
     # out the negative-index wrap-around it would otherwise add to each of the eight reads.
     ci, cj, ck = min(int(x), nx - 1), min(int(y), ny - 1), min(int(z), nz - 1)
     u, v, w = x - ci, y - cj, z - ck
-    i, j, k = np.uint64(ci), np.uint64(cj), np.uint64(ck)
-    i1, j1, k1 = i + np.uint64(1), j + np.uint64(1), k + np.uint64(1)
-    # In float64 before any difference: the data may be unsigned integers.
-    d000, d100 = np.float64(data[i, j, k]), np.float64(data[i1, j, k])
-    d010, d110 = np.float64(data[i, j1, k]), np.float64(data[i1, j1, k])
-    d001, d101 = np.float64(data[i, j, k1]), np.float64(data[i1, j, k1])
-    d011, d111 = np.float64(data[i, j1, k1]), np.float64(data[i1, j1, k1])
-    c00 = d000 + u * (d100 - d000)
-    c10 = d010 + u * (d110 - d010)
-    c01 = d001 + u * (d101 - d001)
-    c11 = d011 + u * (d111 - d011)
-    c0 = c00 + v * (c10 - c00)
-    c1 = c01 + v * (c11 - c01)
-    return c0 + w * (c1 - c0)
+    # Along the first axis, then the second, then the third, each voxel converted to float64
+    # before any difference (the data may be unsigned integers); the rows' two voxels along
+    # the third axis as the two lanes of a vector (the same operations per lane).
+    return cell_value(data, np.uint64(ci), np.uint64(cj), np.uint64(ck), u, v, w)
 
 
 @jit(inline="always")
@@ -282,6 +274,25 @@ def _value_on_plane(grid, scratch, axis, p, a, b):
 
 
 @jit()
+def _prefetch_at(grid, scratch, x, y, z):
+    """Prefetch the four rows of voxels :func:`_value_at` reads at the point (each row's two
+    voxels lie side by side along the last axis)."""
+    data = grid.data
+    nx, ny, nz = data.shape[0] - 1, data.shape[1] - 1, data.shape[2] - 1
+    # Clamped as unsigned integers, without the float clamps of the read: a point below 0 (or
+    # not a number) truncates to a negative integer, which as unsigned is above the top and is
+    # clamped to it; a prefetch of the wrong voxels only costs its hint.
+    i = min(np.uint64(int(x)), np.uint64(nx - 1))
+    j = min(np.uint64(int(y)), np.uint64(ny - 1))
+    k = min(np.uint64(int(z)), np.uint64(nz - 1))
+    i1, j1 = i + np.uint64(1), j + np.uint64(1)
+    prefetch(data, (i, j, k))
+    prefetch(data, (i1, j, k))
+    prefetch(data, (i, j1, k))
+    prefetch(data, (i1, j1, k))
+
+
+@jit()
 def _look_ahead(grid):
     """Eight loads and seven blends a value: the fixed-step loop takes it one sample early."""
     return True
@@ -303,7 +314,7 @@ def _shading_gradient_at(grid, scratch, x, y, z):
 register(TrilinearGrid, cell_count=_cell_count, new_scratch=_new_scratch, cell_load=_cell_load,
          cell_pieces=whole_cell, piece_range=cell_range, piece_poly=_piece_poly,
          gradient=_gradient, value_gradient_at=_value_gradient_at, value_at=_value_at,
-         value_on_plane=_value_on_plane, look_ahead=_look_ahead,
+         value_on_plane=_value_on_plane, look_ahead=_look_ahead, prefetch_at=_prefetch_at,
          separate_shading=_separate_shading, shading_gradient_at=_shading_gradient_at)
 
 

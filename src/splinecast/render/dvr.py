@@ -78,6 +78,7 @@ from ..preintegration import (
     preintegrate,
     table_cell,
     table_channel,
+    table_rgba,
 )
 from ..roots.pieces import poly_value
 from ..transfer import TransferFunction
@@ -600,13 +601,9 @@ def _segment(mode, grid, scratch, st, ray, stretch):
         top = table.shape[1] - 1.0
         uf = min(max((va - mode.t_lo) * mode.t_scale, 0.0), top)
         ub = min(max((vb - mode.t_lo) * mode.t_scale, 0.0), top)
-        cell = table_cell(table, uf, ub)
-        a = table_channel(table, 0, cell, 3)
+        r, g, b, a = table_rgba(table, 0, table_cell(table, uf, ub))
         if not a > 0.0:
             return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
-        r = table_channel(table, 0, cell, 0)
-        g = table_channel(table, 0, cell, 1)
-        b = table_channel(table, 0, cell, 2)
     else:
         r, g, b, a = _classify(mode.pi_mode, mode.table, mode.h0, mode.t_lo, mode.t_scale,
                                mode.lut, mode.t_lo, mode.l_scale, va, vb, length)
