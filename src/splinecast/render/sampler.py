@@ -32,7 +32,7 @@ model (the value is the model's ``value_at``, inlined into the pair's kernel):
 * in that run loop, the model's ``prefetch_at`` asks for the voxels of the sample seven beyond
   the look-ahead's (a software prefetch, which reads nothing into a register): reads that miss
   the second-level cache then overlap the samples in between (trilinear DVR with dense transfer
-  functions 1.11-1.17x; three samples ahead 1.06-1.11x, eleven or fourteen no better);
+  functions 1.11-1.17x; three, eleven or fourteen samples ahead no better);
 * a footprint interval (:mod:`.footprint`) is widened to the samples on either side of it,
   so a ray started or ended by it takes the segments of the whole ray.
 
@@ -83,7 +83,7 @@ __all__ = ["sample_pixel", "bound_sample_pixel"]
 _LOOK_AHEAD = True
 
 #: How many samples beyond the look-ahead's the run loop prefetches the voxels of.
-_PREFETCH = 14.0
+_PREFETCH = 7.0
 
 
 @jit(inline="always")
