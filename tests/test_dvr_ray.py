@@ -234,40 +234,53 @@ def test_value_on_a_voxel_plane_is_the_value_at_that_point(model, axis):
     np.testing.assert_allclose(values[~inner, 0], values[~inner, 1], rtol=1e-14)
 
 
-def test_taking_values_one_sample_early_changes_nothing():
-    """The trilinear model's values are taken one sample early (``look_ahead``): the same
-    hooks registered for a twin grid class without it run the plain loop, and the two give
-    bit-identical colours and depths, with leaps, early termination and a step that does not
-    divide the volume (a ray's last segment cut at its exit)."""
+def _twin_without(hook: str, name: str) -> tuple:
+    """A Marschner-Lobb 40^3 grid of the trilinear model and the same grid as a twin grid
+    class registered with every trilinear hook but ``hook`` (the model's default then)."""
     from collections import namedtuple
 
     from splinecast.models import pieces
     from splinecast.models.trilinear import TrilinearGrid
 
-    plain_class = namedtuple("TrilinearGridNoLookAhead", TrilinearGrid._fields)
-    hooks = {k: v for k, v in pieces.hooks_of(TrilinearGrid).items() if k != "look_ahead"}
+    plain_class = namedtuple(name, TrilinearGrid._fields)
+    hooks = {k: v for k, v in pieces.hooks_of(TrilinearGrid).items() if k != hook}
     assert len(hooks) < len(pieces.hooks_of(TrilinearGrid))
     pieces.register(plain_class, **hooks)
     vol = sc.demo("marschner-lobb", size=40)
     grid = sc.Scene(vol).grid
-    plain = grid.with_kernel(plain_class(*grid.kernel))
-    lo, hi = vol.value_range
-    tf = sc.TransferFunction([(lo, 0.0), (lo + 0.45 * (hi - lo), 0.0),
-                              (lo + 0.55 * (hi - lo), 0.3), (hi, 0.9)], domain=(lo, hi))
+    return vol, grid, grid.with_kernel(plain_class(*grid.kernel))
+
+
+def _both_twins(vol: sc.Volume, grid, plain, tf: sc.TransferFunction):
+    """Renders of ``grid`` and its twin ``plain`` for two cameras and three (step,
+    termination) settings: a step that divides the volume and two that do not, no termination
+    and an early one. Yields ``((rgba, depth, ...), counts)`` of each."""
     cams = [sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(48, 36)),
             sc.Camera.orbit(vol, azimuth=-70, elevation=50, size=(40, 30), zoom=1.6)]
     for step, termination in ((1.0, 1.0 - 2.0**-10), (0.7, None), (2.5, 0.9)):
         setup = Dvr(tf, sc.DVRSettings(step=step, sampling="ray", termination=termination))
         for cam in cams:
-            (rgba, depth, *_), counts = render_grid(grid, setup, cam)
-            (rgba_p, depth_p, *_), counts_p = render_grid(plain, setup, cam)
-            assert rgba[..., 3].max() > 0.5
-            np.testing.assert_array_equal(rgba, rgba_p)
-            np.testing.assert_array_equal(depth, depth_p)
-            # The early values: more evaluated (a ray that stops leaves one unused), never
-            # fewer, and the same segments.
-            np.testing.assert_array_equal(counts[1], counts_p[1])
-            assert (counts[0] >= counts_p[0]).all() and counts[0].sum() > counts_p[0].sum()
+            yield render_grid(grid, setup, cam), render_grid(plain, setup, cam)
+
+
+def test_taking_values_one_sample_early_changes_nothing():
+    """The trilinear model's values are taken one sample early (``look_ahead``): the same
+    hooks registered for a twin grid class without it run the plain loop, and the two give
+    bit-identical colours and depths, with leaps, early termination and a step that does not
+    divide the volume (a ray's last segment cut at its exit)."""
+    vol, grid, plain = _twin_without("look_ahead", "TrilinearGridNoLookAhead")
+    lo, hi = vol.value_range
+    tf = sc.TransferFunction([(lo, 0.0), (lo + 0.45 * (hi - lo), 0.0),
+                              (lo + 0.55 * (hi - lo), 0.3), (hi, 0.9)], domain=(lo, hi))
+    for ((rgba, depth, *_), counts), ((rgba_p, depth_p, *_), counts_p) in _both_twins(
+            vol, grid, plain, tf):
+        assert rgba[..., 3].max() > 0.5
+        np.testing.assert_array_equal(rgba, rgba_p)
+        np.testing.assert_array_equal(depth, depth_p)
+        # The early values: more evaluated (a ray that stops leaves one unused), never
+        # fewer, and the same segments.
+        np.testing.assert_array_equal(counts[1], counts_p[1])
+        assert (counts[0] >= counts_p[0]).all() and counts[0].sum() > counts_p[0].sum()
 
 
 def test_prefetching_voxels_changes_nothing():
@@ -275,33 +288,17 @@ def test_prefetching_voxels_changes_nothing():
     hooks registered for a twin grid class without it (the default, nothing) give
     bit-identical colours, depths and counts, with leaps, early termination and steps that do
     and do not divide the volume (prefetches near and beyond the grid's far faces)."""
-    from collections import namedtuple
-
-    from splinecast.models import pieces
-    from splinecast.models.trilinear import TrilinearGrid
-
-    plain_class = namedtuple("TrilinearGridNoPrefetch", TrilinearGrid._fields)
-    hooks = {k: v for k, v in pieces.hooks_of(TrilinearGrid).items() if k != "prefetch_at"}
-    assert len(hooks) < len(pieces.hooks_of(TrilinearGrid))
-    pieces.register(plain_class, **hooks)
-    vol = sc.demo("marschner-lobb", size=40)
-    grid = sc.Scene(vol).grid
-    plain = grid.with_kernel(plain_class(*grid.kernel))
+    vol, grid, plain = _twin_without("prefetch_at", "TrilinearGridNoPrefetch")
     lo, hi = vol.value_range
     tf = sc.TransferFunction([(lo, 0.0), (lo + 0.2 * (hi - lo), 0.02), (hi, 0.2)],
                              domain=(lo, hi))
-    cams = [sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(48, 36)),
-            sc.Camera.orbit(vol, azimuth=-70, elevation=50, size=(40, 30), zoom=1.6)]
-    for step, termination in ((1.0, 1.0 - 2.0**-10), (0.7, None), (2.5, 0.9)):
-        setup = Dvr(tf, sc.DVRSettings(step=step, sampling="ray", termination=termination))
-        for cam in cams:
-            (rgba, depth, *_), counts = render_grid(grid, setup, cam)
-            (rgba_p, depth_p, *_), counts_p = render_grid(plain, setup, cam)
-            assert rgba[..., 3].max() > 0.5
-            np.testing.assert_array_equal(rgba, rgba_p)
-            np.testing.assert_array_equal(depth, depth_p)
-            for c, c_p in zip(counts, counts_p, strict=True):
-                np.testing.assert_array_equal(c, c_p)
+    for ((rgba, depth, *_), counts), ((rgba_p, depth_p, *_), counts_p) in _both_twins(
+            vol, grid, plain, tf):
+        assert rgba[..., 3].max() > 0.5
+        np.testing.assert_array_equal(rgba, rgba_p)
+        np.testing.assert_array_equal(depth, depth_p)
+        for c, c_p in zip(counts, counts_p, strict=True):
+            np.testing.assert_array_equal(c, c_p)
 
 
 def test_clear_ends_are_where_the_opacity_is_zero_to_the_end():
