@@ -86,7 +86,12 @@ class Frame:
 
     def to_uint8(self) -> np.ndarray:
         """The colour buffer as 8-bit RGBA (needs the ``rgba`` output)."""
-        return (np.clip(self._needs("rgba"), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+        # One float temporary, scaled in place (three otherwise: about 10 ms of a 1024x768
+        # frame on a busy machine, which a viewer pays per frame); the same operations.
+        scaled = np.clip(self._needs("rgba"), 0.0, 1.0)
+        scaled *= 255.0
+        scaled += 0.5
+        return scaled.astype(np.uint8)
 
     def _repr_png_(self) -> bytes | None:
         """PNG bytes of the colour buffer: Jupyter and IPython show a Frame as its image

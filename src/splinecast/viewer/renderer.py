@@ -384,12 +384,12 @@ class FrameRenderer:
             height = min(rows, camera.height - row0)
             if height == camera.height:  # whole: the frame's own pixels, no copy
                 frame = scene.render(camera, **options)
-                image = _to_uint8(frame)
+                image = frame.to_uint8()
             else:
                 frame = scene.render(camera.tile(0, row0, camera.width, height), **options)
                 if image is None:
                     image = np.empty((camera.height, camera.width, 4), np.uint8)
-                image[row0:row0 + height] = _to_uint8(frame)
+                image[row0:row0 + height] = frame.to_uint8()
             parts.append((height, frame.stats))
         render_ms = (time.perf_counter() - start) * 1e3
         self._learn(request, step, camera.width * camera.height, render_ms)
@@ -460,21 +460,6 @@ def _tiny_volume(volume: Volume) -> Volume:
                    lo, hi).astype(volume.dtype)
     data.flat[0], data.flat[-1] = lo, hi
     return Volume(data, spacing=volume.spacing, origin=volume.origin)
-
-
-def _to_uint8(frame: Any) -> np.ndarray:
-    """``frame.to_uint8()``, converted in place where the colour buffer allows: it is this
-    render's own and dropped after, so the temporary float images ``to_uint8`` makes (three of
-    the frame's size, about 10 ms of a 1024x768 frame on a busy machine) are not needed."""
-    rgba = frame.rgba
-    if (rgba is None or rgba.dtype.kind != "f" or not rgba.flags.writeable
-            or not rgba.flags.owndata):
-        return frame.to_uint8()
-    # The arithmetic of Frame.to_uint8, step by step in the buffer (the same values).
-    np.clip(rgba, 0.0, 1.0, out=rgba)
-    rgba *= 255.0
-    rgba += 0.5
-    return rgba.astype(np.uint8)
 
 
 def _merge_stats(parts: list[tuple[int, dict[str, Any]]], width: int,
