@@ -211,7 +211,7 @@ def render_job(job: str, args: dict, anon, sample, stop, peak) -> dict:
     st = frame.stats
     np.savez(args["image"], depth=frame.depth, rgba=frame.rgba)
     scene.close()
-    keep = ("cut_bricks", "cut_levels", "pieces_traced", "pieces_changed_at_seams",
+    keep = ("cut_bricks", "cut_levels", "drawables_traced", "drawables_changed_at_seams",
             "seam_parts", "seam_copy_bytes", "reserved_bytes", "resident_bytes", "peak_bytes",
             "budget", "loaded", "evicted", "trace_ms", "cut_ms")
     return {"before": before, "open_s": open_s, "at_once_s": at_once_s,

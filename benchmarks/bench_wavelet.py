@@ -178,7 +178,7 @@ def bench_store_render(vol, degree: int, dtype, iso: float, size, repeats: int,
                 "epsilon_pixels": multiple, "epsilon": multiple * pixel,
                 "chunks_percent": 100.0 * st["chunk_share"],
                 "active_percent": 100.0 * st["active_chunks"] / store.layout.chunk_total(),
-                "pieces": st["pieces"],
+                "drawables": st["drawables"],
                 "first_frame_ms": first_ms, "first_reconstruct_ms": st["reconstruct_ms"],
                 "select_ms": frame.stats["select_ms"],
                 "steady_frame_ms": steady_ms, "steady_trace_ms": frame.stats["trace_ms"],
@@ -233,7 +233,7 @@ def markdown(results: dict) -> str:
                 f"`bspline{v['degree']}` "
                 f"{st['full_resolution_ms']:.0f} ms per frame.",
                 "",
-                "| ε (pixels) | chunks % | refined % | pieces | first frame ms (reconstruct) "
+                "| ε (pixels) | chunks % | refined % | drawables | first frame ms (reconstruct) "
                 "| steady frame ms (trace) | full-res time / frame time | MSE (RGB) "
                 "| hit mismatch % |",
                 "|---|---|---|---|---|---|---|---|---|",
@@ -241,7 +241,7 @@ def markdown(results: dict) -> str:
             for r in st["render"]:
                 lines.append(
                     f"| {r['epsilon_pixels']} | {r['chunks_percent']:.1f} | "
-                    f"{r['active_percent']:.1f} | {r['pieces']} | {r['first_frame_ms']:.0f} "
+                    f"{r['active_percent']:.1f} | {r['drawables']} | {r['first_frame_ms']:.0f} "
                     f"({r['first_reconstruct_ms']:.0f}) | {r['steady_frame_ms']:.0f} "
                     f"({r['steady_trace_ms']:.0f}) | {r['ratio_to_full_resolution']:.2f} | "
                     f"{r['mse_rgb']:.2e} | {r['hit_mismatch_percent']:.2f} |")

@@ -43,7 +43,7 @@ LONGEST_FILES = (
     "test_cli_warmup.py",
     "test_movie.py",
     "test_cli.py",
-    "test_pieces_driver.py",
+    "test_cut_driver.py",
     "test_cut_render.py",
     "test_timepoints.py",
     "test_type6_analytic.py",

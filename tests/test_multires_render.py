@@ -139,11 +139,11 @@ def shapes(tmp_path_factory) -> dict[str, tuple[sc.Volume, Path]]:
 
 
 def _brick_maker(mv, model: str, tree):
-    """``piece(level, index)``: the :class:`Piece` of one brick of levels 0-2, its array cut
+    """``drawable(level, index)``: the :class:`Drawable` of one brick of levels 0-2, its array cut
     from the level read whole and padded by numpy with the model's border rule (independent of
     the cache)."""
     from splinecast.multires.cut.octree import GHOST
-    from splinecast.multires.draw.cut_renderer import Piece
+    from splinecast.multires.draw.cut_renderer import Drawable
 
     padded = {}
     for level in (0, 1, 2):
@@ -151,16 +151,16 @@ def _brick_maker(mv, model: str, tree):
         padded[level] = np.pad(lv.read((0, 0, 0), lv.shape), GHOST,
                                mode=sc.MODELS[model].border_rule)
 
-    def piece(level, index):
+    def drawable(level, index):
         first, stop = (a[0] for a in tree.window(level, np.array([index])))
         lo, hi = (a[0] for a in tree.box(level, np.array([index])))
         window = tuple(slice(int(f) + GHOST, int(s) + GHOST) for f, s in zip(first, stop,
                                                                                strict=True))
         key = (level, *map(int, index))
-        return Piece(key, key, level, np.ascontiguousarray(padded[level][window]),
+        return Drawable(key, key, level, np.ascontiguousarray(padded[level][window]),
                      tuple(int(v) for v in first), lo, hi)
 
-    return piece
+    return drawable
 
 
 def _checkerboard_cut(mv, model: str):
@@ -171,20 +171,20 @@ def _checkerboard_cut(mv, model: str):
     from splinecast.multires.draw.cut_renderer import CutRenderer
 
     tree = BrickOctree(mv)
-    piece = _brick_maker(mv, model, tree)
-    pieces = []
+    drawable = _brick_maker(mv, model, tree)
+    drawables = []
     for i2 in np.indices(tree.counts[2]).reshape(3, -1).T:
         if i2.sum() % 2:
-            pieces.append(piece(2, i2))
+            drawables.append(drawable(2, i2))
             continue
         for i1 in tree.children(2, i2[None]):
             if i1.sum() % 2:
-                pieces.append(piece(1, i1))
+                drawables.append(drawable(1, i1))
                 continue
-            pieces.extend(piece(0, i0) for i0 in tree.children(1, i1[None]))
+            drawables.extend(drawable(0, i0) for i0 in tree.children(1, i1[None]))
     coarse = mv.level(-1)
     prepared = sc.MODELS[model](sc.Volume(coarse.read((0, 0, 0), coarse.shape)))
-    return pieces, tree, prepared, CutRenderer
+    return drawables, tree, prepared, CutRenderer
 
 
 def _level_errors(mv, model: str, sdf, spacing: float) -> dict[int, float]:
@@ -216,12 +216,12 @@ def _core_rays(cam: sc.Camera, sdf, depth: float) -> tuple[np.ndarray, np.ndarra
     return values.min(axis=-1) < -depth, ts[values.argmin(axis=-1)]
 
 
-def _holes(renderer, pieces, cam, sdf, depth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _holes(renderer, drawables, cam, sdf, depth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Core rays that miss the surface or hit it behind the solid's core (through a hole), the
     exact distance at every hit, and the core mask."""
     from splinecast.render.iso import Iso
 
-    out, _ = renderer.render(pieces, Iso(0.0, inside="low"), cam)
+    out, _ = renderer.render(drawables, Iso(0.0, inside="low"), cam)
     t_hit, position = out[1], out[2]
     core, t_core = _core_rays(cam, sdf, depth)
     hit = np.isfinite(t_hit)
@@ -245,17 +245,17 @@ def test_no_holes_where_levels_meet(shapes, model, shape):
     vol, path = shapes[shape]
     sdf, depth = SHAPES[shape]
     mv = sc.read(path)
-    pieces, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
-    assert {p.level for p in pieces} == {0, 1, 2}
+    drawables, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
+    assert {p.level for p in drawables} == {0, 1, 2}
     renderer = CutRenderer(prepared, tree, Seams(prepared))
     tolerance = max(_level_errors(mv, model, sdf, vol.spacing[0]).values()) * 1.05 + 1e-9
     for cam in _orbit(vol):
-        bad, error, core = _holes(renderer, pieces, cam, sdf, depth)
+        bad, error, core = _holes(renderer, drawables, cam, sdf, depth)
         what = f"{model} {shape} azimuth {cam.position.round(2)}"
         assert core.sum() > 300, what
         assert bad.sum() == 0, f"{what}: {bad.sum()} rays through the core miss the surface"
         assert error.max() <= tolerance, f"{what}: hit {error.max():.4g} > {tolerance:.4g} off"
-        assert renderer.stats["pieces_changed_at_seams"] > 0
+        assert renderer.stats["drawables_changed_at_seams"] > 0
         if sc.MODELS[model].nested_degree is not None:  # the restriction alone closes the seams
             assert renderer.stats["seam_closure_hits"] == 0, what
 
@@ -266,12 +266,12 @@ def test_without_seam_treatment_the_same_cut_has_holes(shapes):
 
     vol, path = shapes["torus"]
     sdf, depth = SHAPES["torus"]
-    pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), "trilinear")
+    drawables, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), "trilinear")
     plain = CutRenderer(prepared, tree, None)
     fixed = CutRenderer(prepared, tree, Seams(prepared))
-    holes = sum(_holes(plain, pieces, cam, sdf, depth)[0].sum() for cam in _orbit(vol))
+    holes = sum(_holes(plain, drawables, cam, sdf, depth)[0].sum() for cam in _orbit(vol))
     assert holes > 10
-    assert sum(_holes(fixed, pieces, cam, sdf, depth)[0].sum() for cam in _orbit(vol)) == 0
+    assert sum(_holes(fixed, drawables, cam, sdf, depth)[0].sum() for cam in _orbit(vol)) == 0
 
 
 def _shared_boundary_points(a, b, rng, count: int = 40) -> np.ndarray | None:
@@ -291,13 +291,13 @@ def test_reconstructions_agree_on_faces_between_levels(shapes, model):
     from splinecast.multires.draw.seams import Seams
 
     vol, path = shapes["torus"]
-    pieces, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), model)
+    drawables, tree, prepared, CutRenderer = _checkerboard_cut(sc.read(path), model)
     renderer = CutRenderer(prepared, tree)
-    changes = Seams(prepared).plan(pieces, renderer)
+    changes = Seams(prepared).plan(drawables, renderer)
     rng = np.random.default_rng(1)
     gap_before, gap_after, pairs = 0.0, 0.0, 0
-    for a in pieces:
-        for b in pieces:
+    for a in drawables:
+        for b in drawables:
             if b.level <= a.level:
                 continue
             points = _shared_boundary_points(a, b, rng)
@@ -383,7 +383,7 @@ def test_frames_converge_without_holes_while_bricks_arrive(shapes, monkeypatch):
                     break
             assert frames[-1].stats["complete"]
             # Some frame met ancestors beside finer bricks.
-            assert any(f.stats["pieces_changed_at_seams"] > 0 for f in frames)
+            assert any(f.stats["drawables_changed_at_seams"] > 0 for f in frames)
             # Every frame from the first read on (the first frame, drawn from the pinned
             # coarsest level alone before any read, is too coarse for the thin torus: a frame
             # the renderer only draws with ``wait=False``).
@@ -410,18 +410,18 @@ def test_the_incremental_seam_plan_equals_a_plan_from_scratch(shapes, model):
     from splinecast.render.iso import Iso
 
     mv = sc.read(shapes["torus"][1])
-    pieces, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
+    drawables, tree, prepared, CutRenderer = _checkerboard_cut(mv, model)
     brick = _brick_maker(mv, model, tree)
 
-    def parent(piece):  # drawn from its level-2 ancestor, or its parent (level 0, even index)
-        level, *index = piece.key
+    def parent(drawable):  # drawn from its level-2 ancestor, or its parent (level 0, even index)
+        level, *index = drawable.key
         up = 1 if level == 0 and sum(index) % 2 == 0 else 2
         up = brick(up, np.array(index) // 2 ** (up - level))
-        return replace(piece, key=up.key, level=up.level, data=up.data, first=up.first,
+        return replace(drawable, key=up.key, level=up.level, data=up.data, first=up.first,
                        substituted=True)
 
     rng = np.random.default_rng(7)
-    fine = np.array([n for n, p in enumerate(pieces) if p.level < 2])
+    fine = np.array([n for n, p in enumerate(drawables) if p.level < 2])
     renderer = CutRenderer(prepared, tree, Seams(prepared))
     camera = sc.Camera.orbit(mv, azimuth=20, elevation=-30, size=(48, 48), zoom=0.8)
     reused = 0
@@ -434,7 +434,7 @@ def test_the_incremental_seam_plan_equals_a_plan_from_scratch(shapes, model):
                              replace=False) if len(missing) > share * len(fine) else []
         missing -= set(np.asarray(arrived).tolist())
         missing |= set(rng.choice(fine, size=int(0.05 * len(fine) * share)).tolist())
-        cut = [parent(p) if n in missing else p for n, p in enumerate(pieces)]
+        cut = [parent(p) if n in missing else p for n, p in enumerate(drawables)]
         changes = renderer.seams.plan(cut, renderer)
         reused += len(changes) - renderer.seams.recomputed
         fresh = Seams(prepared)._plan(cut, renderer)

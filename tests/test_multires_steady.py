@@ -1,4 +1,4 @@
-"""A view that stays the same: the loader goes quiet, and the cut, its pieces and the launch are
+"""A view that stays the same: the loader goes quiet, and the cut, its drawables and the launch are
 reused without changing the image.
 
 References: the loader's own counters (a read-ahead that evicted itself kept reading the same
@@ -75,7 +75,7 @@ def test_a_steady_view_reuses_its_cut_and_launch_and_draws_the_same_image(sphere
             np.testing.assert_array_equal(frame.depth, first.depth)
             np.testing.assert_array_equal(frame.rgba, first.rgba)
         # Another isovalue (another filter and block selection), another view and back, MIP
-        # then minIP (the same cut and pieces, another block selection): each is what a fresh
+        # then minIP (the same cut and drawables, another block selection): each is what a fresh
         # scene draws.
         mip = {"mode": "mip", "window": (0.0, 30.0)}
         minip = dict(mip, mode="minip")
@@ -112,7 +112,7 @@ def test_the_render_brick_grows_to_64_only_where_level_0_keeps_8_bricks_per_axis
 def test_bricks_drawn_from_one_ancestor_are_one_piece_that_draws_the_coarse_level(
         tmp_path, model):
     """Before any brick is read, the whole cut is drawn from the coarsest level. Its bricks
-    become one piece per coarsest brick over that brick's box, so the frame is the in-memory
+    become one drawable per coarsest brick over that brick's box, so the frame is the in-memory
     render of the coarsest level (reference: :class:`splinecast.Scene` of that level's voxels;
     a 33^3 volume, whose coarse levels cover level 0's domain exactly)."""
     n = 33
@@ -130,7 +130,7 @@ def test_bricks_drawn_from_one_ancestor_are_one_piece_that_draws_the_coarse_leve
         roots = len(tree.roots())
     coarse = mv.level(tree.coarsest)
     assert frame.stats["substituted"] == frame.stats["cut_bricks"] > roots
-    assert frame.stats["pieces"] <= roots
+    assert frame.stats["drawables"] <= roots
     reference = sc.Scene(coarse.to_volume(max_bytes=2**30), model=model).render(
         cam, iso=11.0, inside="low")
     hit = np.isfinite(reference.depth)

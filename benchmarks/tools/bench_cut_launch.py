@@ -1,9 +1,9 @@
-"""Per-piece overhead of the cut renderer: one launch per frame against one call per piece.
+"""Per-drawable overhead of the cut renderer: one launch per frame against one call per drawable.
 
-A multiresolution frame is traced through many bricks (pieces), pyramid or wavelet. The cut
-renderer used to call the segment entry point once per piece (screen rectangle, tile camera,
-state copied out and back, a parallel launch); it now traces all pieces in one compiled launch
-(:mod:`splinecast.render.pieces_driver`). Both paths are still in the code
+A multiresolution frame is traced through many bricks (drawables), pyramid or wavelet. The cut
+renderer used to call the segment entry point once per drawable (screen rectangle, tile camera,
+state copied out and back, a parallel launch); it now traces all drawables in one compiled launch
+(:mod:`splinecast.render.cut_driver`). Both paths are still in the code
 (``CutRenderer.batched``), so this runs them side by side in one process, interleaved, on the
 same cut, after warm-up:
 
@@ -54,17 +54,17 @@ def timed(fn, repeats: int) -> dict:
 
 
 def both_paths(scene, render, repeats: int) -> dict:
-    """The steady frame per piece and in one launch, interleaved (two rounds each)."""
-    out: dict = {"per_piece": [], "one_launch": []}
+    """The steady frame per drawable and in one launch, interleaved (two rounds each)."""
+    out: dict = {"per_drawable": [], "one_launch": []}
     for _ in range(2):
-        for batched, name in ((False, "per_piece"), (True, "one_launch")):
+        for batched, name in ((False, "per_drawable"), (True, "one_launch")):
             scene.renderer.batched = batched
             out[name].append(timed(render, repeats))
     stats = scene.renderer.stats
     result = {}
     for name, runs in out.items():
         result[name] = {k: float(np.median([r[k] for r in runs])) for k in ("wall_ms", "cpu_ms")}
-    result["pieces"] = int(stats["pieces"])
+    result["drawables"] = int(stats["drawables"])
     return result
 
 
@@ -135,7 +135,8 @@ def run_wavelet(args) -> dict:
 
 def markdown(result: dict, command: str, note: str) -> str:
     w, h = result["size"]
-    lines = [f"# Cut renderer: one launch per frame vs one call per piece ({result['kind']})", "",
+    lines = [f"# Cut renderer: one launch per frame vs one call per drawable "
+             f"({result['kind']})", "",
              f"`{command}` — {note}", "",
              f"Machine: {result['machine']['cpu']}, {result['machine']['cores']} cores, "
              f"{result['machine']['numba_threads']} Numba threads. Medians of "
@@ -150,15 +151,16 @@ def markdown(result: dict, command: str, note: str) -> str:
     if result["kind"] == "plain":
         lines += [f"{result['n']}^3 uint8 pyramid, {w}x{h}, trilinear, budget "
                   f"{result['budget']}, lod 1.", "",
-                  "| mode | pieces (levels) | per piece wall / CPU ms | one launch wall / CPU ms "
+                  "| mode | drawables (levels) | per drawable wall / CPU ms "
+                  "| one launch wall / CPU ms "
                   "| in-memory level 0 wall / CPU ms | in-memory fitting level wall / CPU ms "
                   "| one launch / level 0 (CPU) | one launch / fitting level (CPU) |",
                   "|---|---|---|---|---|---|---|---|"]
         for r in result["rows"]:
-            a, b = r["per_piece"], r["one_launch"]
+            a, b = r["per_drawable"], r["one_launch"]
             m0, mf = r["memory_level0"], r["memory_fits"]
             lines.append(
-                f"| {r['mode']} | {r['pieces']} ({r['cut_levels']}) | {a['wall_ms']:.0f} / "
+                f"| {r['mode']} | {r['drawables']} ({r['cut_levels']}) | {a['wall_ms']:.0f} / "
                 f"{a['cpu_ms']:.0f} | {b['wall_ms']:.0f} / {b['cpu_ms']:.0f} | "
                 f"{m0['wall_ms']:.0f} / {m0['cpu_ms']:.0f} | level {mf['level']}: "
                 f"{mf['wall_ms']:.0f} / {mf['cpu_ms']:.0f} | {b['cpu_ms'] / m0['cpu_ms']:.2f}x |"
@@ -168,11 +170,12 @@ def markdown(result: dict, command: str, note: str) -> str:
         lines += [f"Chmutov {result['n']}^3, degree 3, float32 wavelet store, iso 0, {w}x{h}. "
                   f"Full-resolution in-memory bspline3: {f['wall_ms']:.0f} ms wall, "
                   f"{f['cpu_ms']:.0f} ms CPU.", "",
-                  "| ε (pixels) | pieces | per piece wall / CPU ms | one launch wall / CPU ms | "
+                  "| ε (pixels) | drawables | per drawable wall / CPU ms "
+                  "| one launch wall / CPU ms | "
                   "speed-up (CPU) | full-res / one launch (CPU) |", "|---|---|---|---|---|---|"]
         for r in result["rows"]:
-            a, b = r["per_piece"], r["one_launch"]
-            lines.append(f"| {r['epsilon_pixels']:g} | {r['pieces']} | {a['wall_ms']:.0f} / "
+            a, b = r["per_drawable"], r["one_launch"]
+            lines.append(f"| {r['epsilon_pixels']:g} | {r['drawables']} | {a['wall_ms']:.0f} / "
                          f"{a['cpu_ms']:.0f} | {b['wall_ms']:.0f} / {b['cpu_ms']:.0f} | "
                          f"{a['cpu_ms'] / b['cpu_ms']:.2f}x | {f['cpu_ms'] / b['cpu_ms']:.2f}x |")
     return "\n".join(lines) + "\n"

@@ -68,7 +68,8 @@ def measure(store: str, budget: str, mode: str, repeats: int, settle: int) -> di
         memory_ms.append((time.perf_counter() - t) * 1e3)
     st = frame.stats
     scene.close()
-    keep = ("cut_bricks", "cut_levels", "pieces", "pieces_traced", "pieces_changed_at_seams",
+    keep = ("cut_bricks", "cut_levels", "drawables", "drawables_traced",
+            "drawables_changed_at_seams",
             "seam_copy_bytes", "trace_ms", "cut_ms", "seam_plan_ms", "cut_reused",
             "resident_bytes", "reserved_bytes", "whole_level")
     return {"src": sc.__file__, "budget": budget, "mode": mode, "memory_level": level,
@@ -105,7 +106,7 @@ def main() -> None:
                 ", ".join(f"{v:.0f}" for v in r["settling_ms"]), f"{r['multi_ms']:.0f} ms",
                 f"level {r['memory_level']}: {r['memory_ms']:.0f} ms", f"{r['ratio']:.2f}x",
                 str(fin["cut_bricks"]), json.dumps(fin["cut_levels"]),
-                str(fin["pieces_changed_at_seams"])]
+                str(fin["drawables_changed_at_seams"])]
 
     write_results(
         HERE / "results" / args.save,
@@ -117,7 +118,7 @@ def main() -> None:
         "in-memory scene of the finest level within the budget render in turn: medians of "
         "the repeats, side by side in one process.",
         ["budget", "mode", "to complete (frames)", "settling frames ms", "steady out of core",
-         "in memory", "ratio", "cut bricks", "cut levels", "pieces changed at seams"],
+         "in memory", "ratio", "cut bricks", "cut levels", "drawables changed at seams"],
         rows, cells)
 
 

@@ -7,7 +7,7 @@
 ``bench_multires.py``: 1024x768, zoom 1.3, trilinear; iso 128 or DVR) frame after frame with
 the default load budget until the cut is complete (or ``--frames``).
 Prints one JSON line per frame (wall ms, and the frame's ``seam_plan_ms``, ``cut_ms``,
-``trace_ms``, ``pieces_changed_at_seams``, bricks loaded) and a summary line. The first frame
+``trace_ms``, ``drawables_changed_at_seams``, bricks loaded) and a summary line. The first frame
 compiles; compare runs from a warm Numba cache. ``--src`` imports splinecast from another source
 tree; ``--baseline DIR`` runs this source and that one one after the other in fresh processes
 and, with ``--save NAME``, writes ``benchmarks/results/NAME.{json,md}`` with the machine.
@@ -61,7 +61,7 @@ def main() -> None:
             st = frame.stats
             row = {"ms": (time.perf_counter() - t) * 1e3,
                    **{k: st.get(k) for k in ("seam_plan_ms", "cut_ms", "trace_ms",
-                                             "pieces_changed_at_seams", "loaded_this_frame",
+                                             "drawables_changed_at_seams", "loaded_this_frame",
                                              "cut_bricks", "substituted", "complete")}}
             rows.append(row)
             if not args.quiet:

@@ -224,7 +224,7 @@ class Scene(SceneTemplate):
 
     def trace(self, request: RenderRequest, camera: Camera, **frame_options: Any) -> Traced:
         """Trace a validated request (:func:`prepare_render`) through this scene's grid: the
-        piece of the render template (:class:`~splinecast.render.template.SceneTemplate`) an
+        step of the render template (:class:`~splinecast.render.template.SceneTemplate`) an
         in-memory scene supplies."""
         grid, flags, planes, stats = self.grid, None, request.planes, request.stats
         if request.iso is not None:

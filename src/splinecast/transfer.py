@@ -342,16 +342,16 @@ class TransferFunction:
         Infinite ends stand for the constant extrapolation beyond the first or last point.
         """
         p = self.opacity_points
-        pieces: list[tuple[float, float]] = []
+        visible: list[tuple[float, float]] = []
         if p[0, 1] > 0:
-            pieces.append((-math.inf, p[0, 0]))
+            visible.append((-math.inf, p[0, 0]))
         for (v0, a0), (v1, a1) in zip(p[:-1], p[1:], strict=True):
             if a0 > 0 or a1 > 0:
-                pieces.append((float(v0), float(v1)))
+                visible.append((float(v0), float(v1)))
         if p[-1, 1] > 0:
-            pieces.append((p[-1, 0], math.inf))
+            visible.append((p[-1, 0], math.inf))
         merged: list[tuple[float, float]] = []
-        for a, b in pieces:
+        for a, b in visible:
             if merged and a <= merged[-1][1]:
                 merged[-1] = (merged[-1][0], max(merged[-1][1], b))
             else:

@@ -81,7 +81,7 @@ from ..io.omezarr import MultiscaleVolume, is_zarr
 from ..io.remote import is_url
 from ..models import MODELS
 from ..multires.cut.octree import DEFAULT_BRICK, BrickOctree
-from ..multires.draw.cut_renderer import CutRenderer, Piece, screen_rect
+from ..multires.draw.cut_renderer import CutRenderer, Drawable, screen_rect
 from ..multires.store.cache import read_bricks
 from ..render.frame import Frame
 from ..render.segment import combine_states, counters, finish_state, new_state
@@ -239,7 +239,7 @@ def level_view(volume: MultiscaleVolume, level: int) -> MultiscaleVolume:
 
 
 class _Loaded:
-    """A share opened in a worker process: its bricks as pieces and the renderer of a cut."""
+    """A share opened in a worker process: its bricks as drawables and the renderer of a cut."""
 
     def __init__(self, share: Share) -> None:
         start = time.perf_counter()
@@ -261,9 +261,9 @@ class _Loaded:
         self.model = MODELS[source.model](small, **dict(source.options))
         self.renderer = CutRenderer(self.model, self.octree, None)
         lo, hi = self.octree.box(0, index)
-        self.pieces = [Piece((0, *b.key[1:]), b.key, 0, b.data, b.first, lo[n], hi[n])
+        self.drawables = [Drawable((0, *b.key[1:]), b.key, 0, b.data, b.first, lo[n], hi[n])
                        for n, b in enumerate(bricks)]
-        boxes = [self.renderer.box(p)[:2] for p in self.pieces]
+        boxes = [self.renderer.box(p)[:2] for p in self.drawables]
         #: The share's box as drawn, in the level's index space.
         self.box_lo = np.min([b[0] for b in boxes], axis=0)
         self.box_hi = np.max([b[1] for b in boxes], axis=0)
@@ -342,7 +342,7 @@ def prepare_share(share: Share) -> dict[str, Any] | SplinecastError:
             return exc
         return {"value_range": loaded.value_range, "bytes_read": loaded.bytes_read,
                 "box_lo": loaded.box_lo.tolist(), "box_hi": loaded.box_hi.tolist(),
-                "load_ms": loaded.load_ms, "bricks": len(loaded.pieces)}
+                "load_ms": loaded.load_ms, "bricks": len(loaded.drawables)}
 
 
 def render_share(share: Share, camera: Camera, options: dict[str, Any], header: VolumeInfo,
@@ -361,10 +361,10 @@ def render_share(share: Share, camera: Camera, options: dict[str, Any], header: 
         tile = camera if full else camera.tile(*rect)
         state = new_state(request.setup, tile)
         counts = counters(tile.height, tile.width)
-        loaded.renderer.trace(loaded.pieces, request.setup, tile, state, counts, request.planes)
+        loaded.renderer.trace(loaded.drawables, request.setup, tile, state, counts, request.planes)
         part = Partial(rect, state, counts)
         part.stats = {"trace_ms": [(time.perf_counter() - start) * 1e3], "combine_ms": 0.0,
-                      "moved": 0, "pieces_traced": loaded.renderer.stats["pieces_traced"]}
+                      "moved": 0, "drawables_traced": loaded.renderer.stats["drawables_traced"]}
         return part
 
 
@@ -391,8 +391,8 @@ def _widen(part: Partial, rect: tuple[int, ...], setup: Any, camera: Camera) -> 
     counts = counters(h, w)
     pc, pr, pw, ph = part.rect  # type: ignore[misc]
     window = (slice(pr - r0, pr - r0 + ph), slice(pc - c0, pc - c0 + pw))
-    for full, piece in zip((*state, *counts), (*part.state, *part.counts), strict=True):
-        full[window] = piece
+    for full, window_values in zip((*state, *counts), (*part.state, *part.counts), strict=True):
+        full[window] = window_values
     return state, counts
 
 
@@ -406,8 +406,8 @@ def combine_partials(front: Partial, back: Partial, camera: Camera, options: dic
                  "combine_ms": front.stats["combine_ms"] + back.stats["combine_ms"],
                  "moved": front.stats["moved"] + back.stats["moved"] + front.nbytes
                  + back.nbytes,
-                 "pieces_traced": (front.stats.get("pieces_traced", 0)
-                                   + back.stats.get("pieces_traced", 0))}
+                 "drawables_traced": (front.stats.get("drawables_traced", 0)
+                                   + back.stats.get("drawables_traced", 0))}
         if front.rect is None or back.rect is None:
             out = back if front.rect is None else front
             return Partial(out.rect, out.state, out.counts, stats)
@@ -473,7 +473,7 @@ def refine_dvr_depth(share: Share, camera: Camera, options: dict[str, Any], head
         state = new_state(request.setup, tile)
         state[0][..., 3] = np.where(cross, front[a0:a1, b0:b1], _SKIP_OPACITY)
         counts = counters(tile.height, tile.width)
-        loaded.renderer.trace(loaded.pieces, request.setup, tile, state, counts, request.planes)
+        loaded.renderer.trace(loaded.drawables, request.setup, tile, state, counts, request.planes)
         ms = (time.perf_counter() - start) * 1e3
     return rect, np.where(cross, state[1], np.inf), ms
 
@@ -515,7 +515,7 @@ def finish_partial(part: Partial, camera: Camera, options: dict[str, Any], heade
             "share_trace_ms_sum": float(sum(trace)),
             "composite_ms": float(part.stats["combine_ms"]),
             "partial_bytes": int(part.stats["moved"] + part.nbytes),
-            "pieces_traced": int(part.stats.get("pieces_traced", 0)),
+            "drawables_traced": int(part.stats.get("drawables_traced", 0)),
         })
         if setup.refines_depth_after_compositing:
             frame.stats["depth_refined_pixels"] = refined

@@ -672,10 +672,10 @@ class Remote:
                             f"the {limit} this request can take; refused unread")
         body = bytearray()
         while True:
-            piece = await r.content.read(min(1 << 20, limit + 1 - len(body)))
-            if not piece:
+            more = await r.content.read(min(1 << 20, limit + 1 - len(body)))
+            if not more:
                 break
-            body += piece
+            body += more
             if len(body) > limit:
                 raise ReadError(f"{redact(url)}: the server sends more than the {limit} "
                                 "bytes this request can take; refused")
@@ -888,11 +888,11 @@ class Remote:
                 key, start, stop, cap = requests[i]
                 if data is None:
                     continue
-                piece = data if start is None else data[at:at + stop - start]  # type: ignore
-                out[i] = piece
-                whole = start is None or len(piece) == stop - start  # type: ignore[operator]
+                answer = data if start is None else data[at:at + stop - start]  # type: ignore
+                out[i] = answer
+                whole = start is None or len(answer) == stop - start  # type: ignore[operator]
                 if self.cache is not None and whole:
-                    self.cache.put(self._ident(key, start, stop, cap), piece)
+                    self.cache.put(self._ident(key, start, stop, cap), answer)
         return out
 
     def fetch(self, key: str | None, start: int | None = None, stop: int | None = None, *,

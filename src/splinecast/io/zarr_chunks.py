@@ -277,15 +277,15 @@ def _inflate(data: bytes, size: int | None, cap: int) -> bytes:
     import zlib
 
     limit = _target(size, cap)
-    pieces: list[bytes] = []
+    decoded: list[bytes] = []
     got = 0
     stream = zlib.decompressobj(15 + 32)  # either header
     todo = data
     try:
         while True:
-            piece = stream.decompress(todo, limit + 1 - got)
-            pieces.append(piece)
-            got += len(piece)
+            more = stream.decompress(todo, limit + 1 - got)
+            decoded.append(more)
+            got += len(more)
             if got > limit:
                 raise _Bad(f"the deflate stream inflates beyond the chunk's {limit} bytes")
             todo = stream.unconsumed_tail
@@ -296,11 +296,11 @@ def _inflate(data: bytes, size: int | None, cap: int) -> bytes:
                 if rest[:2] != b"\x1f\x8b":
                     raise _Bad(f"{len(rest)} bytes after the deflate stream")
                 stream, todo = zlib.decompressobj(15 + 32), rest
-            elif not todo and not piece:
+            elif not todo and not more:
                 raise _Bad("the deflate stream is truncated")
     except zlib.error as exc:
         raise _Bad(f"corrupt deflate data ({_first_line(exc)})") from None
-    out = b"".join(pieces)
+    out = b"".join(decoded)
     _checked_length(len(out), size, cap, "the deflate stream inflates to")
     return out
 
@@ -309,16 +309,16 @@ def _unpack_stream(make: Any, errors: tuple[type[BaseException], ...], name: str
                    data: bytes, size: int | None, cap: int) -> bytes:
     """bz2 or lzma (concatenated streams too), at most one byte more than the chunk."""
     limit = _target(size, cap)
-    pieces: list[bytes] = []
+    decoded: list[bytes] = []
     got = 0
     stream = make()
     todo = data
     try:
         for _ in range(limit + len(data) + 2):  # each round makes progress or ends
-            piece = stream.decompress(todo, max_length=limit + 1 - got)
+            more = stream.decompress(todo, max_length=limit + 1 - got)
             todo = b""
-            pieces.append(piece)
-            got += len(piece)
+            decoded.append(more)
+            got += len(more)
             if got > limit:
                 raise _Bad(f"the {name} stream inflates beyond the chunk's {limit} bytes")
             if stream.eof:
@@ -326,11 +326,11 @@ def _unpack_stream(make: Any, errors: tuple[type[BaseException], ...], name: str
                 if not rest:
                     break
                 stream, todo = make(), rest
-            elif stream.needs_input and not piece:
+            elif stream.needs_input and not more:
                 raise _Bad(f"the {name} stream is truncated")
     except errors as exc:
         raise _Bad(f"corrupt {name} data ({_first_line(exc)})") from None
-    out = b"".join(pieces)
+    out = b"".join(decoded)
     _checked_length(len(out), size, cap, f"the {name} stream inflates to")
     return out
 

@@ -28,7 +28,7 @@ _EXPORTS = {
     "parse_bytes": "store.budget",
     "MultiscaleScene": "scenes.multiscale",
     "CutRenderer": "draw.cut_renderer",
-    "Piece": "draw.cut_renderer",
+    "Drawable": "draw.cut_renderer",
     "Seams": "draw.seams",
 }
 

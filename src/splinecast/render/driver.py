@@ -286,11 +286,11 @@ def _trace_band(grid, mode, blocks, state, out, setup, rect, passes, counters, b
     ``setup`` (:class:`RaySetup`); ``buffers`` are the thread's scratch buffers
     (:class:`Buffers`).
 
-    This is also the one-launch cut renderer's per-piece unit (:mod:`.pieces_driver`), which
+    This is also the one-launch cut renderer's per-drawable unit (:mod:`.cut_driver`), which
     calls the pair's compiled band instead of inlining its own copy of the pixel loop: both
     renderers then share one compiled loop per (model, mode, argument types). A pixel whose
     ``t_range`` is empty (``t0 > t1``) is left alone, state and outputs included: the cut
-    renderer marks so the pixels a piece does not cover (tracing them would load their state
+    renderer marks so the pixels a drawable does not cover (tracing them would load their state
     and store it unchanged), antialiasing the pixels it does not trace again
     (:mod:`.antialias`). A non-empty ``footprint`` (:mod:`.footprint`) limits the
     rays of each of its tiles to the tile's interval; the pixels of a tile it leaves empty are
@@ -455,7 +455,7 @@ def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, cou
     left one thread waiting for the other."""
     height, width = counters.visited.shape
     # The first column as a variable: a constant argument is typed as a literal, which would
-    # compile a band of its own instead of the one the cut renderer shares (.pieces_driver).
+    # compile a band of its own instead of the one the cut renderer shares (.cut_driver).
     first = width - width
     while True:
         b = take(bands.counter)
@@ -533,7 +533,7 @@ def pair_bindings(grid_class: type, mode_class: type) -> dict[str, Any] | None:
 def pair_band(grid_class: type, mode_class: type) -> Any:
     """:func:`_trace_band` for one (model, mode) pair, its hooks inlined (made once per pair):
     the unit the in-memory renderer's image loop calls per band of rows and the one-launch cut
-    renderer per piece and tile.
+    renderer per drawable and tile.
 
     The generic loop calls each hook through an overload: a real call that LLVM does not inline
     (its tuple arguments expand to a hundred values or more) and that increments and decrements

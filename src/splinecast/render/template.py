@@ -13,7 +13,7 @@ channels) derives from :class:`SceneTemplate`, which owns the public ``render`` 
       -> finish             (finish_frame) the host's buffers -> a Frame: colours, surface
                              effects, antialiasing, statistics
 
-A scene kind supplies only the pieces of the middle step (the :class:`SceneTemplate` protocol: a
+A scene kind supplies only the parts of the middle step (the :class:`SceneTemplate` protocol: a
 ``trace`` method, the volume its defaults come from, how it checks an isovalue, its own frame
 options); a kind whose frames are made elsewhere (sort-first Dask: tiles made by the workers'
 scenes with their own ``render_frame``; sort-last: finished on a Dask worker with the same
@@ -152,7 +152,7 @@ class Traced:
 class SceneTemplate:
     """Base class of every scene kind: ``render`` written once (see the module's description).
 
-    A scene kind supplies the pieces for a camera:
+    A scene kind supplies the parts of a frame it alone knows:
 
     ``trace(request, camera, **frame_options) -> Traced``
         The camera's rays through the grids the kind holds, in the mode of ``request`` (a
@@ -217,7 +217,7 @@ class SceneTemplate:
         if "render" not in cls.__dict__:
             cls.render = _render_of(cls)  # type: ignore[method-assign]
 
-    # ------------------------------------------------------------------ the pieces (defaults)
+    # ------------------------------------------------------------------- the parts (defaults)
     @property
     def defaults_volume(self) -> Any:
         """The volume the automatic choices come from (default: ``self.volume``)."""
@@ -661,13 +661,13 @@ def _sample_tracer(request: RenderRequest, trace: Callable[..., tuple],
     return samples
 
 
-def whole_frame_tracer(renderer: Any, pieces: Any, planes: np.ndarray) -> Callable[..., tuple]:
+def whole_frame_tracer(renderer: Any, drawables: Any, planes: np.ndarray) -> Callable[..., tuple]:
     """:func:`finish_frame`'s ``trace`` for a scene drawn by a cut renderer
-    (:class:`splinecast.multires.draw.cut_renderer.CutRenderer`) from ``pieces``: every pixel of
+    (:class:`splinecast.multires.draw.cut_renderer.CutRenderer`) from ``drawables``: every pixel of
     the image
     traced, whatever the mask (the launch has no per-pixel mask)."""
 
     def trace(cam: Camera, mask: np.ndarray, mode: Any) -> tuple:
-        return renderer.render(pieces, mode, cam, planes)[0]
+        return renderer.render(drawables, mode, cam, planes)[0]
 
     return trace

@@ -3,7 +3,7 @@
 ``Scene(pyramid, cut="error")`` draws, in DVR and MIP/minIP, the cut that
 :class:`~.cut.update.CutUpdater` keeps up to date frame after frame (transfer-function distortion
 times importance, greedy split-and-collapse under a brick budget N and a load budget M) instead of
-the screen-space level-of-detail cut of :mod:`.cut.lod`. This module only connects the pieces:
+the screen-space level-of-detail cut of :mod:`.cut.lod`. This module only connects the parts:
 
 1. :func:`octree_tree`: the :class:`~.cut.tree.BrickTree` of a store's
    :class:`~.cut.octree.BrickOctree` (node ids level by level, finest first, C order of the brick

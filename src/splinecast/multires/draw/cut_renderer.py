@@ -1,23 +1,23 @@
 """The renderer of a cut: every box of a multiresolution cut traced from its own brick, front to
 back per ray, through the segment entry point of the render driver.
 
-Pieces
-    A :class:`Piece` is one box of a cut (level-0 index space) and the brick that reconstructs
+Drawables
+    A :class:`Drawable` is one box of a cut (level-0 index space) and the brick that reconstructs
     it: an array of one level's values with ghost layers (voxels, or B-spline coefficients for
     the B-spline models, whose coefficients are the voxels), the level index of its first
     element and a key naming its contents. A brick drawn in place of a missing descendant (a
-    substitution) is a piece whose level is coarser than the cut's brick; several pieces may
-    share one array. Anything that produces pieces can be rendered: the brick stream of an
+    substitution) is a drawable whose level is coarser than the cut's brick; several drawables may
+    share one array. Anything that produces drawables can be rendered: the brick stream of an
     OME-Zarr pyramid (:mod:`~splinecast.multires.scenes.multiscale`), spline-wavelet
     reconstructions, a
     distributed worker's share of the bricks.
 
 Grids
-    A piece's array becomes the model's kernel grid (:func:`splinecast.render.segment.make_grid`)
+    A drawable's array becomes the model's kernel grid (:func:`splinecast.render.segment.make_grid`)
     with the level's placement: index offset ``first + pad`` (``pad`` the model's border layers,
     so that the grid's cell ``c`` reads the same voxels as cell ``offset + c`` of the whole
     level), the level's origin and spacing and the rendered domain in the level's index space.
-    The grid covers the whole brick; each ray is restricted to the piece's box with a per-ray
+    The grid covers the whole brick; each ray is restricted to the drawable's box with a per-ray
     parameter interval (:func:`.draw.probe.box_ranges`, the driver's ``t_range``), so boxes that cut
     through cells (the even B-spline and the type-6 models, whose cells are centred on voxels,
     or an ancestor drawn over a descendant's box) need nothing special. Grids of unmodified
@@ -26,18 +26,18 @@ Grids
     (:mod:`.draw.seams`).
 
 Tracing
-    The pieces are put in front-to-back order (:mod:`.draw.order`) and traced in one compiled launch
-    per frame (:func:`splinecast.render.pieces_driver.trace_pieces`): parallel over screen
-    tiles, each tile walks the pieces whose screen rectangle (:func:`screen_rects`, the box's
+    The drawables are put in front-to-back order (:mod:`.draw.order`) and traced in one compiled
+    launch per frame (:func:`splinecast.render.cut_driver.trace_cut`): parallel over screen
+    tiles, each tile walks the drawables whose screen rectangle (:func:`screen_rects`, the box's
     projection) overlaps it, in that order, and hands each pixel of the rectangle to the
-    driver's per-ray unit with the ray's interval inside the piece's box; the mode's per-pixel
+    driver's per-ray unit with the ray's interval inside the drawable's box; the mode's per-pixel
     state stays in the full-image arrays. A ray thus crosses the boxes one after the other
     exactly as it crosses the bricks of one volume (``tests/test_bricks.py``), and a cut whose
-    boxes all come from level 0 renders the in-memory image. The per-piece path (one
-    :func:`~splinecast.render.segment.trace_segment` call per piece over a tile camera of its
+    boxes all come from level 0 renders the in-memory image. The per-drawable path (one
+    :func:`~splinecast.render.segment.trace_segment` call per drawable over a tile camera of its
     rectangle, the state copied out and back) is kept as the reference
-    (:attr:`CutRenderer.batched` off; ``tests/test_pieces_driver.py`` compares the two
-    bit for bit): per piece it costs a parallel launch and copies, milliseconds on a shared
+    (:attr:`CutRenderer.batched` off; ``tests/test_cut_driver.py`` compares the two
+    bit for bit): per drawable it costs a parallel launch and copies, milliseconds on a shared
     machine, which dominated frames of many small bricks. Boxes at the volume's border are
     extended to the model's domain (the type-6 splines render half a voxel beyond the outer
     voxel centres); see :meth:`CutRenderer.box`.
@@ -72,15 +72,15 @@ from ...camera import (
     Camera,
 )
 from ...render.clipping import NO_PLANES
+from ...render.cut_driver import TILE, tile_lists, trace_cut
 from ...render.driver import GEOM_SIZE, band_order, finalize, reset_state
-from ...render.pieces_driver import TILE, tile_lists, trace_pieces
 from ...render.rays import GEOM_OFFSET
 from ...render.segment import Grid, counters, make_grid, trace_segment
 from .order import eye_index, front_to_back
 from .probe import box_ranges, sample_grid
 from .seam_parts import SHELL_SHARE_MAX, Parts, crop_range, part_order, split_box
 
-__all__ = ["Piece", "LevelGeometry", "CutRenderer", "screen_rect", "screen_rects",
+__all__ = ["Drawable", "LevelGeometry", "CutRenderer", "screen_rect", "screen_rects",
            "SERIAL_PIXELS", "SERIAL_CELLS", "gc_paused"]
 
 #: Tiles of fewer pixels are traced on one thread, and grids of bricks of fewer cells built on
@@ -141,10 +141,10 @@ def _threads(serial: bool) -> Iterator[None]:
 def gc_paused() -> Iterator[None]:
     """Hold Python's cyclic garbage collector for the body (it runs again after it).
 
-    A frame with tens of thousands of pieces allocates a few small tuples per piece while
-    about a million objects (each piece's cached grid, pair and box) stay alive; the
+    A frame with tens of thousands of drawables allocates a few small tuples per drawable while
+    about a million objects (each drawable's cached grid, pair and box) stay alive; the
     allocations trigger full collections that traverse all of them: 0.66 s of a 3 s steady
-    frame of a 512^3 wavelet store with 33 k pieces (cProfile, ``_pair``'s own time, which fell
+    frame of a 512^3 wavelet store with 33 k drawables (cProfile, ``_pair``'s own time, which fell
     to nothing with the collector held). The body creates no reference cycles, so holding the
     collector only moves that work out of the frame; reference counting still frees memory.
     """
@@ -159,15 +159,15 @@ def gc_paused() -> Iterator[None]:
 
 
 @dataclass(frozen=True, eq=False)
-class Piece:
+class Drawable:
     """One box of a cut and the brick array that reconstructs it.
 
     Attributes
     ----------
     cut_key : (level, i, j, k)
-        The cut's brick whose box this is (orders the pieces front to back).
+        The cut's brick whose box this is (orders the drawables front to back).
     key : hashable
-        Names the array's contents (a brick's key): pieces with the same key share one grid.
+        Names the array's contents (a brick's key): drawables with the same key share one grid.
     level : int
         Level of the array (coarser than ``cut_key[0]`` when an ancestor stands in).
     data : ndarray (nx, ny, nz)
@@ -275,17 +275,17 @@ def screen_rects(camera: Camera, lo: np.ndarray,
 
 
 class CutRenderer:
-    """Traces the pieces of a cut with one model, front to back per ray.
+    """Traces the drawables of a cut with one model, front to back per ray.
 
     Parameters
     ----------
     model : a model of :data:`splinecast.models.MODELS`
-        Prepared once (from any level: only its kind, options and tables are used); pieces'
+        Prepared once (from any level: only its kind, options and tables are used); drawables'
         arrays become its kernel grids.
     tree : BrickOctree
         The levels' geometry and the bricks' nesting (for the front-to-back order).
     seams : optional
-        Seam treatment with ``plan(pieces, renderer)`` and ``closure``
+        Seam treatment with ``plan(drawables, renderer)`` and ``closure``
         (:class:`.draw.seams.Seams`); ``None`` draws every brick as it is.
     """
 
@@ -313,7 +313,7 @@ class CutRenderer:
         self._changed: dict[Hashable, tuple[Any, Grid, int]] = {}
         #: Per (brick key, box) changed at a seam: the change and the parts it is drawn as
         #: (:mod:`.draw.seam_parts`: shells, then the core last), or ``None`` for a whole copy.
-        self._split: dict[tuple, tuple[Any, list[Piece] | None, Any]] = {}
+        self._split: dict[tuple, tuple[Any, list[Drawable] | None, Any]] = {}
         #: Draw bricks changed at a seam as shells around their unchanged core (else each from
         #: a float64 copy of its whole array, the reference the parts are tested against).
         self.split_seams = True
@@ -324,10 +324,10 @@ class CutRenderer:
         self._seam_pairs: dict[Hashable, tuple[tuple, Hashable]] = {}
         #: The last frame's typed lists of pairs (see :meth:`_pack`).
         self._packed: tuple | None = None
-        #: The last frame's pieces, seam changes, view, order and launch arrays (see
+        #: The last frame's drawables, seam changes, view, order and launch arrays (see
         #: :meth:`_trace`).
         self._last: _LastDraw | None = None
-        #: Trace all pieces of a frame in one compiled launch (else one call per piece).
+        #: Trace all drawables of a frame in one compiled launch (else one call per drawable).
         self.batched = True
         self.stats: dict[str, Any] = {}
 
@@ -341,18 +341,18 @@ class CutRenderer:
                              np.asarray(offset, dtype=np.float64))
 
     # ------------------------------------------------------------------ arrays and grids
-    def prepared(self, piece: Piece) -> tuple[np.ndarray, np.ndarray]:
-        """The array the model's kernels read for a piece, and the level index of its first
+    def prepared(self, drawable: Drawable) -> tuple[np.ndarray, np.ndarray]:
+        """The array the model's kernels read for a drawable, and the level index of its first
         element (the brick's voxels; the type-6 prefilter applied when the model has it)."""
-        if piece.seam_part == "shell":
-            return piece.data, np.asarray(piece.first, dtype=np.int64)
-        cached = self._prepared.get(piece.key)
+        if drawable.seam_part == "shell":
+            return drawable.data, np.asarray(drawable.first, dtype=np.int64)
+        cached = self._prepared.get(drawable.key)
         if cached is not None:
             return cached
-        first = np.asarray(piece.first, dtype=np.int64)
-        data = piece.data
-        data, first = self.model.prefilter_brick(data, first, self.levels[piece.level].shape)
-        self._prepared[piece.key] = (data, first)
+        first = np.asarray(drawable.first, dtype=np.int64)
+        data = drawable.data
+        data, first = self.model.prefilter_brick(data, first, self.levels[drawable.level].shape)
+        self._prepared[drawable.key] = (data, first)
         return data, first
 
     def grid(self, level: int, array: np.ndarray, first: np.ndarray) -> Grid:
@@ -364,39 +364,40 @@ class CutRenderer:
                          level_origin=g.origin, level_spacing=g.spacing, domain=(lo, hi),
                          level_cells=cells)
 
-    def _piece_grid(self, piece: Piece, changes: dict) -> tuple[Grid, bool]:
-        """The grid to trace for a piece: cached, or built from the array changed at a seam.
+    def _drawable_grid(self, drawable: Drawable, changes: dict) -> tuple[Grid, bool]:
+        """The grid to trace for a drawable: cached, or built from the array changed at a seam.
         Builds of small bricks run their compiled calls on one thread (thread start-up costs
         more than they do); a cached grid costs a dictionary lookup only, which matters at tens
-        of thousands of pieces per frame (switching the thread count for every piece took
-        0.44 s of a profiled 32 k-piece wavelet frame)."""
-        change = None if piece.seam_part else changes.get(piece.key)
+        of thousands of drawables per frame (switching the thread count for every drawable took
+        0.44 s of a profiled 32 k-drawable wavelet frame)."""
+        change = None if drawable.seam_part else changes.get(drawable.key)
         if change is None:
-            grid = self._grids.get(piece.key)
+            grid = self._grids.get(drawable.key)
             if grid is None:
-                with _threads(piece.data.size < SERIAL_CELLS):
-                    array, first = self.prepared(piece)
-                    grid = self._grids[piece.key] = self.grid(piece.level, array, first)
+                with _threads(drawable.data.size < SERIAL_CELLS):
+                    array, first = self.prepared(drawable)
+                    grid = self._grids[drawable.key] = self.grid(drawable.level, array, first)
             return grid, False
-        kept = self._changed.get(piece.key)
+        kept = self._changed.get(drawable.key)
         if kept is not None and kept[0] is change:
             return kept[1], False
-        with _threads(piece.data.size < SERIAL_CELLS):
-            array, first = self.prepared(piece)
+        with _threads(drawable.data.size < SERIAL_CELLS):
+            array, first = self.prepared(drawable)
             copy = change.apply(array)
-            grid = self.grid(piece.level, copy, first)
-        self._changed[piece.key] = (change, grid, copy.nbytes)
+            grid = self.grid(drawable.level, copy, first)
+        self._changed[drawable.key] = (change, grid, copy.nbytes)
         return grid, True
 
-    def evaluate(self, piece: Piece, points: np.ndarray, changes: dict | None = None) -> np.ndarray:
-        """The reconstruction a piece draws (with its seam ``changes``, if any) at level-0 index
+    def evaluate(self, drawable: Drawable, points: np.ndarray,
+                 changes: dict | None = None) -> np.ndarray:
+        """The reconstruction a drawable draws (with its seam ``changes``, if any) at level-0 index
         points (n, 3)."""
-        array, first = self.prepared(piece)
-        change = (changes or {}).get(piece.key)
+        array, first = self.prepared(drawable)
+        change = (changes or {}).get(drawable.key)
         if change is not None:
             array = change.apply(array)
-        grid = self.grid(piece.level, array, first)
-        local = (self.levels[piece.level].from_level0(points) + self.model.shift
+        grid = self.grid(drawable.level, array, first)
+        local = (self.levels[drawable.level].from_level0(points) + self.model.shift
                  - grid.geom[GEOM_OFFSET:GEOM_OFFSET + 3])
         out = np.empty(len(local))
         sample_grid(grid.kernel, np.ascontiguousarray(local), out)
@@ -413,8 +414,8 @@ class CutRenderer:
                 del store[key]
 
     # ------------------------------------------------------------------ rendering
-    def box(self, piece: Piece) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The level-0 box a piece draws, and which of its upper faces are the domain's (closed
+    def box(self, drawable: Drawable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The level-0 box a drawable draws, and which of its upper faces are the domain's (closed
         to rays lying in them).
 
         The cut's box moved by ``-shift`` level-0 voxels, so that boxes of level 0 end on cell
@@ -423,10 +424,10 @@ class CutRenderer:
         volume (DVR's segments end at every cell boundary). Moving every box alike keeps them a
         partition. At the volume's border the box reaches the model's domain.
         """
-        lo = np.asarray(piece.box_lo, dtype=np.float64)
-        hi = np.asarray(piece.box_hi, dtype=np.float64)
+        lo = np.asarray(drawable.box_lo, dtype=np.float64)
+        hi = np.asarray(drawable.box_hi, dtype=np.float64)
         d_lo, d_hi = self.domain0
-        if piece.placed:
+        if drawable.placed:
             return lo, hi, hi >= d_hi
         shift = float(self.model.shift)
         first, last = lo <= 0.0, hi >= d_hi - self.margin
@@ -434,20 +435,20 @@ class CutRenderer:
         hi = np.where(last, d_hi, hi - shift)
         return lo, hi, last
 
-    def render(self, pieces: Sequence[Piece], setup: Any, camera: Camera,
+    def render(self, drawables: Sequence[Drawable], setup: Any, camera: Camera,
                planes: np.ndarray = NO_PLANES) -> tuple[tuple, tuple]:
-        """Trace an image through the pieces of a cut; returns ``(outputs, counters)``."""
+        """Trace an image through the drawables of a cut; returns ``(outputs, counters)``."""
         h, w = camera.height, camera.width
         stats = counters(h, w)
         out = setup.output(h, w)
         # The states are reset and the outputs written inside the one launch (no separate
-        # passes over the image), or around the per-piece path.
-        self._trace(pieces, setup, camera, setup.state(h, w), stats, planes, out)
+        # passes over the image), or around the per-drawable path.
+        self._trace(drawables, setup, camera, setup.state(h, w), stats, planes, out)
         return out, stats
 
-    def trace(self, pieces: Sequence[Piece], setup: Any, camera: Camera, state: tuple,
+    def trace(self, drawables: Sequence[Drawable], setup: Any, camera: Camera, state: tuple,
               stats: tuple, planes: np.ndarray = NO_PLANES) -> None:
-        """Carry the per-pixel ``state`` of ``setup`` through the pieces, front to back.
+        """Carry the per-pixel ``state`` of ``setup`` through the drawables, front to back.
 
         ``state`` and ``stats`` are full-image arrays
         (:func:`~splinecast.render.segment.new_state`,
@@ -455,31 +456,31 @@ class CutRenderer:
         that splits a cut (a distributed worker) traces its share into its own state and
         merges the states with the mode's ``combine`` in depth order.
 
-        One compiled launch traces all pieces
-        (:func:`~splinecast.render.pieces_driver.trace_pieces`); with :attr:`batched` off, or for a
-        cut whose grids have more than two Numba types, each piece is traced by its own call of the
-        segment entry point (the reference the batched launch is tested against).
+        One compiled launch traces all drawables
+        (:func:`~splinecast.render.cut_driver.trace_cut`); with :attr:`batched` off, or for a
+        cut whose grids have more than two Numba types, each drawable is traced by its own call of
+        the segment entry point (the reference the batched launch is tested against).
         """
-        self._trace(pieces, setup, camera, state, stats, planes, None)
+        self._trace(drawables, setup, camera, state, stats, planes, None)
 
-    def _trace(self, pieces: Sequence[Piece], setup: Any, camera: Camera, state: tuple,
+    def _trace(self, drawables: Sequence[Drawable], setup: Any, camera: Camera, state: tuple,
                stats: tuple, planes: np.ndarray, out: tuple | None) -> None:
         """:meth:`trace`; with ``out``, from uninitialised ``state`` arrays (reset here) to the
         finished outputs written into ``out``."""
         start = time.perf_counter()
         planes = np.ascontiguousarray(planes, dtype=np.float64).reshape(-1, 4)
-        # The same pieces (the scene hands out the same list while the cut and what is
+        # The same drawables (the scene hands out the same list while the cut and what is
         # resident stay) seen the same way: the seam plan, the order and the launch's arrays
-        # of the last frame are still right (tens of microseconds per piece to redo).
+        # of the last frame are still right (tens of microseconds per drawable to redo).
         view = (camera.pixel_basis().tobytes(), planes.tobytes(), _blocks_key(setup),
                 type(setup.params))
         last = self._last
-        steady = last is not None and last.pieces is pieces and view[2] is not None
+        steady = last is not None and last.drawables is drawables and view[2] is not None
         if steady:
             assert last is not None
             changes = last.changes
         else:
-            changes = self.seams.plan(pieces, self) if self.seams is not None else {}
+            changes = self.seams.plan(drawables, self) if self.seams is not None else {}
             # Grids built for a change an array no longer has go: kept while the array stayed
             # in the cut, such float64 copies (8 bytes per voxel) grew to several times the
             # brick budget while a large cut refined.
@@ -494,9 +495,9 @@ class CutRenderer:
         if steady and last is not None and last.view == view:
             drawn, drawn_changes, launch = last.drawn, last.drawn_changes, last.launch
         else:
-            keys = np.array([p.cut_key for p in pieces], dtype=np.int64).reshape(-1, 4)
-            drawn, drawn_changes = self._drawn(pieces, front_to_back(keys, camera, self.tree),
-                                               changes, camera)
+            keys = np.array([p.cut_key for p in drawables], dtype=np.int64).reshape(-1, 4)
+            drawn, drawn_changes = self._drawn(drawables, front_to_back(keys, camera, self.tree),
+                                                  changes, camera)
             launch = None
         order = np.arange(len(drawn))
         self._last = None
@@ -505,7 +506,7 @@ class CutRenderer:
             done, launch = self._trace_batched(drawn, order, drawn_changes, closure, setup,
                                                camera, state, stats, planes, out, launch)
             if done is not None and view[2] is not None:
-                self._last = _LastDraw(pieces, changes, view, drawn, drawn_changes, launch)
+                self._last = _LastDraw(drawables, changes, view, drawn, drawn_changes, launch)
         if done is None:
             if out is not None:
                 reset_state(setup.params, state, camera.height, camera.width)
@@ -514,10 +515,11 @@ class CutRenderer:
             if out is not None:
                 finalize(setup.params, state, out, camera.pixel_basis())
         traced, rebuilt = done
-        self.stats = {"pieces": len(pieces), "pieces_traced": traced, "launch_reused": steady,
+        self.stats = {"drawables": len(drawables), "drawables_traced": traced,
+                      "launch_reused": steady,
                       "one_launch": self._last is not None,
-                      "pieces_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
-                      "seam_plan_ms": plan_s * 1e3, "seam_parts": len(drawn) - len(pieces),
+                      "drawables_changed_at_seams": len(changes), "grids_built_at_seams": rebuilt,
+                      "seam_plan_ms": plan_s * 1e3, "seam_parts": len(drawn) - len(drawables),
                       "seam_copy_bytes": self.seam_copy_bytes()}
         if closure is not None:
             self.stats["seam_closure_hits"] = closure.hits
@@ -535,37 +537,37 @@ class CutRenderer:
         changes = sum(c.index.nbytes + c.values.nbytes for c in held.values())
         return shells + changes + sum(nbytes for _, _, nbytes in self._changed.values())
 
-    def _drawn(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
-               camera: Camera) -> tuple[list[Piece], dict]:
-        """The pieces to trace, front to back, and the seam changes still to apply to them:
-        each piece changed at a seam is replaced by its parts (:mod:`.draw.seam_parts`) in the order
-        seen from ``camera``, where it splits."""
-        ordered = [pieces[int(n)] for n in order]
+    def _drawn(self, drawables: Sequence[Drawable], order: np.ndarray, changes: dict,
+               camera: Camera) -> tuple[list[Drawable], dict]:
+        """The drawables to trace, front to back, and the seam changes still to apply to them:
+        each drawable changed at a seam is replaced by its parts (:mod:`.draw.seam_parts`) in the
+        order seen from ``camera``, where it splits."""
+        ordered = [drawables[int(n)] for n in order]
         if not changes or not self.split_seams:
             return ordered, changes
         point, eye = eye_index(camera, self.tree)
-        drawn: list[Piece] = []
+        drawn: list[Drawable] = []
         used: set[tuple] = set()
-        for piece in ordered:
-            change = changes.get(piece.key)
+        for drawable in ordered:
+            change = changes.get(drawable.key)
             if change is None:
-                drawn.append(piece)
+                drawn.append(drawable)
                 continue
-            lo, hi, _ = self.box(piece)
-            key = (piece.key, lo.tobytes(), hi.tobytes())
+            lo, hi, _ = self.box(drawable)
+            key = (drawable.key, lo.tobytes(), hi.tobytes())
             entry = self._split.get(key)
             if entry is None or entry[0] is not change:
                 if entry is not None:
                     self._drop_split(key)
-                entry = self._split[key] = (change, *self._parts(piece, change, lo, hi))
+                entry = self._split[key] = (change, *self._parts(drawable, change, lo, hi))
             used.add(key)
             parts, split = entry[1], entry[2]
             if parts is None:
-                drawn.append(piece)
+                drawn.append(drawable)
             elif split is None:  # no changed element reaches the box: the brick's own grid
                 drawn.extend(parts)
             else:
-                lv = self.levels[piece.level]
+                lv = self.levels[drawable.level]
                 if eye is None:
                     at = part_order(split, point * lv.scale, perspective=False)
                 else:
@@ -575,17 +577,17 @@ class CutRenderer:
         # of bricks now drawn in parts (or from an ancestor's box that splits) go.
         for key in [k for k in self._split if k not in used]:
             self._drop_split(key)
-        whole = {piece.key for piece in drawn if not piece.seam_part}
+        whole = {drawable.key for drawable in drawn if not drawable.seam_part}
         for key in [k for k in self._changed if k not in whole]:
             del self._changed[key]
         return drawn, {k: c for k, c in changes.items() if k in whole}
 
-    def _parts(self, piece: Piece, change: Any, lo: np.ndarray,
-               hi: np.ndarray) -> tuple[list[Piece] | None, Parts | None]:
-        """A changed piece's parts (shells, then the core) and their split, or ``(None,
+    def _parts(self, drawable: Drawable, change: Any, lo: np.ndarray,
+               hi: np.ndarray) -> tuple[list[Drawable] | None, Parts | None]:
+        """A changed drawable's parts (shells, then the core) and their split, or ``(None,
         None)`` when it is drawn from a whole copy."""
-        array, first = self.prepared(piece)
-        lv = self.levels[piece.level]
+        array, first = self.prepared(drawable)
+        lv = self.levels[drawable.level]
         lo_b, hi_b = lv.from_level0(lo), lv.from_level0(hi)
         radius = float(self.seams.radius) if self.seams is not None else 0.0
         elements = np.stack(np.unravel_index(change.index, array.shape), axis=1) + first
@@ -594,7 +596,7 @@ class CutRenderer:
         reach = np.all((elements >= lo_b - radius - 1.0) & (elements <= hi_b + radius + 1.0),
                        axis=1)
         if not reach.any():
-            return [replace(piece, seam_part="core")], None
+            return [replace(drawable, seam_part="core")], None
         split = split_box(lo_b, hi_b, elements[reach], radius)
         if split is None:
             return None, None
@@ -604,37 +606,37 @@ class CutRenderer:
                 SHELL_SHARE_MAX * array.size):
             return None, None
         changed = change.apply(array)  # transient: only the shells' elements are kept
-        parts: list[Piece] = []
+        parts: list[Drawable] = []
         for p, (box_lo, box_hi) in enumerate(split.boxes):
             # Back to level 0, exactly where a part's face is the brick's.
             lo0 = np.where(box_lo == lo_b, lo, (box_lo - lv.offset) / lv.scale)
             hi0 = np.where(box_hi == hi_b, hi, (box_hi - lv.offset) / lv.scale)
             if p == len(split.boxes) - 1:
-                parts.append(replace(piece, box_lo=lo0, box_hi=hi0, placed=True,
+                parts.append(replace(drawable, box_lo=lo0, box_hi=hi0, placed=True,
                                      seam_part="core"))
                 continue
             start, stop = crops[p]
             data = np.ascontiguousarray(changed[start[0]:stop[0], start[1]:stop[1],
                                                 start[2]:stop[2]])
             self._serial += 1
-            parts.append(replace(piece, key=("seam shell", self._serial), data=data,
+            parts.append(replace(drawable, key=("seam shell", self._serial), data=data,
                                  first=tuple(int(v) for v in first + start), box_lo=lo0,
                                  box_hi=hi0, placed=True, seam_part="shell"))
         return parts, split
 
     def _drop_split(self, key: tuple) -> None:
-        """Forget a changed piece's parts and the grids built for its shells."""
+        """Forget a changed drawable's parts and the grids built for its shells."""
         _, parts, _ = self._split.pop(key)
         for shell in (parts or [])[:-1]:
             for store in (self._grids, self._pairs):
                 store.pop(shell.key, None)
 
-    def boxes(self, pieces: Sequence[Piece]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`box` of many pieces at once: ``lo``, ``hi`` (n, 3) and ``closed`` (n, 3)."""
-        n = len(pieces)
-        lo = np.array([p.box_lo for p in pieces], dtype=np.float64).reshape(n, 3)
-        hi = np.array([p.box_hi for p in pieces], dtype=np.float64).reshape(n, 3)
-        placed = np.array([p.placed for p in pieces], dtype=bool)[:, None]
+    def boxes(self, drawables: Sequence[Drawable]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`box` of many drawables at once: ``lo``, ``hi`` (n, 3) and ``closed`` (n, 3)."""
+        n = len(drawables)
+        lo = np.array([p.box_lo for p in drawables], dtype=np.float64).reshape(n, 3)
+        hi = np.array([p.box_hi for p in drawables], dtype=np.float64).reshape(n, 3)
+        placed = np.array([p.placed for p in drawables], dtype=bool)[:, None]
         d_lo, d_hi = self.domain0
         shift = float(self.model.shift)
         first, last = lo <= 0.0, hi >= d_hi - self.margin
@@ -643,16 +645,16 @@ class CutRenderer:
         closed = np.where(placed, hi >= d_hi, last)
         return out_lo, out_hi, closed
 
-    def _trace_batched(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
+    def _trace_batched(self, drawables: Sequence[Drawable], order: np.ndarray, changes: dict,
                        closure: Any, setup: Any, camera: Camera, state: tuple, stats: tuple,
                        planes: np.ndarray, out: tuple | None,
                        launch: _Launch | None = None) -> tuple[tuple[int, int] | None, Any]:
-        """All pieces in one compiled launch (with ``out``: the states reset and the outputs
+        """All drawables in one compiled launch (with ``out``: the states reset and the outputs
         written in it too); ``None``, before anything is traced, if their grids have too many
         types. Returns that and the launch's arrays (``launch``: those of the last frame, for
-        the same pieces, seam changes, view and mode)."""
+        the same drawables, seam changes, view and mode)."""
         if launch is None:
-            launch = self._launch(pieces, order, changes, setup, camera)
+            launch = self._launch(drawables, order, changes, setup, camera)
         if launch is None:
             return None, None
         h, w = camera.height, camera.width
@@ -667,22 +669,22 @@ class CutRenderer:
             exits = (np.empty((0, 0)), np.empty((0, 0), dtype=np.int64),
                      np.empty((0, 0), dtype=np.int64))
         final = out is not None
-        hits = trace_pieces(launch.grids[0], launch.grids[1], launch.which, setup.params, state,
-                            out if final else setup.output(0, 0), camera.pixel_basis(),
-                            launch.geoms, launch.boxes, launch.closed, launch.rects,
-                            launch.levels, self.origin0, self.spacing0, planes,
-                            np.empty((h, w, 2)), _tiles(h, w), *launch.tile_lists, final, final,
-                            closure is not None, *exits, *stats)
+        hits = trace_cut(launch.grids[0], launch.grids[1], launch.which, setup.params, state,
+                         out if final else setup.output(0, 0), camera.pixel_basis(),
+                         launch.geoms, launch.boxes, launch.closed, launch.rects,
+                         launch.levels, self.origin0, self.spacing0, planes,
+                         np.empty((h, w, 2)), _tiles(h, w), *launch.tile_lists, final, final,
+                         closure is not None, *exits, *stats)
         if closure is not None:
             closure.hits += int(hits)
         rebuilt, launch.rebuilt = launch.rebuilt, 0  # built once, for the first frame
         return (len(launch.which), rebuilt), launch
 
-    def _launch(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict, setup: Any,
+    def _launch(self, drawables: Sequence[Drawable], order: np.ndarray, changes: dict, setup: Any,
                 camera: Camera) -> _Launch | None:
-        """The arrays :func:`trace_pieces` takes for the pieces seen by ``camera`` (grids built
+        """The arrays :func:`trace_cut` takes for the drawables seen by ``camera`` (grids built
         where missing); ``None`` if their grids have more than two Numba types."""
-        ordered = [pieces[int(n)] for n in order]
+        ordered = [drawables[int(n)] for n in order]
         if not ordered:
             return None
         lo, hi, closed = self.boxes(ordered)
@@ -695,18 +697,18 @@ class CutRenderer:
         blocks_key = _blocks_key(setup)
         pairs: list[tuple[tuple, Hashable]] = []  # distinct grids' (kernel, blocks), signature
         index: dict[int, int] = {}  # id(grid) -> position in pairs
-        per_piece = np.empty(len(keep), dtype=np.int64)
+        per_drawable = np.empty(len(keep), dtype=np.int64)
         geoms = np.empty((len(keep), GEOM_SIZE))
         for m, n in enumerate(keep):
-            piece = ordered[int(n)]
-            grid, changed = self._piece_grid(piece, changes)
+            drawable = ordered[int(n)]
+            grid, changed = self._drawable_grid(drawable, changes)
             rebuilt += changed
             geoms[m] = grid.geom
             at = index.get(id(grid))
             if at is None:
                 at = index[id(grid)] = len(pairs)
-                pairs.append(self._pair(piece.key, grid, setup, blocks_key))
-            per_piece[m] = at
+                pairs.append(self._pair(drawable.key, grid, setup, blocks_key))
+            per_drawable[m] = at
         if not len(keep):
             return _Launch((), np.zeros((0, 2), np.int64), geoms, np.zeros((0, 2, 3)),
                            np.zeros((0, 3), bool), np.zeros((0, 4), np.int64),
@@ -717,7 +719,7 @@ class CutRenderer:
             return None
         grids, slot = packed
         rects = np.ascontiguousarray(rects[keep])
-        return _Launch(tuple(grids), np.ascontiguousarray(slot[per_piece]), geoms,
+        return _Launch(tuple(grids), np.ascontiguousarray(slot[per_drawable]), geoms,
                        np.ascontiguousarray(np.stack([lo[keep], hi[keep]], axis=1)),
                        np.ascontiguousarray(closed[keep]), rects,
                        np.array([ordered[int(n)].level for n in keep], dtype=np.int64), rebuilt,
@@ -766,32 +768,32 @@ class CutRenderer:
         self._packed = (key, grids, slot)
         return grids, slot
 
-    def _seam_pair(self, piece: Piece, setup: Any) -> tuple[tuple, Hashable]:
+    def _seam_pair(self, drawable: Drawable, setup: Any) -> tuple[tuple, Hashable]:
         """A ``(kernel, blocks)`` pair of the type a grid changed at a seam has (built from a
-        float64 copy of ``piece``'s array, as :meth:`~.draw.seams.Change.apply` makes), and its
+        float64 copy of ``drawable``'s array, as :meth:`~.draw.seams.Change.apply` makes), and its
         signature; one per mode type."""
         key = _signature(setup.params)
         kept = self._seam_pairs.get(key)
         if kept is None:
             # Only its type matters: a corner of the array, not a float64 copy of the whole
             # brick kept beside the budget for the session.
-            array, first = self.prepared(piece)
+            array, first = self.prepared(drawable)
             corner = np.array(array[:_EXEMPLAR, :_EXEMPLAR, :_EXEMPLAR], dtype=np.float64,
                               order="C")
-            grid = self.grid(piece.level, corner, first)
+            grid = self.grid(drawable.level, corner, first)
             pair = (grid.kernel, setup.blocks(grid.hierarchy))
             kept = self._seam_pairs[key] = (pair, _signature(pair))
         return kept
 
-    def _float32_pair(self, piece: Piece, setup: Any) -> tuple:
+    def _float32_pair(self, drawable: Drawable, setup: Any) -> tuple:
         """A ``(kernel, blocks)`` pair of the type a float32 store's grids have (the type-6
         models convert every array to their own dtype: there it is the seam pair's type)."""
         key = ("float32", _signature(setup.params))
         kept = self._seam_pairs.get(key)
         if kept is None:
-            array, first = self.prepared(piece)
+            array, first = self.prepared(drawable)
             corner = array[:_EXEMPLAR, :_EXEMPLAR, :_EXEMPLAR]
-            grid = self.grid(piece.level, np.array(corner, dtype=np.float32, order="C"), first)
+            grid = self.grid(drawable.level, np.array(corner, dtype=np.float32, order="C"), first)
             kept = self._seam_pairs[key] = ((grid.kernel, setup.blocks(grid.hierarchy)), None)
         return kept[0]
 
@@ -799,7 +801,7 @@ class CutRenderer:
               blocks_key: Any) -> tuple[tuple, Hashable]:
         """A grid's ``(kernel, blocks)`` for the launch and the signature of its Numba type;
         kept between frames while the grid and the mode's block selection stay the same (block
-        flags and Numba's typing cost a millisecond or more per piece)."""
+        flags and Numba's typing cost a millisecond or more per drawable)."""
         kept = self._pairs.get(key)
         if kept is not None and kept[0] is grid and blocks_key is not None and (
                 kept[1] == blocks_key):
@@ -809,15 +811,15 @@ class CutRenderer:
         self._pairs[key] = (grid, blocks_key, pair, signature)
         return pair, signature
 
-    def _trace_each(self, pieces: Sequence[Piece], order: np.ndarray, changes: dict,
+    def _trace_each(self, drawables: Sequence[Drawable], order: np.ndarray, changes: dict,
                     closure: Any, setup: Any, camera: Camera, state: tuple, stats: tuple,
                     planes: np.ndarray) -> tuple[int, int]:
-        """One segment-entry-point call per piece, over the screen rectangle of its box."""
+        """One segment-entry-point call per drawable, over the screen rectangle of its box."""
         origin0, spacing0 = self.origin0, self.spacing0
         traced = rebuilt = 0
         for n in order:
-            piece = pieces[int(n)]
-            lo, hi, closed = self.box(piece)
+            drawable = drawables[int(n)]
+            lo, hi, closed = self.box(drawable)
             world_lo = origin0 + lo * spacing0
             world_hi = origin0 + hi * spacing0
             rect = screen_rect(camera, np.minimum(world_lo, world_hi),
@@ -829,17 +831,17 @@ class CutRenderer:
             if box_ranges(tile.pixel_basis(), origin0, spacing0, lo, hi, closed, planes,
                           t_range) == 0:
                 continue
-            grid, changed = self._piece_grid(piece, changes)
+            grid, changed = self._drawable_grid(drawable, changes)
             rebuilt += changed
             traced += 1
             local = _gather(state, rect, tile is camera)
             local_stats = counters(tile.height, tile.width)
             if closure is not None:
-                closure.enter(piece, grid, tile, t_range, local, rect)
+                closure.enter(drawable, grid, tile, t_range, local, rect)
             with _threads(tile.width * tile.height < SERIAL_PIXELS):
                 trace_segment(grid, setup, tile, local, local_stats, planes, t_range)
             if closure is not None:
-                closure.leave(piece, grid, tile, t_range, local, rect)
+                closure.leave(drawable, grid, tile, t_range, local, rect)
             if tile is not camera:
                 _scatter(state, local, rect)
             for total, part in zip(stats, local_stats, strict=True):
@@ -850,22 +852,22 @@ class CutRenderer:
 
 @dataclass
 class _LastDraw:
-    """What the last frame drew: its pieces (the list object), their seam changes, the view
-    (camera basis, clip planes, block selection, mode type), the pieces as traced and the
+    """What the last frame drew: its drawables (the list object), their seam changes, the view
+    (camera basis, clip planes, block selection, mode type), the drawables as traced and the
     launch's arrays."""
 
-    pieces: Sequence[Piece]
+    drawables: Sequence[Drawable]
     changes: dict
     view: tuple
-    #: The pieces as traced (changed ones in parts), front to back, and their changes.
-    drawn: list[Piece]
+    #: The drawables as traced (changed ones in parts), front to back, and their changes.
+    drawn: list[Drawable]
     drawn_changes: dict
     launch: Any
 
 
 @dataclass
 class _Launch:
-    """What :func:`trace_pieces` takes for one frame's pieces, besides the mode's arrays."""
+    """What :func:`trace_cut` takes for one frame's drawables, besides the mode's arrays."""
 
     grids: tuple
     which: np.ndarray
@@ -876,7 +878,7 @@ class _Launch:
     levels: np.ndarray
     #: Grids built at seams for it (reported by the first frame that traces it).
     rebuilt: int
-    #: :func:`~splinecast.render.pieces_driver.tile_lists` of ``rects``.
+    #: :func:`~splinecast.render.cut_driver.tile_lists` of ``rects``.
     tile_lists: tuple
 
 
@@ -896,7 +898,7 @@ def _signature(value: Any) -> Hashable:
         f = value.flags
         # Numba's layout: an array both C- and F-contiguous (a thin shell's coarsest block
         # level, (3, 1, 1)) is typed "C"; telling the two apart split one type in two and sent
-        # every frame with seam shells to the per-piece path.
+        # every frame with seam shells to the per-drawable path.
         layout = "C" if f.c_contiguous else "F" if f.f_contiguous else "A"
         return (value.dtype.str, value.ndim, layout, f.writeable, f.aligned)
     if isinstance(value, tuple):

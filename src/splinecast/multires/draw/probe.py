@@ -18,7 +18,7 @@ from numba import prange
 
 from ..._jit import jit
 from ...models.pieces import new_scratch, value_gradient_at
-from ...render.pieces_driver import box_interval
+from ...render.cut_driver import box_interval
 from ...render.rays import GEOM_SPACING, grid_point
 
 __all__ = ["box_ranges", "sample_grid", "grid_values_at"]

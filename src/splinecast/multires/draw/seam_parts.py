@@ -1,7 +1,7 @@
 """A brick changed at a seam, drawn as thin shells of changed values around its unchanged core.
 
 :mod:`.draw.seams` makes neighbouring levels agree by replacing the elements of the finer brick that
-lie within the model's radius ``r`` of a coarser piece. Those elements all lie near the brick's
+lie within the model's radius ``r`` of a coarser drawable. Those elements all lie near the brick's
 faces, yet a grid needs one dense array, so the changed brick used to be drawn from a float64
 copy of its whole array: 8 bytes per voxel for every brick at a level boundary, 2 MiB per 64^3
 brick, as much again as the budget itself when a large view refined.
@@ -13,7 +13,7 @@ store's values, already built and shared with frames without the seam): no point
 is within ``r`` of a changed element, so it reads exactly the values the changed copy holds.
 Each shell gets a float64 copy of only the elements its points read. A ray crosses the parts
 of a box one after the other in the k-d order seen from the eye (:func:`part_order`), so the
-pieces of a cut stay in a valid front-to-back order when a brick is replaced by its parts.
+drawables of a cut stay in a valid front-to-back order when a brick is replaced by its parts.
 
 Shell thicknesses are whole level voxels counted from the box's faces, which lie on the
 model's cell boundaries; the parts therefore cut rays where cells do, and a first hit and its
@@ -37,7 +37,7 @@ __all__ = ["Parts", "split_box", "part_order", "crop_range", "SHELL_SHARE_MAX"]
 
 #: A brick is split only when its shells' copies hold at most this share of its array's
 #: elements: above it they would save little over one copy of the whole brick, and every part
-#: costs the launch a piece.
+#: costs the launch a drawable.
 SHELL_SHARE_MAX = 0.75
 
 

@@ -7,12 +7,12 @@ The finer side is therefore changed, never the coarser one:
 
 Restriction (all models)
     Every element ``p`` of a brick's array (level ``b``) that lies within the model's influence
-    radius ``r = (support + 1) / 2`` voxels of a coarser piece of the cut (max-norm distance to
-    its box, in level-``b`` voxels) is replaced by the coarser piece's function expressed at
+    radius ``r = (support + 1) / 2`` voxels of a coarser drawable of the cut (max-norm distance to
+    its box, in level-``b`` voxels) is replaced by the coarser drawable's function expressed at
     level ``b``. Within that radius lie all the elements the finer brick's reconstruction reads
     on the common face (faces, edges and corners alike: trilinear reads the face's own voxels,
     ``r = 1``; cubic B-spline and type-6 one layer more, ``r = 2`` and ``3/2``). When several
-    coarser pieces are that close, the finest of them supplies the values; arrays are processed
+    coarser drawables are that close, the finest of them supplies the values; arrays are processed
     from the coarsest level to the finest, each using the already changed arrays of the coarser
     ones. The rule depends only on an element's position, so two bricks of one level that share
     an element change it alike and still agree with each other.
@@ -25,11 +25,11 @@ Exact where the finer level can represent the coarser function (*nested* models)
     ``[1, 4, 6, 4, 1] / 8``). Replacing the elements near the face by these coefficients makes
     the fine reconstruction equal the coarse one on the whole common boundary (C0, up to
     rounding): no crack in any mode. Several levels meeting at an edge or a corner are handled
-    by the coarse-to-fine order (the finer coarse piece was itself restricted to the coarsest).
+    by the coarse-to-fine order (the finer coarse drawable was itself restricted to the coarsest).
 
 Approximate for ``bspline2``, ``qss`` and ``s31``, and for pyramids offset by half a voxel
     Their coarse function is not in the finer level's space (even-degree knots and type-6 cubes
-    lie between voxel centres, so the levels' pieces do not nest). The elements near the face get
+    lie between voxel centres, so the levels' drawables do not nest). The elements near the face get
     the coarse function's *values* there; the two sides then differ on the face by the fine
     level's approximation error of the smooth coarse function (measured in
     ``tests/test_multires_render.py``), not by the difference between the levels. For the
@@ -42,9 +42,9 @@ Approximate for ``bspline2``, ``qss`` and ``s31``, and for pyramids offset by ha
 Cost while a cut refines
     Every frame that brings bricks changes the cut, so the plan is redone per frame. It is
     incremental: an array's change is a function of its own contents (its key) and of the coarser
-    pieces within its reach, their boxes and their own changes, so it is kept while those are the
+    drawables within its reach, their boxes and their own changes, so it is kept while those are the
     same, and a recomputed change that comes out equal keeps its identity (the finer arrays next
-    to it, and the grid the renderer built from it, stay valid). The pieces within reach come
+    to it, and the grid the renderer built from it, stay valid). The drawables within reach come
     from a k-d tree per class of box sizes, and nested models subdivide once per source array
     with per-axis matrices. The plan's work is then proportional to the bricks that arrived,
     not to the cut (``benchmarks/tools/bench_stream_frames.py`` times it frame by frame).
@@ -120,10 +120,10 @@ class Seams:
     def __init__(self, model: Any) -> None:
         self.model = model
         self.degree = model.nested_degree
-        #: Elements closer than this (level voxels, max norm) to a coarser piece are replaced.
+        #: Elements closer than this (level voxels, max norm) to a coarser drawable are replaced.
         self.radius = (int(model.support) + 1) / 2.0
         self._last: tuple[Any, dict] | None = None
-        # Per array key: what its change was computed from (the coarser pieces within reach,
+        # Per array key: what its change was computed from (the coarser drawables within reach,
         # with their boxes and the versions of their own changes), the change, and its version.
         # A cut that changes by a few bricks recomputes only the arrays near them.
         self._memo: dict[Hashable, tuple[tuple, Change | None, int]] = {}
@@ -136,29 +136,29 @@ class Seams:
         iso = setup.first_hit_iso()
         return None if iso is None else IsoClosure(iso, camera)
 
-    def plan(self, pieces: Sequence[Any], renderer: Any) -> dict[Hashable, Change]:
+    def plan(self, drawables: Sequence[Any], renderer: Any) -> dict[Hashable, Change]:
         """The changes of every array of the cut whose bricks meet coarser ones."""
-        signature = tuple((p.key, tuple(p.box_lo), tuple(p.box_hi)) for p in pieces)
+        signature = tuple((p.key, tuple(p.box_lo), tuple(p.box_hi)) for p in drawables)
         if self._last is not None and self._last[0] == signature:
             self.recomputed = 0
             return self._last[1]
-        changes = self._plan(pieces, renderer)
+        changes = self._plan(drawables, renderer)
         self._last = (signature, changes)
         return changes
 
-    def _plan(self, pieces: Sequence[Any], renderer: Any) -> dict[Hashable, Change]:
+    def _plan(self, drawables: Sequence[Any], renderer: Any) -> dict[Hashable, Change]:
         self.recomputed = 0
-        if len({p.level for p in pieces}) < 2:
+        if len({p.level for p in drawables}) < 2:
             self._memo = {}
             return {}
         by_key: dict[Hashable, Any] = {}
-        for p in pieces:
+        for p in drawables:
             by_key.setdefault(p.key, p)
-        levels = np.array([p.level for p in pieces])
-        boxes = [renderer.box(p)[:2] for p in pieces]
+        levels = np.array([p.level for p in drawables])
+        boxes = [renderer.box(p)[:2] for p in drawables]
         box_lo = np.array([b[0] for b in boxes]).reshape(-1, 3)
         box_hi = np.array([b[1] for b in boxes]).reshape(-1, 3)
-        # Every piece's box in the index space of each level that has arrays (once per level,
+        # Every drawable's box in the index space of each level that has arrays (once per level,
         # not once per array: the boxes are compared with every array of that level).
         in_level = {level: (renderer.levels[level].from_level0(box_lo),
                             renderer.levels[level].from_level0(box_hi))
@@ -171,12 +171,13 @@ class Seams:
         grids: dict[Hashable, Any] = {}
         arrays: dict[Hashable, tuple[np.ndarray, np.ndarray]] = {}
         for key in sorted(reach, key=lambda k: -by_key[k].level):
-            piece = by_key[key]
-            array, first = renderer.prepared(piece)
+            drawable = by_key[key]
+            array, first = renderer.prepared(drawable)
             candidates = reach[key]
-            lo, hi = in_level[piece.level][0][candidates], in_level[piece.level][1][candidates]
-            depends = (tuple(pieces[int(n)].key for n in candidates), lo.tobytes(),
-                       hi.tobytes(), tuple(versions.get(pieces[int(n)].key, 0)
+            lo = in_level[drawable.level][0][candidates]
+            hi = in_level[drawable.level][1][candidates]
+            depends = (tuple(drawables[int(n)].key for n in candidates), lo.tobytes(),
+                       hi.tobytes(), tuple(versions.get(drawables[int(n)].key, 0)
                                            for n in candidates))
             kept = self._memo.get(key)
             if kept is not None and kept[0] == depends:
@@ -185,7 +186,7 @@ class Seams:
                     changes[key], versions[key] = kept[1], kept[2]
                 continue
             self.recomputed += 1
-            change = self._change(pieces, candidates, lo, hi, array, first, piece.level,
+            change = self._change(drawables, candidates, lo, hi, array, first, drawable.level,
                                   renderer, changes, arrays, grids, aligned)
             if kept is not None and _same(kept[1], change):
                 # The same values again (what changed was too far away to matter): keep the
@@ -203,8 +204,8 @@ class Seams:
 
     def _reach(self, by_key: dict[Hashable, Any], levels: np.ndarray, in_level: dict,
                renderer: Any) -> dict[Hashable, np.ndarray]:
-        """For every array that has coarser pieces within the radius of its elements: those
-        pieces (indices into the cut), finest level first, then in the cut's order."""
+        """For every array that has coarser drawables within the radius of its elements: those
+        drawables (indices into the cut), finest level first, then in the cut's order."""
         reach: dict[Hashable, np.ndarray] = {}
         for level in sorted(in_level):
             coarser = np.flatnonzero(levels > level)
@@ -220,8 +221,8 @@ class Seams:
             w_hi = w_lo + np.array(extents, dtype=np.float64).reshape(-1, 3) - 1
             lo, hi = in_level[level][0][coarser], in_level[level][1][coarser]
             which, near = _within_reach(w_lo, w_hi, lo, hi, self.radius)
-            # Finest coarser piece first, then the cut's order (the order the values are taken
-            # in where several coarser pieces are within reach of one element).
+            # Finest coarser drawable first, then the cut's order (the order the values are taken
+            # in where several coarser drawables are within reach of one element).
             order = np.lexsort((near, levels[coarser[near]], which))
             which, near = which[order], coarser[near[order]]
             bounds = np.flatnonzero(np.diff(which)) + 1
@@ -230,12 +231,12 @@ class Seams:
                     reach[keys[int(which[group[0]])]] = near[group]
         return reach
 
-    def _change(self, pieces: Sequence[Any], candidates: np.ndarray, lo: np.ndarray,
+    def _change(self, drawables: Sequence[Any], candidates: np.ndarray, lo: np.ndarray,
                 hi: np.ndarray, array: np.ndarray, first: np.ndarray, level: int,
                 renderer: Any, changes: dict, arrays: dict, grids: dict,
                 aligned: bool) -> Change | None:
         """The change of one array (level ``level``, first index ``first``) from the coarser
-        pieces ``candidates`` (finest first) whose boxes in this level's index space are
+        drawables ``candidates`` (finest first) whose boxes in this level's index space are
         ``lo``, ``hi``."""
         shape = np.asarray(array.shape)
         taken = np.zeros(array.shape, dtype=bool)
@@ -263,18 +264,18 @@ class Seams:
         boxes: dict[Hashable, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
         if aligned:
             for n, start, stop, _, _, _ in regions:
-                key = pieces[n].key
+                key = drawables[n].key
                 lo_, hi_ = boxes.get(key, (start, stop, None))[:2]
                 boxes[key] = (np.minimum(lo_, start), np.maximum(hi_, stop), None)
             for key, (lo_, hi_, _) in boxes.items():
-                source = next(pieces[n] for n, *_ in regions if pieces[n].key == key)
+                source = next(drawables[n] for n, *_ in regions if drawables[n].key == key)
                 src, src_first = self._source(source, renderer, changes, arrays)
                 boxes[key] = (lo_, hi_, _subdivided(src, src_first, first + lo_, first + hi_ - 1,
                                                     source.level, level, renderer.tree,
                                                     self.degree))
         value_parts = []
         for n, start, stop, new, local, _ in regions:
-            source = pieces[n]
+            source = drawables[n]
             values = None
             if aligned:
                 lo_, _, box = boxes[source.key]
@@ -297,7 +298,7 @@ class Seams:
     @staticmethod
     def _source(source: Any, renderer: Any, changes: dict,
                 arrays: dict) -> tuple[np.ndarray, np.ndarray]:
-        """A coarser piece's array with its own change applied (once per plan), and its first
+        """A coarser drawable's array with its own change applied (once per plan), and its first
         index."""
         kept = arrays.get(source.key)
         if kept is None:
@@ -310,7 +311,7 @@ class Seams:
 
     def _values(self, source: Any, where: np.ndarray, level: int, renderer: Any,
                 changes: dict, arrays: dict, grids: dict, aligned: bool) -> np.ndarray:
-        """The (changed) function of the coarser piece ``source`` at the level-``level``
+        """The (changed) function of the coarser drawable ``source`` at the level-``level``
         indices ``where`` (n, 3), as level-``level`` coefficients."""
         array, first = self._source(source, renderer, changes, arrays)
         if aligned:
@@ -442,8 +443,8 @@ def _subdivision_matrix(length: int, chain: tuple[int, ...], degree: int) -> np.
 class IsoClosure:
     """Closes the remaining cracks of a first-hit isosurface at level boundaries.
 
-    Kept per frame: for every ray, where it left the last piece it crossed without a hit, the
-    field there minus the isovalue, and that piece's level. When the ray enters a piece of
+    Kept per frame: for every ray, where it left the last drawable it crossed without a hit, the
+    field there minus the isovalue, and that drawable's level. When the ray enters a drawable of
     another level at the same parameter and the field there lies on the other side of the
     isovalue, the ray hits the surface at the face (depth and gradient written into the Iso
     mode's state: ``state[0]`` depth, ``state[1]`` world gradient).
@@ -470,14 +471,14 @@ class IsoClosure:
         c0, r0, w, h = rect
         return array[r0:r0 + h, c0:c0 + w]
 
-    def enter(self, piece: Any, grid: Any, tile: Any, t_range: np.ndarray, state: tuple,
+    def enter(self, drawable: Any, grid: Any, tile: Any, t_range: np.ndarray, state: tuple,
               rect: tuple[int, int, int, int]) -> None:
-        """Before tracing ``piece``: a hit on the face where the field jumps across the iso."""
+        """Before tracing ``drawable``: a hit on the face where the field jumps across the iso."""
         depth, gradient = state[0], state[1]
         t_in = t_range[..., 0]
         exit_t = self._window(self.exit_t, rect)
         want = ((t_in <= t_range[..., 1]) & np.isinf(depth) & (exit_t == t_in)
-                & (self._window(self.exit_level, rect) != piece.level))
+                & (self._window(self.exit_level, rect) != drawable.level))
         if not want.any():
             return
         value, grad = self._values(grid, tile, t_in, want)
@@ -488,9 +489,10 @@ class IsoClosure:
         gradient[jump] = grad[jump]
         self.hits += int(jump.sum())
 
-    def leave(self, piece: Any, grid: Any, tile: Any, t_range: np.ndarray, state: tuple,
+    def leave(self, drawable: Any, grid: Any, tile: Any, t_range: np.ndarray, state: tuple,
               rect: tuple[int, int, int, int]) -> None:
-        """After tracing ``piece``: where the rays without a hit leave it, and the field there."""
+        """After tracing ``drawable``: where the rays without a hit leave it, and the field
+        there."""
         t_out = t_range[..., 1]
         want = (t_range[..., 0] <= t_out) & np.isinf(state[0])
         if not want.any():
@@ -498,4 +500,4 @@ class IsoClosure:
         value, _ = self._values(grid, tile, t_out, want)
         self._window(self.exit_t, rect)[want] = t_out[want]
         self._window(self.exit_g, rect)[want] = value[want] - self.iso
-        self._window(self.exit_level, rect)[want] = piece.level
+        self._window(self.exit_level, rect)[want] = drawable.level

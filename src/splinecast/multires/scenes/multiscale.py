@@ -12,15 +12,15 @@ frame it
    an optional point of ``interest``, split-and-collapse under the brick budget and ``load_budget``,
    updated from the previous frame's cut; :mod:`.cut.policy`) in DVR and MIP/minIP, and the
    level-of-detail cut in the isosurface modes;
-2. turns the cut into :class:`~.draw.cut_renderer.Piece` s and fixes the seams between levels
+2. turns the cut into :class:`~.draw.cut_renderer.Drawable` s and fixes the seams between levels
    (:mod:`.draw.seams`);
-3. traces the pieces front to back per ray (:class:`~.draw.cut_renderer.CutRenderer`) in the mode
+3. traces the drawables front to back per ray (:class:`~.draw.cut_renderer.CutRenderer`) in the mode
    of :meth:`~splinecast.Scene.render`, with the same options and the same :class:`Frame`.
 
 ``frame.stats`` adds the stream's counts (``complete``, ``substituted``, ``resident``,
-``loaded_this_frame``, ``cut_bricks``, ``cut_levels``, ...) and the renderer's (``pieces``,
-``pieces_traced``, ``pieces_changed_at_seams``, ``seam_closure_hits``). Rendering the same view
-again converges to the complete cut.
+``loaded_this_frame``, ``cut_bricks``, ``cut_levels``, ...) and the renderer's (``drawables``,
+``drawables_traced``, ``drawables_changed_at_seams``, ``seam_closure_hits``). Rendering the same
+view again converges to the complete cut.
 
 Memory: the brick cache holds at most ``budget`` bytes. Models whose kernels need another dtype
 than the store's (the type-6 splines read float32 or float64) hold a converted copy of every
@@ -51,12 +51,12 @@ from ..cut.octree import DEFAULT_BRICK, BrickOctree
 from ..cut.policy import CUT_PRIORITIES, ErrorCut, check_cut
 from ..cut.relevance import ValueFilter
 from ..cut.stream import BrickStream, FrameBricks
-from ..draw.cut_renderer import CutRenderer, Piece
+from ..draw.cut_renderer import CutRenderer, Drawable
 from ..draw.seams import Seams
 from ..store.budget import parse_bytes
 from .whole_level import WholeLevel
 
-__all__ = ["MultiscaleScene", "pieces_of", "render_brick", "RENDER_BRICK"]
+__all__ = ["MultiscaleScene", "drawables_of", "render_brick", "RENDER_BRICK"]
 
 #: Most rounds of ``load_budget`` bricks a ``complete=True`` frame waits for (a cut that keeps
 #: changing, in a store whose ranges are learnt while reading, ends there).
@@ -73,7 +73,7 @@ def render_brick(volume: MultiscaleVolume) -> int:
     while below :data:`RENDER_BRICK` and level 0 keeps at least 8 bricks along every axis.
 
     A brick of the cut costs per ray that crosses it (entering its grid and hierarchy) and per
-    frame (a grid, seams, a piece of the launch); the pyramid's bricks are its storage chunks,
+    frame (a grid, seams, a drawable of the launch); the pyramid's bricks are its storage chunks,
     kept small so that reads are fine-grained. Rendering bricks of several chunks makes a cut of
     a large volume several times smaller, so it completes sooner and draws faster. Small
     volumes keep their bricks: their cuts are small anyway.
@@ -85,14 +85,14 @@ def render_brick(volume: MultiscaleVolume) -> int:
     return brick
 
 
-def pieces_of(frame: FrameBricks, octree: BrickOctree | None = None) -> list[Piece]:
-    """The pieces of a frame of a :class:`~.cut.stream.BrickStream`: each brick of the cut with the
-    array drawn for it (its own or its finest resident ancestor's).
+def drawables_of(frame: FrameBricks, octree: BrickOctree | None = None) -> list[Drawable]:
+    """The drawables of a frame of a :class:`~.cut.stream.BrickStream`: each brick of the cut with
+    the array drawn for it (its own or its finest resident ancestor's).
 
-    With the ``octree``, bricks of the cut drawn from one ancestor are drawn as one piece per
+    With the ``octree``, bricks of the cut drawn from one ancestor are drawn as one drawable per
     octree node under that ancestor whose bricks in the cut are all drawn from it: the ancestor
     over the node's whole box (bricks left out of the cut there, which cannot contribute at
-    their own level, are then drawn from the ancestor as well: its level as it is). Every piece
+    their own level, are then drawn from the ancestor as well: its level as it is). Every drawable
     costs per ray that crosses it, and the first frames of a view draw thousands of bricks from
     a few coarse ones.
     """
@@ -111,11 +111,11 @@ def pieces_of(frame: FrameBricks, octree: BrickOctree | None = None) -> list[Pie
                 continue
             done.add(node)
             lo, hi = octree.box(node[0], np.array([node[1:]]))  # type: ignore[union-attr]
-            out.append(Piece(node, brick.key, int(brick.key[0]), brick.data,
+            out.append(Drawable(node, brick.key, int(brick.key[0]), brick.data,
                              tuple(int(v) for v in brick.first),  # type: ignore[arg-type]
                              lo[0], hi[0], True))
             continue
-        out.append(Piece(cut.key(item.n), brick.key, int(brick.key[0]), brick.data,
+        out.append(Drawable(cut.key(item.n), brick.key, int(brick.key[0]), brick.data,
                          tuple(int(v) for v in brick.first),  # type: ignore[arg-type]
                          cut.box_lo[item.n], cut.box_hi[item.n], item.substituted))
     return out
@@ -285,7 +285,7 @@ class MultiscaleScene(SceneTemplate):
                 volume, self.stream, finest,
                 self._cache_budget() - self.stream.cache.pinned_bytes, model, options)
         self.prepare_ms = (time.perf_counter() - start) * 1e3
-        self._last_pieces: tuple[list, list[Piece]] | None = None
+        self._last_drawables: tuple[list, list[Drawable]] | None = None
         #: The view (camera, level of detail, visible values) of the last reservation.
         self._reserved_view: tuple | None = None
         self.seams_in_budget = True
@@ -327,7 +327,7 @@ class MultiscaleScene(SceneTemplate):
     def trace(self, request: Any, camera: Camera, *, lod: float | None = None,
               interest: Any = None, wait: bool = True, timeout: float | None = None,
               complete: bool = False, missing: str = "substitute") -> Traced:
-        """The cut of ``camera`` traced in the mode of ``request``: the piece of the render
+        """The cut of ``camera`` traced in the mode of ``request``: the step of the render
         template (:class:`~splinecast.render.template.SceneTemplate`) a multiscale scene
         supplies. Its keywords are the scene's frame options: ``render(camera, ..., lod=...,
         wait=False)`` passes them here. Antialiasing (``samples``) is off by default: the rays
@@ -405,18 +405,18 @@ class MultiscaleScene(SceneTemplate):
                 more = f" ({len(unreadable)} bricks of the view cannot be read)" \
                     if len(unreadable) > 1 else ""
                 raise ReadError(f"{reason}{more}")
-            # The same draw items (a steady view): the same pieces, so that the renderer keeps
+            # The same draw items (a steady view): the same drawables, so that the renderer keeps
             # its seam plan and launch arrays.
-            last = self._last_pieces
+            last = self._last_drawables
             if last is not None and last[0] is bricks.items:
-                pieces = last[1]
+                drawables = last[1]
             else:
-                pieces = pieces_of(bricks, self.stream.octree)
-                self._last_pieces = (bricks.items, pieces)
+                drawables = drawables_of(bricks, self.stream.octree)
+                self._last_drawables = (bricks.items, drawables)
             request.stats["cut_ms"] = (time.perf_counter() - start) * 1e3
             start = time.perf_counter()
-            out, counters = self.renderer.render(pieces, request.setup, camera, request.planes)
-        self.renderer.forget(p.key for p in pieces)
+            out, counters = self.renderer.render(drawables, request.setup, camera, request.planes)
+        self.renderer.forget(p.key for p in drawables)
         # The seam copies count against the budget: the bricks get what they leave. The same
         # view keeps what it reserved: its seams depend on its cut and its cut on the room the
         # reservation leaves, so lowering the reservation after a smaller cut (smaller seams) let
@@ -438,7 +438,7 @@ class MultiscaleScene(SceneTemplate):
         stats["lod"] = self.lod if lod is None else lod
         stats["whole_level"] = False
         return Traced(out, counters, start,
-                      whole_frame_tracer(self.renderer, pieces, request.planes))
+                      whole_frame_tracer(self.renderer, drawables, request.planes))
 
     def _trace_whole(self, whole: Any, cut: Cut, request: Any, camera: Camera,
                      lod: float | None) -> Traced:
@@ -453,8 +453,8 @@ class MultiscaleScene(SceneTemplate):
             resident_bytes=cache.nbytes + self.whole.nbytes, requested=0, substituted=0,
             complete=True, unreadable=0, unreadable_reason="", cut_bricks=len(cut),
             cut_levels=cut.levels(), cut_bytes=cut.nbytes, cut_limited_by_budget=cut.limited,
-            cut_policy="lod", lod=self.lod if lod is None else lod, pieces=1,
-            pieces_traced=1, pieces_changed_at_seams=0, seam_copy_bytes=0, whole_level=True,
+            cut_policy="lod", lod=self.lod if lod is None else lod, drawables=1,
+            drawables_traced=1, drawables_changed_at_seams=0, seam_copy_bytes=0, whole_level=True,
             whole_level_read_ms=self.whole.read_ms)
         return traced
 

@@ -28,7 +28,7 @@ Seams
 of all levels), ``active_chunks`` (refined), ``select_ms``, ``reconstruct_ms``,
 ``bricks_computed``, ``bricks_reused``, ``detail_owners`` (chunks whose details entered a brick
 this frame), ``details_read`` (detail blocks read this frame), ``resident_bytes`` (bricks and
-details cached after the frame, under ``budget``) and the renderer's ``pieces``.
+details cached after the frame, under ``budget``) and the renderer's ``drawables``.
 """
 
 from __future__ import annotations
@@ -47,14 +47,14 @@ from ...models import MODELS
 from ...render.defaults import auto_iso
 from ...render.template import SceneTemplate, Traced, check_iso, whole_frame_tracer
 from ...volume import Volume
-from ..draw.cut_renderer import CutRenderer, Piece, gc_paused
+from ..draw.cut_renderer import CutRenderer, Drawable, gc_paused
 from ..store.budget import parse_bytes
 from ..wavelet.layout import WaveletLayout
 from ..wavelet.lod import Selection, select
 from ..wavelet.reconstruct import ChunkReconstructor
 from ..wavelet.store import WaveletVolume
 
-__all__ = ["WaveletScene", "WaveletTree", "wavelet_pieces"]
+__all__ = ["WaveletScene", "WaveletTree", "wavelet_drawables"]
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ class WaveletTree:
 
 
 # Entries of a scene's box cache before it starts over: several frames of the largest
-# selections the benchmarks make (about 33 k pieces for a 512^3 store); each entry is a key and
+# selections the benchmarks make (about 33 k drawables for a 512^3 store); each entry is a key and
 # one to eight small boxes.
 _BOXES_KEPT = 200_000
 
@@ -115,7 +115,7 @@ _BOXES_KEPT = 200_000
 def _region(lay: WaveletLayout, level: int, idx: Sequence[int]) -> tuple[list[float], list[float]]:
     """A chunk's region clipped to the voxel box (level-0 voxel index space): the arithmetic of
     :meth:`.WaveletLayout.region` on Python floats (numpy per scalar cost most of a frame's
-    piece list)."""
+    drawable list)."""
     width = lay.chunk * 2.0**level
     start = lay.region_start
     lo, hi = [], []
@@ -148,14 +148,14 @@ def _boxes(lay: WaveletLayout, level: int, idx: tuple[int, int, int],
             if hi[0] > lo[0] and hi[1] > lo[1] and hi[2] > lo[2]]
 
 
-def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor,
-                   boxes: dict | None = None) -> list[Piece]:
-    """The pieces of a selection: each drawn brick over its region, or over the octants of it
-    whose finer chunk is not reconstructed (one piece per octant, named by that child chunk so
+def wavelet_drawables(selection: Selection, reconstructor: ChunkReconstructor,
+                      boxes: dict | None = None) -> list[Drawable]:
+    """The drawables of a selection: each drawn brick over its region, or over the octants of it
+    whose finer chunk is not reconstructed (one drawable per octant, named by that child chunk so
     the front-to-back order sees leaves of one octree). Call ``reconstructor.update`` first.
 
     ``boxes`` keeps each ``(level, chunk, octant mask)``'s boxes between calls (they depend on
-    the layout only): a frame of tens of thousands of pieces otherwise spends most of its
+    the layout only): a frame of tens of thousands of drawables otherwise spends most of its
     Python time recomputing them.
     """
     lay = selection.layout
@@ -171,7 +171,7 @@ def wavelet_pieces(selection: Selection, reconstructor: ChunkReconstructor,
         first = (lay.chunk * idx[0] - lay.pad, lay.chunk * idx[1] - lay.pad,
                  lay.chunk * idx[2] - lay.pad)
         for cut_key, lo, hi in drawn:
-            out.append(Piece(cut_key, key, level, coeffs, first, lo, hi, placed=True))
+            out.append(Drawable(cut_key, key, level, coeffs, first, lo, hi, placed=True))
     return out
 
 
@@ -246,9 +246,9 @@ class WaveletScene(SceneTemplate):
                                                 budget=self.budget, label=str(volume.path))
         self.renderer = CutRenderer(self.model, place, None)
         self.selection: Selection | None = None
-        self._boxes: dict = {}  # wavelet_pieces' boxes per (level, chunk, octant mask)
-        # (reconstructor version, octant tables, pieces) of the last frame.
-        self._last_pieces: tuple[int, list[np.ndarray], list[Piece]] | None = None
+        self._boxes: dict = {}  # wavelet_drawables' boxes per (level, chunk, octant mask)
+        # (reconstructor version, octant tables, drawables) of the last frame.
+        self._last_drawables: tuple[int, list[np.ndarray], list[Drawable]] | None = None
         self.prepare_ms = (time.perf_counter() - start) * 1e3
 
     @staticmethod
@@ -288,7 +288,7 @@ class WaveletScene(SceneTemplate):
         return check_iso(self.volume, auto_iso(self.preview) if iso is None else iso)
 
     def trace(self, request: Any, camera: Camera, *, lod: float | None = None) -> Traced:
-        """The selection of ``camera`` traced in the mode of ``request``: the piece of the
+        """The selection of ``camera`` traced in the mode of ``request``: the step of the
         render template (:class:`~splinecast.render.template.SceneTemplate`) a wavelet scene
         supplies. Antialiasing (``samples``) is off by default: each further sample's rays are
         traced for the whole image through the selection.
@@ -311,21 +311,22 @@ class WaveletScene(SceneTemplate):
         if len(self._boxes) > _BOXES_KEPT:
             self._boxes.clear()
         with gc_paused():
-            last = self._last_pieces
+            last = self._last_drawables
             if (last is not None and last[0] == self.reconstructor.version
                     and all(np.array_equal(a, b)
                             for a, b in zip(last[1], selection.octants, strict=True))):
                 # The same bricks drawn the same way, none rewritten: the same list, which
                 # lets the renderer keep its draw order and launch arrays (a steady view).
-                pieces, reused = last[2], True
+                drawables, reused = last[2], True
             else:
-                pieces, reused = wavelet_pieces(selection, self.reconstructor, self._boxes), False
-                self._last_pieces = (self.reconstructor.version, selection.octants, pieces)
+                drawables = wavelet_drawables(selection, self.reconstructor, self._boxes)
+                reused = False
+                self._last_drawables = (self.reconstructor.version, selection.octants, drawables)
             self.selection = selection
             start = time.perf_counter()
-            out, counters = self.renderer.render(pieces, setup, camera, request.planes)
+            out, counters = self.renderer.render(drawables, setup, camera, request.planes)
             if not reused:
-                self.renderer.forget(p.key for p in pieces)
+                self.renderer.forget(p.key for p in drawables)
         stats = request.stats
         stats.update(self.renderer.stats)
         stats.update({
@@ -338,7 +339,7 @@ class WaveletScene(SceneTemplate):
             "details_read": rstats.details_read, "resident_bytes": rstats.resident_bytes,
         })
         return Traced(out, counters, start,
-                      whole_frame_tracer(self.renderer, pieces, request.planes))
+                      whole_frame_tracer(self.renderer, drawables, request.planes))
 
     def __repr__(self) -> str:
         return (f"WaveletScene({self.volume.name!r}, model={self.model.name!r}, "

@@ -3,7 +3,7 @@
 When the level-of-detail cut of a view is level 0 everywhere it draws (every brick that can show
 something refined down to the finest level, within the cut's share of the budget) and level 0
 fits in the budget, the cut's picture is the finest level's: the brick renderer then only adds
-per-brick costs (a grid and a block hierarchy per brick, the launch over the pieces, whose
+per-brick costs (a grid and a block hierarchy per brick, the launch over the drawables, whose
 first-class function arguments Numba cannot cache on disk) to what an in-memory
 :class:`~splinecast.scene.Scene` of that level does in one grid. :class:`WholeLevel` reads level
 0 once, through the level's bounded chunk reader (:meth:`~splinecast.io.omezarr.Level.read`),

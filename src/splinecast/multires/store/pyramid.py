@@ -143,10 +143,10 @@ def _downsample_task(fine: Any, halve: tuple[bool, bool, bool], shape: tuple[int
 
     ``fine`` is anything with ``shape`` and ``read(lo, hi)``: the level just written, or for
     level 1 the source itself (level 0 equals it, and a memory-mapped source reads far faster
-    than decoding the Zarr chunks again). The fine voxels are read in as few pieces as
+    than decoding the Zarr chunks again). The fine voxels are read in as few slabs as
     :data:`_READ_BYTES` allows (every read decodes whole chunks, so many thin reads decode the
     chunks on their boundaries over and over); the filter then runs a slab of output planes at a
-    time over the piece in memory, which bounds its float64 temporaries. ``labels``: the
+    time over the slab in memory, which bounds its float64 temporaries. ``labels``: the
     weighted mode of :mod:`.store.label_downsample` instead of the binomial average.
     """
     halve_block = mode_halve if labels else binomial_halve

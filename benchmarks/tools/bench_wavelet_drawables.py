@@ -1,18 +1,18 @@
-"""Per-brick Python overhead of a wavelet frame: the piece list and a steady frame.
+"""Per-brick Python overhead of a wavelet frame: the drawable list and a steady frame.
 
-``wavelet_pieces`` turns a selection into the cut renderer's pieces (one per drawn brick or
-octant). It runs every frame, so its cost per piece adds to the renderer's own per-piece cost.
+``wavelet_drawables`` turns a selection into the cut renderer's drawables (one per drawn brick or
+octant). It runs every frame, so its cost per drawable adds to the renderer's own per-drawable cost.
 This measures, on a Chmutov 64^3 degree-3 store (k = 8) from one orbit view, for ε = 0 (every
-chunk, 512 pieces) and a small ε: the median time of the piece list (per piece) and the median
-steady frame (bricks reused; 64x48 pixels, so the trace is small next to the overhead).
+chunk, 512 drawables) and a small ε: the median time of the drawable list (per drawable) and
+the median steady frame (bricks reused; 64x48 pixels, so the trace is small next to the overhead).
 
 ``--large``: a noise 512^3 degree-3 store seen whole (zoom 1) at 1024x768, ε = 5, 10 and 25
-pixels (tens of thousands of pieces down to a few hundred): the median steady frame and its
+pixels (tens of thousands of drawables down to a few hundred): the median steady frame and its
 trace.
 
-Run ``python benchmarks/tools/bench_wavelet_pieces.py --label NAME --json OUT.json [--large]`` once
-per code version, e.g. with ``PYTHONPATH=<old checkout>/src`` for the baseline (the results file
-keeps every label's rows side by side).
+Run ``python benchmarks/tools/bench_wavelet_drawables.py --label NAME --json OUT.json
+[--large]`` once per code version, e.g. with ``PYTHONPATH=<old checkout>/src`` for the baseline
+(the results file keeps every label's rows side by side).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import splinecast as sc
-from splinecast.multires.scenes.wavelet import wavelet_pieces
+from splinecast.multires.scenes.wavelet import wavelet_drawables
 from splinecast.multires.wavelet.lod import select
 from splinecast.multires.wavelet.store import build_wavelet_pyramid
 
@@ -47,13 +47,13 @@ def _small(args) -> list[dict]:
         scene.render(camera, iso=0.0)  # compile, reconstruct, read
         selection = select(store.layout, store.ranges, camera.position, eps, 0.0, store.spacing,
                            store.origin)
-        pieces = len(wavelet_pieces(selection, scene.reconstructor))
-        pieces_ms = median_ms(lambda s=selection, r=scene.reconstructor: wavelet_pieces(s, r),
-                               args.repeats)
+        drawables = len(wavelet_drawables(selection, scene.reconstructor))
+        drawables_ms = median_ms(lambda s=selection, r=scene.reconstructor: wavelet_drawables(s, r),
+                                  args.repeats)
         frame_ms = median_ms(lambda s=scene: s.render(camera, iso=0.0), max(3, args.repeats // 3))
-        rows.append({"label": args.label, "lod": eps, "pieces": pieces,
-                     "pieces_ms": round(pieces_ms, 2),
-                     "us_per_piece": round(pieces_ms / pieces * 1e3, 1),
+        rows.append({"label": args.label, "lod": eps, "drawables": drawables,
+                     "drawables_ms": round(drawables_ms, 2),
+                     "us_per_drawable": round(drawables_ms / drawables * 1e3, 1),
                      "steady_frame_ms": round(frame_ms, 1)})
         print(rows[-1], flush=True)
     return rows
@@ -79,7 +79,7 @@ def _large(args) -> list[dict]:
 
         frame_ms = median_ms(steady, 5)
         rows.append({"label": args.label, "lod_pixels": multiple,
-                     "pieces": frame.stats["pieces"], "steady_frame_ms": round(frame_ms, 1),
+                     "drawables": frame.stats["drawables"], "steady_frame_ms": round(frame_ms, 1),
                      "steady_trace_ms": round(sorted(traces)[len(traces) // 2], 1)})
         print(rows[-1], flush=True)
     return rows

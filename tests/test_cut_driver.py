@@ -1,7 +1,7 @@
-"""The one-launch renderer of a cut (:mod:`splinecast.render.pieces_driver`) against the
-per-piece one (one segment-entry-point call per piece, :meth:`CutRenderer._trace_each`).
+"""The one-launch renderer of a cut (:mod:`splinecast.render.cut_driver`) against the
+per-drawable one (one segment-entry-point call per drawable, :meth:`CutRenderer._trace_each`).
 
-The per-piece path is the independent reference: its images equal the in-memory renderer's
+The per-drawable path is the independent reference: its images equal the in-memory renderer's
 (``tests/test_multires_render.py``, ``tests/test_bricks.py``). Tracing a ray through the same
 grids in the same order with the same intervals must give bit-identical states, so the two paths
 are compared exactly, on cuts that mix levels (seam-changed float64 grids next to the store's
@@ -49,8 +49,8 @@ def _options(mode: str) -> dict:
 
 
 def _both(scene, cam: sc.Camera, **options) -> tuple[sc.Frame, sc.Frame, dict, dict]:
-    """The same cut rendered per piece and in one launch: the launch is handed the very bricks
-    the per-piece render drew (the loader thread goes on prefetching and evicting between the
+    """The same cut rendered per drawable and in one launch: the launch is handed the very bricks
+    the per-drawable render drew (the loader thread goes on prefetching and evicting between the
     two renders; what is compared here is the tracing, not the stream)."""
     with replay(scene) as frames:
         scene.renderer.batched = False
@@ -85,7 +85,7 @@ def test_one_launch_equals_one_call_per_piece_in_every_mode(torus, mode):
             each, batched, _, stats = _both(scene, cam, **_options(mode))
             what = f"{mode} {cam.position.round(2)}"
             assert len(batched.stats["cut_levels"]) >= 2, what  # levels meet in this cut
-            assert stats["pieces_changed_at_seams"] > 0, what  # two grid types in the launch
+            assert stats["drawables_changed_at_seams"] > 0, what  # two grid types in the launch
             if mode == "iso":
                 assert np.isfinite(batched.depth).sum() > 100, what
             _assert_identical(each, batched, what)
@@ -109,7 +109,7 @@ def test_seam_closure_inside_the_launch_equals_the_per_piece_closure(torus, mode
 
 def test_clip_planes_and_a_camera_tile(torus):
     """Clipped rays, and a tile of the image traced into its own state (a sort-last worker)."""
-    from splinecast.multires.scenes.multiscale import pieces_of
+    from splinecast.multires.scenes.multiscale import drawables_of
     from splinecast.render.iso import Iso
     from splinecast.render.segment import counters, new_state
 
@@ -121,17 +121,17 @@ def test_clip_planes_and_a_camera_tile(torus):
         _assert_identical(each, batched, "clipped")
         plain = scene.render(cam, **_options("iso"))
         assert not np.array_equal(np.isfinite(plain.depth), np.isfinite(batched.depth))
-        # A tile: the pieces of the last frame traced into a tile's state, both ways.
+        # A tile: the drawables of the last frame traced into a tile's state, both ways.
         tile = cam.tile(7, 5, 30, 21)
         setup = Iso(0.0, inside="low")
-        pieces = pieces_of(scene.stream.frame(cam, None, wait=True))
-        assert len({p.level for p in pieces}) >= 2
+        drawables = drawables_of(scene.stream.frame(cam, None, wait=True))
+        assert len({p.level for p in drawables}) >= 2
         results = []
         for batched_flag in (False, True):
             scene.renderer.batched = batched_flag
             state = new_state(setup, tile)
             stats = counters(tile.height, tile.width)
-            scene.renderer.trace(pieces, setup, tile, state, stats)
+            scene.renderer.trace(drawables, setup, tile, state, stats)
             results.append((state, stats))
         for a, b in zip(results[0][0] + results[0][1], results[1][0] + results[1][1],
                         strict=True):
@@ -199,10 +199,10 @@ def test_screen_rects_hold_every_ray_that_meets_the_box():
 
 
 def test_tile_lists_name_every_overlapping_piece_in_order():
-    """Each tile's list is exactly the pieces whose rectangle meets it, ascending (a brute-force
+    """Each tile's list is exactly the drawables whose rectangle meets it, ascending (a brute-force
     overlap test of every tile and rectangle): rectangles at the image's edges, one pixel
     wide, covering the image, and empty ones."""
-    from splinecast.render.pieces_driver import TILE, tile_lists
+    from splinecast.render.cut_driver import TILE, tile_lists
 
     rng = np.random.default_rng(7)
     height, width = 3 * TILE + 5, 5 * TILE + 11
@@ -212,7 +212,7 @@ def test_tile_lists_name_every_overlapping_piece_in_order():
     r1 = np.minimum(r0 + rng.integers(0, 3 * TILE, 300), height)
     rects = np.stack([c0, r0, c1, r1], axis=1)
     rects[:3] = [(0, 0, width, height), (width - 1, height - 1, width, height), (4, 4, 4, 9)]
-    start, pieces = tile_lists(rects, height, width)
+    start, drawables = tile_lists(rects, height, width)
     ncol = -(-width // TILE)
     nrow = -(-height // TILE)
     assert len(start) == nrow * ncol + 1
@@ -223,4 +223,4 @@ def test_tile_lists_name_every_overlapping_piece_in_order():
             expect = [p for p, (a, b, c, d) in enumerate(rects)
                       if max(a, x0) < min(c, x1) and max(b, y0) < min(d, y1)]
             t = tr * ncol + tc
-            assert pieces[start[t]:start[t + 1]].tolist() == expect
+            assert drawables[start[t]:start[t + 1]].tolist() == expect
