@@ -196,6 +196,43 @@ def test_averaging_chain_gives_the_rules_and_cube_bounds_are_exact_ranges(kind):
             assert hier.highs[level][i >> shift, j >> shift, k >> shift] >= b
 
 
+@pytest.mark.parametrize("kind", ["s31", "qss-b", "qss-a"])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.uint8])
+def test_renderers_straight_line_coefficients_are_the_programs(kind, dtype):
+    """The renderer's cube cache is filled by the scheme's program written out as code
+    (``type6_ray.fill_cube``, picked by the grid's scheme number): the same numbers as the
+    program's loop (same sums in the same order: bit for bit), and the rules' weight matrix
+    applied to the 27 values (an independent reference, to rounding)."""
+    from numba import njit
+
+    from splinecast.models.type6 import store_coefficients
+    from splinecast.models.type6_ray import fill_cube
+
+    @njit
+    def fill_all(grid, cubes, out):
+        nz = grid.pad.shape[2] - 2
+        ny = grid.pad.shape[1] - 2
+        for m in range(cubes.shape[0]):
+            lin = cubes[m]
+            fill_cube(grid, lin // (ny * nz), (lin // nz) % ny, lin % nz, out[m])
+
+    data = RNG.normal(size=(4, 5, 3)) * 40.0 + 100.0
+    model = _model(kind, np.clip(data, 0, 255).astype(dtype) if dtype is np.uint8 else
+                   data.astype(dtype))
+    cubes = np.arange(data.size, dtype=np.int64)
+    got = np.full((cubes.size, model.n_points), np.nan)
+    fill_all(model.kernel_grid(), cubes, got)
+    prog = model.program
+    loop = store_coefficients(model.pad, cubes, np.asarray(data.shape, np.int64), *prog.arrays,
+                              prog.n_slots, model.n_points)
+    np.testing.assert_array_equal(got, loop)
+    w = model.tables.weight_matrix()
+    ijk = np.stack(np.unravel_index(cubes, data.shape), axis=1)
+    ref = np.array([w @ model.pad[i:i + 3, j:j + 3, k:k + 3].astype(np.float64).reshape(27)
+                    for i, j, k in ijk])
+    np.testing.assert_allclose(got, ref, rtol=1e-13, atol=0)
+
+
 @pytest.mark.parametrize("kind", ["s31", "qss-b"])
 def test_ray_restriction_matches_the_patch_along_the_segment(kind):
     """The unrolled blossoms of the renderer against de Casteljau evaluation of the patch at

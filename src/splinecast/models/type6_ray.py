@@ -12,7 +12,8 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
 * **Ray restriction.** On a piece, the patch is a univariate Bernstein polynomial of the patch's
   degree, obtained by blossoming at the piece's end points (:func:`.type6.ray_bernstein3`).
 * **Coefficients on demand.** A cube's coefficients are computed from its 27 data values by the
-  model's verified averaging chain into a small per-thread cache the first time a ray needs them,
+  model's verified averaging chain, written out as straight-line code (:func:`program_source`),
+  into a small per-thread cache the first time a ray needs them,
   so the neighbouring pixels of a tile that cross the same cube reuse them; with
   ``precompute=True`` and an isovalue classification they are read from the stored rows.
 * **Ranges.** Without a classification a cube's range is its exact coefficient range (computed
@@ -25,8 +26,8 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
   classification); ``piece_poly`` builds one piece's Bernstein coefficients when a mode asks for
   it. A first-hit ray therefore builds no piece behind its hit (the old hand-written kernels'
   order of work), and nothing of a piece whose range a mode refuses. Everything but the cube's
-  coefficient computation on a cache miss (:func:`_fill_cube`, a call taking only the arrays it
-  needs) is inlined into the driver's loop, which keeps no reference counts
+  coefficient computation on a cache miss (:func:`fill_cube`'s code, a call taking only the
+  arrays it needs) is inlined into the driver's loop, which keeps no reference counts
   (:mod:`splinecast.render.driver`); a hook called out of line would still increment and
   decrement the count of every array of the grid and the scratch tuple (about 19 here).
 * **Normals** come from the de Casteljau directional derivatives of the piece's patch.
@@ -35,27 +36,27 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, overload_jit
 from ..roots.pieces import Bernstein2, Bernstein3
 from .pieces import register
 from .type6 import (
+    SCHEMES,
     QSSGrid,
     S31Grid,
     barycentric,
-    gather27,
     ray_bernstein2,
     ray_bernstein3,
-    run_program1,
     value_gradient,
 )
-from .type6_geometry import tet_of_point
+from .type6_geometry import Type6Program, tet_of_point
 
-__all__ = ["split_cube_segment", "CACHE_ENTRIES"]
+__all__ = ["split_cube_segment", "CACHE_ENTRIES", "fill_cube", "program_source"]
 
-#: Cubes a thread keeps computed (128 x 214 float64 = 219 KB for S31: fits L2).
+#: Cubes a thread keeps computed (128 x 175 float64 = 179 KB for S31: fits L2).
 CACHE_ENTRIES = 128
 
 
@@ -110,7 +111,7 @@ def _cell_count(grid):
 @jit()
 def _new_scratch(grid):
     keys = np.full(CACHE_ENTRIES, -1, np.int64)
-    cache = np.empty((CACHE_ENTRIES, grid.n_slots))
+    cache = np.empty((CACHE_ENTRIES, grid.coeffs.shape[1]))
     return (keys, cache, np.empty(grid.tet_points.shape[1]), np.empty(10), np.empty(4),
             np.empty((8, 2)))
 
@@ -128,12 +129,74 @@ def _cell_load(grid, scratch, i, j, k):
             np.int64(0xFFFFFF))
 
 
-@jit()
-def _fill_cube(pad, i, j, k, buf, targets, ptr, sources, weights):
-    """All coefficients of cube ``(i, j, k)`` into ``buf`` (a cache miss: kept out of line, it
-    takes the few arrays it needs instead of the grid and scratch tuples)."""
-    gather27(pad, i, j, k, buf)
-    run_program1(buf, targets, ptr, sources, weights)
+def program_source(program: Type6Program, name: str) -> str:
+    """Python source of ``name(pad, i, j, k, out)``: ``program`` written out for one cube.
+
+    The function reads the 27 data values around cube ``(i, j, k)`` of ``pad`` (unsigned
+    indices: no negative-index wrap-around), evaluates the program's rows in order as
+    straight-line code with the weights as constants and writes coefficient ``p`` to
+    ``out[p]``. Each row's sum is formed in the order of its terms, as
+    :func:`~.type6.run_program` forms it, so the coefficients are the same numbers. The loop
+    over the rows of :class:`~.type6_geometry.Type6Program` cost about 2000 cycles per cube
+    (its rows' varying lengths defeat branch prediction and every sum is one dependency
+    chain); written out, about 270.
+    """
+    targets, ptr, sources, weights = program.arrays
+    lines = [f"def {name}(pad, i, j, k, out):",
+             "    i0, j0, k0 = np.uint64(i), np.uint64(j), np.uint64(k)",
+             "    i1, j1, k1 = i0 + np.uint64(1), j0 + np.uint64(1), k0 + np.uint64(1)",
+             "    i2, j2, k2 = i0 + np.uint64(2), j0 + np.uint64(2), k0 + np.uint64(2)"]
+    n = 0
+    for a in range(3):
+        for b in range(3):
+            for c in range(3):
+                # np.float64, not float: numba's float() keeps a float32 a float32.
+                lines.append(f"    s{n} = np.float64(pad[i{a}, j{b}, k{c}])")
+                n += 1
+    for r in range(targets.shape[0]):
+        terms = " + ".join(f"{float(weights[q])!r} * s{int(sources[q])}"
+                           for q in range(ptr[r], ptr[r + 1]))
+        lines.append(f"    s{int(targets[r])} = {terms}")
+    lines += [f"    out[{p}] = s{27 + p}" for p in range(program.n_points)]
+    return "\n".join(lines) + "\n"
+def fill_cube(grid, i, j, k, row):
+    """All coefficients of cube ``(i, j, k)`` of ``grid`` into ``row[:n_points]``, by the
+    straight-line code of the grid's scheme (compiled code only)."""
+    raise NotImplementedError
+
+
+#: (grid class, scheme number) -> the compiled :func:`program_source` of the scheme's program.
+_STRAIGHT: dict[tuple[type, int], Any] = {}
+
+
+def _straight_line(grid_class: type, scheme: int) -> Any:
+    key = (grid_class, scheme)
+    fill = _STRAIGHT.get(key)
+    if fill is None:
+        scope: dict[str, Any] = {"np": np}
+        exec(program_source(SCHEMES[grid_class][scheme](), "fill"), scope)  # noqa: S102
+        # Generated code has no file for numba's disk cache; the bands that call it are
+        # cached with its code inside (and recompiled whenever a module of the package changes).
+        fill = _STRAIGHT[key] = jit(scope["fill"], cache=False)
+    return fill
+
+
+# A call (cache misses only), not inlined: the generated body inlined at Numba's IR level
+# corrupted the band's own variables (the pixel's colour was written from garbage; numba 0.6x),
+# whereas generated code called out of line, as ``.render.outputs.copy_pixel``, compiles right.
+@overload_jit(fill_cube, inline="never")
+def _fill_cube(grid, i, j, k, row):
+    cls = getattr(grid, "instance_class", None)
+    if cls not in SCHEMES or not SCHEMES[cls]:
+        return None
+    scope = {f"fill{n}": _straight_line(cls, n) for n in range(len(SCHEMES[cls]))}
+    body = ""
+    for n in range(len(SCHEMES[cls]) - 1):
+        body += (f"    {'if' if n == 0 else 'elif'} grid.scheme == {n}:\n"
+                 f"        fill{n}(grid.pad, i, j, k, row)\n        return\n")
+    body += f"    fill{len(SCHEMES[cls]) - 1}(grid.pad, i, j, k, row)\n"
+    exec(f"def fill(grid, i, j, k, row):\n{body}", scope)  # noqa: S102 - from the tables
+    return scope["fill"]
 
 
 @jit(inline="always")
@@ -152,10 +215,10 @@ def _load_tet(grid, scratch, slot, i, j, k, tet):
     lin = (np.int64(i) * ny + j) * nz + k
     buf = cache[entry]
     if keys[entry] != lin:
-        _fill_cube(grid.pad, i, j, k, buf, grid.targets, grid.ptr, grid.sources, grid.weights)
+        fill_cube(grid, i, j, k, buf)
         keys[entry] = lin
     for n in range(n_local):
-        c[n] = buf[27 + grid.tet_points[tet, n]]
+        c[n] = buf[grid.tet_points[tet, n]]
     return c
 
 
