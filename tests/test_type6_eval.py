@@ -259,3 +259,53 @@ def test_ray_restriction_matches_the_patch_along_the_segment(kind):
         pts = a + s[:, None] * (b - a)
         ref, _ = _eval(model, np.tile(cube, (len(s), 1)), np.full(len(s), tet), pts)
         np.testing.assert_allclose(poly, ref, rtol=0, atol=1e-12)
+
+
+def test_cube_segments_are_cut_at_every_tetrahedron_face_in_order():
+    """``split_cube_segment`` (branch-free: a sorting network) against the crossings of the six
+    planes computed and sorted here, on random segments and degenerate ones (parallel to a
+    plane, inside a plane, through the centre, along an axis); and every piece lies in one
+    tetrahedron (points inside a piece find the same one)."""
+    from numba import njit
+
+    from splinecast.models.type6_geometry import tet_of_point
+    from splinecast.models.type6_ray import split_cube_segment
+
+    @njit(error_model="numpy")  # as every kernel: a division by zero gives inf or NaN
+    def split_all(a, e, cuts, counts):
+        for m in range(a.shape[0]):
+            counts[m] = split_cube_segment(a[m, 0], a[m, 1], a[m, 2], e[m, 0], e[m, 1],
+                                           e[m, 2], cuts[m])
+
+    rng = np.random.default_rng(5)
+    n = 4000
+    a = rng.uniform(-0.5, 0.5, (n, 3))
+    b = rng.uniform(-0.5, 0.5, (n, 3))
+    b[:400, 1:] = a[:400, 1:]  # along x
+    b[400:800, 0] = b[400:800, 1] + (a[400:800, 0] - a[400:800, 1])  # parallel to x = y
+    a[800:1200, 0] = a[800:1200, 1]  # inside x = y
+    b[800:1200, 0] = b[800:1200, 1]
+    b[1200:1600] = -a[1200:1600]  # through the centre
+    a[1600:1700] = np.round(a[1600:1700] * 4) / 4  # on lattice points (exact ties)
+    b[1600:1700] = np.round(b[1600:1700] * 4) / 4
+    e = b - a
+    cuts = np.full((n, 8), np.nan)
+    counts = np.zeros(n, np.int64)
+    split_all(a, e, cuts, counts)
+    for m in range(n):
+        want = []
+        for u, v in ((0, 1), (0, 2), (1, 2)):
+            for sign in (1.0, -1.0):
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    s = -(a[m, u] - sign * a[m, v]) / (e[m, u] - sign * e[m, v])
+                if 0.0 < s < 1.0:
+                    want.append(s)
+        want = [0.0, *sorted(want), 1.0]
+        assert counts[m] == len(want) - 1
+        np.testing.assert_array_equal(cuts[m, :len(want)], want)
+        for p in range(counts[m]):
+            s0, s1 = cuts[m, p], cuts[m, p + 1]
+            if s1 - s0 < 1e-9 or 800 <= m < 1200:  # a tie, or a segment in a face
+                continue
+            tets = {tet_of_point(*(a[m] + s * e[m])) for s in np.linspace(s0, s1, 7)[1:-1]}
+            assert len(tets) == 1, (m, p, tets)
