@@ -12,7 +12,7 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
 * **Ray restriction.** On a piece, the patch is a univariate Bernstein polynomial of the patch's
   degree, obtained by blossoming at the piece's end points (:func:`.type6.ray_bernstein3`).
 * **Coefficients on demand.** A cube's coefficients are computed from its 27 data values by the
-  model's verified averaging chain, written out as straight-line code (:func:`program_source`),
+  model's verified averaging chain, written out as straight-line code (:func:`fill_cube`),
   into a small per-thread cache the first time a ray needs them,
   so the neighbouring pixels of a tile that cross the same cube reuse them; with
   ``precompute=True`` and an isovalue classification they are read from the stored rows.
@@ -39,6 +39,8 @@ import math
 from typing import Any
 
 import numpy as np
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 from .._jit import jit, overload_jit
 from ..roots.pieces import Bernstein2, Bernstein3
@@ -54,7 +56,7 @@ from .type6 import (
 )
 from .type6_geometry import Type6Program, tet_of_point
 
-__all__ = ["split_cube_segment", "CACHE_ENTRIES", "fill_cube", "program_source"]
+__all__ = ["split_cube_segment", "CACHE_ENTRIES", "fill_cube"]
 
 #: Cubes a thread keeps computed (128 x 175 float64 = 179 KB for S31: fits L2).
 CACHE_ENTRIES = 128
@@ -148,43 +150,78 @@ def _cell_load(grid, scratch, i, j, k):
             np.int64(0xFFFFFF))
 
 
-def program_source(program: Type6Program, name: str) -> str:
-    """Python source of ``name(pad, i, j, k, out)``: ``program`` written out for one cube.
+def _program_intrinsic(program: Type6Program) -> Any:
+    """``fill(pad, i, j, k, row)``: ``program`` for cube ``(i, j, k)`` of ``pad`` as
+    straight-line machine code, coefficient ``p`` into ``row[p]`` (compiled code only).
 
-    The function reads the 27 data values around cube ``(i, j, k)`` of ``pad`` (unsigned
-    indices: no negative-index wrap-around), evaluates the program's rows in order as
-    straight-line code with the weights as constants and writes coefficient ``p`` to
-    ``out[p]``. Each row's sum is formed in the order of its terms, as
-    :func:`~.type6.run_program` forms it, so the coefficients are the same numbers. The loop
-    over the rows of :class:`~.type6_geometry.Type6Program` cost about 2000 cycles per cube
-    (its rows' varying lengths defeat branch prediction and every sum is one dependency
-    chain); written out, about 270.
+    The function reads the 27 data values around the cube (``pad[i .. i + 2, j .. j + 2,
+    k .. k + 2]``), evaluates the program's rows in order with the weights as constants and
+    writes the coefficients. Each row's sum is formed in the order of its terms, as
+    :func:`~.type6.run_program` forms it (plain IEEE multiplies and adds, nothing reordered),
+    so the coefficients are the same numbers. The loop over the rows of
+    :class:`~.type6_geometry.Type6Program` cost about 2000 cycles per cube (its rows' varying
+    lengths defeat branch prediction and every sum is one dependency chain); written out,
+    about 270. Emitted as LLVM instructions directly: the same code written as Python took
+    numba 1.7 s of typing and lowering to compile.
     """
     targets, ptr, sources, weights = program.arrays
-    lines = [f"def {name}(pad, i, j, k, out):",
-             "    i0, j0, k0 = np.uint64(i), np.uint64(j), np.uint64(k)",
-             "    i1, j1, k1 = i0 + np.uint64(1), j0 + np.uint64(1), k0 + np.uint64(1)",
-             "    i2, j2, k2 = i0 + np.uint64(2), j0 + np.uint64(2), k0 + np.uint64(2)"]
-    n = 0
-    for a in range(3):
-        for b in range(3):
-            for c in range(3):
-                # np.float64, not float: numba's float() keeps a float32 a float32.
-                lines.append(f"    s{n} = np.float64(pad[i{a}, j{b}, k{c}])")
-                n += 1
-    for r in range(targets.shape[0]):
-        terms = " + ".join(f"{float(weights[q])!r} * s{int(sources[q])}"
-                           for q in range(ptr[r], ptr[r + 1]))
-        lines.append(f"    s{int(targets[r])} = {terms}")
-    lines += [f"    out[{p}] = s{27 + p}" for p in range(program.n_points)]
-    return "\n".join(lines) + "\n"
+    rows = [(int(targets[r]), [(float(weights[q]), int(sources[q]))
+                                for q in range(ptr[r], ptr[r + 1])])
+            for r in range(targets.shape[0])]
+    n_points = program.n_points
+
+    @intrinsic
+    def fill(typingctx, pad, i, j, k, row):
+        sig = types.void(pad, i, j, k, row)
+
+        def codegen(context, builder, signature, args):
+            pad_t, i_t, j_t, k_t, row_t = signature.args
+            pad_v, i_v, j_v, k_v, row_v = args
+            data = context.make_array(pad_t)(context, builder, pad_v)
+            shape = cgutils.unpack_tuple(builder, data.shape, 3)
+            strides = cgutils.unpack_tuple(builder, data.strides, 3)
+            first = [context.cast(builder, v, t, types.intp)
+                     for v, t in ((i_v, i_t), (j_v, j_t), (k_v, k_t))]
+            slots = {}
+            n = 0
+            for a in range(3):
+                for b in range(3):
+                    for c in range(3):
+                        inds = [builder.add(v, context.get_constant(types.intp, d))
+                                for v, d in zip(first, (a, b, c), strict=True)]
+                        at = cgutils.get_item_pointer2(context, builder, data.data, shape,
+                                                       strides, pad_t.layout, inds)
+                        slots[n] = context.cast(builder, builder.load(at), pad_t.dtype,
+                                                types.float64)
+                        n += 1
+            for target, terms in rows:
+                acc = None
+                for w, src in terms:
+                    term = builder.fmul(context.get_constant(types.float64, w), slots[src])
+                    acc = term if acc is None else builder.fadd(acc, term)
+                slots[target] = acc
+            out = context.make_array(row_t)(context, builder, row_v)
+            out_shape = cgutils.unpack_tuple(builder, out.shape, 1)
+            out_strides = cgutils.unpack_tuple(builder, out.strides, 1)
+            for p in range(n_points):
+                at = cgutils.get_item_pointer2(context, builder, out.data, out_shape,
+                                               out_strides, row_t.layout,
+                                               [context.get_constant(types.intp, p)])
+                builder.store(slots[27 + p], at)
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    return fill
+
+
 def fill_cube(grid, i, j, k, row):
     """All coefficients of cube ``(i, j, k)`` of ``grid`` into ``row[:n_points]``, by the
     straight-line code of the grid's scheme (compiled code only)."""
     raise NotImplementedError
 
 
-#: (grid class, scheme number) -> the compiled :func:`program_source` of the scheme's program.
+#: (grid class, scheme number) -> the :func:`_program_intrinsic` of the scheme's program.
 _STRAIGHT: dict[tuple[type, int], Any] = {}
 
 
@@ -192,17 +229,15 @@ def _straight_line(grid_class: type, scheme: int) -> Any:
     key = (grid_class, scheme)
     fill = _STRAIGHT.get(key)
     if fill is None:
-        scope: dict[str, Any] = {"np": np}
-        exec(program_source(SCHEMES[grid_class][scheme](), "fill"), scope)  # noqa: S102
-        # Generated code has no file for numba's disk cache; the bands that call it are
-        # cached with its code inside (and recompiled whenever a module of the package changes).
-        fill = _STRAIGHT[key] = jit(scope["fill"], cache=False)
+        fill = _STRAIGHT[key] = _program_intrinsic(SCHEMES[grid_class][scheme]())
     return fill
 
 
 # A call (cache misses only), not inlined: the generated body inlined at Numba's IR level
 # corrupted the band's own variables (the pixel's colour was written from garbage; numba 0.6x),
 # whereas generated code called out of line, as ``.render.outputs.copy_pixel``, compiles right.
+# Generated code has no file for numba's disk cache; the bands that call it are cached with
+# its code inside (and recompiled whenever a module of the package changes).
 @overload_jit(fill_cube, inline="never")
 def _fill_cube(grid, i, j, k, row):
     cls = getattr(grid, "instance_class", None)
