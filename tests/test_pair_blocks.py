@@ -181,3 +181,23 @@ def test_sampled_method_and_type6_models_have_no_pair_level():
     np.testing.assert_array_equal(sampled.cells_visited, slow.cells_visited)
     assert exact.cells_visited.sum() < sampled.cells_visited.sum()
     assert sc.Scene(vol, model="s31").hierarchy.classify(iso)[3].size == 0
+
+
+@pytest.mark.parametrize("model", ["s31", "qss"])
+@pytest.mark.parametrize("name", ["ml", "blob", "steps"])
+def test_type6_active_pairs_change_no_hit(name, model):
+    """The type-6 models' own classification (active cubes) flags the 2-cell blocks too: the
+    frame is the one leaping 4-cell blocks only, bit for bit, with fewer cubes visited."""
+    vol, iso = pair_volumes()[name]
+    scene = sc.Scene(vol, model=model)
+    cam = sc.Camera.orbit(vol, azimuth=31, elevation=22, size=(48, 40), zoom=1.2)
+    fast = scene.render(cam, iso=iso)
+    flags = scene._iso_flags()
+    assert len(flags) == 5 and flags[3].any()
+    scene._iso_flags = lambda: flags[:3]  # the 4-cell blocks only
+    slow = scene.render(cam, iso=iso)
+    assert fast.hit.sum() > 100
+    for out in ("depth", "position", "normal", "face", "rgba", "cells_tested"):
+        np.testing.assert_array_equal(getattr(fast, out), getattr(slow, out), err_msg=out)
+    assert fast.cells_visited.sum() < 0.9 * slow.cells_visited.sum()
+    assert fast.blocks_skipped.sum() > slow.blocks_skipped.sum()

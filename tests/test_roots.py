@@ -366,3 +366,57 @@ def test_the_power_cubic_first_root_is_the_solvers_answer():
                          for c, val in zip(coeffs, values, strict=True)])
         np.testing.assert_array_equal(got, want)
         assert _hull_decides(coeffs, values).mean() > 0.05  # the shortcut is exercised
+
+
+def _mp_bernstein_first_root(b):
+    """First root in [0, 1] of the cubic with exactly the float Bernstein coefficients ``b``
+    (converted to the power form in exact arithmetic; ``None``: no root)."""
+    with mpmath.workdps(60):
+        b0, b1, b2, b3 = (mpmath.mpf(float(v)) for v in b)
+        c = (b3 - 3 * b2 + 3 * b1 - b0, 3 * (b2 - 2 * b1 + b0), 3 * (b1 - b0), b0)
+        roots = mpmath.polyroots(c, maxsteps=200, extraprec=200)
+        real = sorted(mpmath.re(r) for r in roots if abs(mpmath.im(r)) < mpmath.mpf(10) ** -40)
+        inside = [r for r in real if 0 <= r <= 1]
+        return (min(inside), c) if inside else (None, c)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_bernstein_cubic_first_root_against_mpmath(seed):
+    """The type-6 (s31) pieces' solver, ``bernstein_cubic_first_root``: isolation by
+    subdivision and refinement, on cubics with three separated real roots, one real root, and
+    short nearly linear ray pieces with one crossing (the common case of a hit), at scales from
+    1e-6 to 1e6; the reference is the exact polynomial of the float coefficients."""
+    from splinecast.roots.bernstein_cubic import bernstein_cubic_first_root
+
+    rng = np.random.default_rng(300 + seed)
+    found = 0
+    for case in range(600):
+        scale = 10.0 ** rng.uniform(-6, 6) * rng.choice([-1.0, 1.0])
+        kind = case % 3
+        if kind == 0:
+            roots = random_separated_roots(rng, sep=0.05)
+        elif kind == 1:
+            pair = complex(rng.uniform(-0.5, 1.5), rng.uniform(0.05, 1.0))
+            roots = [rng.uniform(-0.5, 1.5), pair, pair.conjugate()]
+        if kind < 2:
+            c3, c2, c1, c0 = expand(roots, scale)
+            b = (c0, c0 + c1 / 3, c0 + (2 * c1 + c2) / 3, c0 + c1 + c2 + c3)
+        else:
+            start, slope = rng.uniform(-1.0, 1.0), rng.uniform(0.2, 2.0) * rng.choice([-1, 1])
+            bend = rng.normal(size=2) * 0.1
+            b = tuple(scale * v for v in (start, start + slope / 3 + bend[0],
+                                          start + 2 * slope / 3 + bend[1], start + slope))
+        ref, c = _mp_bernstein_first_root(b)
+        got = float(bernstein_cubic_first_root(*b))
+        if ref is None:
+            assert math.isnan(got), f"{b}: no root, got {got!r}"
+            continue
+        assert not math.isnan(got), f"{b}: missed the root {ref}"
+        # Roots closer than 1e-9 to an end are the ends' own tests' business.
+        if min(abs(ref), abs(ref - 1)) < 1e-9:
+            continue
+        tol = 1e-12 + cond_tol(tuple(float(v) for v in c), ref)
+        err = abs(mpmath.mpf(got) - ref)
+        assert err <= tol, f"{b}: got {got!r}, reference {ref}, error {err}"
+        found += 1
+    assert found > 250

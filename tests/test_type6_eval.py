@@ -196,6 +196,43 @@ def test_averaging_chain_gives_the_rules_and_cube_bounds_are_exact_ranges(kind):
             assert hier.highs[level][i >> shift, j >> shift, k >> shift] >= b
 
 
+@pytest.mark.parametrize("kind", ["s31", "qss-b", "qss-a"])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.uint8])
+def test_renderers_straight_line_coefficients_are_the_programs(kind, dtype):
+    """The renderer's cube cache is filled by the scheme's program written out as code
+    (``type6_ray.fill_cube``, picked by the grid's scheme number): the same numbers as the
+    program's loop (same sums in the same order: bit for bit), and the rules' weight matrix
+    applied to the 27 values (an independent reference, to rounding)."""
+    from numba import njit
+
+    from splinecast.models.type6 import store_coefficients
+    from splinecast.models.type6_ray import fill_cube
+
+    @njit
+    def fill_all(grid, cubes, out):
+        nz = grid.pad.shape[2] - 2
+        ny = grid.pad.shape[1] - 2
+        for m in range(cubes.shape[0]):
+            lin = cubes[m]
+            fill_cube(grid, lin // (ny * nz), (lin // nz) % ny, lin % nz, out[m])
+
+    data = RNG.normal(size=(4, 5, 3)) * 40.0 + 100.0
+    model = _model(kind, np.clip(data, 0, 255).astype(dtype) if dtype is np.uint8 else
+                   data.astype(dtype))
+    cubes = np.arange(data.size, dtype=np.int64)
+    got = np.full((cubes.size, model.n_points), np.nan)
+    fill_all(model.kernel_grid(), cubes, got)
+    prog = model.program
+    loop = store_coefficients(model.pad, cubes, np.asarray(data.shape, np.int64), *prog.arrays,
+                              prog.n_slots, model.n_points)
+    np.testing.assert_array_equal(got, loop)
+    w = model.tables.weight_matrix()
+    ijk = np.stack(np.unravel_index(cubes, data.shape), axis=1)
+    ref = np.array([w @ model.pad[i:i + 3, j:j + 3, k:k + 3].astype(np.float64).reshape(27)
+                    for i, j, k in ijk])
+    np.testing.assert_allclose(got, ref, rtol=1e-13, atol=0)
+
+
 @pytest.mark.parametrize("kind", ["s31", "qss-b"])
 def test_ray_restriction_matches_the_patch_along_the_segment(kind):
     """The unrolled blossoms of the renderer against de Casteljau evaluation of the patch at
@@ -222,3 +259,53 @@ def test_ray_restriction_matches_the_patch_along_the_segment(kind):
         pts = a + s[:, None] * (b - a)
         ref, _ = _eval(model, np.tile(cube, (len(s), 1)), np.full(len(s), tet), pts)
         np.testing.assert_allclose(poly, ref, rtol=0, atol=1e-12)
+
+
+def test_cube_segments_are_cut_at_every_tetrahedron_face_in_order():
+    """``split_cube_segment`` (branch-free: a sorting network) against the crossings of the six
+    planes computed and sorted here, on random segments and degenerate ones (parallel to a
+    plane, inside a plane, through the centre, along an axis); and every piece lies in one
+    tetrahedron (points inside a piece find the same one)."""
+    from numba import njit
+
+    from splinecast.models.type6_geometry import tet_of_point
+    from splinecast.models.type6_ray import split_cube_segment
+
+    @njit(error_model="numpy")  # as every kernel: a division by zero gives inf or NaN
+    def split_all(a, e, cuts, counts):
+        for m in range(a.shape[0]):
+            counts[m] = split_cube_segment(a[m, 0], a[m, 1], a[m, 2], e[m, 0], e[m, 1],
+                                           e[m, 2], cuts[m])
+
+    rng = np.random.default_rng(5)
+    n = 4000
+    a = rng.uniform(-0.5, 0.5, (n, 3))
+    b = rng.uniform(-0.5, 0.5, (n, 3))
+    b[:400, 1:] = a[:400, 1:]  # along x
+    b[400:800, 0] = b[400:800, 1] + (a[400:800, 0] - a[400:800, 1])  # parallel to x = y
+    a[800:1200, 0] = a[800:1200, 1]  # inside x = y
+    b[800:1200, 0] = b[800:1200, 1]
+    b[1200:1600] = -a[1200:1600]  # through the centre
+    a[1600:1700] = np.round(a[1600:1700] * 4) / 4  # on lattice points (exact ties)
+    b[1600:1700] = np.round(b[1600:1700] * 4) / 4
+    e = b - a
+    cuts = np.full((n, 8), np.nan)
+    counts = np.zeros(n, np.int64)
+    split_all(a, e, cuts, counts)
+    for m in range(n):
+        want = []
+        for u, v in ((0, 1), (0, 2), (1, 2)):
+            for sign in (1.0, -1.0):
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    s = -(a[m, u] - sign * a[m, v]) / (e[m, u] - sign * e[m, v])
+                if 0.0 < s < 1.0:
+                    want.append(s)
+        want = [0.0, *sorted(want), 1.0]
+        assert counts[m] == len(want) - 1
+        np.testing.assert_array_equal(cuts[m, :len(want)], want)
+        for p in range(counts[m]):
+            s0, s1 = cuts[m, p], cuts[m, p + 1]
+            if s1 - s0 < 1e-9 or 800 <= m < 1200:  # a tie, or a segment in a face
+                continue
+            tets = {tet_of_point(*(a[m] + s * e[m])) for s in np.linspace(s0, s1, 7)[1:-1]}
+            assert len(tets) == 1, (m, p, tets)

@@ -187,7 +187,7 @@ class Scene(SceneTemplate):
         """Block flags of the current isovalue (the model's own work lists when it has them)."""
         if self.active_cells is not None:
             a = self.active_cells
-            return a.act0, a.act1, a.act2
+            return a.act0, a.act1, a.act2, a.pairs, a.packed
         return self.hierarchy.active
 
     def _active_box(self, flags: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray] | None:

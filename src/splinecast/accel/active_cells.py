@@ -14,7 +14,7 @@ Here:
    conservative).
 3. **Compaction**: active cubes (with a 24-bit tetrahedron mask each), the list of active
    tetrahedra (``slot * 24 + tet``), the cube -> slot lookup grid the kernels use and the block
-   flags for empty-space leaps.
+   flags for empty-space leaps (blocks of 64, 16, 4 and 2 cubes).
 4. Optionally (``precompute=True``), the coefficients of every active cube are stored (the
    thesis' "high frame rate" variant, the model's ``coefficient_rows``) so the kernels read
    instead of recomputing them.
@@ -36,7 +36,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from .minmax import BLOCK_SHIFTS, MinMaxHierarchy
+from .minmax import BLOCK_SHIFTS, PAIR_SHIFT, MinMaxHierarchy
 
 __all__ = ["ActiveCells", "CubeBoundHierarchy", "block_ranges", "candidate_cubes", "tet_list"]
 
@@ -152,9 +152,10 @@ def tet_list(masks: np.ndarray) -> np.ndarray:
 @jit(parallel=True)
 def _update_lookup(
     slot: np.ndarray, old: np.ndarray, new: np.ndarray, act0: np.ndarray, act1: np.ndarray,
-    act2: np.ndarray,
+    act2: np.ndarray, pairs: np.ndarray,
 ) -> None:
-    """Reset the old active cubes' slots to -1, then enter the new ones and their block flags.
+    """Reset the old active cubes' slots to -1, then enter the new ones and their block flags
+    (the 2-cell blocks' too).
 
     Parallel: the cubes of a list are distinct, and concurrent writes of a block flag all
     store the same value 1.
@@ -166,15 +167,34 @@ def _update_lookup(
     act0[:] = 0
     act1[:] = 0
     act2[:] = 0
+    pairs[:] = 0
     for m in prange(new.shape[0]):
         lin = new[m]
         flat[lin] = m
         k = lin % nz
         j = (lin // nz) % ny
         i = lin // (ny * nz)
+        pairs[i >> 1, j >> 1, k >> 1] = 1
         act0[i >> 2, j >> 2, k >> 2] = 1
         act1[i >> 4, j >> 4, k >> 4] = 1
         act2[i >> 6, j >> 6, k >> 6] = 1
+
+
+@jit(parallel=True)
+def _pack_pairs(pairs: np.ndarray, packed: np.ndarray) -> None:
+    """The 2-cell flags packed per 4-cell block as :func:`~.minmax.packed_pair_flags` packs
+    them (each block's byte written by one thread: concurrent ``|=`` could lose a bit)."""
+    npx, npy, npz = pairs.shape
+    bx, by, bz = packed.shape
+    for a in prange(bx):
+        for b in range(by):
+            for c in range(bz):
+                bits = 0
+                for p in range(8):
+                    pi, pj, pk = 2 * a + (p >> 2), 2 * b + ((p >> 1) & 1), 2 * c + (p & 1)
+                    if pi < npx and pj < npy and pk < npz and pairs[pi, pj, pk] != 0:
+                        bits |= 1 << p
+                packed[a, b, c] = bits
 
 
 def _block_shape(shape: tuple[int, int, int], shift: int) -> tuple[int, int, int]:
@@ -201,6 +221,10 @@ class ActiveCells:
         Stored coefficients of the active cubes when the model precomputes them.
     act0, act1, act2 : ndarray of uint8
         Block flags (blocks of 4, 16, 64 cubes) for :func:`~.minmax.inactive_block_size`.
+    pairs, packed : ndarray of uint8
+        Flags of the blocks of 2 cubes (one byte each) and the same packed per block of 4
+        (:func:`~.minmax.packed_pair_flags`) for :func:`~.minmax.inactive_pair_size`: rays
+        then leap the inactive pairs of an active block of 4 instead of visiting their cubes.
     """
 
     def __init__(self, model: Any) -> None:
@@ -216,6 +240,8 @@ class ActiveCells:
         self.act0, self.act1, self.act2 = (
             np.zeros(_block_shape(shape, s), np.uint8) for s in BLOCK_SHIFTS
         )
+        self.pairs = np.zeros(_block_shape(shape, PAIR_SHIFT), np.uint8)
+        self.packed = np.zeros_like(self.act0)
         self.stats: dict[str, Any] = {}
         #: Range of the cube bounds per block of 4^3 cubes (iso-independent; skips the scan).
         self.block_lo, self.block_hi = block_ranges(model.cube_lo, model.cube_hi)
@@ -234,7 +260,8 @@ class ActiveCells:
         else:
             new, self.tet_mask = candidates[keep], masks[keep]
         self.tets = tet_list(self.tet_mask)
-        _update_lookup(self.slot, self.cubes, new, self.act0, self.act1, self.act2)
+        _update_lookup(self.slot, self.cubes, new, self.act0, self.act1, self.act2, self.pairs)
+        _pack_pairs(self.pairs, self.packed)
         self.cubes = new
         t3 = time.perf_counter()
         if m.precompute:
@@ -247,7 +274,7 @@ class ActiveCells:
         n_tets = int(self.tets.shape[0])
         lookup_bytes = int(self.slot.nbytes + self.block_lo.nbytes + self.block_hi.nbytes
                            + self.act0.nbytes + self.act1.nbytes
-                           + self.act2.nbytes)
+                           + self.act2.nbytes + self.pairs.nbytes + self.packed.nbytes)
         lists_bytes = int(self.cubes.nbytes + self.tet_mask.nbytes + self.tets.nbytes)
         coeff_bytes_precomputed = n_cubes * m.n_points * 8
         self.stats = {
@@ -274,4 +301,5 @@ class ActiveCells:
         """Memory held by the per-isovalue arrays and the block ranges."""
         return int(sum(a.nbytes for a in (self.slot, self.cubes, self.tet_mask, self.tets,
                                            self.coeffs, self.act0, self.act1, self.act2,
-                                           self.block_lo, self.block_hi)))
+                                           self.pairs, self.packed, self.block_lo,
+                                           self.block_hi)))

@@ -23,11 +23,11 @@ everywhere: expect faint creases in the shading that S31 does not have.
 from __future__ import annotations
 
 from fractions import Fraction as F
-from functools import lru_cache
+from functools import lru_cache, partial
 
 from ..errors import ParameterError
 from ..volume import Volume
-from .type6 import Type6Model
+from .type6 import QSSGrid, Type6Model, register_scheme
 from .type6_geometry import Type6Program, Type6Tables, derive_program, derive_tables, parse_rules
 
 __all__ = ["QSS_BOUNDARY_RULES", "QSS_B_RULES", "QSS_A_RULES", "QSSModel", "qss_tables",
@@ -95,6 +95,10 @@ def qss_program(variant: str = "qss-b") -> Type6Program:
     return derive_program(qss_tables(variant), CHAINS[variant])
 
 
+#: Variant name -> its number among the quadratic schemes (:func:`~.type6.register_scheme`).
+QSS_SCHEMES = {v: register_scheme(QSSGrid, partial(qss_program, v)) for v in VARIANTS}
+
+
 class QSSModel(Type6Model):
     """Quadratic super spline on the type-6 partition.
 
@@ -125,4 +129,4 @@ class QSSModel(Type6Model):
             raise ParameterError("prefilter is only available for model s31")
         self.variant = variant
         super().__init__(volume, qss_tables(variant), prefilter=False, precompute=precompute,
-                         root_finder=root_finder, program=qss_program(variant))
+                         root_finder=root_finder, scheme=QSS_SCHEMES[variant])

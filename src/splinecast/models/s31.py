@@ -18,7 +18,7 @@ from fractions import Fraction as F
 from functools import lru_cache
 
 from ..volume import Volume
-from .type6 import Type6Model
+from .type6 import S31Grid, Type6Model, register_scheme
 from .type6_geometry import Type6Program, Type6Tables, derive_program, derive_tables, parse_rules
 
 __all__ = ["S31_RULES", "S31_CHAIN", "S31Model", "s31_tables", "s31_program"]
@@ -92,6 +92,10 @@ def s31_program() -> Type6Program:
     return derive_program(s31_tables(), S31_CHAIN)
 
 
+#: The S31 scheme's number among the cubic schemes (:func:`~.type6.register_scheme`).
+S31_SCHEME = register_scheme(S31Grid, s31_program)
+
+
 class S31Model(Type6Model):
     """Cubic C1 spline on the type-6 partition.
 
@@ -124,5 +128,5 @@ class S31Model(Type6Model):
     def __init__(self, volume: Volume, prefilter: bool = False, precompute: bool = False,
                  root_finder: str = "bernstein") -> None:
         super().__init__(volume, s31_tables(), prefilter=prefilter, precompute=precompute,
-                         root_finder=root_finder, program=s31_program())
+                         root_finder=root_finder, scheme=S31_SCHEME)
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Callable
 from functools import cached_property
 from typing import Any
 
@@ -45,7 +46,6 @@ from .type6_geometry import (
     Type6Tables,
     barycentric_matrices,
     decasteljau_tables,
-    derive_program,
     tet_of_point,
 )
 from .validation import require_renderable
@@ -54,6 +54,8 @@ __all__ = [
     "Type6Model",
     "S31Grid",
     "QSSGrid",
+    "SCHEMES",
+    "register_scheme",
     "ROOT_FINDERS",
     "gather27",
     "tet_coefficients",
@@ -63,7 +65,6 @@ __all__ = [
     "ray_bernstein",
     "cube_bounds",
     "run_program",
-    "run_program1",
     "barycentric",
     "ray_bernstein3",
     "ray_bernstein2",
@@ -75,14 +76,40 @@ __all__ = [
 ]
 
 _GRID_FIELDS = ["pad", "cube_lo", "cube_hi", "slot", "tet_mask", "coeffs", "tet_points",
-                "targets", "ptr", "sources", "weights", "bary", "steps", "newton", "n_slots"]
+                "bary", "steps", "newton", "scheme"]
 #: Kernel grid of the S31 model (hooks in :mod:`.type6_ray`): the clamp-padded data (cube ``c``
 #: needs ``pad[c .. c + 2]``), per-cube coefficient bounds, the optional isovalue classification
-#: (``slot``, ``tet_mask``, precomputed ``coeffs``; empty arrays without), the scheme's tables
-#: and program, the root finder choice and the program's buffer size.
+#: (``slot``, ``tet_mask``, precomputed ``coeffs``; empty arrays without), the scheme's tables,
+#: the root finder choice and the number of the model's coefficient program among the grid
+#: class's (:data:`SCHEMES`).
 S31Grid = namedtuple("S31Grid", _GRID_FIELDS)
 #: Kernel grid of the QSS model (same fields as :data:`S31Grid`).
 QSSGrid = namedtuple("QSSGrid", _GRID_FIELDS)
+
+#: Kernel grid class -> the coefficient programs of the schemes it renders, in the order of
+#: their numbers (the grids' ``scheme``), each as a function that returns it (programs are
+#: derived on first use). The ray hooks compile each program into straight-line code
+#: (:mod:`.type6_ray`); the model modules add theirs with :func:`register_scheme`.
+SCHEMES: dict[type, list[Callable[[], Type6Program]]] = {S31Grid: [], QSSGrid: []}
+
+
+def register_scheme(grid_class: type, program: Callable[[], Type6Program]) -> int:
+    """Add a coefficient scheme to the schemes a kernel grid class renders.
+
+    Parameters
+    ----------
+    grid_class : type
+        :data:`S31Grid` (cubic schemes) or :data:`QSSGrid` (quadratic ones).
+    program : callable
+        Returns the scheme's verified program (:func:`~.type6_geometry.derive_program`).
+
+    Returns
+    -------
+    int
+        The scheme's number: what a model of the scheme passes as ``scheme``.
+    """
+    SCHEMES[grid_class].append(program)
+    return len(SCHEMES[grid_class]) - 1
 
 #: Root finders of the ray–patch intersection (``root_finder=`` option): name -> code.
 ROOT_FINDERS = {"bernstein": 0, "newton": 1}
@@ -297,20 +324,6 @@ def ray_bernstein2(
     u1 = e0 * pa0 + e1 * pa1 + e2 * pa2 + e3 * pa3
     u2 = e0 * pe0 + e1 * pe1 + e2 * pe2 + e3 * pe3
     return u0, u1, u2
-
-
-@jit(inline="always")
-def run_program1(
-    buf: np.ndarray, targets: np.ndarray, ptr: np.ndarray, sources: np.ndarray,
-    weights: np.ndarray,
-) -> None:
-    """:func:`run_program` for one cube whose buffer is the 1-D ``buf`` (data in ``buf[:27]``)."""
-    for r in range(targets.shape[0]):
-        acc = 0.0
-        for q in range(ptr[r], ptr[r + 1]):
-            acc += weights[q] * buf[sources[q]]
-        buf[targets[r]] = acc
-
 
 
 @jit(parallel=True)
@@ -613,8 +626,9 @@ class Type6Model(ReconstructionModel):
         The data (at least 1 voxel per axis, no NaN or inf).
     tables : Type6Tables
         The scheme's derived coefficient tables.
-    program : Type6Program, optional
-        The scheme's verified evaluation chain (default: the direct rules).
+    scheme : int
+        The number of the scheme among those of the model's kernel grid class
+        (:func:`register_scheme`, whose program must be derived from ``tables``).
     prefilter : bool
         Replace the data by ``f - Delta_h f / 8`` first (see :func:`laplacian_prefilter`).
     precompute : bool
@@ -634,8 +648,7 @@ class Type6Model(ReconstructionModel):
 
     def __init__(
         self, volume: Volume, tables: Type6Tables, prefilter: bool = False,
-        precompute: bool = False, root_finder: str = "bernstein",
-        program: Type6Program | None = None,
+        precompute: bool = False, root_finder: str = "bernstein", scheme: int = 0,
     ) -> None:
         if not isinstance(volume, Volume):
             raise ParameterError(f"volume must be a splinecast.Volume, got {type(volume)}")
@@ -661,7 +674,8 @@ class Type6Model(ReconstructionModel):
             barycentric_matrices(),
             decasteljau_tables(tables.degree),
         )
-        self.program = program if program is not None else derive_program(tables)
+        self.scheme = int(scheme)
+        self.program = SCHEMES[self.grid_class][self.scheme]()
         self.tolerance = rounding_tolerance(self.pad, self.program)
         self.cube_lo, self.cube_hi = cube_bounds(
             self.pad, *self.program.arrays, self.program.n_slots, tables.n_points,
@@ -741,9 +755,13 @@ class Type6Model(ReconstructionModel):
             mask = np.zeros(0, np.uint32)
             coeffs = np.zeros((0, self.n_points))
         tet_points, _, _, _, bary, steps = self.tables_arrays
-        cls = S31Grid if self.degree == 3 else QSSGrid
-        return cls(pad, lo, hi, slot, mask, coeffs, tet_points, *self.program.arrays, bary, steps,
-                   self.root_finder == "newton", self.program.n_slots)
+        return self.grid_class(pad, lo, hi, slot, mask, coeffs, tet_points, bary, steps,
+                               self.root_finder == "newton", self.scheme)
+
+    @property
+    def grid_class(self) -> type:
+        """:data:`S31Grid` for a cubic scheme, :data:`QSSGrid` for a quadratic one."""
+        return S31Grid if self.tables.degree == 3 else QSSGrid
 
     @property
     def n_points(self) -> int:

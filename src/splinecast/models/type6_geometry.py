@@ -343,12 +343,14 @@ class Type6Program:
     that every coefficient comes out with exactly the weights of the tables.
     """
 
-    def __init__(self, targets, ptr, sources, weights, n_slots) -> None:
+    def __init__(self, targets, ptr, sources, weights, n_slots, n_points) -> None:
         self.targets = targets
         self.ptr = ptr
         self.sources = sources
         self.weights = weights
         self.n_slots = n_slots
+        #: Coefficients per cube (slots ``27 .. 27 + n_points - 1``; auxiliaries follow).
+        self.n_points = n_points
 
     @property
     def n_terms(self) -> int:
@@ -437,4 +439,5 @@ def derive_program(
     ptr = np.cumsum([0] + [len(r) for _, r in rows]).astype(np.int64)
     sources = np.array([s for _, r in rows for s, _ in r], np.int64)
     weights_arr = np.array([float(w) for _, r in rows for _, w in r])
-    return Type6Program(targets, ptr, sources, weights_arr, 27 + tables.n_points + n_aux)
+    return Type6Program(targets, ptr, sources, weights_arr, 27 + tables.n_points + n_aux,
+                        tables.n_points)

@@ -12,7 +12,8 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
 * **Ray restriction.** On a piece, the patch is a univariate Bernstein polynomial of the patch's
   degree, obtained by blossoming at the piece's end points (:func:`.type6.ray_bernstein3`).
 * **Coefficients on demand.** A cube's coefficients are computed from its 27 data values by the
-  model's verified averaging chain into a small per-thread cache the first time a ray needs them,
+  model's verified averaging chain, written out as straight-line code (:func:`fill_cube`),
+  into a small per-thread cache the first time a ray needs them,
   so the neighbouring pixels of a tile that cross the same cube reuse them; with
   ``precompute=True`` and an isovalue classification they are read from the stored rows.
 * **Ranges.** Without a classification a cube's range is its exact coefficient range (computed
@@ -25,8 +26,8 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
   classification); ``piece_poly`` builds one piece's Bernstein coefficients when a mode asks for
   it. A first-hit ray therefore builds no piece behind its hit (the old hand-written kernels'
   order of work), and nothing of a piece whose range a mode refuses. Everything but the cube's
-  coefficient computation on a cache miss (:func:`_fill_cube`, a call taking only the arrays it
-  needs) is inlined into the driver's loop, which keeps no reference counts
+  coefficient computation on a cache miss (:func:`fill_cube`'s code, a call taking only the
+  arrays it needs) is inlined into the driver's loop, which keeps no reference counts
   (:mod:`splinecast.render.driver`); a hook called out of line would still increment and
   decrement the count of every array of the grid and the scratch tuple (about 19 here).
 * **Normals** come from the de Casteljau directional derivatives of the piece's patch.
@@ -35,42 +36,45 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
-from .._jit import jit
+from .._jit import jit, overload_jit
 from ..roots.pieces import Bernstein2, Bernstein3
 from .pieces import register
 from .type6 import (
+    SCHEMES,
     QSSGrid,
     S31Grid,
     barycentric,
-    gather27,
     ray_bernstein2,
     ray_bernstein3,
-    run_program1,
     value_gradient,
 )
-from .type6_geometry import tet_of_point
+from .type6_geometry import Type6Program, tet_of_point
 
-__all__ = ["split_cube_segment", "CACHE_ENTRIES"]
+__all__ = ["split_cube_segment", "CACHE_ENTRIES", "fill_cube"]
 
-#: Cubes a thread keeps computed (128 x 214 float64 = 219 KB for S31: fits L2).
+#: Cubes a thread keeps computed (128 x 175 float64 = 179 KB for S31: fits L2).
 CACHE_ENTRIES = 128
 
 
 @jit(inline="always")
-def _plane_cut(a_u: float, a_v: float, e_u: float, e_v: float, sign: float,
-               cuts: np.ndarray, n: int) -> int:
-    """Append the segment parameter where ``u = sign * v`` is crossed, if inside (0, 1)."""
-    g0 = a_u - sign * a_v
-    ge = e_u - sign * e_v
-    if ge != 0.0:
-        s = -g0 / ge
-        if 0.0 < s < 1.0:
-            cuts[n] = s
-            return n + 1
-    return n
+def _plane_cut(a_u: float, a_v: float, e_u: float, e_v: float, sign: float) -> float:
+    """The segment parameter where ``u = sign * v`` is crossed if inside (0, 1), else 2.
+
+    A segment parallel to the plane divides by zero: inf or NaN, neither inside (0, 1).
+    """
+    s = -(a_u - sign * a_v) / (e_u - sign * e_v)
+    return s if (s > 0.0) & (s < 1.0) else 2.0
+
+
+@jit(inline="always")
+def _order(a: float, b: float) -> tuple[float, float]:
+    return min(a, b), max(a, b)
 
 
 @jit(inline="always")
@@ -79,24 +83,42 @@ def split_cube_segment(ax: float, ay: float, az: float, ex: float, ey: float, ez
     """Sorted break points of the segment ``a + s e`` (``s`` in [0, 1]) at tetrahedron faces.
 
     Fills ``cuts[0..n]`` with ``0, s_1, ..., 1`` (increasing) and returns ``n``, the number of
-    pieces. ``a`` and ``e`` are in local cube coordinates (relative to the cube centre).
+    pieces (``cuts`` holds at least 8 values). ``a`` and ``e`` are in local cube coordinates
+    (relative to the cube centre).
+
+    Without a branch on the data: a plane not crossed inside the segment gives 2, and a sorting
+    network of min/max pairs puts those last. Branches on where a ray crosses the planes (and
+    an insertion sort's) were mispredicted so often that cutting a cube cost about 270 cycles,
+    more than building a piece's polynomial; now about 50.
     """
+    s0 = _plane_cut(ax, ay, ex, ey, 1.0)
+    s1 = _plane_cut(ax, ay, ex, ey, -1.0)
+    s2 = _plane_cut(ax, az, ex, ez, 1.0)
+    s3 = _plane_cut(ax, az, ex, ez, -1.0)
+    s4 = _plane_cut(ay, az, ey, ez, 1.0)
+    s5 = _plane_cut(ay, az, ey, ez, -1.0)
+    n = 1 + ((s0 < 2.0) + (s1 < 2.0) + (s2 < 2.0) + (s3 < 2.0) + (s4 < 2.0)
+             + (s5 < 2.0))
+    # The optimal 12-comparator sorting network of six values, layer by layer.
+    s0, s5 = _order(s0, s5)
+    s1, s3 = _order(s1, s3)
+    s2, s4 = _order(s2, s4)
+    s1, s2 = _order(s1, s2)
+    s3, s4 = _order(s3, s4)
+    s0, s3 = _order(s0, s3)
+    s2, s5 = _order(s2, s5)
+    s0, s1 = _order(s0, s1)
+    s2, s3 = _order(s2, s3)
+    s4, s5 = _order(s4, s5)
+    s1, s2 = _order(s1, s2)
+    s3, s4 = _order(s3, s4)
     cuts[0] = 0.0
-    n = 1
-    n = _plane_cut(ax, ay, ex, ey, 1.0, cuts, n)
-    n = _plane_cut(ax, ay, ex, ey, -1.0, cuts, n)
-    n = _plane_cut(ax, az, ex, ez, 1.0, cuts, n)
-    n = _plane_cut(ax, az, ex, ez, -1.0, cuts, n)
-    n = _plane_cut(ay, az, ey, ez, 1.0, cuts, n)
-    n = _plane_cut(ay, az, ey, ez, -1.0, cuts, n)
-    # Insertion sort of at most six values.
-    for a in range(2, n):
-        v = cuts[a]
-        b = a - 1
-        while b >= 1 and cuts[b] > v:
-            cuts[b + 1] = cuts[b]
-            b -= 1
-        cuts[b + 1] = v
+    cuts[1] = s0
+    cuts[2] = s1
+    cuts[3] = s2
+    cuts[4] = s3
+    cuts[5] = s4
+    cuts[6] = s5
     cuts[n] = 1.0
     return n
 
@@ -110,7 +132,7 @@ def _cell_count(grid):
 @jit()
 def _new_scratch(grid):
     keys = np.full(CACHE_ENTRIES, -1, np.int64)
-    cache = np.empty((CACHE_ENTRIES, grid.n_slots))
+    cache = np.empty((CACHE_ENTRIES, grid.coeffs.shape[1]))
     return (keys, cache, np.empty(grid.tet_points.shape[1]), np.empty(10), np.empty(4),
             np.empty((8, 2)))
 
@@ -128,12 +150,107 @@ def _cell_load(grid, scratch, i, j, k):
             np.int64(0xFFFFFF))
 
 
-@jit()
-def _fill_cube(pad, i, j, k, buf, targets, ptr, sources, weights):
-    """All coefficients of cube ``(i, j, k)`` into ``buf`` (a cache miss: kept out of line, it
-    takes the few arrays it needs instead of the grid and scratch tuples)."""
-    gather27(pad, i, j, k, buf)
-    run_program1(buf, targets, ptr, sources, weights)
+def _program_intrinsic(program: Type6Program) -> Any:
+    """``fill(pad, i, j, k, row)``: ``program`` for cube ``(i, j, k)`` of ``pad`` as
+    straight-line machine code, coefficient ``p`` into ``row[p]`` (compiled code only).
+
+    The function reads the 27 data values around the cube (``pad[i .. i + 2, j .. j + 2,
+    k .. k + 2]``), evaluates the program's rows in order with the weights as constants and
+    writes the coefficients. Each row's sum is formed in the order of its terms, as
+    :func:`~.type6.run_program` forms it (plain IEEE multiplies and adds, nothing reordered),
+    so the coefficients are the same numbers. The loop over the rows of
+    :class:`~.type6_geometry.Type6Program` cost about 2000 cycles per cube (its rows' varying
+    lengths defeat branch prediction and every sum is one dependency chain); written out,
+    about 270. Emitted as LLVM instructions directly: the same code written as Python took
+    numba 1.7 s of typing and lowering to compile.
+    """
+    targets, ptr, sources, weights = program.arrays
+    rows = [(int(targets[r]), [(float(weights[q]), int(sources[q]))
+                                for q in range(ptr[r], ptr[r + 1])])
+            for r in range(targets.shape[0])]
+    n_points = program.n_points
+
+    @intrinsic
+    def fill(typingctx, pad, i, j, k, row):
+        sig = types.void(pad, i, j, k, row)
+
+        def codegen(context, builder, signature, args):
+            pad_t, i_t, j_t, k_t, row_t = signature.args
+            pad_v, i_v, j_v, k_v, row_v = args
+            data = context.make_array(pad_t)(context, builder, pad_v)
+            shape = cgutils.unpack_tuple(builder, data.shape, 3)
+            strides = cgutils.unpack_tuple(builder, data.strides, 3)
+            first = [context.cast(builder, v, t, types.intp)
+                     for v, t in ((i_v, i_t), (j_v, j_t), (k_v, k_t))]
+            slots = {}
+            n = 0
+            for a in range(3):
+                for b in range(3):
+                    for c in range(3):
+                        inds = [builder.add(v, context.get_constant(types.intp, d))
+                                for v, d in zip(first, (a, b, c), strict=True)]
+                        at = cgutils.get_item_pointer2(context, builder, data.data, shape,
+                                                       strides, pad_t.layout, inds)
+                        slots[n] = context.cast(builder, builder.load(at), pad_t.dtype,
+                                                types.float64)
+                        n += 1
+            for target, terms in rows:
+                acc = None
+                for w, src in terms:
+                    term = builder.fmul(context.get_constant(types.float64, w), slots[src])
+                    acc = term if acc is None else builder.fadd(acc, term)
+                slots[target] = acc
+            out = context.make_array(row_t)(context, builder, row_v)
+            out_shape = cgutils.unpack_tuple(builder, out.shape, 1)
+            out_strides = cgutils.unpack_tuple(builder, out.strides, 1)
+            for p in range(n_points):
+                at = cgutils.get_item_pointer2(context, builder, out.data, out_shape,
+                                               out_strides, row_t.layout,
+                                               [context.get_constant(types.intp, p)])
+                builder.store(slots[27 + p], at)
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    return fill
+
+
+def fill_cube(grid, i, j, k, row):
+    """All coefficients of cube ``(i, j, k)`` of ``grid`` into ``row[:n_points]``, by the
+    straight-line code of the grid's scheme (compiled code only)."""
+    raise NotImplementedError
+
+
+#: (grid class, scheme number) -> the :func:`_program_intrinsic` of the scheme's program.
+_STRAIGHT: dict[tuple[type, int], Any] = {}
+
+
+def _straight_line(grid_class: type, scheme: int) -> Any:
+    key = (grid_class, scheme)
+    fill = _STRAIGHT.get(key)
+    if fill is None:
+        fill = _STRAIGHT[key] = _program_intrinsic(SCHEMES[grid_class][scheme]())
+    return fill
+
+
+# A call (cache misses only), not inlined: the generated body inlined at Numba's IR level
+# corrupted the band's own variables (the pixel's colour was written from garbage; numba 0.6x),
+# whereas generated code called out of line, as ``.render.outputs.copy_pixel``, compiles right.
+# Generated code has no file for numba's disk cache; the bands that call it are cached with
+# its code inside (and recompiled whenever a module of the package changes).
+@overload_jit(fill_cube, inline="never")
+def _fill_cube(grid, i, j, k, row):
+    cls = getattr(grid, "instance_class", None)
+    if cls not in SCHEMES or not SCHEMES[cls]:
+        return None
+    scope = {f"fill{n}": _straight_line(cls, n) for n in range(len(SCHEMES[cls]))}
+    body = ""
+    for n in range(len(SCHEMES[cls]) - 1):
+        body += (f"    {'if' if n == 0 else 'elif'} grid.scheme == {n}:\n"
+                 f"        fill{n}(grid.pad, i, j, k, row)\n        return\n")
+    body += f"    fill{len(SCHEMES[cls]) - 1}(grid.pad, i, j, k, row)\n"
+    exec(f"def fill(grid, i, j, k, row):\n{body}", scope)  # noqa: S102 - from the tables
+    return scope["fill"]
 
 
 @jit(inline="always")
@@ -152,10 +269,10 @@ def _load_tet(grid, scratch, slot, i, j, k, tet):
     lin = (np.int64(i) * ny + j) * nz + k
     buf = cache[entry]
     if keys[entry] != lin:
-        _fill_cube(grid.pad, i, j, k, buf, grid.targets, grid.ptr, grid.sources, grid.weights)
+        fill_cube(grid, i, j, k, buf)
         keys[entry] = lin
     for n in range(n_local):
-        c[n] = buf[27 + grid.tet_points[tet, n]]
+        c[n] = buf[grid.tet_points[tet, n]]
     return c
 
 

@@ -339,8 +339,8 @@ class Iso(ModeHost):
         """Block flags for the isovalue (``flags`` overrides, e.g. a model's own), and, for
         the exact method, the 2-cell blocks' flags when ``flags`` has them (the sampled
         method leaps the 4-cell blocks only, so its samples stay where they were): packed per
-        4-cell block for the walk (``blocks[3]``), and one byte each for the footprint
-        (``blocks[4]``)."""
+        4-cell block for the walk (``blocks[3]``; ``flags[4]`` when ``flags`` brings them
+        packed), and one byte each for the footprint (``blocks[4]``)."""
         if flags is None:
             flags = hierarchy.classify(self.params.iso)
         no_pairs = np.zeros((0, 0, 0), np.uint8)
@@ -349,8 +349,12 @@ class Iso(ModeHost):
             return (*flags[:3], no_pairs, no_pairs)
         # The kernel reads the pairs packed per 4-cell block; the footprint projects them.
         pack = getattr(hierarchy, "packed_pairs", None)
-        packed = (pack(pairs, flags[0]) if pack is not None else
-                  packed_pair_flags(pairs, np.asarray(flags[0].shape, np.int64)))
+        if len(flags) > 4:
+            packed = flags[4]
+        elif pack is not None:
+            packed = pack(pairs, flags[0])
+        else:
+            packed = packed_pair_flags(pairs, np.asarray(flags[0].shape, np.int64))
         return (*flags[:3], packed, pairs)
 
     def footprint_flags(self, blocks: tuple) -> tuple | None:

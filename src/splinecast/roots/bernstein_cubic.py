@@ -8,7 +8,8 @@ Bernstein form ``sum_k b_k C(d, k) s^k (1 - s)^(d - k)``.
 * :func:`bernstein_cubic_first_root` -- guaranteed first root by Bernstein subdivision: intervals
   are visited left to right; one whose control polygon has no sign change holds no root (convex
   hull property) and is dropped, one with exactly one sign change holds exactly one root (Descartes'
-  rule for Bernstein polynomials), which a safeguarded Newton iteration refines, anything else is
+  rule for Bernstein polynomials), which Newton's iteration on the power form refines from the
+  secant point, kept inside the interval (:func:`.cubic.refine_bracketed`), anything else is
   halved. The walk over the dyadic intervals needs no stack: an interval's coefficients are
   recomputed from the original ones by blossoming, which for a cubic costs a dozen operations.
 * :func:`newton_cubic_first_root` -- the references' method: Newton's iteration from three starts
@@ -24,7 +25,7 @@ from __future__ import annotations
 import math
 
 from .._jit import jit
-from .cubic import quadratic_roots
+from .cubic import quadratic_roots, refine_bracketed
 
 __all__ = [
     "bernstein_quadratic_first_root",
@@ -86,30 +87,6 @@ def bernstein_quadratic_first_root(b0: float, b1: float, b2: float) -> float:
     return min(max(best, 0.0), 1.0)
 
 
-@jit(inline="always")
-def _refine(b0, b1, b2, b3, lo, hi, glo):
-    """The one root of the cubic in ``[lo, hi]`` where it changes sign (Newton + bisection)."""
-    s = 0.5 * (lo + hi)
-    for _ in range(100):
-        g = bernstein3_value(b0, b1, b2, b3, s)
-        if g == 0.0:
-            return s
-        if (g < 0.0) == (glo < 0.0):
-            lo = s
-        else:
-            hi = s
-        if hi - lo <= 4e-16:
-            break
-        slope = _bernstein3_slope(b0, b1, b2, b3, s)
-        nxt = s - g / slope if slope != 0.0 else 0.5 * (lo + hi)
-        if not (lo < nxt < hi):
-            nxt = 0.5 * (lo + hi)
-        if nxt == s:
-            break
-        s = nxt
-    return s
-
-
 @jit()
 def bernstein_cubic_first_root(b0: float, b1: float, b2: float, b3: float) -> float:
     """First root in [0, 1] of the cubic with Bernstein coefficients ``b0..b3``; NaN if none."""
@@ -148,7 +125,11 @@ def bernstein_cubic_first_root(b0: float, b1: float, b2: float, b3: float) -> fl
                         changes += 1
                     prev = c
             if changes == 1 and c3 != 0.0 and (c3 > 0.0) != pos:
-                return _refine(b0, b1, b2, b3, lo, hi, c0)
+                # Exactly one root, and the cubic's values at both ends (c0, c3): bracketed
+                # Newton on the power form from the secant point, as for the power cubics.
+                return refine_bracketed(b3 - 3.0 * b2 + 3.0 * b1 - b0,
+                                         3.0 * (b2 - 2.0 * b1 + b0), 3.0 * (b1 - b0), b0,
+                                         lo, hi, c0, c3)
             if level >= _MAX_LEVEL:
                 return 0.5 * (lo + hi)  # a tangential touch narrowed to 2^-48
             level += 1

@@ -21,7 +21,8 @@ import math
 
 from .._jit import jit
 
-__all__ = ["cubic_first_root", "quadratic_roots", "horner3", "cubic_roots_in_unit", "cubic_max"]
+__all__ = ["cubic_first_root", "quadratic_roots", "horner3", "cubic_roots_in_unit", "cubic_max",
+           "refine_bracketed"]
 
 _NEWTON_MAX_ITERATIONS = 80
 
@@ -65,10 +66,12 @@ def quadratic_roots(a: float, b: float, c: float) -> tuple[int, float, float]:
 
 
 @jit()
-def _refine_bracketed(
+def refine_bracketed(
     c3: float, c2: float, c1: float, c0: float, lo: float, hi: float, glo: float, ghi: float
 ) -> float:
-    """Root of a cubic that is monotone on ``[lo, hi]`` with ``glo * ghi < 0``."""
+    """The root of a cubic in ``[lo, hi]``, given its values ``glo`` and ``ghi`` of opposite
+    signs at the ends, where it has exactly one (it is monotone there, or the interval is
+    isolated otherwise): Newton's method from the secant point, kept inside the bracket."""
     # Start from the secant (regula falsi) point: on a monotone piece it is already close.
     s = lo - glo * (hi - lo) / (ghi - glo)
     if not (lo < s < hi):
@@ -139,7 +142,7 @@ def cubic_first_root(c3: float, c2: float, c1: float, c0: float, lo: float, hi: 
         if gb == 0.0:
             return b
         if (ga < 0.0) != (gb < 0.0):
-            return _refine_bracketed(c3, c2, c1, c0, a, b, ga, gb)
+            return refine_bracketed(c3, c2, c1, c0, a, b, ga, gb)
         a, ga = b, gb
     return math.nan
 
