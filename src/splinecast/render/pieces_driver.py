@@ -155,10 +155,9 @@ def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
 # for every piece; the field there is evaluated only when the ray enters a piece of another
 # level at that parameter (few rays: the seams), from the piece it left.
 
-def closure_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
-    """Before piece number ``piece`` of ``cut``, whose grid is ``kernel`` (scratch ``scr``):
-    a hit on its entry face if the field jumps across the isovalue there (compiled code only);
-    returns 1 for a hit, else 0."""
+def closure_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
+    """Before piece number ``piece`` of ``cut``: a hit on its entry face if the field jumps
+    across the isovalue there (compiled code only); returns 1 for a hit, else 0."""
     raise NotImplementedError
 
 
@@ -169,33 +168,34 @@ def closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit
 
 
 # Reference counting on (``_nrt=True``) although its caller runs without: it allocates the
-# scratch of the other piece's grid (see :func:`_piece_pixels`).
+# scratch of the piece's grid (see :func:`_piece_pixels`).
 @jit(_nrt=True)
-def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, height, t):
-    """The field of piece ``q`` (as drawn) at parameter ``t`` of the ray."""
+def _piece_field(grids_a, grids_b, which, geoms, q, basis, row, col, width, height, t):
+    """Value and world gradient of piece ``q``'s field (as drawn) at parameter ``t`` of the
+    ray. The piece is looked up in the cut's lists, not handed over as a grid: the closure then
+    compiles once per cut, not once per list type of the piece it enters."""
     if which[q, 0] == 0:
         pair_a = grids_a[which[q, 1]]
-        v, _, _, _ = _field_at(pair_a[0], new_scratch(pair_a[0]), geoms[q], basis, row, col,
-                               width, height, t)
-        return v
+        return _field_at(pair_a[0], new_scratch(pair_a[0]), geoms[q], basis, row, col, width,
+                         height, t)
     pair_b = grids_b[which[q, 1]]
-    v, _, _, _ = _field_at(pair_b[0], new_scratch(pair_b[0]), geoms[q], basis, row, col, width,
-                           height, t)
-    return v
+    return _field_at(pair_b[0], new_scratch(pair_b[0]), geoms[q], basis, row, col, width,
+                     height, t)
 
 
 @jit()
-def _iso_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
+def _iso_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
     # The caller checked that the ray left a piece of another level at t_in.
     row, col, width, height = pixel
-    geom = cut.geoms[piece]
     depth, gradient = state[0], state[1]
     if not (t_in <= t_out and depth[row, col] == math.inf):
         return 0
-    before = _exit_value(cut.grids_a, cut.grids_b, cut.which, cut.geoms,
-                         seam.exit_piece[row, col], basis, row, col, width, height,
-                         t_in) - mode.iso
-    v, gx, gy, gz = _field_at(kernel, scr, geom, basis, row, col, width, height, t_in)
+    before, _, _, _ = _piece_field(cut.grids_a, cut.grids_b, cut.which, cut.geoms,
+                                   seam.exit_piece[row, col], basis, row, col, width, height,
+                                   t_in)
+    before -= mode.iso
+    v, gx, gy, gz = _piece_field(cut.grids_a, cut.grids_b, cut.which, cut.geoms, piece, basis,
+                                 row, col, width, height, t_in)
     g = v - mode.iso
     if g == 0.0 or (g < 0.0) != (before < 0.0):
         depth[row, col] = t_in
@@ -217,7 +217,7 @@ def _iso_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_pi
 
 
 @jit()
-def _no_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
+def _no_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
     return 0
 
 
@@ -232,7 +232,7 @@ def _is_iso(mode) -> bool:
 
 
 @overload_jit(closure_enter, inline="never")
-def _closure_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
+def _closure_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
     return (_iso_enter if _is_iso(mode) else _no_enter).py_func
 
 
@@ -272,9 +272,9 @@ def _box_intervals(view, origin0, spacing0, box_lo, box_hi, closed, tile, rect, 
 
 # Without Numba's reference counting, as the driver's band (:func:`.driver._trace_band`): the
 # closure's hooks take the mode's state tuple and would count every array in it at each call.
-# Nothing here allocates; the closure's evaluation of another piece's grid, which does, is
-# compiled with counting (:func:`_exit_value`). No Python entry: unboxing the typed lists of
-# its arguments needs counting.
+# Nothing here allocates; the closure's evaluation of a piece's grid, which does, is compiled
+# with counting (:func:`_piece_field`). No Python entry: unboxing the typed lists of its
+# arguments needs counting.
 @jit(_nrt=False, no_cpython_wrapper=True)
 def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, seam, counters,
                   buffers):
@@ -283,24 +283,42 @@ def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, se
     hits and the number of rays that ended in it (marked in ``tile.ended``). ``buffers``: the
     band's, allocated by the caller (:func:`_trace_tile`).
 
-    Three passes over the rectangle: each ray's interval in the piece's box
-    (:func:`_box_intervals`) and the closure's test on entry; the
-    pair's compiled band over the rectangle, which traces exactly the rays with an interval
-    (the driver's per-pixel unit, compiled once per model, mode and types and shared with the
-    in-memory renderer); then the closure's note on exit and which rays ended here."""
-    kernel, blocks = pair[0], pair[1]
+    Three passes over the rectangle: each ray's interval in the piece's box and the closure's
+    test on entry (:func:`_piece_enter`); the pair's compiled band over the rectangle, which
+    traces exactly the rays with an interval (the driver's per-pixel unit, compiled once per
+    model, mode and types and shared with the in-memory renderer); then the closure's note on
+    exit and which rays ended here (:func:`_piece_leave`). Only the band's call depends on the
+    grid's type, so the two passes around it compile once for both lists of the cut, and this
+    function, compiled once per list, is the call alone."""
+    traced, hits = _piece_enter(mode, state, cut, view, piece, rect, tile, seam, counters)
+    if traced == 0:
+        return 0, 0
+    # Flags as values of the launch's own arguments, not constants: a constant argument would
+    # be typed as a literal and compile the band again instead of sharing the in-memory one.
+    yes = tile.row0 >= 0
+    t_range = view.t_range
+    # No footprint (an empty view of t_range: a C array like the in-memory renderer's, so the
+    # band compiled for it serves here too).
+    band(pair[0], mode, pair[1], state, out,
+         RaySetup(view.basis, cut.geoms[piece], view.planes, t_range, t_range[:0]), rect,
+         Passes(yes, yes, not yes, yes), counters, buffers)
+    return hits, _piece_leave(mode, state, cut, view, piece, rect, tile, seam)
+
+
+@jit(_nrt=False, no_cpython_wrapper=True)
+def _piece_enter(mode, state, cut, view, piece, rect, tile, seam, counters):
+    """Before a piece's band (:func:`_piece_pixels`): each ray's interval in its box
+    (:func:`_box_intervals`) and the closure's test on entry; returns the number of rays with
+    an interval and the closure's hits."""
     basis, t_range = view.basis, view.t_range
     r0, r1, c0, c1 = rect.r0, rect.r1, rect.c0, rect.c1
-    tr0, tc0, ended = tile
     close, exit_t, exit_piece, exit_level = seam
     level = cut.levels[piece]
     height, width = counters.visited.shape
     traced = _box_intervals(view, cut.origin0, cut.spacing0, cut.boxes[piece, 0],
                             cut.boxes[piece, 1], cut.closed[piece], tile, rect, width, height)
-    if traced == 0:
-        return 0, 0
     hits = 0
-    if close:
+    if close and traced:
         for row in range(r0, r1):
             for col in range(c0, c1):
                 t0 = t_range[row, col, 0]
@@ -309,15 +327,19 @@ def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, se
                 # here): calls with this many arguments cost more than the rest of a short ray.
                 if t0 <= t1 and exit_t[row, col] == t0 and exit_level[row, col] != level:
                     hits += closure_enter(mode, state, basis, Pixel(row, col, width, height),
-                                          t0, t1, piece, kernel, buffers.model, cut, seam)
-    # Flags as values of the launch's own arguments, not constants: a constant argument would
-    # be typed as a literal and compile the band again instead of sharing the in-memory one.
-    yes = tr0 >= 0
-    # No footprint (an empty view of t_range: a C array like the in-memory renderer's, so the
-    # band compiled for it serves here too).
-    band(kernel, mode, blocks, state, out,
-         RaySetup(basis, cut.geoms[piece], view.planes, t_range, t_range[:0]), rect,
-         Passes(yes, yes, not yes, yes), counters, buffers)
+                                          t0, t1, piece, cut, seam)
+    return traced, hits
+
+
+@jit(_nrt=False, no_cpython_wrapper=True)
+def _piece_leave(mode, state, cut, view, piece, rect, tile, seam):
+    """After a piece's band (:func:`_piece_pixels`): the closure's note on exit and which rays
+    ended in the piece (marked in ``tile.ended``); returns their number."""
+    t_range = view.t_range
+    r0, r1, c0, c1 = rect.r0, rect.r1, rect.c0, rect.c1
+    tr0, tc0, ended = tile
+    close, exit_t, exit_piece, exit_level = seam
+    level = cut.levels[piece]
     n_ended = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
@@ -331,7 +353,7 @@ def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, se
             if done(mode, state_load(mode, state, row, col)):
                 ended[row - tr0, col - tc0] = True
                 n_ended += 1
-    return hits, n_ended
+    return n_ended
 
 
 # No Python entry: called only through its address (:func:`_launch_functions`), and the entry's
