@@ -107,13 +107,12 @@ def test_seam_closure_inside_the_launch_equals_the_per_piece_closure(torus, mode
     assert hits > 0  # the closure did end rays (else this test checks nothing of it)
 
 
-def test_the_closure_and_the_passes_around_the_band_compile_once_per_cut(torus):
-    """A launch has two lists of grids (the store's type and the seams' float64 copies): only
-    the band's call (``_piece_pixels``) is compiled per list; the closure, which reads a
-    piece's grid from the cut's lists, and the passes before and after the band are compiled
-    once per cut type (else each would compile again for the float64 list of every model and
-    mode). Counted on what this process compiled (a launch loaded from Numba's cache compiles
-    nothing)."""
+def test_the_closure_compiles_once_per_cut(torus):
+    """A launch has two lists of grids (the store's type and the seams' float64 copies): the
+    piece's pixels (``_piece_pixels``) are compiled per list; the isosurface's seam closure,
+    which reads the grid of the piece a ray left from the cut's lists, once per cut type (else
+    it would compile again for the float64 list of every model). Counted on what this process
+    compiled (a launch loaded from Numba's cache compiles nothing)."""
     from splinecast.render import pieces_driver as pd
 
     vol, path = torus
@@ -128,11 +127,10 @@ def test_the_closure_and_the_passes_around_the_band_compile_once_per_cut(torus):
         return [signature[at] for signature in function.signatures]
 
     cuts = cut_types(pd._piece_pixels, 5)
-    for function, at in ((pd._piece_enter, 2), (pd._piece_leave, 2), (pd._iso_enter, 7)):
-        once = cut_types(function, at)
-        assert len(once) == len(set(once)), function  # never twice for one cut
-        assert set(once) <= set(cuts), function
-    # Two lists of another grid type each: the band's call is compiled for both.
+    once = cut_types(pd._iso_enter, 5)
+    assert len(once) == len(set(once))  # never twice for one cut
+    assert set(once) <= set(cuts)
+    # Two lists of another grid type each: the pixels are compiled for both.
     for cut in set(cuts):
         assert cuts.count(cut) <= 2
     fields = [signature[:2] for signature in pd._piece_field.signatures]

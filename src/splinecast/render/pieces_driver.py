@@ -153,11 +153,22 @@ def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
 # The closure reads and writes the isosurface mode's state (depth, world gradient): it is
 # compiled for IsoMode only, every other mode gets the no-op. Where a ray left a piece is noted
 # for every piece; the field there is evaluated only when the ray enters a piece of another
-# level at that parameter (few rays: the seams), from the piece it left.
+# level at that parameter (few rays: the seams), from the piece it left. The field of the piece
+# it enters is evaluated by the caller, which has that piece's grid and scratch
+# (``closure_field``): the rest of the closure reads grids from the cut's lists only, so it is
+# compiled once per cut, not once per list of grids.
 
-def closure_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
-    """Before piece number ``piece`` of ``cut``: a hit on its entry face if the field jumps
-    across the isovalue there (compiled code only); returns 1 for a hit, else 0."""
+def closure_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
+    """For the closure, the field of the piece a ray enters (grid ``kernel``, scratch ``scr``,
+    placement ``geom``) at ``t_in``: ``(True, value, gx, gy, gz)`` if the closure tests the ray
+    there, else ``(False, 0, 0, 0, 0)`` (compiled code only)."""
+    raise NotImplementedError
+
+
+def closure_enter(mode, state, basis, pixel, t_in, cut, seam, field):
+    """Before a piece of ``cut``, whose field at ``t_in`` is ``field`` (value and world
+    gradient, :func:`closure_field`): a hit on its entry face if the field jumps across the
+    isovalue there (compiled code only); returns 1 for a hit, else 0."""
     raise NotImplementedError
 
 
@@ -168,37 +179,50 @@ def closure_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit
 
 
 # Reference counting on (``_nrt=True``) although its caller runs without: it allocates the
-# scratch of the piece's grid (see :func:`_piece_pixels`).
+# scratch of the other piece's grid (see :func:`_piece_pixels`).
 @jit(_nrt=True)
-def _piece_field(grids_a, grids_b, which, geoms, q, basis, row, col, width, height, t):
-    """Value and world gradient of piece ``q``'s field (as drawn) at parameter ``t`` of the
-    ray. The piece is looked up in the cut's lists, not handed over as a grid: the closure then
-    compiles once per cut, not once per list type of the piece it enters."""
+def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, height, t):
+    """The field of piece ``q`` (as drawn) at parameter ``t`` of the ray."""
     if which[q, 0] == 0:
         pair_a = grids_a[which[q, 1]]
-        return _field_at(pair_a[0], new_scratch(pair_a[0]), geoms[q], basis, row, col, width,
-                         height, t)
+        v, _, _, _ = _field_at(pair_a[0], new_scratch(pair_a[0]), geoms[q], basis, row, col,
+                               width, height, t)
+        return v
     pair_b = grids_b[which[q, 1]]
-    return _field_at(pair_b[0], new_scratch(pair_b[0]), geoms[q], basis, row, col, width,
-                     height, t)
+    v, _, _, _ = _field_at(pair_b[0], new_scratch(pair_b[0]), geoms[q], basis, row, col, width,
+                           height, t)
+    return v
+
+
+# A function of its own (compiled once per list of grids), not inlined into the pixels: inlined,
+# the field's evaluation is typed again inside each copy of the piece's pixels.
+@jit()
+def _iso_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
+    row, col, width, height = pixel
+    if not (t_in <= t_out and state[0][row, col] == math.inf):
+        return False, 0.0, 0.0, 0.0, 0.0
+    v, gx, gy, gz = _field_at(kernel, scr, geom, basis, row, col, width, height, t_in)
+    return True, v, gx, gy, gz
 
 
 @jit()
-def _iso_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
-    # The caller checked that the ray left a piece of another level at t_in.
+def _no_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
+    return False, 0.0, 0.0, 0.0, 0.0
+
+
+@jit()
+def _iso_enter(mode, state, basis, pixel, t_in, cut, seam, field):
+    # The caller checked that the ray left a piece of another level at t_in, and that the ray
+    # has no hit yet (closure_field).
     row, col, width, height = pixel
-    depth, gradient = state[0], state[1]
-    if not (t_in <= t_out and depth[row, col] == math.inf):
-        return 0
-    before, _, _, _ = _piece_field(cut.grids_a, cut.grids_b, cut.which, cut.geoms,
-                                   seam.exit_piece[row, col], basis, row, col, width, height,
-                                   t_in)
-    before -= mode.iso
-    v, gx, gy, gz = _piece_field(cut.grids_a, cut.grids_b, cut.which, cut.geoms, piece, basis,
-                                 row, col, width, height, t_in)
+    gradient = state[1]
+    before = _exit_value(cut.grids_a, cut.grids_b, cut.which, cut.geoms,
+                         seam.exit_piece[row, col], basis, row, col, width, height,
+                         t_in) - mode.iso
+    v, gx, gy, gz = field
     g = v - mode.iso
     if g == 0.0 or (g < 0.0) != (before < 0.0):
-        depth[row, col] = t_in
+        state[0][row, col] = t_in
         gradient[row, col, 0] = gx
         gradient[row, col, 1] = gy
         gradient[row, col, 2] = gz
@@ -217,7 +241,7 @@ def _iso_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_pi
 
 
 @jit()
-def _no_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
+def _no_enter(mode, state, basis, pixel, t_in, cut, seam, field):
     return 0
 
 
@@ -231,8 +255,13 @@ def _is_iso(mode) -> bool:
     return getattr(mode, "instance_class", None) is IsoMode
 
 
+@overload_jit(closure_field, inline="never")
+def _closure_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
+    return (_iso_field if _is_iso(mode) else _no_field).py_func
+
+
 @overload_jit(closure_enter, inline="never")
-def _closure_enter(mode, state, basis, pixel, t_in, t_out, piece, cut, seam):
+def _closure_enter(mode, state, basis, pixel, t_in, cut, seam, field):
     return (_iso_enter if _is_iso(mode) else _no_enter).py_func
 
 
@@ -287,10 +316,12 @@ def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, se
     test on entry (:func:`_piece_enter`); the pair's compiled band over the rectangle, which
     traces exactly the rays with an interval (the driver's per-pixel unit, compiled once per
     model, mode and types and shared with the in-memory renderer); then the closure's note on
-    exit and which rays ended here (:func:`_piece_leave`). Only the band's call depends on the
-    grid's type, so the two passes around it compile once for both lists of the cut, and this
-    function, compiled once per list, is the call alone."""
-    traced, hits = _piece_enter(mode, state, cut, view, piece, rect, tile, seam, counters)
+    exit and which rays ended here (:func:`_piece_leave`). Of the closure, only the field of
+    the piece entered is compiled here, once per list of grids; the rest is a compiled function
+    of its own (:func:`_iso_enter`) that reads grids from the cut's lists, compiled once for
+    both lists of the cut."""
+    traced, hits = _piece_enter(pair[0], buffers.model, mode, state, cut, view, piece, rect,
+                                tile, seam, counters)
     if traced == 0:
         return 0, 0
     # Flags as values of the launch's own arguments, not constants: a constant argument would
@@ -305,15 +336,18 @@ def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, se
     return hits, _piece_leave(mode, state, cut, view, piece, rect, tile, seam)
 
 
-@jit(_nrt=False, no_cpython_wrapper=True)
-def _piece_enter(mode, state, cut, view, piece, rect, tile, seam, counters):
-    """Before a piece's band (:func:`_piece_pixels`): each ray's interval in its box
-    (:func:`_box_intervals`) and the closure's test on entry; returns the number of rays with
-    an interval and the closure's hits."""
+# Inlined into :func:`_piece_pixels` (a call with the cut's, the view's and the state's arrays
+# as arguments cost a few percent of a frame); the closure it calls stays one compiled function.
+@jit(inline="always")
+def _piece_enter(kernel, scr, mode, state, cut, view, piece, rect, tile, seam, counters):
+    """Before a piece's band (:func:`_piece_pixels`), whose grid is ``kernel`` (scratch
+    ``scr``): each ray's interval in its box (:func:`_box_intervals`) and the closure's test on
+    entry; returns the number of rays with an interval and the closure's hits."""
     basis, t_range = view.basis, view.t_range
     r0, r1, c0, c1 = rect.r0, rect.r1, rect.c0, rect.c1
     close, exit_t, exit_piece, exit_level = seam
     level = cut.levels[piece]
+    geom = cut.geoms[piece]
     height, width = counters.visited.shape
     traced = _box_intervals(view, cut.origin0, cut.spacing0, cut.boxes[piece, 0],
                             cut.boxes[piece, 1], cut.closed[piece], tile, rect, width, height)
@@ -326,12 +360,16 @@ def _piece_enter(mode, state, cut, view, piece, rect, tile, seam, counters):
                 # The closure's cheap test first (a ray leaving a piece of another level right
                 # here): calls with this many arguments cost more than the rest of a short ray.
                 if t0 <= t1 and exit_t[row, col] == t0 and exit_level[row, col] != level:
-                    hits += closure_enter(mode, state, basis, Pixel(row, col, width, height),
-                                          t0, t1, piece, cut, seam)
+                    pixel = Pixel(row, col, width, height)
+                    tested, v, gx, gy, gz = closure_field(mode, state, kernel, scr, geom, basis,
+                                                          pixel, t0, t1)
+                    if tested:
+                        hits += closure_enter(mode, state, basis, pixel, t0, cut, seam,
+                                              (v, gx, gy, gz))
     return traced, hits
 
 
-@jit(_nrt=False, no_cpython_wrapper=True)
+@jit(inline="always")
 def _piece_leave(mode, state, cut, view, piece, rect, tile, seam):
     """After a piece's band (:func:`_piece_pixels`): the closure's note on exit and which rays
     ended in the piece (marked in ``tile.ended``); returns their number."""
