@@ -301,9 +301,9 @@ def _box_intervals(view, origin0, spacing0, box_lo, box_hi, closed, tile, rect, 
 
 # Without Numba's reference counting, as the driver's band (:func:`.driver._trace_band`): the
 # closure's hooks take the mode's state tuple and would count every array in it at each call.
-# Nothing here allocates; the closure's evaluation of a piece's grid, which does, is compiled
-# with counting (:func:`_piece_field`). No Python entry: unboxing the typed lists of its
-# arguments needs counting.
+# Nothing here allocates; the closure's evaluation of another piece's grid, which does, is
+# compiled with counting (:func:`_exit_value`). No Python entry: unboxing the typed lists of
+# its arguments needs counting.
 @jit(_nrt=False, no_cpython_wrapper=True)
 def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, seam, counters,
                   buffers):
