@@ -133,8 +133,8 @@ def test_the_closure_compiles_once_per_cut(torus):
     # Two lists of another grid type each: the pixels are compiled for both.
     for cut in set(cuts):
         assert cuts.count(cut) <= 2
-    fields = [signature[:2] for signature in pd._piece_field.signatures]
-    assert len(fields) == len(set(fields))
+    lists = [signature[:2] for signature in pd._exit_value.signatures]
+    assert len(lists) == len(set(lists))
 
 
 def test_clip_planes_and_a_camera_tile(torus):
