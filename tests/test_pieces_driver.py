@@ -107,36 +107,6 @@ def test_seam_closure_inside_the_launch_equals_the_per_piece_closure(torus, mode
     assert hits > 0  # the closure did end rays (else this test checks nothing of it)
 
 
-def test_the_closure_compiles_once_per_cut(torus):
-    """A launch has two lists of grids (the store's type and the seams' float64 copies): the
-    piece's pixels (``_piece_pixels``) are compiled per list; the isosurface's seam closure,
-    which reads the grid of the piece a ray left from the cut's lists, once per cut type (else
-    it would compile again for the float64 list of every model). Counted on what this process
-    compiled (a launch loaded from Numba's cache compiles nothing)."""
-    from splinecast.render import pieces_driver as pd
-
-    vol, path = torus
-    cam = sc.Camera.orbit(vol, azimuth=25, elevation=30, size=(48, 40), zoom=1.6)
-    with sc.Scene(sc.read(path), model="bspline2", budget="512KiB", lod=1.0) as scene:
-        frame = scene.render(cam, complete=True, **_options("iso"))
-        assert scene.renderer.stats["one_launch"]
-        assert scene.renderer.stats["pieces_changed_at_seams"] > 0  # both lists hold grids
-    assert np.isfinite(frame.depth).sum() > 100
-
-    def cut_types(function, at: int) -> list:
-        return [signature[at] for signature in function.signatures]
-
-    cuts = cut_types(pd._piece_pixels, 5)
-    once = cut_types(pd._iso_enter, 5)
-    assert len(once) == len(set(once))  # never twice for one cut
-    assert set(once) <= set(cuts)
-    # Two lists of another grid type each: the pixels are compiled for both.
-    for cut in set(cuts):
-        assert cuts.count(cut) <= 2
-    lists = [signature[:2] for signature in pd._exit_value.signatures]
-    assert len(lists) == len(set(lists))
-
-
 def test_clip_planes_and_a_camera_tile(torus):
     """Clipped rays, and a tile of the image traced into its own state (a sort-last worker)."""
     from splinecast.multires.scenes.multiscale import pieces_of

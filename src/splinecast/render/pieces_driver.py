@@ -153,22 +153,12 @@ def _field_at(kernel, scr, geom, basis, row, col, width, height, t):
 # The closure reads and writes the isosurface mode's state (depth, world gradient): it is
 # compiled for IsoMode only, every other mode gets the no-op. Where a ray left a piece is noted
 # for every piece; the field there is evaluated only when the ray enters a piece of another
-# level at that parameter (few rays: the seams), from the piece it left. The field of the piece
-# it enters is evaluated by the caller, which has that piece's grid and scratch
-# (``closure_field``): the rest of the closure reads grids from the cut's lists only, so it is
-# compiled once per cut, not once per list of grids.
+# level at that parameter (few rays: the seams), from the piece it left.
 
-def closure_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
-    """For the closure, the field of the piece a ray enters (grid ``kernel``, scratch ``scr``,
-    placement ``geom``) at ``t_in``: ``(True, value, gx, gy, gz)`` if the closure tests the ray
-    there, else ``(False, 0, 0, 0, 0)`` (compiled code only)."""
-    raise NotImplementedError
-
-
-def closure_enter(mode, state, basis, pixel, t_in, cut, seam, field):
-    """Before a piece of ``cut``, whose field at ``t_in`` is ``field`` (value and world
-    gradient, :func:`closure_field`): a hit on its entry face if the field jumps across the
-    isovalue there (compiled code only); returns 1 for a hit, else 0."""
+def closure_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
+    """Before piece number ``piece`` of ``cut``, whose grid is ``kernel`` (scratch ``scr``):
+    a hit on its entry face if the field jumps across the isovalue there (compiled code only);
+    returns 1 for a hit, else 0."""
     raise NotImplementedError
 
 
@@ -194,35 +184,21 @@ def _exit_value(grids_a, grids_b, which, geoms, q, basis, row, col, width, heigh
     return v
 
 
-# A function of its own (compiled once per list of grids), not inlined into the pixels: inlined,
-# the field's evaluation is typed again inside each copy of the piece's pixels.
 @jit()
-def _iso_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
+def _iso_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
+    # The caller checked that the ray left a piece of another level at t_in.
     row, col, width, height = pixel
-    if not (t_in <= t_out and state[0][row, col] == math.inf):
-        return False, 0.0, 0.0, 0.0, 0.0
-    v, gx, gy, gz = _field_at(kernel, scr, geom, basis, row, col, width, height, t_in)
-    return True, v, gx, gy, gz
-
-
-@jit()
-def _no_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
-    return False, 0.0, 0.0, 0.0, 0.0
-
-
-@jit()
-def _iso_enter(mode, state, basis, pixel, t_in, cut, seam, field):
-    # The caller checked that the ray left a piece of another level at t_in, and that the ray
-    # has no hit yet (closure_field).
-    row, col, width, height = pixel
-    gradient = state[1]
+    geom = cut.geoms[piece]
+    depth, gradient = state[0], state[1]
+    if not (t_in <= t_out and depth[row, col] == math.inf):
+        return 0
     before = _exit_value(cut.grids_a, cut.grids_b, cut.which, cut.geoms,
                          seam.exit_piece[row, col], basis, row, col, width, height,
                          t_in) - mode.iso
-    v, gx, gy, gz = field
+    v, gx, gy, gz = _field_at(kernel, scr, geom, basis, row, col, width, height, t_in)
     g = v - mode.iso
     if g == 0.0 or (g < 0.0) != (before < 0.0):
-        state[0][row, col] = t_in
+        depth[row, col] = t_in
         gradient[row, col, 0] = gx
         gradient[row, col, 1] = gy
         gradient[row, col, 2] = gz
@@ -241,7 +217,7 @@ def _iso_leave(mode, state, row, col, t_in, t_out, level, piece, exit_t, exit_pi
 
 
 @jit()
-def _no_enter(mode, state, basis, pixel, t_in, cut, seam, field):
+def _no_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
     return 0
 
 
@@ -255,13 +231,8 @@ def _is_iso(mode) -> bool:
     return getattr(mode, "instance_class", None) is IsoMode
 
 
-@overload_jit(closure_field, inline="never")
-def _closure_field(mode, state, kernel, scr, geom, basis, pixel, t_in, t_out):
-    return (_iso_field if _is_iso(mode) else _no_field).py_func
-
-
 @overload_jit(closure_enter, inline="never")
-def _closure_enter(mode, state, basis, pixel, t_in, cut, seam, field):
+def _closure_enter(mode, state, basis, pixel, t_in, t_out, piece, kernel, scr, cut, seam):
     return (_iso_enter if _is_iso(mode) else _no_enter).py_func
 
 
@@ -312,47 +283,24 @@ def _piece_pixels(band, pair, mode, state, out, cut, view, piece, rect, tile, se
     hits and the number of rays that ended in it (marked in ``tile.ended``). ``buffers``: the
     band's, allocated by the caller (:func:`_trace_tile`).
 
-    Three passes over the rectangle: each ray's interval in the piece's box and the closure's
-    test on entry (:func:`_piece_enter`); the pair's compiled band over the rectangle, which
-    traces exactly the rays with an interval (the driver's per-pixel unit, compiled once per
-    model, mode and types and shared with the in-memory renderer); then the closure's note on
-    exit and which rays ended here (:func:`_piece_leave`). Of the closure, only the field of
-    the piece entered is compiled here, once per list of grids; the rest is a compiled function
-    of its own (:func:`_iso_enter`) that reads grids from the cut's lists, compiled once for
-    both lists of the cut."""
-    traced, hits = _piece_enter(pair[0], buffers.model, mode, state, cut, view, piece, rect,
-                                tile, seam, counters)
-    if traced == 0:
-        return 0, 0
-    # Flags as values of the launch's own arguments, not constants: a constant argument would
-    # be typed as a literal and compile the band again instead of sharing the in-memory one.
-    yes = tile.row0 >= 0
-    t_range = view.t_range
-    # No footprint (an empty view of t_range: a C array like the in-memory renderer's, so the
-    # band compiled for it serves here too).
-    band(pair[0], mode, pair[1], state, out,
-         RaySetup(view.basis, cut.geoms[piece], view.planes, t_range, t_range[:0]), rect,
-         Passes(yes, yes, not yes, yes), counters, buffers)
-    return hits, _piece_leave(mode, state, cut, view, piece, rect, tile, seam)
-
-
-# Inlined into :func:`_piece_pixels` (a call with the cut's, the view's and the state's arrays
-# as arguments cost a few percent of a frame); the closure it calls stays one compiled function.
-@jit(inline="always")
-def _piece_enter(kernel, scr, mode, state, cut, view, piece, rect, tile, seam, counters):
-    """Before a piece's band (:func:`_piece_pixels`), whose grid is ``kernel`` (scratch
-    ``scr``): each ray's interval in its box (:func:`_box_intervals`) and the closure's test on
-    entry; returns the number of rays with an interval and the closure's hits."""
+    Three passes over the rectangle: each ray's interval in the piece's box
+    (:func:`_box_intervals`) and the closure's test on entry; the
+    pair's compiled band over the rectangle, which traces exactly the rays with an interval
+    (the driver's per-pixel unit, compiled once per model, mode and types and shared with the
+    in-memory renderer); then the closure's note on exit and which rays ended here."""
+    kernel, blocks = pair[0], pair[1]
     basis, t_range = view.basis, view.t_range
     r0, r1, c0, c1 = rect.r0, rect.r1, rect.c0, rect.c1
+    tr0, tc0, ended = tile
     close, exit_t, exit_piece, exit_level = seam
     level = cut.levels[piece]
-    geom = cut.geoms[piece]
     height, width = counters.visited.shape
     traced = _box_intervals(view, cut.origin0, cut.spacing0, cut.boxes[piece, 0],
                             cut.boxes[piece, 1], cut.closed[piece], tile, rect, width, height)
+    if traced == 0:
+        return 0, 0
     hits = 0
-    if close and traced:
+    if close:
         for row in range(r0, r1):
             for col in range(c0, c1):
                 t0 = t_range[row, col, 0]
@@ -360,24 +308,16 @@ def _piece_enter(kernel, scr, mode, state, cut, view, piece, rect, tile, seam, c
                 # The closure's cheap test first (a ray leaving a piece of another level right
                 # here): calls with this many arguments cost more than the rest of a short ray.
                 if t0 <= t1 and exit_t[row, col] == t0 and exit_level[row, col] != level:
-                    pixel = Pixel(row, col, width, height)
-                    tested, v, gx, gy, gz = closure_field(mode, state, kernel, scr, geom, basis,
-                                                          pixel, t0, t1)
-                    if tested:
-                        hits += closure_enter(mode, state, basis, pixel, t0, cut, seam,
-                                              (v, gx, gy, gz))
-    return traced, hits
-
-
-@jit(inline="always")
-def _piece_leave(mode, state, cut, view, piece, rect, tile, seam):
-    """After a piece's band (:func:`_piece_pixels`): the closure's note on exit and which rays
-    ended in the piece (marked in ``tile.ended``); returns their number."""
-    t_range = view.t_range
-    r0, r1, c0, c1 = rect.r0, rect.r1, rect.c0, rect.c1
-    tr0, tc0, ended = tile
-    close, exit_t, exit_piece, exit_level = seam
-    level = cut.levels[piece]
+                    hits += closure_enter(mode, state, basis, Pixel(row, col, width, height),
+                                          t0, t1, piece, kernel, buffers.model, cut, seam)
+    # Flags as values of the launch's own arguments, not constants: a constant argument would
+    # be typed as a literal and compile the band again instead of sharing the in-memory one.
+    yes = tr0 >= 0
+    # No footprint (an empty view of t_range: a C array like the in-memory renderer's, so the
+    # band compiled for it serves here too).
+    band(kernel, mode, blocks, state, out,
+         RaySetup(basis, cut.geoms[piece], view.planes, t_range, t_range[:0]), rect,
+         Passes(yes, yes, not yes, yes), counters, buffers)
     n_ended = 0
     for row in range(r0, r1):
         for col in range(c0, c1):
@@ -391,7 +331,7 @@ def _piece_leave(mode, state, cut, view, piece, rect, tile, seam):
             if done(mode, state_load(mode, state, row, col)):
                 ended[row - tr0, col - tc0] = True
                 n_ended += 1
-    return n_ended
+    return hits, n_ended
 
 
 # No Python entry: called only through its address (:func:`_launch_functions`), and the entry's
