@@ -34,6 +34,19 @@ def test_the_probes_fit_the_fixed_step_loop(phase):
     assert "return _ph, _rdtsc() - _c0, evaluated" in text
 
 
+def test_the_shared_source_guards_every_probe():
+    """The band the three passes share: every phase's probes, each under a test of its pass's
+    number (read once per ray), and the phase's sum returned."""
+    text = sb.instrumented_source(_source(), None)
+    compile(text, "<test>", "exec")
+    probes = sum(len(p) for p in sb._PASSES.values())
+    assert text.count("_rdtsc()") == probes + 2
+    assert text.count("_phase = _selected()") == 1
+    for number, phase in enumerate(sb._ORDER):
+        assert text.count(f"if _phase == {number}:") == len(sb._PASSES[phase])
+    assert "return _ph, _rdtsc() - _c0, evaluated" in text
+
+
 def test_a_missing_anchor_is_named():
     source = _source().replace("                if not known:\n", "                if 1:\n")
     with pytest.raises(ValueError, match="if not known"):

@@ -17,8 +17,11 @@ counters then hold cycles (the phase's, the whole ray's, and the samples evaluat
 One pass per phase, so a probe (two counter reads, about 20-40 cycles, which also order the
 instructions around them) distorts only the phase it measures; each pass reports the whole ray
 too, and the rest (ray set-up, the loop's own bookkeeping, what the probes cost the others) is
-the whole less the three phases. Counts are for comparing phases, not for adding up to a frame
-time exactly. The events (segments, samples, leaps) come from a frame of the real kernel.
+the whole less the three phases. The three passes share one compiled band (about 25 s of
+compile each otherwise): every probe is guarded by a test of the pass's number, read once per
+ray, so a probe of another pass costs a predicted branch. Counts are for comparing phases, not
+for adding up to a frame time exactly. The events (segments, samples, leaps) come from a frame
+of the real kernel.
 
     NUMBA_NUM_THREADS=1 python benchmarks/tools/sample_breakdown.py \\
         --scene "MNI152 T1 MRI 197x233x189" [--tf auto|suite] [--size 1024x768]
@@ -97,41 +100,108 @@ _END = "    return evaluated, taken, leaps\n"
 _NEW_END = "    return _ph, _rdtsc() - _c0, evaluated\n"
 
 
-def instrumented_source(source: str, phase: str) -> str:
-    """``sample_pixel``'s source with the probes of ``phase``."""
-    for anchor, text, where in (_START, *_PASSES[phase]):
-        if source.count(anchor) != 1:
-            raise ValueError(f"sample_breakdown: anchor not found once in sample_pixel: "
-                             f"{anchor.strip()[:60]!r}")
-        if where == "before_last_line":  # after all but the anchor's last line
-            head, _, last = anchor.rpartition("\n")
-            source = source.replace(anchor, head + "\n" + text + last)
-        else:
-            source = source.replace(anchor, text + anchor if where == "before" else anchor + text)
+#: The passes in the order of their numbers (what ``_phase`` holds in the shared band).
+_ORDER = tuple(_PASSES)
+#: The shared band's ray set-up: every probe's start defined, and the pass it measures read.
+_SELECT = ("    t0, t1, ray = grid_ray(",
+           "    _cs = _cv = _cg = 0\n    _phase = _selected()\n", "before")
+
+
+def _insert(source: str, anchor: str, text: str, where: str) -> str:
+    """``source`` with ``text`` inserted at ``anchor`` (which must occur once)."""
+    if source.count(anchor) != 1:
+        raise ValueError(f"sample_breakdown: anchor not found once in sample_pixel: "
+                         f"{anchor.strip()[:60]!r}")
+    if where == "before_last_line":  # after all but the anchor's last line
+        head, _, last = anchor.rpartition("\n")
+        return source.replace(anchor, head + "\n" + text + last)
+    return source.replace(anchor, text + anchor if where == "before" else anchor + text)
+
+
+def _guarded(text: str, number: int) -> str:
+    """The one-line probe ``text`` run only in pass ``number``."""
+    body = text.lstrip(" ")
+    indent = text[:len(text) - len(body)]
+    return f"{indent}if _phase == {number}:\n{indent}    {body}"
+
+
+def instrumented_source(source: str, phase: str | None) -> str:
+    """``sample_pixel``'s source with the probes of ``phase``; with ``None``, every phase's,
+    each run only while ``_selected()`` (read once per ray) returns its number in
+    :data:`_ORDER`."""
+    if phase is None:
+        source = _insert(source, *_SELECT)
+        probes = [(anchor, _guarded(text, number), where)
+                  for number, name in enumerate(_ORDER)
+                  for anchor, text, where in _PASSES[name]]
+    else:
+        probes = list(_PASSES[phase])
+    for anchor, text, where in (_START, *probes):
+        source = _insert(source, anchor, text, where)
     if source.count(_END) != 1:
         raise ValueError("sample_breakdown: sample_pixel's return not found once")
     return source.replace(_END, _NEW_END)
 
 
+#: The pass the shared band measures (its number in :data:`_ORDER`); the band reads it at each
+#: ray's start, so choosing another pass needs no compile.
+_PASS_NUMBER = np.zeros(1, dtype=np.int64)
+#: The shared instrumented band of each (model, mode) pair built in this process.
+_BANDS: dict[tuple[type, type], Any] = {}
+
+
+def _selected_intrinsic() -> Any:
+    """A Numba intrinsic returning :data:`_PASS_NUMBER`'s value at the time of the call (a
+    global array would be frozen into the code as a constant)."""
+    from llvmlite import ir
+    from numba.core import types
+    from numba.core.extending import intrinsic
+
+    address = _PASS_NUMBER.ctypes.data
+
+    @intrinsic
+    def selected(typingctx):
+        def codegen(context, builder, signature, args):
+            i64 = ir.IntType(64)
+            pointer = builder.inttoptr(ir.Constant(i64, address), i64.as_pointer())
+            return builder.load(pointer)
+
+        return types.int64(), codegen
+
+    return selected
+
+
 def install(grid_class: type, mode_class: type, phase: str) -> None:
-    """Compile the pair's band with ``phase``'s instrumented loop and make the renderer use it."""
+    """Make the renderer use the pair's instrumented band, measuring ``phase``: the band with
+    every phase's probes (:func:`instrumented_source`), compiled at the pair's first call."""
+    from splinecast.render import driver
+
+    _PASS_NUMBER[0] = _ORDER.index(phase)
+    band = _BANDS.get((grid_class, mode_class))
+    if band is None:
+        band = _BANDS[(grid_class, mode_class)] = _build(grid_class, mode_class)
+    driver._KERNELS[(grid_class, mode_class)] = band
+
+
+def _build(grid_class: type, mode_class: type) -> Any:
+    """The pair's band with the instrumented loop (not cached: the copy's code has no source
+    file, and it must never replace the real band)."""
     from splinecast._jit import jit, rebound
     from splinecast.render import driver, sampler
 
     source = textwrap.dedent(inspect.getsource(sampler.sample_pixel.py_func))
     namespace = {**vars(sampler), "_rdtsc": _rdtsc_intrinsic(),
-                 "jit": functools.partial(jit, cache=False)}
-    exec(compile(instrumented_source(source, phase), "<sample_breakdown>", "exec"), namespace)
+                 "_selected": _selected_intrinsic(), "jit": functools.partial(jit, cache=False)}
+    exec(compile(instrumented_source(source, None), "<sample_breakdown>", "exec"), namespace)
     bind = driver.pair_bindings(grid_class, mode_class)
-    suffix = f"{grid_class.__name__}_{mode_class.__name__}_phase_{phase}"
+    suffix = f"{grid_class.__name__}_{mode_class.__name__}_phases"
     where = rebound(sampler._sample_grid, bind, suffix, cache=False)
     on_plane = rebound(sampler._on_plane, bind, suffix, cache=False)
     planes = rebound(sampler._plane_samples, {**bind, "_on_plane": on_plane}, suffix, cache=False)
     pixel = rebound(namespace["sample_pixel"],
                     {**bind, "_sample_grid": where, "_plane_samples": planes}, suffix,
                     cache=False)
-    band = rebound(driver._trace_band, {**bind, "_trace_pixel": pixel}, suffix, cache=False)
-    driver._KERNELS[(grid_class, mode_class)] = band
+    return rebound(driver._trace_band, {**bind, "_trace_pixel": pixel}, suffix, cache=False)
 
 
 def main() -> None:

@@ -45,13 +45,14 @@ the model's per-thread caches.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import namedtuple
 from typing import Any
 
 import numba
 import numpy as np
-from numba import prange, types
+from numba import types
 
 from .._jit import bind_first_class, inlined, jit, rebound
 from ..accel.traversal import walk_begin, walk_step_cached
@@ -467,12 +468,28 @@ def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, cou
              Buffers(new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64)))
 
 
-@jit(parallel=True)
 def finalize(mode, state, out, basis):
     """Write every pixel's outputs from the state left by the last segment."""
+    rows = out[0].shape[0]
+    counter = np.zeros(1, np.int64)
+    run_on_threads(functools.partial(_finalize_rows, mode, state, out, basis, counter),
+                   max(1, min(numba.get_num_threads(), rows)))
+
+
+# Rows taken from a shared counter on ordinary threads (:mod:`.work_queue`), not a parallel
+# loop: Numba's parallel loop compiles a second library for its body, a second or two per mode
+# and output types, for a pass that costs a few milliseconds per frame. Without reference
+# counting (nothing here allocates): counted, every call of the mode's hooks would increment
+# and decrement each array of the state and output tuples, per pixel.
+@jit(_nrt=False)
+def _finalize_rows(mode, state, out, basis, counter):
+    """One thread's share of :func:`finalize`: the rows it takes from ``counter``."""
     height = out[0].shape[0]
     width = out[0].shape[1]
-    for row in prange(height):
+    while True:
+        row = take(counter)
+        if row >= height:
+            break
         for col in range(width):
             finish(mode, out, row, col, state_load(mode, state, row, col),
                    _bare_ray(basis, row, col, width, height))
@@ -509,10 +526,20 @@ def _pass_untraced(mode, state, out, basis, row, col, width, height, load, store
         finish(mode, out, row, col, st, ray)
 
 
-@jit(parallel=True)
 def reset_state(mode, state, height, width):
     """Fill the state arrays with fresh states (no segment traced yet)."""
-    for row in prange(height):
+    counter = np.zeros(1, np.int64)
+    run_on_threads(functools.partial(_reset_rows, mode, state, int(height), int(width), counter),
+                   max(1, min(numba.get_num_threads(), int(height))))
+
+
+@jit(_nrt=False)
+def _reset_rows(mode, state, height, width, counter):
+    """One thread's share of :func:`reset_state` (rows as :func:`_finalize_rows`)."""
+    while True:
+        row = take(counter)
+        if row >= height:
+            break
         for col in range(width):
             state_store(mode, state, row, col, state_new(mode))
 
