@@ -28,9 +28,9 @@ def test_block_ranges_compile_once_for_arrays_of_files_and_of_memory():
     data = RNG.standard_normal((13, 11, 9)).astype(np.float32)
     n_cells = tuple(s - 1 for s in data.shape)
     first = minmax.MinMaxHierarchy(data, n_cells, 1)
-    compiled = len(minmax._finest_ranges.overloads)
+    compiled = len(minmax._finest_range_slabs.overloads)
     second = minmax.MinMaxHierarchy(_read_only_copy(data), n_cells, 1)
-    assert len(minmax._finest_ranges.overloads) == compiled
+    assert len(minmax._finest_range_slabs.overloads) == compiled
     for a, b in zip(first.lows + first.highs, second.lows + second.highs, strict=True):
         np.testing.assert_array_equal(a, b)
     # The finest blocks (4 cells: values 0..4 along each axis) against numpy.
@@ -48,11 +48,11 @@ def test_brick_histograms_compile_once_for_any_order_and_flags():
     hi = lo + 8
     quantizer = histograms.Quantizer.for_data(np.uint8, (0, 255))
     first = histograms.box_histograms(source, coarse, lo, hi, 0.5, -0.25, quantizer)
-    compiled = len(histograms._brick_batch.overloads)
+    compiled = len(histograms._brick_batch_chunks.overloads)
     second = histograms.box_histograms(_read_only_copy(source), _read_only_copy(coarse),
                                        np.asfortranarray(lo), np.asfortranarray(hi),
                                        (0.5, 0.5, 0.5), np.full(3, -0.25), quantizer)
-    assert len(histograms._brick_batch.overloads) == compiled
+    assert len(histograms._brick_batch_chunks.overloads) == compiled
     for name in ("offsets", "keys", "counts"):
         np.testing.assert_array_equal(getattr(first, name), getattr(second, name))
     # Every brick counts each of its source voxels once.

@@ -1,4 +1,4 @@
-"""``render.work_queue``: the shared counter and the threads that run compiled loops on it.
+"""``_jit.work_queue``: the shared counter and the threads that run compiled loops on it.
 
 References: a count per item kept by the test (every item taken exactly once, whichever thread
 takes it), the images of one thread (the frames of every thread must equal them), a barrier
@@ -16,7 +16,7 @@ from numba import njit, prange
 
 import splinecast as sc
 from splinecast._jit import jit
-from splinecast.render.work_queue import run_on_threads, take
+from splinecast._jit.work_queue import run_on_threads, take
 
 
 @njit(parallel=True)

@@ -540,7 +540,7 @@ def bind_first_class(kernel: Any, callee: Any, callee_types: Callable[[tuple], t
                      args: tuple) -> Callable[[], Any]:
     """:func:`call_with_first_class` made ready but not called: a function of no arguments
     that runs ``kernel(callee, *args)``, to run it on several threads at once
-    (:func:`splinecast.render.work_queue.run_on_threads`)."""
+    (:func:`splinecast._jit.work_queue.run_on_threads`)."""
     key = (kernel, callee, tuple(_fingerprint(a) for a in args))
     entry = _CALLS.get(key)
     if entry is None:

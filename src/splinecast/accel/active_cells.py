@@ -4,11 +4,11 @@ Kalbe et al. 2009 and Koch 2009 (section 4.1) prepare every frame's work list on
 cubes whose patches may contain the isovalue, then, inside them, the tetrahedra whose patch may.
 Here:
 
-1. **Cube classification** (compiled parallel scan and two-pass compaction): a cube is active
+1. **Cube classification** (compiled scan and two-pass compaction, on threads): a cube is active
    when the isovalue lies in the exact range of its coefficients (the model's ``cube_lo`` /
    ``cube_hi``, computed once per volume, float32 rounded outward). No coefficient is computed
    here.
-2. **Tetrahedron classification** (the model's ``tet_masks``, compiled and parallel over the
+2. **Tetrahedron classification** (the model's ``tet_masks``, compiled and on threads over the
    candidate cubes): each tetrahedron is active when the isovalue lies in the range of its own
    Bernstein–Bézier coefficients (convex hull property: the patch lies in that range, so this is
    conservative).
@@ -25,6 +25,10 @@ cells hands a *classifier* from its ``active_cell_classifier()``, an object offe
 ``tet_masks(cubes, iso)`` and ``coefficient_rows(cubes)`` (the protocol
 ``splinecast.models.base.ActiveCellClassifier`` documents them); this layer never imports a
 model and never asks which model it serves.
+
+The scans run on threads that take slabs or chunks from a shared counter
+(:func:`~splinecast._jit.work_queue.run_items`), not in Numba's parallel loops, which compile
+about twice as long: these kernels are part of every type-6 model's first render.
 """
 
 from __future__ import annotations
@@ -33,21 +37,31 @@ import time
 from typing import Any
 
 import numpy as np
-from numba import prange
 
 from .._jit import jit
+from .._jit.work_queue import run_items, take
 from .minmax import BLOCK_SHIFTS, PAIR_SHIFT, MinMaxHierarchy
 
 __all__ = ["ActiveCells", "CubeBoundHierarchy", "block_ranges", "candidate_cubes", "tet_list"]
 
-@jit(parallel=True)
 def block_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Range of the cube bounds over aligned blocks of 4^3 cubes (iso-independent)."""
+    shape = tuple((n + 3) >> 2 for n in lo.shape)
+    blo = np.empty(shape, lo.dtype)
+    bhi = np.empty(shape, hi.dtype)
+    run_items(_block_range_slabs, shape[0], lo, hi, blo, bhi)
+    return blo, bhi
+
+
+@jit
+def _block_range_slabs(lo, hi, blo, bhi, counter):
+    """One thread's share of :func:`block_ranges`: the slabs of blocks it takes."""
     nx, ny, nz = lo.shape
-    bx, by, bz = (nx + 3) >> 2, (ny + 3) >> 2, (nz + 3) >> 2
-    blo = np.empty((bx, by, bz), lo.dtype)
-    bhi = np.empty((bx, by, bz), hi.dtype)
-    for a in prange(bx):
+    bx, by, bz = blo.shape
+    while True:
+        a = take(counter)
+        if a >= bx:
+            break
         for b in range(by):
             for c in range(bz):
                 vmin = lo[4 * a, 4 * b, 4 * c]
@@ -59,7 +73,6 @@ def block_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray
                             vmax = max(vmax, hi[i, j, k])
                 blo[a, b, c] = vmin
                 bhi[a, b, c] = vmax
-    return blo, bhi
 
 
 @jit(inline="always")
@@ -75,35 +88,41 @@ def _scan_block(lo, hi, iso, a, b, c, out, n, write):
     return n
 
 
-@jit(parallel=True)
 def candidate_cubes(
     lo: np.ndarray, hi: np.ndarray, blo: np.ndarray, bhi: np.ndarray, iso: float,
 ) -> np.ndarray:
-    """Linear indices of the cubes with ``lo <= iso <= hi``, compacted in two parallel passes.
+    """Linear indices of the cubes with ``lo <= iso <= hi``, compacted in two passes on threads
+    (count per slab, then write at the slab's offset).
 
     Only the 4^3 blocks whose range (``blo``, ``bhi``) holds ``iso`` are scanned; cubes come
     block by block (slabs of blocks in ``x`` order), which keeps later gathers local.
     """
-    bx, by, bz = blo.shape
+    bx = blo.shape[0]
     counts = np.zeros(bx + 1, np.int64)
-    dummy = np.empty(0, np.int64)
-    for a in prange(bx):
-        n = 0
-        for b in range(by):
-            for c in range(bz):
-                if blo[a, b, c] <= iso and bhi[a, b, c] >= iso:
-                    n = _scan_block(lo, hi, iso, a, b, c, dummy, n, False)
-        counts[a + 1] = n
-    for a in range(bx):
-        counts[a + 1] += counts[a]
-    out = np.empty(counts[bx], np.int64)
-    for a in prange(bx):
-        n = counts[a]
-        for b in range(by):
-            for c in range(bz):
-                if blo[a, b, c] <= iso and bhi[a, b, c] >= iso:
-                    n = _scan_block(lo, hi, iso, a, b, c, out, n, True)
+    iso = float(iso)
+    run_items(_candidate_slabs, bx, lo, hi, blo, bhi, iso, counts, np.empty(0, np.int64), False)
+    np.cumsum(counts, out=counts)
+    out = np.empty(int(counts[bx]), np.int64)
+    run_items(_candidate_slabs, bx, lo, hi, blo, bhi, iso, counts, out, True)
     return out
+
+
+@jit
+def _candidate_slabs(lo, hi, blo, bhi, iso, counts, out, write, counter):
+    """One thread's share of :func:`candidate_cubes`: for the slabs it takes, the count of
+    candidates into ``counts[a + 1]``, or (``write``) the candidates from offset ``counts[a]``."""
+    bx, by, bz = blo.shape
+    while True:
+        a = take(counter)
+        if a >= bx:
+            break
+        n = counts[a] if write else 0
+        for b in range(by):
+            for c in range(bz):
+                if blo[a, b, c] <= iso and bhi[a, b, c] >= iso:
+                    n = _scan_block(lo, hi, iso, a, b, c, out, n, write)
+        if not write:
+            counts[a + 1] = n
 
 
 class CubeBoundHierarchy(MinMaxHierarchy):
@@ -121,35 +140,60 @@ class CubeBoundHierarchy(MinMaxHierarchy):
         self.active = ()
 
 
-@jit(parallel=True)
+#: Cubes per item of :func:`tet_list`'s passes.
+_TET_CHUNK = 4096
+
+
 def tet_list(masks: np.ndarray) -> np.ndarray:
-    """Compact list ``slot * 24 + tet`` of the active tetrahedra (parallel two-pass prefix)."""
-    n = masks.shape[0]
-    n_chunks = (n + 4095) // 4096
+    """Compact list ``slot * 24 + tet`` of the active tetrahedra (two-pass prefix on threads:
+    count per chunk of cubes, then write at the chunk's offset)."""
+    n_chunks = (masks.shape[0] + _TET_CHUNK - 1) // _TET_CHUNK
     counts = np.zeros(n_chunks + 1, np.int64)
-    for ch in prange(n_chunks):
+    run_items(_count_tets, n_chunks, masks, counts)
+    np.cumsum(counts, out=counts)
+    out = np.empty(int(counts[n_chunks]), np.int32)
+    run_items(_write_tets, n_chunks, masks, counts, out)
+    return out
+
+
+@jit
+def _count_tets(masks, counts, counter):
+    """One thread's share of :func:`tet_list`'s first pass: active tetrahedra per chunk."""
+    n = masks.shape[0]
+    while True:
+        ch = take(counter)
+        if ch >= counts.shape[0] - 1:
+            break
         c = 0
-        for m in range(ch * 4096, min(n, (ch + 1) * 4096)):
+        for m in range(ch * _TET_CHUNK, min(n, (ch + 1) * _TET_CHUNK)):
             x = masks[m]
             while x:
                 x &= x - np.uint32(1)
                 c += 1
         counts[ch + 1] = c
-    for ch in range(n_chunks):
-        counts[ch + 1] += counts[ch]
-    out = np.empty(counts[n_chunks], np.int32)
-    for ch in prange(n_chunks):
+
+
+@jit
+def _write_tets(masks, counts, out, counter):
+    """One thread's share of :func:`tet_list`'s second pass: each chunk's entries."""
+    n = masks.shape[0]
+    while True:
+        ch = take(counter)
+        if ch >= counts.shape[0] - 1:
+            break
         o = counts[ch]
-        for m in range(ch * 4096, min(n, (ch + 1) * 4096)):
+        for m in range(ch * _TET_CHUNK, min(n, (ch + 1) * _TET_CHUNK)):
             x = masks[m]
             for t in range(24):
                 if (x >> t) & 1:
                     out[o] = m * 24 + t
                     o += 1
-    return out
 
 
-@jit(parallel=True)
+#: Cubes per item of :func:`_update_lookup`'s passes.
+_CUBE_CHUNK = 16384
+
+
 def _update_lookup(
     slot: np.ndarray, old: np.ndarray, new: np.ndarray, act0: np.ndarray, act1: np.ndarray,
     act2: np.ndarray, pairs: np.ndarray,
@@ -157,36 +201,65 @@ def _update_lookup(
     """Reset the old active cubes' slots to -1, then enter the new ones and their block flags
     (the 2-cell blocks' too).
 
-    Parallel: the cubes of a list are distinct, and concurrent writes of a block flag all
+    On threads: the cubes of a list are distinct, and concurrent writes of a block flag all
     store the same value 1.
     """
-    ny, nz = slot.shape[1], slot.shape[2]
-    flat = slot.reshape(-1)
-    for m in prange(old.shape[0]):
-        flat[old[m]] = -1
+    run_items(_reset_slots, -(-old.shape[0] // _CUBE_CHUNK), slot, old)
     act0[:] = 0
     act1[:] = 0
     act2[:] = 0
     pairs[:] = 0
-    for m in prange(new.shape[0]):
-        lin = new[m]
-        flat[lin] = m
-        k = lin % nz
-        j = (lin // nz) % ny
-        i = lin // (ny * nz)
-        pairs[i >> 1, j >> 1, k >> 1] = 1
-        act0[i >> 2, j >> 2, k >> 2] = 1
-        act1[i >> 4, j >> 4, k >> 4] = 1
-        act2[i >> 6, j >> 6, k >> 6] = 1
+    run_items(_enter_cubes, -(-new.shape[0] // _CUBE_CHUNK), slot, new, act0, act1, act2, pairs)
 
 
-@jit(parallel=True)
+@jit
+def _reset_slots(slot, old, counter):
+    """One thread's share of :func:`_update_lookup`'s reset: chunks of the old cubes."""
+    flat = slot.reshape(-1)  # a view (Numba refuses to reshape a non-contiguous array)
+    while True:
+        start = take(counter) * _CUBE_CHUNK
+        if start >= old.shape[0]:
+            break
+        for m in range(start, min(start + _CUBE_CHUNK, old.shape[0])):
+            flat[old[m]] = -1
+
+
+@jit
+def _enter_cubes(slot, new, act0, act1, act2, pairs, counter):
+    """One thread's share of :func:`_update_lookup`'s entries: chunks of the new cubes."""
+    ny, nz = slot.shape[1], slot.shape[2]
+    flat = slot.reshape(-1)
+    while True:
+        start = take(counter) * _CUBE_CHUNK
+        if start >= new.shape[0]:
+            break
+        for m in range(start, min(start + _CUBE_CHUNK, new.shape[0])):
+            lin = new[m]
+            flat[lin] = m
+            k = lin % nz
+            j = (lin // nz) % ny
+            i = lin // (ny * nz)
+            pairs[i >> 1, j >> 1, k >> 1] = 1
+            act0[i >> 2, j >> 2, k >> 2] = 1
+            act1[i >> 4, j >> 4, k >> 4] = 1
+            act2[i >> 6, j >> 6, k >> 6] = 1
+
+
 def _pack_pairs(pairs: np.ndarray, packed: np.ndarray) -> None:
     """The 2-cell flags packed per 4-cell block as :func:`~.minmax.packed_pair_flags` packs
     them (each block's byte written by one thread: concurrent ``|=`` could lose a bit)."""
+    run_items(_pack_pair_slabs, packed.shape[0], pairs, packed)
+
+
+@jit
+def _pack_pair_slabs(pairs, packed, counter):
+    """One thread's share of :func:`_pack_pairs`: the slabs of blocks it takes."""
     npx, npy, npz = pairs.shape
     bx, by, bz = packed.shape
-    for a in prange(bx):
+    while True:
+        a = take(counter)
+        if a >= bx:
+            break
         for b in range(by):
             for c in range(bz):
                 bits = 0

@@ -14,9 +14,9 @@ import math
 from typing import Any
 
 import numpy as np
-from numba import prange
 
 from .._jit import jit, read_only
+from .._jit.work_queue import run_items, take
 
 __all__ = ["BLOCK_SHIFTS", "PAIR_SHIFT", "MinMaxHierarchy", "inactive_block_size",
            "packed_pair_flags", "inactive_pair_size", "neighbourhood"]
@@ -48,7 +48,6 @@ def _level_scale(vmin: float, vmax: float) -> float:
     return scale if scale < np.inf else 0.0
 
 
-@jit(parallel=True)
 def _finest_ranges(
     coeffs: np.ndarray, support: int, n_cells: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -58,18 +57,29 @@ def _finest_ranges(
     lowest and highest level: its values lie in ``lo + [low, high] * (hi - lo) / PAIR_LEVELS``
     (rounded outwards, so the levels bound the values; :func:`_pair_flags` explains why the
     test of an isovalue against them never misses one inside). A block's range is the union
-    of its pairs' (their value windows cover its own)."""
+    of its pairs' (their value windows cover its own). Slabs of blocks along the first axis
+    are spread over threads (:func:`~splinecast._jit.work_queue.run_items`)."""
     block = 1 << BLOCK_SHIFTS[0]
-    nbx = (n_cells[0] + block - 1) // block
-    nby = (n_cells[1] + block - 1) // block
-    nbz = (n_cells[2] + block - 1) // block
+    shape = tuple((int(n) + block - 1) // block for n in n_cells)
+    lo = np.empty(shape, dtype=np.float64)
+    hi = np.empty(shape, dtype=np.float64)
+    pairs = np.zeros(shape + (16,), dtype=np.uint8)
+    run_items(_finest_range_slabs, shape[0], coeffs, int(support), n_cells, lo, hi, pairs)
+    return lo, hi, pairs
+
+
+@jit
+def _finest_range_slabs(coeffs, support, n_cells, lo, hi, pairs, counter):
+    """One thread's share of :func:`_finest_ranges`: the slabs of blocks it takes."""
+    block = 1 << BLOCK_SHIFTS[0]
+    nbx, nby, nbz = lo.shape
     npx, npy, npz = (n_cells[0] + 1) // 2, (n_cells[1] + 1) // 2, (n_cells[2] + 1) // 2
-    lo = np.empty((nbx, nby, nbz), dtype=np.float64)
-    hi = np.empty((nbx, nby, nbz), dtype=np.float64)
-    pairs = np.zeros((nbx, nby, nbz, 16), dtype=np.uint8)
     sx, sy, sz = coeffs.shape
     edge = block + support  # values per axis a block reads
-    for bi in prange(nbx):
+    while True:
+        bi = take(counter)
+        if bi >= nbx:
+            break
         plo = np.empty(8)
         phi = np.empty(8)
         # The range of each of the block's value columns along k over each half of the block
@@ -124,12 +134,10 @@ def _finest_ranges(
                     q_hi = math.ceil((phi[p] - vmin) * scale)
                     pairs[bi, bj, bk, 2 * p] = int(min(max(q_lo, 0.0), PAIR_LEVELS))
                     pairs[bi, bj, bk, 2 * p + 1] = int(min(max(q_hi, 0.0), PAIR_LEVELS))
-    return lo, hi, pairs
 
 
-@jit(parallel=True)
 def _pair_flags(lo: np.ndarray, hi: np.ndarray, pairs: np.ndarray, act0: np.ndarray,
-                iso: float, n_cells: np.ndarray) -> np.ndarray:
+                iso: float, n_cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Flags of the 2-cell blocks inside the active 4-cell blocks that can hold ``iso``.
 
     A pair's value ``v`` and the isovalue go to levels by the same expression,
@@ -140,11 +148,22 @@ def _pair_flags(lo: np.ndarray, hi: np.ndarray, pairs: np.ndarray, act0: np.ndar
     ``PAIR_LEVELS``). Blocks whose range is one value or not finite flag every pair.
 
     Returns the flags, one byte per 2-cell block, and the same packed into one byte per 4-cell
-    block (:func:`packed_pair_flags`)."""
-    npx, npy, npz = (n_cells[0] + 1) // 2, (n_cells[1] + 1) // 2, (n_cells[2] + 1) // 2
-    out = np.zeros((npx, npy, npz), dtype=np.uint8)
+    block (:func:`packed_pair_flags`). Slabs of blocks along the first axis are spread over
+    threads; a slab writes only its own pairs and bytes."""
+    out = np.zeros(tuple((int(n) + 1) // 2 for n in n_cells), dtype=np.uint8)
     packed = np.zeros(act0.shape, dtype=np.uint8)
-    for bi in prange(act0.shape[0]):
+    run_items(_pair_flag_slabs, act0.shape[0], lo, hi, pairs, act0, float(iso), out, packed)
+    return out, packed
+
+
+@jit
+def _pair_flag_slabs(lo, hi, pairs, act0, iso, out, packed, counter):
+    """One thread's share of :func:`_pair_flags`: the slabs of blocks it takes."""
+    npx, npy, npz = out.shape
+    while True:
+        bi = take(counter)
+        if bi >= act0.shape[0]:
+            break
         for bj in range(act0.shape[1]):
             for bk in range(act0.shape[2]):
                 if act0[bi, bj, bk] == 0:
@@ -162,7 +181,6 @@ def _pair_flags(lo: np.ndarray, hi: np.ndarray, pairs: np.ndarray, act0: np.ndar
                     if every or (q_lo <= level and (q_hi >= level or q_hi == PAIR_LEVELS)):
                         out[pi, pj, pk] = 1
                         packed[bi, bj, bk] |= np.uint8(1 << p)
-    return out, packed
 
 
 @jit

@@ -34,9 +34,9 @@ from functools import cached_property
 from typing import Any
 
 import numpy as np
-from numba import prange
 
 from .._jit import jit
+from .._jit.work_queue import run_items, take
 from ..errors import ParameterError
 from ..volume import Volume
 from .base import ActiveCellClassifier, ReconstructionModel
@@ -326,7 +326,10 @@ def ray_bernstein2(
     return u0, u1, u2
 
 
-@jit(parallel=True)
+#: Points per item of :func:`evaluate_in_tets` on threads.
+_POINT_CHUNK = 1024
+
+
 def evaluate_in_tets(
     pad: np.ndarray, tet_points: np.ndarray, indptr: np.ndarray, cols: np.ndarray,
     vals: np.ndarray, bary: np.ndarray, steps: np.ndarray, degree: int,
@@ -336,25 +339,39 @@ def evaluate_in_tets(
 
     Point ``m`` is evaluated with the polynomial of tetrahedron ``tets[m]`` of cube ``cubes[m]``
     at local coordinates ``q[m]`` (also outside that tetrahedron: the polynomial extends), which
-    is what continuity tests across shared faces need.
+    is what continuity tests across shared faces need. Chunks of points are spread over threads
+    (:func:`~splinecast._jit.work_queue.run_items`).
     """
     m_pts = q.shape[0]
     values = np.empty(m_pts)
     grads = np.empty((m_pts, 3))
-    for m in prange(m_pts):
-        v27 = np.empty(27)
-        c = np.empty(tet_points.shape[1])
-        b10 = np.empty(10)
-        b4 = np.empty(4)
-        gather27(pad, cubes[m, 0], cubes[m, 1], cubes[m, 2], v27)
-        tet_coefficients(v27, tets[m], tet_points, indptr, cols, vals, c)
-        v, gx, gy, gz = value_gradient(c, degree, steps, bary, tets[m],
-                                       q[m, 0], q[m, 1], q[m, 2], b10, b4)
-        values[m] = v
-        grads[m, 0] = gx
-        grads[m, 1] = gy
-        grads[m, 2] = gz
+    run_items(_evaluate_chunks, -(-m_pts // _POINT_CHUNK), pad, tet_points, indptr, cols, vals,
+              bary, steps, int(degree), cubes, tets, q, values, grads)
     return values, grads
+
+
+@jit
+def _evaluate_chunks(pad, tet_points, indptr, cols, vals, bary, steps, degree, cubes, tets, q,
+                     values, grads, counter):
+    """One thread's share of :func:`evaluate_in_tets`: the chunks of points it takes."""
+    m_pts = q.shape[0]
+    v27 = np.empty(27)
+    c = np.empty(tet_points.shape[1])
+    b10 = np.empty(10)
+    b4 = np.empty(4)
+    while True:
+        start = take(counter) * _POINT_CHUNK
+        if start >= m_pts:
+            break
+        for m in range(start, min(start + _POINT_CHUNK, m_pts)):
+            gather27(pad, cubes[m, 0], cubes[m, 1], cubes[m, 2], v27)
+            tet_coefficients(v27, tets[m], tet_points, indptr, cols, vals, c)
+            v, gx, gy, gz = value_gradient(c, degree, steps, bary, tets[m],
+                                           q[m, 0], q[m, 1], q[m, 2], b10, b4)
+            values[m] = v
+            grads[m, 0] = gx
+            grads[m, 1] = gy
+            grads[m, 2] = gz
 
 
 @jit()
@@ -436,7 +453,6 @@ def _round_up32(x: float) -> np.float32:
     return f
 
 
-@jit(parallel=True)
 def cube_bounds(
     pad: np.ndarray, targets: np.ndarray, ptr: np.ndarray, sources: np.ndarray,
     weights: np.ndarray, n_slots: int, n_points: int, tol: float,
@@ -450,14 +466,28 @@ def cube_bounds(
     so it stays conservative. By the convex hull property the cube's patches lie in this
     range, which is iso-independent: an isovalue change then only compares. A cube of equal
     data points has the exact range of that value (a MIP over a constant background then leaps
-    it as soon as it has met the value, as over the trilinear model's).
+    it as soon as it has met the value, as over the trilinear model's). Slices along the first
+    axis are spread over threads (:func:`~splinecast._jit.work_queue.run_items`).
     """
-    nx, ny, nz = pad.shape[0] - 2, pad.shape[1] - 2, pad.shape[2] - 2
-    lo = np.empty((nx, ny, nz), np.float32)
-    hi = np.empty((nx, ny, nz), np.float32)
-    for i in prange(nx):
-        buf = np.empty((n_slots, _LANES))
-        size = np.empty(_LANES)
+    shape = (pad.shape[0] - 2, pad.shape[1] - 2, pad.shape[2] - 2)
+    lo = np.empty(shape, np.float32)
+    hi = np.empty(shape, np.float32)
+    run_items(_cube_bound_slices, shape[0], pad, targets, ptr, sources, weights, int(n_slots),
+              int(n_points), float(tol), lo, hi)
+    return lo, hi
+
+
+@jit
+def _cube_bound_slices(pad, targets, ptr, sources, weights, n_slots, n_points, tol, lo, hi,
+                       counter):
+    """One thread's share of :func:`cube_bounds`: the slices of cubes it takes."""
+    nx, ny, nz = lo.shape
+    buf = np.empty((n_slots, _LANES))
+    size = np.empty(_LANES)
+    while True:
+        i = take(counter)
+        if i >= nx:
+            break
         for j in range(ny):
             for k0 in range(0, nz, _LANES):
                 n = min(_LANES, nz - k0)
@@ -480,7 +510,6 @@ def cube_bounds(
                 for m in range(n):
                     lo[i, j, k0 + m] = _round_down32(vmin[m] - tol * size[m])
                     hi[i, j, k0 + m] = _round_up32(vmax[m] + tol * size[m])
-    return lo, hi
 
 
 @jit(inline="always")
@@ -490,7 +519,6 @@ def _gather_lanes(pad, cubes, start, n, ny, nz, buf):
         gather27_lane(pad, lin // (ny * nz), (lin // nz) % ny, lin % nz, buf, m)
 
 
-@jit(parallel=True)
 def classify_tets(
     pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, tet_points: np.ndarray,
     targets: np.ndarray, ptr: np.ndarray, sources: np.ndarray, weights: np.ndarray,
@@ -500,20 +528,31 @@ def classify_tets(
 
     The coefficients come from the model's program, ``_LANES`` cubes side by side; a range is
     widened by ``tol`` (rounding) so the test stays conservative for the renderer's sums.
+    Groups of ``_LANES`` cubes are spread over threads.
     """
+    masks = np.zeros(cubes.shape[0], np.uint32)
+    run_items(_classify_chunks, -(-cubes.shape[0] // _LANES), pad, cubes, shape, tet_points,
+              targets, ptr, sources, weights, int(n_slots), float(iso) - tol, float(iso) + tol,
+              masks)
+    return masks
+
+
+@jit
+def _classify_chunks(pad, cubes, shape, tet_points, targets, ptr, sources, weights, n_slots,
+                     lo_iso, hi_iso, masks, counter):
+    """One thread's share of :func:`classify_tets`: the groups of cubes it takes."""
     n = cubes.shape[0]
-    masks = np.zeros(n, np.uint32)
-    n_chunks = (n + _LANES - 1) // _LANES
     ny, nz = shape[1], shape[2]
     n_local = tet_points.shape[1]
-    lo_iso = iso - tol
-    hi_iso = iso + tol
-    for chunk in prange(n_chunks):
-        buf = np.empty((n_slots, _LANES))
-        vmin = np.empty(_LANES)
-        vmax = np.empty(_LANES)
-        mask = np.zeros(_LANES, np.uint32)
-        start = chunk * _LANES
+    buf = np.empty((n_slots, _LANES))
+    vmin = np.empty(_LANES)
+    vmax = np.empty(_LANES)
+    mask = np.zeros(_LANES, np.uint32)
+    while True:
+        start = take(counter) * _LANES
+        if start >= n:
+            break
+        mask[:] = 0
         cnt = min(_LANES, n - start)
         _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
         run_program(buf, cnt, targets, ptr, sources, weights)
@@ -533,29 +572,36 @@ def classify_tets(
                     mask[m] |= bit
         for m in range(cnt):
             masks[start + m] = mask[m]
-    return masks
 
 
-@jit(parallel=True)
 def store_coefficients(
     pad: np.ndarray, cubes: np.ndarray, shape: np.ndarray, targets: np.ndarray, ptr: np.ndarray,
     sources: np.ndarray, weights: np.ndarray, n_slots: int, n_points: int,
 ) -> np.ndarray:
-    """All coefficients of the given cubes, shape (n, n_points) float64."""
-    n = cubes.shape[0]
-    out = np.empty((n, n_points))
-    n_chunks = (n + _LANES - 1) // _LANES
+    """All coefficients of the given cubes, shape (n, n_points) float64 (groups of ``_LANES``
+    cubes on threads)."""
+    out = np.empty((cubes.shape[0], int(n_points)))
+    run_items(_store_chunks, -(-cubes.shape[0] // _LANES), pad, cubes, shape, targets, ptr,
+              sources, weights, int(n_slots), out)
+    return out
+
+
+@jit
+def _store_chunks(pad, cubes, shape, targets, ptr, sources, weights, n_slots, out, counter):
+    """One thread's share of :func:`store_coefficients`: the groups of cubes it takes."""
+    n, n_points = out.shape
     ny, nz = shape[1], shape[2]
-    for chunk in prange(n_chunks):
-        buf = np.empty((n_slots, _LANES))
-        start = chunk * _LANES
+    buf = np.empty((n_slots, _LANES))
+    while True:
+        start = take(counter) * _LANES
+        if start >= n:
+            break
         cnt = min(_LANES, n - start)
         _gather_lanes(pad, cubes, start, cnt, ny, nz, buf)
         run_program(buf, cnt, targets, ptr, sources, weights)
         for m in range(cnt):
             for p in range(n_points):
                 out[start + m, p] = buf[27 + p, m]
-    return out
 
 
 #: Bound on the difference between two ways of rounding a coefficient's sum, relative to the

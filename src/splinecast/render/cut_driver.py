@@ -38,13 +38,13 @@ import numba
 import numpy as np
 
 from .._jit import bind_first_classes, first_class, jit, overload_jit
+from .._jit.work_queue import run_on_threads, take
 from ..models.pieces import new_scratch, value_gradient_at
 from .clipping import box_slab, clip_interval
 from .driver import Buffers, Counters, Passes, Pixel, RaySetup, Rect, band_types, pair_band
 from .iso import IsoMode
 from .mode_api import done, finish, mode_scratch, state_load, state_new, state_store
 from .rays import GEOM_SPACING, Ray, grid_point, index_axis, pixel_ray
-from .work_queue import run_on_threads, take
 
 __all__ = ["trace_cut", "tile_lists", "box_interval", "TILE", "Cut", "View", "Tiles",
            "FrameEnds", "Seam", "TileRays"]

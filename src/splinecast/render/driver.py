@@ -55,6 +55,7 @@ import numpy as np
 from numba import types
 
 from .._jit import bind_first_class, inlined, jit, rebound
+from .._jit.work_queue import run_on_threads, take
 from ..accel.traversal import walk_begin, walk_step_cached
 from ..camera import BASIS_COL0, BASIS_ROW0
 from ..models import pieces as model_api
@@ -83,7 +84,6 @@ from .mode_api import (
 from .outputs import copy_pixel
 from .rays import GEOM_SIZE, Ray, RayPiece, grid_ray, pixel_ray
 from .sampler import bound_sample_pixel
-from .work_queue import run_on_threads, take
 
 __all__ = ["trace", "pair_band", "pair_bindings", "finalize", "reset_state", "band_order",
            "scratch_types", "GEOM_SIZE", "RaySetup", "Rect", "Passes", "Counters", "Buffers",

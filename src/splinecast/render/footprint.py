@@ -44,6 +44,7 @@ import numba
 import numpy as np
 
 from .._jit import jit
+from .._jit.work_queue import run_on_threads, take
 from ..camera import (
     BASIS_COL0,
     BASIS_EYE,
@@ -58,7 +59,6 @@ from ..camera import (
     BASIS_UP,
 )
 from .rays import GEOM_OFFSET, GEOM_ORIGIN, GEOM_SHIFT, GEOM_SPACING
-from .work_queue import run_on_threads, take
 
 __all__ = ["FOOTPRINT_SHIFT", "NO_FOOTPRINT", "ENTRY_ONLY", "MAX_PROJECTED_BLOCKS",
            "MAX_PROJECTED_PAIRS", "block_footprint", "fill_box", "footprint_level"]

@@ -50,9 +50,9 @@ from typing import Any
 
 import numba
 import numpy as np
-from numba import prange
 
 from ..._jit import jit, read_only
+from ..._jit.work_queue import run_items, take
 from ...errors import ParameterError
 from .tree import BrickGrid, regular_brick_tree, segment_indices
 
@@ -308,13 +308,24 @@ def _one_brick(source, coarse, lo, hi, ax, cx, quant, dense, touched, out, out_a
     return ntouched
 
 
-@jit(parallel=True, nogil=True)
 def _brick_batch(source, coarse, lo, hi, ax, cx, quant, out_at, out, nnz, nchunks):
     """Histograms of bricks ``lo[b]..hi[b]`` (source ranges), one thread per chunk of bricks
-    (``quant``: a :class:`_Quant`, ``out``: an :class:`_Out`)."""
+    (``quant``: a :class:`_Quant`, ``out``: an :class:`_Out`; chunk ``i`` takes every
+    ``nchunks``-th brick from ``i``)."""
+    run_items(_brick_batch_chunks, nchunks, source, coarse, lo, hi, ax, cx, quant, out_at, out,
+              nnz, nchunks)
+
+
+@jit
+def _brick_batch_chunks(source, coarse, lo, hi, ax, cx, quant, out_at, out, nnz, nchunks,
+                        counter):
+    """One thread's share of :func:`_brick_batch`: the chunks of bricks it takes."""
     bins = quant.bins
     nb = lo.shape[0]
-    for chunk in prange(nchunks):
+    while True:
+        chunk = take(counter)
+        if chunk >= nchunks:
+            break
         dense = np.zeros(bins * bins, np.int64)
         touched = np.empty(bins * bins, np.int64)
         for b in range(chunk, nb, nchunks):
@@ -322,12 +333,23 @@ def _brick_batch(source, coarse, lo, hi, ax, cx, quant, out_at, out, nnz, nchunk
                                 out, out_at[b])
 
 
-@jit(parallel=True, nogil=True)
 def _sum_rows(offsets, keys, counts, group_start, members, nkeys, out_at, out_keys, out_counts,
               nnz, nchunks):
-    """Sparse sum of the histograms ``members[group_start[g]:group_start[g + 1]]`` per group."""
+    """Sparse sum of the histograms ``members[group_start[g]:group_start[g + 1]]`` per group
+    (chunk ``i`` of ``nchunks``, one per thread, takes every ``nchunks``-th group from ``i``)."""
+    run_items(_sum_row_chunks, nchunks, offsets, keys, counts, group_start, members, nkeys, out_at,
+              out_keys, out_counts, nnz, nchunks)
+
+
+@jit
+def _sum_row_chunks(offsets, keys, counts, group_start, members, nkeys, out_at, out_keys,
+                    out_counts, nnz, nchunks, counter):
+    """One thread's share of :func:`_sum_rows`: the chunks of groups it takes."""
     ng = group_start.shape[0] - 1
-    for chunk in prange(nchunks):
+    while True:
+        chunk = take(counter)
+        if chunk >= nchunks:
+            break
         dense = np.zeros(nkeys, np.int64)
         touched = np.empty(nkeys, np.int64)
         for g in range(chunk, ng, nchunks):
@@ -348,10 +370,14 @@ def _sum_rows(offsets, keys, counts, group_start, members, nkeys, out_at, out_ke
             nnz[g] = ntouched
 
 
-@jit(parallel=True, nogil=True)
-def _leaf_ranges(source, brick, ghost, nb0, nb1, nb2, vmin, vmax):
+@jit
+def _leaf_range_items(source, brick, ghost, nb0, nb1, nb2, vmin, vmax, counter):
+    """One thread's share of :func:`leaf_value_ranges`: the bricks it takes."""
     n0, n1, n2 = source.shape
-    for b in prange(nb0 * nb1 * nb2):
+    while True:
+        b = take(counter)
+        if b >= nb0 * nb1 * nb2:
+            break
         a = b // (nb1 * nb2)
         bb = (b // nb2) % nb1
         cc = b % nb2
@@ -592,5 +618,6 @@ def leaf_value_ranges(source: np.ndarray, brick: int,
     nb = tuple(-(-n // brick) for n in source.shape)
     vmin = np.empty(int(np.prod(nb)), np.float64)
     vmax = np.empty(int(np.prod(nb)), np.float64)
-    _leaf_ranges(source, int(brick), int(ghost), nb[0], nb[1], nb[2], vmin, vmax)
+    run_items(_leaf_range_items, vmin.shape[0], source, int(brick), int(ghost), nb[0], nb[1],
+              nb[2], vmin, vmax)
     return vmin.reshape(nb), vmax.reshape(nb)

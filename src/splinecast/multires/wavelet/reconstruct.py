@@ -37,9 +37,9 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
-from numba import prange
 
 from ..._jit import jit
+from ..._jit.work_queue import run_items, take
 from ...errors import ParameterError
 from .filters import spline_wavelet
 from .layout import DETAIL_BANDS, WaveletLayout, reflect_index, reflect_indices
@@ -219,18 +219,28 @@ def _reconstruct_one(
     return stray
 
 
-@jit(parallel=True)
 def _reconstruct_chunks(
     children: np.ndarray, parent_slot: np.ndarray, parents: np.ndarray, out_slot: np.ndarray,
     out: np.ndarray, details: tuple, synthesis: tuple, owners_used: np.ndarray,
 ) -> int:
-    """:func:`_reconstruct_one` for every child, in parallel; returns the summed stray count."""
+    """:func:`_reconstruct_one` for every child, on threads; returns the summed stray count."""
     stray = np.zeros(children.shape[0], np.int64)
-    for q in prange(children.shape[0]):
+    run_items(_reconstruct_items, children.shape[0], children, parent_slot, parents, out_slot,
+              out, details, synthesis, owners_used, stray)
+    return int(stray.sum())
+
+
+@jit
+def _reconstruct_items(children, parent_slot, parents, out_slot, out, details, synthesis,
+                       owners_used, stray, counter):
+    """One thread's share of :func:`_reconstruct_chunks`: the children it takes."""
+    while True:
+        q = take(counter)
+        if q >= children.shape[0]:
+            break
         stray[q] = _reconstruct_one(
             children[q], parents[parent_slot[q]], out[out_slot[q]], details, synthesis,
             owners_used[q])
-    return int(stray.sum())
 
 
 @dataclass

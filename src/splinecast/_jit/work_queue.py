@@ -1,6 +1,7 @@
 """Work shared by threads: a counter they take items from, and the threads that run it.
 
-Compiled image loops run on ordinary threads (:func:`run_on_threads`): each runs the same
+Compiled loops (the renderer's image loops, the acceleration structures' scans over the volume)
+run on ordinary threads (:func:`run_on_threads`): each runs the same
 compiled function, which takes the next item from a shared counter (:func:`take`) until none is
 left. The compiled code releases the GIL, so the threads run at once::
 
@@ -12,10 +13,12 @@ left. The compiled code releases the GIL, so the threads run at once::
         ...
 
 Why not Numba's parallel loop: it compiles a second library for the loop's body for every
-argument type (a second or two per model, mode and data type, on the first render of each), and
-it hands each thread a range of iterations fixed in advance, so a thread that drew the cheap
-bands of an image waited at the end for the other. Taking items as each thread becomes free
-balances that, and a function without a parallel loop compiles in a fraction of the time.
+argument type (a second or two per model, mode and data type, on the first render of each:
+about half the compile of a volume's block ranges), and it hands each thread a range of
+iterations fixed in advance, so a thread that drew the cheap bands of an image waited at the
+end for the other. Taking items as each thread becomes free balances that, and a function
+without a parallel loop compiles in a fraction of the time. :func:`run_items` runs such a
+function over a number of items.
 
 Numba has no atomic operations on the CPU; :func:`take` is LLVM's ``atomicrmw add``.
 """
@@ -23,16 +26,18 @@ Numba has no atomic operations on the CPU; :func:`take` is LLVM's ``atomicrmw ad
 from __future__ import annotations
 
 import concurrent.futures
+import functools
 import threading
 from collections.abc import Callable
 from typing import TypeVar
 
 import numba
+import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-__all__ = ["take", "run_on_threads"]
+__all__ = ["take", "run_on_threads", "run_items"]
 
 T = TypeVar("T")
 
@@ -102,3 +107,28 @@ def run_on_threads(work: Callable[[], T], threads: int) -> list[T]:
         concurrent.futures.wait(futures)
     results.extend(f.result() for f in futures if not f.cancelled())
     return results
+
+
+def run_items(kernel: Callable[..., object], n_items: int, *args: object) -> None:
+    """Run the compiled ``kernel(*args, counter)`` on as many threads as are useful for
+    ``n_items`` items.
+
+    ``kernel`` takes item numbers from ``counter`` (:func:`take`) until it draws one at or past
+    its own count of items (which must be ``n_items``) and writes its results into arrays among
+    ``args``; each item must write places no other item writes. With no item, it is not called.
+
+    Parameters
+    ----------
+    kernel : callable
+        A compiled function (``nogil``) whose last argument is the counter.
+    n_items : int
+        How many items there are: at most this many threads run.
+    *args
+        The kernel's other arguments.
+    """
+    n_items = int(n_items)
+    if n_items <= 0:
+        return
+    counter = np.zeros(1, np.int64)
+    run_on_threads(functools.partial(kernel, *args, counter),
+                   max(1, min(numba.get_num_threads(), n_items)))
