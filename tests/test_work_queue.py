@@ -16,7 +16,7 @@ from numba import njit, prange
 
 import splinecast as sc
 from splinecast._jit import jit
-from splinecast._jit.work_queue import run_on_threads, take
+from splinecast._jit.work_queue import run_items, run_on_threads, take
 
 
 @njit(parallel=True)
@@ -134,3 +134,37 @@ def test_a_failure_is_reported_after_the_other_copies_end():
     with pytest.raises(ValueError, match="caller's copy"):
         run_on_threads(work, 2)
     assert finished.is_set()  # the pool's copy had ended before the error reached the caller
+
+
+@jit
+def _mark_items(n_items, marks, counter):
+    while True:
+        item = take(counter)
+        if item >= n_items:
+            break
+        marks[item] += 1
+
+
+def test_run_items_takes_every_item_once_and_calls_nothing_for_none():
+    for n in (1, 2, 3, 1000, 100_003):
+        marks = np.zeros(n, np.int64)
+        run_items(_mark_items, n, n, marks)
+        assert np.all(marks == 1), n
+    # No item: the kernel is not called (it would fail on these arguments).
+    run_items(_mark_items, 0, "not an array", None)
+
+
+def test_results_of_threaded_scans_equal_one_thread():
+    """The scans that ``run_items`` spreads over threads give what one thread gives."""
+    vol = sc.demo("marschner-lobb", size=33)
+    cam = sc.Camera.orbit(vol, azimuth=25, elevation=15, size=(48, 40))
+    threads = numba.get_num_threads()
+    many = sc.Scene(vol, model="s31").render(cam, iso=0.45)
+    numba.set_num_threads(1)
+    try:
+        one = sc.Scene(vol, model="s31").render(cam, iso=0.45)
+    finally:
+        numba.set_num_threads(threads)
+    assert np.isfinite(one.depth).sum() > 100
+    for name in ("rgba", "depth", "normal", "cells_visited"):
+        assert np.array_equal(getattr(one, name), getattr(many, name), equal_nan=True), name
