@@ -165,9 +165,10 @@ def _colormap_reference(values, window, colormap, background):
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("colormap", ["viridis", "hot"])
-def test_apply_colormap_matches_the_whole_array_formula(dtype, colormap):
+@pytest.mark.parametrize("shape", [(37, 53), (301, 263)])  # one chunk of pixels; several
+def test_apply_colormap_matches_the_whole_array_formula(dtype, colormap, shape):
     rng = np.random.default_rng(7)
-    values = rng.uniform(-3.0, 13.0, (37, 53)).astype(dtype)
+    values = rng.uniform(-3.0, 13.0, shape).astype(dtype)
     values[rng.random(values.shape) < 0.1] = np.nan
     values[0, :3] = (np.inf, -np.inf, 2.0 + 1.5 * 10 / 1023)  # a tie of the nearest entry
     strided = values[:, ::2]  # not contiguous

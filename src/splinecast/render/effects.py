@@ -25,9 +25,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import prange
 
 from .._jit import jit
+from .._jit.work_queue import run_items, take
 from ..errors import ParameterError
 from .rays import pixel_ray
 
@@ -180,16 +180,25 @@ def surface_rgb(shading: np.ndarray, effects: np.ndarray, rgb: tuple, n: tuple, 
     return min(r * light + spec, 1.0), min(g * light + spec, 1.0), min(b * light + spec, 1.0)
 
 
-@jit(parallel=True)
 def apply_effects(basis: np.ndarray, shading: np.ndarray, effects: np.ndarray,
                   position: np.ndarray, normal: np.ndarray, face: np.ndarray,
                   rgba: np.ndarray) -> None:
     """Re-shade every hit pixel of a first-hit frame with ``effects`` (in place).
 
     Front faces use ``shading``'s front colour, back faces its back colour, as the iso kernels do.
+    Rows are spread over threads (:func:`~splinecast._jit.work_queue.run_items`).
     """
+    run_items(_effect_rows, face.shape[0], basis, shading, effects, position, normal, face, rgba)
+
+
+@jit
+def _effect_rows(basis, shading, effects, position, normal, face, rgba, counter):
+    """One thread's share of :func:`apply_effects`: the rows it takes."""
     height, width = face.shape
-    for row in prange(height):
+    while True:
+        row = take(counter)
+        if row >= height:
+            break
         for col in range(width):
             f = face[row, col]
             if f == 0:
