@@ -128,10 +128,11 @@ Buffers.__doc__ = """One thread's scratch buffers for the pixel loop: the model'
 (:func:`splinecast.models.pieces.new_scratch`), the mode's (``mode_scratch``), and the piece
 boundaries (float64) and tags (int64) of one cell."""
 
-Bands = namedtuple("Bands", ("order", "rows", "tile", "counter"))
-Bands.__doc__ = """How the image loop hands out its work: bands of ``rows`` rows in the order
-``order`` (int64 array), each traced ``tile`` columns at a time, the next one taken from the
-shared one-element int64 array ``counter`` (:func:`.work_queue.take`)."""
+Bands = namedtuple("Bands", ("order", "rows", "tile", "counter", "group"))
+Bands.__doc__ = """How the image loop hands out its work: groups of ``group`` bands of ``rows``
+rows in the order ``order`` (int64 array), the next one taken from the shared one-element int64
+array ``counter`` (:func:`.work_queue.take`). A group of one band is traced ``tile`` columns at a
+time; a larger group one column of tiles at a time, its bands' tiles top to bottom."""
 
 Pixel = namedtuple("Pixel", ("row", "col", "width", "height"))
 Pixel.__doc__ = """Pixel ``(row, col)`` of an image (or tile) of ``width`` x ``height``
@@ -359,7 +360,7 @@ def _trace_band(grid, mode, blocks, state, out, setup, rect, passes, counters, b
 
 
 def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,
-          band_rows, tile, load, store, final, count, visited, tested, skipped):
+          band_rows, tile, load, store, final, count, visited, tested, skipped, group=1):
     """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
 
     All parameters are prepared by the host side (:mod:`.segment`).
@@ -387,7 +388,8 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
         image the camera's pixels overlap (:func:`.footprint.block_footprint`), or none; rays
         of a tile it leaves empty are not traced.
     bands : ndarray of int64
-        Order of the bands of ``band_rows`` rows; ``tile`` columns per tile.
+        Order of the groups of ``group`` bands of ``band_rows`` rows (one thread's work item);
+        ``tile`` columns per tile.
     load, store, final : bool
         Read the state arrays at the start, write them at the end, write the outputs.
     count : bool
@@ -395,9 +397,12 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
         arrays that are only read for the image's size).
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
+    group : int
+        Bands per work item, traced a column of ``tile`` columns at a time (tiles of
+        ``band_rows`` x ``tile`` pixels, each traced as with one band: the same pixels).
     """
     args = (grid, mode, blocks, state, out, RaySetup(basis, geom, planes, t_range, footprint),
-            Bands(bands, int(band_rows), int(tile), np.zeros(1, np.int64)),
+            Bands(bands, int(band_rows), int(tile), np.zeros(1, np.int64), max(1, int(group))),
             Passes(bool(load), bool(store), bool(final), bool(count)),
             Counters(visited, tested, skipped))
     work = bind_first_class(_trace_image, pair_band(type(grid), type(mode)), _image_band_types,
@@ -453,19 +458,41 @@ def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, cou
     Each thread that runs it (:func:`.work_queue.run_on_threads`) takes the next band in the
     order ``bands.order`` when it is free (``bands.counter``: the shared counter; a
     :class:`Bands`): bands differ in cost by orders of magnitude, and a split fixed in advance
-    left one thread waiting for the other."""
+    left one thread waiting for the other.
+
+    A work item of several bands (``bands.group``) is traced one column of tiles at a time,
+    each column's tiles from top to bottom: rays close on the screen, which read the same
+    voxels, are then traced close in time, while those voxels are still in the core's cache
+    (a band traced tile by tile across the whole image had let the voxels its neighbours
+    share fall out of it before the band below needed them). Each tile is traced as its band
+    would trace it (its own rectangle, the mode's scratch reset at its start), so the pixels
+    are the same."""
     height, width = counters.visited.shape
     # The first column as a variable: a constant argument is typed as a literal, which would
     # compile a band of its own instead of the one the cut renderer shares (.cut_driver).
     first = width - width
+    rows, tile, group = bands.rows, bands.tile, bands.group
     while True:
         b = take(bands.counter)
         if b >= bands.order.shape[0]:
             break
-        r0 = bands.order[b] * bands.rows
-        band(grid, mode, blocks, state, out, setup,
-             Rect(r0, min(height, r0 + bands.rows), first, width, bands.tile), passes, counters,
-             Buffers(new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64)))
+        buffers = Buffers(new_scratch(grid), mode_scratch(mode), np.empty(8),
+                          np.empty(8, np.int64))
+        r0 = bands.order[b] * rows * group
+        if group == 1:
+            band(grid, mode, blocks, state, out, setup,
+                 Rect(r0, min(height, r0 + rows), first, width, tile), passes, counters, buffers)
+            continue
+        r_end = min(height, r0 + rows * group)
+        c0 = first
+        while c0 < width:
+            c1 = min(width, c0 + tile)
+            r = r0
+            while r < r_end:
+                band(grid, mode, blocks, state, out, setup, Rect(r, min(r_end, r + rows), c0, c1,
+                                                                 tile), passes, counters, buffers)
+                r += rows
+            c0 = c1
 
 
 def finalize(mode, state, out, basis):
