@@ -299,13 +299,6 @@ def sample_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, 
                     # for a model whose value is cheap: a costly value inlined at the loop's
                     # extra call sites made s31 DVR 1.08-1.16x slower.
                     stop = False
-                    # A run starts after a leap or at the ray's entry, where no sample in
-                    # front has prefetched the voxels of the next ones: ask for those the
-                    # loop's own prefetch would have asked for (between the look-ahead and
-                    # its first prefetch), so their reads overlap too.
-                    for n in range(2, int(_PREFETCH) + 1):
-                        tp = anchor + (m + n) * dt
-                        prefetch_at(grid, scr, ox + tp * dx, oy + tp * dy, oz + tp * dz)
                     bx, by, bz = ox + tb * dx, oy + tb * dy, oz + tb * dz
                     if ahead_m == m:
                         vb = ahead
