@@ -109,9 +109,10 @@ footprint : ndarray, shape (tiles_y, tiles_x, 2) or (0, 0, 2)
     Per-tile parameter interval of the blocks the mode can see (:mod:`.footprint`), or none.
 """
 
-Rect = namedtuple("Rect", ("r0", "r1", "c0", "c1", "tile"))
-Rect.__doc__ = """Rows ``[r0, r1)`` x columns ``[c0, c1)`` of the image, traced ``tile``
-columns at a time (integers)."""
+Rect = namedtuple("Rect", ("r0", "r1", "c0", "c1", "tile", "rows"))
+Rect.__doc__ = """Rows ``[r0, r1)`` x columns ``[c0, c1)`` of the image, traced in tiles of
+``rows`` rows by ``tile`` columns (integers), a column of tiles after another, each column's
+tiles from top to bottom."""
 
 Passes = namedtuple("Passes", ("load", "store", "final", "count"))
 Passes.__doc__ = """What a trace does besides tracing (booleans): read the state arrays at the
@@ -299,7 +300,7 @@ def _trace_band(grid, mode, blocks, state, out, setup, rect, passes, counters, b
     not traced (their states are passed on, and finished with ``final``).
     """
     basis, t_range, footprint = setup.basis, setup.t_range, setup.footprint
-    r0, r1, c0, c1, tile = rect
+    r0, r1, c0, c1, tile, rows = rect
     load, store, final, count = passes
     visited, tested, skipped = counters
     height, width = visited.shape
@@ -315,47 +316,58 @@ def _trace_band(grid, mode, blocks, state, out, setup, rect, passes, counters, b
     # of such tiles (a fresh state's outputs do not depend on the pixel; .outputs.copy_pixel).
     # Not when some pixels are to be left alone (``t_range``).
     fresh = footed and final and not load and not store and not ranged
+    # A rectangle one tile tall: a run of tiles where nothing projects gets one finished
+    # pixel copied over the whole run.
+    one_row = r1 - r0 <= rows
     tc0 = c0
     while tc0 < c1:
         tc1 = min(c1, tc0 + tile)
-        # Each tile's rays start from a fresh mode scratch (what a mode carries from one ray to
-        # the next, such as MIP's depth of the previous maximum): a pixel's result then depends
-        # only on the rays of its own tile, so any window of the image whose edges lie on tile
-        # and band boundaries (Camera.tile, the viewer's stripes, Dask's tiles) renders the
-        # same pixels as the whole image, whatever a mode does with its scratch.
-        tile_begin(mode, buffers.mode)
-        if fresh and _unseen(footprint, r0 + row0, r1 + row0, tc0 + col0, tc1 + col0, ty0, tx0):
-            end = tc1
-            while end < c1 and _unseen(footprint, r0 + row0, r1 + row0, end + col0,
-                                       min(c1, end + tile) + col0, ty0, tx0):
-                end = min(c1, end + tile)
-            _finish_fresh(mode, out, r0, tc0)
-            copy_pixel(out, r0, tc0, r0, r1, tc0, end)
-            tc0 = end
-            continue
-        for row in range(r0, r1):
-            for col in range(tc0, tc1):
-                if ranged and t_range[row, col, 0] > t_range[row, col, 1]:
-                    continue
-                if footed:
-                    ty = ((row + row0) >> FOOTPRINT_SHIFT) - ty0
-                    tx = ((col + col0) >> FOOTPRINT_SHIFT) - tx0
-                    t_lo = footprint[ty, tx, 0]
-                    t_hi = footprint[ty, tx, 1]
-                    if t_lo > t_hi:
-                        # Nothing the mode can see projects here: no ray to set up.
-                        if store or final:
-                            _pass_untraced(mode, state, out, basis, row, col, width, height,
-                                           load, store, final)
+        tr0 = r0
+        while tr0 < r1:
+            tr1 = min(r1, tr0 + rows)
+            # Each tile's rays start from a fresh mode scratch (what a mode carries from one
+            # ray to the next, such as MIP's depth of the previous maximum): a pixel's result
+            # then depends only on the rays of its own tile, so any window of the image whose
+            # edges lie on tile boundaries (Camera.tile, the viewer's stripes, Dask's tiles)
+            # renders the same pixels as the whole image, whatever a mode does with its
+            # scratch, and so does any order of the tiles.
+            tile_begin(mode, buffers.mode)
+            if fresh and _unseen(footprint, tr0 + row0, tr1 + row0, tc0 + col0, tc1 + col0,
+                                 ty0, tx0):
+                end = tc1
+                while one_row and end < c1 and _unseen(footprint, r0 + row0, r1 + row0,
+                                                       end + col0, min(c1, end + tile) + col0,
+                                                       ty0, tx0):
+                    end = min(c1, end + tile)
+                _finish_fresh(mode, out, tr0, tc0)
+                copy_pixel(out, tr0, tc0, tr0, tr1, tc0, end)
+                tc1 = end  # only ever past the tile in a rectangle one tile tall
+                tr0 = tr1
+                continue
+            for row in range(tr0, tr1):
+                for col in range(tc0, tc1):
+                    if ranged and t_range[row, col, 0] > t_range[row, col, 1]:
                         continue
-                nv, nt, ns = _trace_pixel(
-                    grid, mode, blocks, state, out, setup, passes, buffers,
-                    Pixel(row, col, width, height), (t_lo, t_hi), cells,
-                )
-                if count:
-                    visited[row, col] += nv
-                    tested[row, col] += nt
-                    skipped[row, col] += ns
+                    if footed:
+                        ty = ((row + row0) >> FOOTPRINT_SHIFT) - ty0
+                        tx = ((col + col0) >> FOOTPRINT_SHIFT) - tx0
+                        t_lo = footprint[ty, tx, 0]
+                        t_hi = footprint[ty, tx, 1]
+                        if t_lo > t_hi:
+                            # Nothing the mode can see projects here: no ray to set up.
+                            if store or final:
+                                _pass_untraced(mode, state, out, basis, row, col, width,
+                                               height, load, store, final)
+                            continue
+                    nv, nt, ns = _trace_pixel(
+                        grid, mode, blocks, state, out, setup, passes, buffers,
+                        Pixel(row, col, width, height), (t_lo, t_hi), cells,
+                    )
+                    if count:
+                        visited[row, col] += nv
+                        tested[row, col] += nt
+                        skipped[row, col] += ns
+            tr0 = tr1
         tc0 = tc1
 
 
@@ -476,23 +488,11 @@ def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, cou
         b = take(bands.counter)
         if b >= bands.order.shape[0]:
             break
-        buffers = Buffers(new_scratch(grid), mode_scratch(mode), np.empty(8),
-                          np.empty(8, np.int64))
         r0 = bands.order[b] * rows * group
-        if group == 1:
-            band(grid, mode, blocks, state, out, setup,
-                 Rect(r0, min(height, r0 + rows), first, width, tile), passes, counters, buffers)
-            continue
-        r_end = min(height, r0 + rows * group)
-        c0 = first
-        while c0 < width:
-            c1 = min(width, c0 + tile)
-            r = r0
-            while r < r_end:
-                band(grid, mode, blocks, state, out, setup, Rect(r, min(r_end, r + rows), c0, c1,
-                                                                 tile), passes, counters, buffers)
-                r += rows
-            c0 = c1
+        band(grid, mode, blocks, state, out, setup,
+             Rect(r0, min(height, r0 + rows * group), first, width, tile, rows), passes,
+             counters,
+             Buffers(new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64)))
 
 
 def finalize(mode, state, out, basis):
