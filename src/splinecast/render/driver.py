@@ -472,13 +472,13 @@ def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, cou
     :class:`Bands`): bands differ in cost by orders of magnitude, and a split fixed in advance
     left one thread waiting for the other.
 
-    A work item of several bands (``bands.group``) is traced one column of tiles at a time,
-    each column's tiles from top to bottom: rays close on the screen, which read the same
-    voxels, are then traced close in time, while those voxels are still in the core's cache
-    (a band traced tile by tile across the whole image had let the voxels its neighbours
-    share fall out of it before the band below needed them). Each tile is traced as its band
-    would trace it (its own rectangle, the mode's scratch reset at its start), so the pixels
-    are the same."""
+    A work item of several bands (``bands.group``) is one call of the band over all their
+    rows, which traces it one column of tiles at a time, each column's tiles from top to
+    bottom: rays close on the screen, which read the same voxels, are then traced close in
+    time, while those voxels are still in the core's cache (a band traced tile by tile across
+    the whole image had let the voxels its neighbours share fall out of it before the band
+    below needed them). The tiles are the bands' (the mode's scratch reset at the start of
+    each), so the pixels are the same."""
     height, width = counters.visited.shape
     # The first column as a variable: a constant argument is typed as a literal, which would
     # compile a band of its own instead of the one the cut renderer shares (.cut_driver).

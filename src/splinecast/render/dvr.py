@@ -716,6 +716,8 @@ class Dvr(ModeHost):
     """
 
     name = "dvr"
+    #: Rays composite through the volume (ModeHost.deep_rays).
+    deep_rays = True
     #: The depth of a sort-last pixel is where the opacity in front crosses the threshold,
     #: which only the composited shares in front of a share know.
     refines_depth_after_compositing = True

@@ -206,8 +206,9 @@ def _run(grid: Grid, mode: Any, camera: Any, blocks: tuple, state: tuple, out: t
     band_rows = max(1, grid.band_rows)
     tile = grid.tile if grid.tile > 0 else w
     # Bands per work item (traced a column of tiles at a time): only with tiles narrower than
-    # the image.
-    group = max(1, grid.work_rows // band_rows) if tile < w else 1
+    # the image, for modes whose rays go deep into the volume.
+    deep = bool(getattr(mode, "deep_rays", False))
+    group = max(1, grid.work_rows // band_rows) if tile < w and deep else 1
     n_bands = (h + band_rows - 1) // band_rows
     bands = band_order((n_bands + group - 1) // group)
     trace(grid.kernel, mode.params, blocks, state, out, camera.pixel_basis(), grid.geom,
