@@ -636,6 +636,9 @@ register(DvrRayMode, sample_step=_sample_step, segment=_segment, **_HOOKS)
 #: Key of the "ray" sampling's footprint flags in the render cache (see Dvr.footprint_flags).
 _SEGMENT_BLOCKS = "segment blocks"
 
+#: Key of the table's transparent corners in the render cache (see _zero_corners).
+_ZERO_CORNERS = "zero corners"
+
 
 def _segment_blocks(mode: Any, visible: np.ndarray, lows: np.ndarray,
                     highs: np.ndarray) -> np.ndarray:
@@ -767,7 +770,12 @@ class Dvr(ModeHost):
         term = 2.0 if settings.termination is None else float(settings.termination)
         bg = np.asarray(background, np.float64).reshape(4)
         params_class = DvrRayMode if settings.sampling == "ray" else DvrMode
-        zero_below, zero_above = _zero_corners(table[0, :, :, 3])
+        # Computed once per table (a millisecond or two): kept with the table it is for.
+        found = cache.get(_ZERO_CORNERS)
+        if found is None or found[0] is not table:
+            found = (table, _zero_corners(table[0, :, :, 3]))
+            cache[_ZERO_CORNERS] = found
+        zero_below, zero_above = found[1]
         self.params = params_class(
             prefix, lo, (prefix.shape[0] - 1) / (hi - lo), pi_mode, table, float(settings.step),
             lo, (table.shape[1] - 1) / (hi - lo), lut, (lut.shape[0] - 1) / (hi - lo),
