@@ -40,7 +40,9 @@ first-class function (:func:`splinecast._jit.bind_first_class`), so it compiles 
 Work is spread over threads in bands of ``band_rows`` rows: each thread (:mod:`.work_queue`)
 takes the next band of the order ``bands`` (a permutation that mixes busy and empty parts of the
 image) when it is free, and traverses it in tiles of ``tile`` columns so neighbouring rays reuse
-the model's per-thread caches.
+the model's per-thread caches. A model may hand out several bands at once (``work_rows``) to the
+modes whose rays go through the volume: the item is then traced a column of tiles at a time,
+the same tiles, so the same pixels.
 """
 
 from __future__ import annotations
