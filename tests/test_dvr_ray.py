@@ -15,6 +15,8 @@ References, independent of the code under test:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from test_bricks import _cameras, _render_bricks
@@ -344,3 +346,67 @@ def test_a_background_at_the_transparent_end_is_leapt_and_the_image_keeps_its_bo
     assert default.blocks_skipped.sum() > 0
     mean = np.abs(default.rgba[..., :3] - case.ref).mean()
     assert mean <= TARGET, mean * 255
+
+
+def _ends_transparent_tf(lo: float, hi: float) -> sc.TransferFunction:
+    """Transparent below 40% and above 85% of ``[lo, hi]``, visible in between."""
+    return sc.TransferFunction([(lo, 0.0), (lo + 0.4 * (hi - lo), 0.0),
+                                (lo + 0.6 * (hi - lo), 0.3), (lo + 0.8 * (hi - lo), 0.1),
+                                (lo + 0.85 * (hi - lo), 0.0), (hi, 0.0)], domain=(lo, hi))
+
+
+def test_zero_corners_bound_lookups_of_transparent_entries_only():
+    """The bounds below and above which the default DVR skips the table lookup: every
+    ``(uf, ub)`` they let through has four corners of opacity 0 in the table the kernel reads
+    (corners as the lookup takes them: ``int(u)`` and ``int(u) + 1``, ``int(u)`` at most
+    ``n - 2``), checked exhaustively on a quarter-index grid; a transfer function that is
+    nowhere transparent has no such bounds, and one transparent everywhere skips all."""
+    from splinecast.render.dvr import _zero_corners
+
+    setup = Dvr(_ends_transparent_tf(0.0, 1.0), None)
+    table = setup.params.table[0, :, :, 3]
+    below, above = setup.params.zero_below, setup.params.zero_above
+    n = table.shape[0]
+    assert 0.3 * n < below < 0.45 * n and 0.8 * n < above < 0.9 * n, (below, above)
+    u = np.concatenate([np.arange(0.0, n - 1.0, 0.25), [n - 1.0]])
+    uf, ub = (a.ravel() for a in np.meshgrid(u, u, indexing="ij"))
+    skipped = ((uf < below) & (ub < below)) | ((uf >= above) & (ub >= above))
+    i0 = np.minimum(uf.astype(np.int64), n - 2)[skipped]
+    j0 = np.minimum(ub.astype(np.int64), n - 2)[skipped]
+    corners = np.stack([table[i0 + di, j0 + dj] for di in (0, 1) for dj in (0, 1)])
+    assert skipped.sum() > 0.1 * skipped.size
+    assert (corners == 0.0).all()
+    dense = Dvr(sc.TransferFunction([(0.0, 0.1), (1.0, 0.3)], domain=(0.0, 1.0)), None)
+    assert dense.params.zero_below <= 0.0 and dense.params.zero_above == math.inf
+    assert _zero_corners(np.zeros((8, 8))) == (math.inf, math.inf)
+
+
+def test_skipping_transparent_lookups_changes_nothing():
+    """The default DVR with a transfer function transparent at both ends: the image, depth
+    and counts are bit-identical to those of the same settings with the skip switched off
+    (bounds that let nothing through, so every segment reads the table), on the
+    Marschner-Lobb volume and on integer voxels (a background of zeros)."""
+    ml = sc.demo("marschner-lobb", size=40)
+    rng = np.random.default_rng(7)
+    blocky = (rng.random((36, 30, 33)) * 3).round() * 60
+    blocky[:, :, :6] = 0.0
+    volumes = [ml, sc.Volume(np.ascontiguousarray(blocky.astype(np.uint8)))]
+    for vol in volumes:
+        scene = sc.Scene(vol)
+        lo, hi = vol.value_range
+        tf = _ends_transparent_tf(lo, hi)
+        cams = [sc.Camera.orbit(vol, azimuth=30, elevation=20, size=(48, 36)),
+                sc.Camera.orbit(vol, azimuth=-70, elevation=50, size=(40, 30), zoom=1.6)]
+        for termination in (1.0 - 2.0**-10, None):
+            setup = Dvr(tf, sc.DVRSettings(step=1.0, sampling="ray", termination=termination))
+            assert setup.params.zero_below > 0.0 and setup.params.zero_above < math.inf
+            plain = Dvr(tf, sc.DVRSettings(step=1.0, sampling="ray", termination=termination))
+            plain.params = plain.params._replace(zero_below=-math.inf, zero_above=math.inf)
+            for cam in cams:
+                (rgba, depth, *_), counts = render_grid(scene.grid, setup, cam)
+                (rgba_p, depth_p, *_), counts_p = render_grid(scene.grid, plain, cam)
+                assert rgba[..., 3].max() > 0.3
+                np.testing.assert_array_equal(rgba, rgba_p)
+                np.testing.assert_array_equal(depth, depth_p)
+                for c, c_p in zip(counts, counts_p, strict=True):
+                    np.testing.assert_array_equal(c, c_p)

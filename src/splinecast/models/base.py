@@ -103,6 +103,10 @@ class ReconstructionModel:
     #: neighbouring rays together while their values are in the cache.
     band_rows: ClassVar[int] = 1
     tile: ClassVar[int] = 0
+    #: Rows of a thread's work item when larger than ``band_rows`` (0: ``band_rows``): the
+    #: item's tiles are traced a column at a time, so rays that share voxels are traced close
+    #: in time (the tiles and their pixels stay the same).
+    work_rows: ClassVar[int] = 0
     #: Seconds a first render's kernels typically take to compile from an empty cache on a
     #: 2-core machine (an order of magnitude, shown to users while they wait).
     typical_compile_s: ClassVar[int] = 60

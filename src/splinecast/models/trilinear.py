@@ -350,6 +350,11 @@ class TrilinearModel(ReconstructionModel):
     #: they are in the cache (whole rows let them fall out before the next row needs them).
     band_rows = 8
     tile = 8
+    #: In the modes whose rays go through the volume (DVR, MIP) a thread traces 32 rows at a
+    #: time, a column of four tiles after another: a tile's neighbours then find the voxels
+    #: they share with it still in the cache (exact MIP 1.05-1.12x, DVR 1.01-1.14x faster
+    #: than a band of 8 rows across the image).
+    work_rows = 32
     #: The shading field reads this many voxels beyond a cell's support on each side
     #: (:mod:`.shading_field`): a brick's grid carries them as its halo.
     shading_halo = SHADING_HALO

@@ -380,7 +380,7 @@ def _trace_tile(band_a, band_b, mode, state, out, cut, view, tiles, n, ends, sea
         r1 = min(rects[p, 3], tr1)
         if c0 >= c1 or r0 >= r1:
             continue
-        rect = Rect(r0, r1, c0, c1, c1 - c0)
+        rect = Rect(r0, r1, c0, c1, c1 - c0, r1 - r0)
         if which[p, 0] == 0:
             pair_a = cut.grids_a[which[p, 1]]
             h, e = _drawable_pixels(band_a, pair_a, mode, state, out, cut, view, p, rect,

@@ -40,7 +40,9 @@ first-class function (:func:`splinecast._jit.bind_first_class`), so it compiles 
 Work is spread over threads in bands of ``band_rows`` rows: each thread (:mod:`.work_queue`)
 takes the next band of the order ``bands`` (a permutation that mixes busy and empty parts of the
 image) when it is free, and traverses it in tiles of ``tile`` columns so neighbouring rays reuse
-the model's per-thread caches.
+the model's per-thread caches. A model may hand out several bands at once (``work_rows``) to the
+modes whose rays go through the volume: the item is then traced a column of tiles at a time,
+the same tiles, so the same pixels.
 """
 
 from __future__ import annotations
@@ -109,9 +111,10 @@ footprint : ndarray, shape (tiles_y, tiles_x, 2) or (0, 0, 2)
     Per-tile parameter interval of the blocks the mode can see (:mod:`.footprint`), or none.
 """
 
-Rect = namedtuple("Rect", ("r0", "r1", "c0", "c1", "tile"))
-Rect.__doc__ = """Rows ``[r0, r1)`` x columns ``[c0, c1)`` of the image, traced ``tile``
-columns at a time (integers)."""
+Rect = namedtuple("Rect", ("r0", "r1", "c0", "c1", "tile", "rows"))
+Rect.__doc__ = """Rows ``[r0, r1)`` x columns ``[c0, c1)`` of the image, traced in tiles of
+``rows`` rows by ``tile`` columns (integers), a column of tiles after another, each column's
+tiles from top to bottom."""
 
 Passes = namedtuple("Passes", ("load", "store", "final", "count"))
 Passes.__doc__ = """What a trace does besides tracing (booleans): read the state arrays at the
@@ -128,10 +131,11 @@ Buffers.__doc__ = """One thread's scratch buffers for the pixel loop: the model'
 (:func:`splinecast.models.pieces.new_scratch`), the mode's (``mode_scratch``), and the piece
 boundaries (float64) and tags (int64) of one cell."""
 
-Bands = namedtuple("Bands", ("order", "rows", "tile", "counter"))
-Bands.__doc__ = """How the image loop hands out its work: bands of ``rows`` rows in the order
-``order`` (int64 array), each traced ``tile`` columns at a time, the next one taken from the
-shared one-element int64 array ``counter`` (:func:`.work_queue.take`)."""
+Bands = namedtuple("Bands", ("order", "rows", "tile", "counter", "group"))
+Bands.__doc__ = """How the image loop hands out its work: groups of ``group`` bands of ``rows``
+rows in the order ``order`` (int64 array), the next one taken from the shared one-element int64
+array ``counter`` (:func:`.work_queue.take`). A group of one band is traced ``tile`` columns at a
+time; a larger group one column of tiles at a time, its bands' tiles top to bottom."""
 
 Pixel = namedtuple("Pixel", ("row", "col", "width", "height"))
 Pixel.__doc__ = """Pixel ``(row, col)`` of an image (or tile) of ``width`` x ``height``
@@ -298,7 +302,7 @@ def _trace_band(grid, mode, blocks, state, out, setup, rect, passes, counters, b
     not traced (their states are passed on, and finished with ``final``).
     """
     basis, t_range, footprint = setup.basis, setup.t_range, setup.footprint
-    r0, r1, c0, c1, tile = rect
+    r0, r1, c0, c1, tile, rows = rect
     load, store, final, count = passes
     visited, tested, skipped = counters
     height, width = visited.shape
@@ -314,52 +318,63 @@ def _trace_band(grid, mode, blocks, state, out, setup, rect, passes, counters, b
     # of such tiles (a fresh state's outputs do not depend on the pixel; .outputs.copy_pixel).
     # Not when some pixels are to be left alone (``t_range``).
     fresh = footed and final and not load and not store and not ranged
+    # A rectangle one tile tall: a run of tiles where nothing projects gets one finished
+    # pixel copied over the whole run.
+    one_row = r1 - r0 <= rows
     tc0 = c0
     while tc0 < c1:
         tc1 = min(c1, tc0 + tile)
-        # Each tile's rays start from a fresh mode scratch (what a mode carries from one ray to
-        # the next, such as MIP's depth of the previous maximum): a pixel's result then depends
-        # only on the rays of its own tile, so any window of the image whose edges lie on tile
-        # and band boundaries (Camera.tile, the viewer's stripes, Dask's tiles) renders the
-        # same pixels as the whole image, whatever a mode does with its scratch.
-        tile_begin(mode, buffers.mode)
-        if fresh and _unseen(footprint, r0 + row0, r1 + row0, tc0 + col0, tc1 + col0, ty0, tx0):
-            end = tc1
-            while end < c1 and _unseen(footprint, r0 + row0, r1 + row0, end + col0,
-                                       min(c1, end + tile) + col0, ty0, tx0):
-                end = min(c1, end + tile)
-            _finish_fresh(mode, out, r0, tc0)
-            copy_pixel(out, r0, tc0, r0, r1, tc0, end)
-            tc0 = end
-            continue
-        for row in range(r0, r1):
-            for col in range(tc0, tc1):
-                if ranged and t_range[row, col, 0] > t_range[row, col, 1]:
-                    continue
-                if footed:
-                    ty = ((row + row0) >> FOOTPRINT_SHIFT) - ty0
-                    tx = ((col + col0) >> FOOTPRINT_SHIFT) - tx0
-                    t_lo = footprint[ty, tx, 0]
-                    t_hi = footprint[ty, tx, 1]
-                    if t_lo > t_hi:
-                        # Nothing the mode can see projects here: no ray to set up.
-                        if store or final:
-                            _pass_untraced(mode, state, out, basis, row, col, width, height,
-                                           load, store, final)
+        tr0 = r0
+        while tr0 < r1:
+            tr1 = min(r1, tr0 + rows)
+            # Each tile's rays start from a fresh mode scratch (what a mode carries from one
+            # ray to the next, such as MIP's depth of the previous maximum): a pixel's result
+            # then depends only on the rays of its own tile, so any window of the image whose
+            # edges lie on tile boundaries (Camera.tile, the viewer's stripes, Dask's tiles)
+            # renders the same pixels as the whole image, whatever a mode does with its
+            # scratch, and so does any order of the tiles.
+            tile_begin(mode, buffers.mode)
+            if fresh and _unseen(footprint, tr0 + row0, tr1 + row0, tc0 + col0, tc1 + col0,
+                                 ty0, tx0):
+                end = tc1
+                while one_row and end < c1 and _unseen(footprint, r0 + row0, r1 + row0,
+                                                       end + col0, min(c1, end + tile) + col0,
+                                                       ty0, tx0):
+                    end = min(c1, end + tile)
+                _finish_fresh(mode, out, tr0, tc0)
+                copy_pixel(out, tr0, tc0, tr0, tr1, tc0, end)
+                tc1 = end  # only ever past the tile in a rectangle one tile tall
+                tr0 = tr1
+                continue
+            for row in range(tr0, tr1):
+                for col in range(tc0, tc1):
+                    if ranged and t_range[row, col, 0] > t_range[row, col, 1]:
                         continue
-                nv, nt, ns = _trace_pixel(
-                    grid, mode, blocks, state, out, setup, passes, buffers,
-                    Pixel(row, col, width, height), (t_lo, t_hi), cells,
-                )
-                if count:
-                    visited[row, col] += nv
-                    tested[row, col] += nt
-                    skipped[row, col] += ns
+                    if footed:
+                        ty = ((row + row0) >> FOOTPRINT_SHIFT) - ty0
+                        tx = ((col + col0) >> FOOTPRINT_SHIFT) - tx0
+                        t_lo = footprint[ty, tx, 0]
+                        t_hi = footprint[ty, tx, 1]
+                        if t_lo > t_hi:
+                            # Nothing the mode can see projects here: no ray to set up.
+                            if store or final:
+                                _pass_untraced(mode, state, out, basis, row, col, width,
+                                               height, load, store, final)
+                            continue
+                    nv, nt, ns = _trace_pixel(
+                        grid, mode, blocks, state, out, setup, passes, buffers,
+                        Pixel(row, col, width, height), (t_lo, t_hi), cells,
+                    )
+                    if count:
+                        visited[row, col] += nv
+                        tested[row, col] += nt
+                        skipped[row, col] += ns
+            tr0 = tr1
         tc0 = tc1
 
 
 def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprint, bands,
-          band_rows, tile, load, store, final, count, visited, tested, skipped):
+          band_rows, tile, load, store, final, count, visited, tested, skipped, group=1):
     """Trace every pixel of the image (or tile) through ``grid`` with ``mode``.
 
     All parameters are prepared by the host side (:mod:`.segment`).
@@ -387,7 +402,8 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
         image the camera's pixels overlap (:func:`.footprint.block_footprint`), or none; rays
         of a tile it leaves empty are not traced.
     bands : ndarray of int64
-        Order of the bands of ``band_rows`` rows; ``tile`` columns per tile.
+        Order of the groups of ``group`` bands of ``band_rows`` rows (one thread's work item);
+        ``tile`` columns per tile.
     load, store, final : bool
         Read the state arrays at the start, write them at the end, write the outputs.
     count : bool
@@ -395,9 +411,12 @@ def trace(grid, mode, blocks, state, out, basis, geom, planes, t_range, footprin
         arrays that are only read for the image's size).
     visited, tested, skipped : ndarray of int32, shape (height, width)
         Per-ray statistics, incremented.
+    group : int
+        Bands per work item, traced a column of ``tile`` columns at a time (tiles of
+        ``band_rows`` x ``tile`` pixels, each traced as with one band: the same pixels).
     """
     args = (grid, mode, blocks, state, out, RaySetup(basis, geom, planes, t_range, footprint),
-            Bands(bands, int(band_rows), int(tile), np.zeros(1, np.int64)),
+            Bands(bands, int(band_rows), int(tile), np.zeros(1, np.int64), max(1, int(group))),
             Passes(bool(load), bool(store), bool(final), bool(count)),
             Counters(visited, tested, skipped))
     work = bind_first_class(_trace_image, pair_band(type(grid), type(mode)), _image_band_types,
@@ -453,18 +472,28 @@ def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, cou
     Each thread that runs it (:func:`.work_queue.run_on_threads`) takes the next band in the
     order ``bands.order`` when it is free (``bands.counter``: the shared counter; a
     :class:`Bands`): bands differ in cost by orders of magnitude, and a split fixed in advance
-    left one thread waiting for the other."""
+    left one thread waiting for the other.
+
+    A work item of several bands (``bands.group``) is one call of the band over all their
+    rows, which traces it one column of tiles at a time, each column's tiles from top to
+    bottom: rays close on the screen, which read the same voxels, are then traced close in
+    time, while those voxels are still in the core's cache (a band traced tile by tile across
+    the whole image had let the voxels its neighbours share fall out of it before the band
+    below needed them). The tiles are the bands' (the mode's scratch reset at the start of
+    each), so the pixels are the same."""
     height, width = counters.visited.shape
     # The first column as a variable: a constant argument is typed as a literal, which would
     # compile a band of its own instead of the one the cut renderer shares (.cut_driver).
     first = width - width
+    rows, tile, group = bands.rows, bands.tile, bands.group
     while True:
         b = take(bands.counter)
         if b >= bands.order.shape[0]:
             break
-        r0 = bands.order[b] * bands.rows
+        r0 = bands.order[b] * rows * group
         band(grid, mode, blocks, state, out, setup,
-             Rect(r0, min(height, r0 + bands.rows), first, width, bands.tile), passes, counters,
+             Rect(r0, min(height, r0 + rows * group), first, width, tile, rows), passes,
+             counters,
              Buffers(new_scratch(grid), mode_scratch(mode), np.empty(8), np.empty(8, np.int64)))
 
 

@@ -243,7 +243,8 @@ DEFAULT_SETTINGS = DVRSettings(step=1.0, sampling="ray", termination=1.0 - 2.0**
 DvrMode = namedtuple("DvrMode", [
     "prefix", "p_lo", "p_scale", "pi_mode", "table", "h0", "t_lo", "t_scale", "lut",
     "l_scale", "adaptive", "h_max", "exponent", "term", "shade", "ambient", "diffuse",
-    "bg_r", "bg_g", "bg_b", "bg_a", "pieces", "clear_below", "clear_above"])
+    "bg_r", "bg_g", "bg_b", "bg_a", "pieces", "clear_below", "clear_above", "zero_below",
+    "zero_above"])
 
 #: The same parameters for ``sampling="ray"``: another class, so the driver runs the fixed-step
 #: loop of :mod:`.sampler` for it.
@@ -601,6 +602,11 @@ def _segment(mode, grid, scratch, st, ray, stretch):
         top = table.shape[1] - 1.0
         uf = min(max((va - mode.t_lo) * mode.t_scale, 0.0), top)
         ub = min(max((vb - mode.t_lo) * mode.t_scale, 0.0), top)
+        if (uf < mode.zero_below and ub < mode.zero_below) or (
+                uf >= mode.zero_above and ub >= mode.zero_above):
+            # All four entries the lookup would read have opacity 0 (_zero_corners): the
+            # segment is transparent, as the lookup would find, without reading the table.
+            return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
         r, g, b, a = table_rgba(table, 0, table_cell(table, uf, ub))
         if not a > 0.0:
             return acc_r, acc_g, acc_b, acc_a, t_half, samples, t_next
@@ -629,6 +635,9 @@ register(DvrRayMode, sample_step=_sample_step, segment=_segment, **_HOOKS)
 
 #: Key of the "ray" sampling's footprint flags in the render cache (see Dvr.footprint_flags).
 _SEGMENT_BLOCKS = "segment blocks"
+
+#: Key of the table's transparent corners in the render cache (see _zero_corners).
+_ZERO_CORNERS = "zero corners"
 
 
 def _segment_blocks(mode: Any, visible: np.ndarray, lows: np.ndarray,
@@ -710,6 +719,8 @@ class Dvr(ModeHost):
     """
 
     name = "dvr"
+    #: Rays composite through the volume (ModeHost.deep_rays).
+    deep_rays = True
     #: The depth of a sort-last pixel is where the opacity in front crosses the threshold,
     #: which only the composited shares in front of a share know.
     refines_depth_after_compositing = True
@@ -759,13 +770,19 @@ class Dvr(ModeHost):
         term = 2.0 if settings.termination is None else float(settings.termination)
         bg = np.asarray(background, np.float64).reshape(4)
         params_class = DvrRayMode if settings.sampling == "ray" else DvrMode
+        # Computed once per table (a millisecond or two): kept with the table it is for.
+        found = cache.get(_ZERO_CORNERS)
+        if found is None or found[0] is not table:
+            found = (table, _zero_corners(table[0, :, :, 3]))
+            cache[_ZERO_CORNERS] = found
+        zero_below, zero_above = found[1]
         self.params = params_class(
             prefix, lo, (prefix.shape[0] - 1) / (hi - lo), pi_mode, table, float(settings.step),
             lo, (table.shape[1] - 1) / (hi - lo), lut, (lut.shape[0] - 1) / (hi - lo),
             bool(settings.adaptive), float(settings.h_max), float(settings.exponent), term,
             bool(settings.shade), float(settings.ambient), float(settings.diffuse),
             float(bg[0]), float(bg[1]), float(bg[2]), float(bg[3]),
-            settings.sampling == "pieces", *tf.clear_ends())
+            settings.sampling == "pieces", *tf.clear_ends(), zero_below, zero_above)
 
     def blocks(self, hierarchy: Any, flags: tuple | None = None) -> tuple:
         """Flags of the blocks whose value range meets a visible part of the transfer function,
@@ -832,6 +849,29 @@ class Dvr(ModeHost):
                      np.zeros((h, w), np.int8) if "face" in o else None, *counters, stats)
 
     combine = staticmethod(combine_dvr)
+
+
+def _zero_corners(alpha: np.ndarray) -> tuple[float, float]:
+    """Where a bilinear lookup of the 2D table ``alpha`` (opacity, ``(n, n)``) at value indices
+    ``(uf, ub)`` reads only entries of opacity 0: ``(below, above)`` such that it does when
+    both indices are below ``below`` or both at least ``above`` (the corners of
+    :func:`~splinecast.preintegration.table_cell` are ``int(u)`` and ``int(u) + 1``, with
+    ``int(u)`` at most ``n - 2``). A transfer function that is transparent below or above some
+    value (the automatic one, below its isovalue) has such corners: segments there need no
+    lookup. ``(-inf, inf)`` where there are none."""
+    n = alpha.shape[0]
+    rows, cols = np.nonzero(alpha)
+    if rows.size == 0:
+        return math.inf, math.inf
+    # Entries with both indices below the smallest max(i, j) of a non-zero entry are zero; a
+    # lookup's corners are when int(u) + 1 is below it, which u < smallest - 1 gives.
+    below = float(np.min(np.maximum(rows, cols))) - 1.0
+    # Entries with both indices above the largest min(i, j) of a non-zero entry are zero;
+    # a lookup's corners are when int(u) is above it, which u >= largest + 1 gives unless
+    # int(u) is clamped to n - 2 below that.
+    top = int(np.max(np.minimum(rows, cols))) + 1
+    above = float(top) if top <= n - 2 else math.inf
+    return below, above
 
 
 def _table(tf: TransferFunction, settings: DVRSettings, cache: dict) -> np.ndarray:

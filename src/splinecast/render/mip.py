@@ -442,6 +442,9 @@ class Mip(ModeHost):
         the projected values, so ``"rgba"`` computes them even when ``"value"`` is not kept.
     """
 
+    #: Rays go through the volume (ModeHost.deep_rays).
+    deep_rays = True
+
     def blocks_key(self) -> Hashable:
         """Which extremum: the blocks depend on the grid's ranges alone."""
         return ("mip", float(self.params.sign))

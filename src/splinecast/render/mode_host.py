@@ -29,6 +29,11 @@ class ModeHost:
     #: are applied on the host from the hit's position, normal and face after tracing (the
     #: first-hit isosurface; several isosurfaces apply them in their kernels).
     effects_after_tracing: bool = False
+    #: Whether the mode's rays go deep into the volume (they do not stop at a first hit), so
+    #: rays of neighbouring tiles share many voxels: a thread then traces the model's work
+    #: items of several bands (``work_rows``) a column of tiles at a time, while the voxels
+    #: they share are in the cache. Rays that stop at a surface gain nothing from it.
+    deep_rays: bool = False
 
     def blocks_key(self) -> Hashable | None:
         """What the mode's block selection (``blocks``) depends on besides the grid; None when

@@ -63,6 +63,8 @@ class Grid:
         Cells of the grid per axis.
     band_rows, tile : int
         How the driver cuts the image into work (see :mod:`.driver`; ``tile = 0``: whole rows).
+    work_rows : int
+        Rows of a thread's work item, traced a column of tiles at a time (0: ``band_rows``).
     """
 
     kernel: tuple
@@ -71,13 +73,15 @@ class Grid:
     n_cells: tuple[int, int, int]
     band_rows: int = 1
     tile: int = 0
+    work_rows: int = 0
 
     def __post_init__(self) -> None:
         self.kernel = read_only_kernel(self.kernel)
 
     def with_kernel(self, kernel: tuple) -> Grid:
         """The same grid with another kernel tuple of the same cells (e.g. iso-classified)."""
-        return Grid(kernel, self.hierarchy, self.geom, self.n_cells, self.band_rows, self.tile)
+        return Grid(kernel, self.hierarchy, self.geom, self.n_cells, self.band_rows, self.tile,
+                    self.work_rows)
 
     def with_domain(self, lo: Any, hi: Any) -> Grid:
         """The same grid rendering only the part of its domain inside the box ``[lo, hi]``
@@ -87,7 +91,8 @@ class Grid:
         low, high = slice(GEOM_LO, GEOM_LO + 3), slice(GEOM_HI, GEOM_HI + 3)
         geom[low] = np.maximum(geom[low], np.asarray(lo, np.float64))
         geom[high] = np.minimum(geom[high], np.asarray(hi, np.float64))
-        return Grid(self.kernel, self.hierarchy, geom, self.n_cells, self.band_rows, self.tile)
+        return Grid(self.kernel, self.hierarchy, geom, self.n_cells, self.band_rows, self.tile,
+                    self.work_rows)
 
 
 def read_only_kernel(kernel: tuple) -> tuple:
@@ -165,7 +170,7 @@ def make_grid(model: Any, array: np.ndarray | None = None, offset: Any = (0, 0, 
     else:
         kernel = model.kernel_grid(arr)
     return Grid(kernel, _hierarchy(model, arr, n_cells), geom, n_cells,
-                model.band_rows, model.tile)
+                model.band_rows, model.tile, model.work_rows)
 
 
 def brick_grid(model: Any, lo: Any, hi: Any) -> Grid:
@@ -200,10 +205,15 @@ def _run(grid: Grid, mode: Any, camera: Any, blocks: tuple, state: tuple, out: t
     h, w = camera.height, camera.width
     band_rows = max(1, grid.band_rows)
     tile = grid.tile if grid.tile > 0 else w
-    bands = band_order((h + band_rows - 1) // band_rows)
+    # Bands per work item (traced a column of tiles at a time): only with tiles narrower than
+    # the image, for modes whose rays go deep into the volume.
+    deep = bool(getattr(mode, "deep_rays", False))
+    group = max(1, grid.work_rows // band_rows) if tile < w and deep else 1
+    n_bands = (h + band_rows - 1) // band_rows
+    bands = band_order((n_bands + group - 1) // group)
     trace(grid.kernel, mode.params, blocks, state, out, camera.pixel_basis(), grid.geom,
           np.ascontiguousarray(planes, np.float64), t_range, footprint, bands, band_rows, tile,
-          load, store, final, count, *stats)
+          load, store, final, count, *stats, group=group)
 
 
 def screen_footprint(grid: Grid, mode: Any, camera: Any, blocks: tuple) -> np.ndarray:
