@@ -207,7 +207,7 @@ def _run(grid: Grid, mode: Any, camera: Any, blocks: tuple, state: tuple, out: t
     tile = grid.tile if grid.tile > 0 else w
     # Bands per work item (traced a column of tiles at a time): only with tiles narrower than
     # the image, for modes whose rays go deep into the volume.
-    deep = bool(getattr(mode, "deep_rays", False))
+    deep = bool(mode.deep_rays)
     group = max(1, grid.work_rows // band_rows) if tile < w and deep else 1
     n_bands = (h + band_rows - 1) // band_rows
     bands = band_order((n_bands + group - 1) // group)
