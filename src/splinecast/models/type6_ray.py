@@ -59,7 +59,7 @@ from .type6_geometry import Type6Program, tet_of_point
 __all__ = ["split_cube_segment", "CACHE_ENTRIES", "fill_cube"]
 
 #: Cubes a thread keeps computed (128 x 175 float64 = 179 KB for S31: fits L2).
-CACHE_ENTRIES = 128
+CACHE_ENTRIES = 512
 
 
 @jit(inline="always")
@@ -260,8 +260,8 @@ def _cube_row(grid, scratch, slot, i, j, k):
     if slot >= 0 and grid.coeffs.shape[0] > 0:
         return grid.coeffs[slot]
     keys, cache = scratch[0], scratch[1]
-    # Direct-mapped by the low bits of the cube index: distinct within any 4 x 4 x 8 cubes.
-    entry = ((i & 3) << 5) | ((j & 3) << 3) | (k & 7)
+    # Direct-mapped by the low bits of the cube index: distinct within any 8 x 8 x 8 cubes.
+    entry = ((i & 7) << 6) | ((j & 7) << 3) | (k & 7)
     ny, nz = grid.pad.shape[1] - 2, grid.pad.shape[2] - 2
     lin = (np.int64(i) * ny + j) * nz + k
     buf = cache[entry]
