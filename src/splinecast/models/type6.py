@@ -70,6 +70,8 @@ __all__ = [
     "ray_bernstein2",
     "ray_bernstein3_at",
     "ray_bernstein2_at",
+    "bernstein3_value_at",
+    "bernstein2_value_at",
     "gather27_lane",
     "rounding_tolerance",
     "RELATIVE_ROUNDING",
@@ -285,9 +287,7 @@ def ray_bernstein3_at(
 
     Read in place from a cube's coefficient row (``idx`` the tetrahedron's row of the
     tables' ``tet_points``): copying the 20 coefficients first cost a store and a load each.
-    Straight-line code keeps every intermediate in registers. With ``e = a`` the first value is
-    the patch's value at ``a``, computed as :func:`value_gradient` computes it (the same
-    products and sums in the same order), and the compiler drops the rest.
+    Straight-line code keeps every intermediate in registers.
     """
     c0, c1, c2, c3, c4 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]], row[idx[4]]
     c5, c6, c7, c8, c9 = row[idx[5]], row[idx[6]], row[idx[7]], row[idx[8]], row[idx[9]]
@@ -331,6 +331,51 @@ def ray_bernstein3_at(
     u2 = e0 * ae0 + e1 * ae1 + e2 * ae2 + e3 * ae3
     u3 = e0 * ee0 + e1 * ee1 + e2 * ee2 + e3 * ee3
     return u0, u1, u2, u3
+
+
+@jit(inline="always")
+def bernstein3_value_at(row: np.ndarray, idx: np.ndarray, l0: float, l1: float, l2: float,
+                        l3: float) -> float:
+    """The cubic patch whose coefficient ``n`` is ``row[idx[n]]`` at barycentric ``l``:
+    :func:`ray_bernstein3_at`'s first value with ``e = a`` (the same products and sums in the
+    same order, so the same number as :func:`value_gradient`'s value), written out alone.
+
+    The fixed-step loop inlines the value at several places; the blossom's other three
+    values, which the compiler drops anyway, doubled the time its kernel took to compile."""
+    c0, c1, c2, c3, c4 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]], row[idx[4]]
+    c5, c6, c7, c8, c9 = row[idx[5]], row[idx[6]], row[idx[7]], row[idx[8]], row[idx[9]]
+    c10, c11, c12, c13 = row[idx[10]], row[idx[11]], row[idx[12]], row[idx[13]]
+    c14, c15, c16, c17 = row[idx[14]], row[idx[15]], row[idx[16]], row[idx[17]]
+    c18, c19 = row[idx[18]], row[idx[19]]
+    p0 = l0 * c0 + l1 * c1 + l2 * c2 + l3 * c3
+    p1 = l0 * c1 + l1 * c4 + l2 * c5 + l3 * c6
+    p2 = l0 * c2 + l1 * c5 + l2 * c7 + l3 * c8
+    p3 = l0 * c3 + l1 * c6 + l2 * c8 + l3 * c9
+    p4 = l0 * c4 + l1 * c10 + l2 * c11 + l3 * c12
+    p5 = l0 * c5 + l1 * c11 + l2 * c13 + l3 * c14
+    p6 = l0 * c6 + l1 * c12 + l2 * c14 + l3 * c15
+    p7 = l0 * c7 + l1 * c13 + l2 * c16 + l3 * c17
+    p8 = l0 * c8 + l1 * c14 + l2 * c17 + l3 * c18
+    p9 = l0 * c9 + l1 * c15 + l2 * c18 + l3 * c19
+    q0 = l0 * p0 + l1 * p1 + l2 * p2 + l3 * p3
+    q1 = l0 * p1 + l1 * p4 + l2 * p5 + l3 * p6
+    q2 = l0 * p2 + l1 * p5 + l2 * p7 + l3 * p8
+    q3 = l0 * p3 + l1 * p6 + l2 * p8 + l3 * p9
+    return l0 * q0 + l1 * q1 + l2 * q2 + l3 * q3
+
+
+@jit(inline="always")
+def bernstein2_value_at(row: np.ndarray, idx: np.ndarray, l0: float, l1: float, l2: float,
+                        l3: float) -> float:
+    """:func:`bernstein3_value_at` for a quadratic patch (:func:`ray_bernstein2_at`'s first
+    value with ``e = a``)."""
+    c0, c1, c2, c3, c4 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]], row[idx[4]]
+    c5, c6, c7, c8, c9 = row[idx[5]], row[idx[6]], row[idx[7]], row[idx[8]], row[idx[9]]
+    p0 = l0 * c0 + l1 * c1 + l2 * c2 + l3 * c3
+    p1 = l0 * c1 + l1 * c4 + l2 * c5 + l3 * c6
+    p2 = l0 * c2 + l1 * c5 + l2 * c7 + l3 * c8
+    p3 = l0 * c3 + l1 * c6 + l2 * c8 + l3 * c9
+    return l0 * p0 + l1 * p1 + l2 * p2 + l3 * p3
 
 
 @jit(inline="always")

@@ -50,6 +50,8 @@ from .type6 import (
     QSSGrid,
     S31Grid,
     barycentric,
+    bernstein2_value_at,
+    bernstein3_value_at,
     ray_bernstein2_at,
     ray_bernstein3_at,
     value_gradient,
@@ -422,12 +424,12 @@ def _locate(grid, x, y, z):
 
 @jit()
 def _value_at3(grid, scratch, x, y, z):
-    # The value alone (the fixed-step loop takes one per sample): the first level of the
-    # blossom at (q, q, q), read in place; the same number value_gradient_at returns.
+    # The value alone (the fixed-step loop takes one per sample), read in place: the same
+    # number value_gradient_at returns, without copying the coefficients or the gradient.
     i, j, k, tet, qx, qy, qz = _locate(grid, x, y, z)
     row = _cube_row(grid, scratch, np.int64(-1), i, j, k)
     l0, l1, l2, l3 = barycentric(grid.bary, tet, qx, qy, qz)
-    return ray_bernstein3_at(row, grid.tet_points[tet], l0, l1, l2, l3, l0, l1, l2, l3)[0]
+    return bernstein3_value_at(row, grid.tet_points[tet], l0, l1, l2, l3)
 
 
 @jit()
@@ -435,7 +437,7 @@ def _value_at2(grid, scratch, x, y, z):
     i, j, k, tet, qx, qy, qz = _locate(grid, x, y, z)
     row = _cube_row(grid, scratch, np.int64(-1), i, j, k)
     l0, l1, l2, l3 = barycentric(grid.bary, tet, qx, qy, qz)
-    return ray_bernstein2_at(row, grid.tet_points[tet], l0, l1, l2, l3, l0, l1, l2, l3)[0]
+    return bernstein2_value_at(row, grid.tet_points[tet], l0, l1, l2, l3)
 
 
 @jit()

@@ -21,9 +21,9 @@ projection is the same computation on the negated field.
 
 Two more prunings leave the answer bit-identical (``tests/test_mip.py``): a tested piece whose
 Bernstein control points cannot beat the running maximum, or lie below the lower bound, is
-dropped before the roots of its derivative are solved for, and after a tested cell the driver asks for the skip size again
-(``asks_again``), so a ray whose maximum reached its block's (plateaus of equal values, as in CT
-and MRI) leaps the rest of the block.
+dropped before the roots of its derivative are solved for, and after a tested cell the driver
+asks for the skip size again (``asks_again``), so a ray whose maximum reached its block's
+(plateaus of equal values, as in CT and MRI) leaps the rest of the block.
 
 With a tolerance ``e`` (``Mip(tolerance=...)``, a fraction of the display window), the exact
 method leaves out every block, cell and piece whose maximum does not beat the running maximum
