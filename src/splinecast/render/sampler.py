@@ -64,7 +64,6 @@ from .mode_api import (
     done,
     entry_left_out,
     finish,
-    never,
     sample_planes,
     sample_step,
     segment,
@@ -82,11 +81,6 @@ __all__ = ["sample_pixel", "bound_sample_pixel"]
 #: Whether :func:`sample_pixel` compiles the look-ahead code (its model's ``look_ahead`` may be
 #: true); :func:`bound_sample_pixel` binds the pair's constant in its copy.
 _LOOK_AHEAD = True
-
-#: Whether :func:`sample_pixel` compiles the loop on planes (its mode's ``sample_planes`` may be
-#: true); :func:`bound_sample_pixel` binds False for a mode that never samples on planes (DVR),
-#: whose kernel then leaves out that loop's five inlined value reads.
-_PLANES = True
 
 #: How many samples beyond the look-ahead's the run loop prefetches the voxels of.
 _PREFETCH = 7.0
@@ -228,7 +222,7 @@ def sample_pixel(grid, mode, blocks, state, out, setup, passes, buffers, pixel, 
     if t0 <= t1 and not done(mode, st):
         ta, t_far = clip_to_box(ox, oy, oz, dx, dy, dz, ncx, ncy, ncz, t0, t1)
         speed = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if _PLANES and ta <= t_far and speed > 0.0 and axis >= 0:
+        if ta <= t_far and speed > 0.0 and axis >= 0:
             st, evaluated, taken, leaps = _plane_samples(
                 grid, mode, st, scr, ray, ta, t_far, speed, samples)
         elif ta <= t_far and speed > 0.0:
@@ -394,9 +388,7 @@ def bound_sample_pixel(bindings: dict, suffix: str) -> Any:
     # The model's look_ahead is a constant (models.pieces): known here, the code of the other
     # case is left out of the pair's kernel when it compiles.
     hook = bindings.get("look_ahead")
-    planes = bindings.get("sample_planes")
-    bindings = {**bindings, "_LOOK_AHEAD": hook is not None and bool(hook.py_func(None)),
-                "_PLANES": planes is None or planes.py_func is not never}
+    bindings = {**bindings, "_LOOK_AHEAD": hook is not None and bool(hook.py_func(None))}
     where = rebound(_sample_grid, bindings, suffix)
     on_plane = rebound(_on_plane, bindings, suffix)
     planes = rebound(_plane_samples, {**bindings, "_on_plane": on_plane}, suffix)
