@@ -30,6 +30,10 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
   arrays it needs) is inlined into the driver's loop, which keeps no reference counts
   (:mod:`splinecast.render.driver`); a hook called out of line would still increment and
   decrement the count of every array of the grid and the scratch tuple (about 19 here).
+* **In place.** Ranges, ray polynomials and values read a tetrahedron's 20 (10) coefficients
+  from the cube's row through the tables' ``tet_points``, without copying them first; the
+  fixed-step loop's ``value_at`` evaluates the value alone (:func:`.type6.bernstein3_value_at`,
+  the same number as the value of ``value_gradient_at``).
 * **Normals** come from the de Casteljau directional derivatives of the piece's patch.
 """
 
