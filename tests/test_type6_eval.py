@@ -309,3 +309,48 @@ def test_cube_segments_are_cut_at_every_tetrahedron_face_in_order():
                 continue
             tets = {tet_of_point(*(a[m] + s * e[m])) for s in np.linspace(s0, s1, 7)[1:-1]}
             assert len(tets) == 1, (m, p, tets)
+
+
+@pytest.mark.parametrize("kind", ["s31", "qss"])
+def test_value_at_is_the_value_of_value_gradient_at(kind):
+    """The value-only hook of the fixed-step loop (coefficients read in place from the cube
+    cache) against the value of ``value_gradient_at`` (a copy of the tetrahedron's
+    coefficients and a de Casteljau evaluation with gradient) to the last bit, and against
+    the sparse rules' evaluation (``evaluate_in_tets``), at random points in random order (so
+    the thread's cube cache both misses and hits), on tetrahedron faces and outside the
+    spline's box (clamped)."""
+    from splinecast._jit import jit
+    from splinecast.models.pieces import new_scratch, value_at, value_gradient_at
+
+    @jit()
+    def values(grid, points):
+        scratch = new_scratch(grid)
+        out = np.empty((points.shape[0], 2))
+        for n in range(points.shape[0]):
+            x, y, z = points[n, 0], points[n, 1], points[n, 2]
+            out[n, 0] = value_at(grid, scratch, x, y, z)
+            out[n, 1] = value_gradient_at(grid, scratch, x, y, z)[0]
+        return out
+
+    data = RNG.normal(size=(7, 6, 9))
+    scene = sc.Scene(sc.Volume(data), model=kind)
+    model, grid = scene.model, scene.grid.kernel
+    shape = np.array(data.shape)
+    # Traversal space (index + 1/2, the box [0, n]), a little beyond it on every side.
+    points = RNG.uniform(-0.4, shape + 0.4, size=(3000, 3))
+    # On the planes between tetrahedra (|qx| = |qy| and the like) and on cube faces.
+    cubes = np.floor(points[:600]).astype(float)
+    q = points[:600] - cubes - 0.5
+    q[:200, 1] = np.copysign(q[:200, 0], q[:200, 1])
+    q[200:400, 2] = -q[200:400, 0]
+    q[400:500, 0] = 0.5
+    points[:600] = cubes + 0.5 + q
+    points[500:600] = np.round(points[500:600])
+    got = values(grid, points)
+    np.testing.assert_array_equal(got[:, 0], got[:, 1])
+    # Inside the box, the sparse rules' value of the same cube and tetrahedron.
+    inside = np.all((points >= 0) & (points <= shape), axis=1)
+    cube, tet, loc = locate(points[inside] - 0.5, shape)
+    ref, _ = _eval(model, cube, tet, loc)
+    assert inside.sum() > 1000 and np.ptp(ref) > 1.0
+    np.testing.assert_allclose(got[inside, 0], ref, rtol=0, atol=1e-12)

@@ -68,6 +68,10 @@ __all__ = [
     "barycentric",
     "ray_bernstein3",
     "ray_bernstein2",
+    "ray_bernstein3_at",
+    "ray_bernstein2_at",
+    "bernstein3_value_at",
+    "bernstein2_value_at",
     "gather27_lane",
     "rounding_tolerance",
     "RELATIVE_ROUNDING",
@@ -256,6 +260,11 @@ def barycentric(bary: np.ndarray, tet: int, x: float, y: float, z: float
             b[tet, 3, 0] * x + b[tet, 3, 1] * y + b[tet, 3, 2] * z + b[tet, 3, 3])
 
 
+#: Coefficient numbers of a tetrahedron in order: what :func:`ray_bernstein3` and
+#: :func:`ray_bernstein2` read their coefficient array through.
+_IDENTITY = np.arange(20, dtype=np.int64)
+
+
 @jit(inline="always")
 def ray_bernstein3(
     c: np.ndarray, a0: float, a1: float, a2: float, a3: float,
@@ -264,29 +273,47 @@ def ray_bernstein3(
     """:func:`ray_bernstein` for a cubic, unrolled (indices from ``decasteljau_tables(3)``).
 
     ``a`` and ``e`` are the barycentric coordinates of the segment's end points; the result
-    is the blossom at ``(a, a, a)``, ``(a, a, e)``, ``(a, e, e)``, ``(e, e, e)``. Straight-line
-    code keeps every intermediate in registers.
+    is the blossom at ``(a, a, a)``, ``(a, a, e)``, ``(a, e, e)``, ``(e, e, e)``.
     """
-    pa0 = a0 * c[0] + a1 * c[1] + a2 * c[2] + a3 * c[3]
-    pa1 = a0 * c[1] + a1 * c[4] + a2 * c[5] + a3 * c[6]
-    pa2 = a0 * c[2] + a1 * c[5] + a2 * c[7] + a3 * c[8]
-    pa3 = a0 * c[3] + a1 * c[6] + a2 * c[8] + a3 * c[9]
-    pa4 = a0 * c[4] + a1 * c[10] + a2 * c[11] + a3 * c[12]
-    pa5 = a0 * c[5] + a1 * c[11] + a2 * c[13] + a3 * c[14]
-    pa6 = a0 * c[6] + a1 * c[12] + a2 * c[14] + a3 * c[15]
-    pa7 = a0 * c[7] + a1 * c[13] + a2 * c[16] + a3 * c[17]
-    pa8 = a0 * c[8] + a1 * c[14] + a2 * c[17] + a3 * c[18]
-    pa9 = a0 * c[9] + a1 * c[15] + a2 * c[18] + a3 * c[19]
-    pe0 = e0 * c[0] + e1 * c[1] + e2 * c[2] + e3 * c[3]
-    pe1 = e0 * c[1] + e1 * c[4] + e2 * c[5] + e3 * c[6]
-    pe2 = e0 * c[2] + e1 * c[5] + e2 * c[7] + e3 * c[8]
-    pe3 = e0 * c[3] + e1 * c[6] + e2 * c[8] + e3 * c[9]
-    pe4 = e0 * c[4] + e1 * c[10] + e2 * c[11] + e3 * c[12]
-    pe5 = e0 * c[5] + e1 * c[11] + e2 * c[13] + e3 * c[14]
-    pe6 = e0 * c[6] + e1 * c[12] + e2 * c[14] + e3 * c[15]
-    pe7 = e0 * c[7] + e1 * c[13] + e2 * c[16] + e3 * c[17]
-    pe8 = e0 * c[8] + e1 * c[14] + e2 * c[17] + e3 * c[18]
-    pe9 = e0 * c[9] + e1 * c[15] + e2 * c[18] + e3 * c[19]
+    return ray_bernstein3_at(c, _IDENTITY, a0, a1, a2, a3, e0, e1, e2, e3)
+
+
+@jit(inline="always")
+def ray_bernstein3_at(
+    row: np.ndarray, idx: np.ndarray, a0: float, a1: float, a2: float, a3: float,
+    e0: float, e1: float, e2: float, e3: float,
+) -> tuple[float, float, float, float]:
+    """:func:`ray_bernstein3` of the tetrahedron whose coefficient ``n`` is ``row[idx[n]]``.
+
+    Read in place from a cube's coefficient row (``idx`` the tetrahedron's row of the
+    tables' ``tet_points``): copying the 20 coefficients first cost a store and a load each.
+    Straight-line code keeps every intermediate in registers.
+    """
+    c0, c1, c2, c3, c4 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]], row[idx[4]]
+    c5, c6, c7, c8, c9 = row[idx[5]], row[idx[6]], row[idx[7]], row[idx[8]], row[idx[9]]
+    c10, c11, c12, c13 = row[idx[10]], row[idx[11]], row[idx[12]], row[idx[13]]
+    c14, c15, c16, c17 = row[idx[14]], row[idx[15]], row[idx[16]], row[idx[17]]
+    c18, c19 = row[idx[18]], row[idx[19]]
+    pa0 = a0 * c0 + a1 * c1 + a2 * c2 + a3 * c3
+    pa1 = a0 * c1 + a1 * c4 + a2 * c5 + a3 * c6
+    pa2 = a0 * c2 + a1 * c5 + a2 * c7 + a3 * c8
+    pa3 = a0 * c3 + a1 * c6 + a2 * c8 + a3 * c9
+    pa4 = a0 * c4 + a1 * c10 + a2 * c11 + a3 * c12
+    pa5 = a0 * c5 + a1 * c11 + a2 * c13 + a3 * c14
+    pa6 = a0 * c6 + a1 * c12 + a2 * c14 + a3 * c15
+    pa7 = a0 * c7 + a1 * c13 + a2 * c16 + a3 * c17
+    pa8 = a0 * c8 + a1 * c14 + a2 * c17 + a3 * c18
+    pa9 = a0 * c9 + a1 * c15 + a2 * c18 + a3 * c19
+    pe0 = e0 * c0 + e1 * c1 + e2 * c2 + e3 * c3
+    pe1 = e0 * c1 + e1 * c4 + e2 * c5 + e3 * c6
+    pe2 = e0 * c2 + e1 * c5 + e2 * c7 + e3 * c8
+    pe3 = e0 * c3 + e1 * c6 + e2 * c8 + e3 * c9
+    pe4 = e0 * c4 + e1 * c10 + e2 * c11 + e3 * c12
+    pe5 = e0 * c5 + e1 * c11 + e2 * c13 + e3 * c14
+    pe6 = e0 * c6 + e1 * c12 + e2 * c14 + e3 * c15
+    pe7 = e0 * c7 + e1 * c13 + e2 * c16 + e3 * c17
+    pe8 = e0 * c8 + e1 * c14 + e2 * c17 + e3 * c18
+    pe9 = e0 * c9 + e1 * c15 + e2 * c18 + e3 * c19
     aa0 = a0 * pa0 + a1 * pa1 + a2 * pa2 + a3 * pa3
     aa1 = a0 * pa1 + a1 * pa4 + a2 * pa5 + a3 * pa6
     aa2 = a0 * pa2 + a1 * pa5 + a2 * pa7 + a3 * pa8
@@ -307,19 +334,76 @@ def ray_bernstein3(
 
 
 @jit(inline="always")
+def bernstein3_value_at(row: np.ndarray, idx: np.ndarray, l0: float, l1: float, l2: float,
+                        l3: float) -> float:
+    """The cubic patch whose coefficient ``n`` is ``row[idx[n]]`` at barycentric ``l``:
+    :func:`ray_bernstein3_at`'s first value with ``e = a`` (the same products and sums in the
+    same order, so the same number as :func:`value_gradient`'s value), written out alone.
+
+    The fixed-step loop inlines the value at several places; the blossom's other three
+    values, which the compiler drops anyway, doubled the time its kernel took to compile."""
+    c0, c1, c2, c3, c4 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]], row[idx[4]]
+    c5, c6, c7, c8, c9 = row[idx[5]], row[idx[6]], row[idx[7]], row[idx[8]], row[idx[9]]
+    c10, c11, c12, c13 = row[idx[10]], row[idx[11]], row[idx[12]], row[idx[13]]
+    c14, c15, c16, c17 = row[idx[14]], row[idx[15]], row[idx[16]], row[idx[17]]
+    c18, c19 = row[idx[18]], row[idx[19]]
+    p0 = l0 * c0 + l1 * c1 + l2 * c2 + l3 * c3
+    p1 = l0 * c1 + l1 * c4 + l2 * c5 + l3 * c6
+    p2 = l0 * c2 + l1 * c5 + l2 * c7 + l3 * c8
+    p3 = l0 * c3 + l1 * c6 + l2 * c8 + l3 * c9
+    p4 = l0 * c4 + l1 * c10 + l2 * c11 + l3 * c12
+    p5 = l0 * c5 + l1 * c11 + l2 * c13 + l3 * c14
+    p6 = l0 * c6 + l1 * c12 + l2 * c14 + l3 * c15
+    p7 = l0 * c7 + l1 * c13 + l2 * c16 + l3 * c17
+    p8 = l0 * c8 + l1 * c14 + l2 * c17 + l3 * c18
+    p9 = l0 * c9 + l1 * c15 + l2 * c18 + l3 * c19
+    q0 = l0 * p0 + l1 * p1 + l2 * p2 + l3 * p3
+    q1 = l0 * p1 + l1 * p4 + l2 * p5 + l3 * p6
+    q2 = l0 * p2 + l1 * p5 + l2 * p7 + l3 * p8
+    q3 = l0 * p3 + l1 * p6 + l2 * p8 + l3 * p9
+    return l0 * q0 + l1 * q1 + l2 * q2 + l3 * q3
+
+
+@jit(inline="always")
+def bernstein2_value_at(row: np.ndarray, idx: np.ndarray, l0: float, l1: float, l2: float,
+                        l3: float) -> float:
+    """:func:`bernstein3_value_at` for a quadratic patch (:func:`ray_bernstein2_at`'s first
+    value with ``e = a``)."""
+    c0, c1, c2, c3, c4 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]], row[idx[4]]
+    c5, c6, c7, c8, c9 = row[idx[5]], row[idx[6]], row[idx[7]], row[idx[8]], row[idx[9]]
+    p0 = l0 * c0 + l1 * c1 + l2 * c2 + l3 * c3
+    p1 = l0 * c1 + l1 * c4 + l2 * c5 + l3 * c6
+    p2 = l0 * c2 + l1 * c5 + l2 * c7 + l3 * c8
+    p3 = l0 * c3 + l1 * c6 + l2 * c8 + l3 * c9
+    return l0 * p0 + l1 * p1 + l2 * p2 + l3 * p3
+
+
+@jit(inline="always")
 def ray_bernstein2(
     c: np.ndarray, a0: float, a1: float, a2: float, a3: float,
     e0: float, e1: float, e2: float, e3: float,
 ) -> tuple[float, float, float]:
     """:func:`ray_bernstein` for a quadratic, unrolled (indices from ``decasteljau_tables(2)``)."""
-    pa0 = a0 * c[0] + a1 * c[1] + a2 * c[2] + a3 * c[3]
-    pa1 = a0 * c[1] + a1 * c[4] + a2 * c[5] + a3 * c[6]
-    pa2 = a0 * c[2] + a1 * c[5] + a2 * c[7] + a3 * c[8]
-    pa3 = a0 * c[3] + a1 * c[6] + a2 * c[8] + a3 * c[9]
-    pe0 = e0 * c[0] + e1 * c[1] + e2 * c[2] + e3 * c[3]
-    pe1 = e0 * c[1] + e1 * c[4] + e2 * c[5] + e3 * c[6]
-    pe2 = e0 * c[2] + e1 * c[5] + e2 * c[7] + e3 * c[8]
-    pe3 = e0 * c[3] + e1 * c[6] + e2 * c[8] + e3 * c[9]
+    return ray_bernstein2_at(c, _IDENTITY, a0, a1, a2, a3, e0, e1, e2, e3)
+
+
+@jit(inline="always")
+def ray_bernstein2_at(
+    row: np.ndarray, idx: np.ndarray, a0: float, a1: float, a2: float, a3: float,
+    e0: float, e1: float, e2: float, e3: float,
+) -> tuple[float, float, float]:
+    """:func:`ray_bernstein2` of the tetrahedron whose coefficient ``n`` is ``row[idx[n]]``
+    (as :func:`ray_bernstein3_at`)."""
+    c0, c1, c2, c3, c4 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]], row[idx[4]]
+    c5, c6, c7, c8, c9 = row[idx[5]], row[idx[6]], row[idx[7]], row[idx[8]], row[idx[9]]
+    pa0 = a0 * c0 + a1 * c1 + a2 * c2 + a3 * c3
+    pa1 = a0 * c1 + a1 * c4 + a2 * c5 + a3 * c6
+    pa2 = a0 * c2 + a1 * c5 + a2 * c7 + a3 * c8
+    pa3 = a0 * c3 + a1 * c6 + a2 * c8 + a3 * c9
+    pe0 = e0 * c0 + e1 * c1 + e2 * c2 + e3 * c3
+    pe1 = e0 * c1 + e1 * c4 + e2 * c5 + e3 * c6
+    pe2 = e0 * c2 + e1 * c5 + e2 * c7 + e3 * c8
+    pe3 = e0 * c3 + e1 * c6 + e2 * c8 + e3 * c9
     u0 = a0 * pa0 + a1 * pa1 + a2 * pa2 + a3 * pa3
     u1 = e0 * pa0 + e1 * pa1 + e2 * pa2 + e3 * pa3
     u2 = e0 * pe0 + e1 * pe1 + e2 * pe2 + e3 * pe3

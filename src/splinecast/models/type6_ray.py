@@ -30,6 +30,10 @@ What is particular to these models (the interface is :mod:`splinecast.models.pie
   arrays it needs) is inlined into the driver's loop, which keeps no reference counts
   (:mod:`splinecast.render.driver`); a hook called out of line would still increment and
   decrement the count of every array of the grid and the scratch tuple (about 19 here).
+* **In place.** Ranges, ray polynomials and values read a tetrahedron's 20 (10) coefficients
+  from the cube's row through the tables' ``tet_points``, without copying them first; the
+  fixed-step loop's ``value_at`` evaluates the value alone (:func:`.type6.bernstein3_value_at`,
+  the same number as the value of ``value_gradient_at``).
 * **Normals** come from the de Casteljau directional derivatives of the piece's patch.
 """
 
@@ -50,16 +54,21 @@ from .type6 import (
     QSSGrid,
     S31Grid,
     barycentric,
-    ray_bernstein2,
-    ray_bernstein3,
+    bernstein2_value_at,
+    bernstein3_value_at,
+    ray_bernstein2_at,
+    ray_bernstein3_at,
     value_gradient,
 )
 from .type6_geometry import Type6Program, tet_of_point
 
 __all__ = ["split_cube_segment", "CACHE_ENTRIES", "fill_cube"]
 
-#: Cubes a thread keeps computed (128 x 175 float64 = 179 KB for S31: fits L2).
-CACHE_ENTRIES = 128
+#: Cubes a thread keeps computed (512 x 175 float64 = 717 KB for S31: fits L2). Mapped by
+#: 8 x 8 x 8 cubes: the neighbouring rays of a tile meet a cube again after about one ray of
+#: 60-100 cubes, which 4 x 4 x 8 cubes mapped onto the same entries along a ray (hits: 35% of
+#: the fixed-step samples of a Marschner-Lobb frame; 51% now).
+CACHE_ENTRIES = 512
 
 
 @jit(inline="always")
@@ -254,26 +263,57 @@ def _fill_cube(grid, i, j, k, row):
 
 
 @jit(inline="always")
-def _load_tet(grid, scratch, slot, i, j, k, tet):
-    """The coefficients of tetrahedron ``tet`` of cube ``(i, j, k)`` into ``scratch[2]``."""
-    c = scratch[2]
-    n_local = grid.tet_points.shape[1]
+def _cube_row(grid, scratch, slot, i, j, k):
+    """The coefficients of cube ``(i, j, k)``: its stored row (``slot``, with a classification
+    that stored them), else its entry of the thread's cache, computed there on a miss."""
     if slot >= 0 and grid.coeffs.shape[0] > 0:
-        for n in range(n_local):
-            c[n] = grid.coeffs[slot, grid.tet_points[tet, n]]
-        return c
+        return grid.coeffs[slot]
     keys, cache = scratch[0], scratch[1]
-    # Direct-mapped by the low bits of the cube index: distinct within any 4 x 4 x 8 cubes.
-    entry = ((i & 3) << 5) | ((j & 3) << 3) | (k & 7)
+    # Direct-mapped by the low bits of the cube index: distinct within any 8 x 8 x 8 cubes.
+    entry = ((i & 7) << 6) | ((j & 7) << 3) | (k & 7)
     ny, nz = grid.pad.shape[1] - 2, grid.pad.shape[2] - 2
     lin = (np.int64(i) * ny + j) * nz + k
     buf = cache[entry]
     if keys[entry] != lin:
         fill_cube(grid, i, j, k, buf)
         keys[entry] = lin
-    for n in range(n_local):
-        c[n] = buf[grid.tet_points[tet, n]]
+    return buf
+
+
+@jit(inline="always")
+def _load_tet(grid, scratch, slot, i, j, k, tet):
+    """The coefficients of tetrahedron ``tet`` of cube ``(i, j, k)`` into ``scratch[2]`` (for
+    the de Casteljau gradient; the rest reads them in place, :func:`_cube_row`)."""
+    c = scratch[2]
+    row = _cube_row(grid, scratch, slot, i, j, k)
+    for n in range(grid.tet_points.shape[1]):
+        c[n] = row[grid.tet_points[tet, n]]
     return c
+
+
+@jit(inline="always")
+def _hull(row, idx):
+    """``(min, max)`` of ``row[idx[n]]`` over the tetrahedron's coefficients (20 or 10).
+
+    Four independent chains, joined at the end: one chain of 20 dependent ``min``/``max``
+    waited about 80 cycles per piece on their latency. Min and max are exact, so the order
+    changes nothing."""
+    n = idx.shape[0]
+    v0, v1, v2, v3 = row[idx[0]], row[idx[1]], row[idx[2]], row[idx[3]]
+    lo0, hi0, lo1, hi1, lo2, hi2, lo3, hi3 = v0, v0, v1, v1, v2, v2, v3, v3
+    m = 4
+    while m + 4 <= n:
+        v0, v1, v2, v3 = row[idx[m]], row[idx[m + 1]], row[idx[m + 2]], row[idx[m + 3]]
+        lo0, hi0 = min(lo0, v0), max(hi0, v0)
+        lo1, hi1 = min(lo1, v1), max(hi1, v1)
+        lo2, hi2 = min(lo2, v2), max(hi2, v2)
+        lo3, hi3 = min(lo3, v3), max(hi3, v3)
+        m += 4
+    while m < n:
+        v0 = row[idx[m]]
+        lo0, hi0 = min(lo0, v0), max(hi0, v0)
+        m += 1
+    return min(min(lo0, lo1), min(lo2, lo3)), max(max(hi0, hi1), max(hi2, hi3))
 
 
 @jit(inline="always")
@@ -286,6 +326,18 @@ def _cell_pieces(grid, scratch, ctx, cell, a, e, cuts, tags):
     ex, ey, ez = e
     n = split_cube_segment(ax - 0.5, ay - 0.5, az - 0.5, ex, ey, ez, cuts)
     ranges = scratch[5]
+    if ctx[2] < 0 and ctx[3] == 0xFFFFFF:
+        # No classification: each piece's range is the convex hull of its tetrahedron's
+        # coefficients, read in place from the cube's row (looked up once per cube).
+        row = _cube_row(grid, scratch, ctx[2], i, j, k)
+        for p in range(n):
+            sm = 0.5 * (cuts[p] + cuts[p + 1])
+            tet = tet_of_point(ax - 0.5 + sm * ex, ay - 0.5 + sm * ey, az - 0.5 + sm * ez)
+            tags[p] = tet + 32 * p
+            lo, hi = _hull(row, grid.tet_points[tet])
+            ranges[p, 0] = lo
+            ranges[p, 1] = hi
+        return n
     for p in range(n):
         sm = 0.5 * (cuts[p] + cuts[p + 1])
         tet = tet_of_point(ax - 0.5 + sm * ex, ay - 0.5 + sm * ey, az - 0.5 + sm * ez)
@@ -293,19 +345,9 @@ def _cell_pieces(grid, scratch, ctx, cell, a, e, cuts, tags):
         if (ctx[3] >> tet) & 1 == 0:
             ranges[p, 0] = math.inf  # not in the mask: the piece cannot contribute
             ranges[p, 1] = -math.inf
-        elif ctx[2] >= 0:
+        else:
             ranges[p, 0] = -math.inf  # classified active for the isovalue
             ranges[p, 1] = math.inf
-        else:
-            # The convex hull of the tetrahedron's coefficients.
-            c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
-            lo = c[0]
-            hi = c[0]
-            for m in range(1, c.shape[0]):
-                lo = min(lo, c[m])
-                hi = max(hi, c[m])
-            ranges[p, 0] = lo
-            ranges[p, 1] = hi
     return n
 
 
@@ -323,10 +365,10 @@ def _piece_poly3(grid, scratch, ctx, cell, tag, a, b):
     ax, ay, az = a
     bx, by, bz = b
     tet = tag & 31
-    c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
+    row = _cube_row(grid, scratch, ctx[2], i, j, k)
     a0, a1, a2, a3 = barycentric(grid.bary, tet, ax - 0.5, ay - 0.5, az - 0.5)
     e0, e1, e2, e3 = barycentric(grid.bary, tet, bx - 0.5, by - 0.5, bz - 0.5)
-    u0, u1, u2, u3 = ray_bernstein3(c, a0, a1, a2, a3, e0, e1, e2, e3)
+    u0, u1, u2, u3 = ray_bernstein3_at(row, grid.tet_points[tet], a0, a1, a2, a3, e0, e1, e2, e3)
     return Bernstein3(u0, u1, u2, u3, grid.newton)
 
 
@@ -336,10 +378,10 @@ def _piece_poly2(grid, scratch, ctx, cell, tag, a, b):
     ax, ay, az = a
     bx, by, bz = b
     tet = tag & 31
-    c = _load_tet(grid, scratch, ctx[2], i, j, k, tet)
+    row = _cube_row(grid, scratch, ctx[2], i, j, k)
     a0, a1, a2, a3 = barycentric(grid.bary, tet, ax - 0.5, ay - 0.5, az - 0.5)
     e0, e1, e2, e3 = barycentric(grid.bary, tet, bx - 0.5, by - 0.5, bz - 0.5)
-    u0, u1, u2 = ray_bernstein2(c, a0, a1, a2, a3, e0, e1, e2, e3)
+    u0, u1, u2 = ray_bernstein2_at(row, grid.tet_points[tet], a0, a1, a2, a3, e0, e1, e2, e3)
     return Bernstein2(u0, u1, u2)
 
 
@@ -363,8 +405,17 @@ def _gradient2(grid, scratch, ctx, i, j, k, tag, x, y, z):
 
 @jit()
 def _value_gradient_deg(grid, scratch, x, y, z, degree):
+    i, j, k, tet, qx, qy, qz = _locate(grid, x, y, z)
+    c = _load_tet(grid, scratch, np.int64(-1), i, j, k, tet)
+    return value_gradient(c, degree, grid.steps, grid.bary, tet, qx, qy, qz, scratch[3],
+                          scratch[4])
+
+
+@jit(inline="always")
+def _locate(grid, x, y, z):
+    """Cube, tetrahedron and local point (relative to the cube's centre) of a point of the
+    traversal space, clamped into the spline's box."""
     nx, ny, nz = _cell_count(grid)
-    # Clamp into the spline's box, then find the cube and the point relative to its centre.
     x = min(max(x, 0.0), float(nx))
     y = min(max(y, 0.0), float(ny))
     z = min(max(z, 0.0), float(nz))
@@ -372,10 +423,25 @@ def _value_gradient_deg(grid, scratch, x, y, z, degree):
     j = min(int(math.floor(y)), ny - 1)
     k = min(int(math.floor(z)), nz - 1)
     qx, qy, qz = x - i - 0.5, y - j - 0.5, z - k - 0.5
-    tet = tet_of_point(qx, qy, qz)
-    c = _load_tet(grid, scratch, np.int64(-1), i, j, k, tet)
-    return value_gradient(c, degree, grid.steps, grid.bary, tet, qx, qy, qz, scratch[3],
-                          scratch[4])
+    return i, j, k, tet_of_point(qx, qy, qz), qx, qy, qz
+
+
+@jit()
+def _value_at3(grid, scratch, x, y, z):
+    # The value alone (the fixed-step loop takes one per sample), read in place: the same
+    # number value_gradient_at returns, without copying the coefficients or the gradient.
+    i, j, k, tet, qx, qy, qz = _locate(grid, x, y, z)
+    row = _cube_row(grid, scratch, np.int64(-1), i, j, k)
+    l0, l1, l2, l3 = barycentric(grid.bary, tet, qx, qy, qz)
+    return bernstein3_value_at(row, grid.tet_points[tet], l0, l1, l2, l3)
+
+
+@jit()
+def _value_at2(grid, scratch, x, y, z):
+    i, j, k, tet, qx, qy, qz = _locate(grid, x, y, z)
+    row = _cube_row(grid, scratch, np.int64(-1), i, j, k)
+    l0, l1, l2, l3 = barycentric(grid.bary, tet, qx, qy, qz)
+    return bernstein2_value_at(row, grid.tet_points[tet], l0, l1, l2, l3)
 
 
 @jit()
@@ -388,12 +454,17 @@ def _value_gradient_at2(grid, scratch, x, y, z):
     return _value_gradient_deg(grid, scratch, x, y, z, 2)
 
 
-# Every hook is inlined into the per-pair loop (the cache-miss path stays a call inside them).
-_CALLED = ()
+# Every hook but value_at is inlined into the per-pair loop (the cache-miss path stays a call
+# inside them). The fixed-step loop reads values at several places: value_at inlined at each
+# made s31 DVR frames about 1.2x faster than this call but took its kernel from 17 to 28 s of
+# compile; called, it compiles in about the time the value_gradient_at it replaces did.
+_CALLED = ("value_at",)
 
 register(S31Grid, called=_CALLED, cell_count=_cell_count, new_scratch=_new_scratch,
          cell_load=_cell_load, cell_pieces=_cell_pieces, piece_range=_piece_range,
-         piece_poly=_piece_poly3, gradient=_gradient3, value_gradient_at=_value_gradient_at3)
+         piece_poly=_piece_poly3, gradient=_gradient3, value_gradient_at=_value_gradient_at3,
+         value_at=_value_at3)
 register(QSSGrid, called=_CALLED, cell_count=_cell_count, new_scratch=_new_scratch,
          cell_load=_cell_load, cell_pieces=_cell_pieces, piece_range=_piece_range,
-         piece_poly=_piece_poly2, gradient=_gradient2, value_gradient_at=_value_gradient_at2)
+         piece_poly=_piece_poly2, gradient=_gradient2, value_gradient_at=_value_gradient_at2,
+         value_at=_value_at2)

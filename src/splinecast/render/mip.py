@@ -20,10 +20,10 @@ never the answer, which is therefore the same whatever the order of the rays. Mi
 projection is the same computation on the negated field.
 
 Two more prunings leave the answer bit-identical (``tests/test_mip.py``): a tested piece whose
-Bernstein control points cannot beat the running maximum is dropped before the roots of its
-derivative are solved for, and after a tested cell the driver asks for the skip size again
-(``asks_again``), so a ray whose maximum reached its block's (plateaus of equal values, as in CT
-and MRI) leaps the rest of the block.
+Bernstein control points cannot beat the running maximum, or lie below the lower bound, is
+dropped before the roots of its derivative are solved for, and after a tested cell the driver
+asks for the skip size again (``asks_again``), so a ray whose maximum reached its block's
+(plateaus of equal values, as in CT and MRI) leaps the rest of the block.
 
 With a tolerance ``e`` (``Mip(tolerance=...)``, a fraction of the display window), the exact
 method leaves out every block, cell and piece whose maximum does not beat the running maximum
@@ -244,10 +244,13 @@ def _consume(mode, mscratch, grid, scratch, piece, ray, st):
     # running maximum needs no roots of its derivative (most tested cells of a bright volume).
     # The margin, far above the rounding of the hull and of poly_max's values, leaves every
     # piece poly_max could find better to poly_max, so the answer is its.
+    # Below the lower bound (a value the ray meets, less a margin) the piece cannot hold the
+    # answer either, although it could still raise the running maximum on the way.
     if mode.prune != 0.0:
         lo_p, hi_p = poly_bounds(poly)
         top = hi_p if mode.sign > 0.0 else -lo_p
-        if top + 1e-11 * max(abs(lo_p), abs(hi_p)) <= best + mode.tolerance:
+        top += 1e-11 * max(abs(lo_p), abs(hi_p))
+        if top <= best + mode.tolerance or top < st[2]:
             return st
     v, s = poly_max(poly, mode.sign)
     if v > best:
