@@ -65,7 +65,8 @@ interval in the drawable being traced (work space, shape (height, width, 2))."""
 Tiles = namedtuple("Tiles", ("order", "start", "drawables", "counter"))
 Tiles.__doc__ = """The screen tiles: first row and column of each (``order``, in the order handed
 out), the drawables overlapping each (``start``, ``drawables``: :func:`tile_lists`), and the shared
-one-element int64 counter the threads take the next tile from (:func:`.work_queue.take`)."""
+one-element int64 counter the threads take the next tile from
+(:func:`~splinecast._jit.work_queue.take`)."""
 
 FrameEnds = namedtuple("FrameEnds", ("fresh", "final"))
 FrameEnds.__doc__ = """Whether the launch resets the states first (``fresh``) and writes the
@@ -407,9 +408,9 @@ def _trace_tile(band_a, band_b, mode, state, out, cut, view, tiles, n, ends, sea
 @jit()
 def _launch(tile_fn, band_a, band_b, mode, state, out, cut, view, tiles, ends, seam, counters):
     """One thread's share of :func:`trace_cut`: it takes the next tile (``tiles.counter``:
-    the counter the threads share, :mod:`.work_queue`) until none is left and returns the
-    closure's hits. ``tile_fn`` is the pair's :func:`_trace_tile` as a first-class function,
-    so this function compiles without the tile's code."""
+    the counter the threads share, :mod:`~splinecast._jit.work_queue`) until none is left and
+    returns the closure's hits. ``tile_fn`` is the pair's :func:`_trace_tile` as a first-class
+    function, so this function compiles without the tile's code."""
     hits = 0
     while True:
         n = take(tiles.counter)

@@ -37,12 +37,12 @@ Numba's IR level (no call, no reference counting per hook), compiled once and ca
 under its own name (:func:`pair_band`). The image loop around it takes the pair's band as a
 first-class function (:func:`splinecast._jit.bind_first_class`), so it compiles without it.
 
-Work is spread over threads in bands of ``band_rows`` rows: each thread (:mod:`.work_queue`)
-takes the next band of the order ``bands`` (a permutation that mixes busy and empty parts of the
-image) when it is free, and traverses it in tiles of ``tile`` columns so neighbouring rays reuse
-the model's per-thread caches. A model may hand out several bands at once (``work_rows``) to the
-modes whose rays go through the volume: the item is then traced a column of tiles at a time,
-the same tiles, so the same pixels.
+Work is spread over threads in bands of ``band_rows`` rows: each thread
+(:mod:`~splinecast._jit.work_queue`) takes the next band of the order ``bands`` (a permutation
+that mixes busy and empty parts of the image) when it is free, and traverses it in tiles of
+``tile`` columns so neighbouring rays reuse the model's per-thread caches. A model may hand out
+several bands at once (``work_rows``) to the modes whose rays go through the volume: the item is
+then traced a column of tiles at a time, the same tiles, so the same pixels.
 """
 
 from __future__ import annotations
@@ -134,8 +134,9 @@ boundaries (float64) and tags (int64) of one cell."""
 Bands = namedtuple("Bands", ("order", "rows", "tile", "counter", "group"))
 Bands.__doc__ = """How the image loop hands out its work: groups of ``group`` bands of ``rows``
 rows in the order ``order`` (int64 array), the next one taken from the shared one-element int64
-array ``counter`` (:func:`.work_queue.take`). A group of one band is traced ``tile`` columns at a
-time; a larger group one column of tiles at a time, its bands' tiles top to bottom."""
+array ``counter`` (:func:`~splinecast._jit.work_queue.take`). A group of one band is traced
+``tile`` columns at a time; a larger group one column of tiles at a time, its bands' tiles top
+to bottom."""
 
 Pixel = namedtuple("Pixel", ("row", "col", "width", "height"))
 Pixel.__doc__ = """Pixel ``(row, col)`` of an image (or tile) of ``width`` x ``height``
@@ -469,8 +470,8 @@ def _trace_image(band, grid, mode, blocks, state, out, setup, bands, passes, cou
     first-class function (:func:`splinecast._jit.bind_first_class`), so this function compiles
     without the band's code (its caller's library would link and optimize it again).
 
-    Each thread that runs it (:func:`.work_queue.run_on_threads`) takes the next band in the
-    order ``bands.order`` when it is free (``bands.counter``: the shared counter; a
+    Each thread that runs it (:func:`~splinecast._jit.work_queue.run_on_threads`) takes the
+    next band in the order ``bands.order`` when it is free (``bands.counter``: the shared counter; a
     :class:`Bands`): bands differ in cost by orders of magnitude, and a split fixed in advance
     left one thread waiting for the other.
 
@@ -505,9 +506,9 @@ def finalize(mode, state, out, basis):
                    max(1, min(numba.get_num_threads(), rows)))
 
 
-# Rows taken from a shared counter on ordinary threads (:mod:`.work_queue`), not a parallel
-# loop: Numba's parallel loop compiles a second library for its body, a second or two per mode
-# and output types, for a pass that costs a few milliseconds per frame. Without reference
+# Rows taken from a shared counter on ordinary threads (splinecast._jit.work_queue), not a
+# parallel loop: Numba's parallel loop compiles a second library for its body, a second or two
+# per mode and output types, for a pass that costs a few milliseconds per frame. Without reference
 # counting (nothing here allocates): counted, every call of the mode's hooks would increment
 # and decrement each array of the state and output tuples, per pixel.
 @jit(_nrt=False)

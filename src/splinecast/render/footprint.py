@@ -161,8 +161,8 @@ def fill_box(tiles: np.ndarray, box: np.ndarray) -> np.ndarray:
 @jit()
 def _project(basis, geom, active, shift, ncx, ncy, ncz, width, height, slabs, next_part):
     """One thread's share of :func:`block_footprint`: it takes the next slab of block rows
-    (``next_part``: the counter the threads share, :mod:`.work_queue`) and covers its tiles
-    in that slab's interval image."""
+    (``next_part``: the counter the threads share, :mod:`~splinecast._jit.work_queue`) and
+    covers its tiles in that slab's interval image."""
     parts = slabs.shape[0]
     edge = 1 << shift
     ortho = basis[BASIS_ORTHO] != 0.0
